@@ -1,0 +1,1 @@
+"""Boussinesq Stokes + temperature convection on DOLFINx with adaptive meshes."""

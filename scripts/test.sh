@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Set everything up (idempotent) and run the test suite: the collective tests under mpirun with
+# 2 ranks and 3 ranks (--oversubscribe), then the serial tests (exit 5, none collected, fails). Extra arguments go to every pytest call.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+py="$(bash scripts/setup.sh | tail -n 1)"
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+export PYTHONDONTWRITEBYTECODE=1
+
+status=0
+
+logdir="$(mktemp -d)"
+for n in 2 3; do
+    echo "== collective tests under mpirun -n $n =="
+    rc=0
+    # Rank 0 reports; the other ranks log to files that are shown when the run fails.
+    timeout 1800 mpirun -n "$n" --oversubscribe bash -c '
+        if [ "$OMPI_COMM_WORLD_RANK" = 0 ]; then exec "$0" -m pytest -p no:cacheprovider --color=no "${@:2}";
+        else exec "$0" -m pytest -p no:cacheprovider --color=no -q "${@:2}" > "$1/rank$OMPI_COMM_WORLD_RANK.log" 2>&1; fi
+    ' "$py" "$logdir" -m "mpi and not slow" "$@" || rc=$?
+    if [ "$rc" -ne 0 ]; then
+        for f in "$logdir"/rank*.log; do echo "---- $f"; tail -n 60 "$f"; done
+        status=$rc
+    fi
+done
+rm -rf "$logdir"
+
+# Serial tests last, so the closing summary line is the main run's.
+echo "== serial tests =="
+rc=0
+"$py" -m pytest -m "not slow and not mpi" "$@" || rc=$?
+[ "$rc" -ne 0 ] && status=$rc
+exit "$status"

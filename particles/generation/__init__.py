@@ -1,0 +1,1 @@
+"""Particle generators (seed paper section 2.2)."""

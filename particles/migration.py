@@ -1,0 +1,271 @@
+"""Hand particles to the rank that owns their cell (seed paper section 2.4, between subdomains).
+
+After particles moved, each one sits in an owned cell (nothing to do), in a ghost cell (its owner
+is known from the cell index map: send it there), or in no local cell at all (``cells == -1``).
+Ghost-cell particles travel by non-blocking point-to-point messages to neighbour ranks only: first
+one count per neighbour, then one float64 buffer per neighbour whose rows hold the particle id, the
+*global* cell index as a hint, the position, the reference position and every property column
+(ids and cell indices are carried bit-for-bit as int64 reinterpreted as float64). The receiver
+turns the global cell index into its local owned index and inserts the batch.
+
+Unlocated particles take a global fallback: every rank publishes the bounding box of its owned
+cells once; a particle goes to all other ranks whose box contains it; each candidate searches its
+owned cells and answers found/not found; the lowest rank that found it keeps it. Particles nobody
+found are removed and counted as lost.
+
+Integrator stage data travels as property columns, so a particle that changes rank in the middle
+of a Runge-Kutta step carries its stages with it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+import dolfinx.mesh
+
+from particles.generation._cells import geometry_dofmap, locate_owned
+from particles.swarm import Swarm
+
+__all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
+
+_TAG_COUNT = 7301
+_TAG_DATA = 7302
+_CACHE_ATTR = "_particles_migrator"
+
+
+@dataclass(frozen=True)
+class MigrationStats:
+    """Counts of one :func:`migrate` call (local to this rank, and global totals).
+
+    Attributes:
+        sent: Particles this rank sent to neighbours (ghost-cell particles).
+        received: Particles this rank received (from neighbours and through the fallback).
+        fallback_sent: Unlocated particles this rank offered to candidate ranks (each counted once).
+        lost: Particles this rank removed because no rank contains them.
+        global_sent, global_received, global_fallback_sent, global_lost: Sums over all ranks.
+    """
+
+    sent: int
+    received: int
+    fallback_sent: int
+    lost: int
+    global_sent: int
+    global_received: int
+    global_fallback_sent: int
+    global_lost: int
+
+
+def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], global_cells: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+    """Rows of particles as one float64 table: [id, global cell, x, xref, properties]."""
+    table = np.empty((rows.shape[0], 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns))
+    table[:, 0] = swarm.ids[rows].view(np.float64)
+    table[:, 1] = np.ascontiguousarray(global_cells, dtype=np.int64).view(np.float64)
+    c = 2
+    table[:, c : c + swarm.gdim] = swarm.x[rows]
+    c += swarm.gdim
+    table[:, c : c + swarm.tdim] = swarm.xref[rows]
+    c += swarm.tdim
+    table[:, c:] = swarm.properties[rows]
+    return table
+
+
+class _Unpacked:
+    def __init__(self, swarm: Swarm, table: npt.NDArray[np.float64]) -> None:
+        table = np.ascontiguousarray(table).reshape(-1, 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns)
+        self.ids = np.ascontiguousarray(table[:, 0]).view(np.int64)
+        self.global_cells = np.ascontiguousarray(table[:, 1]).view(np.int64)
+        c = 2
+        self.x = table[:, c : c + swarm.gdim]
+        c += swarm.gdim
+        self.xref = table[:, c : c + swarm.tdim]
+        c += swarm.tdim
+        self.properties = table[:, c:]
+
+
+class Migrator:
+    """Communication pattern of one mesh, computed once (collective constructor).
+
+    Attributes:
+        neighbours: Ranks that own one of my ghost cells or ghost one of my cells, sorted, int32.
+        owned_boxes: Bounding box of the owned cells of every rank, shape=(size, 2, gdim); empty
+            ranks have lower > upper.
+    """
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
+        self.mesh = mesh
+        self.comm: MPI.Intracomm = mesh.comm
+        tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+        cmap = mesh.topology.index_map(tdim)
+        self.num_owned_cells = cmap.size_local
+        self.cell_range = tuple(int(r) for r in cmap.local_range)
+        self.ghost_owners = np.asarray(cmap.owners, dtype=np.int32)
+        self.ghost_globals = np.asarray(cmap.ghosts, dtype=np.int64)
+        rank = self.comm.rank
+        out_ranks = np.unique(self.ghost_owners)
+        out_ranks = out_ranks[out_ranks != rank]
+        # The ranks that ghost my cells: let MPI invert the "I ghost a cell of" graph.
+        graph = self.comm.Create_dist_graph([rank], [len(out_ranks)], [int(r) for r in out_ranks], reorder=False)
+        sources, _ = graph.Get_dist_neighbors()[:2]
+        graph.Free()
+        self.neighbours = np.union1d(out_ranks, np.asarray(sources, dtype=np.int32)).astype(np.int32)
+        self.owned_boxes = self._gather_boxes(gdim)
+
+    def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
+        box = np.empty((2, gdim))
+        box[0], box[1] = np.inf, -np.inf
+        if self.num_owned_cells:
+            nodes = np.unique(geometry_dofmap(self.mesh)[: self.num_owned_cells])
+            x = self.mesh.geometry.x[nodes, :gdim]
+            box[0], box[1] = x.min(axis=0), x.max(axis=0)
+        boxes = np.empty((self.comm.size, 2, gdim))
+        self.comm.Allgather(box, boxes)
+        return boxes
+
+    # ------------------------------------------------------------------ exchange helpers
+    def _neighbour_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int) -> list[npt.NDArray[np.float64]]:
+        """Send tables[r] to every neighbour r (empty if absent); return the received tables."""
+        comm = self.comm
+        nbrs = [int(r) for r in self.neighbours]
+        send_counts = {r: np.array([tables[r].shape[0] if r in tables else 0], dtype=np.int64) for r in nbrs}
+        recv_counts = {r: np.zeros(1, dtype=np.int64) for r in nbrs}
+        reqs = [comm.Irecv(recv_counts[r], source=r, tag=_TAG_COUNT) for r in nbrs]
+        reqs += [comm.Isend(send_counts[r], dest=r, tag=_TAG_COUNT) for r in nbrs]
+        MPI.Request.Waitall(reqs)
+        recv = {r: np.empty((int(recv_counts[r][0]), ncols)) for r in nbrs if recv_counts[r][0] > 0}
+        reqs = [comm.Irecv(recv[r], source=r, tag=_TAG_DATA) for r in recv]
+        reqs += [comm.Isend(np.ascontiguousarray(tables[r]), dest=r, tag=_TAG_DATA)
+                 for r in nbrs if send_counts[r][0] > 0]
+        MPI.Request.Waitall(reqs)
+        return [recv[r] for r in sorted(recv)]
+
+    def _sparse_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int
+                         ) -> dict[int, npt.NDArray[np.float64]]:
+        """Send tables[r] to any rank r (collective; counts by alltoall). Returns {source: table}."""
+        comm = self.comm
+        send_counts = np.zeros(comm.size, dtype=np.int64)
+        for r, t in tables.items():
+            send_counts[r] = t.shape[0]
+        recv_counts = np.empty(comm.size, dtype=np.int64)
+        comm.Alltoall(send_counts, recv_counts)
+        recv = {r: np.empty((int(recv_counts[r]), ncols)) for r in range(comm.size) if recv_counts[r] > 0}
+        reqs = [comm.Irecv(recv[r], source=r, tag=_TAG_DATA) for r in recv]
+        reqs += [comm.Isend(np.ascontiguousarray(tables[r]), dest=r, tag=_TAG_DATA) for r in tables if tables[r].shape[0]]
+        MPI.Request.Waitall(reqs)
+        return recv
+
+    # ------------------------------------------------------------------ migration
+    def migrate(self, swarm: Swarm, /) -> MigrationStats:
+        """Move ghost-cell particles to their owners and resolve unlocated ones (collective).
+
+        Args:
+            swarm: Particles on ``self.mesh``; ``cells`` may hold owned, ghost or -1 entries.
+
+        Returns:
+            Local and global counts of sent, received, fallback and lost particles.
+        """
+        if swarm.mesh is not self.mesh:
+            raise ValueError("the swarm lives on a different mesh than this Migrator")
+        ncols = 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns
+        cells = swarm.cells
+        ghost = cells >= self.num_owned_cells
+        sent = int(np.count_nonzero(ghost))
+        received = 0
+        tables: dict[int, npt.NDArray[np.float64]] = {}
+        if sent:
+            rows = np.flatnonzero(ghost)
+            g = cells[rows] - self.num_owned_cells
+            owners = self.ghost_owners[g]
+            table = _pack(swarm, rows, self.ghost_globals[g])
+            for r in np.unique(owners):
+                tables[int(r)] = table[owners == r]
+        incoming = self._neighbour_exchange(tables, ncols) if self.comm.size > 1 else []
+        if sent:
+            swarm.remove(ghost)
+        if incoming:
+            batch = _Unpacked(swarm, np.concatenate(incoming))
+            local = batch.global_cells - self.cell_range[0]
+            if np.any((local < 0) | (local >= self.num_owned_cells)):
+                raise RuntimeError("migration received a particle for a cell this rank does not own")
+            swarm.add(batch.ids, batch.x, batch.xref, local.astype(np.int32), batch.properties)
+            received += batch.ids.shape[0]
+
+        unlocated = swarm.cells < 0
+        n_unlocated = int(np.count_nonzero(unlocated))
+        fallback_sent = lost = 0
+        if self.comm.size == 1:
+            lost = swarm.remove(unlocated)
+        elif self.comm.allreduce(n_unlocated, op=MPI.SUM) > 0:
+            fallback_sent, fb_received, lost = self._fallback(swarm, unlocated, ncols)
+            received += fb_received
+        totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64), op=MPI.SUM)
+        return MigrationStats(sent, received, fallback_sent, lost, *(int(t) for t in totals))
+
+    def _fallback(self, swarm: Swarm, unlocated: npt.NDArray[np.bool_], ncols: int) -> tuple[int, int, int]:
+        """Global search for unlocated particles (collective). Returns (offered, received, lost)."""
+        rank, size = self.comm.rank, self.comm.size
+        rows = np.flatnonzero(unlocated)
+        x = swarm.x[rows]
+        lower, upper = self.owned_boxes[:, 0, :], self.owned_boxes[:, 1, :]
+        tol = 1e-12 * max(1.0, float(np.nanmax(np.abs(self.owned_boxes[np.isfinite(self.owned_boxes)]), initial=1.0)))
+        inside = np.all((x[:, None, :] >= lower[None] - tol) & (x[:, None, :] <= upper[None] + tol), axis=2)
+        inside[:, rank] = False
+        table = _pack(swarm, rows, np.full(rows.shape[0], -1, dtype=np.int64))
+        swarm.remove(unlocated)
+        offers = {r: np.flatnonzero(inside[:, r]) for r in range(size) if inside[:, r].any()}
+        received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
+        # Candidates search their owned cells and answer with the local cell (or -1).
+        found_cells: dict[int, npt.NDArray[np.int32]] = {}
+        found_xref: dict[int, npt.NDArray[np.float64]] = {}
+        answers: dict[int, npt.NDArray[np.float64]] = {}
+        for src, t in received.items():
+            loc = locate_owned(self.mesh, _Unpacked(swarm, t).x)
+            found_cells[src], found_xref[src] = loc.cells, loc.xref
+            answers[src] = (loc.cells >= 0).astype(np.float64)[:, None]
+        replies = self._sparse_exchange(answers, 1)
+        # The offering rank picks the lowest rank that found each particle.
+        keeper = np.full(rows.shape[0], size, dtype=np.int64)
+        for r in sorted(replies, reverse=True):
+            hit = replies[r][:, 0] > 0
+            keeper[offers[r][hit]] = r
+        decisions = {r: (keeper[idx] == r).astype(np.float64)[:, None] for r, idx in offers.items()}
+        verdicts = self._sparse_exchange(decisions, 1)
+        n_in = 0
+        for src in sorted(verdicts):
+            keep = verdicts[src][:, 0] > 0
+            if keep.any():
+                batch = _Unpacked(swarm, received[src][keep])
+                swarm.add(batch.ids, batch.x, found_xref[src][keep], found_cells[src][keep], batch.properties)
+                n_in += int(np.count_nonzero(keep))
+        offered = int(np.count_nonzero(inside.any(axis=1)))
+        lost = int(np.count_nonzero(keeper == size))
+        return offered, n_in, lost
+
+
+def migrator_for(mesh: dolfinx.mesh.Mesh, /) -> Migrator:
+    """The :class:`Migrator` of ``mesh``, built on first use and cached on the mesh (collective)."""
+    migrator = getattr(mesh, _CACHE_ATTR, None)
+    if migrator is None:
+        migrator = Migrator(mesh)
+        setattr(mesh, _CACHE_ATTR, migrator)
+    return migrator
+
+
+def migrate(swarm: Swarm, /, *, migrator: Migrator | None = None) -> MigrationStats:
+    """Send every particle to the rank owning its cell; drop particles outside the domain (collective).
+
+    Particles in ghost cells go to the ghost's owner (neighbour messages); particles with
+    ``cells == -1`` go through the bounding-box fallback; the rest stay. In serial, particles with
+    ``cells == -1`` are removed as lost. Afterwards every particle is in an owned cell of its rank.
+
+    Args:
+        swarm: The particles.
+        migrator: The mesh's communication pattern; by default :func:`migrator_for` (cached).
+
+    Returns:
+        Local and global counts.
+    """
+    return (migrator or migrator_for(swarm.mesh)).migrate(swarm)

@@ -1,0 +1,143 @@
+"""Migration of particles between ranks: ghost-cell path, global fallback, lost particles."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import dolfinx.geometry
+import dolfinx.mesh
+
+from particles import Swarm
+from particles.generation._cells import cell_nodes, locate_owned, pull_back, push_forward
+from particles.migration import Migrator, migrate, migrator_for
+
+
+def _locate_local(mesh, x):
+    """Owned or ghost local cell containing each point (-1 if none), like a transport step would."""
+    tdim = mesh.topology.dim
+    cmap = mesh.topology.index_map(tdim)
+    n = cmap.size_local + cmap.num_ghosts
+    points = np.zeros((x.shape[0], 3))
+    points[:, : x.shape[1]] = x
+    tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim, np.arange(n, dtype=np.int32))
+    colliding = dolfinx.geometry.compute_colliding_cells(mesh, dolfinx.geometry.compute_collisions(tree, points), points)
+    cells = np.full(x.shape[0], -1, dtype=np.int32)
+    for i in range(x.shape[0]):
+        links = colliding.links(i)
+        if len(links):
+            cells[i] = links.min()
+    return cells
+
+
+def _midpoint_swarm(mesh):
+    swarm = Swarm(mesh)
+    swarm.add_property("tag", 2)
+    owned = np.arange(swarm.num_owned_cells, dtype=np.int32)
+    x = cell_nodes(mesh, owned).mean(axis=1)
+    ids = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[owned]
+    props = np.stack([2.0 * ids, -1.0 * ids], axis=1)
+    swarm.add(ids, x, pull_back(mesh, owned, x), owned, props)
+    return swarm
+
+
+def _gather_ids(comm, ids):
+    return np.sort(np.concatenate(comm.allgather(ids)))
+
+
+def _moved(ids, x):
+    """Small shift (neighbour), point reflection (far: fallback), far outside (lost), or stay."""
+    x = x.copy()
+    kind = ids % 4
+    x[kind == 0] += np.array([0.09, 0.05])
+    x[kind == 1] = 1.0 - x[kind == 1]
+    x[kind == 2] += np.array([3.0, 0.0])
+    x = np.clip(x, -10.0, 10.0)
+    x[(kind == 0)] = np.clip(x[kind == 0], 0.0, 1.0)
+    return x
+
+
+def _check_owned_and_contained(swarm):
+    mesh = swarm.mesh
+    ok = True
+    try:
+        swarm.check_invariants()
+    except AssertionError:
+        ok = False
+    loc = locate_owned(mesh, swarm.x)
+    ok &= bool(np.all(loc.cells >= 0))
+    # The particle's own cell contains it: x = Phi_K(xref) and xref in the reference triangle.
+    ok &= bool(np.allclose(push_forward(mesh, swarm.cells, swarm.xref), swarm.x, atol=1e-12))
+    xr = swarm.xref
+    ok &= bool(np.all(xr >= -1e-10) and np.all(xr.sum(axis=1) <= 1 + 1e-10))
+    return ok
+
+
+def _run_migration(comm, ghost_mode=dolfinx.mesh.GhostMode.shared_facet):
+    mesh = dolfinx.mesh.create_unit_square(comm, 12, 12, ghost_mode=ghost_mode)
+    swarm = _midpoint_swarm(mesh)
+    n0 = swarm.global_num_particles()
+    ids0 = _gather_ids(comm, swarm.ids)
+    swarm.x = _moved(swarm.ids, swarm.x)
+    swarm.cells = _locate_local(mesh, swarm.x)
+    inside = swarm.cells >= 0
+    swarm.xref = np.full_like(swarm.xref, np.nan)
+    swarm.xref[inside] = pull_back(mesh, swarm.cells[inside], swarm.x[inside])
+    swarm.sort()
+    n_unlocated = comm.allreduce(int(np.count_nonzero(~inside)), op=MPI.SUM)
+    stats = migrate(swarm)
+    return mesh, swarm, n0, ids0, stats, n_unlocated
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ghost_mode", [dolfinx.mesh.GhostMode.shared_facet, dolfinx.mesh.GhostMode.none])
+def test_migrate_ghost_fallback_lost(ghost_mode):
+    comm = MPI.COMM_WORLD
+    mesh, swarm, n0, ids0, stats, n_unlocated = _run_migration(comm, ghost_mode)
+    expected_lost = ids0[ids0 % 4 == 2]
+    ids = _gather_ids(comm, swarm.ids)
+    ok = _check_owned_and_contained(swarm)
+    ok &= bool(np.allclose(swarm.property("tag"), np.stack([2.0 * swarm.ids, -1.0 * swarm.ids], axis=1)))
+    assert comm.allreduce(ok, op=MPI.LAND)
+    assert stats.global_lost == expected_lost.shape[0]
+    assert swarm.global_num_particles() == n0 - stats.global_lost
+    np.testing.assert_array_equal(ids, np.setdiff1d(ids0, expected_lost))
+    assert stats.global_fallback_sent > 0
+    assert (stats.global_sent > 0) == (ghost_mode == dolfinx.mesh.GhostMode.shared_facet)
+    assert stats.global_received == stats.global_sent + n_unlocated - stats.global_lost
+
+
+@pytest.mark.mpi
+def test_migrate_positions_preserved():
+    """Every particle arrives with exactly the position it was given (compare with serial)."""
+    comm = MPI.COMM_WORLD
+    _, swarm, _, _, _, _ = _run_migration(comm)
+    ids = np.concatenate(comm.allgather(swarm.ids))
+    x = np.concatenate(comm.allgather(swarm.x))
+    _, serial, _, _, _, _ = _run_migration(MPI.COMM_SELF)
+    order, sorder = np.argsort(ids), np.argsort(serial.ids)
+    np.testing.assert_array_equal(ids[order], serial.ids[sorder])
+    np.testing.assert_array_equal(x[order], serial.x[sorder])
+
+
+@pytest.mark.mpi
+def test_migrator_neighbours_symmetric():
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_unit_square(comm, 6, 6)
+    m = migrator_for(mesh)
+    assert migrator_for(mesh) is m
+    pairs = comm.allgather([int(r) for r in m.neighbours])
+    assert all(comm.rank in pairs[r] for r in pairs[comm.rank])
+    assert comm.rank not in pairs[comm.rank]
+
+
+def test_migrate_serial_removes_unlocated():
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
+    swarm = _midpoint_swarm(mesh)
+    n = swarm.num_particles
+    swarm.cells[:3] = -1
+    swarm.sort()
+    stats = migrate(swarm, migrator=Migrator(mesh))
+    assert stats.lost == stats.global_lost == 3
+    assert stats.sent == stats.received == 0
+    assert swarm.num_particles == n - 3
+    swarm.check_invariants()

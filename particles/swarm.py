@@ -22,6 +22,9 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
+from particles.geometry import CellGeometry
+from particles.kernels import cell_order
+
 __all__ = ["PropertyLayout", "Swarm"]
 
 
@@ -74,6 +77,15 @@ class Swarm:
         self.properties = np.empty((0, 0), dtype=np.float64)
         self._layout: dict[str, PropertyLayout] = {}
         self.offsets = np.zeros(self.num_owned_cells + 1, dtype=np.int64)
+        self._geometry: CellGeometry | None = None
+
+    @property
+    def geometry(self) -> CellGeometry:
+        """Per-cell geometry data of the mesh (affine maps, vertex-to-cell adjacency, BB tree),
+        built on first use and shared by evaluation, transport and generators."""
+        if self._geometry is None:
+            self._geometry = CellGeometry(self.mesh)
+        return self._geometry
 
     # ------------------------------------------------------------------ properties
     @property
@@ -193,19 +205,18 @@ class Swarm:
     def sort(self) -> None:
         """Restore the order by cell after ``cells`` changed (stable: ties keep their order).
 
-        Particles with ``cells`` outside the owned range (ghost or -1) are placed last; the
-        offsets only describe owned cells.
+        A counting sort by cell, O(n + num_owned_cells), compiled with numba; nothing is moved if
+        the particles are already in order. Particles with ``cells`` outside the owned range
+        (ghost or -1) are placed last; the offsets only describe owned cells.
         """
-        key = self.cells.astype(np.int64)
-        key[(key < 0) | (key >= self.num_owned_cells)] = self.num_owned_cells
-        if key.shape[0] > 1 and np.any(key[1:] < key[:-1]):
-            order = np.argsort(key, kind="stable")
+        order, offsets, already = cell_order(self.cells, self.num_owned_cells)
+        if not already:
             self.ids = self.ids[order]
             self.x = self.x[order]
             self.xref = self.xref[order]
             self.cells = self.cells[order]
             self.properties = self.properties[order]
-        self._rebuild_offsets()
+        self.offsets = offsets
 
     def _rebuild_offsets(self) -> None:
         owned = self.cells[(self.cells >= 0) & (self.cells < self.num_owned_cells)]

@@ -1,0 +1,227 @@
+"""Cell geometry helpers: per-cell affine maps, vertex-to-cell adjacency, pull-back, point location.
+
+A :class:`CellGeometry` is built once per mesh and holds everything the particle kernels need
+without calling back into DOLFINx:
+
+- the geometry nodes of every local cell (owned and ghost) and their coordinates;
+- for affine simplices, the map ``x = origin + J X`` and its inverse ``X = K (x - origin)``
+  precomputed per cell;
+- the vertex-to-cell adjacency (CSR) with, per (vertex, cell) pair, the unit vector from the vertex
+  to the cell centre, used to order the neighbour search of the transport step (seed paper 2.4);
+- a lazily built DOLFINx bounding-box tree for the global fallback search.
+
+Non-affine cells (quadrilaterals, hexahedra, degree-2 geometry) are pulled back with a vectorised
+Newton iteration on the basix coordinate element.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import basix
+import numpy as np
+import numpy.typing as npt
+
+import dolfinx.geometry
+import dolfinx.mesh
+
+__all__ = ["CellGeometry", "Located", "cell_geometry", "locate"]
+
+_BASIX_CELL = {
+    dolfinx.mesh.CellType.interval: basix.CellType.interval,
+    dolfinx.mesh.CellType.triangle: basix.CellType.triangle,
+    dolfinx.mesh.CellType.tetrahedron: basix.CellType.tetrahedron,
+    dolfinx.mesh.CellType.quadrilateral: basix.CellType.quadrilateral,
+    dolfinx.mesh.CellType.hexahedron: basix.CellType.hexahedron,
+}
+_SIMPLICES = (dolfinx.mesh.CellType.interval, dolfinx.mesh.CellType.triangle, dolfinx.mesh.CellType.tetrahedron)
+
+
+class Located(NamedTuple):
+    """Result of a point search.
+
+    Attributes:
+        cells: Local cell containing each point (-1 if none on this rank), shape=(m,), int32.
+        xref: Reference coordinates in that cell (undefined where cells == -1), shape=(m, tdim).
+    """
+
+    cells: npt.NDArray[np.int32]
+    xref: npt.NDArray[np.float64]
+
+
+class CellGeometry:
+    """Geometry data of all local cells (owned + ghost) of a mesh, built once.
+
+    Args:
+        mesh: A DOLFINx mesh with degree-1 or degree-2 Lagrange geometry.
+        tol: Relative tolerance of the inside-cell test, in reference coordinates.
+
+    Attributes:
+        nodes: Geometry nodes of each cell, shape=(num_local_cells, num_nodes), int32.
+        coords: Node coordinates, shape=(num_geometry_nodes, gdim), float64.
+        affine: True for degree-1 simplices, where ``origin``, ``J`` and ``K`` are valid.
+        origin: First vertex of each cell, shape=(num_local_cells, gdim).
+        J: Jacobian of each cell map, shape=(num_local_cells, gdim, tdim).
+        K: (Pseudo-)inverse Jacobian, shape=(num_local_cells, tdim, gdim).
+        centres: Vertex average of each cell, shape=(num_local_cells, gdim).
+        v2c_offsets, v2c_cells: CSR vertex-to-cell adjacency over geometry nodes (int64 / int32).
+        v2c_dirs: Unit vector from the vertex to the centre of the cell, shape=(nnz, gdim).
+    """
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, /, *, tol: float = 1e-12) -> None:
+        self.mesh = mesh
+        self.tol = float(tol)
+        self.tdim: int = mesh.topology.dim
+        self.gdim: int = mesh.geometry.dim
+        self.cell_type = mesh.topology.cell_type
+        if self.cell_type not in _BASIX_CELL:
+            raise NotImplementedError(f"cell type {self.cell_type} is not supported")
+        self.basix_cell = _BASIX_CELL[self.cell_type]
+        self.simplex = self.cell_type in _SIMPLICES
+        cell_map = mesh.topology.index_map(self.tdim)
+        self.num_owned_cells: int = cell_map.size_local
+        self.num_local_cells: int = cell_map.size_local + cell_map.num_ghosts
+        self.degree: int = mesh.geometry.cmap.degree
+        if self.degree > 2:
+            raise NotImplementedError("geometry of degree > 2 is not supported")
+        dofmap = mesh.geometry.dofmap
+        nn = dofmap.offsets[1] - dofmap.offsets[0]
+        self.nodes = np.ascontiguousarray(dofmap.array.reshape(-1, nn)[: self.num_local_cells], dtype=np.int32)
+        self.coords = np.ascontiguousarray(mesh.geometry.x[:, : self.gdim], dtype=np.float64)
+        self.num_vertices: int = basix.geometry(self.basix_cell).shape[0]
+        self.coordinate_element = basix.create_element(
+            basix.ElementFamily.P, self.basix_cell, self.degree, basix.LagrangeVariant.gll_warped
+        )
+        vertices = self.coords[self.nodes[:, : self.num_vertices]]
+        self.centres = vertices.mean(axis=1)
+        self.affine = self.simplex and self.degree == 1
+        self.origin = np.ascontiguousarray(vertices[:, 0, :])
+        if self.affine:
+            self.J = np.ascontiguousarray(np.transpose(vertices[:, 1:, :] - vertices[:, :1, :], (0, 2, 1)))
+        else:
+            self.J = self.jacobians(np.arange(self.num_local_cells, dtype=np.int32),
+                                    np.tile(basix.geometry(self.basix_cell).mean(axis=0), (self.num_local_cells, 1)))
+        self.K = np.ascontiguousarray(np.linalg.pinv(self.J))
+        self._build_adjacency(vertices)
+        self._tree: dolfinx.geometry.BoundingBoxTree | None = None
+
+    def _build_adjacency(self, vertices: npt.NDArray[np.float64]) -> None:
+        nv = self.num_vertices
+        vnodes = self.nodes[:, :nv].reshape(-1)
+        owner = np.repeat(np.arange(self.num_local_cells, dtype=np.int32), nv)
+        order = np.argsort(vnodes, kind="stable")
+        self.v2c_cells = np.ascontiguousarray(owner[order])
+        counts = np.bincount(vnodes, minlength=self.coords.shape[0])
+        self.v2c_offsets = np.zeros(self.coords.shape[0] + 1, dtype=np.int64)
+        np.cumsum(counts, out=self.v2c_offsets[1:])
+        d = self.centres[self.v2c_cells] - self.coords[vnodes[order]]
+        self.v2c_dirs = np.ascontiguousarray(d / np.linalg.norm(d, axis=1)[:, None])
+        self.max_valence = int(counts.max()) if counts.size else 0
+
+    # ------------------------------------------------------------------ maps
+    def jacobians(self, cells: npt.NDArray[np.int32], xref: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Jacobian dx/dX at reference points, shape=(m, gdim, tdim)."""
+        if self.affine:
+            return self.J[cells]
+        tab = self.coordinate_element.tabulate(1, np.ascontiguousarray(xref))[1:, :, :, 0]
+        xc = self.coords[self.nodes[cells]]
+        return np.einsum("tmn,mng->mgt", tab, xc)
+
+    def push_forward(self, cells: npt.NDArray[np.int32], xref: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Physical coordinates of reference points ``xref`` in ``cells``, shape=(m, gdim)."""
+        if self.affine:
+            return self.origin[cells] + np.einsum("mgt,mt->mg", self.J[cells], xref)
+        phi = self.coordinate_element.tabulate(0, np.ascontiguousarray(xref))[0, :, :, 0]
+        return np.einsum("mn,mng->mg", phi, self.coords[self.nodes[cells]])
+
+    def pull_back(
+        self, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64], *, max_iterations: int = 30
+    ) -> npt.NDArray[np.float64]:
+        """Reference coordinates of physical points ``x`` (shape=(m, gdim)) in ``cells`` (shape=(m,)).
+
+        Affine cells use the stored inverse map; others use a vectorised Newton iteration.
+        """
+        cells = np.asarray(cells, dtype=np.int32)
+        x = np.asarray(x, dtype=np.float64).reshape(-1, self.gdim)
+        if self.affine:
+            return np.einsum("mtg,mg->mt", self.K[cells], x - self.origin[cells])
+        xref = np.einsum("mtg,mg->mt", self.K[cells], x - self.centres[cells])
+        xref += basix.geometry(self.basix_cell).mean(axis=0)
+        active = np.arange(cells.shape[0])
+        for _ in range(max_iterations):
+            if active.size == 0:
+                break
+            c, X = cells[active], xref[active]
+            r = x[active] - self.push_forward(c, X)
+            dX = np.einsum("mtg,mg->mt", np.linalg.pinv(self.jacobians(c, X)), r)
+            xref[active] = X + dX
+            active = active[np.linalg.norm(dX, axis=1) > 1e-14]
+        return xref
+
+    def inside(self, xref: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+        """Whether reference points lie in the reference cell (tolerance ``tol``), shape=(m,)."""
+        t = self.tol
+        if self.simplex:
+            return np.all(xref >= -t, axis=1) & (xref.sum(axis=1) <= 1.0 + t)
+        return np.all((xref >= -t) & (xref <= 1.0 + t), axis=1)
+
+    # ------------------------------------------------------------------ search
+    @property
+    def tree(self) -> dolfinx.geometry.BoundingBoxTree:
+        """Bounding-box tree over all local (owned + ghost) cells, built on first use."""
+        if self._tree is None:
+            self._tree = dolfinx.geometry.BoundingBoxTree(
+                self.mesh, self.tdim, np.arange(self.num_local_cells, dtype=np.int32)
+            )
+        return self._tree
+
+    def locate(self, points: npt.ArrayLike) -> Located:
+        """Find a local cell containing each point with the bounding-box tree, and pull back.
+
+        Among several colliding cells (point on a shared facet) the lowest local index is
+        taken, which prefers owned cells over ghosts.
+
+        Args:
+            points: Physical points, shape=(m, gdim).
+
+        Returns:
+            :class:`Located` with cells (-1 where no local cell contains the point) and xref.
+        """
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, self.gdim)
+        m = pts.shape[0]
+        cells = np.full(m, -1, dtype=np.int32)
+        xref = np.zeros((m, self.tdim), dtype=np.float64)
+        if m == 0:
+            return Located(cells, xref)
+        p3 = np.zeros((m, 3), dtype=np.float64)
+        p3[:, : self.gdim] = pts
+        candidates = dolfinx.geometry.compute_collisions(self.tree, p3)
+        colliding = dolfinx.geometry.compute_colliding_cells(self.mesh, candidates, p3)
+        offsets = np.asarray(colliding.offsets)
+        links = np.asarray(colliding.array, dtype=np.int32)
+        counts = np.diff(offsets)
+        hit = counts > 0
+        if np.any(hit):
+            cells[hit] = np.minimum.reduceat(links, offsets[:-1][hit])
+            xref[hit] = self.pull_back(cells[hit], pts[hit])
+        return Located(cells, xref)
+
+
+def cell_geometry(mesh: dolfinx.mesh.Mesh, /, *, tol: float = 1e-12) -> CellGeometry:
+    """Build the :class:`CellGeometry` of ``mesh``."""
+    return CellGeometry(mesh, tol=tol)
+
+
+def locate(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike, /, *, geometry: CellGeometry | None = None) -> Located:
+    """Locate ``points`` (shape=(m, gdim)) in the local cells of ``mesh`` by bounding-box search.
+
+    Args:
+        mesh: The mesh.
+        points: Physical points, shape=(m, gdim).
+        geometry: Reuse an existing :class:`CellGeometry` of ``mesh`` (and its tree).
+
+    Returns:
+        :class:`Located`: ``cells`` int32 (-1 if not on this rank) and ``xref`` (m, tdim).
+    """
+    geom = geometry if geometry is not None else CellGeometry(mesh)
+    return geom.locate(points)

@@ -1,0 +1,166 @@
+"""Adaptive mesh refinement and coarsening by rebuilding from the coarse base mesh.
+
+DOLFINx 0.5 refines (Plaza) but cannot coarsen. Every adaptation therefore computes a *wanted
+level* per cell of the current mesh and rebuilds the mesh from the coarse base mesh, refining level
+by level the cells whose level is below the wanted level found at their midpoint. The refinement
+keeps each cell on the rank of its base ancestor (``redistribute=False``), so old and new meshes
+cover the same part of the domain on every rank and fields move between them without communication
+(see :mod:`convection.transfer`).
+
+The level of a simplex is measured from its volume: ``level = floor(log2(V_base / V) / tdim)``, so a
+cell split uniformly once is level 1 and a cell only bisected for conformity stays at its level.
+
+Indicator (Kelly-type): for a continuous field f, ``eta_K^2 = sum over interior facets F of K of
+h_F * integral_F [df/dn]^2``; for a discontinuous field (e.g. DG0 composition), ``[f]^2`` replaces
+the jump of the normal derivative. Each field's indicator is scaled by its global maximum and the
+largest scaled value is used. The ``refine_fraction`` of cells with the largest indicator go up one
+level, the ``coarsen_fraction`` with the smallest go down one, within [min_level, max_level].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+import dolfinx.fem
+import dolfinx.la
+import dolfinx.mesh
+import ufl
+
+from convection.mesh import cell_volumes
+from convection.transfer import PointEvaluator
+
+__all__ = ["AdaptivityParameters", "MeshHierarchy", "kelly_indicator", "wanted_levels"]
+
+
+@dataclass(frozen=True)
+class AdaptivityParameters:
+    """Parameters of the ``adaptivity`` config section."""
+
+    every: int = 10
+    min_level: int = 0
+    max_level: int = 2
+    refine_fraction: float = 0.3
+    coarsen_fraction: float = 0.3
+
+    @classmethod
+    def from_config(cls, section: dict) -> "AdaptivityParameters":
+        return cls(section["every"], section["min_level"], section["max_level"],
+                   section["refine_fraction"], section["coarsen_fraction"])
+
+
+def kelly_indicator(fields: Sequence[dolfinx.fem.Function], /) -> npt.NDArray[np.float64]:
+    """Scaled Kelly-type indicator per owned cell, shape=(num_owned_cells,), values in [0, 1].
+
+    Collective. Continuous fields use the jump of the normal derivative, DG fields the jump of
+    the value (see the module docstring).
+    """
+    if not fields:
+        raise ValueError("the refinement indicator needs at least one field")
+    mesh = fields[0].function_space.mesh
+    tdim = mesh.topology.dim
+    num_owned = mesh.topology.index_map(tdim).size_local
+    V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    w = ufl.TestFunction(V0)
+    h = ufl.CellDiameter(mesh)
+    n = ufl.FacetNormal(mesh)
+    combined = np.zeros(num_owned)
+    for f in fields:
+        family = f.function_space.ufl_element().family()
+        if family in ("Discontinuous Lagrange", "DG", "DQ"):
+            integrand = ufl.avg(h) ** (1 - tdim) * ufl.jump(f) ** 2
+        else:
+            integrand = ufl.avg(h) * ufl.jump(ufl.grad(f), n) ** 2
+        vec = dolfinx.fem.assemble_vector(dolfinx.fem.form(integrand * ufl.avg(w) * ufl.dS))
+        vec.scatter_reverse(dolfinx.la.ScatterMode.add)
+        eta = np.sqrt(np.maximum(vec.array[V0.dofmap.list.array.reshape(-1)[:num_owned]], 0.0))
+        scale = mesh.comm.allreduce(float(eta.max(initial=0.0)), op=MPI.MAX)
+        if scale > 0.0:
+            combined = np.maximum(combined, eta / scale)
+    return combined
+
+
+def wanted_levels(
+    indicator: npt.NDArray[np.float64], levels: npt.NDArray[np.int32], params: AdaptivityParameters, comm: MPI.Comm, /
+) -> npt.NDArray[np.int32]:
+    """Wanted level per owned cell from a global ranking of the indicator (collective).
+
+    Args:
+        indicator: Per owned cell, shape=(num_owned_cells,).
+        levels: Current level per owned cell, shape=(num_owned_cells,).
+        params: Fractions and level bounds.
+        comm: The mesh communicator.
+    """
+    everything = np.concatenate(comm.allgather(indicator))
+    wanted = levels.astype(np.int32).copy()
+    if everything.size:
+        refine_at = np.quantile(everything, 1.0 - params.refine_fraction) if params.refine_fraction > 0 else np.inf
+        coarsen_at = np.quantile(everything, params.coarsen_fraction) if params.coarsen_fraction > 0 else -np.inf
+        refine = (indicator > refine_at) & (indicator > 0.0)
+        coarsen = (indicator <= coarsen_at) & ~refine
+        wanted[refine] += 1
+        wanted[coarsen] -= 1
+    return np.clip(wanted, params.min_level, params.max_level).astype(np.int32)
+
+
+class MeshHierarchy:
+    """The coarse base mesh and the level of each cell of meshes refined from it.
+
+    Args:
+        base: The coarse, uniformly sized base mesh (simplices).
+    """
+
+    def __init__(self, base: dolfinx.mesh.Mesh, /) -> None:
+        if base.topology.cell_type not in (dolfinx.mesh.CellType.triangle, dolfinx.mesh.CellType.tetrahedron):
+            raise ValueError("adaptive refinement needs a simplex mesh (mesh.cell_type: simplex)")
+        self.base = base
+        self.tdim = base.topology.dim
+        num_owned = base.topology.index_map(self.tdim).size_local
+        self.base_volume = base.comm.allreduce(float(cell_volumes(base)[:num_owned].max(initial=0.0)), op=MPI.MAX)
+
+    def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
+        """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""
+        num_owned = mesh.topology.index_map(self.tdim).size_local
+        ratio = self.base_volume / cell_volumes(mesh)[:num_owned]
+        return np.floor(np.log2(ratio) / self.tdim + 1e-6).astype(np.int32)
+
+    def uniform(self, level: int, /) -> dolfinx.mesh.Mesh:
+        """The base mesh refined uniformly ``level`` times (collective)."""
+        mesh = self.base
+        for _ in range(level):
+            mesh = dolfinx.mesh.refine(mesh, redistribute=False)
+        return mesh
+
+    def rebuild(self, old: dolfinx.mesh.Mesh, wanted: npt.NDArray[np.int32], /) -> dolfinx.mesh.Mesh:
+        """A mesh refined from the base so each cell reaches the wanted level of ``old`` at its midpoint.
+
+        Args:
+            old: The current mesh (refined from this hierarchy's base without redistribution).
+            wanted: Wanted level per owned cell of ``old``, shape=(num_owned_cells of old,).
+
+        Collective.
+        """
+        locator = PointEvaluator(old)
+        old_owned = old.topology.index_map(self.tdim).size_local
+        max_wanted = old.comm.allreduce(int(wanted.max(initial=0)), op=MPI.MAX)
+        mesh = self.base
+        for _ in range(max_wanted + 2):
+            num_owned = mesh.topology.index_map(self.tdim).size_local
+            cells = np.arange(num_owned, dtype=np.int32)
+            midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
+            old_cells = locator.locate(midpoints)
+            target = np.zeros(num_owned, dtype=np.int32)
+            inside = (old_cells >= 0) & (old_cells < old_owned)
+            target[inside] = wanted[old_cells[inside]]
+            marked = cells[self.levels(mesh) < target]
+            if mesh.comm.allreduce(marked.size, op=MPI.SUM) == 0:
+                break
+            mesh.topology.create_entities(1)
+            edges = dolfinx.mesh.compute_incident_entities(mesh, marked, self.tdim, 1)
+            mesh = dolfinx.mesh.refine(mesh, edges, redistribute=False)
+        return mesh
+

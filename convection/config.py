@@ -1,0 +1,246 @@
+"""Run configuration: the YAML schema of a convection run, loading and ``--set`` overrides.
+
+Every config has at least ``mesh.cells``, ``time.end`` and ``output.directory``. Sections:
+
+- ``mesh``: box domain and cells per direction, refinement levels for adaptivity;
+- ``physics``: Ra, Rb, H and the viscosity law;
+- ``boundary``: velocity and temperature conditions per side (left/right, bottom/top, front/back);
+- ``initial``: initial temperature and composition (closed-form expressions, see
+  :mod:`convection.expressions`);
+- ``stokes``, ``energy``: discretisation and solver choices;
+- ``time``: end time, CFL number, step limits, steady-state stop;
+- ``adaptivity``: refine/coarsen between levels every N steps;
+- ``output``: folder, field output interval, progress display.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any, Iterable
+
+import yaml
+
+from convection.expressions import Expression, ExpressionError
+from convection.schema import REQUIRED, ConfigError, Field, validate
+
+__all__ = ["SCHEMA", "ConfigError", "dump_config", "expression_constants", "load_config", "parse_overrides"]
+
+_SIDES = ("left", "right", "bottom", "top", "front", "back")
+VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed")
+TEMPERATURE_KINDS = ("dirichlet", "insulating")
+
+
+def _check_velocity_bc(value: Any) -> str | None:
+    kind = value.get("kind") if isinstance(value, dict) else value
+    if kind not in VELOCITY_KINDS:
+        return f"velocity condition {value!r} is not one of {list(VELOCITY_KINDS)} (or {{kind: prescribed, value: [..]}})"
+    if isinstance(value, dict):
+        extra = set(value) - {"kind", "value"}
+        if extra:
+            return f"unknown entry {sorted(extra)[0]!r}; allowed: ['kind', 'value']"
+        if kind == "prescribed" and not isinstance(value.get("value"), list):
+            return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
+    elif kind == "prescribed":
+        return "a prescribed velocity needs the form {kind: prescribed, value: [vx, vy(, vz)]}"
+    return None
+
+
+def _check_temperature_bc(value: Any) -> str | None:
+    if value == "insulating":
+        return None
+    if isinstance(value, dict) and set(value) == {"dirichlet"}:
+        try:
+            float(value["dirichlet"])
+        except (TypeError, ValueError):
+            return f"dirichlet value must be a number, got {value['dirichlet']!r}"
+        return None
+    return f"temperature condition {value!r} must be 'insulating' or {{dirichlet: <number>}}"
+
+
+def _sides(check, default) -> dict[str, Field]:
+    return {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v))
+            for side in _SIDES}
+
+
+SCHEMA: dict[str, Any] = {
+    "name": Field("str", default="run", help="a label for the run"),
+    "mesh": {
+        "cells": Field("list[int]", REQUIRED, length=(2, 3), minimum=1, help="cells per direction, e.g. [32, 32]"),
+        "lower": Field("list[float]", None, nullable=True, length=(2, 3), help="lower box corner (default 0)"),
+        "upper": Field("list[float]", None, nullable=True, length=(2, 3), help="upper box corner (default 1)"),
+        "cell_type": Field("str", "simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes"),
+        "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left")),
+    },
+    "physics": {
+        "Ra": Field("float", REQUIRED, minimum=0.0, help="thermal Rayleigh number"),
+        "Rb": Field("float", 0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_z)"),
+        "H": Field("float", 0.0, help="internal heating"),
+        "viscosity": {
+            "material_viscosities": Field("list[float]", None, nullable=True, length=(2,), exclusive_minimum=0.0,
+                                          help="[eta of C=0 material, eta of C=1 material]"),
+            "mixing": Field("str", "geometric", choices=("geometric", "arithmetic", "harmonic")),
+            "temperature_law": Field("str", "none", choices=("none", "frank_kamenetskii")),
+            "gamma": Field("float", 0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii"),
+        },
+    },
+    "boundary": {
+        "velocity": _sides(_check_velocity_bc, "free_slip"),
+        "temperature": _sides(_check_temperature_bc, "insulating"),
+    },
+    "initial": {
+        "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical)"),
+        "composition": Field("str", None, nullable=True,
+                             help="expression in x, y, z (1 = dense/second material), or null for none"),
+        "constants": Field("mapping", {}, help="named constants usable in the expressions"),
+    },
+    "stokes": {
+        "degree": Field("int", 2, minimum=2, help="velocity degree (pressure degree - 1)"),
+        "solver": Field("str", "direct", choices=("direct", "iterative")),
+        "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver"),
+    },
+    "energy": {
+        "degree": Field("int", 2, minimum=1),
+        "stabilisation": Field("str", "supg", choices=("supg", "none")),
+    },
+    "composition": {
+        "degree": Field("int", 0, minimum=0, help="0: DG0 cell values; >= 1: continuous Lagrange"),
+    },
+    "time": {
+        "end": Field("float", REQUIRED, exclusive_minimum=0.0, help="end time (nondimensional)"),
+        "cfl": Field("float", 1.0, exclusive_minimum=0.0),
+        "dt_max": Field("float", None, nullable=True, exclusive_minimum=0.0),
+        "dt_initial": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                            help="first step when the initial velocity is zero"),
+        "max_steps": Field("int", None, nullable=True, minimum=0),
+        "steady_state_tolerance": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                                        help="stop when Nu and vrms change by less than this (relative) per unit step window"),
+        "steady_state_window": Field("int", 20, minimum=1, help="steps over which the steady-state change is measured"),
+    },
+    "adaptivity": {
+        "enabled": Field("bool", False),
+        "every": Field("int", 10, minimum=1, help="adapt every N steps"),
+        "min_level": Field("int", 0, minimum=0),
+        "max_level": Field("int", 2, minimum=0),
+        "refine_fraction": Field("float", 0.3, minimum=0.0, help="fraction of cells (by indicator) to refine"),
+        "coarsen_fraction": Field("float", 0.3, minimum=0.0, help="fraction of cells to coarsen"),
+        "initial_steps": Field("int", None, nullable=True, minimum=0,
+                               help="adapt this many times to the initial condition (default max_level - min_level)"),
+        "fields": Field("list[str]", ["temperature"], choices=("temperature", "composition")),
+    },
+    "output": {
+        "directory": Field("str", REQUIRED, help="output folder (statistics.csv, fields, config)"),
+        "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
+        "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none")),
+        "progress_every": Field("int", 10, minimum=1, help="steps between progress lines"),
+    },
+}
+
+
+def _check_consistency(config: dict[str, Any]) -> None:
+    mesh, adapt = config["mesh"], config["adaptivity"]
+    gdim = len(mesh["cells"])
+    for key in ("lower", "upper"):
+        if mesh[key] is not None and len(mesh[key]) != gdim:
+            raise ConfigError(f"config key 'mesh.{key}': needs {gdim} entries like mesh.cells")
+    lower = mesh["lower"] or [0.0] * gdim
+    upper = mesh["upper"] or [1.0] * gdim
+    if any(u <= lo for lo, u in zip(lower, upper)):
+        raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
+    if adapt["min_level"] > adapt["max_level"]:
+        raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
+    if gdim == 2:
+        for section in ("velocity", "temperature"):
+            for side in ("front", "back"):
+                if config["boundary"][section][side] not in (None, "free_slip", "insulating"):
+                    raise ConfigError(f"config key 'boundary.{section}.{side}': only exists in 3D")
+    for side, bc in config["boundary"]["velocity"].items():
+        if isinstance(bc, dict) and bc["kind"] == "prescribed" and len(bc["value"]) != gdim:
+            raise ConfigError(f"config key 'boundary.velocity.{side}.value': needs {gdim} components")
+    for name, value in config["initial"]["constants"].items():
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ConfigError(f"config key 'initial.constants.{name}': expected a number, got {value!r}")
+    for key in ("temperature", "composition"):
+        text = config["initial"][key]
+        if text is not None:
+            try:
+                Expression(text, constants=expression_constants(config), gdim=gdim)
+            except ExpressionError as err:
+                raise ConfigError(f"config key 'initial.{key}': {err}") from None
+
+
+def expression_constants(config: dict[str, Any]) -> dict[str, float]:
+    """Constants available in initial-condition expressions: Ra, Rb, H and initial.constants."""
+    physics = config["physics"]
+    return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **config["initial"]["constants"]}
+
+
+def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:
+    """Parse ``--set key.sub=value`` strings into (path, value) with YAML-typed values."""
+    parsed = []
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"--set {item!r}: expected key.sub=value")
+        key, text = item.split("=", 1)
+        path = [p for p in key.strip().split(".") if p]
+        if not path:
+            raise ConfigError(f"--set {item!r}: empty key")
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            value = text
+        parsed.append((path, value))
+    return parsed
+
+
+def _apply_override(document: dict[str, Any], path: list[str], value: Any) -> None:
+    node = document
+    for i, part in enumerate(path[:-1]):
+        child = node.get(part)
+        if child is None:
+            child = node[part] = {}
+        if not isinstance(child, dict):
+            raise ConfigError(f"--set {'.'.join(path)}: '{'.'.join(path[:i + 1])}' is not a section")
+        node = child
+    node[path[-1]] = value
+
+
+def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, document: dict | None = None) -> dict[str, Any]:
+    """Read, override and validate a run configuration.
+
+    Args:
+        path: YAML file (or None when ``document`` is given).
+        overrides: ``key.sub=value`` strings applied on top of the file.
+        document: An already parsed document to use instead of the file.
+
+    Returns:
+        The fully resolved configuration (every key present, defaults filled in).
+
+    Raises:
+        ConfigError: with a one-line message naming the key.
+    """
+    if document is None:
+        if path is None:
+            raise ConfigError("no configuration file given")
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"config file '{p}' not found")
+        try:
+            document = yaml.safe_load(p.read_text()) or {}
+        except yaml.YAMLError as err:
+            mark = getattr(err, "problem_mark", None)
+            where = f" at line {mark.line + 1}" if mark is not None else ""
+            raise ConfigError(f"config file '{p}': invalid YAML{where}") from None
+        if not isinstance(document, dict):
+            raise ConfigError(f"config file '{p}': expected a mapping at the top level")
+    document = copy.deepcopy(document)
+    for key_path, value in parse_overrides(overrides):
+        _apply_override(document, key_path, value)
+    config = validate(SCHEMA, document)
+    _check_consistency(config)
+    return config
+
+
+def dump_config(config: dict[str, Any]) -> str:
+    """The resolved config as YAML text (written to the output folder as config.yaml)."""
+    return yaml.safe_dump(config, sort_keys=False, default_flow_style=None)

@@ -1,0 +1,103 @@
+"""Carry finite element fields from one mesh to another covering the same domain.
+
+DOLFINx 0.5 has no ``interpolate_nonmatching_meshes``: the new Function is interpolated from a
+callable that evaluates the old Function at the new interpolation points. Points are searched in
+this rank's part of the old mesh first (a bounding-box tree); meshes rebuilt from the same
+distributed base mesh without redistribution (see :mod:`convection.adaptivity`) find every point
+locally. Points not found locally are resolved collectively: they are shared with all ranks, each
+rank evaluates the ones it holds, and the values are combined.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+import dolfinx.fem
+import dolfinx.geometry
+import dolfinx.mesh
+
+__all__ = ["PointEvaluator", "transfer_function"]
+
+
+class PointEvaluator:
+    """Evaluate Functions on a fixed mesh at arbitrary points (collective for missing points).
+
+    Args:
+        mesh: The mesh the source Functions live on.
+    """
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
+        self.mesh = mesh
+        tdim = mesh.topology.dim
+        cell_map = mesh.topology.index_map(tdim)
+        cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
+        self._tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim, cells, padding=1e-12)
+
+    def locate(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
+        """First local cell containing each point (-1 where none), points shape=(n, 3)."""
+        candidates = dolfinx.geometry.compute_collisions(self._tree, points)
+        colliding = dolfinx.geometry.compute_colliding_cells(self.mesh, candidates, points)
+        offsets = colliding.offsets
+        found = offsets[1:] > offsets[:-1]
+        cells = np.full(points.shape[0], -1, dtype=np.int32)
+        cells[found] = colliding.array[offsets[:-1][found]]
+        return cells
+
+    def evaluate(self, function: dolfinx.fem.Function, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Values of ``function`` at ``points`` (shape=(n, 3)); returns shape=(n, value_size).
+
+        Collective: every rank must call it (with its own, possibly empty, point set).
+        """
+        comm = self.mesh.comm
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        value_size = int(np.prod(function.ufl_shape)) if function.ufl_shape else 1
+        values = np.zeros((points.shape[0], value_size))
+        cells = self.locate(points)
+        found = cells >= 0
+        if np.any(found):
+            values[found] = function.eval(points[found], cells[found]).reshape(-1, value_size)
+        missing = np.flatnonzero(~found)
+        if comm.allreduce(missing.size, op=MPI.SUM) == 0:
+            return values
+        # Collective fallback: share the missing points with every rank.
+        all_points = comm.allgather(points[missing])
+        gathered = np.concatenate(all_points) if all_points else np.empty((0, 3))
+        gcells = self.locate(gathered)
+        gfound = gcells >= 0
+        gvalues = np.zeros((gathered.shape[0], value_size))
+        if np.any(gfound):
+            gvalues[gfound] = function.eval(gathered[gfound], gcells[gfound]).reshape(-1, value_size)
+        # Owner of each value: lowest rank that found it.
+        rank_found = np.where(gfound, comm.rank, comm.size).astype(np.int32)
+        owner = np.empty_like(rank_found)
+        comm.Allreduce(rank_found, owner, op=MPI.MIN)
+        gvalues[owner != comm.rank] = 0.0
+        total = np.empty_like(gvalues)
+        comm.Allreduce(gvalues, total, op=MPI.SUM)
+        if np.any(owner == comm.size):
+            lost = int(np.count_nonzero(owner == comm.size))
+            raise RuntimeError(f"{lost} points lie outside the source mesh; cannot transfer the field")
+        start = sum(p.shape[0] for p in all_points[: comm.rank])
+        values[missing] = total[start: start + missing.size]
+        return values
+
+
+def transfer_function(
+    source: dolfinx.fem.Function, target: dolfinx.fem.Function, /, *, evaluator: PointEvaluator | None = None
+) -> None:
+    """Interpolate ``source`` (on mesh A) into ``target`` (on mesh B): target = I_B(source).
+
+    Collective. Pass an ``evaluator`` built once for mesh A to share its search tree between fields.
+    """
+    evaluator = evaluator or PointEvaluator(source.function_space.mesh)
+    mesh = target.function_space.mesh
+    tdim = mesh.topology.dim
+    owned = np.arange(mesh.topology.index_map(tdim).size_local, dtype=np.int32)
+
+    def values(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        return evaluator.evaluate(source, x.T).T
+
+    target.interpolate(values, cells=owned)
+    target.x.scatter_forward()

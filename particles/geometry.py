@@ -104,6 +104,7 @@ class CellGeometry:
         self.K = np.ascontiguousarray(np.linalg.pinv(self.J))
         self._build_adjacency(vertices)
         self._tree: dolfinx.geometry.BoundingBoxTree | None = None
+        self._c2c: tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]] | None = None
 
     def _build_adjacency(self, vertices: npt.NDArray[np.float64]) -> None:
         nv = self.num_vertices
@@ -117,6 +118,24 @@ class CellGeometry:
         d = self.centres[self.v2c_cells] - self.coords[vnodes[order]]
         self.v2c_dirs = np.ascontiguousarray(d / np.linalg.norm(d, axis=1)[:, None])
         self.max_valence = int(counts.max()) if counts.size else 0
+
+    @property
+    def vertex_neighbours(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+        """CSR ``(offsets, cells)`` of the cells sharing a vertex with each cell (itself excluded)."""
+        if self._c2c is None:
+            nv = self.num_vertices
+            vnodes = self.nodes[:, :nv].reshape(-1)
+            starts = self.v2c_offsets[vnodes]
+            lengths = self.v2c_offsets[vnodes + 1] - starts
+            seg = np.cumsum(lengths) - lengths
+            idx = np.repeat(starts - seg, lengths) + np.arange(int(lengths.sum()))
+            owner = np.repeat(np.repeat(np.arange(self.num_local_cells, dtype=np.int64), nv), lengths)
+            pairs = np.unique(np.stack([owner, self.v2c_cells[idx].astype(np.int64)], axis=1), axis=0)
+            pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+            offsets = np.zeros(self.num_local_cells + 1, dtype=np.int64)
+            np.cumsum(np.bincount(pairs[:, 0], minlength=self.num_local_cells), out=offsets[1:])
+            self._c2c = (offsets, pairs[:, 1].astype(np.int32))
+        return self._c2c
 
     # ------------------------------------------------------------------ maps
     def jacobians(self, cells: npt.NDArray[np.int32], xref: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -1,0 +1,7 @@
+"""``python -m convection``: see :mod:`convection.cli`."""
+
+import sys
+
+from convection.cli import main
+
+sys.exit(main())

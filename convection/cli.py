@@ -1,0 +1,87 @@
+"""Command line: ``python -m convection run configs/NAME.yaml [--set key.sub=value ...] [--output DIR]``.
+
+Configuration problems print one line naming the key (``error: config key 'time.end': ...``) on
+rank 0 and exit with code 2 on every rank, before any collective call, so mpirun never hangs.
+SIGINT/SIGTERM stop the run at the end of the current step with the statistics flushed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+from typing import Sequence
+
+from mpi4py import MPI
+
+from convection.config import ConfigError, load_config
+
+__all__ = ["main"]
+
+EXIT_CONFIG_ERROR = 2
+EXIT_STOPPED = 130
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m convection", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a configuration")
+    run.add_argument("config", help="YAML configuration file")
+    run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                     help="override a config value, e.g. --set mesh.cells=[64,64] (repeatable)")
+    run.add_argument("--output", default=None, help="output folder (overrides output.directory)")
+    check = sub.add_parser("check", help="validate a configuration and print it fully resolved")
+    check.add_argument("config")
+    check.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    check.add_argument("--output", default=None)
+    return parser
+
+
+class _StopFlag:
+    """Set by SIGINT/SIGTERM; a second signal restores the default action."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def __call__(self, signum: int, frame: object) -> None:
+        self.requested = True
+        signal.signal(signum, signal.SIG_DFL)
+
+    def __bool__(self) -> bool:
+        return self.requested
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit code."""
+    logging.getLogger().setLevel(logging.WARNING)
+    args = _parser().parse_args(argv)
+    comm = MPI.COMM_WORLD
+    overrides = list(args.overrides)
+    if args.output is not None:
+        overrides.append(f"output.directory={args.output}")
+    try:
+        config = load_config(args.config, overrides)
+    except ConfigError as err:
+        if comm.rank == 0:
+            print(f"error: {err}", file=sys.stderr, flush=True)
+        return EXIT_CONFIG_ERROR
+    if args.command == "check":
+        if comm.rank == 0:
+            from convection.config import dump_config
+
+            print(dump_config(config), end="")
+        return 0
+
+    from convection.simulation import Simulation
+
+    stop = _StopFlag()
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    simulation = Simulation(config, comm=comm)
+    summary = simulation.run(should_stop=lambda: stop.requested)
+    return EXIT_STOPPED if summary.reason == "stopped by signal" else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

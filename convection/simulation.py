@@ -1,0 +1,300 @@
+"""The time loop of a convection run, built from a resolved configuration.
+
+Per step (Boussinesq, see :mod:`convection.approximation`):
+
+1. dt from the CFL number of the current velocity (:func:`convection.timestep.cfl_timestep`);
+2. advance the temperature by dt with the current velocity (:class:`convection.energy.EnergySolver`);
+3. solve Stokes with the new temperature and the composition field (:class:`convection.stokes.StokesSolver`);
+4. statistics row (time, dt, vrms, Nusselt, T mean/min/max, cells), progress, field output;
+5. every ``adaptivity.every`` steps: rebuild the mesh from the base mesh (:mod:`convection.adaptivity`)
+   and carry every field to it.
+
+The composition field C is set from ``initial.composition`` and kept fixed (later issues make it
+come from particles); it enters the buoyancy (Ra T - Rb C) e_z and the viscosity.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from mpi4py import MPI
+
+import dolfinx.fem
+import dolfinx.mesh
+
+from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels
+from convection.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.boundary import TemperatureBC, VelocityBC, side_names
+from convection.config import dump_config, expression_constants
+from convection.diagnostics import nusselt, temperature_stats, vrms
+from convection.energy import EnergySolver
+from convection.expressions import Expression
+from convection.mesh import BoxSpec, create_box_mesh
+from convection.output import FieldOutput
+from convection.progress import Progress
+from convection.statistics import StatisticsWriter
+from convection.stokes import StokesSolver
+from convection.timestep import cfl_timestep
+from convection.transfer import PointEvaluator, transfer_function
+
+__all__ = ["RunSummary", "Simulation", "STATISTICS_COLUMNS"]
+
+STATISTICS_COLUMNS = (
+    "step", "time", "dt", "vrms", "nusselt", "T_mean", "T_min", "T_max", "cells", "stokes_iterations",
+    "wall_time",
+)
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a finished (or stopped) run reached."""
+
+    steps: int
+    time: float
+    vrms: float
+    nusselt: float
+    cells: int
+    wall_time: float
+    reason: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
+    """Velocity conditions per side of the ``boundary.velocity`` section (null sides: traction free)."""
+    result = {}
+    for side in side_names(gdim):
+        value = section[side]
+        if value is None:
+            continue
+        if isinstance(value, dict):
+            result[side] = VelocityBC(value["kind"], tuple(float(v) for v in value.get("value") or ()) or None)
+        else:
+            result[side] = VelocityBC(value)
+    return result
+
+
+def temperature_bcs_from_config(section: dict, gdim: int) -> dict[str, TemperatureBC]:
+    """Temperature conditions per side of the ``boundary.temperature`` section."""
+    result = {}
+    for side in side_names(gdim):
+        value = section[side]
+        if value is None or value == "insulating":
+            result[side] = TemperatureBC("insulating")
+        else:
+            result[side] = TemperatureBC("dirichlet", float(value["dirichlet"]))
+    return result
+
+
+class Simulation:
+    """A convection run on one communicator (collective construction and run).
+
+    Args:
+        config: A resolved configuration (:func:`convection.config.load_config`).
+        comm: The communicator.
+    """
+
+    def __init__(self, config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+        self.config = config
+        self.comm = comm
+        self.output_dir = Path(config["output"]["directory"])
+        self.spec = BoxSpec.from_config(config["mesh"])
+        gdim = self.spec.gdim
+        physics = config["physics"]
+        visc = physics["viscosity"]
+        law = ViscosityLaw(
+            material_viscosities=tuple(visc["material_viscosities"]) if visc["material_viscosities"] else None,
+            mixing=visc["mixing"], temperature_law=visc["temperature_law"], gamma=visc["gamma"],
+        )
+        self.approximation = BoussinesqApproximation(Ra=physics["Ra"], Rb=physics["Rb"], H=physics["H"], viscosity=law)
+        self.velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], gdim)
+        self.temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], gdim)
+        constants = expression_constants(config)
+        self.initial_temperature = Expression(config["initial"]["temperature"], constants=constants, gdim=gdim)
+        text = config["initial"]["composition"]
+        self.initial_composition = Expression(text, constants=constants, gdim=gdim) if text is not None else None
+
+        self.adaptivity = AdaptivityParameters.from_config(config["adaptivity"]) if config["adaptivity"]["enabled"] else None
+        base = create_box_mesh(comm, self.spec)
+        self.hierarchy = MeshHierarchy(base) if self.adaptivity else None
+        mesh = self.hierarchy.uniform(self.adaptivity.min_level) if self.hierarchy else base
+        self._build(mesh)
+        self._set_initial_fields()
+        if self.adaptivity:
+            rounds = config["adaptivity"]["initial_steps"]
+            if rounds is None:
+                rounds = self.adaptivity.max_level - self.adaptivity.min_level
+            for _ in range(rounds):
+                self.adapt(initial=True)
+        self.t = 0.0
+        self.step = 0
+        self._last_dt = 0.0
+
+    # ------------------------------------------------------------------ setup
+    def _build(self, mesh: dolfinx.mesh.Mesh) -> None:
+        cfg = self.config
+        self.mesh = mesh
+        self.stokes = StokesSolver(
+            mesh, self.approximation, bcs=self.velocity_bcs, degree=cfg["stokes"]["degree"],
+            solver=cfg["stokes"]["solver"], petsc_options=cfg["stokes"]["petsc_options"],
+        )
+        self.energy = EnergySolver(
+            mesh, self.approximation, bcs=self.temperature_bcs, degree=cfg["energy"]["degree"],
+            stabilisation=cfg["energy"]["stabilisation"],
+        )
+        self.composition: dolfinx.fem.Function | None = None
+        if self.initial_composition is not None:
+            degree = cfg["composition"]["degree"]
+            space = dolfinx.fem.FunctionSpace(mesh, ("DG", 0) if degree == 0 else ("Lagrange", degree))
+            self.composition = dolfinx.fem.Function(space, name="composition")
+
+    def _set_initial_fields(self) -> None:
+        self.energy.set_initial(self.initial_temperature)
+        if self.composition is not None and self.initial_composition is not None:
+            self.composition.interpolate(self.initial_composition)
+            self.composition.x.scatter_forward()
+
+    @property
+    def num_cells(self) -> int:
+        return int(self.mesh.topology.index_map(self.mesh.topology.dim).size_global)
+
+    # ------------------------------------------------------------------ adaptivity
+    def adapt(self, *, initial: bool = False) -> tuple[int, int]:
+        """Refine/coarsen once and carry the fields to the new mesh. Returns (cells before, after).
+
+        With ``initial=True`` the fields on the new mesh are set from the initial conditions
+        instead of being transferred (used to resolve the initial state). Collective.
+        """
+        assert self.hierarchy is not None and self.adaptivity is not None
+        fields = []
+        if "temperature" in self.config["adaptivity"]["fields"]:
+            fields.append(self.energy.T)
+        if "composition" in self.config["adaptivity"]["fields"] and self.composition is not None:
+            fields.append(self.composition)
+        before = self.num_cells
+        indicator = kelly_indicator(fields or [self.energy.T])
+        wanted = wanted_levels(indicator, self.hierarchy.levels(self.mesh), self.adaptivity, self.comm)
+        new_mesh = self.hierarchy.rebuild(self.mesh, wanted)
+        old_stokes, old_energy, old_composition = self.stokes, self.energy, self.composition
+        self._build(new_mesh)
+        if initial:
+            self._set_initial_fields()
+        else:
+            evaluator = PointEvaluator(old_stokes.mesh)
+
+            def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
+                transfer_function(src, dst, evaluator=evaluator)
+
+            self.stokes.transfer_from(old_stokes, transfer)
+            self.energy.transfer_from(old_energy, transfer)
+            if old_composition is not None and self.composition is not None:
+                transfer(old_composition, self.composition)
+        return before, self.num_cells
+
+    # ------------------------------------------------------------------ time loop
+    def _diagnostics(self) -> dict[str, float]:
+        stats = temperature_stats(self.energy.T)
+        return {
+            "vrms": vrms(self.stokes.u),
+            "nusselt": nusselt(self.energy, self.stokes.u, side="top"),
+            "T_mean": stats.mean, "T_min": stats.min, "T_max": stats.max,
+        }
+
+    def _timestep(self) -> float:
+        tcfg = self.config["time"]
+        dt = cfl_timestep(self.stokes.u, tcfg["cfl"], dt_max=tcfg["dt_max"])
+        if not np.isfinite(dt) or dt <= 0.0:
+            dt = tcfg["dt_initial"] or tcfg["dt_max"] or 0.0
+            if dt <= 0.0:
+                raise RuntimeError("the velocity is zero and neither time.dt_initial nor time.dt_max is set")
+        return min(dt, tcfg["end"] - self.t)
+
+    def _fields(self) -> dict[str, dolfinx.fem.Function]:
+        out = {"temperature": self.energy.T, "velocity": self.stokes.u, "pressure": self.stokes.p}
+        if self.composition is not None:
+            out["composition"] = self.composition
+        return out
+
+    def run(self, *, should_stop: Callable[[], bool] = lambda: False) -> RunSummary:
+        """Run to ``time.end`` (or max_steps, steady state, or a stop request). Collective.
+
+        Args:
+            should_stop: Polled every step on every rank (e.g. a signal flag); the run stops when it
+                is True on any rank, with the statistics flushed.
+        """
+        cfg = self.config
+        tcfg, ocfg = cfg["time"], cfg["output"]
+        rank0 = self.comm.rank == 0
+        if rank0:
+            self.output_dir.mkdir(parents=True, exist_ok=True)
+            (self.output_dir / "config.yaml").write_text(dump_config(cfg))
+        self.comm.barrier()
+        writer = StatisticsWriter(self.output_dir / "statistics.csv", STATISTICS_COLUMNS, comm=self.comm)
+        fields = FieldOutput(self.output_dir)
+        progress = Progress(tcfg["end"], mode=ocfg["progress"], every=ocfg["progress_every"], enabled=rank0)
+        start = time.monotonic()
+        history: list[tuple[float, float]] = []
+        reason = "end time"
+        result = self.stokes.solve(self.energy.T, self.composition)
+        row: dict[str, Any] = {}
+        try:
+            while True:
+                diag = self._diagnostics()
+                row = {"step": self.step, "time": self.t, "dt": 0.0 if self.step == 0 else self._last_dt,
+                       "cells": self.num_cells, "stokes_iterations": result.iterations,
+                       "wall_time": time.monotonic() - start, **diag}
+                writer.write(row)
+                progress.update(self.step, self.t, row["dt"], diag["vrms"], extra=f"Nu={diag['nusselt']:.5g}")
+                if ocfg["fields_every"] and self.step % ocfg["fields_every"] == 0:
+                    fields.write(self._fields(), self.t)
+                history.append((diag["vrms"], diag["nusselt"]))
+                if self.t >= tcfg["end"] * (1.0 - 1e-12):
+                    break
+                if tcfg["max_steps"] is not None and self.step >= tcfg["max_steps"]:
+                    reason = "max steps"
+                    break
+                if self._steady(history):
+                    reason = "steady state"
+                    break
+                if self.comm.allreduce(bool(should_stop()), op=MPI.LOR):
+                    reason = "stopped by signal"
+                    break
+                dt = self._timestep()
+                self.energy.step(self.stokes.u, dt)
+                self.t += dt
+                self.step += 1
+                self._last_dt = dt
+                if self.adaptivity and self.step % self.adaptivity.every == 0:
+                    before, after = self.adapt()
+                    progress.message(f"adapted mesh at step {self.step}: {before} -> {after} cells")
+                result = self.stokes.solve(self.energy.T, self.composition)
+        finally:
+            writer.close()
+            progress.close()
+        fields.write(self._fields(), self.t)
+        fields.close()
+        summary = RunSummary(self.step, self.t, float(row.get("vrms", np.nan)), float(row.get("nusselt", np.nan)),
+                             self.num_cells, time.monotonic() - start, reason)
+        if rank0:
+            (self.output_dir / "summary.json").write_text(json.dumps(summary.as_dict(), indent=2) + "\n")
+            progress.message(f"finished ({reason}): step {summary.steps}, t={summary.time:.6g}, "
+                             f"vrms={summary.vrms:.6g}, Nu={summary.nusselt:.6g}, {summary.cells} cells, "
+                             f"{summary.wall_time:.1f} s")
+        return summary
+
+
+    def _steady(self, history: list[tuple[float, float]]) -> bool:
+        tol = self.config["time"]["steady_state_tolerance"]
+        window = self.config["time"]["steady_state_window"]
+        if tol is None or len(history) <= window:
+            return False
+        recent = np.array(history[-window - 1:])
+        scale = np.maximum(np.abs(recent[-1]), 1e-300)
+        change = np.max(np.abs(recent - recent[-1]), axis=0) / scale
+        return bool(np.all(change < tol))

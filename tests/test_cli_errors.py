@@ -1,0 +1,81 @@
+"""Bad configuration inputs give one line naming the key, exit code 2, no traceback, no hang.
+
+Each case runs the real CLI under ``mpirun -n 2`` (and once serially) in a subprocess.
+"""
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from convection.config import ConfigError, load_config
+
+ROOT = Path(__file__).resolve().parents[1]
+GOOD = ROOT / "configs" / "blankenbach_1a.yaml"
+
+
+def _run(args, *, ranks=2, timeout=120):
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    cmd = [sys.executable, "-m", "convection", *args]
+    if ranks > 1:
+        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
+    return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+CASES = {
+    "unknown key": (["run", str(GOOD), "--set", "mesh.colls=[4,4]"], "mesh.colls"),
+    "wrong type": (["run", str(GOOD), "--set", "physics.Ra=hot"], "physics.Ra"),
+    "missing file": (["run", "configs/does_not_exist.yaml"], "not found"),
+    "negative end time": (["run", str(GOOD), "--set", "time.end=-1"], "time.end"),
+    "bad choice": (["run", str(GOOD), "--set", "stokes.solver=magic"], "stokes.solver"),
+    "bad expression": (["run", str(GOOD), "--set", "initial.temperature=1-q"], "initial.temperature"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_bad_input_under_mpirun(name):
+    args, needle = CASES[name]
+    proc = _run(args, ranks=2)
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, proc.stderr  # printed once (rank 0), one line
+    assert needle in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_missing_required_value(tmp_path):
+    path = _write(tmp_path, "mesh: {cells: [4, 4]}\nphysics: {Ra: 1e4}\noutput: {directory: out}\n")
+    proc = _run(["run", path], ranks=1)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "error: config key 'time.end': required value missing (end time (nondimensional))"
+
+
+def test_invalid_yaml(tmp_path):
+    proc = _run(["run", _write(tmp_path, "mesh: [cells: 4\n")], ranks=1)
+    assert proc.returncode == 2 and "invalid YAML" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_check_prints_resolved_config():
+    proc = _run(["check", str(GOOD), "--set", "time.end=0.5", "--output", "elsewhere"], ranks=1)
+    assert proc.returncode == 0, proc.stderr
+    assert "end: 0.5" in proc.stdout and "directory: elsewhere" in proc.stdout
+
+
+def test_load_config_defaults_and_overrides():
+    config = load_config(GOOD, ["mesh.cells=[8, 4]", "physics.Rb=1e3"])
+    assert config["mesh"]["cells"] == [8, 4]
+    assert config["physics"]["Rb"] == 1000.0  # "1e3" (a string for PyYAML) coerced to float
+    assert config["adaptivity"]["enabled"] is False
+    with pytest.raises(ConfigError, match="mesh.upper"):
+        load_config(GOOD, ["mesh.lower=[0, 0]", "mesh.upper=[1, 0]"])
+    with pytest.raises(ConfigError, match="boundary.velocity.top.value"):
+        load_config(GOOD, ["boundary.velocity.top={kind: prescribed, value: [1, 0, 0]}"])

@@ -1,0 +1,321 @@
+"""Taylor-Hood Stokes solver for the Boussinesq momentum and mass equations.
+
+Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in Q``)::
+
+    (2 eta eps(u), eps(v)) - (p, div v) = ((Ra T - Rb C) e_z, v)
+                            -(q, div u) = 0
+
+on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1). Boundary conditions are
+:class:`~convection.boundary.VelocityBC` per box side; free slip is a zero Dirichlet condition on
+the normal velocity component. When every side fixes the normal velocity the pressure is only
+defined up to a constant: the constant-pressure null space is attached to the operator (iterative
+solver) or removed by pinning one pressure dof (direct solver, exact because the system is
+consistent), and the pressure is then normalised to zero mean, ``int p dx = 0``.
+
+Solvers (``solver=``):
+    ``"direct"``: MUMPS LU of the monolithic (block) system; the factorisation is reused while the
+        viscosity is constant.
+    ``"iterative"``: MINRES with the block-diagonal preconditioner
+        ``diag(A, M_p / eta)``: one BoomerAMG V-cycle (strong threshold 0.7, which keeps the
+        iteration count mesh independent for P2) on the velocity block ``A`` and Jacobi on the
+        viscosity-scaled pressure mass matrix (PETSc fieldsplit, additive).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import dolfinx
+import dolfinx.fem.petsc
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from convection.approximation import BoussinesqApproximation
+from convection.boundary import VelocityBC, box_bounds, side_names, velocity_dirichlet_bcs
+
+STOKES_SOLVERS: dict[str, str] = {
+    "direct": "MUMPS LU on the monolithic Taylor-Hood system",
+    "iterative": "MINRES + block-diagonal (BoomerAMG on velocity, Jacobi on M_p/eta) preconditioner",
+}
+"""Registry of Stokes solver kinds (lowercase name -> one-line description)."""
+
+_instance_counter = itertools.count()
+
+
+class StokesResult(NamedTuple):
+    """Outcome of :meth:`StokesSolver.solve`.
+
+    Attributes:
+        iterations: Krylov iterations (1 for the direct solver).
+        residual_norm: Euclidean norm of the true residual ``b - K x`` of the assembled system.
+    """
+
+    iterations: int
+    residual_norm: float
+
+
+def _default_options(solver: str) -> dict[str, Any]:
+    if solver == "direct":
+        return {
+            "ksp_type": "preonly",
+            "pc_type": "lu",
+            "pc_factor_mat_solver_type": "mumps",
+        }
+    return {
+        "ksp_type": "minres",
+        "ksp_rtol": 1e-10,
+        "ksp_atol": 1e-14,
+        "ksp_max_it": 2000,
+        "pc_type": "fieldsplit",
+        "pc_fieldsplit_type": "additive",
+        "fieldsplit_u_ksp_type": "preonly",
+        "fieldsplit_u_pc_type": "hypre",
+        "fieldsplit_u_pc_hypre_type": "boomeramg",
+        "fieldsplit_u_pc_hypre_boomeramg_strong_threshold": 0.7,
+        "fieldsplit_p_ksp_type": "preonly",
+        "fieldsplit_p_pc_type": "jacobi",
+    }
+
+
+class StokesSolver:
+    """Stokes solver on a fixed mesh (see the module docstring for equations and solvers).
+
+    Args:
+        mesh: box mesh (2D or 3D).
+        approximation: physics parameters and viscosity law.
+        bcs: velocity condition per side name (see :mod:`convection.boundary`); sides not listed
+            are traction free.
+        degree: velocity degree ``k >= 2``; the pressure has degree ``k - 1``.
+        solver: ``"direct"`` | ``"iterative"``.
+        petsc_options: extra PETSc options overriding the defaults (without prefix).
+
+    Attributes:
+        u: velocity, vector P(degree) Function.
+        p: pressure, P(degree-1) Function (zero mean when the pressure has a null space).
+    """
+
+    def __init__(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        approximation: BoussinesqApproximation,
+        /,
+        *,
+        bcs: dict[str, VelocityBC],
+        degree: int = 2,
+        solver: str = "direct",
+        petsc_options: dict | None = None,
+    ) -> None:
+        if solver not in STOKES_SOLVERS:
+            raise ValueError(f"Unknown Stokes solver {solver!r}; valid names: {sorted(STOKES_SOLVERS)}")
+        if degree < 2:
+            raise ValueError("Taylor-Hood needs velocity degree >= 2")
+        self.mesh = mesh
+        self.approximation = approximation
+        self.bcs = dict(bcs)
+        self.degree = degree
+        self.solver = solver
+        cell = mesh.ufl_cell()
+        self.V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", cell, degree))
+        self.Q = dolfinx.fem.FunctionSpace(mesh, ufl.FiniteElement("Lagrange", cell, degree - 1))
+        self.u = dolfinx.fem.Function(self.V, name="velocity")
+        self.p = dolfinx.fem.Function(self.Q, name="pressure")
+
+        gdim = mesh.geometry.dim
+        self.has_pressure_null_space = all(s in self.bcs for s in side_names(gdim))
+        self._bcs = velocity_dirichlet_bcs(self.V, self.bcs)
+        self._pinned = self.has_pressure_null_space and solver == "direct"
+        if self._pinned:
+            self._bcs.append(self._pressure_pin())
+
+        one = dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0))
+        self._volume = mesh.comm.allreduce(
+            dolfinx.fem.assemble_scalar(dolfinx.fem.form(one * ufl.dx(domain=mesh))), op=MPI.SUM
+        )
+        self._p_integral = dolfinx.fem.form(self.p * ufl.dx)
+
+        self._forms_key: tuple[Any, Any] | None = None
+        self._a = self._L = self._a_pc = None
+        self._A: PETSc.Mat | None = None
+        self._P: PETSc.Mat | None = None
+        self._b: PETSc.Vec | None = None
+        self._x: PETSc.Vec | None = None
+        self._null_space: PETSc.NullSpace | None = None
+        self._operator_current = False
+
+        self._prefix = f"stokes{next(_instance_counter)}_"
+        options = _default_options(solver)
+        options.update(petsc_options or {})
+        self._petsc_options = options
+        self.ksp = PETSc.KSP().create(mesh.comm)
+        self.ksp.setOptionsPrefix(self._prefix)
+
+    # ------------------------------------------------------------------ setup
+    def _pressure_pin(self) -> dolfinx.fem.DirichletBCMetaClass:
+        """Zero Dirichlet condition on the pressure dof(s) at the lower box corner."""
+        lower = box_bounds(self.mesh).lower
+        tol = 1e-10 * float(np.max(box_bounds(self.mesh).upper - lower))
+        gdim = self.mesh.geometry.dim
+
+        def corner(x: np.ndarray) -> np.ndarray:
+            return np.all(np.abs(x[:gdim] - lower[:, None]) <= tol, axis=0)
+
+        dofs = dolfinx.fem.locate_dofs_geometrical(self.Q, corner)
+        return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, self.Q)
+
+    def _build_forms(self, T: Any, C: Any) -> None:
+        u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
+        p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
+        eta = self.approximation.viscosity(T, C)
+        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim)
+        zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
+        dx = ufl.dx(domain=self.mesh)
+        a = [
+            [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
+             -ufl.inner(p, ufl.div(v)) * dx],
+            [-ufl.inner(ufl.div(u), q) * dx, None],
+        ]
+        if self._pinned:
+            a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
+        self._a = dolfinx.fem.form(a)
+        # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
+        zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
+        self._L = dolfinx.fem.form(
+            [ufl.inner(f, v) * dx + ufl.inner(zero_vec, v) * dx, ufl.inner(zero, q) * dx]
+        )
+        if self.solver == "iterative":
+            self._a_pc = dolfinx.fem.form(
+                [[a[0][0], None], [None, ufl.inner(p, q) / eta * dx]]
+            )
+        self._operator_current = False
+
+    def _setup_linear_algebra(self) -> None:
+        self._A = dolfinx.fem.petsc.create_matrix_block(self._a)
+        self._b = dolfinx.fem.petsc.create_vector_block(self._L)
+        self._x = self._b.duplicate()
+        if self.solver == "iterative":
+            self._P = dolfinx.fem.petsc.create_matrix_block(self._a_pc)
+        if self.has_pressure_null_space and self.solver == "iterative":
+            null_vec = self._b.duplicate()
+            null_vec.set(0.0)
+            n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+            null_vec.array[n_u:] = 1.0
+            null_vec.normalize()
+            self._null_space = PETSc.NullSpace().create(vectors=[null_vec], comm=self.mesh.comm)
+
+        opts = PETSc.Options()
+        for key, value in self._petsc_options.items():
+            opts[self._prefix + key] = value
+        if self.solver == "iterative":
+            self.ksp.setOperators(self._A, self._P)
+            pc = self.ksp.getPC()
+            pc.setType("fieldsplit")
+            is_u, is_p = self._index_sets()
+            pc.setFieldSplitIS(("u", is_u), ("p", is_p))
+        else:
+            self.ksp.setOperators(self._A)
+        self.ksp.setFromOptions()
+        if self.solver == "iterative":
+            self.ksp.setInitialGuessNonzero(True)
+
+    def _index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
+        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        n_p = self.Q.dofmap.index_map.size_local
+        start = self._A.getOwnershipRange()[0]
+        comm = self.mesh.comm
+        is_u = PETSc.IS().createStride(n_u, start, 1, comm=comm)
+        is_p = PETSc.IS().createStride(n_p, start + n_u, 1, comm=comm)
+        return is_u, is_p
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, T: Any, C: Any = None) -> StokesResult:
+        """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
+
+        Args:
+            T: temperature (Function, UFL expression or number).
+            C: composition (Function of any degree, UFL expression, number or ``None`` = 0).
+
+        Returns:
+            Iteration count and true residual norm.
+        """
+        key = (T, C)
+        if self._forms_key is None or self._forms_key[0] is not T or self._forms_key[1] is not C:
+            self._build_forms(T, C)
+            self._forms_key = key
+            if self._A is None:
+                self._setup_linear_algebra()
+
+        if not self._operator_current or self.approximation.is_variable_viscosity:
+            self._A.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix_block(self._A, self._a, bcs=self._bcs)
+            self._A.assemble()
+            if self._null_space is not None:
+                self._A.setNullSpace(self._null_space)
+            if self._P is not None:
+                self._P.zeroEntries()
+                dolfinx.fem.petsc.assemble_matrix_block(self._P, self._a_pc, bcs=self._bcs)
+                self._P.assemble()
+            self._operator_current = True
+
+        with self._b.localForm() as b_local:
+            b_local.set(0.0)
+        dolfinx.fem.petsc.assemble_vector_block(self._b, self._L, self._a, bcs=self._bcs)
+        if self._null_space is not None:
+            self._null_space.remove(self._b)
+
+        self._pack_solution(self._x)
+        self.ksp.solve(self._b, self._x)
+        reason = self.ksp.getConvergedReason()
+        if reason < 0:
+            raise RuntimeError(f"Stokes solver did not converge (PETSc reason {reason})")
+        self._unpack_solution(self._x)
+        self._normalise_pressure()
+
+        residual = self._b.duplicate()
+        self._A.mult(self._x, residual)
+        residual.aypx(-1.0, self._b)
+        iterations = self.ksp.getIterationNumber() if self.solver == "iterative" else 1
+        return StokesResult(int(iterations), float(residual.norm()))
+
+    def _pack_solution(self, x: PETSc.Vec) -> None:
+        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        n_p = self.Q.dofmap.index_map.size_local
+        x.array[:n_u] = self.u.x.array[:n_u]
+        x.array[n_u:] = self.p.x.array[:n_p]
+
+    def _unpack_solution(self, x: PETSc.Vec) -> None:
+        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        n_p = self.Q.dofmap.index_map.size_local
+        self.u.x.array[:n_u] = x.array_r[:n_u]
+        self.p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
+        self.u.x.scatter_forward()
+        self.p.x.scatter_forward()
+
+    def _normalise_pressure(self) -> None:
+        if not self.has_pressure_null_space:
+            return
+        mean = self.mesh.comm.allreduce(
+            dolfinx.fem.assemble_scalar(self._p_integral), op=MPI.SUM
+        ) / self._volume
+        self.p.x.array[:] -= mean
+
+    # ------------------------------------------------------------------ adaptivity
+    def transfer_from(
+        self,
+        old: "StokesSolver",
+        transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
+    ) -> None:
+        """Copy ``u`` and ``p`` (used as the initial guess) from a solver on the previous mesh.
+
+        Args:
+            old: solver on the old mesh.
+            transfer: ``transfer(src_on_old_mesh, dst_on_new_mesh)`` fills ``dst``; supplied by
+                the caller (e.g. interpolation between non-matching meshes). Collective.
+        """
+        transfer(old.u, self.u)
+        transfer(old.p, self.p)
+        self.u.x.scatter_forward()
+        self.p.x.scatter_forward()

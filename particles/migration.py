@@ -27,7 +27,7 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
-from particles.generation._cells import geometry_dofmap, locate_owned
+from particles.generation._cells import locate_owned, owned_box
 from particles.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
@@ -115,12 +115,7 @@ class Migrator:
         self.owned_boxes = self._gather_boxes(gdim)
 
     def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
-        box = np.empty((2, gdim))
-        box[0], box[1] = np.inf, -np.inf
-        if self.num_owned_cells:
-            nodes = np.unique(geometry_dofmap(self.mesh)[: self.num_owned_cells])
-            x = self.mesh.geometry.x[nodes, :gdim]
-            box[0], box[1] = x.min(axis=0), x.max(axis=0)
+        box = owned_box(self.mesh)
         boxes = np.empty((self.comm.size, 2, gdim))
         self.comm.Allgather(box, boxes)
         return boxes

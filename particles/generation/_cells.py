@@ -22,6 +22,7 @@ __all__ = [
     "geometry_dofmap",
     "is_affine_simplex",
     "locate_owned",
+    "owned_box",
     "pull_back",
     "push_forward",
 ]
@@ -50,6 +51,18 @@ def geometry_dofmap(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.int32]:
     """Geometry node indices of every local cell, shape=(num_local_cells, num_nodes), int32."""
     dofmap = mesh.geometry.dofmap
     return dofmap.array.reshape(-1, int(dofmap.offsets[1] - dofmap.offsets[0]))
+
+
+def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:
+    """Bounding box of this rank's owned cells, shape=(2, gdim) (lower > upper if none)."""
+    gdim = mesh.geometry.dim
+    box = np.empty((2, gdim))
+    box[0], box[1] = np.inf, -np.inf
+    num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    if num_owned:
+        x = mesh.geometry.x[np.unique(geometry_dofmap(mesh)[:num_owned]), :gdim]
+        box[0], box[1] = x.min(axis=0), x.max(axis=0)
+    return box
 
 
 def cell_nodes(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32]) -> npt.NDArray[np.float64]:

@@ -1,0 +1,64 @@
+"""A regular lattice of points in a box (ASPECT's "uniform box").
+
+Along direction ``d`` there are ``counts[d]`` points from ``lower[d]`` to ``upper[d]`` inclusive
+(one point: the middle). The point with lattice index ``(i_0, ..., i_{d-1})`` has list index
+``ravel_multi_index`` (C order) and id ``first_id + list index``. Each rank only builds the part of
+the lattice inside the bounding box of its owned cells, so no rank holds the whole lattice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from particles.generation._base import GenerationResult
+from particles.generation._cells import owned_box
+from particles.generation._listed import insert_listed_points
+from particles.swarm import Swarm
+
+__all__ = ["BoxLattice"]
+
+
+@dataclass(frozen=True)
+class BoxLattice:
+    """Lattice parameters (each a tuple of length gdim).
+
+    Attributes:
+        lower: Lower corner of the box.
+        upper: Upper corner of the box.
+        counts: Points per direction (>= 1).
+    """
+
+    name: ClassVar[str] = "box_lattice"
+    description: ClassVar[str] = "regular lattice of points in a box with a given count per direction"
+
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    counts: tuple[int, ...]
+
+    def axis(self, d: int) -> npt.NDArray[np.float64]:
+        """Coordinates of the lattice planes along direction ``d``, shape=(counts[d],)."""
+        n, lo, hi = int(self.counts[d]), float(self.lower[d]), float(self.upper[d])
+        if n == 1:
+            return np.array([0.5 * (lo + hi)])
+        return lo + np.arange(n) * ((hi - lo) / (n - 1))
+
+    def generate(self, swarm: Swarm, /) -> GenerationResult:
+        """Insert the lattice points inside the mesh into ``swarm`` (collective)."""
+        gdim = swarm.gdim
+        if not (len(self.lower) == len(self.upper) == len(self.counts) == gdim) or min(self.counts) < 1:
+            raise ValueError(f"box_lattice needs lower, upper, counts of length {gdim} and counts >= 1")
+        box = owned_box(swarm.mesh)
+        tol = 1e-10 * max(1.0, float(np.max(np.abs(np.concatenate([self.lower, self.upper])))))
+        selected = []
+        for d in range(gdim):
+            c = self.axis(d)
+            selected.append(np.flatnonzero((c >= box[0, d] - tol) & (c <= box[1, d] + tol)))
+        grids = np.meshgrid(*selected, indexing="ij")
+        multi = tuple(g.reshape(-1) for g in grids)
+        index = np.ravel_multi_index(multi, tuple(int(n) for n in self.counts)).astype(np.int64)
+        x = np.stack([self.axis(d)[multi[d]] for d in range(gdim)], axis=1).reshape(-1, gdim)
+        return insert_listed_points(swarm, x, index, int(np.prod(self.counts)))

@@ -1,0 +1,96 @@
+"""Random particles following a density inside cells too: Metropolis-Hastings per cell.
+
+As in the seed paper, particle counts per cell come from the cell integrals of the density
+(:mod:`particles.generation._allocation`), and the positions inside cell ``K`` are samples of a
+Metropolis-Hastings chain in the reference cell with target ``g(X) = rho(Phi_K(X)) |det J_K(X)|``,
+which is the density pulled back to the reference cell (so curved and non-affine cells are
+sampled correctly). Proposals are independent uniform points of the reference cell; a proposal
+``X'`` is accepted when ``u g(X) < g(X')`` (always while ``g(X) = 0``). After ``burn_in`` steps every ``thinning``-th state is
+kept. Each cell's chain draws from the cell's own random stream, so the result does not depend on
+the number of ranks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from particles.generation._allocation import allocate_counts
+from particles.generation._base import Density, GenerationResult, evaluate_density, first_free_id, insert_in_cells
+from particles.generation._maps import CellMaps
+from particles.generation._ordering import key_order_offsets
+from particles.generation._random import cell_streams, uniforms
+from particles.generation._sampling import cell_weights, uniform_reference_points
+from particles.swarm import Swarm
+
+__all__ = ["MetropolisHastings"]
+
+_STREAM = 2
+
+
+@dataclass(frozen=True)
+class MetropolisHastings:
+    """Metropolis-Hastings sampling of ``rho`` (callable on points shape=(n, gdim) -> (n,)).
+
+    Attributes:
+        num_particles: Global number of particles.
+        density: Non-negative, non-normalised density; None means uniform.
+        seed: Random seed.
+        thinning: Keep every ``thinning``-th chain state (J in the seed paper).
+        burn_in: Chain steps discarded before the first kept state.
+        quadrature_degree: Degree of the quadrature rule for the cell integrals.
+    """
+
+    name: ClassVar[str] = "metropolis_hastings"
+    description: ClassVar[str] = "density-following positions by a Metropolis-Hastings chain in each cell"
+
+    num_particles: int
+    density: Density | None = None
+    seed: int = 0
+    thinning: int = 10
+    burn_in: int = 20
+    quadrature_degree: int = 4
+
+    def _target(self, maps: CellMaps, idx: npt.NDArray[np.int64], xhat: npt.NDArray[np.float64]
+                ) -> npt.NDArray[np.float64]:
+        g = maps.abs_det(idx, xhat)
+        if self.density is not None:
+            g = g * evaluate_density(self.density, maps.push(idx, xhat))
+        return g
+
+    def generate(self, swarm: Swarm, /) -> GenerationResult:
+        """Insert the particles into ``swarm`` (collective)."""
+        if self.thinning < 1 or self.burn_in < 0 or self.num_particles < 0:
+            raise ValueError("need thinning >= 1, burn_in >= 0, num_particles >= 0")
+        comm = swarm.comm
+        maps = CellMaps(swarm.mesh)
+        streams = cell_streams(maps.keys, self.seed, _STREAM)
+        weights = cell_weights(maps, self.density, self.quadrature_degree)
+        counts = allocate_counts(comm, weights, self.num_particles, uniforms(streams, np.zeros(len(streams)), 1)[:, 0])
+        offsets = key_order_offsets(comm, maps.keys, counts)
+        base = first_free_id(swarm)
+        chains = np.flatnonzero(counts > 0)
+        tdim = maps.tdim
+        state = uniform_reference_points(maps.basix_cell, uniforms(streams[chains], np.ones(chains.shape[0]), tdim))
+        g = self._target(maps, chains, state)
+        steps = self.burn_in + counts[chains] * self.thinning
+        samples = np.empty((int(counts.sum()), tdim))
+        start = (np.cumsum(counts) - counts)[chains]
+        for t in range(1, int(steps.max(initial=0)) + 1):
+            active = np.flatnonzero(steps >= t)
+            u = uniforms(streams[chains[active]], np.full(active.shape[0], 1 + t), tdim + 1)
+            proposal = uniform_reference_points(maps.basix_cell, u[:, :tdim])
+            g_new = self._target(maps, chains[active], proposal)
+            accept = (u[:, tdim] * g[active] < g_new) | (g[active] <= 0)
+            state[active[accept]] = proposal[accept]
+            g[active[accept]] = g_new[accept]
+            kept = t - self.burn_in
+            if kept > 0 and kept % self.thinning == 0:
+                samples[start[active] + kept // self.thinning - 1] = state[active]
+        idx = np.repeat(np.arange(counts.shape[0]), counts)
+        within = np.arange(idx.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
+        insert_in_cells(swarm, maps, idx, samples, base + offsets[idx] + within)
+        return GenerationResult(int(idx.shape[0]), self.num_particles, base)

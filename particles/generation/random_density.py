@@ -1,0 +1,89 @@
+"""Random particles with a given (non-normalised) density; uniform inside each cell.
+
+Following ASPECT's "random uniform" / "probability density function" generators, cell ``K`` gets
+weight ``w_K = int_K rho dx`` (quadrature; the cell volume for a uniform density); the global total
+of particles is shared out by :mod:`particles.generation._allocation` (expected count
+``N w_K / sum w``, partition independent), and each particle is placed uniformly in its cell
+(uniform reference-simplex sample, affine map). Every draw comes from the cell's own random stream,
+and ids follow the global order of cell keys, so a fixed seed gives the same (id, position) set on
+any number of ranks. Inside a cell the density is treated as constant; use
+``metropolis_hastings`` to follow it inside cells (or for non-affine cells).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from particles.generation._allocation import allocate_counts
+from particles.generation._base import Density, GenerationResult, first_free_id, insert_in_cells
+from particles.generation._maps import CellMaps
+from particles.generation._ordering import key_order_offsets
+from particles.generation._random import cell_streams, uniforms
+from particles.generation._sampling import cell_weights, uniform_reference_points
+from particles.swarm import Swarm
+
+__all__ = ["RandomDensity", "RandomUniform"]
+
+_STREAM = 1
+
+
+@dataclass(frozen=True)
+class RandomDensity:
+    """Random positions with density ``rho`` (callable on points shape=(n, gdim) -> (n,)).
+
+    Attributes:
+        num_particles: Global number of particles.
+        seed: Random seed.
+        density: Non-negative, non-normalised density; None means uniform.
+        quadrature_degree: Degree of the quadrature rule for the cell integrals of the density.
+    """
+
+    name: ClassVar[str] = "random_density"
+    description: ClassVar[str] = "random positions with probability proportional to a density function"
+
+    num_particles: int
+    seed: int = 0
+    density: Density | None = None
+    quadrature_degree: int = 4
+
+    def generate(self, swarm: Swarm, /) -> GenerationResult:
+        """Insert the particles into ``swarm`` (collective)."""
+        if self.num_particles < 0:
+            raise ValueError("num_particles must be >= 0")
+        maps = CellMaps(swarm.mesh)
+        if not maps.affine:
+            raise ValueError(f"{self.name} needs affine simplex cells; use metropolis_hastings for other cells")
+        comm = swarm.comm
+        streams = cell_streams(maps.keys, self.seed, _STREAM)
+        weights = cell_weights(maps, self.density, self.quadrature_degree)
+        counts = allocate_counts(comm, weights, self.num_particles, uniforms(streams, np.zeros(len(streams)), 1)[:, 0])
+        offsets = key_order_offsets(comm, maps.keys, counts)
+        base = first_free_id(swarm)
+        idx = np.repeat(np.arange(counts.shape[0]), counts)
+        within = np.arange(idx.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
+        xhat = uniform_reference_points(maps.basix_cell, uniforms(streams[idx], 1 + within, maps.tdim))
+        insert_in_cells(swarm, maps, idx, xhat, base + offsets[idx] + within)
+        return GenerationResult(int(idx.shape[0]), self.num_particles, base)
+
+
+@dataclass(frozen=True)
+class RandomUniform:
+    """Uniformly distributed random positions (``random_density`` with a constant density).
+
+    Attributes:
+        num_particles: Global number of particles.
+        seed: Random seed.
+    """
+
+    name: ClassVar[str] = "random_uniform"
+    description: ClassVar[str] = "uniformly distributed random positions"
+
+    num_particles: int
+    seed: int = 0
+
+    def generate(self, swarm: Swarm, /) -> GenerationResult:
+        """Insert the particles into ``swarm`` (collective)."""
+        return RandomDensity(self.num_particles, self.seed).generate(swarm)

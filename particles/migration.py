@@ -9,9 +9,10 @@ one count per neighbour, then one float64 buffer per neighbour whose rows hold t
 turns the global cell index into its local owned index and inserts the batch.
 
 Unlocated particles take a global fallback: every rank publishes the bounding box of its owned
-cells once; a particle goes to all other ranks whose box contains it; each candidate searches its
-owned cells and answers found/not found; the lowest rank that found it keeps it. Particles nobody
-found are removed and counted as lost.
+cells once; a particle goes to all other ranks whose box contains it (the only collective step,
+an Alltoall of counts); a sole candidate keeps it if one of its owned cells contains it; with
+several candidates, they answer found/not found and the lowest rank that found it keeps it.
+Particles nobody found are removed and counted as lost.
 
 Integrator stage data travels as property columns, so a particle that changes rank in the middle
 of a Runge-Kutta step carries its stages with it.
@@ -27,13 +28,14 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
-from particles.generation._cells import locate_owned, owned_box
+from particles.generation._cells import OwnedLocation, locate_owned, owned_box
 from particles.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
 
 _TAG_COUNT = 7301
 _TAG_DATA = 7302
+_TAG_REPLY = 7303
 _CACHE_ATTR = "_particles_migrator"
 
 
@@ -45,7 +47,8 @@ class MigrationStats:
         sent: Particles this rank sent to neighbours (ghost-cell particles).
         received: Particles this rank received (from neighbours and through the fallback).
         fallback_sent: Unlocated particles this rank offered to candidate ranks (each counted once).
-        lost: Particles this rank removed because no rank contains them.
+        lost: Particles this rank declared lost because no rank contains them (the offering rank,
+            or the sole candidate rank of the fallback that did not find it).
         global_sent, global_received, global_fallback_sent, global_lost: Sums over all ranks.
     """
 
@@ -200,44 +203,72 @@ class Migrator:
         return MigrationStats(sent, received, fallback_sent, lost, *(int(t) for t in totals))
 
     def _fallback(self, swarm: Swarm, unlocated: npt.NDArray[np.bool_], ncols: int) -> tuple[int, int, int]:
-        """Global search for unlocated particles (collective). Returns (offered, received, lost)."""
-        rank, size = self.comm.rank, self.comm.size
+        """Global search for unlocated particles (collective). Returns (offered, received, lost).
+
+        Round 1 (the only collective one) offers each particle to every other rank whose owned box
+        contains it, together with the number of candidates. A sole candidate decides alone: it
+        keeps the particle if one of its owned cells contains it, else counts it lost. For
+        particles with several candidates, the candidates answer found/not found (round 2) and the
+        offering rank tells each candidate whether it is the lowest finder (round 3); both rounds
+        are point-to-point between the pairs of round 1.
+        """
+        rank = self.comm.rank
         rows = np.flatnonzero(unlocated)
         x = swarm.x[rows]
         lower, upper = self.owned_boxes[:, 0, :], self.owned_boxes[:, 1, :]
-        tol = 1e-12 * max(1.0, float(np.nanmax(np.abs(self.owned_boxes[np.isfinite(self.owned_boxes)]), initial=1.0)))
+        finite = self.owned_boxes[np.isfinite(self.owned_boxes)]
+        tol = 1e-12 * max(1.0, float(np.abs(finite).max(initial=1.0)))
         inside = np.all((x[:, None, :] >= lower[None] - tol) & (x[:, None, :] <= upper[None] + tol), axis=2)
         inside[:, rank] = False
-        table = _pack(swarm, rows, np.full(rows.shape[0], -1, dtype=np.int64))
+        num_candidates = inside.sum(axis=1)
+        table = _pack(swarm, rows, num_candidates.astype(np.int64))
         swarm.remove(unlocated)
-        offers = {r: np.flatnonzero(inside[:, r]) for r in range(size) if inside[:, r].any()}
+        offers = {r: np.flatnonzero(inside[:, r]) for r in range(self.comm.size) if inside[:, r].any()}
         received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
-        # Candidates search their owned cells and answer with the local cell (or -1).
-        found_cells: dict[int, npt.NDArray[np.int32]] = {}
-        found_xref: dict[int, npt.NDArray[np.float64]] = {}
+        lost = int(np.count_nonzero(num_candidates == 0))
+        kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]] = []
+        shared: dict[int, tuple[npt.NDArray[np.int64], OwnedLocation]] = {}
         answers: dict[int, npt.NDArray[np.float64]] = {}
-        for src, t in received.items():
-            loc = locate_owned(self.mesh, _Unpacked(swarm, t).x)
-            found_cells[src], found_xref[src] = loc.cells, loc.xref
-            answers[src] = (loc.cells >= 0).astype(np.float64)[:, None]
-        replies = self._sparse_exchange(answers, 1)
-        # The offering rank picks the lowest rank that found each particle.
-        keeper = np.full(rows.shape[0], size, dtype=np.int64)
+        for src in sorted(received):
+            t = received[src]
+            batch = _Unpacked(swarm, t)
+            loc = locate_owned(self.mesh, batch.x)
+            sole = batch.global_cells == 1
+            kept.append((t[sole & (loc.cells >= 0)], loc.xref[sole & (loc.cells >= 0)], loc.cells[sole & (loc.cells >= 0)]))
+            lost += int(np.count_nonzero(sole & (loc.cells < 0)))
+            if (~sole).any():
+                shared[src] = (np.flatnonzero(~sole), loc)
+                answers[src] = (loc.cells[~sole] >= 0).astype(np.float64)[:, None]
+        multi = {r: idx[num_candidates[idx] > 1] for r, idx in offers.items()}
+        multi = {r: idx for r, idx in multi.items() if idx.size}
+        replies = self._known_exchange(answers, {r: idx.shape[0] for r, idx in multi.items()})
+        keeper = np.full(rows.shape[0], self.comm.size, dtype=np.int64)
         for r in sorted(replies, reverse=True):
-            hit = replies[r][:, 0] > 0
-            keeper[offers[r][hit]] = r
-        decisions = {r: (keeper[idx] == r).astype(np.float64)[:, None] for r, idx in offers.items()}
-        verdicts = self._sparse_exchange(decisions, 1)
-        n_in = 0
+            keeper[multi[r][replies[r][:, 0] > 0]] = r
+        lost += int(np.count_nonzero((keeper == self.comm.size) & (num_candidates > 1)))
+        decisions = {r: (keeper[idx] == r).astype(np.float64)[:, None] for r, idx in multi.items()}
+        verdicts = self._known_exchange(decisions, {r: a.shape[0] for r, a in answers.items()})
         for src in sorted(verdicts):
-            keep = verdicts[src][:, 0] > 0
-            if keep.any():
-                batch = _Unpacked(swarm, received[src][keep])
-                swarm.add(batch.ids, batch.x, found_xref[src][keep], found_cells[src][keep], batch.properties)
-                n_in += int(np.count_nonzero(keep))
-        offered = int(np.count_nonzero(inside.any(axis=1)))
-        lost = int(np.count_nonzero(keeper == size))
+            rows_shared, loc = shared[src]
+            sel = rows_shared[verdicts[src][:, 0] > 0]
+            kept.append((received[src][sel], loc.xref[sel], loc.cells[sel]))
+        n_in = 0
+        for t, xref, cells in kept:
+            if t.shape[0]:
+                batch = _Unpacked(swarm, t)
+                swarm.add(batch.ids, batch.x, xref, cells, batch.properties)
+                n_in += t.shape[0]
+        offered = int(np.count_nonzero(num_candidates > 0))
         return offered, n_in, lost
+
+    def _known_exchange(self, tables: dict[int, npt.NDArray[np.float64]], expected: dict[int, int]
+                        ) -> dict[int, npt.NDArray[np.float64]]:
+        """Point-to-point exchange of one-column tables when both sides know the sizes."""
+        recv = {r: np.empty((n, 1)) for r, n in expected.items() if n > 0}
+        reqs = [self.comm.Irecv(recv[r], source=r, tag=_TAG_REPLY) for r in recv]
+        reqs += [self.comm.Isend(np.ascontiguousarray(t), dest=r, tag=_TAG_REPLY) for r, t in tables.items() if t.shape[0]]
+        MPI.Request.Waitall(reqs)
+        return recv
 
 
 def migrator_for(mesh: dolfinx.mesh.Mesh, /) -> Migrator:

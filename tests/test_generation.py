@@ -262,3 +262,23 @@ def test_parallel_density_statistics():
     assert ok and x.shape[0] == 4000 and comm.allreduce(swarm.num_particles) == 4000
     assert chi2 < dof + 5.0 * np.sqrt(2.0 * dof)
     assert comm.allreduce(result.num_local) == result.num_global == 4000
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("gen", [RandomUniform(700, seed=1), ReferencePoints("quadrature", 2),
+                                 MetropolisHastings(300, density=lambda x: 1.0 + x[:, 2], seed=2, thinning=3),
+                                 BoxLattice((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (5, 4, 5))])
+def test_same_particles_on_any_number_of_ranks_3d(gen):
+    comm = MPI.COMM_WORLD
+
+    def factory(c):
+        return dolfinx.mesh.create_unit_cube(c, 4, 4, 4)
+
+    swarm, result, ok = _run(comm, gen, factory)
+    ids, x = _gathered(comm, swarm)
+    serial, _, serial_ok = _run(MPI.COMM_SELF, gen, factory)
+    sorder = np.argsort(serial.ids)
+    assert ok and serial_ok and result.num_outside == 0
+    np.testing.assert_array_equal(ids, np.arange(result.num_global))
+    np.testing.assert_array_equal(ids, serial.ids[sorder])
+    np.testing.assert_array_equal(x, serial.x[sorder])

@@ -141,3 +141,28 @@ def test_migrate_serial_removes_unlocated():
     assert stats.sent == stats.received == 0
     assert swarm.num_particles == n - 3
     swarm.check_invariants()
+
+
+@pytest.mark.mpi
+def test_fallback_points_on_partition_boundaries_kept_once():
+    """Unlocated particles at mesh vertices (many shared by ranks): each kept by the lowest finder."""
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_unit_square(comm, 6, 6, ghost_mode=dolfinx.mesh.GhostMode.none)
+    swarm = Swarm(mesh)
+    vertices = np.array([[i / 6, j / 6] for i in range(7) for j in range(7)])
+    if comm.rank == 0:
+        # Rank 0 offers all of them; only other ranks are candidates.
+        swarm.add(np.arange(49), vertices, np.full((49, 2), np.nan), np.full(49, -1, dtype=np.int32))
+    stats = migrate(swarm)
+    found = locate_owned(mesh, vertices).cells >= 0 if comm.rank > 0 else np.zeros(49, dtype=bool)
+    found_by = np.array(comm.allgather(found))  # (size, 49)
+    finder = np.where(found_by.any(axis=0), np.argmax(found_by, axis=0), -1)
+    holders = np.concatenate([np.full(len(i), r) for r, i in enumerate(comm.allgather(swarm.ids))])
+    ids = np.concatenate(comm.allgather(swarm.ids))
+    ok = comm.allreduce(_check_owned_and_contained(swarm), op=MPI.LAND)
+    assert ok
+    np.testing.assert_array_equal(np.sort(ids), np.flatnonzero(finder >= 0))
+    np.testing.assert_array_equal(holders, finder[ids])
+    assert stats.global_lost == np.count_nonzero(finder < 0)
+    if comm.size > 2:
+        assert np.any(found_by.sum(axis=0) > 1)  # the tie rule was exercised

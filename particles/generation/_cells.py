@@ -50,7 +50,7 @@ def is_affine_simplex(mesh: dolfinx.mesh.Mesh) -> bool:
 def geometry_dofmap(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.int32]:
     """Geometry node indices of every local cell, shape=(num_local_cells, num_nodes), int32."""
     dofmap = mesh.geometry.dofmap
-    return dofmap.array.reshape(-1, int(dofmap.offsets[1] - dofmap.offsets[0]))
+    return dofmap.array.reshape(-1, mesh.geometry.cmap.create_dof_layout().num_dofs)
 
 
 def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:

@@ -67,7 +67,7 @@ class CellMaps:
         self.cells = np.arange(num_owned, dtype=np.int32)
         nodes = cell_nodes(mesh, self.cells)
         canonical = _lex_sort_rows(nodes)
-        self.keys = canonical.reshape(num_owned, -1)
+        self.keys = canonical.reshape(num_owned, nodes.shape[1] * self.gdim)
         self.affine = is_affine_simplex(mesh)
         self.basix_cell = basix.cell.string_to_type(mesh.topology.cell_name())
         self._nodes = canonical if self.affine else nodes

@@ -100,7 +100,7 @@ class Migrator:
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
         self.mesh = mesh
-        self.comm: MPI.Intracomm = mesh.comm
+        self.comm: MPI.Intracomm = mesh.comm.Dup()  # private tag space for the messages below
         tdim, gdim = mesh.topology.dim, mesh.geometry.dim
         cmap = mesh.topology.index_map(tdim)
         self.num_owned_cells = cmap.size_local

@@ -9,7 +9,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from convection.boundary import side_axis, side_facet_tags, side_names, side_tag
+from convection.boundary import side_axis, side_names
 from convection.energy import EnergySolver
 
 
@@ -83,19 +83,15 @@ def nusselt(energy_solver: EnergySolver, u: dolfinx.fem.Function, side: str = "t
     flux_out = energy_solver.boundary_flux(u, side)
     q_axis = -flux_out if upper else flux_out
 
-    tags = side_facet_tags(mesh)
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags)
-    one = dolfinx.fem.Constant(mesh, np.float64(1.0))
     names = side_names(gdim)
     lower_side, upper_side = [s for s in names if side_axis(s, gdim)[0] == axis]
     if side_axis(lower_side, gdim)[1]:
         lower_side, upper_side = upper_side, lower_side
-    area = _integrate(mesh, one * ds(side_tag(side, gdim)))
-    T = energy_solver.T
+    area = energy_solver.side_integral(side)[1]
     means = []
     for s in (lower_side, upper_side):
-        tag = side_tag(s, gdim)
-        means.append(_integrate(mesh, T * ds(tag)) / _integrate(mesh, one * ds(tag)))
+        integral, measure = energy_solver.side_integral(s)
+        means.append(integral / measure)
     x = mesh.geometry.x[:, axis]
     lo = mesh.comm.allreduce(float(x.min()) if x.size else np.inf, op=MPI.MIN)
     hi = mesh.comm.allreduce(float(x.max()) if x.size else -np.inf, op=MPI.MAX)

@@ -47,7 +47,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
-from convection.boundary import TemperatureBC, locate_side_dofs, temperature_dirichlet_bcs
+from convection.boundary import (
+    TemperatureBC,
+    locate_side_dofs,
+    side_facet_tags,
+    side_tag,
+    temperature_dirichlet_bcs,
+)
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -158,7 +164,8 @@ class EnergySolver:
         self._a = self._L = None
         self._A: PETSc.Mat | None = None
         self._b: PETSc.Vec | None = None
-        self._flux_forms: dict[tuple[int, str], tuple[Any, Any]] = {}
+        self._flux_forms: dict[tuple[int, str], tuple[Any, Any, Any]] = {}
+        self._side_forms: dict[str, tuple[Any, Any]] = {}
 
         self._prefix = f"energy{next(_instance_counter)}_"
         options = _default_options(solver)
@@ -300,6 +307,20 @@ class EnergySolver:
             self._flux_forms[key] = (dolfinx.fem.form(F), w, u)
         form = self._flux_forms[key][0]
         return float(self.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM))
+
+    def side_integral(self, side: str) -> tuple[float, float]:
+        """``(int_side T ds, int_side 1 ds)`` over the whole mesh. Collective."""
+        if side not in self._side_forms:
+            tags = side_facet_tags(self.mesh)
+            ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=tags)(
+                side_tag(side, self.mesh.geometry.dim)
+            )
+            one = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(1.0))
+            self._side_forms[side] = (dolfinx.fem.form(self.T * ds), dolfinx.fem.form(one * ds))
+        values = np.array([dolfinx.fem.assemble_scalar(f) for f in self._side_forms[side]])
+        total = np.empty_like(values)
+        self.mesh.comm.Allreduce(values, total, op=MPI.SUM)
+        return float(total[0]), float(total[1])
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(

@@ -20,7 +20,6 @@ from convection.config import ConfigError, load_config
 __all__ = ["main"]
 
 EXIT_CONFIG_ERROR = 2
-EXIT_STOPPED = 130
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -43,9 +42,11 @@ class _StopFlag:
 
     def __init__(self) -> None:
         self.requested = False
+        self.signum = 0
 
     def __call__(self, signum: int, frame: object) -> None:
         self.requested = True
+        self.signum = signum
         signal.signal(signum, signal.SIG_DFL)
 
     def __bool__(self) -> bool:
@@ -80,7 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     simulation = Simulation(config, comm=comm)
     summary = simulation.run(should_stop=lambda: stop.requested)
-    return EXIT_STOPPED if summary.reason == "stopped by signal" else 0
+    # Stopped by a signal: the shell convention 128 + signal number (on the ranks that got it).
+    return 128 + stop.signum if summary.reason == "stopped by signal" and stop.signum else 0
 
 
 if __name__ == "__main__":

@@ -243,6 +243,7 @@ class Simulation:
         reason = "end time"
         result = self.stokes.solve(self.energy.T, self.composition)
         row: dict[str, Any] = {}
+        written_step = -1
         try:
             while True:
                 diag = self._diagnostics()
@@ -253,6 +254,7 @@ class Simulation:
                 progress.update(self.step, self.t, row["dt"], diag["vrms"], extra=f"Nu={diag['nusselt']:.5g}")
                 if ocfg["fields_every"] and self.step % ocfg["fields_every"] == 0:
                     fields.write(self._fields(), self.t)
+                    written_step = self.step
                 history.append((diag["vrms"], diag["nusselt"]))
                 if self.t >= tcfg["end"] * (1.0 - 1e-12):
                     break
@@ -277,7 +279,8 @@ class Simulation:
         finally:
             writer.close()
             progress.close()
-        fields.write(self._fields(), self.t)
+        if written_step != self.step:
+            fields.write(self._fields(), self.t)
         fields.close()
         summary = RunSummary(self.step, self.t, float(row.get("vrms", np.nan)), float(row.get("nusselt", np.nan)),
                              self.num_cells, time.monotonic() - start, reason)

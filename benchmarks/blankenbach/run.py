@@ -1,0 +1,136 @@
+"""Blankenbach et al. (1989) steady convection benchmark: run cases 1a/1b/1c and compare.
+
+Usage::
+
+    python benchmarks/blankenbach/run.py [--case 1a 1b 1c] [--ranks 2] [--quick]
+                                         [--adaptive] [--compare-ranks] [--out DIR]
+
+Each case runs ``configs/blankenbach_<case>.yaml`` with the CLI under mpirun (to steady state),
+then writes ``<out>/results.md`` — a table of the mesh used, Nu and vrms at steady state and their
+relative errors against ``reference.csv`` — and ``<out>/results.png``. ``--adaptive`` adds an
+adaptive run of case 1b and compares it with the uniform one; ``--compare-ranks`` runs 1a on 1
+and 2 ranks and reports the differences. ``--quick`` uses coarse meshes (for smoke tests).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT))
+
+from convection.plot import read_statistics  # noqa: E402
+
+
+def reference() -> dict[str, dict[str, float]]:
+    with open(HERE / "reference.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(line for line in f if not line.startswith("#"))]
+    return {r["case"]: {k: float(v) for k, v in r.items() if k != "case"} for r in rows}
+
+
+def run_case(config: str, out: Path, ranks: int, overrides: list[str]) -> dict:
+    """Run one config with the CLI under mpirun; returns summary.json plus the statistics."""
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    cmd = [sys.executable, "-m", "convection", "run", str(ROOT / "configs" / config), "--output", str(out),
+           "--set", "output.progress=lines", "--set", "output.progress_every=100"]
+    for item in overrides:
+        cmd += ["--set", item]
+    if ranks > 1:
+        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
+    print("$", " ".join(cmd), flush=True)
+    subprocess.run(cmd, cwd=ROOT, env=env, check=True)
+    summary = json.loads((out / "summary.json").read_text())
+    summary["statistics"] = read_statistics(out / "statistics.csv")
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--case", nargs="+", default=["1a", "1b", "1c"], choices=["1a", "1b", "1c"])
+    parser.add_argument("--ranks", type=int, default=2)
+    parser.add_argument("--quick", action="store_true", help="coarse meshes, short runs")
+    parser.add_argument("--adaptive", action="store_true", help="also run 1b adaptively and compare")
+    parser.add_argument("--compare-ranks", action="store_true", help="run 1a on 1 and 2 ranks")
+    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "blankenbach"))
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    ref = reference()
+    quick = ["mesh.cells=[12,12]", "time.steady_state_tolerance=1e-4"] if args.quick else []
+
+    rows = []
+    results = {}
+    for case in args.case:
+        summary = run_case(f"blankenbach_{case}.yaml", out / case, args.ranks, quick)
+        results[case] = summary
+        config = (out / case / "config.yaml").read_text()
+        cells = next(line.split(":", 1)[1].strip() for line in config.splitlines() if line.strip().startswith("cells:"))
+        rows.append((case, f"{cells} P2-P1/P2 uniform", summary, ref[case]))
+    if args.adaptive:
+        adaptive = ["adaptivity.enabled=true", "adaptivity.every=5", "adaptivity.min_level=0",
+                    "adaptivity.max_level=2", "adaptivity.refine_fraction=0.2", "adaptivity.coarsen_fraction=0.5",
+                    "mesh.cells=[16,16]"] + (["mesh.cells=[6,6]", "time.steady_state_tolerance=1e-4"] if args.quick else [])
+        summary = run_case("blankenbach_1b.yaml", out / "1b_adaptive", args.ranks, adaptive)
+        results["1b_adaptive"] = summary
+        rows.append(("1b", "[16, 16] base, levels 0-2, adaptive", summary, ref["1b"]))
+
+    lines = ["| case | mesh | steps | cells | Nu | Nu rel. error | vrms | vrms rel. error | wall time [s] |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for case, mesh, s, r in rows:
+        nu_err = (s["nusselt"] - r["nusselt"]) / r["nusselt"]
+        v_err = (s["vrms"] - r["vrms"]) / r["vrms"]
+        lines.append(f"| {case} | {mesh} | {s['steps']} | {s['cells']} | {s['nusselt']:.6f} | {nu_err:+.3%} | "
+                     f"{s['vrms']:.5f} | {v_err:+.3%} | {s['wall_time']:.1f} |")
+    if "1b_adaptive" in results and "1b" in results:
+        a, u = results["1b_adaptive"], results["1b"]
+        lines += ["", f"Adaptive 1b vs uniform 1b: Nu {(a['nusselt'] - u['nusselt']) / u['nusselt']:+.3%}, "
+                      f"vrms {(a['vrms'] - u['vrms']) / u['vrms']:+.3%}, cells {a['cells']} vs {u['cells']} "
+                      f"(see {out / '1b_adaptive' / 'statistics.csv'}, column cells)"]
+    if args.compare_ranks:
+        one = run_case("blankenbach_1a.yaml", out / "1a_ranks1", 1, quick)
+        two = run_case("blankenbach_1a.yaml", out / "1a_ranks2", 2, quick)
+        lines += ["", f"1a on 1 vs 2 ranks: Nu {one['nusselt']:.10f} vs {two['nusselt']:.10f} "
+                      f"(rel. diff {abs(one['nusselt'] - two['nusselt']) / one['nusselt']:.2e}), vrms {one['vrms']:.10f} vs "
+                      f"{two['vrms']:.10f} (rel. diff {abs(one['vrms'] - two['vrms']) / one['vrms']:.2e}), "
+                      f"steps {one['steps']} vs {two['steps']}"]
+    table = "\n".join(lines) + "\n"
+    (out / "results.md").write_text(table)
+    print(table)
+    _plot(results, ref, out / "results.png")
+    print(f"wrote {out / 'results.md'} and {out / 'results.png'}")
+    return 0
+
+
+def _plot(results: dict, ref: dict, png: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    for name, s in results.items():
+        st = s["statistics"]
+        case = name[:2]
+        axes[0].plot(st["time"], st["nusselt"] / ref[case]["nusselt"], label=name)
+        axes[1].plot(st["time"], st["vrms"] / ref[case]["vrms"], label=name)
+    for ax, label in zip(axes, ("Nu / Nu_ref", "vrms / vrms_ref")):
+        ax.axhline(1.0, color="k", lw=0.8)
+        ax.set_ylim(0.9, 1.1)
+        ax.set_xscale("log")
+        ax.set_xlabel("time")
+        ax.set_ylabel(label)
+        ax.legend()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,98 @@
+"""End-to-end convection runs through Simulation and the CLI (small meshes, few steps)."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from convection.config import load_config
+from convection.plot import read_statistics
+from convection.simulation import STATISTICS_COLUMNS, Simulation
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _config(tmp_path, *extra):
+    return load_config(ROOT / "configs" / "blankenbach_1a.yaml", [
+        "mesh.cells=[8,8]", "time.max_steps=15", "output.progress=none", f"output.directory={tmp_path}",
+        "output.fields_every=5", *extra,
+    ])
+
+
+def _run(config, comm):
+    return Simulation(config, comm=comm).run()
+
+
+def test_run_writes_statistics_config_and_fields(tmp_path):
+    summary = _run(_config(tmp_path), MPI.COMM_SELF)
+    assert summary.steps == 15 and summary.reason == "max steps"
+    stats = read_statistics(tmp_path / "statistics.csv")
+    assert list(stats) == list(STATISTICS_COLUMNS)
+    assert np.array_equal(stats["step"], np.arange(16))
+    assert np.all(np.diff(stats["time"]) > 0)
+    assert stats["nusselt"][0] == pytest.approx(1.0, abs=2e-2)  # nearly conductive start
+    assert np.all((stats["T_min"] >= -0.05) & (stats["T_max"] <= 1.05))
+    assert stats["vrms"][-1] > stats["vrms"][0]  # convection starts
+    assert json.loads((tmp_path / "summary.json").read_text())["steps"] == 15
+    assert load_config(tmp_path / "config.yaml")["mesh"]["cells"] == [8, 8]  # resolved copy re-loads
+    meshio = pytest.importorskip("meshio")
+    with meshio.xdmf.TimeSeriesReader(str(tmp_path / "fields_000.xdmf")) as reader:
+        points, _ = reader.read_points_cells()
+        assert reader.num_steps > 0
+    assert points.shape[0] == 81
+    import h5py
+
+    with h5py.File(tmp_path / "fields_000.h5", "r") as h5:
+        assert len(h5["Function/temperature"]) == 4  # steps 0, 5, 10, 15
+        assert set(h5["Function"]) == {"temperature", "velocity", "pressure"}
+
+
+def test_adaptive_run_changes_cells_and_keeps_fields(tmp_path):
+    config = _config(tmp_path, "adaptivity.enabled=true", "adaptivity.every=5", "adaptivity.max_level=2",
+                     "adaptivity.refine_fraction=0.2", "adaptivity.coarsen_fraction=0.3")
+    summary = _run(config, MPI.COMM_SELF)
+    stats = read_statistics(tmp_path / "statistics.csv")
+    assert stats["cells"][0] > 128  # refined to the initial state
+    assert len(set(stats["cells"])) > 1  # the mesh changed during the run
+    # transferred fields stay sane across adaptations
+    assert np.all(np.abs(np.diff(stats["vrms"][1:])) < 0.5 * stats["vrms"][1:].max())
+    assert summary.cells == stats["cells"][-1]
+    assert len(list(tmp_path.glob("fields_*.xdmf"))) >= 2
+
+
+@pytest.mark.mpi
+def test_parallel_run_matches_serial(tmp_path_factory):
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path_factory.mktemp("sim")) if comm.rank == 0 else None))
+    parallel = _run(_config(base / "parallel"), comm)
+    serial = _run(_config(base / f"serial{comm.rank}"), MPI.COMM_SELF)
+    ok = (abs(parallel.vrms - serial.vrms) <= 1e-8 * serial.vrms
+          and abs(parallel.nusselt - serial.nusselt) <= 1e-8 * serial.nusselt
+          and parallel.steps == serial.steps)
+    assert comm.allreduce(ok, op=MPI.LAND), (parallel, serial)
+
+
+def test_sigterm_stops_cleanly(tmp_path):
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    cmd = [shutil.which("mpirun"), "-n", "2", "--oversubscribe", sys.executable, "-m", "convection", "run",
+           str(ROOT / "configs" / "blankenbach_1a.yaml"), "--set", "mesh.cells=[8,8]", "--set", "time.end=1e3",
+           "--set", "time.steady_state_tolerance=null", "--set", "output.progress=none", "--output", str(tmp_path)]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    stats = tmp_path / "statistics.csv"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and (not stats.exists() or len(stats.read_text().splitlines()) < 6):
+        time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    proc.communicate(timeout=120)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["reason"] == "stopped by signal"
+    rows = read_statistics(stats)
+    assert rows["step"][-1] == summary["steps"] >= 5

@@ -5,7 +5,8 @@ Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in 
     (2 eta eps(u), eps(v)) - (p, div v) = ((Ra T - Rb C) e_z, v)
                             -(q, div u) = 0
 
-on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1). Boundary conditions are
+on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1). With a variable viscosity the
+cell integrals use a quadrature of degree ``3 k``. Boundary conditions are
 :class:`~convection.boundary.VelocityBC` per box side; free slip is a zero Dirichlet condition on
 the normal velocity component. When every side fixes the normal velocity the pressure is only
 defined up to a constant: the constant-pressure null space is attached to the operator (iterative
@@ -172,7 +173,9 @@ class StokesSolver:
         eta = self.approximation.viscosity(T, C)
         f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim)
         zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
-        dx = ufl.dx(domain=self.mesh)
+        # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
+        metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
+        dx = ufl.dx(domain=self.mesh, metadata=metadata)
         a = [
             [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
              -ufl.inner(p, ufl.div(v)) * dx],

@@ -31,7 +31,7 @@ from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_ind
 from convection.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.boundary import TemperatureBC, VelocityBC, side_names
 from convection.config import dump_config, expression_constants
-from convection.diagnostics import nusselt, temperature_stats, vrms
+from convection.diagnostics import RunDiagnostics
 from convection.energy import EnergySolver
 from convection.expressions import Expression
 from convection.mesh import BoxSpec, create_box_mesh
@@ -148,6 +148,7 @@ class Simulation:
             mesh, self.approximation, bcs=self.temperature_bcs, degree=cfg["energy"]["degree"],
             stabilisation=cfg["energy"]["stabilisation"],
         )
+        self.diagnostics = RunDiagnostics(self.stokes.u, self.energy, side="top")
         self.composition: dolfinx.fem.Function | None = None
         if self.initial_composition is not None:
             degree = cfg["composition"]["degree"]
@@ -199,12 +200,9 @@ class Simulation:
 
     # ------------------------------------------------------------------ time loop
     def _diagnostics(self) -> dict[str, float]:
-        stats = temperature_stats(self.energy.T)
-        return {
-            "vrms": vrms(self.stokes.u),
-            "nusselt": nusselt(self.energy, self.stokes.u, side="top"),
-            "T_mean": stats.mean, "T_min": stats.min, "T_max": stats.max,
-        }
+        d = self.diagnostics.compute()
+        return {"vrms": d.vrms, "nusselt": d.nusselt, "T_mean": d.temperature.mean,
+                "T_min": d.temperature.min, "T_max": d.temperature.max}
 
     def _timestep(self) -> float:
         tcfg = self.config["time"]

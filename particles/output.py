@@ -1,0 +1,408 @@
+"""Particle output: one HDF5 file per output step plus one XDMF time series (seed paper 2.8).
+
+Every rank writes its own slice of ONE dataset per quantity into a shared HDF5 file with MPI-IO
+(Debian's ``python3-h5py-mpi``): the slice starts at the exclusive prefix sum of the local particle
+counts. A step's file holds
+
+- ``ids``: global particle ids, shape=(N,), int64;
+- ``positions``: shape=(N, 3), float64 (zero-padded in 1D/2D, as XDMF and ParaView expect);
+- ``connectivity``: ``0..N-1``, shape=(N,), int64 (the Polyvertex topology);
+- ``rank``: the rank that owned each particle, shape=(N,), int32 (for pictures of the partition);
+- ``properties/<name>``: one dataset per property, shape=(N,) or (N, k), float64.
+
+``particles.xdmf`` lists all steps as a Temporal collection of Polyvertex grids that reference the
+datasets above, so ParaView opens the whole series at once. Every file appears atomically: it is
+written under a hidden temporary name in the same directory and renamed (``os.replace``, by rank 0
+after a barrier) only once complete, so a run killed at any moment leaves only complete files under
+the final names (at worst a stray hidden temporary file).
+
+If the h5py build is serial and more than one rank writes, the data are gathered to rank 0, which
+writes alone (a :class:`RuntimeWarning` says so).
+
+Mesh fields (e.g. a DG0 or P1 Function interpolated from particles) go through
+:func:`write_mesh_fields`, a thin wrapper of :class:`dolfinx.io.XDMFFile`.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import NamedTuple, Sequence
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+import ufl
+from mpi4py import MPI
+
+import dolfinx.fem
+import dolfinx.io
+import dolfinx.mesh
+
+from particles.swarm import Swarm
+
+__all__ = ["H5Sink", "OutputRecord", "ParticleWriter", "atomic_write_text", "exclusive_offset", "write_mesh_fields"]
+
+
+def exclusive_offset(comm: MPI.Intracomm, count: int, /) -> tuple[int, int]:
+    """Start of this rank's slice and the global total for local ``count`` rows (collective).
+
+    Returns:
+        ``(offset, total)``: the exclusive prefix sum of the counts, and their sum.
+    """
+    offset = comm.exscan(int(count), op=MPI.SUM)
+    total = comm.allreduce(int(count), op=MPI.SUM)
+    return (0 if offset is None or comm.rank == 0 else int(offset)), int(total)
+
+
+def _mpi_h5py() -> bool:
+    return bool(h5py.get_config().mpi)
+
+
+class H5Sink:
+    """An HDF5 file written collectively under a temporary name and renamed when complete.
+
+    With an MPI build of h5py (or a single rank) every rank writes its slice of each distributed
+    dataset itself (``driver="mpio"``); otherwise the slices are gathered and rank 0 writes. Use
+    as a context manager: leaving the block normally publishes the file (:meth:`commit`), an
+    exception removes the temporary file.
+
+    Args:
+        path: Final file name (same on all ranks).
+        comm: The communicator of the ranks that write.
+        parallel: Force MPI-IO (True) or gather-to-rank-0 (False); by default MPI-IO whenever the
+            h5py build supports it.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], comm: MPI.Intracomm, /, *, parallel: bool | None = None) -> None:
+        self.path = Path(path)
+        self.comm = comm
+        if parallel is None:
+            parallel = comm.size == 1 or _mpi_h5py()
+            if not parallel:
+                warnings.warn(
+                    f"h5py is a serial build: gathering particle data to rank 0 to write {self.path.name}",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+        elif parallel and comm.size > 1 and not _mpi_h5py():
+            raise RuntimeError("parallel HDF5 output needs an MPI build of h5py")
+        self.parallel = parallel
+        name = f".{self.path.name}.{uuid.uuid4().hex[:12]}.tmp" if comm.rank == 0 else None
+        self.tmp = self.path.parent / comm.bcast(name, root=0)
+        self.file: h5py.File | None = None
+        if self.parallel and comm.size > 1:
+            self.file = h5py.File(self.tmp, "w", driver="mpio", comm=comm)
+        elif comm.rank == 0:
+            self.file = h5py.File(self.tmp, "w")
+
+    def __enter__(self) -> H5Sink:
+        return self
+
+    def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
+        if exc_type is None:
+            self.commit()
+        else:
+            self.abort()
+
+    def distributed(self, name: str, local: npt.ArrayLike) -> None:
+        """Dataset ``name`` = concatenation over ranks (in rank order) of ``local`` (collective).
+
+        ``local`` has shape=(n, ...) with the same trailing shape and dtype on every rank.
+        """
+        local = np.ascontiguousarray(local)
+        if self.parallel:
+            offset, total = exclusive_offset(self.comm, local.shape[0])
+            dset = self._create(name, (total, *local.shape[1:]), local.dtype)
+            if local.shape[0]:
+                dset[offset : offset + local.shape[0]] = local
+        else:
+            pieces = self.comm.gather(local, root=0)
+            if self.comm.rank == 0:
+                self._create(name, None, None, data=np.concatenate(pieces))
+
+    def replicated(self, name: str, value: npt.ArrayLike) -> None:
+        """Dataset ``name`` holding rank 0's ``value`` (collective; shape and dtype from rank 0)."""
+        value = np.ascontiguousarray(value) if self.comm.rank == 0 else None
+        meta = self.comm.bcast((value.shape, value.dtype.str) if value is not None else None, root=0)
+        if self.parallel and self.comm.size > 1:
+            dset = self._create(name, meta[0], np.dtype(meta[1]))
+            if self.comm.rank == 0 and value.size:
+                dset[...] = value
+        elif self.comm.rank == 0:
+            self._create(name, None, None, data=value)
+
+    def attrs(self, **values: object) -> None:
+        """Root attributes (rank 0's values are written; collective)."""
+        values = self.comm.bcast(values if self.comm.rank == 0 else None, root=0)
+        if self.file is not None:
+            for key, value in values.items():
+                self.file.attrs[key] = value
+
+    def _create(self, name: str, shape: tuple[int, ...] | None, dtype: np.dtype | None,
+                data: npt.NDArray | None = None) -> h5py.Dataset:
+        assert self.file is not None
+        if data is not None:
+            return self.file.create_dataset(name, data=data)
+        return self.file.create_dataset(name, shape=shape, dtype=dtype)
+
+    def commit(self) -> Path:
+        """Close, then publish the file under its final name (collective). Returns the path."""
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+        self.comm.Barrier()
+        if self.comm.rank == 0:
+            _fsync(self.tmp)
+            os.replace(self.tmp, self.path)
+        self.comm.Barrier()
+        return self.path
+
+    def abort(self) -> None:
+        """Close and delete the temporary file (best effort, no communication)."""
+        if self.file is not None:
+            try:
+                self.file.close()
+            except Exception:  # noqa: BLE001 - already failing; keep the original error
+                pass
+            self.file = None
+        if self.comm.rank == 0:
+            self.tmp.unlink(missing_ok=True)
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and ``os.replace`` (one process)."""
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:12]}.tmp"
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+class OutputRecord(NamedTuple):
+    """One written output step.
+
+    Attributes:
+        step: Time step number.
+        time: Simulation time.
+        path: The step's HDF5 file.
+        num_particles: Particles written (over all ranks).
+    """
+
+    step: int
+    time: float
+    path: Path
+    num_particles: int
+
+
+def _attribute_type(k: int) -> str:
+    return {1: "Scalar", 3: "Vector", 6: "Tensor6", 9: "Tensor"}.get(k, "Matrix")
+
+
+def _data_item(h5name: str, dataset: str, shape: tuple[int, ...], dtype: np.dtype) -> ET.Element:
+    kind = "Float" if dtype.kind == "f" else ("UInt" if dtype.kind == "u" else "Int")
+    item = ET.Element("DataItem", Dimensions=" ".join(str(s) for s in shape), NumberType=kind,
+                      Precision=str(dtype.itemsize), Format="HDF")
+    item.text = f"{h5name}:/{dataset}"
+    return item
+
+
+class ParticleWriter:
+    """Write particles with chosen properties, one HDF5 file per step and one XDMF series.
+
+    Files in ``directory``: ``{name}_{step:06d}.h5`` and ``{name}.xdmf``. An existing XDMF file
+    there is read on construction; its entries for steps before the step being written are kept
+    (so a restarted run continues its series), later ones are replaced.
+
+    Args:
+        directory: Output directory (created if missing).
+        name: File name stem.
+        properties: Property names to write; ``None`` writes all (except names starting with
+            ``_``, which are temporary columns such as integrator stages).
+        every_nth: Write only particles whose ``id % every_nth == 0`` (a rank-independent subset).
+        ids: Write only these particle ids (combined with ``every_nth`` if both are given).
+
+    Example:
+        >>> writer = ParticleWriter("out", properties=["temperature"], every_nth=10)
+        >>> writer.write(swarm, t, step)
+    """
+
+    def __init__(
+        self,
+        directory: str | os.PathLike[str],
+        /,
+        *,
+        name: str = "particles",
+        properties: Sequence[str] | None = None,
+        every_nth: int = 1,
+        ids: npt.ArrayLike | None = None,
+    ) -> None:
+        if every_nth < 1:
+            raise ValueError(f"every_nth must be >= 1, got {every_nth}")
+        self.directory = Path(directory)
+        self.name = name
+        self.properties = None if properties is None else list(properties)
+        self.every_nth = int(every_nth)
+        self.ids = None if ids is None else np.unique(np.asarray(ids, dtype=np.int64))
+        self.xdmf_path = self.directory / f"{name}.xdmf"
+        self._grids: list[tuple[int, ET.Element]] | None = None
+
+    def h5_path(self, step: int) -> Path:
+        """The HDF5 file of output step ``step``."""
+        return self.directory / f"{self.name}_{step:06d}.h5"
+
+    def selection(self, swarm: Swarm, /) -> npt.NDArray[np.int64]:
+        """Local rows of ``swarm`` that are written, shape=(m,), int64 (in storage order)."""
+        keep = np.ones(swarm.num_particles, dtype=bool)
+        if self.every_nth > 1:
+            keep &= swarm.ids % self.every_nth == 0
+        if self.ids is not None:
+            keep &= np.isin(swarm.ids, self.ids)
+        return np.flatnonzero(keep)
+
+    def _property_names(self, swarm: Swarm) -> list[str]:
+        if self.properties is None:
+            return [p for p in swarm.property_names if not p.startswith("_")]
+        for p in self.properties:
+            swarm.layout(p)  # KeyError listing the known names
+        return self.properties
+
+    def write(self, swarm: Swarm, t: float, step: int) -> OutputRecord:
+        """Write the selected particles at time ``t`` as output step ``step`` (collective).
+
+        Args:
+            swarm: The particles.
+            t: Simulation time (the XDMF time value).
+            step: Step number (names the HDF5 file).
+
+        Returns:
+            :class:`OutputRecord` of the written step (same on all ranks).
+        """
+        comm = swarm.comm
+        if comm.rank == 0:
+            self.directory.mkdir(parents=True, exist_ok=True)
+        comm.Barrier()
+        rows = self.selection(swarm)
+        names = self._property_names(swarm)
+        n = rows.shape[0]
+        positions = np.zeros((n, 3), dtype=np.float64)
+        positions[:, : swarm.gdim] = swarm.x[rows]
+        path = self.h5_path(step)
+        with H5Sink(path, comm) as sink:
+            offset, total = exclusive_offset(comm, n)
+            sink.distributed("ids", swarm.ids[rows])
+            sink.distributed("positions", positions)
+            sink.distributed("connectivity", np.arange(offset, offset + n, dtype=np.int64))
+            sink.distributed("rank", np.full(n, comm.rank, dtype=np.int32))
+            shapes: dict[str, tuple[int, ...]] = {}
+            for p in names:
+                values = swarm.property(p)[rows]
+                values = values[:, 0] if values.shape[1] == 1 else values
+                sink.distributed(f"properties/{p}", values)
+                shapes[p] = (total, *values.shape[1:])
+            sink.attrs(time=float(t), step=int(step), num_ranks=comm.size, gdim=swarm.gdim)
+        if comm.rank == 0:
+            self._add_grid(step, float(t), path.name, total, shapes)
+            atomic_write_text(self.xdmf_path, self._xdmf_text())
+        comm.Barrier()
+        return OutputRecord(int(step), float(t), path, total)
+
+    # ------------------------------------------------------------------ XDMF (rank 0 only)
+    def _load_grids(self) -> list[tuple[int, ET.Element]]:
+        if self._grids is None:
+            self._grids = []
+            if self.xdmf_path.exists():
+                try:
+                    root = ET.parse(self.xdmf_path).getroot()
+                except ET.ParseError:
+                    return self._grids
+                for grid in root.iter("Grid"):
+                    label = grid.get("Name", "")
+                    if grid.get("GridType") == "Uniform" and label.startswith("step_"):
+                        self._grids.append((int(label[5:]), grid))
+        return self._grids
+
+    def _add_grid(self, step: int, t: float, h5name: str, total: int, shapes: dict[str, tuple[int, ...]]) -> None:
+        grids = [(s, g) for s, g in self._load_grids() if s < step]
+        grid = ET.Element("Grid", Name=f"step_{step}", GridType="Uniform")
+        ET.SubElement(grid, "Time", Value=repr(t))
+        topo = ET.SubElement(grid, "Topology", TopologyType="Polyvertex", NumberOfElements=str(total),
+                             NodesPerElement="1")
+        topo.append(_data_item(h5name, "connectivity", (total,), np.dtype(np.int64)))
+        geom = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
+        geom.append(_data_item(h5name, "positions", (total, 3), np.dtype(np.float64)))
+        fields = [("id", "ids", (total,), np.dtype(np.int64)), ("rank", "rank", (total,), np.dtype(np.int32))]
+        fields += [(p, f"properties/{p}", shape, np.dtype(np.float64)) for p, shape in shapes.items()]
+        for label, dataset, shape, dtype in fields:
+            k = int(np.prod(shape[1:])) if len(shape) > 1 else 1
+            attr = ET.SubElement(grid, "Attribute", Name=label, AttributeType=_attribute_type(k), Center="Node")
+            attr.append(_data_item(h5name, dataset, shape, dtype))
+        grids.append((step, grid))
+        self._grids = grids
+
+    def _xdmf_text(self) -> str:
+        root = ET.Element("Xdmf", Version="3.0")
+        domain = ET.SubElement(root, "Domain")
+        series = ET.SubElement(domain, "Grid", Name=self.name, GridType="Collection", CollectionType="Temporal")
+        for _, grid in self._load_grids():
+            series.append(grid)
+        ET.indent(root)
+        return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_mesh_fields(
+    path: str | os.PathLike[str],
+    mesh: dolfinx.mesh.Mesh,
+    fields: Sequence[dolfinx.fem.Function],
+    t: float,
+    /,
+    *,
+    append: bool = False,
+) -> None:
+    """Write mesh Functions (e.g. fields interpolated from particles) at time ``t`` to XDMF (collective).
+
+    DG0 fields are written as cell data; other fields are interpolated to (vector) P1 first,
+    which is what :class:`dolfinx.io.XDMFFile` stores as point data on a linear mesh.
+
+    Args:
+        path: The ``.xdmf`` file (its ``.h5`` sits beside it).
+        mesh: The mesh of all ``fields``.
+        fields: Functions to write; their names become the XDMF attribute names.
+        t: Time value.
+        append: Add this time to an existing file written before with the same mesh; otherwise
+            the file is created and the mesh written.
+    """
+    out: list[dolfinx.fem.Function] = []
+    for f in fields:
+        element = f.function_space.ufl_element()
+        if element.degree() == 0 or (element.family() in ("P", "Lagrange", "Q") and element.degree() == 1):
+            out.append(f)
+            continue
+        shape = f.ufl_shape
+        if shape:
+            p1 = ufl.VectorElement("Lagrange", mesh.ufl_cell(), 1, dim=shape[0])
+        else:
+            p1 = ufl.FiniteElement("Lagrange", mesh.ufl_cell(), 1)
+        g = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, p1), name=f.name)
+        g.interpolate(f)
+        out.append(g)
+    with dolfinx.io.XDMFFile(mesh.comm, str(path), "a" if append else "w") as xdmf:
+        if not append:
+            xdmf.write_mesh(mesh)
+        for f in out:
+            xdmf.write_function(f, float(t))

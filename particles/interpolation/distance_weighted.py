@@ -1,0 +1,87 @@
+"""Inverse-distance weighting of the particles in reach of each dof point.
+
+    u_d = sum_p w_p v_p / sum_p w_p,   w_p = max(|y_d - x_p|, eps h_K)^(-power),
+
+with ``y_d`` the dof point (a DG0 target: the cell midpoint). The floor ``eps h_K`` (``h_K`` the
+cell diameter) keeps the weight finite when a particle sits on the dof point; such a particle then
+dominates and ``u_d`` is its value to round-off. The reach is:
+
+- discontinuous targets: the particles of the dof's cell, plus (``use_neighbours=True``) those of
+  all cells sharing a vertex with it, including other ranks' cells through the ghost layer of
+  :mod:`particles.ghosts` (complete for any DOLFINx ghost mode);
+- continuous targets (P1, any Lagrange degree): the particles of every cell containing the dof,
+  summed over ranks by a reverse scatter (``use_neighbours`` is not accepted).
+
+Dofs with nothing in reach follow the empty-cell rule of :mod:`particles.interpolation._fill`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+import dolfinx.fem
+
+from particles.interpolation._base import (
+    InterpolationStats,
+    TargetSpace,
+    cell_means,
+    gather_samples,
+    write_result,
+)
+from particles.interpolation._kernels import idw_accumulate
+from particles.swarm import Swarm
+
+__all__ = ["DistanceWeighted", "cell_diameters"]
+
+
+def cell_diameters(swarm: Swarm) -> np.ndarray:
+    """Twice the largest centre-to-vertex distance of each owned cell, shape=(num_owned_cells,)."""
+    geo = swarm.geometry
+    n = swarm.num_owned_cells
+    v = geo.coords[geo.nodes[:n, : geo.num_vertices]]
+    return 2.0 * np.sqrt(((v - geo.centres[:n, None, :]) ** 2).sum(axis=2).max(axis=1)) if n else np.empty(0)
+
+
+@dataclass(frozen=True)
+class DistanceWeighted:
+    """Inverse-distance weighted average at the dof points.
+
+    Attributes:
+        power: Exponent of the inverse distance (> 0).
+        use_neighbours: Also use the particles of vertex-neighbour cells (DG targets; collective
+            ghost exchange).
+        eps: Distance floor relative to the cell diameter.
+    """
+
+    name: ClassVar[str] = "distance_weighted"
+    description: ClassVar[str] = "inverse-distance weighted average of the particles in the cell (and neighbours) at the dof points"
+
+    power: float = 2.0
+    use_neighbours: bool = False
+    eps: float = 1e-9
+
+    def __post_init__(self) -> None:
+        if not self.power > 0 or not self.eps > 0:
+            raise ValueError("power and eps must be > 0")
+
+    def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
+                    component: int | None = None) -> InterpolationStats:
+        """Write the weighted averages of ``property_name`` into ``target`` (collective)."""
+        space = TargetSpace(target, swarm.num_owned_cells)
+        if self.use_neighbours:
+            space.require(f"{self.name} with use_neighbours", continuous=False)
+        samples = gather_samples(swarm, property_name, component, ghosts=self.use_neighbours)
+        ex = samples.exchange
+        nb_off = ex.neighbour_offsets if ex is not None else np.zeros(swarm.num_owned_cells + 1, dtype=np.int64)
+        nb_cells = ex.neighbour_cells if ex is not None else np.zeros(0, dtype=np.int32)
+        num = np.zeros(space.num_local_dofs)
+        den = np.zeros(space.num_local_dofs)
+        floor = self.eps * cell_diameters(swarm)
+        idw_accumulate(space.dof_points(), space.dofs, samples.offsets, np.ascontiguousarray(samples.x),
+                       samples.values, nb_off, nb_cells, self.use_neighbours, float(self.power), floor, num, den)
+        means, known = cell_means(swarm, samples.values[: swarm.num_particles])
+        return write_result(swarm, space, target, self.name, num=num, den=den, cell_values=means,
+                            cell_known=known, ghost_particles=samples.num_ghosts)

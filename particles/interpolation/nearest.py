@@ -1,0 +1,49 @@
+"""Nearest particle: each dof takes the value of the particle of its cell nearest to the dof point.
+
+For a DG0 target the dof point is the cell midpoint; for DG_k the Lagrange points of the cell.
+Ties (equal distances) go to the smallest particle id, so the result does not depend on the
+storage order. Only discontinuous targets (a continuous dof has no single cell). Empty cells follow
+the empty-cell rule of :mod:`particles.interpolation._fill`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+import dolfinx.fem
+
+from particles.interpolation._base import (
+    InterpolationStats,
+    TargetSpace,
+    cell_means,
+    property_values,
+    write_result,
+)
+from particles.interpolation._kernels import nearest_values
+from particles.swarm import Swarm
+
+__all__ = ["Nearest"]
+
+
+@dataclass(frozen=True)
+class Nearest:
+    """Value of the nearest particle of the cell at each dof point (no parameters)."""
+
+    name: ClassVar[str] = "nearest"
+    description: ClassVar[str] = "value of the particle of the cell nearest to each dof point (DG)"
+
+    def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
+                    component: int | None = None) -> InterpolationStats:
+        """Write nearest-particle values of ``property_name`` into ``target`` (collective)."""
+        space = TargetSpace(target, swarm.num_owned_cells)
+        space.require(self.name, continuous=False)
+        v = property_values(swarm, property_name, component)
+        num = np.zeros(space.num_local_dofs)
+        den = np.zeros(space.num_local_dofs)
+        nearest_values(space.dof_points(), space.dofs, swarm.offsets, swarm.x, v, swarm.ids, num, den)
+        means, known = cell_means(swarm, v)
+        return write_result(swarm, space, target, self.name, num=num, den=den, cell_values=means,
+                            cell_known=known, ghost_particles=0)

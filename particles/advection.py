@@ -13,6 +13,12 @@ After every stage position the particle's cell and reference position are update
 needed later travel with the particle as temporary property columns, removed after the step.
 The last slope is used at once and never stored, so Euler needs no stage columns at all.
 
+Quantities integrated alongside the positions (deformation gradient, accumulated strain, damage)
+are given as :class:`ParticleODE` objects: property ``y`` obeys ``dy/dt = rhs(swarm, c, y, L)``
+with ``L = grad u`` at the stage position, interpolated linearly in time like the velocity. The
+state ``[x, y_1, y_2, ...]`` is advanced by the same tableau, and the start state and stage slopes
+of every ``y`` travel in the same temporary property columns as those of ``x``.
+
 With linear-in-time velocity the scheme keeps order ``min(p, 2)`` for time-dependent fields
 (the interpolation error is O(dt^2)); for steady fields, or with an exact time-dependent callable
 (:meth:`Advector.step_callable`), the tableau's own order ``p`` is retained.
@@ -22,7 +28,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -33,9 +39,27 @@ from particles.evaluation import Evaluator
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
 
-__all__ = ["AdvectionStats", "Advector", "ButcherTableau", "INTEGRATORS", "get_integrator"]
+__all__ = ["AdvectionStats", "Advector", "ButcherTableau", "INTEGRATORS", "ParticleODE", "get_integrator"]
 
 _STAGE_PROPERTY = "_rk_stage_data"
+
+OdeRhs = Callable[[Swarm, float, npt.NDArray[np.float64], npt.NDArray[np.float64]], npt.ArrayLike]
+"""``rhs(swarm, c, y, grad_u) -> dy/dt``: stage node ``c`` in [0, 1], ``y`` shape=(n, size),
+``grad_u[p, i, j] = d u_i / d x_j`` shape=(n, gdim, gdim); returns shape=(n, size), float64."""
+
+
+@dataclass(frozen=True)
+class ParticleODE:
+    """A particle property integrated together with the position.
+
+    Attributes:
+        name: Swarm property holding ``y`` (its columns are the ODE state, updated in place).
+        rhs: Right-hand side, see :data:`OdeRhs`. Called at every stage with the swarm positioned
+            at the stage (``swarm.x``, ``swarm.cells``, ``swarm.xref`` and ``y`` are stage values).
+    """
+
+    name: str
+    rhs: OdeRhs
 
 
 @dataclass(frozen=True)
@@ -127,15 +151,22 @@ class Advector:
     Args:
         swarm: The particles (sorted, all in owned cells).
         integrator: Registry name: ``"euler"``, ``"rk2"`` or ``"rk4"``.
+        odes: Properties integrated alongside the positions with the same tableau.
 
     Example:
-        >>> adv = Advector(swarm, integrator="rk2")
+        >>> adv = Advector(swarm, integrator="rk2", odes=[ParticleODE("F", rhs)])
         >>> stats = adv.step(u_old, u_new, dt)
     """
 
-    def __init__(self, swarm: Swarm, /, *, integrator: str = "rk2") -> None:
+    def __init__(self, swarm: Swarm, /, *, integrator: str = "rk2", odes: Sequence[ParticleODE] = ()) -> None:
         self.swarm = swarm
         self.tableau = get_integrator(integrator)
+        self.odes: tuple[ParticleODE, ...] = tuple(odes)
+        names = [ode.name for ode in self.odes]
+        if len(set(names)) != len(names):
+            raise ValueError(f"ODE properties must be distinct, got {names}")
+        if _STAGE_PROPERTY in names:
+            raise ValueError(f"{_STAGE_PROPERTY!r} is reserved for stage data")
         self._evaluators: dict[int, Evaluator] = {}
 
     def _evaluator(self, V: dolfinx.fem.FunctionSpace) -> Evaluator:
@@ -158,18 +189,29 @@ class Advector:
         if ev_old.value_size != self.swarm.gdim or ev_new.value_size != self.swarm.gdim:
             raise ValueError("the velocity must have gdim components")
 
-        def slope(c: float) -> npt.NDArray[np.float64]:
+        def blend(c: float, kind: str) -> npt.NDArray[np.float64]:
             s = self.swarm
+            f_old, f_new = getattr(ev_old, kind), getattr(ev_new, kind)
             if c == 0.0 or u_new is u_old:
-                return ev_old.values(u_old, s.cells, s.xref)
+                return f_old(u_old, s.cells, s.xref)
             if c == 1.0:
-                return ev_new.values(u_new, s.cells, s.xref)
-            return (1.0 - c) * ev_old.values(u_old, s.cells, s.xref) + c * ev_new.values(u_new, s.cells, s.xref)
+                return f_new(u_new, s.cells, s.xref)
+            return (1.0 - c) * f_old(u_old, s.cells, s.xref) + c * f_new(u_new, s.cells, s.xref)
 
-        return self._advance(slope, dt)
+        def push(alpha: float) -> None:
+            """Euler without ODEs: x += alpha u_old(x), fused into the evaluation kernel."""
+            s = self.swarm
+            ev_old.values(u_old, s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
+
+        return self._advance(lambda c: blend(c, "values"), lambda c: blend(c, "gradients"), dt, euler_push=push)
 
     def step_callable(
-        self, velocity: Callable[[npt.NDArray[np.float64], float], npt.ArrayLike], t: float, dt: float
+        self,
+        velocity: Callable[[npt.NDArray[np.float64], float], npt.ArrayLike],
+        t: float,
+        dt: float,
+        *,
+        velocity_gradient: Callable[[npt.NDArray[np.float64], float], npt.ArrayLike] | None = None,
     ) -> AdvectionStats:
         """Advance by ``dt`` from time ``t`` in a prescribed velocity, evaluated exactly at each stage.
 
@@ -177,44 +219,103 @@ class Advector:
             velocity: ``velocity(x, t)`` with x shape=(n, gdim), returning shape=(n, gdim).
             t: Time at the start of the step.
             dt: Time step.
+            velocity_gradient: ``grad_u(x, t)`` returning shape=(n, gdim, gdim); required when the
+                advector integrates ODE properties.
         """
-        return self._advance(lambda c: np.asarray(velocity(self.swarm.x, t + c * dt), dtype=np.float64), dt)
+        if self.odes and velocity_gradient is None:
+            raise ValueError("step_callable needs velocity_gradient when ODE properties are integrated")
+        gdim = self.swarm.gdim
 
-    def _advance(self, slope: Callable[[float], npt.NDArray[np.float64]], dt: float) -> AdvectionStats:
+        def gradient(c: float) -> npt.NDArray[np.float64]:
+            assert velocity_gradient is not None
+            g = np.asarray(velocity_gradient(self.swarm.x, t + c * dt), dtype=np.float64)
+            return g.reshape(-1, gdim, gdim)
+
+        return self._advance(lambda c: np.asarray(velocity(self.swarm.x, t + c * dt), dtype=np.float64), gradient, dt)
+
+    def _state(self) -> npt.NDArray[np.float64]:
+        """The integrated state [x, y_1, y_2, ...], shape=(n, gdim + sum of ODE sizes)."""
+        swarm = self.swarm
+        if not self.odes:
+            return swarm.x.copy()
+        return np.concatenate([swarm.x] + [swarm.property(ode.name) for ode in self.odes], axis=1)
+
+    def _set_state(self, state: npt.NDArray[np.float64]) -> None:
+        swarm = self.swarm
+        gdim = swarm.gdim
+        swarm.x[:] = state[:, :gdim]
+        col = gdim
+        for ode in self.odes:
+            lay = swarm.layout(ode.name)
+            swarm.properties[:, lay.columns] = state[:, col : col + lay.size]
+            col += lay.size
+
+    def _slope(
+        self,
+        velocity: Callable[[float], npt.NDArray[np.float64]],
+        gradient: Callable[[float], npt.NDArray[np.float64]],
+        c: float,
+    ) -> npt.NDArray[np.float64]:
+        """d/dt of the state at the current (stage) positions, shape=(n, width)."""
+        k = velocity(c)
+        if not self.odes:
+            return k
+        swarm = self.swarm
+        grad_u = gradient(c)
+        parts = [k]
+        for ode in self.odes:
+            y = swarm.property(ode.name)
+            dy = np.asarray(ode.rhs(swarm, c, y.copy(), grad_u), dtype=np.float64)
+            parts.append(dy.reshape(y.shape))
+        return np.concatenate(parts, axis=1)
+
+    def _advance(
+        self,
+        velocity: Callable[[float], npt.NDArray[np.float64]],
+        gradient: Callable[[float], npt.NDArray[np.float64]],
+        dt: float,
+        *,
+        euler_push: Callable[[float], None] | None = None,
+    ) -> AdvectionStats:
         swarm, tab = self.swarm, self.tableau
-        gdim, s = swarm.gdim, tab.stages
+        s = tab.stages
+        w = swarm.gdim + sum(swarm.layout(ode.name).size for ode in self.odes)
         timer = _Timer()
         transport = TransportStats(0, 0, 0, 0)
         moved = [0, 0, 0, 0]
         if s > 1:
-            swarm.add_property(_STAGE_PROPERTY, gdim * s)
-            swarm.property(_STAGE_PROPERTY)[:, :gdim] = swarm.x
+            swarm.add_property(_STAGE_PROPERTY, w * s)
+            swarm.property(_STAGE_PROPERTY)[:, :w] = self._state()
         try:
             for i in range(s):
                 if i > 0:
                     t0 = time.perf_counter()
                     data = swarm.property(_STAGE_PROPERTY)
-                    x = data[:, :gdim].copy()
+                    y = data[:, :w].copy()
                     for j in range(i):
                         if tab.a[i][j] != 0.0:
-                            x += (dt * tab.a[i][j]) * data[:, gdim * (j + 1) : gdim * (j + 2)]
-                    swarm.x[:] = x
+                            y += (dt * tab.a[i][j]) * data[:, w * (j + 1) : w * (j + 2)]
+                    self._set_state(y)
                     timer.evaluation += time.perf_counter() - t0
                     transport = transport + self._move(timer, moved)
                 t0 = time.perf_counter()
-                k = slope(tab.c[i])
+                if s == 1 and not self.odes and euler_push is not None and tab.c[0] == 0.0:
+                    euler_push(dt * tab.b[0])
+                    timer.evaluation += time.perf_counter() - t0
+                    continue
+                k = self._slope(velocity, gradient, tab.c[i])
                 if i < s - 1:
-                    swarm.property(_STAGE_PROPERTY)[:, gdim * (i + 1) : gdim * (i + 2)] = k
+                    swarm.property(_STAGE_PROPERTY)[:, w * (i + 1) : w * (i + 2)] = k
                 else:
                     if s == 1:
-                        swarm.x += (dt * tab.b[0]) * k
+                        y = self._state() + (dt * tab.b[0]) * k
                     else:
                         data = swarm.property(_STAGE_PROPERTY)
-                        x = data[:, :gdim] + (dt * tab.b[i]) * k
+                        y = data[:, :w] + (dt * tab.b[i]) * k
                         for j in range(i):
                             if tab.b[j] != 0.0:
-                                x += (dt * tab.b[j]) * data[:, gdim * (j + 1) : gdim * (j + 2)]
-                        swarm.x[:] = x
+                                y += (dt * tab.b[j]) * data[:, w * (j + 1) : w * (j + 2)]
+                    self._set_state(y)
                 timer.evaluation += time.perf_counter() - t0
             transport = transport + self._move(timer, moved)
         finally:

@@ -59,11 +59,11 @@ class Evaluator:
         self.dofs = np.ascontiguousarray(V.dofmap.list.array.reshape(-1, element.dim)[:ncells], dtype=np.int32)
         self.fast: bool = (
             self.geometry.simplex
+            and self.geometry.tdim in (2, 3)
             and element.family == basix.ElementFamily.P
             and element.degree in (1, 2)
             and not element.discontinuous
         )
-        self._edges = np.asarray(basix.topology(self.geometry.basix_cell)[1], dtype=np.int64).reshape(-1, 2)
 
     def _coefficients(self, u: dolfinx.fem.Function) -> npt.NDArray[np.float64]:
         W = u.function_space
@@ -73,32 +73,52 @@ class Evaluator:
         return u.x.array
 
     def values(
-        self, u: dolfinx.fem.Function, cells: npt.NDArray[np.int32], xref: npt.NDArray[np.float64]
+        self,
+        u: dolfinx.fem.Function,
+        cells: npt.NDArray[np.int32],
+        xref: npt.NDArray[np.float64],
+        *,
+        out: npt.NDArray[np.float64] | None = None,
+        alpha: float = 1.0,
+        beta: float = 0.0,
     ) -> npt.NDArray[np.float64]:
-        """Values of ``u`` at particles.
+        """Values of ``u`` at particles, optionally accumulated: ``out = beta * out + alpha * u``.
 
         Args:
             u: Function in ``V``.
             cells: Local cells (>= 0), shape=(n,), int32.
             xref: Reference coordinates, shape=(n, tdim).
+            out: Result array, shape=(n, value_size), C-contiguous float64 (allocated if None).
+            alpha: Scale of the values.
+            beta: Scale of the old ``out`` (0: overwritten). E.g. an Euler push in place is
+                ``values(u, cells, xref, out=x, alpha=dt, beta=1)``.
 
         Returns:
-            shape=(n, value_size), float64.
+            ``out``, shape=(n, value_size), float64.
         """
         coeffs = self._coefficients(u)
         n = cells.shape[0]
-        out = np.empty((n, self.bs), dtype=np.float64)
+        if out is None:
+            out = np.empty((n, self.bs), dtype=np.float64)
+            beta = 0.0
+        elif out.shape != (n, self.bs) or out.dtype != np.float64 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous float64 array of shape {(n, self.bs)}")
         if n == 0:
             return out
         if self.fast:
             evaluate_simplex_p12(
                 np.ascontiguousarray(cells, dtype=np.int32), np.ascontiguousarray(xref, dtype=np.float64),
-                self.dofs, coeffs, self.bs, self.element.degree, self._edges, out,
+                self.dofs, coeffs, self.bs, self.element.degree, float(alpha), float(beta), out,
             )
             return out
         phi = self.element.tabulate(0, np.ascontiguousarray(xref, dtype=np.float64))[0, :, :, 0]
         local = coeffs.reshape(-1, self.bs)[self.dofs[cells]]
-        np.einsum("nd,ndb->nb", phi, local, out=out)
+        vals = np.einsum("nd,ndb->nb", phi, local)
+        if beta == 0.0:
+            np.multiply(vals, alpha, out=out)
+        else:
+            out *= beta
+            out += alpha * vals
         return out
 
     def gradients(

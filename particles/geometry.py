@@ -6,8 +6,8 @@ without calling back into DOLFINx:
 - the geometry nodes of every local cell (owned and ghost) and their coordinates;
 - for affine simplices, the map ``x = origin + J X`` and its inverse ``X = K (x - origin)``
   precomputed per cell;
-- the vertex-to-cell adjacency (CSR) with, per (vertex, cell) pair, the unit vector from the vertex
-  to the cell centre, used to order the neighbour search of the transport step (seed paper 2.4);
+- the vertex-to-cell adjacency (CSR) and the cell centres, used to order the neighbour search of
+  the transport step (seed paper 2.4);
 - a lazily built DOLFINx bounding-box tree for the global fallback search.
 
 Non-affine cells (quadrilaterals, hexahedra, degree-2 geometry) are pulled back with a vectorised
@@ -65,7 +65,6 @@ class CellGeometry:
         K: (Pseudo-)inverse Jacobian, shape=(num_local_cells, tdim, gdim).
         centres: Vertex average of each cell, shape=(num_local_cells, gdim).
         v2c_offsets, v2c_cells: CSR vertex-to-cell adjacency over geometry nodes (int64 / int32).
-        v2c_dirs: Unit vector from the vertex to the centre of the cell, shape=(nnz, gdim).
     """
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, /, *, tol: float = 1e-12) -> None:
@@ -102,11 +101,11 @@ class CellGeometry:
             self.J = self.jacobians(np.arange(self.num_local_cells, dtype=np.int32),
                                     np.tile(basix.geometry(self.basix_cell).mean(axis=0), (self.num_local_cells, 1)))
         self.K = np.ascontiguousarray(np.linalg.pinv(self.J))
-        self._build_adjacency(vertices)
+        self._build_adjacency()
         self._tree: dolfinx.geometry.BoundingBoxTree | None = None
         self._c2c: tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]] | None = None
 
-    def _build_adjacency(self, vertices: npt.NDArray[np.float64]) -> None:
+    def _build_adjacency(self) -> None:
         nv = self.num_vertices
         vnodes = self.nodes[:, :nv].reshape(-1)
         owner = np.repeat(np.arange(self.num_local_cells, dtype=np.int32), nv)
@@ -115,8 +114,6 @@ class CellGeometry:
         counts = np.bincount(vnodes, minlength=self.coords.shape[0])
         self.v2c_offsets = np.zeros(self.coords.shape[0] + 1, dtype=np.int64)
         np.cumsum(counts, out=self.v2c_offsets[1:])
-        d = self.centres[self.v2c_cells] - self.coords[vnodes[order]]
-        self.v2c_dirs = np.ascontiguousarray(d / np.linalg.norm(d, axis=1)[:, None])
         self.max_valence = int(counts.max()) if counts.size else 0
 
     @property

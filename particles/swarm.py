@@ -211,11 +211,12 @@ class Swarm:
         """
         order, offsets, already = cell_order(self.cells, self.num_owned_cells)
         if not already:
-            self.ids = self.ids[order]
-            self.x = self.x[order]
-            self.xref = self.xref[order]
-            self.cells = self.cells[order]
-            self.properties = self.properties[order]
+            # np.take(axis=0) is several times faster than fancy indexing of 2-D rows
+            self.ids = np.take(self.ids, order)
+            self.x = np.take(self.x, order, axis=0)
+            self.xref = np.take(self.xref, order, axis=0)
+            self.cells = np.take(self.cells, order)
+            self.properties = np.take(self.properties, order, axis=0)
         self.offsets = offsets
 
     def _rebuild_offsets(self) -> None:

@@ -2,8 +2,8 @@
 
 For every particle the reference position in its old cell is recomputed; if it is still inside,
 nothing else happens. Otherwise the cells around the old cell's vertex closest to the particle
-are tried in order of descending ``a . b_K'`` (``a`` = particle - vertex, ``b_K'`` = unit vector
-from the vertex to the centre of candidate ``K'``), then the other vertex neighbours of the old
+are tried in order of descending ``a . b_K'`` (``a`` = particle - vertex, ``b_K'`` = centre of
+candidate ``K'`` - vertex), then the other vertex neighbours of the old
 cell; only particles still not found use a bounding-box search over this rank's owned and ghost
 cells. Particles found nowhere get ``cells = -1``; particles found in ghost cells keep the ghost
 index. Migration (:mod:`particles.migration`) then hands both kinds on. Finally the swarm is
@@ -88,10 +88,10 @@ def relocate(swarm: Swarm, /, *, sort: bool = True) -> TransportStats:
     geom = swarm.geometry
     n = swarm.num_particles
     status = np.empty(n, dtype=np.int8)
-    if geom.affine:
+    if geom.affine and geom.gdim == geom.tdim and geom.tdim in (2, 3):
         relocate_affine_simplex(
             swarm.x, swarm.cells, swarm.xref, geom.origin, geom.K, geom.nodes, geom.coords,
-            geom.v2c_offsets, geom.v2c_cells, geom.v2c_dirs, geom.num_vertices, max(geom.max_valence, 1),
+            geom.v2c_offsets, geom.v2c_cells, geom.centres, geom.num_vertices, max(geom.max_valence, 1),
             geom.tol, status,
         )
     else:

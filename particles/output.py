@@ -384,8 +384,8 @@ def write_mesh_fields(
         mesh: The mesh of all ``fields``.
         fields: Functions to write; their names become the XDMF attribute names.
         t: Time value.
-        append: Add this time to an existing file written before with the same mesh; otherwise
-            the file is created and the mesh written.
+        append: Add this time to an existing file written before by this function with the same
+            mesh; otherwise the file is (re)created and the mesh written.
     """
     out: list[dolfinx.fem.Function] = []
     for f in fields:
@@ -394,7 +394,9 @@ def write_mesh_fields(
             out.append(f)
             continue
         shape = f.ufl_shape
-        if shape:
+        if len(shape) == 2:
+            p1 = ufl.TensorElement("Lagrange", mesh.ufl_cell(), 1, shape=shape)
+        elif shape:
             p1 = ufl.VectorElement("Lagrange", mesh.ufl_cell(), 1, dim=shape[0])
         else:
             p1 = ufl.FiniteElement("Lagrange", mesh.ufl_cell(), 1)

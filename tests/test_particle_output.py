@@ -12,6 +12,7 @@ import h5py
 import meshio
 import numpy as np
 import pytest
+import ufl
 from mpi4py import MPI
 
 import dolfinx.fem
@@ -247,9 +248,11 @@ def test_mesh_fields_dg0_as_cell_data(tmp_path):
     dg0.x.array[:] = 2.0
     p2 = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)), name="temperature")
     p2.interpolate(lambda x: x[0] + x[1])
-    write_mesh_fields(tmp_path / "fields.xdmf", mesh, [dg0, p2], 0.0)
-    write_mesh_fields(tmp_path / "fields.xdmf", mesh, [dg0, p2], 1.0, append=True)
+    tensor = dolfinx.fem.Function(
+        dolfinx.fem.FunctionSpace(mesh, ufl.TensorElement("DG", mesh.ufl_cell(), 1)), name="strain")
+    write_mesh_fields(tmp_path / "fields.xdmf", mesh, [dg0, p2, tensor], 0.0)
+    write_mesh_fields(tmp_path / "fields.xdmf", mesh, [dg0, p2, tensor], 1.0, append=True)
     root = ET.parse(tmp_path / "fields.xdmf").getroot()
     centers = {(a.get("Name"), a.get("Center")) for a in root.iter("Attribute")}
-    assert centers == {("density", "Cell"), ("temperature", "Node")}
+    assert centers == {("density", "Cell"), ("temperature", "Node"), ("strain", "Node")}
     assert sorted({float(t.get("Value")) for t in root.iter("Time")}) == [0.0, 1.0]

@@ -54,6 +54,7 @@ from convection.boundary import (
     side_tag,
     temperature_dirichlet_bcs,
 )
+from convection.petsc_options import set_owned_options
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -170,9 +171,7 @@ class EnergySolver:
         self._prefix = f"energy{next(_instance_counter)}_"
         options = _default_options(solver)
         options.update(petsc_options or {})
-        opts = PETSc.Options()
-        for key, value in options.items():
-            opts[self._prefix + key] = value
+        set_owned_options(self, self._prefix, options)
         self.ksp = PETSc.KSP().create(mesh.comm)
         self.ksp.setOptionsPrefix(self._prefix)
 

@@ -37,6 +37,7 @@ from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import VelocityBC, box_bounds, side_names, velocity_dirichlet_bcs
+from convection.petsc_options import set_owned_options
 
 STOKES_SOLVERS: dict[str, str] = {
     "direct": "MUMPS LU on the monolithic Taylor-Hood system",
@@ -209,9 +210,7 @@ class StokesSolver:
             null_vec.normalize()
             self._null_space = PETSc.NullSpace().create(vectors=[null_vec], comm=self.mesh.comm)
 
-        opts = PETSc.Options()
-        for key, value in self._petsc_options.items():
-            opts[self._prefix + key] = value
+        set_owned_options(self, self._prefix, self._petsc_options)
         if self.solver == "iterative":
             self.ksp.setOperators(self._A, self._P)
             pc = self.ksp.getPC()

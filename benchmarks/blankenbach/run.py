@@ -75,12 +75,15 @@ def main(argv: list[str] | None = None) -> int:
         cells = next(line.split(":", 1)[1].strip() for line in config.splitlines() if line.strip().startswith("cells:"))
         rows.append((case, f"{cells} P2-P1/P2 uniform", summary, ref[case]))
     if args.adaptive:
-        adaptive = ["adaptivity.enabled=true", "adaptivity.every=5", "adaptivity.min_level=0",
-                    "adaptivity.max_level=2", "adaptivity.refine_fraction=0.2", "adaptivity.coarsen_fraction=0.5",
+        # Base 16x16 refined at most once: the finest cells match the uniform 32x32 run.
+        # Mesh changes perturb Nu/vrms slightly (~1e-5), so the steady-state test is looser.
+        adaptive = ["adaptivity.enabled=true", "adaptivity.every=20", "adaptivity.min_level=0",
+                    "time.steady_state_tolerance=5e-5", "time.steady_state_window=40",
+                    "adaptivity.max_level=1", "adaptivity.refine_fraction=0.3", "adaptivity.coarsen_fraction=0.3",
                     "mesh.cells=[16,16]"] + (["mesh.cells=[6,6]", "time.steady_state_tolerance=1e-4"] if args.quick else [])
         summary = run_case("blankenbach_1b.yaml", out / "1b_adaptive", args.ranks, adaptive)
         results["1b_adaptive"] = summary
-        rows.append(("1b", "[16, 16] base, levels 0-2, adaptive", summary, ref["1b"]))
+        rows.append(("1b", "[16, 16] base, levels 0-1, adaptive", summary, ref["1b"]))
 
     lines = ["| case | mesh | steps | cells | Nu | Nu rel. error | vrms | vrms rel. error | wall time [s] |",
              "|---|---|---|---|---|---|---|---|---|"]

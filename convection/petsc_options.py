@@ -1,0 +1,30 @@
+"""Per-object PETSc options that leave the global options database when the object goes away.
+
+Each solver uses its own options prefix so several solvers can coexist with different settings.
+PETSc's options database is global and limited (512 entries by default): a run that rebuilds its
+solvers after every mesh adaptation would exhaust it, so the entries are removed again when the
+solver that set them is garbage collected.
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any, Mapping
+
+from petsc4py import PETSc
+
+__all__ = ["set_owned_options"]
+
+
+def _clear(prefix: str, keys: list[str]) -> None:
+    opts = PETSc.Options()
+    for key in keys:
+        opts.delValue(prefix + key)
+
+
+def set_owned_options(owner: object, prefix: str, options: Mapping[str, Any], /) -> None:
+    """Set ``prefix + key = value`` for every option; remove them when ``owner`` is collected."""
+    opts = PETSc.Options()
+    for key, value in options.items():
+        opts[prefix + key] = value
+    weakref.finalize(owner, _clear, prefix, list(options))

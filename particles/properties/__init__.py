@@ -1,0 +1,201 @@
+"""Particle properties (seed paper section 2.6): registry, one module per property, and a manager.
+
+All particles of a swarm carry the same named properties, stored as scalar columns of the swarm's
+property table (a vector takes gdim columns, a tensor gdim*gdim, row-major). Every property is a
+frozen dataclass of its parameters registered under a lowercase name; it declares its size, its
+initialiser, the policy for particles added later (``"reinitialise"``: the initialiser at the new
+position; ``"interpolate"``: from the older particles nearby) and when it updates (``"never"``,
+``"every_step"``, ``"output_only"``). Properties obeying an ODE along the path (deformation
+gradient, integrated strain, damage) are advanced by the Advector together with the positions:
+
+    >>> manager = PropertyManager(swarm, ["initial_position", DeformationGradient(), "integrated_strain"])
+    >>> manager.initialise(PropertyContext(u_new=u))
+    >>> advector = Advector(swarm, integrator="rk2", odes=manager.odes())
+    >>> advector.step(u_old, u_new, dt)
+    >>> manager.update(PropertyContext(time=t + dt, dt=dt, u_old=u_old, u_new=u_new))
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Sequence, Union
+
+import numpy as np
+import numpy.typing as npt
+
+from particles.advection import ParticleODE
+from particles.properties._base import (
+    NEW_PARTICLE_POLICIES,
+    UPDATE_POLICIES,
+    EvaluatorCache,
+    ParticleProperty,
+    PropertyContext,
+)
+from particles.properties._interpolate import interpolate_from_neighbours
+from particles.properties.damage import Damage
+from particles.properties.deformation_gradient import DeformationGradient
+from particles.properties.function import FunctionProperty
+from particles.properties.initial_composition import InitialComposition
+from particles.properties.initial_position import InitialPosition
+from particles.properties.integrated_strain import IntegratedStrain
+from particles.properties.pressure import Pressure
+from particles.properties.rank import Rank
+from particles.properties.strain_rate import StrainRate
+from particles.properties.temperature import Temperature
+from particles.properties.time_since_creation import TimeSinceCreation
+from particles.properties.velocity import Velocity
+from particles.swarm import PropertyLayout, Swarm
+
+__all__ = [
+    "NEW_PARTICLE_POLICIES",
+    "PROPERTIES",
+    "UPDATE_POLICIES",
+    "Damage",
+    "DeformationGradient",
+    "FunctionProperty",
+    "InitialComposition",
+    "InitialPosition",
+    "IntegratedStrain",
+    "ParticleProperty",
+    "Pressure",
+    "PropertyContext",
+    "PropertyManager",
+    "Rank",
+    "StrainRate",
+    "Temperature",
+    "TimeSinceCreation",
+    "Velocity",
+    "create_property",
+    "describe_properties",
+]
+
+PROPERTIES: dict[str, type[ParticleProperty]] = {
+    cls.name: cls
+    for cls in (
+        InitialPosition, InitialComposition, FunctionProperty, Velocity, Temperature, Pressure, StrainRate,
+        IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank,
+    )
+}
+"""Property classes by their lowercase config name."""
+
+PropertySpec = Union[ParticleProperty, str]
+
+
+def describe_properties() -> dict[str, str]:
+    """One-line description of every registered property, by name."""
+    return {name: cls.description for name, cls in PROPERTIES.items()}
+
+
+def create_property(name: str, /, **parameters: Any) -> ParticleProperty:
+    """The property registered as ``name`` with the given parameters.
+
+    Raises:
+        ValueError: Unknown name (the message lists the valid names).
+    """
+    try:
+        cls = PROPERTIES[name]
+    except KeyError:
+        raise ValueError(f"unknown particle property {name!r}; valid: {sorted(PROPERTIES)}") from None
+    return cls(**parameters)
+
+
+class PropertyManager:
+    """The properties carried by every particle of one swarm.
+
+    Adds each property's columns to the swarm at construction (zero-filled). The manager remembers
+    the last context it was given, so :meth:`initialise_new` (the ``initialise(swarm, rows)`` hook
+    of population control) can re-evaluate fields at new particles.
+
+    Args:
+        swarm: The swarm.
+        properties: Property objects or registered names (built with default parameters).
+
+    Raises:
+        ValueError: Two properties with the same column name, or an unknown name.
+    """
+
+    def __init__(self, swarm: Swarm, properties: Sequence[PropertySpec], /) -> None:
+        self.swarm = swarm
+        built = [create_property(p) if isinstance(p, str) else p for p in properties]
+        columns = [p.column for p in built]
+        duplicates = sorted({c for c in columns if columns.count(c) > 1})
+        if duplicates:
+            raise ValueError(f"particle properties share column names {duplicates}; give them distinct labels")
+        self.properties: tuple[ParticleProperty, ...] = tuple(built)
+        self._evaluators = EvaluatorCache()
+        self._context = PropertyContext(evaluators=self._evaluators)
+        for prop in self.properties:
+            swarm.add_property(prop.column, prop.size(swarm.gdim))
+
+    @property
+    def names(self) -> list[str]:
+        """Column names of the managed properties, in order."""
+        return [p.column for p in self.properties]
+
+    def __getitem__(self, column: str) -> ParticleProperty:
+        for prop in self.properties:
+            if prop.column == column:
+                return prop
+        raise KeyError(f"no managed particle property {column!r}; known: {self.names}")
+
+    def layout(self, column: str) -> PropertyLayout:
+        """Column range of property ``column`` in the swarm's property table."""
+        return self.swarm.layout(self[column].column)
+
+    def values(self, column: str) -> npt.NDArray[np.float64]:
+        """View of property ``column``, shape=(n, size)."""
+        return self.swarm.property(self[column].column)
+
+    def _bind(self, context: PropertyContext) -> PropertyContext:
+        if context.evaluators is not self._evaluators:
+            context = dataclasses.replace(context, evaluators=self._evaluators)
+        self._context = context
+        return context
+
+    def initialise(self, context: PropertyContext | None = None, /) -> None:
+        """Initialise every property at every particle (start of a run)."""
+        ctx = self._bind(context if context is not None else self._context)
+        rows = np.arange(self.swarm.num_particles, dtype=np.int64)
+        for prop in self.properties:
+            prop.initialise(self.swarm, rows, ctx)
+
+    def initialise_new(self, swarm: Swarm, rows: npt.ArrayLike, /) -> None:
+        """Give the particles ``rows`` (added after the start) their values, per property policy.
+
+        ``"reinitialise"`` calls the property's initialiser at the particle's position with the last
+        context; ``"interpolate"`` takes the mean of the other particles in the same cell (the
+        nearest other particle if the cell has none; the initialiser if this rank has no other
+        particle). Not collective.
+
+        Args:
+            swarm: The managed swarm (the argument makes this a population-control hook).
+            rows: Rows of the new particles, shape=(m,), integer.
+        """
+        if swarm is not self.swarm:
+            raise ValueError("initialise_new called with a swarm this manager does not manage")
+        rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+        for prop in self.properties:
+            if prop.new_particles_policy == "interpolate":
+                lay = swarm.layout(prop.column)
+                if interpolate_from_neighbours(swarm, rows, lay.columns):
+                    continue
+            prop.initialise(swarm, rows, self._context)
+
+    def update(self, context: PropertyContext, /, *, at_output: bool = False) -> None:
+        """Refresh the properties whose policy says so; call once per time step, after advection.
+
+        ``"every_step"`` properties are refreshed on every call, ``"output_only"`` ones only with
+        ``at_output=True``. Integrated properties are skipped: the Advector advances them (pass
+        :meth:`odes` to it).
+        """
+        ctx = self._bind(context)
+        for prop in self.properties:
+            if prop.integrated:
+                continue
+            policy = prop.update_policy
+            if policy == "every_step" or (policy == "output_only" and at_output):
+                prop.refresh(self.swarm, ctx)
+
+    def odes(self) -> list[ParticleODE]:
+        """The integrated properties as Advector ODEs (``Advector(swarm, odes=manager.odes())``)."""
+        return [ParticleODE(p.column, p.rhs) for p in self.properties if p.integrated]

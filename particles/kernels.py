@@ -298,10 +298,11 @@ def _search_vertex_neighbours(
 
 @numba.njit(cache=True)
 def _stay_pass(x, cells, xref, origin, K, tol, status):  # pragma: no cover
-    """First pass: particles still inside their cell get their new xref and STAYED."""
+    """First pass: particles still inside their cell get their new xref and STAYED; returns their count."""
     n = x.shape[0]
     tdim = K.shape[1]
     gdim = K.shape[2]
+    stayed = 0
     if tdim == 2 and gdim == 2:
         for p in range(n):
             c = cells[p]
@@ -316,6 +317,7 @@ def _stay_pass(x, cells, xref, origin, K, tol, status):  # pragma: no cover
                 xref[p, 0] = X
                 xref[p, 1] = Y
                 status[p] = STAYED
+                stayed += 1
             else:
                 status[p] = UNRESOLVED
     elif tdim == 3 and gdim == 3:
@@ -335,6 +337,7 @@ def _stay_pass(x, cells, xref, origin, K, tol, status):  # pragma: no cover
                 xref[p, 1] = Y
                 xref[p, 2] = Z
                 status[p] = STAYED
+                stayed += 1
             else:
                 status[p] = UNRESOLVED
     else:
@@ -345,8 +348,10 @@ def _stay_pass(x, cells, xref, origin, K, tol, status):  # pragma: no cover
                 for i in range(tdim):
                     xref[p, i] = xr[i]
                 status[p] = STAYED
+                stayed += 1
             else:
                 status[p] = UNRESOLVED
+    return stayed
 
 
 @numba.njit(cache=True)
@@ -359,10 +364,13 @@ def relocate_affine_simplex(
     vertex closest to the point, ordered by descending ``(x - v) . (centre(K') - v)``
     (seed paper section 2.4), then the remaining vertex neighbours of the old cell. ``status``
     gets STAYED, NEIGHBOUR or UNRESOLVED (cell == -1 on input, or not found: left for the
-    bounding-box fallback; ``cells`` is then unchanged). Two passes: a tight loop for the
+    bounding-box fallback; ``cells`` is then unchanged). Returns the counts per status, shape=(3,).
+    Two passes: a tight loop for the
     particles that stayed (most of them), then the search for the others.
     """
-    _stay_pass(x, cells, xref, origin, K, tol, status)
+    counts = np.zeros(3, dtype=np.int64)
+    counts[STAYED] = _stay_pass(x, cells, xref, origin, K, tol, status)
+    counts[UNRESOLVED] = x.shape[0] - counts[STAYED]
     tdim = K.shape[1]
     xr = np.empty(tdim)
     cand = np.empty(max_valence, dtype=np.int32)
@@ -377,6 +385,9 @@ def relocate_affine_simplex(
         if found >= 0:
             cells[p] = found
             status[p] = NEIGHBOUR
+            counts[NEIGHBOUR] += 1
+            counts[UNRESOLVED] -= 1
             for i in range(tdim):
                 xref[p, i] = xr[i]
+    return counts
 

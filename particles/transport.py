@@ -89,14 +89,14 @@ def relocate(swarm: Swarm, /, *, sort: bool = True) -> TransportStats:
     n = swarm.num_particles
     status = np.empty(n, dtype=np.int8)
     if geom.affine and geom.gdim == geom.tdim and geom.tdim in (2, 3):
-        relocate_affine_simplex(
+        counts = relocate_affine_simplex(
             swarm.x, swarm.cells, swarm.xref, geom.origin, geom.K, geom.nodes, geom.coords,
             geom.v2c_offsets, geom.v2c_cells, geom.centres, geom.num_vertices, max(geom.max_valence, 1),
             geom.tol, status,
         )
     else:
         _relocate_general(geom, swarm.x, swarm.cells, swarm.xref, status)
-    counts = np.bincount(status, minlength=3)
+        counts = np.bincount(status, minlength=3)
     rows = np.flatnonzero(status == UNRESOLVED) if counts[UNRESOLVED] else np.empty(0, dtype=np.int64)
     found = 0
     if rows.size:

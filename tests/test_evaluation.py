@@ -110,6 +110,12 @@ def test_fast_path_matches_basix_path(kind, degree):
     p3 = np.zeros((500, 3))
     p3[:, :gdim] = ev.geometry.push_forward(cells, xref)
     assert np.allclose(w.eval(p3, cells), fast, atol=1e-12)
+    # accumulation out = beta * out + alpha * u (used for the in-place Euler push), both paths
+    for use_fast in (True, False):
+        ev.fast = use_fast
+        acc = np.ones((500, gdim))
+        ev.values(w, cells, xref, out=acc, alpha=0.5, beta=2.0)
+        assert np.allclose(acc, 2.0 + 0.5 * slow, atol=1e-13)
 
 
 def test_locate_outside_and_function_space_check():

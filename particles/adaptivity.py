@@ -1,0 +1,61 @@
+"""Particles through mesh refinement, coarsening and repartitioning (seed paper section 2.5).
+
+When the mesh changes, every particle must end up in its new cell with a correct reference
+position, without losing any. DOLFINx 0.5 exposes the parent-cell map only for uniform refinement,
+and meshes rebuilt from a base mesh (for coarsening) have no parent relation to the previous mesh
+at all, so the new cells are found by a *rank-local* bounding-box search on the new mesh: meshes
+refined without redistribution keep every region on the rank that owned it, so almost every
+particle is found among this rank's new cells without communication. Particles that land in a
+ghost cell or outside this rank's new cells (after a repartition) are handed on by the migration
+step (:func:`particles.migration.migrate`), which also counts any particle found nowhere.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+import dolfinx.mesh
+
+from particles.migration import migrate
+from particles.swarm import Swarm
+
+__all__ = ["MeshChangeStats", "move_to_mesh"]
+
+
+class MeshChangeStats(NamedTuple):
+    """Counts of one move to a new mesh (global sums over ranks).
+
+    Attributes:
+        found_locally: Particles located in an owned cell of the new mesh on their rank.
+        migrated: Particles that had to change rank.
+        lost: Particles found on no rank (must be 0 when both meshes cover the same domain).
+    """
+
+    found_locally: int
+    migrated: int
+    lost: int
+
+
+def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /) -> tuple[Swarm, MeshChangeStats]:
+    """A swarm on ``mesh`` holding all particles of ``swarm`` (ids, positions, properties). Collective.
+
+    Args:
+        swarm: Particles on the old mesh (all in owned cells).
+        mesh: The new mesh, covering the same domain.
+
+    Returns:
+        The new swarm (same property layout) and the move's statistics.
+    """
+    new = Swarm(mesh)
+    for name in swarm.property_names:
+        lay = swarm.layout(name)
+        new.add_property(name, lay.size)
+    located = new.geometry.locate(swarm.x)
+    cells = located.cells
+    local = (cells >= 0) & (cells < new.num_owned_cells)
+    new.add(swarm.ids, swarm.x, located.xref, cells, swarm.properties)
+    stats = migrate(new)
+    found = mesh.comm.allreduce(int(np.count_nonzero(local)))
+    return new, MeshChangeStats(found, int(stats.global_sent + stats.global_fallback_sent), int(stats.global_lost))

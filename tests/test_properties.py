@@ -396,11 +396,25 @@ def _ode_run(comm, integrator):
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("integrator", ["rk2", "rk4"])
-def test_ode_properties_across_ranks_match_serial(integrator):
+def test_ode_properties_across_ranks_match_serial(integrator, monkeypatch):
+    import particles.advection
+
     comm = MPI.COMM_WORLD
+    sent_per_move = []
+    migrate = particles.advection._migrate
+
+    def counting_migrate(swarm):
+        counts = migrate(swarm)
+        sent_per_move.append(counts[0])
+        return counts
+
+    monkeypatch.setattr(particles.advection, "_migrate", counting_migrate)
     ids, props, sent = _ode_run(comm, integrator)
+    stages = {"rk2": 2, "rk4": 4}[integrator]
+    mid_step = sum(c for i, c in enumerate(sent_per_move) if i % stages != stages - 1)
     ref_ids, ref_props, _ = _ode_run(MPI.COMM_SELF, integrator)
     assert sent > 0
+    assert comm.allreduce(mid_step, op=MPI.SUM) > 0  # particles changed rank between stages
     np.testing.assert_array_equal(ids, np.arange(200))
     np.testing.assert_array_equal(ref_ids, ids)
     np.testing.assert_allclose(props, ref_props, rtol=0, atol=1e-12)

@@ -155,7 +155,9 @@ class ParticleProperty:
 
     def __post_init__(self) -> None:
         if self.update is not None and self.update not in UPDATE_POLICIES:
-            raise ValueError(f"property {self.name!r}: unknown update policy {self.update!r}; valid: {list(UPDATE_POLICIES)}")
+            raise ValueError(
+                f"property {self.name!r}: unknown update policy {self.update!r}; valid: {list(UPDATE_POLICIES)}"
+            )
         if self.new_particles is not None and self.new_particles not in NEW_PARTICLE_POLICIES:
             raise ValueError(
                 f"property {self.name!r}: unknown new-particle policy {self.new_particles!r}; "

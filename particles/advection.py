@@ -36,6 +36,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from particles.evaluation import Evaluator
+from particles.kernels import stage_combination
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
 
@@ -198,12 +199,18 @@ class Advector:
                 return f_new(u_new, s.cells, s.xref)
             return (1.0 - c) * f_old(u_old, s.cells, s.xref) + c * f_new(u_new, s.cells, s.xref)
 
-        def push(alpha: float) -> None:
-            """Euler without ODEs: x += alpha u_old(x), fused into the evaluation kernel."""
+        def push(c: float, alpha: float) -> None:
+            """x += alpha u(c) at the current cells/xref, fused into the evaluation kernel."""
             s = self.swarm
-            ev_old.values(u_old, s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
+            if c == 0.0 or u_new is u_old:
+                ev_old.values(u_old, s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
+            elif c == 1.0:
+                ev_new.values(u_new, s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
+            else:
+                ev_old.values(u_old, s.cells, s.xref, out=s.x, alpha=alpha * (1.0 - c), beta=1.0)
+                ev_new.values(u_new, s.cells, s.xref, out=s.x, alpha=alpha * c, beta=1.0)
 
-        return self._advance(lambda c: blend(c, "values"), lambda c: blend(c, "gradients"), dt, euler_push=push)
+        return self._advance(lambda c: blend(c, "values"), lambda c: blend(c, "gradients"), dt, push=push)
 
     def step_callable(
         self,
@@ -275,11 +282,14 @@ class Advector:
         gradient: Callable[[float], npt.NDArray[np.float64]],
         dt: float,
         *,
-        euler_push: Callable[[float], None] | None = None,
+        push: Callable[[float, float], None] | None = None,
     ) -> AdvectionStats:
+        """Run the stages. ``push(c, alpha)``, if given, does ``x += alpha k(c)`` in place from the
+        current cells/xref (fused evaluation); it is used for the last stage when no ODEs ride along."""
         swarm, tab = self.swarm, self.tableau
         s = tab.stages
         w = swarm.gdim + sum(swarm.layout(ode.name).size for ode in self.odes)
+        fused = push is not None and not self.odes
         timer = _Timer()
         transport = TransportStats(0, 0, 0, 0)
         moved = [0, 0, 0, 0]
@@ -290,17 +300,15 @@ class Advector:
             for i in range(s):
                 if i > 0:
                     t0 = time.perf_counter()
-                    data = swarm.property(_STAGE_PROPERTY)
-                    y = data[:, :w].copy()
-                    for j in range(i):
-                        if tab.a[i][j] != 0.0:
-                            y += (dt * tab.a[i][j]) * data[:, w * (j + 1) : w * (j + 2)]
-                    self._set_state(y)
+                    self._combine([dt * tab.a[i][j] for j in range(i)], w)
                     timer.evaluation += time.perf_counter() - t0
                     transport = transport + self._move(timer, moved)
                 t0 = time.perf_counter()
-                if s == 1 and not self.odes and euler_push is not None and tab.c[0] == 0.0:
-                    euler_push(dt * tab.b[0])
+                if i == s - 1 and fused:
+                    assert push is not None
+                    if s > 1:  # x = x0 + dt sum_{j<i} b_j k_j; cells/xref still hold the stage point
+                        self._combine([dt * tab.b[j] for j in range(i)], w)
+                    push(tab.c[i], dt * tab.b[i])
                     timer.evaluation += time.perf_counter() - t0
                     continue
                 k = self._slope(velocity, gradient, tab.c[i])
@@ -310,11 +318,10 @@ class Advector:
                     if s == 1:
                         y = self._state() + (dt * tab.b[0]) * k
                     else:
-                        data = swarm.property(_STAGE_PROPERTY)
-                        y = data[:, :w] + (dt * tab.b[i]) * k
-                        for j in range(i):
-                            if tab.b[j] != 0.0:
-                                y += (dt * tab.b[j]) * data[:, w * (j + 1) : w * (j + 2)]
+                        y = np.empty((swarm.num_particles, w))
+                        stage_combination(swarm.properties, swarm.layout(_STAGE_PROPERTY).start, w,
+                                          np.array([dt * tab.b[j] for j in range(i)]), y)
+                        y += (dt * tab.b[i]) * k
                     self._set_state(y)
                 timer.evaluation += time.perf_counter() - t0
             transport = transport + self._move(timer, moved)
@@ -323,6 +330,15 @@ class Advector:
                 swarm.remove_property(_STAGE_PROPERTY)
         return AdvectionStats(transport, moved[0], moved[1], moved[2], moved[3],
                               timer.evaluation, timer.relocation, timer.communication)
+
+    def _combine(self, coefs: list[float], w: int) -> None:
+        """Set the state to the start state plus ``sum_j coefs[j] k_j`` from the stage columns."""
+        swarm = self.swarm
+        start = swarm.layout(_STAGE_PROPERTY).start
+        out = swarm.x if not self.odes else np.empty((swarm.num_particles, w))
+        stage_combination(swarm.properties, start, w, np.asarray(coefs, dtype=np.float64), out)
+        if self.odes:
+            self._set_state(out)
 
     def _move(self, timer: _Timer, moved: list[int]) -> TransportStats:
         """Relocate after positions changed, then migrate; accumulates counts into ``moved``."""

@@ -17,6 +17,7 @@ __all__ = [
     "cell_order",
     "evaluate_simplex_p12",
     "relocate_affine_simplex",
+    "stage_combination",
 ]
 
 STAYED = 0
@@ -391,3 +392,19 @@ def relocate_affine_simplex(
                 xref[p, i] = xr[i]
     return counts
 
+
+
+@numba.njit(cache=True)
+def stage_combination(table, start, width, coefs, out):  # pragma: no cover
+    """Runge-Kutta stage sum from stage columns of the property table, in one pass.
+
+    ``out[p, i] = table[p, start + i] + sum_j coefs[j] * table[p, start + width * (j + 1) + i]``
+    for ``i < width``: the start state plus the weighted stage slopes stored after it.
+    (Several times faster than the same NumPy expression on strided column views.)
+    """
+    for p in range(table.shape[0]):
+        for i in range(width):
+            acc = table[p, start + i]
+            for j in range(coefs.shape[0]):
+                acc += coefs[j] * table[p, start + width * (j + 1) + i]
+            out[p, i] = acc

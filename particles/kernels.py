@@ -16,6 +16,7 @@ __all__ = [
     "UNRESOLVED",
     "cell_order",
     "evaluate_simplex_p12",
+    "permute_particles",
     "relocate_affine_simplex",
     "stage_combination",
 ]
@@ -408,3 +409,37 @@ def stage_combination(table, start, width, coefs, out):  # pragma: no cover
             for j in range(coefs.shape[0]):
                 acc += coefs[j] * table[p, start + width * (j + 1) + i]
             out[p, i] = acc
+
+
+@numba.njit(cache=True)
+def _permute_rows(order, a, out):  # pragma: no cover
+    """out[i] = a[order[i]] for a 2-D array; 1-3 columns written out (runtime-length inner loops
+    are much slower here)."""
+    m = a.shape[1]
+    if m == 2:
+        for i in range(order.shape[0]):
+            r = order[i]
+            out[i, 0] = a[r, 0]
+            out[i, 1] = a[r, 1]
+    elif m == 3:
+        for i in range(order.shape[0]):
+            r = order[i]
+            out[i, 0] = a[r, 0]
+            out[i, 1] = a[r, 1]
+            out[i, 2] = a[r, 2]
+    else:
+        for i in range(order.shape[0]):
+            r = order[i]
+            for j in range(m):
+                out[i, j] = a[r, j]
+
+
+@numba.njit(cache=True)
+def permute_particles(order, ids, x, xref, cells, ids_out, x_out, xref_out, cells_out):  # pragma: no cover
+    """Write row ``order[i]`` of ids, x, xref, cells into row i of the preallocated outputs."""
+    for i in range(order.shape[0]):
+        r = order[i]
+        ids_out[i] = ids[r]
+        cells_out[i] = cells[r]
+    _permute_rows(order, x, x_out)
+    _permute_rows(order, xref, xref_out)

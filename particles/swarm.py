@@ -14,6 +14,7 @@ migration step (``particles.migration``) hands the others to their owners.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +24,7 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from particles.geometry import CellGeometry
-from particles.kernels import cell_order
+from particles.kernels import cell_order, permute_particles
 
 __all__ = ["PropertyLayout", "Swarm"]
 
@@ -78,6 +79,7 @@ class Swarm:
         self._layout: dict[str, PropertyLayout] = {}
         self.offsets = np.zeros(self.num_owned_cells + 1, dtype=np.int64)
         self._geometry: CellGeometry | None = None
+        self._spare: tuple[npt.NDArray, ...] | None = None
 
     @property
     def geometry(self) -> CellGeometry:
@@ -211,13 +213,30 @@ class Swarm:
         """
         order, offsets, already = cell_order(self.cells, self.num_owned_cells)
         if not already:
-            # np.take(axis=0) is several times faster than fancy indexing of 2-D rows
-            self.ids = np.take(self.ids, order)
-            self.x = np.take(self.x, order, axis=0)
-            self.xref = np.take(self.xref, order, axis=0)
-            self.cells = np.take(self.cells, order)
-            self.properties = np.take(self.properties, order, axis=0)
+            old = (self.ids, self.x, self.xref, self.cells)
+            new = self._spare_buffers()
+            permute_particles(order, *old, *new)
+            self.ids, self.x, self.xref, self.cells = new
+            self._spare = old
+            if self.properties.shape[1]:
+                self.properties = np.take(self.properties, order, axis=0)
+            else:
+                self.properties = np.empty((self.num_particles, 0), dtype=np.float64)
         self.offsets = offsets
+
+    def _spare_buffers(self) -> tuple[npt.NDArray, ...]:
+        """Arrays for the next permutation: the ones replaced by the previous sort if nothing else
+        refers to them any more (writing into fresh memory costs page faults that dominate the
+        sort), else new ones. Arrays handed out before a sort are therefore never overwritten."""
+        current = (self.ids, self.x, self.xref, self.cells)
+        spare, self._spare = self._spare, None
+        if spare is None:
+            return tuple(np.empty_like(c) for c in current)
+        for k in range(len(current)):
+            # references: the tuple ``spare`` and getrefcount's argument; more means a user holds it
+            if spare[k].shape != current[k].shape or sys.getrefcount(spare[k]) > 2:
+                return tuple(np.empty_like(c) for c in current)
+        return spare
 
     def _rebuild_offsets(self) -> None:
         owned = self.cells[(self.cells >= 0) & (self.cells < self.num_owned_cells)]

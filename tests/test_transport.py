@@ -107,3 +107,21 @@ def test_relocate_then_migrate_distributed():
     assert comm.allreduce(err, op=MPI.MAX) < 1e-12
     assert comm.allreduce(sorted_ok, op=MPI.LAND)
     assert all_ids.shape[0] == total == np.unique(all_ids).shape[0]
+
+
+def test_sort_reuses_buffers_but_never_overwrites_held_arrays():
+    rng = np.random.default_rng(4)
+    swarm = _swarm(_mesh("triangle"), 600, rng)
+    held, held_view = swarm.x, swarm.xref[:, 0]
+    expected, expected_view = held.copy(), held_view.copy()
+    for _ in range(4):
+        swarm.cells[:] = rng.integers(0, swarm.num_owned_cells, swarm.num_particles)
+        swarm.sort()
+        assert np.array_equal(held, expected) and np.array_equal(held_view, expected_view)
+        assert np.all(np.diff(swarm.cells) >= 0)
+    del held, held_view
+    spare_x = id(swarm._spare[1])  # an id, not a reference (a reference would block the reuse)
+    swarm.cells[:] = rng.integers(0, swarm.num_owned_cells, swarm.num_particles)
+    swarm.sort()
+    assert id(swarm.x) == spare_x  # released buffers are reused
+    swarm.check_invariants()

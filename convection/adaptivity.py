@@ -95,6 +95,12 @@ def wanted_levels(
         params: Fractions and level bounds.
         comm: The mesh communicator.
     """
+    # Round to 9 significant digits relative to the (global) maximum before ranking: cells along a
+    # straight interface share an indicator value, and round-off from a different partition (the
+    # order of facet contributions) must not decide which of them cross the threshold.
+    scale = comm.allreduce(float(np.abs(indicator).max(initial=0.0)), op=MPI.MAX)
+    if scale > 0.0:
+        indicator = np.round(indicator / scale, 9)
     everything = np.concatenate(comm.allgather(indicator))
     wanted = levels.astype(np.int32).copy()
     if everything.size:

@@ -100,11 +100,21 @@ SCHEMA: dict[str, Any] = {
         "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver"),
     },
     "energy": {
+        "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),
         "degree": Field("int", 2, minimum=1),
         "stabilisation": Field("str", "supg", choices=("supg", "none")),
     },
     "composition": {
-        "degree": Field("int", 0, minimum=0, help="0: DG0 cell values; >= 1: continuous Lagrange"),
+        "source": Field("str", "static", choices=("static", "particles"),
+                        help="static: C fixed at initial.composition; particles: averaged from advected particles"),
+        "degree": Field("int", 0, minimum=0, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares)"),
+    },
+    "particles": {
+        "generator": Field("mapping", {"name": "random_uniform", "particles_per_cell": 20, "seed": 1},
+                           help="generator name and parameters; particles_per_cell may replace num_particles"),
+        "integrator": Field("str", "rk2", choices=("euler", "rk2", "rk4")),
+        "interpolator": Field("mapping", {"name": "cell_average", "mean": "arithmetic"},
+                              help="particle-to-mesh interpolator name and parameters"),
     },
     "time": {
         "end": Field("float", REQUIRED, exclusive_minimum=0.0, help="end time (nondimensional)"),
@@ -160,6 +170,7 @@ def _check_consistency(config: dict[str, Any]) -> None:
     for name, value in config["initial"]["constants"].items():
         if not isinstance(value, (int, float)) or isinstance(value, bool):
             raise ConfigError(f"config key 'initial.constants.{name}': expected a number, got {value!r}")
+    _check_particles(config)
     for key in ("temperature", "composition"):
         text = config["initial"][key]
         if text is not None:
@@ -173,6 +184,27 @@ def expression_constants(config: dict[str, Any]) -> dict[str, float]:
     """Constants available in initial-condition expressions: Ra, Rb, H and initial.constants."""
     physics = config["physics"]
     return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **config["initial"]["constants"]}
+
+
+def _check_particles(config: dict[str, Any]) -> None:
+    from particles.generation import GENERATORS
+    from particles.interpolation import INTERPOLATORS
+
+    section = config["particles"]
+    for key, registry in (("generator", GENERATORS), ("interpolator", INTERPOLATORS)):
+        params = dict(section[key])
+        name = params.pop("name", None)
+        if name not in registry:
+            raise ConfigError(f"config key 'particles.{key}.name': {name!r} is not one of {sorted(registry)}")
+        if key == "generator" and "particles_per_cell" in params:
+            params.pop("particles_per_cell")
+            params["num_particles"] = 1
+        try:
+            registry[name](**params)
+        except (TypeError, ValueError) as err:
+            raise ConfigError(f"config key 'particles.{key}': {err}") from None
+    if config["composition"]["source"] == "particles" and config["initial"]["composition"] is None:
+        raise ConfigError("config key 'initial.composition': required when composition.source is particles")
 
 
 def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:

@@ -117,10 +117,14 @@ class RunDiagnostics:
         u: velocity Function.
         energy_solver: the temperature solver (Nusselt number from its consistent flux).
         side: side for the Nusselt number.
+        nusselt: False to skip the Nusselt number (reported as NaN), e.g. without a temperature
+            equation.
     """
 
-    def __init__(self, u: dolfinx.fem.Function, energy_solver: EnergySolver, /, *, side: str = "top") -> None:
+    def __init__(self, u: dolfinx.fem.Function, energy_solver: EnergySolver, /, *, side: str = "top",
+                 nusselt: bool = True) -> None:
         self.u = u
+        self.with_nusselt = nusselt
         self.energy = energy_solver
         self.side = side
         mesh = u.function_space.mesh
@@ -142,4 +146,5 @@ class RunDiagnostics:
         extremes = np.empty(2)
         comm.Allreduce(local[2:], extremes, op=MPI.MAX)
         stats = TemperatureStats(float(sums[1] / self._volume), float(-extremes[0]), float(extremes[1]))
-        return StepDiagnostics(float(np.sqrt(sums[0] / self._volume)), nusselt(self.energy, self.u, self.side), stats)
+        nu = nusselt(self.energy, self.u, self.side) if self.with_nusselt else float("nan")
+        return StepDiagnostics(float(np.sqrt(sums[0] / self._volume)), nu, stats)

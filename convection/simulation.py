@@ -9,8 +9,13 @@ Per step (Boussinesq, see :mod:`convection.approximation`):
 5. every ``adaptivity.every`` steps: rebuild the mesh from the base mesh (:mod:`convection.adaptivity`)
    and carry every field to it.
 
-The composition field C is set from ``initial.composition`` and kept fixed (later issues make it
-come from particles); it enters the buoyancy (Ra T - Rb C) e_z and the viscosity.
+The composition field C enters the buoyancy (Ra T - Rb C) e_z and the viscosity. With
+``composition.source: static`` it is set from ``initial.composition`` and kept fixed; with
+``particles`` it is averaged per step from advected particles
+(:class:`convection.particle_composition.ParticleComposition`): after the temperature step the
+particles move from t^n to t^{n+1} in the velocity interpolated linearly in time between u^n and
+the extrapolation u* = (1 + w) u^n - w u^{n-1} (w = dt_n / dt_{n-1}; u* = u^n on the first step),
+then C is re-averaged and Stokes is solved with it.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from convection.energy import EnergySolver
 from convection.expressions import Expression
 from convection.mesh import BoxSpec, create_box_mesh
 from convection.output import FieldOutput
+from convection.particle_composition import ParticleComposition
 from convection.progress import Progress
 from convection.statistics import StatisticsWriter
 from convection.stokes import StokesSolver
@@ -46,7 +52,7 @@ __all__ = ["RunSummary", "Simulation", "STATISTICS_COLUMNS"]
 
 STATISTICS_COLUMNS = (
     "step", "time", "dt", "vrms", "nusselt", "T_mean", "T_min", "T_max", "cells", "stokes_iterations",
-    "wall_time",
+    "n_particles", "n_lost", "wall_time",
 )
 
 
@@ -132,6 +138,16 @@ class Simulation:
                 rounds = self.adaptivity.max_level - self.adaptivity.min_level
             for _ in range(rounds):
                 self.adapt(initial=True)
+        self.particles: ParticleComposition | None = None
+        if config["composition"]["source"] == "particles":
+            assert self.initial_composition is not None
+            pcfg = config["particles"]
+            self.particles = ParticleComposition(
+                self.mesh, self.initial_composition, generator=pcfg["generator"], integrator=pcfg["integrator"],
+                interpolator=pcfg["interpolator"], degree=config["composition"]["degree"],
+            )
+            self.composition = self.particles.field
+        self._u_previous: dolfinx.fem.Function | None = None
         self.t = 0.0
         self.step = 0
         self._last_dt = 0.0
@@ -148,7 +164,8 @@ class Simulation:
             mesh, self.approximation, bcs=self.temperature_bcs, degree=cfg["energy"]["degree"],
             stabilisation=cfg["energy"]["stabilisation"],
         )
-        self.diagnostics = RunDiagnostics(self.stokes.u, self.energy, side="top")
+        self.diagnostics = RunDiagnostics(self.stokes.u, self.energy, side="top",
+                                          nusselt=cfg["energy"]["enabled"])
         self.composition: dolfinx.fem.Function | None = None
         if self.initial_composition is not None:
             degree = cfg["composition"]["degree"]
@@ -186,16 +203,23 @@ class Simulation:
         self._build(new_mesh)
         if initial:
             self._set_initial_fields()
-        else:
-            evaluator = PointEvaluator(old_stokes.mesh)
+            return before, self.num_cells
+        evaluator = PointEvaluator(old_stokes.mesh)
 
-            def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
-                transfer_function(src, dst, evaluator=evaluator)
+        def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
+            transfer_function(src, dst, evaluator=evaluator)
 
-            self.stokes.transfer_from(old_stokes, transfer)
-            self.energy.transfer_from(old_energy, transfer)
-            if old_composition is not None and self.composition is not None:
-                transfer(old_composition, self.composition)
+        self.stokes.transfer_from(old_stokes, transfer)
+        self.energy.transfer_from(old_energy, transfer)
+        if self._u_previous is not None:
+            u_previous = dolfinx.fem.Function(self.stokes.u.function_space)
+            transfer(self._u_previous, u_previous)
+            self._u_previous = u_previous
+        if getattr(self, "particles", None) is not None:
+            self.particles.move_to_mesh(new_mesh)
+            self.composition = self.particles.field
+        elif old_composition is not None and self.composition is not None:
+            transfer(old_composition, self.composition)
         return before, self.num_cells
 
     # ------------------------------------------------------------------ time loop
@@ -212,6 +236,21 @@ class Simulation:
             if dt <= 0.0:
                 raise RuntimeError("the velocity is zero and neither time.dt_initial nor time.dt_max is set")
         return min(dt, tcfg["end"] - self.t)
+
+    def _velocity_at_step_end(self, dt: float) -> dolfinx.fem.Function:
+        """u* = (1 + w) u^n - w u^{n-1} (w = dt / previous dt), or u^n on the first step; then
+        remembers u^n as the previous velocity."""
+        u = self.stokes.u
+        if self._u_previous is None or self._last_dt <= 0.0:
+            u_end = u
+        else:
+            w = dt / self._last_dt
+            u_end = dolfinx.fem.Function(u.function_space)
+            u_end.x.array[:] = (1.0 + w) * u.x.array - w * self._u_previous.x.array
+        if self._u_previous is None or self._u_previous.function_space is not u.function_space:
+            self._u_previous = dolfinx.fem.Function(u.function_space)
+        self._u_previous.x.array[:] = u.x.array
+        return u_end
 
     def _fields(self) -> dict[str, dolfinx.fem.Function]:
         out = {"temperature": self.energy.T, "velocity": self.stokes.u, "pressure": self.stokes.p}
@@ -247,6 +286,8 @@ class Simulation:
                 diag = self._diagnostics()
                 row = {"step": self.step, "time": self.t, "dt": 0.0 if self.step == 0 else self._last_dt,
                        "cells": self.num_cells, "stokes_iterations": result.iterations,
+                       "n_particles": self.particles.num_particles if self.particles else 0,
+                       "n_lost": self.particles.lost if self.particles else 0,
                        "wall_time": time.monotonic() - start, **diag}
                 writer.write(row)
                 progress.update(self.step, self.t, row["dt"], diag["vrms"], extra=f"Nu={diag['nusselt']:.5g}")
@@ -266,7 +307,10 @@ class Simulation:
                     reason = "stopped by signal"
                     break
                 dt = self._timestep()
-                self.energy.step(self.stokes.u, dt)
+                if self.config["energy"]["enabled"]:
+                    self.energy.step(self.stokes.u, dt)
+                if self.particles is not None:
+                    self.particles.advect(self.stokes.u, self._velocity_at_step_end(dt), dt)
                 self.t += dt
                 self.step += 1
                 self._last_dt = dt

@@ -96,3 +96,36 @@ def test_sigterm_stops_cleanly(tmp_path):
     assert summary["reason"] == "stopped by signal"
     rows = read_statistics(stats)
     assert rows["step"][-1] == summary["steps"] >= 5
+
+
+def _vk_config(tmp_path, *extra):
+    return load_config(ROOT / "configs" / "vankeken_1a.yaml", [
+        "mesh.cells=[8,8]", "adaptivity.max_level=1", "time.max_steps=12", "output.progress=none",
+        f"output.directory={tmp_path}", "output.fields_every=0", "particles.generator.particles_per_cell=8",
+        *extra,
+    ])
+
+
+def test_particle_composition_run(tmp_path):
+    summary = _run(_vk_config(tmp_path), MPI.COMM_SELF)
+    stats = read_statistics(tmp_path / "statistics.csv")
+    assert summary.reason == "max steps"
+    assert np.all(stats["n_particles"] == stats["n_particles"][0]) and stats["n_particles"][0] > 0
+    assert np.all(stats["n_lost"] == 0)
+    assert np.all(np.diff(stats["vrms"]) > 0)  # Rayleigh-Taylor growth in its early phase
+    assert 1.0e-4 < stats["vrms"][0] < 4.0e-4  # van Keken: vrms(0) ~ 1.85e-4 (coarse mesh here)
+    assert np.isnan(stats["nusselt"]).all()  # no temperature equation in this setup
+
+
+@pytest.mark.mpi
+def test_particle_composition_parallel(tmp_path_factory):
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path_factory.mktemp("vk")) if comm.rank == 0 else None))
+    config = _vk_config(base / "parallel", "adaptivity.enabled=false")
+    parallel = _run(config, comm)
+    serial = _run(_vk_config(base / f"serial{comm.rank}", "adaptivity.enabled=false"), MPI.COMM_SELF)
+    stats = read_statistics(base / "parallel" / "statistics.csv") if comm.rank == 0 else None
+    ok = abs(parallel.vrms - serial.vrms) <= 1e-7 * serial.vrms
+    if comm.rank == 0:
+        ok = ok and bool(np.all(stats["n_lost"] == 0)) and stats["n_particles"][-1] == stats["n_particles"][0]
+    assert comm.allreduce(ok, op=MPI.LAND), (parallel, serial)

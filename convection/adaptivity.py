@@ -113,6 +113,17 @@ def wanted_levels(
     return np.clip(wanted, params.min_level, params.max_level).astype(np.int32)
 
 
+def _with_ghost_values(mesh: dolfinx.mesh.Mesh, owned_values: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """Per-cell integers of the owned cells extended to the ghost cells (collective)."""
+    V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    f = dolfinx.fem.Function(V0)
+    dofs = V0.dofmap.list.array.reshape(-1)
+    num_owned = owned_values.shape[0]
+    f.x.array[dofs[:num_owned]] = owned_values
+    f.x.scatter_forward()
+    return np.rint(f.x.array[dofs]).astype(np.int32)
+
+
 class MeshHierarchy:
     """The coarse base mesh and the level of each cell of meshes refined from it.
 
@@ -151,17 +162,21 @@ class MeshHierarchy:
         Collective.
         """
         locator = PointEvaluator(old)
-        old_owned = old.topology.index_map(self.tdim).size_local
+        wanted_local = _with_ghost_values(old, wanted)
         max_wanted = old.comm.allreduce(int(wanted.max(initial=0)), op=MPI.MAX)
         mesh = self.base
         for _ in range(max_wanted + 2):
             num_owned = mesh.topology.index_map(self.tdim).size_local
             cells = np.arange(num_owned, dtype=np.int32)
             midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
-            old_cells = locator.locate(midpoints)
+            # The largest wanted level among all old cells touching the midpoint: a midpoint on a
+            # facet of the old mesh must not take whichever neighbour the local numbering lists
+            # first, or the result would depend on the partition.
+            offsets, old_cells = locator.colliding(midpoints)
             target = np.zeros(num_owned, dtype=np.int32)
-            inside = (old_cells >= 0) & (old_cells < old_owned)
-            target[inside] = wanted[old_cells[inside]]
+            hit = offsets[1:] > offsets[:-1]
+            if np.any(hit):
+                target[hit] = np.maximum.reduceat(wanted_local[old_cells], offsets[:-1][hit])
             marked = cells[self.levels(mesh) < target]
             if mesh.comm.allreduce(marked.size, op=MPI.SUM) == 0:
                 break

@@ -35,6 +35,12 @@ class PointEvaluator:
         cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
         self._tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim, cells, padding=1e-12)
 
+    def colliding(self, points: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+        """All local cells containing each point, as CSR (offsets shape=(n+1,), cells), points shape=(n, 3)."""
+        candidates = dolfinx.geometry.compute_collisions(self._tree, points)
+        colliding = dolfinx.geometry.compute_colliding_cells(self.mesh, candidates, points)
+        return np.asarray(colliding.offsets, dtype=np.int32), np.asarray(colliding.array, dtype=np.int32)
+
     def locate(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
         """First local cell containing each point (-1 where none), points shape=(n, 3)."""
         candidates = dolfinx.geometry.compute_collisions(self._tree, points)

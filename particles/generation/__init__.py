@@ -21,6 +21,7 @@ from particles.generation.random_density import RandomDensity, RandomUniform
 from particles.generation.reference_points import ReferencePoints
 from particles.generation.shell import Shell
 from particles.swarm import Swarm
+from particles.registry import create, describe
 
 __all__ = [
     "GENERATORS",
@@ -47,7 +48,7 @@ GENERATORS: dict[str, type] = {
 
 def describe_generators() -> dict[str, str]:
     """One-line description of every registered generator, by name."""
-    return {name: cls.description for name, cls in GENERATORS.items()}
+    return describe(GENERATORS)
 
 
 def create_generator(name: str, /, **parameters: Any) -> Generator:
@@ -56,11 +57,7 @@ def create_generator(name: str, /, **parameters: Any) -> Generator:
     Raises:
         ValueError: Unknown name (the message lists the valid names).
     """
-    try:
-        cls = GENERATORS[name]
-    except KeyError:
-        raise ValueError(f"unknown particle generator {name!r}; valid: {sorted(GENERATORS)}") from None
-    return cls(**parameters)
+    return create(GENERATORS, "generator", name, parameters)
 
 
 def generate(swarm: Swarm, generator: Generator | str, /, **parameters: Any) -> GenerationResult:

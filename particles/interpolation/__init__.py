@@ -25,6 +25,7 @@ from particles.interpolation.least_squares import LeastSquares
 from particles.interpolation.nearest import Nearest
 from particles.interpolation.shape_function import ShapeFunction
 from particles.swarm import Swarm
+from particles.registry import create, describe
 
 __all__ = [
     "INTERPOLATORS",
@@ -48,7 +49,7 @@ INTERPOLATORS: dict[str, type] = {
 
 def describe_interpolators() -> dict[str, str]:
     """One-line description of every registered interpolator, by name."""
-    return {name: cls.description for name, cls in INTERPOLATORS.items()}
+    return describe(INTERPOLATORS)
 
 
 def get_interpolator(name: str, /, **parameters: Any) -> Interpolator:
@@ -57,11 +58,7 @@ def get_interpolator(name: str, /, **parameters: Any) -> Interpolator:
     Raises:
         ValueError: Unknown name (the message lists the valid names).
     """
-    try:
-        cls = INTERPOLATORS[name]
-    except KeyError:
-        raise ValueError(f"unknown particle interpolator {name!r}; valid: {sorted(INTERPOLATORS)}") from None
-    return cls(**parameters)
+    return create(INTERPOLATORS, "interpolator", name, parameters)
 
 
 def interpolate_to_mesh(swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,

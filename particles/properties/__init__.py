@@ -45,6 +45,7 @@ from particles.properties.temperature import Temperature
 from particles.properties.time_since_creation import TimeSinceCreation
 from particles.properties.velocity import Velocity
 from particles.swarm import PropertyLayout, Swarm
+from particles.registry import create, describe
 
 __all__ = [
     "NEW_PARTICLE_POLICIES",
@@ -83,7 +84,7 @@ PropertySpec = Union[ParticleProperty, str]
 
 def describe_properties() -> dict[str, str]:
     """One-line description of every registered property, by name."""
-    return {name: cls.description for name, cls in PROPERTIES.items()}
+    return describe(PROPERTIES)
 
 
 def create_property(name: str, /, **parameters: Any) -> ParticleProperty:
@@ -92,11 +93,7 @@ def create_property(name: str, /, **parameters: Any) -> ParticleProperty:
     Raises:
         ValueError: Unknown name (the message lists the valid names).
     """
-    try:
-        cls = PROPERTIES[name]
-    except KeyError:
-        raise ValueError(f"unknown particle property {name!r}; valid: {sorted(PROPERTIES)}") from None
-    return cls(**parameters)
+    return create(PROPERTIES, "property", name, parameters)
 
 
 class PropertyManager:

@@ -2,11 +2,30 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from typing import TextIO
 
-__all__ = ["Progress"]
+__all__ = ["Progress", "is_terminal"]
+
+
+def is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` ends on a terminal.
+
+    Under OpenMPI the ranks' standard output is a pseudo-terminal even when mpirun itself writes
+    into a file or a pipe, so there the answer is taken from mpirun's (the parent's) standard
+    output instead.
+    """
+    if not stream.isatty():
+        return False
+    if "OMPI_COMM_WORLD_SIZE" not in os.environ:
+        return True
+    try:
+        target = os.readlink(f"/proc/{os.getppid()}/fd/1")
+    except OSError:
+        return False
+    return target.startswith(("/dev/pts/", "/dev/tty"))
 
 
 class Progress:
@@ -32,7 +51,7 @@ class Progress:
             return
         out = stream or sys.stdout
         if mode == "auto":
-            mode = "bar" if out.isatty() else "lines"
+            mode = "bar" if is_terminal(out) else "lines"
         self.mode = mode
         if mode == "bar":
             from tqdm import tqdm

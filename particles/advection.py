@@ -36,6 +36,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from particles.evaluation import Evaluator
+from particles.migration import migrate
 from particles.kernels import stage_combination
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
@@ -354,15 +355,7 @@ class Advector:
 
 
 def _migrate(swarm: Swarm) -> tuple[int, int, int, int]:
-    """Call particles.migration.migrate if that module is present; else drop unlocated particles
-    (serial only). Returns (sent, received, lost, global_lost)."""
-    try:
-        from particles.migration import migrate
-    except ImportError:
-        if swarm.comm.size > 1:
-            raise RuntimeError("particles.migration is required for advection on more than one rank") from None
-        gone = (swarm.cells < 0) | (swarm.cells >= swarm.num_owned_cells)
-        lost = swarm.remove(gone)
-        return 0, 0, lost, lost
+    """Hand particles that left this rank's cells to their owners; returns (sent, received,
+    lost, global_lost)."""
     stats = migrate(swarm)
     return stats.sent, stats.received, stats.lost, stats.global_lost

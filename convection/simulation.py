@@ -52,7 +52,7 @@ __all__ = ["RunSummary", "Simulation", "STATISTICS_COLUMNS"]
 
 STATISTICS_COLUMNS = (
     "step", "time", "dt", "vrms", "nusselt", "T_mean", "T_min", "T_max", "cells", "stokes_iterations",
-    "n_particles", "n_lost", "wall_time",
+    "n_particles", "n_lost", "cell_imbalance", "particle_imbalance", "wall_time",
 )
 
 
@@ -237,6 +237,15 @@ class Simulation:
                 raise RuntimeError("the velocity is zero and neither time.dt_initial nor time.dt_max is set")
         return min(dt, tcfg["end"] - self.t)
 
+    def _imbalance(self) -> dict[str, float]:
+        """Load imbalance max/mean over ranks of owned cells and of particles (1 = balanced)."""
+        owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
+        particles = self.particles.swarm.num_particles if self.particles else 0
+        counts = np.array(self.comm.allgather((owned, particles)), dtype=np.float64)
+        mean = counts.mean(axis=0)
+        ratio = np.divide(counts.max(axis=0), mean, out=np.ones(2), where=mean > 0)
+        return {"cell_imbalance": float(ratio[0]), "particle_imbalance": float(ratio[1])}
+
     def _velocity_at_step_end(self, dt: float) -> dolfinx.fem.Function:
         """u* = (1 + w) u^n - w u^{n-1} (w = dt / previous dt), or u^n on the first step; then
         remembers u^n as the previous velocity."""
@@ -288,6 +297,7 @@ class Simulation:
                        "cells": self.num_cells, "stokes_iterations": result.iterations,
                        "n_particles": self.particles.num_particles if self.particles else 0,
                        "n_lost": self.particles.lost if self.particles else 0,
+                       **self._imbalance(),
                        "wall_time": time.monotonic() - start, **diag}
                 writer.write(row)
                 progress.update(self.step, self.t, row["dt"], diag["vrms"], extra=f"Nu={diag['nusselt']:.5g}")

@@ -138,6 +138,11 @@ SCHEMA: dict[str, Any] = {
                                help="adapt this many times to the initial condition (default max_level - min_level)"),
         "fields": Field("list[str]", ["temperature"], choices=("temperature", "composition")),
     },
+    "diagnostics": {
+        "entrainment_material": Field("str", None, nullable=True, choices=("dense", "light"),
+                                      help="material whose entrainment is reported: dense (C = 1) or light (C = 0)"),
+        "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height / its initial volume"),
+    },
     "output": {
         "directory": Field("str", REQUIRED, help="output folder (statistics.csv, fields, config)"),
         "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),

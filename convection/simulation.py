@@ -31,6 +31,7 @@ from mpi4py import MPI
 
 import dolfinx.fem
 import dolfinx.mesh
+import ufl
 
 from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels
 from convection.approximation import BoussinesqApproximation, ViscosityLaw
@@ -52,7 +53,7 @@ __all__ = ["RunSummary", "Simulation", "STATISTICS_COLUMNS"]
 
 STATISTICS_COLUMNS = (
     "step", "time", "dt", "vrms", "nusselt", "T_mean", "T_min", "T_max", "cells", "stokes_iterations",
-    "n_particles", "n_lost", "cell_imbalance", "particle_imbalance", "wall_time",
+    "n_particles", "n_lost", "cell_imbalance", "particle_imbalance", "entrainment", "wall_time",
 )
 
 
@@ -148,6 +149,8 @@ class Simulation:
             )
             self.composition = self.particles.field
         self._u_previous: dolfinx.fem.Function | None = None
+        self._entrainment_form: tuple | None = None
+        self._initial_material_volume: float | None = None
         self.t = 0.0
         self.step = 0
         self._last_dt = 0.0
@@ -237,6 +240,29 @@ class Simulation:
                 raise RuntimeError("the velocity is zero and neither time.dt_initial nor time.dt_max is set")
         return min(dt, tcfg["end"] - self.t)
 
+    def _material_volume_above(self, height: float | None) -> float:
+        """Volume of the configured material above ``height`` (everywhere for None; collective)."""
+        C = self.composition
+        assert C is not None
+        z = ufl.SpatialCoordinate(self.mesh)[self.mesh.geometry.dim - 1]
+        amount = C if self.config["diagnostics"]["entrainment_material"] == "dense" else 1.0 - C
+        key = (id(C), height)
+        if self._entrainment_form is None or self._entrainment_form[0] != key:
+            integrand = amount if height is None else ufl.conditional(ufl.gt(z, height), amount, 0.0)
+            form = dolfinx.fem.form(integrand * ufl.dx)
+            self._entrainment_form = (key, form, C)
+        return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._entrainment_form[1]), op=MPI.SUM)
+
+    def _entrainment(self) -> float:
+        """Fraction of the configured material's initial volume that lies above the entrainment
+        height, from the composition field (NaN when not configured)."""
+        dcfg = self.config["diagnostics"]
+        if dcfg["entrainment_material"] is None or self.composition is None:
+            return float("nan")
+        if self._initial_material_volume is None:
+            self._initial_material_volume = self._material_volume_above(None)
+        return self._material_volume_above(dcfg["entrainment_height"]) / self._initial_material_volume
+
     def _imbalance(self) -> dict[str, float]:
         """Load imbalance max/mean over ranks of owned cells and of particles (1 = balanced)."""
         owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
@@ -297,7 +323,7 @@ class Simulation:
                        "cells": self.num_cells, "stokes_iterations": result.iterations,
                        "n_particles": self.particles.num_particles if self.particles else 0,
                        "n_lost": self.particles.lost if self.particles else 0,
-                       **self._imbalance(),
+                       **self._imbalance(), "entrainment": self._entrainment(),
                        "wall_time": time.monotonic() - start, **diag}
                 writer.write(row)
                 progress.update(self.step, self.t, row["dt"], diag["vrms"], extra=f"Nu={diag['nusselt']:.5g}")

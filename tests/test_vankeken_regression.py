@@ -40,8 +40,10 @@ def quick_run(tmp_path_factory):
 
 def test_values_match_stored(quick_run):
     m = measure(quick_run)
-    values = {**m._asdict(), **{f"vrms_t{t}": float(np.interp(t, quick_run["time"], quick_run["vrms"]))
-                                for t in (50, 100, 150, 200)}}
+    values = dict(m._asdict())
+    for t in (50, 100, 150, 200):
+        for key in ("vrms", "entrainment"):
+            values[f"{key}_t{t}"] = float(np.interp(t, quick_run["time"], quick_run[key]))
     for name, (stored, rtol) in _stored().items():
         assert values[name] == pytest.approx(stored, rel=rtol), name
 
@@ -49,6 +51,9 @@ def test_values_match_stored(quick_run):
 def test_physics(quick_run):
     t, v = quick_run["time"], quick_run["vrms"]
     assert np.all(np.diff(v[t < 190]) > 0)  # the instability grows until the first peak
+    e = quick_run["entrainment"]
+    assert np.all(np.diff(e[t < 200]) > 0)  # light material rises monotonically early
+    assert e[0] == pytest.approx(0.02 * 0.9142 / np.pi / (0.2 * 0.9142), rel=0.05)  # the initial bump
     assert np.all(quick_run["n_particles"] == quick_run["n_particles"][0])  # no particle created or destroyed
     assert np.all(quick_run["n_lost"] == 0)
     m = measure(quick_run)

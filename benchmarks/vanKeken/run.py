@@ -125,14 +125,18 @@ def _plot(curves: dict[str, dict[str, np.ndarray]], ref: dict[str, float], png: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
     for case, stats in curves.items():
         ax.plot(stats["time"], stats["vrms"], label=f"case {case} (this code)")
+        ax2.plot(stats["time"], stats["entrainment"], label=f"case {case} (this code)")
     ax.plot([ref["first_peak_time"]], [ref["first_peak_vrms"]], "k*", markersize=12, label="1a published first peak")
     ax.set_xlabel("time")
     ax.set_ylabel("vrms")
     ax.set_title("van Keken et al. (1997) Rayleigh-Taylor")
     ax.legend()
+    ax2.set_xlabel("time")
+    ax2.set_ylabel("light material above z = 0.2 (fraction)")
+    ax2.legend()
     fig.savefig(png, dpi=110)
     plt.close(fig)
 

@@ -53,9 +53,18 @@ class _StopFlag:
         return self.requested
 
 
+class _WarningsOnly(logging.Filter):
+    """Drops INFO/DEBUG records of the root logger: the form compiler's build steps log there, and
+    the build tools reset the root level to INFO while compiling."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.levelno >= logging.WARNING
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     logging.getLogger().setLevel(logging.WARNING)
+    logging.getLogger().addFilter(_WarningsOnly())
     args = _parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     overrides = list(args.overrides)

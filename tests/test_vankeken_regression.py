@@ -59,3 +59,76 @@ def test_physics(quick_run):
     m = measure(quick_run)
     assert m.peak_time == pytest.approx(208.99, rel=0.05)  # published first peak, coarse tolerance
     assert m.peak_vrms == pytest.approx(3.0916e-3, rel=0.06)
+
+
+# ---------------------------------------------------------------- case 2 (thermochemical entrainment)
+CASE2 = ROOT / "configs" / "vankeken_case2.yaml"
+CASE2_QUICK = ["mesh.cells=[32,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=8",
+               "time.end=0.002", "diagnostics.entrainment_height=0.03", "output.progress=none", "output.fields_every=0"]
+
+
+def _boundary_layer_cell(x, z, Ra=3.0e5, lam=2.0):
+    """van Keken et al. (1997) initial temperature, written independently of the config expression."""
+    from math import erf, exp, pi, sqrt
+
+    u0 = lam ** (7 / 3) / (1 + lam ** 4) ** (2 / 3) * (Ra / (2 * sqrt(pi))) ** (2 / 3)
+    q = 2 * sqrt(lam / (pi * u0))
+    t_upper = 0.5 * erf((1 - z) / 2 * sqrt(u0 / x))
+    t_lower = 1 - 0.5 * erf(z / 2 * sqrt(u0 / (lam - x)))
+    t_rise = 0.5 + q / (2 * sqrt(pi)) * sqrt(u0 / (z + 1)) * exp(-x * x * u0 / (4 * z + 4))
+    t_sink = 0.5 - q / (2 * sqrt(pi)) * sqrt(u0 / (2 - z)) * exp(-(lam - x) ** 2 * u0 / (8 - 4 * z))
+    return min(max(t_upper + t_lower + t_rise + t_sink - 1.5, 0.0), 1.0)
+
+
+def test_case2_initial_temperature_expression():
+    from convection.config import expression_constants
+    from convection.expressions import Expression
+
+    config = load_config(CASE2, ["output.directory=unused"])
+    expr = Expression(config["initial"]["temperature"], constants=expression_constants(config), gdim=2)
+    rng = np.random.default_rng(3)
+    points = np.zeros((3, 500))
+    points[0] = rng.uniform(1e-3, 2 - 1e-3, 500)
+    points[1] = rng.uniform(0, 1, 500)
+    expected = [_boundary_layer_cell(x, z) for x, z in points[:2].T]
+    assert expr(points) == pytest.approx(expected, abs=1e-12)
+    walls = np.array([[0.0, 2.0, 0.0, 2.0, 0.0, 2.0], [0.0, 0.0, 1.0, 1.0, 0.5, 0.5], [0.0] * 6])
+    assert np.all(np.isfinite(expr(walls)))  # the erf arguments stay finite on the side walls
+    assert np.all((expr(points) >= 0) & (expr(points) <= 1))
+
+
+def test_case2_initial_vrms(tmp_path):
+    """vrms of the first Stokes solve with the analytic initial temperature and the dense layer (published ~385)."""
+    config = load_config(CASE2, ["time.max_steps=0", "output.progress=none", "output.fields_every=0",
+                                 f"output.directory={tmp_path}"])
+    Simulation(config, comm=MPI.COMM_SELF).run()
+    stats = read_statistics(tmp_path / "statistics.csv")
+    assert stats["vrms"][0] == pytest.approx(385.0, rel=0.01)
+    assert stats["entrainment"][0] == 0.0
+
+
+def _stored_case2():
+    with open(ROOT / "tests" / "data" / "vankeken_case2_quick.csv", newline="") as f:
+        rows = csv.DictReader(line for line in f if not line.startswith("#"))
+        return {r["quantity"]: (float(r["value"]), float(r["rtol"]), float(r["atol"])) for r in rows}
+
+
+def case2_quick_values(stats):
+    """The quantities stored in tests/data/vankeken_case2_quick.csv, from a quick case-2 run."""
+    values = {"vrms_initial": float(stats["vrms"][0])}
+    for t in (0.0005, 0.001, 0.0015, 0.002):
+        for key in ("vrms", "nusselt", "entrainment"):
+            values[f"{key}_t{t:g}"] = float(np.interp(t, stats["time"], stats[key]))
+    return values
+
+
+def test_case2_quick_matches_stored(tmp_path):
+    config = load_config(CASE2, [*CASE2_QUICK, f"output.directory={tmp_path}"])
+    Simulation(config, comm=MPI.COMM_SELF).run()
+    stats = read_statistics(tmp_path / "statistics.csv")
+    assert np.all(stats["n_particles"] == stats["n_particles"][0])
+    assert np.all(stats["n_lost"] == 0)
+    assert stats["entrainment"][0] == 0.0 and stats["entrainment"][-1] > 0.1  # dense material rises above z = 0.03
+    values = case2_quick_values(stats)
+    for name, (stored, rtol, atol) in _stored_case2().items():
+        assert values[name] == pytest.approx(stored, rel=rtol, abs=atol), name

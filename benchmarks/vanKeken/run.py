@@ -1,21 +1,32 @@
-"""van Keken et al. (1997) Rayleigh-Taylor benchmark, cases 1a/1b/1c: run, measure, compare, plot.
+"""van Keken et al. (1997) benchmarks: Rayleigh-Taylor cases 1a/1b/1c and thermochemical case 2.
 
 Usage::
 
-    python benchmarks/vanKeken/run.py [--case 1a 1b 1c] [--ranks 2] [--quick] [--end 300] [--out DIR]
+    python benchmarks/vanKeken/run.py [--case 1a 1b 1c 2] [--ranks 2] [--quick] [--end T] [--out DIR] [--no-run]
 
-Runs ``configs/vankeken_<case>.yaml`` with the CLI under mpirun, then from each statistics.csv:
-the first vrms peak (height and time, refined by a parabola through the three samples around the
-maximum), the growth rate of the early exponential phase (least-squares slope of log vrms for
-t <= 50, at least three samples) and vrms(0). Writes ``<out>/results.md`` (our numbers vs ``reference.csv`` with relative
-errors, case 1a) and ``<out>/vrms.png`` (our curves with the published peak). ``--quick`` uses a
-coarse mesh and 10 particles per cell (a smoke run of about a minute).
+Runs ``configs/vankeken_<case>.yaml`` (case 2: ``configs/vankeken_case2.yaml``) with the CLI under
+mpirun, then from each statistics.csv:
+
+- cases 1a/1b/1c: the first vrms peak (height and time, refined by a parabola through the three
+  samples around the maximum), the growth rate of the early exponential phase (least-squares slope
+  of log vrms for t <= 50, at least three samples), vrms(0), and for runs past t = 1500 the second
+  peak (the largest vrms for 500 <= t <= 1500); entrainment (light material above z = 0.2) at
+  t = 100, 200, 300, 500, 1000, 2000 when reached;
+- case 2: vrms(0), the first peak (largest vrms for t <= 0.006), the second peak (largest vrms for
+  0.006 <= t <= 0.009), entrainment (dense material above z = 0.2) at t = 0.01 and 0.02, each
+  against the published spread of ``reference.csv`` (inside / outside).
+
+Writes ``<out>/results.md`` and ``<out>/vrms.png`` (cases 1x) or ``<out>/results_2.md`` and
+``<out>/case2.png`` (case 2). ``--quick`` uses coarse settings (a smoke run). ``--no-run`` only
+re-measures existing ``<out>/<case>/statistics.csv`` files. The default end time is 300 for cases
+1x (the first peak is near t = 209 in 1a) and 0.02 for case 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import math
 import os
 import shutil
 import subprocess
@@ -32,10 +43,18 @@ sys.path.insert(0, str(ROOT))
 from convection.plot import read_statistics  # noqa: E402
 
 QUICK = ["mesh.cells=[16,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=10"]
+QUICK_2 = ["mesh.cells=[32,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=10"]
+CONFIGS = {"1a": "vankeken_1a.yaml", "1b": "vankeken_1b.yaml", "1c": "vankeken_1c.yaml", "2": "vankeken_case2.yaml"}
+DEFAULT_END = {"1a": 300.0, "1b": 300.0, "1c": 300.0, "2": 0.02}
+ENTRAINMENT_TIMES_1 = (100.0, 200.0, 300.0, 500.0, 1000.0, 2000.0)
+SECOND_PEAK_WINDOW_1 = (500.0, 1500.0)
+FIRST_PEAK_WINDOW_2 = (0.0, 0.006)
+SECOND_PEAK_WINDOW_2 = (0.006, 0.009)
+ENTRAINMENT_TIMES_2 = (0.01, 0.02)
 
 
 class Measures(NamedTuple):
-    """What the benchmark compares."""
+    """What the Rayleigh-Taylor benchmark compares."""
 
     peak_vrms: float
     peak_time: float
@@ -43,35 +62,95 @@ class Measures(NamedTuple):
     vrms_initial: float
 
 
+class Peak(NamedTuple):
+    """A vrms maximum: height and time (parabola through the samples around the largest sample)."""
+
+    vrms: float
+    time: float
+
+
+class Case2Measures(NamedTuple):
+    """What the thermochemical entrainment benchmark compares (NaN where the run did not reach it)."""
+
+    vrms_initial: float
+    first_peak: Peak
+    second_peak: Peak
+    entrainment: dict[float, float]
+
+
+def peak(t: np.ndarray, v: np.ndarray, window: tuple[float, float] | None = None) -> Peak:
+    """Largest ``v`` for ``t`` in ``window`` (all samples for None), refined by a parabola through
+    the sample and its two neighbours when they form a maximum. NaN if no sample lies in the window."""
+    inside = np.ones(len(t), dtype=bool) if window is None else (t >= window[0]) & (t <= window[1])
+    if not inside.any():
+        return Peak(math.nan, math.nan)
+    idx = np.flatnonzero(inside)
+    i = int(idx[np.argmax(v[idx])])
+    peak_t, peak_v = float(t[i]), float(v[i])
+    if 0 < i < len(t) - 1:
+        a, b, c = np.polyfit(t[i - 1:i + 2], v[i - 1:i + 2], 2)
+        if a < 0:
+            peak_t = float(-b / (2 * a))
+            peak_v = float(c - b * b / (4 * a))
+    return Peak(peak_v, peak_t)
+
+
+def value_at(stats: dict[str, np.ndarray], key: str, time: float) -> float:
+    """Column ``key`` interpolated linearly to ``time`` (NaN if the run did not get there)."""
+    t = stats["time"]
+    if time > t[-1] * (1 + 1e-9):
+        return math.nan
+    return float(np.interp(time, t, stats[key]))
+
+
 def measure(stats: dict[str, np.ndarray], *, early_until: float = 50.0) -> Measures:
     """First vrms peak = the maximum (parabola through the samples around it), early growth rate, vrms(0).
 
     The growth rate is the least-squares slope of log vrms over the early exponential phase,
-    t <= ``early_until`` (at least the first three samples).
+    t <= ``early_until`` (at least the first three samples). In case 1a the first peak is the
+    largest (the second is ~4x lower).
     """
     t, v = stats["time"], stats["vrms"]
-    i = int(np.argmax(v))  # in case 1a the first peak is the largest (the second is ~4x lower)
-    peak_t, peak_v = t[i], v[i]
-    if 0 < i < len(t) - 1:
-        a, b, c = np.polyfit(t[i - 1:i + 2], v[i - 1:i + 2], 2)
-        if a < 0:
-            peak_t = -b / (2 * a)
-            peak_v = c - b * b / (4 * a)
+    first = peak(t, v)
     early = t <= early_until
     early[:3] = True
     rate = float(np.polyfit(t[early], np.log(v[early]), 1)[0])
-    return Measures(float(peak_v), float(peak_t), rate, float(v[0]))
+    return Measures(first.vrms, first.time, rate, float(v[0]))
 
 
-def reference() -> dict[str, float]:
+def measure_case2(stats: dict[str, np.ndarray]) -> Case2Measures:
+    """vrms(0), first and second vrms peaks, entrainment at t = 0.01 and 0.02 of a case-2 run."""
+    t, v = stats["time"], stats["vrms"]
+    return Case2Measures(
+        float(v[0]), peak(t, v, FIRST_PEAK_WINDOW_2), peak(t, v, SECOND_PEAK_WINDOW_2),
+        {time: value_at(stats, "entrainment", time) for time in ENTRAINMENT_TIMES_2},
+    )
+
+
+class Reference(NamedTuple):
+    """A published value: a point value, or a range [low, high] across published methods."""
+
+    value: float
+    low: float
+    high: float
+    source: str
+
+
+def reference(case: str = "1a") -> dict[str, Reference]:
+    """Rows of ``reference.csv`` for one case."""
     with open(HERE / "reference.csv", newline="") as f:
         rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
-    return {r["quantity"]: float(r["value"]) for r in rows if r["case"] == "1a"}
+
+    def number(text: str | None) -> float:
+        return float(text) if text not in (None, "") else math.nan
+
+    return {r["quantity"]: Reference(number(r["value"]), number(r["low"]), number(r["high"]), r["source"])
+            for r in rows if r["case"] == case}
 
 
 def run_case(case: str, out: Path, ranks: int, overrides: list[str]) -> dict[str, np.ndarray]:
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [sys.executable, "-m", "convection", "run", str(ROOT / "configs" / f"vankeken_{case}.yaml"),
+    cmd = [sys.executable, "-m", "convection", "run", str(ROOT / "configs" / CONFIGS[case]),
            "--output", str(out), "--set", "output.progress=lines", "--set", "output.progress_every=100",
            "--set", "output.fields_every=0"]
     for item in overrides:
@@ -83,60 +162,157 @@ def run_case(case: str, out: Path, ranks: int, overrides: list[str]) -> dict[str
     return read_statistics(out / "statistics.csv")
 
 
+def _rel(value: float, ref: float) -> str:
+    return f"{(value - ref) / ref:+.2%}" if math.isfinite(value) and math.isfinite(ref) else "-"
+
+
+def table_case1(curves: dict[str, dict[str, np.ndarray]]) -> str:
+    """Markdown tables of the Rayleigh-Taylor cases: first peak, growth rate, second peak, entrainment."""
+    lines = ["| case | peak vrms | published | rel. error | peak time | published | rel. error | growth rate | "
+             "vrms(0) | particles | lost | steps | wall time [s] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for case, stats in curves.items():
+        m = measure(stats)
+        ref = reference(case)
+        rv = ref.get("first_peak_vrms", Reference(math.nan, math.nan, math.nan, ""))
+        rt = ref.get("first_peak_time", Reference(math.nan, math.nan, math.nan, ""))
+        lines.append(f"| {case} | {m.peak_vrms:.5e} | {rv.value:.5g} | {_rel(m.peak_vrms, rv.value)} | {m.peak_time:.2f} | "
+                     f"{rt.value:.5g} | {_rel(m.peak_time, rt.value)} | {m.growth_rate:.5f} | {m.vrms_initial:.4e} | "
+                     f"{int(stats['n_particles'][0])} | {int(stats['n_lost'][-1])} | {int(stats['step'][-1])} | "
+                     f"{stats['wall_time'][-1]:.0f} |")
+    lines += ["", "| case | second peak vrms (500 <= t <= 1500) | published | rel. error | time | published | "
+              + " | ".join(f"entrainment t={t:g}" for t in ENTRAINMENT_TIMES_1) + " |",
+              "|---|---|---|---|---|---|" + "---|" * len(ENTRAINMENT_TIMES_1)]
+    for case, stats in curves.items():
+        t, v = stats["time"], stats["vrms"]
+        second = peak(t, v, SECOND_PEAK_WINDOW_1) if t[-1] >= SECOND_PEAK_WINDOW_1[1] else Peak(math.nan, math.nan)
+        ref = reference(case)
+        rv = ref.get("second_peak_vrms", Reference(math.nan, math.nan, math.nan, ""))
+        rt = ref.get("second_peak_time", Reference(math.nan, math.nan, math.nan, ""))
+        ent = [value_at(stats, "entrainment", time) for time in ENTRAINMENT_TIMES_1]
+        lines.append(f"| {case} | {second.vrms:.4e} | {rv.value:.4g} | {_rel(second.vrms, rv.value)} | {second.time:.1f} | "
+                     f"{rt.value:.4g} | " + " | ".join(f"{e:.4f}" for e in ent) + " |")
+    return "\n".join(lines).replace("nan", "-") + "\n"
+
+
+def _verdict(value: float, ref: Reference) -> str:
+    if not math.isfinite(value):
+        return "not reached"
+    return "inside" if ref.low <= value <= ref.high else "outside"
+
+
+def table_case2(stats: dict[str, np.ndarray]) -> str:
+    """Markdown table of case 2 against the published spread."""
+    m = measure_case2(stats)
+    ref = reference("2")
+    rows = [
+        ("vrms(0)", m.vrms_initial, ref["vrms_initial"]),
+        ("first peak vrms (t <= 0.006)", m.first_peak.vrms, ref["first_peak_vrms"]),
+        ("first peak time", m.first_peak.time, ref["first_peak_time"]),
+        ("second peak vrms (0.006 <= t <= 0.009)", m.second_peak.vrms, ref["second_peak_vrms"]),
+        ("second peak time", m.second_peak.time, ref["second_peak_time"]),
+        *((f"entrainment at t = {time:g}", m.entrainment[time], ref[f"entrainment_t{time:g}"]) for time in ENTRAINMENT_TIMES_2),
+    ]
+    lines = ["| quantity | this code | published | verdict |", "|---|---|---|---|"]
+    for name, value, r in rows:
+        published = f"{r.low:.4g} - {r.high:.4g}" if math.isfinite(r.low) else f"~{r.value:.4g}"
+        verdict = _verdict(value, r) if math.isfinite(r.low) else (_rel(value, r.value) if math.isfinite(value) else "not reached")
+        lines.append(f"| {name} | {value:.5g} | {published} | {verdict} |")
+    lines.append(f"\nparticles {int(stats['n_particles'][0])}, lost {int(stats['n_lost'][-1])}, steps {int(stats['step'][-1])}, "
+                 f"cells {int(stats['cells'].min())}-{int(stats['cells'].max())}, t_end {stats['time'][-1]:.4g}, "
+                 f"wall time {stats['wall_time'][-1]:.0f} s")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--case", nargs="+", default=["1a"], choices=["1a", "1b", "1c"])
+    parser.add_argument("--case", nargs="+", default=["1a"], choices=sorted(CONFIGS))
     parser.add_argument("--ranks", type=int, default=2)
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--end", type=float, default=300.0, help="end time (the first peak is near t = 209 in 1a)")
+    parser.add_argument("--end", type=float, default=None, help="end time (default: 300 for 1x, 0.02 for 2)")
     parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "vanKeken"))
+    parser.add_argument("--no-run", action="store_true", help="only measure existing <out>/<case>/statistics.csv")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="extra config override")
     args = parser.parse_args(argv)
     out = Path(args.out)
-    overrides = [f"time.end={args.end}"] + (QUICK if args.quick else [])
-    ref = reference()
-    lines = ["| case | peak vrms | rel. error | peak time | rel. error | growth rate | rel. error | vrms(0) | particles | lost | steps |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    out.mkdir(parents=True, exist_ok=True)
     curves = {}
     for case in args.case:
-        stats = run_case(case, out / case, args.ranks, overrides)
-        curves[case] = stats
-        m = measure(stats)
-        if case == "1a":
-            errs = [(m.peak_vrms - ref["first_peak_vrms"]) / ref["first_peak_vrms"],
-                    (m.peak_time - ref["first_peak_time"]) / ref["first_peak_time"],
-                    (m.growth_rate - ref["growth_rate"]) / ref["growth_rate"]]
-            e = [f"{x:+.2%}" for x in errs]
-        else:
-            e = ["(no published value here)"] * 3
-        lines.append(f"| {case} | {m.peak_vrms:.5e} | {e[0]} | {m.peak_time:.2f} | {e[1]} | {m.growth_rate:.5f} | {e[2]} | "
-                     f"{m.vrms_initial:.4e} | {int(stats['n_particles'][0])} | {int(stats['n_lost'][-1])} | {int(stats['step'][-1])} |")
-    table = "\n".join(lines) + "\n"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "results.md").write_text(table)
-    print(table)
-    _plot(curves, ref, out / "vrms.png")
-    print(f"wrote {out / 'results.md'} and {out / 'vrms.png'}")
+        if args.no_run:
+            curves[case] = read_statistics(out / case / "statistics.csv")
+            continue
+        end = args.end if args.end is not None else DEFAULT_END[case]
+        quick = (QUICK_2 if case == "2" else QUICK) if args.quick else []
+        curves[case] = run_case(case, out / case, args.ranks, [f"time.end={end}", *quick, *args.set])
+    rt_cases = {c: s for c, s in curves.items() if c != "2"}
+    if rt_cases:
+        table = table_case1(rt_cases)
+        (out / "results.md").write_text(table)
+        print(table)
+        _plot_case1(rt_cases, out / "vrms.png")
+        print(f"wrote {out / 'results.md'} and {out / 'vrms.png'}")
+    if "2" in curves:
+        table = table_case2(curves["2"])
+        (out / "results_2.md").write_text(table)
+        print(table)
+        _plot_case2(curves["2"], out / "case2.png")
+        print(f"wrote {out / 'results_2.md'} and {out / 'case2.png'}")
     return 0
 
 
-def _plot(curves: dict[str, dict[str, np.ndarray]], ref: dict[str, float], png: Path) -> None:
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _plot_case1(curves: dict[str, dict[str, np.ndarray]], png: Path) -> None:
+    plt = _pyplot()
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
     for case, stats in curves.items():
-        ax.plot(stats["time"], stats["vrms"], label=f"case {case} (this code)")
-        ax2.plot(stats["time"], stats["entrainment"], label=f"case {case} (this code)")
-    ax.plot([ref["first_peak_time"]], [ref["first_peak_vrms"]], "k*", markersize=12, label="1a published first peak")
+        line, = ax.plot(stats["time"], stats["vrms"], label=f"case {case} (this code)")
+        ax2.plot(stats["time"], stats["entrainment"], color=line.get_color(), label=f"case {case} (this code)")
+        ref = reference(case)
+        for key, marker in (("first_peak", "*"), ("second_peak", "^")):
+            if f"{key}_vrms" in ref:
+                ax.plot([ref[f"{key}_time"].value], [ref[f"{key}_vrms"].value], marker, color=line.get_color(),
+                        markeredgecolor="k", markersize=11, label=f"{case} published {key.replace('_', ' ')}")
     ax.set_xlabel("time")
     ax.set_ylabel("vrms")
     ax.set_title("van Keken et al. (1997) Rayleigh-Taylor")
-    ax.legend()
+    ax.legend(fontsize=8)
     ax2.set_xlabel("time")
     ax2.set_ylabel("light material above z = 0.2 (fraction)")
-    ax2.legend()
+    ax2.legend(fontsize=8)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def _plot_case2(stats: dict[str, np.ndarray], png: Path) -> None:
+    plt = _pyplot()
+    ref = reference("2")
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
+    ax.plot(stats["time"], stats["vrms"], label="this code")
+    for key in ("first_peak", "second_peak"):
+        v, t = ref[f"{key}_vrms"], ref[f"{key}_time"]
+        ax.errorbar([t.value], [0.5 * (v.low + v.high)], yerr=[[0.5 * (v.high - v.low)]], fmt="k*", markersize=10,
+                    capsize=4, label=f"published {key.replace('_', ' ')} (spread)")
+    ax.plot([0.0], [ref["vrms_initial"].value], "ks", label="published vrms(0)")
+    ax.set_xlabel("time")
+    ax.set_ylabel("vrms")
+    ax.set_title("van Keken et al. (1997) case 2 (Ra = 3e5, B = 1.5)")
+    ax.legend(fontsize=8)
+    ax2.plot(stats["time"], stats["entrainment"], label="this code")
+    for time in ENTRAINMENT_TIMES_2:
+        r = ref[f"entrainment_t{time:g}"]
+        ax2.errorbar([time], [0.5 * (r.low + r.high)], yerr=[[0.5 * (r.high - r.low)]], fmt="k_", capsize=5,
+                     label="published spread" if time == ENTRAINMENT_TIMES_2[0] else None)
+    ax2.set_xlabel("time")
+    ax2.set_ylabel("dense material above z = 0.2 (fraction)")
+    ax2.legend(fontsize=8)
     fig.savefig(png, dpi=110)
     plt.close(fig)
 

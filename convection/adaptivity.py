@@ -31,6 +31,7 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
+from convection.balance import CellLayout, create_weighted_mesh, gather_cell_layout
 from convection.mesh import cell_volumes
 from convection.transfer import PointEvaluator
 
@@ -138,6 +139,49 @@ class MeshHierarchy:
         self.tdim = base.topology.dim
         num_owned = base.topology.index_map(self.tdim).size_local
         self.base_volume = base.comm.allreduce(float(cell_volumes(base)[:num_owned].max(initial=0.0)), op=MPI.MAX)
+        # Rank-independent index of each local base cell (the order the base mesh was created in).
+        self.base_canonical = np.asarray(base.topology.original_cell_index, dtype=np.int64)
+        self._layout: CellLayout | None = None
+
+    @property
+    def num_base_cells(self) -> int:
+        return int(self.base.topology.index_map(self.tdim).size_global)
+
+    def base_cells(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int64]:
+        """Canonical index of the base cell each owned cell of ``mesh`` descends from (collective).
+
+        ``mesh`` must be refined from the current base without redistribution (a cell's midpoint
+        then lies in an owned base cell of the same rank). Returns shape=(num_owned_cells,), int64.
+        """
+        num_owned = mesh.topology.index_map(self.tdim).size_local
+        midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, np.arange(num_owned, dtype=np.int32))
+        local = PointEvaluator(self.base).locate(midpoints)
+        if np.any(local < 0):
+            raise RuntimeError("a cell lies outside this rank's base cells: mesh not refined from this base")
+        return self.base_canonical[local]
+
+    def repartition(self, mesh: dolfinx.mesh.Mesh, weights: npt.NDArray[np.float64], /) -> None:
+        """Redistribute the base mesh so each rank's descendants carry an equal share of ``weights``.
+
+        Collective. The weight of a base cell is the sum of ``weights`` over its descendants in
+        ``mesh``; the base cells are cut into contiguous blocks of equal weight along a Morton
+        curve (:func:`convection.balance.create_weighted_mesh`). Meshes rebuilt afterwards
+        (:meth:`rebuild`) follow the new base partition.
+
+        Args:
+            mesh: The current mesh, refined from the current base.
+            weights: Load of each owned cell of ``mesh``, shape=(num_owned_cells,).
+        """
+        comm = self.base.comm
+        if self._layout is None:
+            num_owned = self.base.topology.index_map(self.tdim).size_local
+            self._layout = gather_cell_layout(self.base, self.base_canonical[:num_owned])
+        per_base = np.bincount(self.base_cells(mesh), weights=weights, minlength=self.num_base_cells)
+        total = np.zeros_like(per_base) if comm.rank == 0 else None
+        comm.Reduce(per_base, total, op=MPI.SUM, root=0)
+        domain = ufl.Mesh(self.base.ufl_domain().ufl_coordinate_element())
+        created = create_weighted_mesh(comm, self._layout, total, domain)
+        self.base, self.base_canonical = created.mesh, created.canonical
 
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
         """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""
@@ -156,7 +200,7 @@ class MeshHierarchy:
         """A mesh refined from the base so each cell reaches the wanted level of ``old`` at its midpoint.
 
         Args:
-            old: The current mesh (refined from this hierarchy's base without redistribution).
+            old: The current mesh (any partition: points not found on this rank are looked up on all ranks).
             wanted: Wanted level per owned cell of ``old``, shape=(num_owned_cells of old,).
 
         Collective.
@@ -171,12 +215,9 @@ class MeshHierarchy:
             midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
             # The largest wanted level among all old cells touching the midpoint: a midpoint on a
             # facet of the old mesh must not take whichever neighbour the local numbering lists
-            # first, or the result would depend on the partition.
-            offsets, old_cells = locator.colliding(midpoints)
-            target = np.zeros(num_owned, dtype=np.int32)
-            hit = offsets[1:] > offsets[:-1]
-            if np.any(hit):
-                target[hit] = np.maximum.reduceat(wanted_local[old_cells], offsets[:-1][hit])
+            # first, or the result would depend on the partition. After a repartition of the base
+            # the old cells may live on other ranks: the query falls back to all ranks.
+            target = locator.max_over_colliding(midpoints, wanted_local, default=0)
             marked = cells[self.levels(mesh) < target]
             if mesh.comm.allreduce(marked.size, op=MPI.SUM) == 0:
                 break

@@ -10,6 +10,7 @@ Every config has at least ``mesh.cells``, ``time.end`` and ``output.directory``.
 - ``stokes``, ``energy``: discretisation and solver choices;
 - ``time``: end time, CFL number, step limits, steady-state stop;
 - ``adaptivity``: refine/coarsen between levels every N steps;
+- ``balance``: repartition across ranks with cell weights 1 + W n_particles (none/every/threshold);
 - ``output``: folder, field output interval, progress display.
 """
 
@@ -138,6 +139,14 @@ SCHEMA: dict[str, Any] = {
                                help="adapt this many times to the initial condition (default max_level - min_level)"),
         "fields": Field("list[str]", ["temperature"], choices=("temperature", "composition")),
     },
+    "balance": {
+        "strategy": Field("str", "none", choices=("none", "every", "threshold"),
+                          help="repartition the mesh: never, every N steps, or when the load imbalance exceeds a threshold"),
+        "every": Field("int", 10, minimum=1, help="steps between repartitions (every) or checks (threshold)"),
+        "threshold": Field("float", 1.2, minimum=1.0,
+                           help="repartition when max/mean over ranks of the load (cells + W particles) exceeds this"),
+        "particle_weight": Field("float", 0.01, minimum=0.0, help="W in the cell weight 1 + W n_particles(K)"),
+    },
     "diagnostics": {
         "entrainment_material": Field("str", None, nullable=True, choices=("dense", "light"),
                                       help="material whose entrainment is reported: dense (C = 1) or light (C = 0)"),
@@ -164,6 +173,10 @@ def _check_consistency(config: dict[str, Any]) -> None:
         raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
+    needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
+    if needs_simplices and mesh["cell_type"] != "simplex":
+        what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"
+        raise ConfigError(f"config key '{what}': needs mesh.cell_type: simplex (triangles/tetrahedra)")
     if gdim == 2:
         for section in ("velocity", "temperature"):
             for side in ("front", "back"):

@@ -44,7 +44,7 @@ from convection.mesh import BoxSpec, create_box_mesh
 from convection.output import FieldOutput
 from convection.particle_composition import ParticleComposition
 from convection.progress import Progress
-from convection.statistics import StatisticsWriter
+from convection.statistics import BalanceLog, StatisticsWriter
 from convection.stokes import StokesSolver
 from convection.timestep import cfl_timestep
 from convection.transfer import PointEvaluator, transfer_function
@@ -55,6 +55,32 @@ STATISTICS_COLUMNS = (
     "step", "time", "dt", "vrms", "nusselt", "T_mean", "T_min", "T_max", "cells", "stokes_iterations",
     "n_particles", "n_lost", "cell_imbalance", "particle_imbalance", "entrainment", "wall_time",
 )
+
+
+@dataclass(frozen=True)
+class RankLoads:
+    """Per-rank counts, each shape=(num_ranks,): owned cells, particles, load = cells + W particles."""
+
+    cells: np.ndarray
+    particles: np.ndarray
+    load: np.ndarray
+
+    @staticmethod
+    def _ratio(values: np.ndarray) -> float:
+        mean = float(np.mean(values))
+        return float(np.max(values)) / mean if mean > 0 else 1.0
+
+    @property
+    def cell_imbalance(self) -> float:
+        return self._ratio(self.cells)
+
+    @property
+    def particle_imbalance(self) -> float:
+        return self._ratio(self.particles)
+
+    @property
+    def load_imbalance(self) -> float:
+        return self._ratio(self.load)
 
 
 @dataclass(frozen=True)
@@ -129,8 +155,12 @@ class Simulation:
 
         self.adaptivity = AdaptivityParameters.from_config(config["adaptivity"]) if config["adaptivity"]["enabled"] else None
         base = create_box_mesh(comm, self.spec)
-        self.hierarchy = MeshHierarchy(base) if self.adaptivity else None
-        mesh = self.hierarchy.uniform(self.adaptivity.min_level) if self.hierarchy else base
+        balancing = config["balance"]["strategy"] != "none"
+        self.hierarchy = MeshHierarchy(base) if self.adaptivity or balancing else None
+        # The last adaptation (previous mesh, wanted levels): rebuilding it from a repartitioned
+        # base gives the same mesh on the new partition.
+        self._recipe: tuple[dolfinx.mesh.Mesh, np.ndarray] | None = None
+        mesh = self.hierarchy.uniform(self.adaptivity.min_level) if self.adaptivity else base
         self._build(mesh)
         self._set_initial_fields()
         if self.adaptivity:
@@ -204,9 +234,17 @@ class Simulation:
         new_mesh = self.hierarchy.rebuild(self.mesh, wanted)
         old_stokes, old_energy, old_composition = self.stokes, self.energy, self.composition
         self._build(new_mesh)
+        self._recipe = (old_stokes.mesh, wanted)
         if initial:
             self._set_initial_fields()
             return before, self.num_cells
+        self._carry_fields(old_stokes, old_energy, old_composition)
+        return before, self.num_cells
+
+    def _carry_fields(self, old_stokes: StokesSolver, old_energy: EnergySolver,
+                      old_composition: dolfinx.fem.Function | None) -> None:
+        """Carry velocity, pressure, temperature (with history), composition and particles from the
+        solvers of the previous mesh to the current one (collective)."""
         evaluator = PointEvaluator(old_stokes.mesh)
 
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
@@ -219,11 +257,48 @@ class Simulation:
             transfer(self._u_previous, u_previous)
             self._u_previous = u_previous
         if getattr(self, "particles", None) is not None:
-            self.particles.move_to_mesh(new_mesh)
+            self.particles.move_to_mesh(self.mesh)
             self.composition = self.particles.field
         elif old_composition is not None and self.composition is not None:
             transfer(old_composition, self.composition)
-        return before, self.num_cells
+
+    # ------------------------------------------------------------------ load balancing
+    def _rank_loads(self) -> RankLoads:
+        """Owned cells, particles and load 1 + W n_particles summed per rank (collective)."""
+        owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
+        particles = self.particles.swarm.num_particles if self.particles else 0
+        load = owned + self.config["balance"]["particle_weight"] * particles
+        gathered = self.comm.allgather((owned, particles, load))
+        return RankLoads(*(np.array(column) for column in zip(*gathered)))
+
+    def _balance_due(self) -> bool:
+        bcfg = self.config["balance"]
+        if bcfg["strategy"] == "none" or self.comm.size == 1 or self.step % bcfg["every"] != 0:
+            return False
+        if bcfg["strategy"] == "every":
+            return True
+        return self._rank_loads().load_imbalance > bcfg["threshold"]
+
+    def rebalance(self) -> tuple[RankLoads, RankLoads]:
+        """Repartition the mesh with cell weights 1 + W n_particles(K) and move cells, fields and
+        particles with it (collective). The mesh itself does not change: the base mesh is
+        redistributed (:meth:`convection.adaptivity.MeshHierarchy.repartition`) and the current
+        mesh is rebuilt from it with the same refinement recipe. Returns the loads before and after.
+        """
+        assert self.hierarchy is not None
+        before = self._rank_loads()
+        weights = np.ones(before.cells[self.comm.rank])
+        if self.particles is not None:
+            weights += self.config["balance"]["particle_weight"] * self.particles.swarm.particles_per_cell()
+        self.hierarchy.repartition(self.mesh, weights)
+        if self._recipe is not None:
+            new_mesh = self.hierarchy.rebuild(*self._recipe)
+        else:
+            new_mesh = self.hierarchy.uniform(self.adaptivity.min_level if self.adaptivity else 0)
+        old_stokes, old_energy, old_composition = self.stokes, self.energy, self.composition
+        self._build(new_mesh)
+        self._carry_fields(old_stokes, old_energy, old_composition)
+        return before, self._rank_loads()
 
     # ------------------------------------------------------------------ time loop
     def _diagnostics(self) -> dict[str, float]:
@@ -265,12 +340,8 @@ class Simulation:
 
     def _imbalance(self) -> dict[str, float]:
         """Load imbalance max/mean over ranks of owned cells and of particles (1 = balanced)."""
-        owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
-        particles = self.particles.swarm.num_particles if self.particles else 0
-        counts = np.array(self.comm.allgather((owned, particles)), dtype=np.float64)
-        mean = counts.mean(axis=0)
-        ratio = np.divide(counts.max(axis=0), mean, out=np.ones(2), where=mean > 0)
-        return {"cell_imbalance": float(ratio[0]), "particle_imbalance": float(ratio[1])}
+        loads = self._rank_loads()
+        return {"cell_imbalance": loads.cell_imbalance, "particle_imbalance": loads.particle_imbalance}
 
     def _velocity_at_step_end(self, dt: float) -> dolfinx.fem.Function:
         """u* = (1 + w) u^n - w u^{n-1} (w = dt / previous dt), or u^n on the first step; then
@@ -313,6 +384,9 @@ class Simulation:
         start = time.monotonic()
         history: list[tuple[float, float]] = []
         reason = "end time"
+        balance_log = BalanceLog(self.output_dir / "balance.csv", comm=self.comm)
+        if self._balance_due():
+            self._log_rebalance(balance_log, progress)
         result = self.stokes.solve(self.energy.T, self.composition)
         row: dict[str, Any] = {}
         written_step = -1
@@ -353,9 +427,12 @@ class Simulation:
                 if self.adaptivity and self.step % self.adaptivity.every == 0:
                     before, after = self.adapt()
                     progress.message(f"adapted mesh at step {self.step}: {before} -> {after} cells")
+                if self._balance_due():
+                    self._log_rebalance(balance_log, progress)
                 result = self.stokes.solve(self.energy.T, self.composition)
         finally:
             writer.close()
+            balance_log.close()
             progress.close()
         if written_step != self.step:
             fields.write(self._fields(), self.t)
@@ -369,6 +446,16 @@ class Simulation:
                              f"{summary.wall_time:.1f} s")
         return summary
 
+
+    def _log_rebalance(self, log: BalanceLog, progress: Progress) -> None:
+        before, after = self.rebalance()
+        log.write(self.step, before, after)
+        progress.message(
+            f"rebalanced at step {self.step}: cells per rank {before.cells.tolist()} -> {after.cells.tolist()}, "
+            f"particles per rank {before.particles.tolist()} -> {after.particles.tolist()} "
+            f"(imbalance cells {before.cell_imbalance:.3f} -> {after.cell_imbalance:.3f}, "
+            f"particles {before.particle_imbalance:.3f} -> {after.particle_imbalance:.3f})"
+        )
 
     def _steady(self, history: list[tuple[float, float]]) -> bool:
         tol = self.config["time"]["steady_state_tolerance"]

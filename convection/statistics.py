@@ -1,6 +1,8 @@
 """Per-step statistics written to ``<output>/statistics.csv`` as the run goes.
 
 Rank 0 writes; each row is flushed and fsync'ed so a killed run keeps every finished step.
+:class:`BalanceLog` writes ``<output>/balance.csv``: one row per repartition with the per-rank
+cells and particles before and after (lists joined by ``;``).
 """
 
 from __future__ import annotations
@@ -8,11 +10,11 @@ from __future__ import annotations
 import csv
 import os
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from mpi4py import MPI
 
-__all__ = ["StatisticsWriter"]
+__all__ = ["BalanceLog", "StatisticsWriter"]
 
 
 class StatisticsWriter:
@@ -62,3 +64,41 @@ def _format(value: float | int | str) -> str:
     if isinstance(value, float):
         return repr(value)
     return str(value)
+
+
+BALANCE_COLUMNS = (
+    "step", "cells_before", "cells_after", "particles_before", "particles_after",
+    "cell_imbalance_before", "cell_imbalance_after", "particle_imbalance_before", "particle_imbalance_after",
+    "load_imbalance_before", "load_imbalance_after",
+)
+
+
+class BalanceLog:
+    """``balance.csv``: per-rank counts around each repartition (created at the first one).
+
+    Args:
+        path: The CSV file.
+        comm: Communicator; rank 0 writes.
+    """
+
+    def __init__(self, path: str | Path, /, *, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+        self.path = Path(path)
+        self._comm = comm
+        self._writer: StatisticsWriter | None = None
+
+    def write(self, step: int, before: Any, after: Any) -> None:
+        """Append a row; ``before``/``after`` have per-rank ``cells``, ``particles`` arrays and
+        ``cell_imbalance``, ``particle_imbalance``, ``load_imbalance`` (collective)."""
+        if self._writer is None:
+            self._writer = StatisticsWriter(self.path, BALANCE_COLUMNS, comm=self._comm)
+        row: dict[str, float | int | str] = {"step": step}
+        for label, loads in (("before", before), ("after", after)):
+            row[f"cells_{label}"] = ";".join(str(int(c)) for c in loads.cells)
+            row[f"particles_{label}"] = ";".join(str(int(c)) for c in loads.particles)
+            for kind in ("cell", "particle", "load"):
+                row[f"{kind}_imbalance_{label}"] = float(getattr(loads, f"{kind}_imbalance"))
+        self._writer.write(row)
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()

@@ -51,6 +51,53 @@ class PointEvaluator:
         cells[found] = colliding.array[offsets[:-1][found]]
         return cells
 
+    def max_over_colliding(self, points: npt.NDArray[np.float64], values: npt.NDArray[np.int32], /, *,
+                           default: int = -1) -> npt.NDArray[np.int32]:
+        """Largest value among all cells of the (distributed) mesh that contain each point.
+
+        Collective. Points whose colliding cells are all owned here are answered locally; points
+        found nowhere here or touching a ghost cell (a partition boundary, where cells of other
+        ranks may touch them too) are shared with every rank, which answers from its owned cells.
+
+        Args:
+            points: shape=(n, 3).
+            values: One integer per local cell (owned and ghost), shape=(num_local_cells,).
+            default: Result for points in no cell.
+
+        Returns:
+            shape=(n,), int32.
+        """
+        comm = self.mesh.comm
+        num_owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        offsets, cells = self.colliding(points)
+        result = np.full(points.shape[0], default, dtype=np.int32)
+        hit = offsets[1:] > offsets[:-1]
+        if np.any(hit):
+            result[hit] = np.maximum.reduceat(values[cells], offsets[:-1][hit])
+        ghost_hit = np.zeros(points.shape[0], dtype=bool)
+        if cells.size:
+            is_ghost = (cells >= num_owned).astype(np.int64)
+            ghost_hit[hit] = np.add.reduceat(is_ghost, offsets[:-1][hit]) > 0
+        uncertain = np.flatnonzero(~hit | ghost_hit)
+        if comm.allreduce(uncertain.size, op=MPI.SUM) == 0:
+            return result
+        shared = comm.allgather(points[uncertain])
+        gathered = np.concatenate(shared)
+        g_offsets, g_cells = self.colliding(gathered)
+        lowest = np.iinfo(np.int32).min
+        answer = np.full(gathered.shape[0], lowest, dtype=np.int32)
+        g_hit = g_offsets[1:] > g_offsets[:-1]
+        if np.any(g_hit):
+            own_values = np.where(g_cells < num_owned, values[g_cells], lowest).astype(np.int32)
+            answer[g_hit] = np.maximum.reduceat(own_values, g_offsets[:-1][g_hit])
+        total = np.empty_like(answer)
+        comm.Allreduce(answer, total, op=MPI.MAX)
+        total[total == lowest] = default
+        start = sum(p.shape[0] for p in shared[: comm.rank])
+        result[uncertain] = total[start: start + uncertain.size]
+        return result
+
     def evaluate(self, function: dolfinx.fem.Function, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Values of ``function`` at ``points`` (shape=(n, 3)); returns shape=(n, value_size).
 

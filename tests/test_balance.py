@@ -68,3 +68,93 @@ def test_weighted_mesh_partition():
     area = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(1.0 * ufl.dx(domain=mesh))))
     assert area == pytest.approx(1.0)
     assert comm.allreduce(mesh.topology.index_map(2).num_ghosts) > 0
+
+
+def _gathered_midpoints(mesh):
+    comm = mesh.comm
+    tdim = mesh.topology.dim
+    num_owned = mesh.topology.index_map(tdim).size_local
+    mid = dolfinx.mesh.compute_midpoints(mesh, tdim, np.arange(num_owned, dtype=np.int32))
+    everything = np.concatenate(comm.allgather(mid))
+    return everything[np.lexsort(everything.T)]
+
+
+@pytest.mark.mpi
+def test_repartitioned_hierarchy_rebuilds_the_same_mesh_with_balanced_weights():
+    from convection.adaptivity import MeshHierarchy
+
+    comm = MPI.COMM_WORLD
+    base = dolfinx.mesh.create_rectangle(comm, [np.zeros(2), np.ones(2)], [8, 8], dolfinx.mesh.CellType.triangle,
+                                         ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
+    hierarchy = MeshHierarchy(base)
+    mesh = base
+    for _ in range(2):  # refine a band twice: fine cells only near z = 0.3
+        num_owned = mesh.topology.index_map(2).size_local
+        mid = dolfinx.mesh.compute_midpoints(mesh, 2, np.arange(num_owned, dtype=np.int32))
+        wanted = (hierarchy.levels(mesh) + (np.abs(mid[:, 1] - 0.3) < 0.1)).astype(np.int32)
+        previous, mesh = mesh, hierarchy.rebuild(mesh, wanted)
+    reference = _gathered_midpoints(mesh)
+
+    def heavy(m):  # the load: every cell 1, plus 0.5 for "particles" in the upper half
+        num_owned = m.topology.index_map(2).size_local
+        mid = dolfinx.mesh.compute_midpoints(m, 2, np.arange(num_owned, dtype=np.int32))
+        return 1.0 + 0.5 * (mid[:, 1] > 0.5)
+
+    hierarchy.repartition(mesh, heavy(mesh))
+    balanced = hierarchy.rebuild(previous, wanted)
+    loads = np.array(comm.allgather(float(heavy(balanced).sum())))
+    same = np.array_equal(_gathered_midpoints(balanced), reference)
+    assert same  # same cells (identical geometry), only distributed differently
+    # Base cells carry up to 16 cells each, so blocks cannot be cut exactly: within 10%.
+    assert loads.max() / loads.mean() < 1.1, loads
+
+
+@pytest.mark.mpi
+def test_balanced_run_matches_unbalanced_run(tmp_path_factory):
+    from convection.config import load_config
+    from convection.plot import read_statistics
+    from convection.simulation import Simulation
+    from pathlib import Path
+
+    comm = MPI.COMM_WORLD
+    root = Path(__file__).resolve().parents[1]
+    base = Path(comm.bcast(str(tmp_path_factory.mktemp("bal")) if comm.rank == 0 else None))
+
+    def run(name, *extra):
+        config = load_config(root / "configs" / "vankeken_1a.yaml", [
+            "mesh.cells=[8,8]", "adaptivity.max_level=1", "adaptivity.every=4", "time.max_steps=12",
+            "output.progress=none", f"output.directory={base / name}", "output.fields_every=0",
+            "particles.generator.particles_per_cell=40", *extra,
+        ])
+        simulation = Simulation(config, comm=comm)
+        summary = simulation.run()
+        ids = np.concatenate(comm.allgather(simulation.particles.swarm.ids))
+        return summary, np.sort(ids)
+
+    plain, plain_ids = run("plain")
+    balanced, balanced_ids = run("balanced", "balance.strategy=every", "balance.every=3")
+    ok = abs(plain.vrms - balanced.vrms) <= 1e-9 * plain.vrms and plain.cells == balanced.cells
+    ok = ok and np.array_equal(plain_ids, balanced_ids) and np.array_equal(plain_ids, np.arange(plain_ids.size))
+    if comm.rank == 0:
+        import csv
+
+        with open(base / "balanced" / "balance.csv", newline="") as f:
+            rows = list(csv.DictReader(f))
+        log = {key: np.array([float(r[key]) for r in rows]) for key in ("step", "load_imbalance_before",
+                                                                         "load_imbalance_after")}
+        stats = read_statistics(base / "balanced" / "statistics.csv")
+        ok = ok and np.array_equal(log["step"], [0, 3, 6, 9, 12])
+        ok = ok and bool(np.all(log["load_imbalance_after"] <= log["load_imbalance_before"] + 1e-12))
+        ok = ok and bool(np.all(log["load_imbalance_after"] < 1.15)) and bool(np.all(stats["n_lost"] == 0))
+    assert comm.allreduce(ok, op=MPI.LAND), (plain, balanced)
+
+
+def test_balancing_needs_simplices():
+    from pathlib import Path
+
+    from convection.config import ConfigError, load_config
+
+    root = Path(__file__).resolve().parents[1]
+    with pytest.raises(ConfigError, match="balance.strategy.*simplex"):
+        load_config(root / "configs" / "blankenbach_1a.yaml",
+                    ["mesh.cell_type=box", "balance.strategy=every", "output.directory=unused"])

@@ -13,9 +13,6 @@ each statistics.csv and writes ``<out>/lost_particles.md``. The seed paper repor
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -23,6 +20,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
+from convection.launch import run_config  # noqa: E402
 from convection.plot import read_statistics  # noqa: E402
 
 
@@ -33,19 +31,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "lost_particles"))
     args = parser.parse_args(argv)
     out = Path(args.out)
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     rows = ["| integrator | CFL | steps | end time | particles | lost | lost per 1000 steps |", "|---|---|---|---|---|---|---|"]
     for integrator in ("euler", "rk2"):
         for cfl in (1.0, 0.5):
             run_dir = out / f"{integrator}_cfl{cfl}"
-            cmd = [sys.executable, "-m", "convection", "run", str(ROOT / "configs" / "vankeken_1a.yaml"),
-                   "--output", str(run_dir), "--set", f"particles.integrator={integrator}", "--set", f"time.cfl={cfl}",
-                   "--set", f"time.max_steps={args.steps}", "--set", "output.progress=lines",
-                   "--set", "output.progress_every=250", "--set", "output.fields_every=0"]
-            if args.ranks > 1:
-                cmd = [shutil.which("mpirun"), "-n", str(args.ranks), "--oversubscribe", *cmd]
-            print("$", " ".join(cmd), flush=True)
-            subprocess.run(cmd, cwd=ROOT, env=env, check=True)
+            run_config(ROOT / "configs" / "vankeken_1a.yaml", run_dir, ranks=args.ranks, cwd=ROOT, overrides=[
+                f"particles.integrator={integrator}", f"time.cfl={cfl}", f"time.max_steps={args.steps}",
+                "output.progress=lines", "output.progress_every=250", "output.fields_every=0"])
             stats = read_statistics(run_dir / "statistics.csv")
             steps = int(stats["step"][-1])
             n0, lost = int(stats["n_particles"][0]), int(stats["n_lost"][-1])

@@ -1,0 +1,42 @@
+"""Run a configuration with the CLI in a subprocess, under mpirun when more than one rank is asked.
+
+Benchmark scripts drive whole runs this way (each run its own MPI job), then read the run's
+``statistics.csv``. mpirun is given ``--oversubscribe`` so more ranks than cores are allowed (the
+scripts say so where they use it) and the environment variables that let Open MPI run as root.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Sequence
+
+__all__ = ["cli_command", "run_config"]
+
+
+def cli_command(config: str | Path, output: str | Path, /, *, ranks: int = 1,
+                overrides: Sequence[str] = ()) -> list[str]:
+    """The command line that runs ``config`` into ``output`` with ``--set`` ``overrides``."""
+    cmd = [sys.executable, "-m", "convection", "run", str(config), "--output", str(output)]
+    for item in overrides:
+        cmd += ["--set", item]
+    if ranks > 1:
+        mpirun = shutil.which("mpirun")
+        if mpirun is None:
+            raise RuntimeError("mpirun not found on PATH (needed for runs on more than one rank)")
+        cmd = [mpirun, "-n", str(ranks), "--oversubscribe", *cmd]
+    return cmd
+
+
+def run_config(config: str | Path, output: str | Path, /, *, ranks: int = 1, overrides: Sequence[str] = (),
+               cwd: str | Path | None = None, echo: bool = True) -> Path:
+    """Run ``config`` to completion (raises CalledProcessError on failure); returns ``output``."""
+    cmd = cli_command(config, output, ranks=ranks, overrides=overrides)
+    if echo:
+        print("$", " ".join(cmd), flush=True)
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    subprocess.run(cmd, cwd=cwd, env=env, check=True)
+    return Path(output)

@@ -106,9 +106,11 @@ SCHEMA: dict[str, Any] = {
         "stabilisation": Field("str", "supg", choices=("supg", "none")),
     },
     "composition": {
-        "source": Field("str", "static", choices=("static", "particles"),
-                        help="static: C fixed at initial.composition; particles: averaged from advected particles"),
-        "degree": Field("int", 0, minimum=0, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares)"),
+        "source": Field("str", "static", choices=("static", "particles", "field"),
+                        help="static: C fixed at initial.composition; particles: averaged from advected particles; "
+                             "field: advected continuous field (SUPG, no diffusion)"),
+        "degree": Field("int", 0, minimum=0, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); "
+                                                  "source field needs >= 1"),
     },
     "particles": {
         "generator": Field("mapping", {"name": "random_uniform", "particles_per_cell": 20, "seed": 1},
@@ -173,6 +175,11 @@ def _check_consistency(config: dict[str, Any]) -> None:
         raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
+    composition = config["composition"]
+    if composition["source"] != "static" and config["initial"]["composition"] is None:
+        raise ConfigError(f"config key 'initial.composition': needed with composition.source: {composition['source']}")
+    if composition["source"] == "field" and composition["degree"] < 1:
+        raise ConfigError("config key 'composition.degree': an advected composition field needs degree >= 1")
     needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
     if needs_simplices and mesh["cell_type"] != "simplex":
         what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"

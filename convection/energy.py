@@ -2,9 +2,10 @@
 
 Equation::
 
-    dT/dt + u . grad T = lap T + H,
+    dT/dt + u . grad T = kappa lap T + H,
 
-with Dirichlet or insulating (zero-flux, natural) sides. Time discretisation: variable-step BDF2
+with kappa = 1 for the temperature (kappa = 0 without heating advects a composition field), and
+Dirichlet or insulating (zero-flux, natural) sides. Time discretisation: variable-step BDF2
 (BDF1 = backward Euler on the first step, when no history exists). With ``dt_n = t^{n+1} - t^n``
 and ``omega = dt_n / dt_{n-1}``::
 
@@ -110,6 +111,10 @@ class EnergySolver:
         solver: ``"iterative"`` | ``"direct"``.
         petsc_options: extra PETSc options overriding the defaults (without prefix).
         velocity_extrapolation: extrapolate the velocity to the new time level (see above).
+        diffusivity: factor of the diffusion term (1 for the nondimensional temperature; 0 gives
+            pure advection, e.g. an advected composition field).
+        heating: include the internal heating ``H`` of the approximation.
+        name: name of the solution Function (field output).
 
     Attributes:
         T: current temperature ``T^n`` (P(degree) Function).
@@ -130,7 +135,12 @@ class EnergySolver:
         solver: str = "iterative",
         petsc_options: dict | None = None,
         velocity_extrapolation: bool = True,
+        diffusivity: float = 1.0,
+        heating: bool = True,
+        name: str = "temperature",
     ) -> None:
+        if diffusivity < 0.0:
+            raise ValueError(f"diffusivity must not be negative, got {diffusivity}")
         if stabilisation not in STABILISATIONS:
             raise ValueError(
                 f"Unknown stabilisation {stabilisation!r}; valid names: {sorted(STABILISATIONS)}"
@@ -144,11 +154,13 @@ class EnergySolver:
         self.stabilisation = stabilisation
         self.solver = solver
         self.velocity_extrapolation = velocity_extrapolation
+        self.diffusivity = float(diffusivity)
+        self.heating = heating
 
         self.V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree))
-        self.T = dolfinx.fem.Function(self.V, name="temperature")
-        self.T_old = dolfinx.fem.Function(self.V, name="temperature_old")
-        self.T_old2 = dolfinx.fem.Function(self.V, name="temperature_old2")
+        self.T = dolfinx.fem.Function(self.V, name=name)
+        self.T_old = dolfinx.fem.Function(self.V, name=f"{name}_old")
+        self.T_old2 = dolfinx.fem.Function(self.V, name=f"{name}_old2")
         self._T_new = dolfinx.fem.Function(self.V)
         self.dt_old: float | None = None
         self.steps = 0
@@ -180,19 +192,22 @@ class EnergySolver:
         """UFL residual ``F(T_new; w)`` (module docstring) with BDF coefficients ``coef`` (a0,
         a1, a2) and step ``dt``. ``T_new`` may be a TrialFunction (bilinear + linear parts) or a
         Function (a functional of ``w``)."""
-        H = self.approximation.H
+        H = self.approximation.H if self.heating else 0.0
+        kappa = self.diffusivity
         dx = ufl.dx(domain=self.mesh, metadata={"quadrature_degree": 3 * self.degree})
         dtT = (coef[0] * T_new + coef[1] * T_n + coef[2] * T_nm1) / dt
-        F = (
-            dtT * w + ufl.dot(u, ufl.grad(T_new)) * w + ufl.inner(ufl.grad(T_new), ufl.grad(w))
-        ) * dx
+        F = (dtT * w + ufl.dot(u, ufl.grad(T_new)) * w) * dx
+        if kappa != 0.0:
+            F += kappa * ufl.inner(ufl.grad(T_new), ufl.grad(w)) * dx
         if H != 0.0:
             F -= H * w * dx
         if self.stabilisation == "supg":
             h = ufl.CellDiameter(self.mesh) / self.degree
             u_norm = ufl.sqrt(ufl.dot(u, u) + 1e-30)
-            tau = ((2.0 * coef[0] / dt) ** 2 + (2.0 * u_norm / h) ** 2 + 9.0 * (4.0 / h**2) ** 2) ** -0.5
-            strong = dtT + ufl.dot(u, ufl.grad(T_new)) - ufl.div(ufl.grad(T_new)) - H
+            tau = ((2.0 * coef[0] / dt) ** 2 + (2.0 * u_norm / h) ** 2 + 9.0 * (4.0 * kappa / h**2) ** 2) ** -0.5
+            strong = dtT + ufl.dot(u, ufl.grad(T_new)) - H
+            if kappa != 0.0:
+                strong -= kappa * ufl.div(ufl.grad(T_new))
             F += tau * ufl.dot(u, ufl.grad(w)) * strong * dx
         return F
 

@@ -11,6 +11,8 @@ Per step (Boussinesq, see :mod:`convection.approximation`):
 
 The composition field C enters the buoyancy (Ra T - Rb C) e_z and the viscosity. With
 ``composition.source: static`` it is set from ``initial.composition`` and kept fixed; with
+``field`` it is a continuous P(k) field advected after the temperature with the same SUPG/BDF2
+scheme (no diffusion); with
 ``particles`` it is averaged per step from advected particles
 (:class:`convection.particle_composition.ParticleComposition`): after the temperature step the
 particles move from t^n to t^{n+1} in the velocity interpolated linearly in time between u^n and
@@ -24,7 +26,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 from mpi4py import MPI
@@ -55,6 +57,15 @@ STATISTICS_COLUMNS = (
     "step", "time", "dt", "vrms", "nusselt", "T_mean", "T_min", "T_max", "cells", "stokes_iterations",
     "n_particles", "n_lost", "cell_imbalance", "particle_imbalance", "entrainment", "wall_time",
 )
+
+
+class _Solvers(NamedTuple):
+    """The solvers and fields of one mesh (kept while their values move to a new mesh)."""
+
+    stokes: StokesSolver
+    energy: EnergySolver
+    composition: dolfinx.fem.Function | None
+    composition_solver: EnergySolver | None
 
 
 @dataclass(frozen=True)
@@ -171,7 +182,7 @@ class Simulation:
                 self.adapt(initial=True)
         self.particles: ParticleComposition | None = None
         if config["composition"]["source"] == "particles":
-            assert self.initial_composition is not None
+            assert self.initial_composition is not None  # load_config checks it
             pcfg = config["particles"]
             self.particles = ParticleComposition(
                 self.mesh, self.initial_composition, generator=pcfg["generator"], integrator=pcfg["integrator"],
@@ -200,14 +211,24 @@ class Simulation:
         self.diagnostics = RunDiagnostics(self.stokes.u, self.energy, side="top",
                                           nusselt=cfg["energy"]["enabled"])
         self.composition: dolfinx.fem.Function | None = None
+        self.composition_solver: EnergySolver | None = None
         if self.initial_composition is not None:
             degree = cfg["composition"]["degree"]
-            space = dolfinx.fem.FunctionSpace(mesh, ("DG", 0) if degree == 0 else ("Lagrange", degree))
-            self.composition = dolfinx.fem.Function(space, name="composition")
+            if cfg["composition"]["source"] == "field":  # advected like T, without diffusion or heating
+                self.composition_solver = EnergySolver(
+                    mesh, self.approximation, bcs={}, degree=degree, stabilisation=cfg["energy"]["stabilisation"],
+                    diffusivity=0.0, heating=False, name="composition",
+                )
+                self.composition = self.composition_solver.T
+            else:
+                space = dolfinx.fem.FunctionSpace(mesh, ("DG", 0) if degree == 0 else ("Lagrange", degree))
+                self.composition = dolfinx.fem.Function(space, name="composition")
 
     def _set_initial_fields(self) -> None:
         self.energy.set_initial(self.initial_temperature)
-        if self.composition is not None and self.initial_composition is not None:
+        if self.composition_solver is not None:
+            self.composition_solver.set_initial(self.initial_composition)
+        elif self.composition is not None and self.initial_composition is not None:
             self.composition.interpolate(self.initial_composition)
             self.composition.x.scatter_forward()
 
@@ -232,26 +253,28 @@ class Simulation:
         indicator = kelly_indicator(fields or [self.energy.T])
         wanted = wanted_levels(indicator, self.hierarchy.levels(self.mesh), self.adaptivity, self.comm)
         new_mesh = self.hierarchy.rebuild(self.mesh, wanted)
-        old_stokes, old_energy, old_composition = self.stokes, self.energy, self.composition
+        old = self._solvers()
         self._build(new_mesh)
-        self._recipe = (old_stokes.mesh, wanted)
+        self._recipe = (old.stokes.mesh, wanted)
         if initial:
             self._set_initial_fields()
             return before, self.num_cells
-        self._carry_fields(old_stokes, old_energy, old_composition)
+        self._carry_fields(old)
         return before, self.num_cells
 
-    def _carry_fields(self, old_stokes: StokesSolver, old_energy: EnergySolver,
-                      old_composition: dolfinx.fem.Function | None) -> None:
+    def _solvers(self) -> _Solvers:
+        return _Solvers(self.stokes, self.energy, self.composition, self.composition_solver)
+
+    def _carry_fields(self, old: _Solvers) -> None:
         """Carry velocity, pressure, temperature (with history), composition and particles from the
         solvers of the previous mesh to the current one (collective)."""
-        evaluator = PointEvaluator(old_stokes.mesh)
+        evaluator = PointEvaluator(old.stokes.mesh)
 
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
             transfer_function(src, dst, evaluator=evaluator)
 
-        self.stokes.transfer_from(old_stokes, transfer)
-        self.energy.transfer_from(old_energy, transfer)
+        self.stokes.transfer_from(old.stokes, transfer)
+        self.energy.transfer_from(old.energy, transfer)
         if self._u_previous is not None:
             u_previous = dolfinx.fem.Function(self.stokes.u.function_space)
             transfer(self._u_previous, u_previous)
@@ -259,8 +282,10 @@ class Simulation:
         if getattr(self, "particles", None) is not None:
             self.particles.move_to_mesh(self.mesh)
             self.composition = self.particles.field
-        elif old_composition is not None and self.composition is not None:
-            transfer(old_composition, self.composition)
+        elif self.composition_solver is not None and old.composition_solver is not None:
+            self.composition_solver.transfer_from(old.composition_solver, transfer)
+        elif old.composition is not None and self.composition is not None:
+            transfer(old.composition, self.composition)
 
     # ------------------------------------------------------------------ load balancing
     def _rank_loads(self) -> RankLoads:
@@ -295,9 +320,9 @@ class Simulation:
             new_mesh = self.hierarchy.rebuild(*self._recipe)
         else:
             new_mesh = self.hierarchy.uniform(self.adaptivity.min_level if self.adaptivity else 0)
-        old_stokes, old_energy, old_composition = self.stokes, self.energy, self.composition
+        old = self._solvers()
         self._build(new_mesh)
-        self._carry_fields(old_stokes, old_energy, old_composition)
+        self._carry_fields(old)
         return before, self._rank_loads()
 
     # ------------------------------------------------------------------ time loop
@@ -419,6 +444,8 @@ class Simulation:
                 dt = self._timestep()
                 if self.config["energy"]["enabled"]:
                     self.energy.step(self.stokes.u, dt)
+                if self.composition_solver is not None:
+                    self.composition_solver.step(self.stokes.u, dt)
                 if self.particles is not None:
                     self.particles.advect(self.stokes.u, self._velocity_at_step_end(dt), dt)
                 self.t += dt

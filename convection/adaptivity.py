@@ -31,7 +31,7 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
-from convection.balance import CellLayout, create_weighted_mesh, gather_cell_layout
+from convection.balance import PARTITIONERS, CellLayout, create_partitioned_mesh, gather_cell_layout, partition
 from convection.mesh import cell_volumes
 from convection.transfer import PointEvaluator
 
@@ -160,27 +160,38 @@ class MeshHierarchy:
             raise RuntimeError("a cell lies outside this rank's base cells: mesh not refined from this base")
         return self.base_canonical[local]
 
-    def repartition(self, mesh: dolfinx.mesh.Mesh, weights: npt.NDArray[np.float64], /) -> None:
-        """Redistribute the base mesh so each rank's descendants carry an equal share of ``weights``.
+    def repartition(self, mesh: dolfinx.mesh.Mesh, particles: npt.NDArray[np.float64], /, *,
+                    particle_weight: float = 0.01, method: str = "rcb") -> None:
+        """Redistribute the base mesh so ranks get equal loads ``cells + W particles``.
 
-        Collective. The weight of a base cell is the sum of ``weights`` over its descendants in
-        ``mesh``; the base cells are cut into contiguous blocks of equal weight along a Morton
-        curve (:func:`convection.balance.create_weighted_mesh`). Meshes rebuilt afterwards
-        (:meth:`rebuild`) follow the new base partition.
+        Collective. Each base cell carries its descendants in ``mesh`` and their particles; the
+        base cells are partitioned by ``method`` (:data:`convection.balance.PARTITIONERS`).
+        Meshes rebuilt afterwards (:meth:`rebuild`) follow the new base partition.
 
         Args:
             mesh: The current mesh, refined from the current base.
-            weights: Load of each owned cell of ``mesh``, shape=(num_owned_cells,).
+            particles: Particles in each owned cell of ``mesh``, shape=(num_owned_cells,).
+            particle_weight: W in the cell load 1 + W n_particles.
+            method: Partition method name.
         """
         comm = self.base.comm
+        if method not in PARTITIONERS:
+            raise ValueError(f"unknown partition method {method!r}; valid names: {sorted(PARTITIONERS)}")
         if self._layout is None:
             num_owned = self.base.topology.index_map(self.tdim).size_local
             self._layout = gather_cell_layout(self.base, self.base_canonical[:num_owned])
-        per_base = np.bincount(self.base_cells(mesh), weights=weights, minlength=self.num_base_cells)
-        total = np.zeros_like(per_base) if comm.rank == 0 else None
-        comm.Reduce(per_base, total, op=MPI.SUM, root=0)
+        base_of = self.base_cells(mesh)
+        counts = np.zeros((2, self.num_base_cells))
+        counts[0] = np.bincount(base_of, minlength=self.num_base_cells)
+        counts[1] = np.bincount(base_of, weights=particles, minlength=self.num_base_cells)
+        total = np.zeros_like(counts)
+        comm.Reduce(counts, total, op=MPI.SUM, root=0)
+        owners = None
+        if comm.rank == 0:
+            owners = partition(method, self._layout.midpoints, total[0], total[1], comm.size,
+                               particle_weight=particle_weight)
         domain = ufl.Mesh(self.base.ufl_domain().ufl_coordinate_element())
-        created = create_weighted_mesh(comm, self._layout, total, domain)
+        created = create_partitioned_mesh(comm, self._layout, owners, domain)
         self.base, self.base_canonical = created.mesh, created.canonical
 
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:

@@ -1,25 +1,28 @@
-"""Weighted partitioning of a mesh for load balancing (seed paper: cell weight 1 + W n_particles).
+"""Load balancing: partition a mesh with cell loads 1 + W n_particles(K) (seed paper section 2.4).
 
-:func:`weighted_partitioner` gives ``dolfinx.mesh.create_mesh`` a cell partitioner that cuts the
-cells, in the order they are passed, into ``nparts`` contiguous blocks of (nearly) equal total
-weight — a space-filling-curve partition when the cells are passed sorted along a curve
-(:func:`morton_order`). Cells that share a facet with another block are ghosted there, as
-``GhostMode.shared_facet`` requires. The cut needs every cell's weight: pass all cells from one
-rank (the others pass none), which suits coarse base meshes that are refined afterwards.
+A partition method maps per-cell data to an owner rank per cell. Registry :data:`PARTITIONERS`:
 
-:class:`CellLayout` is such a base mesh gathered on rank 0 in a rank-independent order (the
-*canonical* cell index), and :func:`create_weighted_mesh` distributes it again with given weights;
-:class:`convection.adaptivity.MeshHierarchy` uses both to repartition its base mesh (load balancing
-with cell weights 1 + W n_particles summed over each base cell's descendants).
+- ``morton``: cells sorted along a Morton (Z-order) curve of their midpoints, cut into contiguous
+  blocks of equal load (:func:`block_owners`) — the space-filling-curve partition of p4est-based
+  codes such as ASPECT;
+- ``rcb``: recursive coordinate bisection that cuts each part at the load median, choosing at every
+  cut the axis that keeps *both* the cells and the particles most evenly split (a two-constraint
+  geometric partition: for an interface refined along one axis it cuts across the interface, so
+  every rank gets its share of fine cells and of coarse, particle-rich cells).
+
+:func:`owner_partitioner` hands fixed owners to ``dolfinx.mesh.create_mesh`` (cells sharing a
+facet with another rank's cells are ghosted there, as ``GhostMode.shared_facet`` requires). The
+methods need every cell's data: the mesh is gathered whole on rank 0 (:class:`CellLayout`), which
+suits the coarse base meshes that adaptive meshes are refined from
+(:meth:`convection.adaptivity.MeshHierarchy.repartition`).
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
-
 from mpi4py import MPI
 
 import dolfinx.cpp.graph
@@ -27,8 +30,8 @@ import dolfinx.cpp.mesh
 import dolfinx.mesh
 import ufl
 
-__all__ = ["CellLayout", "WeightedMesh", "block_owners", "create_weighted_mesh", "gather_cell_layout", "morton_order",
-           "weighted_partitioner"]
+__all__ = ["CellLayout", "PARTITIONERS", "WeightedMesh", "block_owners", "create_partitioned_mesh",
+           "gather_cell_layout", "morton_order", "morton_owners", "owner_partitioner", "partition", "rcb_owners"]
 
 
 def block_owners(weights: npt.NDArray[np.float64], nparts: int, /) -> npt.NDArray[np.int32]:
@@ -64,26 +67,106 @@ def morton_order(points: npt.NDArray[np.float64], /, *, bits: int = 16) -> npt.N
     return np.argsort(key, kind="stable")
 
 
-def weighted_partitioner(weights: npt.NDArray[np.float64], /) -> Callable[..., Any]:
-    """A cell partitioner for ``dolfinx.mesh.create_mesh(..., partitioner=...)``.
+class PartitionMethod(Protocol):
+    def __call__(self, points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
+                 particles: npt.NDArray[np.float64], nparts: int, /, *,
+                 particle_weight: float) -> npt.NDArray[np.int32]: ...
+
+
+def morton_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
+                  particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float) -> npt.NDArray[np.int32]:
+    """Contiguous blocks of equal load ``cells + W particles`` along a Morton curve.
 
     Args:
-        weights: Weight of each cell this rank passes to ``create_mesh``, in the same order,
+        points: Where each item is (e.g. a base cell's midpoint), shape=(n, d).
+        cells: Mesh cells each item carries (>= 1), shape=(n,).
+        particles: Particles each item carries, shape=(n,).
+        nparts: Number of parts.
+        particle_weight: W.
+
+    Returns:
+        Owner per item, shape=(n,), int32.
+    """
+    order = morton_order(points)
+    owners = np.empty(points.shape[0], dtype=np.int32)
+    owners[order] = block_owners((cells + particle_weight * particles)[order], nparts)
+    return owners
+
+
+def rcb_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
+               particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float) -> npt.NDArray[np.int32]:
+    """Recursive coordinate bisection at the median of ``cells + W particles``, axis by two constraints.
+
+    Each part is split into ``k // 2`` and ``k - k // 2`` parts at the load fraction between them,
+    along the axis whose cut gives the smallest worst ratio (share / target share) of cells and
+    of particles (first axis on ties). Arguments and result as :func:`morton_owners`.
+    """
+    load = cells + particle_weight * particles
+    if np.any(load <= 0.0):
+        raise ValueError("partition loads must be positive")
+    owners = np.zeros(points.shape[0], dtype=np.int32)
+    stack = [(np.arange(points.shape[0]), nparts, 0)]
+    while stack:
+        items, k, first = stack.pop()
+        if k == 1 or items.size == 0:
+            owners[items] = first
+            continue
+        k_left = k // 2
+        fraction = k_left / k
+        best: tuple[float, np.ndarray, np.ndarray] | None = None
+        for axis in range(points.shape[1]):
+            order = items[np.argsort(points[items, axis], kind="stable")]
+            w = load[order]
+            centre = (np.cumsum(w) - 0.5 * w) / w.sum()
+            cut = int(np.searchsorted(centre, fraction))
+            left, right = order[:cut], order[cut:]
+            score = 0.0
+            for quantity in (cells, particles):
+                total = quantity[items].sum()
+                if total > 0:
+                    score = max(score, quantity[left].sum() / (fraction * total),
+                                quantity[right].sum() / ((1.0 - fraction) * total))
+            if best is None or score < best[0] - 1e-12:
+                best = (score, left, right)
+        assert best is not None
+        stack.append((best[1], k_left, first))
+        stack.append((best[2], k - k_left, first + k_left))
+    return owners
+
+
+PARTITIONERS: dict[str, PartitionMethod] = {"morton": morton_owners, "rcb": rcb_owners}
+"""Partition methods by config name (``balance.method``)."""
+
+
+def partition(method: str, points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
+              particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float) -> npt.NDArray[np.int32]:
+    """Owner per item by the named method (see :data:`PARTITIONERS`)."""
+    if method not in PARTITIONERS:
+        raise ValueError(f"unknown partition method {method!r}; valid names: {sorted(PARTITIONERS)}")
+    return PARTITIONERS[method](points, cells, particles, nparts, particle_weight=particle_weight)
+
+
+def owner_partitioner(owners: npt.NDArray[np.int32], /) -> Callable[..., Any]:
+    """A cell partitioner for ``dolfinx.mesh.create_mesh(..., partitioner=...)`` with fixed owners.
+
+    Args:
+        owners: Owner rank of each cell this rank passes to ``create_mesh``, in the same order,
             shape=(num_cells_passed,) (all cells on one rank, none elsewhere).
     """
-    weights = np.asarray(weights, dtype=np.float64)
+    owners = np.asarray(owners, dtype=np.int32)
 
     def graph_partitioner(comm: Any, nparts: int, graph: Any, ghosting: bool) -> Any:
         n = graph.num_nodes
-        if n != weights.shape[0]:
-            raise ValueError(f"weighted partitioner: {weights.shape[0]} weights for {n} cells on this rank")
-        owner = block_owners(weights, nparts)
+        if n != owners.shape[0]:
+            raise ValueError(f"owner partitioner: {owners.shape[0]} owners for {n} cells on this rank")
+        if n and (owners.min() < 0 or owners.max() >= nparts):
+            raise ValueError(f"owner partitioner: owners must lie in [0, {nparts})")
         destinations: list[int] = []
         offsets = [0]
         for i in range(n):
-            destinations.append(int(owner[i]))
+            destinations.append(int(owners[i]))
             if ghosting:
-                others = {int(owner[j]) for j in graph.links(i) if 0 <= j < n} - {int(owner[i])}
+                others = {int(owners[j]) for j in graph.links(i) if 0 <= j < n} - {int(owners[i])}
                 destinations.extend(sorted(others))
             offsets.append(len(destinations))
         return dolfinx.cpp.graph.AdjacencyList_int32(
@@ -99,14 +182,13 @@ class CellLayout(NamedTuple):
     Attributes:
         points: Vertex coordinates, shape=(num_points, gdim) (rank 0).
         cells: Vertex indices of each cell, shape=(num_cells, num_vertices), int64 (rank 0).
-        curve_order: Cells sorted along a Morton curve of their midpoints, shape=(num_cells,),
-            int64, on every rank.
+        midpoints: Cell midpoints, shape=(num_cells, gdim) (rank 0).
         num_cells: Global number of cells (every rank).
     """
 
     points: npt.NDArray[np.float64]
     cells: npt.NDArray[np.int64]
-    curve_order: npt.NDArray[np.int64]
+    midpoints: npt.NDArray[np.float64]
     num_cells: int
 
 
@@ -125,49 +207,39 @@ def gather_cell_layout(mesh: dolfinx.mesh.Mesh, canonical: npt.NDArray[np.int64]
     corners = mesh.geometry.x[dofs][:, :, :gdim].reshape(num_owned, -1)
     gathered = comm.gather((np.asarray(canonical[:num_owned], dtype=np.int64), corners), root=0)
     num_cells = int(mesh.topology.index_map(tdim).size_global)
-    if comm.rank == 0:
-        index = np.concatenate([g[0] for g in gathered])
-        coords = np.concatenate([g[1] for g in gathered]).reshape(-1, tdim + 1, gdim)
-        if not np.array_equal(np.sort(index), np.arange(num_cells)):
-            raise ValueError("canonical cell indices are not a permutation of the global cells")
-        coords = coords[np.argsort(index)]
-        # Coordinates of a shared vertex are bit-identical on every rank (one source), so exact
-        # matching joins the cells again.
-        points, inverse = np.unique(coords.reshape(-1, gdim), axis=0, return_inverse=True)
-        cells = inverse.reshape(num_cells, tdim + 1).astype(np.int64)
-        order = morton_order(coords.mean(axis=1))
-    else:
-        points, cells, order = np.zeros((0, gdim)), np.zeros((0, tdim + 1), dtype=np.int64), None
-    order = comm.bcast(order, root=0)
-    return CellLayout(points, cells, np.asarray(order, dtype=np.int64), num_cells)
+    if comm.rank != 0:
+        return CellLayout(np.zeros((0, gdim)), np.zeros((0, tdim + 1), dtype=np.int64), np.zeros((0, gdim)), num_cells)
+    index = np.concatenate([g[0] for g in gathered])
+    coords = np.concatenate([g[1] for g in gathered]).reshape(-1, tdim + 1, gdim)
+    if not np.array_equal(np.sort(index), np.arange(num_cells)):
+        raise ValueError("canonical cell indices are not a permutation of the global cells")
+    coords = coords[np.argsort(index)]
+    # Coordinates of a shared vertex are bit-identical on every rank (one source), so exact
+    # matching joins the cells again.
+    points, inverse = np.unique(coords.reshape(-1, gdim), axis=0, return_inverse=True)
+    cells = inverse.reshape(num_cells, tdim + 1).astype(np.int64)
+    return CellLayout(points, cells, coords.mean(axis=1), num_cells)
 
 
 class WeightedMesh(NamedTuple):
-    """A mesh created by :func:`create_weighted_mesh` and the canonical index of its local cells."""
+    """A mesh created by :func:`create_partitioned_mesh` and the canonical index of its local cells."""
 
     mesh: dolfinx.mesh.Mesh
     canonical: npt.NDArray[np.int64]  # shape=(num_owned + num_ghost cells,)
 
 
-def create_weighted_mesh(
-    comm: MPI.Comm, layout: CellLayout, weights: npt.NDArray[np.float64] | None, domain: ufl.Mesh, /
-) -> WeightedMesh:
-    """Distribute ``layout`` in contiguous blocks of equal weight along its Morton curve (collective).
+def create_partitioned_mesh(comm: MPI.Comm, layout: CellLayout, owners: npt.NDArray[np.int32] | None,
+                            domain: ufl.Mesh, /) -> WeightedMesh:
+    """Distribute ``layout`` with the given owner of each canonical cell (collective).
 
     Args:
         comm: Communicator of the new mesh.
         layout: The gathered mesh (:func:`gather_cell_layout`).
-        weights: Weight per canonical cell, shape=(num_cells,) (read on rank 0 only); None = 1 each.
+        owners: Owner rank per canonical cell, shape=(num_cells,) (read on rank 0 only).
         domain: The coordinate element (``ufl.Mesh``) of the mesh.
     """
-    order = layout.curve_order
-    if comm.rank == 0:
-        w = np.ones(layout.num_cells) if weights is None else np.asarray(weights, dtype=np.float64)
-        cells, points, w_curve = layout.cells[order], layout.points, w[order]
-    else:
-        cells, points = layout.cells, layout.points
-        w_curve = np.zeros(0)
-    mesh = dolfinx.mesh.create_mesh(comm, cells, points, domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
-                                    partitioner=weighted_partitioner(w_curve))
-    original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)
-    return WeightedMesh(mesh, order[original])
+    owners = np.asarray(owners if comm.rank == 0 else np.zeros(0), dtype=np.int32)
+    mesh = dolfinx.mesh.create_mesh(comm, layout.cells, layout.points, domain,
+                                    ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
+                                    partitioner=owner_partitioner(owners))
+    return WeightedMesh(mesh, np.asarray(mesh.topology.original_cell_index, dtype=np.int64))

@@ -305,17 +305,19 @@ class Simulation:
         return self._rank_loads().load_imbalance > bcfg["threshold"]
 
     def rebalance(self) -> tuple[RankLoads, RankLoads]:
-        """Repartition the mesh with cell weights 1 + W n_particles(K) and move cells, fields and
+        """Repartition the mesh with cell loads 1 + W n_particles(K) and move cells, fields and
         particles with it (collective). The mesh itself does not change: the base mesh is
         redistributed (:meth:`convection.adaptivity.MeshHierarchy.repartition`) and the current
         mesh is rebuilt from it with the same refinement recipe. Returns the loads before and after.
         """
         assert self.hierarchy is not None
         before = self._rank_loads()
-        weights = np.ones(before.cells[self.comm.rank])
+        bcfg = self.config["balance"]
         if self.particles is not None:
-            weights += self.config["balance"]["particle_weight"] * self.particles.swarm.particles_per_cell()
-        self.hierarchy.repartition(self.mesh, weights)
+            particles = self.particles.swarm.particles_per_cell().astype(np.float64)
+        else:
+            particles = np.zeros(int(before.cells[self.comm.rank]))
+        self.hierarchy.repartition(self.mesh, particles, particle_weight=bcfg["particle_weight"], method=bcfg["method"])
         if self._recipe is not None:
             new_mesh = self.hierarchy.rebuild(*self._recipe)
         else:

@@ -8,7 +8,7 @@ import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
-from convection.balance import block_owners, morton_order, weighted_partitioner
+from convection.balance import PARTITIONERS, block_owners, morton_order, owner_partitioner, partition, rcb_owners
 
 
 def test_block_owners_balance_weights():
@@ -19,6 +19,40 @@ def test_block_owners_balance_weights():
     assert sums.max() / sums.mean() < 1.05
     with pytest.raises(ValueError, match="positive"):
         block_owners(np.array([1.0, 0.0]), 2)
+
+
+def _band_model(nx=24):
+    """Base cells of a 0.9142 x 1 box with a refined band at z = 0.2 (16 cells per base cell there)
+    and particles uniform in space: the adaptive Rayleigh-Taylor load pattern."""
+    xs, zs = (np.arange(nx) + 0.5) / nx * 0.9142, (np.arange(nx) + 0.5) / nx
+    mid = np.repeat(np.column_stack([a.ravel() for a in np.meshgrid(xs, zs)]), 2, axis=0)
+    distance = np.abs(mid[:, 1] - 0.2)
+    cells = np.where(distance < 0.06, 16.0, np.where(distance < 0.12, 4.0, 1.0))
+    return mid, cells, np.full(mid.shape[0], 100.0)
+
+
+@pytest.mark.parametrize("nparts", [2, 3, 4])
+def test_rcb_balances_cells_and_particles_together(nparts):
+    mid, cells, particles = _band_model()
+    imbalance = {}
+    for method in sorted(PARTITIONERS):
+        owners = partition(method, mid, cells, particles, nparts, particle_weight=0.01)
+        assert set(owners) == set(range(nparts))
+        c, p = np.bincount(owners, cells), np.bincount(owners, particles)
+        imbalance[method] = (c.max() / c.mean(), p.max() / p.mean())
+    assert max(imbalance["rcb"]) < 1.1, imbalance
+    # The space-filling curve cuts along the band for 3 and 4 parts: one constraint suffers.
+    if nparts > 2:
+        assert max(imbalance["morton"]) > 1.2, imbalance
+    with pytest.raises(ValueError, match="valid names"):
+        partition("metis", mid, cells, particles, 2, particle_weight=0.01)
+
+
+def test_rcb_splits_uneven_part_counts_by_load():
+    mid, cells, particles = _band_model(12)
+    owners = rcb_owners(mid, cells, particles, 3, particle_weight=0.0)
+    load = np.bincount(owners, cells)
+    assert load.max() / load.mean() < 1.1
 
 
 def test_morton_order_is_a_permutation_with_locality():
@@ -52,12 +86,12 @@ def test_weighted_mesh_partition():
         x, cells = _structured(12)
         order = morton_order(x[cells].mean(axis=1))
         cells = cells[order]
-        weights = weight(x[cells].mean(axis=1))
+        owners = block_owners(weight(x[cells].mean(axis=1)), comm.size)
     else:
-        x, cells, weights = np.zeros((0, 2)), np.zeros((0, 3), dtype=np.int64), np.zeros(0)
+        x, cells, owners = np.zeros((0, 2)), np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int32)
     domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.triangle, 1))
     mesh = dolfinx.mesh.create_mesh(comm, cells, x, domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
-                                    partitioner=weighted_partitioner(weights))
+                                    partitioner=owner_partitioner(owners))
     num_owned = mesh.topology.index_map(2).size_local
     mid = dolfinx.mesh.compute_midpoints(mesh, 2, np.arange(num_owned, dtype=np.int32))
     sums = np.array(comm.allgather(float(weight(mid[:, :2]).sum())))
@@ -95,12 +129,15 @@ def test_repartitioned_hierarchy_rebuilds_the_same_mesh_with_balanced_weights():
         previous, mesh = mesh, hierarchy.rebuild(mesh, wanted)
     reference = _gathered_midpoints(mesh)
 
-    def heavy(m):  # the load: every cell 1, plus 0.5 for "particles" in the upper half
+    def particles(m):  # 50 "particles" per cell in the upper half
         num_owned = m.topology.index_map(2).size_local
         mid = dolfinx.mesh.compute_midpoints(m, 2, np.arange(num_owned, dtype=np.int32))
-        return 1.0 + 0.5 * (mid[:, 1] > 0.5)
+        return 50.0 * (mid[:, 1] > 0.5)
 
-    hierarchy.repartition(mesh, heavy(mesh))
+    def heavy(m):  # the load 1 + W n_particles with W = 0.01
+        return 1.0 + 0.01 * particles(m)
+
+    hierarchy.repartition(mesh, particles(mesh), particle_weight=0.01, method="morton")
     balanced = hierarchy.rebuild(previous, wanted)
     loads = np.array(comm.allgather(float(heavy(balanced).sum())))
     same = np.array_equal(_gathered_midpoints(balanced), reference)
@@ -158,3 +195,9 @@ def test_balancing_needs_simplices():
     with pytest.raises(ConfigError, match="balance.strategy.*simplex"):
         load_config(root / "configs" / "blankenbach_1a.yaml",
                     ["mesh.cell_type=box", "balance.strategy=every", "output.directory=unused"])
+
+
+def test_config_offers_every_partition_method():
+    from convection.config import SCHEMA
+
+    assert set(SCHEMA["balance"]["method"].choices) == set(PARTITIONERS)

@@ -8,8 +8,11 @@ Runs ``configs/vankeken_1a.yaml`` (0.9142 x 1, fine cells only near the interfac
 uniform in space) for ``--steps`` steps under three partitionings, each on every rank count:
 
 - ``default``: no repartitioning (DOLFINx's partition of the base mesh, refined in place);
-- ``cells``: repartition every 10 steps with W = 0 (cells balanced, what a mesh code does);
-- ``particles``: repartition every 10 steps with W = 0.01 (cell weight 1 + W n_particles).
+- ``morton W=0``: space-filling-curve blocks of equal cell count every 10 steps (what a mesh code
+  without particle weights does, e.g. p4est's default in ASPECT);
+- ``morton W=0.01``: the same curve with cell loads 1 + W n_particles;
+- ``rcb W=0.01``: recursive coordinate bisection with loads 1 + W n_particles, each cut along the
+  axis that splits both cells and particles most evenly (our default ``balance.method``).
 
 Writes ``<out>/balance_rt.md`` (imbalance max/mean over ranks of cells and of particles at the
 first step, mean and worst over the run, wall time) and ``<out>/balance_rt.png``. Rank counts
@@ -34,8 +37,10 @@ from convection.plot import read_statistics  # noqa: E402
 
 STRATEGIES = {
     "default": [],
-    "cells": ["balance.strategy=every", "balance.every=10", "balance.particle_weight=0"],
-    "particles": ["balance.strategy=every", "balance.every=10", "balance.particle_weight=0.01"],
+    "morton W=0": ["balance.strategy=every", "balance.every=10", "balance.method=morton", "balance.particle_weight=0"],
+    "morton W=0.01": ["balance.strategy=every", "balance.every=10", "balance.method=morton",
+                      "balance.particle_weight=0.01"],
+    "rcb W=0.01": ["balance.strategy=every", "balance.every=10", "balance.method=rcb", "balance.particle_weight=0.01"],
 }
 
 
@@ -43,7 +48,7 @@ def run_all(out: Path, ranks: list[int], steps: int, ppc: int) -> dict[tuple[int
     results = {}
     for n in ranks:
         for name, extra in STRATEGIES.items():
-            run_dir = out / f"{name}_{n}"
+            run_dir = out / f"{name.replace(' ', '_').replace('=', '')}_{n}"
             run_config(ROOT / "configs" / "vankeken_1a.yaml", run_dir, ranks=n, cwd=ROOT, overrides=[
                 f"time.max_steps={steps}", f"particles.generator.particles_per_cell={ppc}",
                 "output.fields_every=0", "output.progress=lines", "output.progress_every=20", *extra])

@@ -170,6 +170,8 @@ def test_balanced_run_matches_unbalanced_run(tmp_path_factory):
 
     plain, plain_ids = run("plain")
     balanced, balanced_ids = run("balanced", "balance.strategy=every", "balance.every=3")
+    run("never", "balance.strategy=threshold", "balance.every=3", "balance.threshold=50")
+    run("whenever", "balance.strategy=threshold", "balance.every=6", "balance.threshold=1")
     ok = abs(plain.vrms - balanced.vrms) <= 1e-9 * plain.vrms and plain.cells == balanced.cells
     ok = ok and np.array_equal(plain_ids, balanced_ids) and np.array_equal(plain_ids, np.arange(plain_ids.size))
     if comm.rank == 0:
@@ -183,6 +185,10 @@ def test_balanced_run_matches_unbalanced_run(tmp_path_factory):
         ok = ok and np.array_equal(log["step"], [0, 3, 6, 9, 12])
         ok = ok and bool(np.all(log["load_imbalance_after"] <= log["load_imbalance_before"] + 1e-12))
         ok = ok and bool(np.all(log["load_imbalance_after"] < 1.15)) and bool(np.all(stats["n_lost"] == 0))
+        ok = ok and not (base / "never" / "balance.csv").exists()  # imbalance never reaches 50
+        with open(base / "whenever" / "balance.csv", newline="") as f:
+            steps = [int(r["step"]) for r in csv.DictReader(f)]
+        ok = ok and set(steps) <= {0, 6, 12} and 0 in steps  # checked every 6 steps, rebalanced when > 1
     assert comm.allreduce(ok, op=MPI.LAND), (plain, balanced)
 
 

@@ -527,7 +527,9 @@ def plot(records: list[dict], path: Path) -> None:
         ax.set_xticklabels([f"{n}*" if r["oversubscribed"] else str(n) for n, r in zip(ranks, recs)])
         ax.set_xlabel("ranks (* = oversubscribed, 2 cores)")
         ax.set_ylabel("seconds (slowest rank, summed over steps)")
-        ax.set_title(f"{study} scaling, annulus, {recs[0]['steps']} RK2 steps")
+        loads = [x for r in recs for x in (r["load_start"], r["load_end"])]
+        ax.set_title(f"{study} scaling, annulus, {recs[0]['steps']} {recs[0]['integrator']} steps\n"
+                     f"(1-min load {min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores)", fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()

@@ -96,3 +96,18 @@ def test_short_collective_run_keeps_every_particle():
     assert in_owned
     assert moved > 0
     assert (sent > 0) == (comm.size > 1)
+
+
+def test_weak_plan_keeps_cells_per_rank_and_efficiency_is_relative_to_one_rank():
+    runs = circular.plan(["strong", "weak"], [1, 2, 4], 32, 24)
+    assert [r.radial for r in runs if r.study == "strong"] == [32, 32, 32]
+    weak = [r for r in runs if r.study == "weak"]
+    cells = [2 * r.radial * circular.angular_divisions(r.radial) for r in weak]
+    assert np.allclose(np.array(cells) / (cells[0] * np.array([1, 2, 4])), 1.0, atol=0.01)
+    base = {"ranks": 1, "particles": 100, "loop_seconds": 8.0, "particle_seconds": 4.0}
+    strong = [dict(base, study="strong"), dict(base, study="strong", ranks=2, loop_seconds=5.0, particle_seconds=2.0)]
+    circular.efficiencies(strong)
+    assert strong[1]["efficiency"] == pytest.approx(0.8) and strong[1]["particle_efficiency"] == pytest.approx(1.0)
+    weak_recs = [dict(base, study="weak"), dict(base, study="weak", ranks=2, particles=210, loop_seconds=10.0)]
+    circular.efficiencies(weak_recs)
+    assert weak_recs[1]["efficiency"] == pytest.approx(8.0 * 1.05 / 10.0)

@@ -13,7 +13,8 @@ step ("drunken sailor"; at 10^3 the CFL step alone blows up). ``--time-limit`` s
 after that many seconds (its statistics keep every finished step).
 
 From each ``statistics.csv`` the script samples e(t) and vrms(t) at :data:`SAMPLE_TIMES` and
-writes ``<results>/results_<case>.md`` (e at fixed times, final time and e, particles, lost,
+writes ``<results>/results_<case>.md`` (e at fixed times, its time average over MEAN_WINDOW
+(less sensitive to single plume events), final time and e, particles, lost,
 steps, wall time; in 3D also the relative difference to the seed's 64^3 value from
 ``reference.csv``), ``entrainment_<case>.png`` (e(t) of the whole series) and ``vrms_<case>.png``.
 ``--quick`` is a smoke run (20 x 20, 5 and 10 particles per cell, t = 0.003; 3D 6^3, t = 0.0003) whose
@@ -39,8 +40,9 @@ from convection.plot import read_statistics  # noqa: E402
 RB = 1.0e6
 DT_FACTOR = 0.25
 SAMPLE_TIMES = (0.005, 0.01, 0.015, 0.02)
+MEAN_WINDOW = (0.01, 0.02)
 DEFAULT_SERIES = {
-    "2d": ("20x5", "20x10", "20x40", "20x100", "40x5", "40x10", "40x40", "40x100", "80x10"),
+    "2d": ("20x5", "20x10", "20x40", "20x100", "40x5", "40x10", "40x40", "40x100", "80x10", "80x40"),
     "3d": ("12x10",),
 }
 QUICK_SERIES = {"2d": ("20x5", "20x10"), "3d": ("6x5",)}
@@ -100,12 +102,14 @@ def seed_reference() -> dict[str, float]:
 def table(case: str, results: dict[Member, dict[str, np.ndarray]], out: Path) -> str:
     """Markdown table of e at SAMPLE_TIMES, the final e and run facts (plus the seed comparison in 3D)."""
     head = "| mesh | particles/cell | " + " | ".join(f"e(t={t:g})" for t in SAMPLE_TIMES) + \
-        " | t reached | final e | final vrms | particles | lost | steps | wall time [s] |"
+        f" | mean e, t in [{MEAN_WINDOW[0]:g}, {MEAN_WINDOW[1]:g}] | t reached | final e | final vrms | particles | lost | steps | wall time [s] |"
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for m, s in results.items():
         e = sample(s, "entrainment", SAMPLE_TIMES)
         mesh = "x".join([str(m.cells)] * (2 if case == "2d" else 3))
         cells = " | ".join("-" if np.isnan(x) else f"{x:.5f}" for x in e)
+        mean = window_mean(s, "entrainment", MEAN_WINDOW)
+        cells += " | -" if np.isnan(mean) else f" | {mean:.5f}"
         lines.append(f"| {mesh} | {m.ppc} | {cells} | {s['time'][-1]:.5f} | {s['entrainment'][-1]:.5f} | "
                      f"{s['vrms'][-1]:.1f} | {int(s['n_particles'][0])} | {int(s['n_lost'][-1])} | "
                      f"{int(s['step'][-1])} | {_wall(out / m.label, s):.0f} |")
@@ -122,6 +126,17 @@ def table(case: str, results: dict[Member, dict[str, np.ndarray]], out: Path) ->
     return text
 
 
+def window_mean(stats: dict[str, np.ndarray], key: str, window: tuple[float, float]) -> float:
+    """Time average of column ``key`` over ``window`` (trapezoid rule; NaN if the run ends before it)."""
+    t, y = stats["time"], stats[key]
+    if t[-1] < window[1] * (1 - 1e-9):
+        return float("nan")
+    inside = (t > window[0]) & (t < window[1])
+    tt = np.concatenate([[window[0]], t[inside], [window[1]]])
+    yy = np.interp(tt, t, y)
+    return float(np.sum(0.5 * (yy[1:] + yy[:-1]) * np.diff(tt)) / (window[1] - window[0]))
+
+
 def _wall(run_dir: Path, stats: dict[str, np.ndarray]) -> float:
     summary = run_dir / "summary.json"
     if summary.is_file():
@@ -130,7 +145,7 @@ def _wall(run_dir: Path, stats: dict[str, np.ndarray]) -> float:
 
 
 def plot(case: str, results: dict[Member, dict[str, np.ndarray]], key: str, ylabel: str, png: Path) -> None:
-    """One curve per member of ``key`` over time."""
+    """One curve per member of ``key`` over time (colour: mesh, line style: particles per cell)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -138,8 +153,10 @@ def plot(case: str, results: dict[Member, dict[str, np.ndarray]], key: str, ylab
 
     fig, ax = plt.subplots(figsize=(8, 5), constrained_layout=True)
     styles = {5: ":", 10: "-", 40: "--", 100: "-."}
+    meshes = sorted({m.cells for m in results})
+    colors = {n: f"C{i}" for i, n in enumerate(meshes)}
     for m, s in results.items():
-        ax.plot(s["time"], s[key], styles.get(m.ppc, "-"), label=f"{m.cells}{'²' if case == '2d' else '³'}, {m.ppc}/cell")
+        ax.plot(s["time"], s[key], styles.get(m.ppc, "-"), color=colors[m.cells], linewidth=0.9, label=f"{m.cells}{'²' if case == '2d' else '³'}, {m.ppc}/cell")
     if key == "entrainment" and case == "3d":
         for label, value in seed_reference().items():
             ax.axhline(value, color="gray", linewidth=0.8, linestyle="--")

@@ -31,7 +31,8 @@ import dolfinx.mesh
 import ufl
 
 __all__ = ["CellLayout", "PARTITIONERS", "WeightedMesh", "block_owners", "create_partitioned_mesh",
-           "gather_cell_layout", "morton_order", "morton_owners", "owner_partitioner", "partition", "rcb_owners"]
+           "gather_cell_layout", "morton_order", "morton_owners", "owner_partitioner", "partition", "rcb_owners",
+           "redistribute"]
 
 
 def block_owners(weights: npt.NDArray[np.float64], nparts: int, /) -> npt.NDArray[np.int32]:
@@ -243,3 +244,24 @@ def create_partitioned_mesh(comm: MPI.Comm, layout: CellLayout, owners: npt.NDAr
                                     ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
                                     partitioner=owner_partitioner(owners))
     return WeightedMesh(mesh, np.asarray(mesh.topology.original_cell_index, dtype=np.int64))
+
+
+def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> dolfinx.mesh.Mesh:
+    """The same cells, distributed so each owned cell of ``mesh`` goes to ``owners`` (collective).
+
+    The cells are gathered on rank 0 and the mesh is created anew (DOLFINx 0.5 has no in-place
+    redistribution), which gives it a fresh, consistent parallel topology.
+
+    Args:
+        mesh: A P1 simplex mesh.
+        owners: New owner rank of each owned cell, shape=(num_owned_cells,).
+    """
+    comm = mesh.comm
+    tdim = mesh.topology.dim
+    num_owned = mesh.topology.index_map(tdim).size_local
+    offset = comm.exscan(num_owned) or 0
+    layout = gather_cell_layout(mesh, np.arange(offset, offset + num_owned, dtype=np.int64))
+    gathered = comm.gather(np.asarray(owners, dtype=np.int32)[:num_owned], root=0)
+    all_owners = np.concatenate(gathered) if comm.rank == 0 else None
+    domain = ufl.Mesh(mesh.ufl_domain().ufl_coordinate_element())
+    return create_partitioned_mesh(comm, layout, all_owners, domain).mesh

@@ -168,9 +168,6 @@ class Simulation:
         base = create_box_mesh(comm, self.spec)
         balancing = config["balance"]["strategy"] != "none"
         self.hierarchy = MeshHierarchy(base) if self.adaptivity or balancing else None
-        # The last adaptation (previous mesh, wanted levels): rebuilding it from a repartitioned
-        # base gives the same mesh on the new partition.
-        self._recipe: tuple[dolfinx.mesh.Mesh, np.ndarray] | None = None
         mesh = self.hierarchy.uniform(self.adaptivity.min_level) if self.adaptivity else base
         self._build(mesh)
         self._set_initial_fields()
@@ -255,7 +252,6 @@ class Simulation:
         new_mesh = self.hierarchy.rebuild(self.mesh, wanted)
         old = self._solvers()
         self._build(new_mesh)
-        self._recipe = (old.stokes.mesh, wanted)
         if initial:
             self._set_initial_fields()
             return before, self.num_cells
@@ -306,9 +302,9 @@ class Simulation:
 
     def rebalance(self) -> tuple[RankLoads, RankLoads]:
         """Repartition the mesh with cell loads 1 + W n_particles(K) and move cells, fields and
-        particles with it (collective). The mesh itself does not change: the base mesh is
-        redistributed (:meth:`convection.adaptivity.MeshHierarchy.repartition`) and the current
-        mesh is rebuilt from it with the same refinement recipe. Returns the loads before and after.
+        particles with it (collective). The mesh itself does not change: the base mesh and the
+        current mesh are redistributed together
+        (:meth:`convection.adaptivity.MeshHierarchy.repartition`). Returns the loads before and after.
         """
         assert self.hierarchy is not None
         before = self._rank_loads()
@@ -317,11 +313,8 @@ class Simulation:
             particles = self.particles.swarm.particles_per_cell().astype(np.float64)
         else:
             particles = np.zeros(int(before.cells[self.comm.rank]))
-        self.hierarchy.repartition(self.mesh, particles, particle_weight=bcfg["particle_weight"], method=bcfg["method"])
-        if self._recipe is not None:
-            new_mesh = self.hierarchy.rebuild(*self._recipe)
-        else:
-            new_mesh = self.hierarchy.uniform(self.adaptivity.min_level if self.adaptivity else 0)
+        new_mesh = self.hierarchy.repartition(self.mesh, particles, particle_weight=bcfg["particle_weight"],
+                                              method=bcfg["method"])
         old = self._solvers()
         self._build(new_mesh)
         self._carry_fields(old)

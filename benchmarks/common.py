@@ -8,15 +8,14 @@ root on ``sys.path``.
 from __future__ import annotations
 
 import csv
-import os
-import shutil
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+
+from convection.launch import cli_command, mpi_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -63,13 +62,9 @@ def start_cli_run(config: Path, output: Path, /, *, ranks: int = 1, overrides: S
         nice: Niceness of the run (0: none).
         log: File for the run's stdout and stderr (default: inherit).
     """
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [sys.executable, "-m", "convection", "run", str(config), "--output", str(output),
-           "--set", "output.progress=lines", "--set", "output.progress_every=200", "--set", "output.fields_every=0"]
-    for item in overrides:
-        cmd += ["--set", item]
-    if ranks > 1:
-        cmd = [shutil.which("mpirun") or "mpirun", "-n", str(ranks), "--oversubscribe", *cmd]
+    env = mpi_environment()
+    quiet = ["output.progress=lines", "output.progress_every=200", "output.fields_every=0"]
+    cmd = cli_command(config, output, ranks=ranks, overrides=[*quiet, *overrides])
     if time_limit is not None:
         cmd = ["timeout", "-s", "TERM", str(int(time_limit)), *cmd]
     if nice:

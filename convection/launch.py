@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-__all__ = ["cli_command", "run_config"]
+__all__ = ["cli_command", "mpi_environment", "run_config"]
 
 
 def cli_command(config: str | Path, output: str | Path, /, *, ranks: int = 1,
@@ -31,12 +31,16 @@ def cli_command(config: str | Path, output: str | Path, /, *, ranks: int = 1,
     return cmd
 
 
+def mpi_environment() -> dict[str, str]:
+    """This process's environment plus the variables that let Open MPI run as root."""
+    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+
+
 def run_config(config: str | Path, output: str | Path, /, *, ranks: int = 1, overrides: Sequence[str] = (),
                cwd: str | Path | None = None, echo: bool = True) -> Path:
     """Run ``config`` to completion (raises CalledProcessError on failure); returns ``output``."""
     cmd = cli_command(config, output, ranks=ranks, overrides=overrides)
     if echo:
         print("$", " ".join(cmd), flush=True)
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    subprocess.run(cmd, cwd=cwd, env=env, check=True)
+    subprocess.run(cmd, cwd=cwd, env=mpi_environment(), check=True)
     return Path(output)

@@ -44,10 +44,12 @@ STRATEGIES = {
 }
 
 
-def run_all(out: Path, ranks: list[int], steps: int, ppc: int) -> dict[tuple[int, str], dict[str, np.ndarray]]:
+def run_all(out: Path, ranks: list[int], steps: int, ppc: int,
+            strategies: list[str]) -> dict[tuple[int, str], dict[str, np.ndarray]]:
     results = {}
     for n in ranks:
-        for name, extra in STRATEGIES.items():
+        for name in strategies:
+            extra = STRATEGIES[name]
             run_dir = out / f"{name.replace(' ', '_').replace('=', '')}_{n}"
             run_config(ROOT / "configs" / "vankeken_1a.yaml", run_dir, ranks=n, cwd=ROOT, overrides=[
                 f"time.max_steps={steps}", f"particles.generator.particles_per_cell={ppc}",
@@ -104,10 +106,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ranks", type=int, nargs="+", default=[2, 3])
     parser.add_argument("--steps", type=int, default=60)
     parser.add_argument("--ppc", type=int, default=200, help="particles per cell of the initial mesh")
+    parser.add_argument("--strategies", nargs="+", default=list(STRATEGIES), choices=list(STRATEGIES))
     parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "balance_rt"))
     args = parser.parse_args(argv)
     out = Path(args.out)
-    results = run_all(out, args.ranks, args.steps, args.ppc)
+    results = run_all(out, args.ranks, args.steps, args.ppc, args.strategies)
     text = table(results, args.ppc)
     out.mkdir(parents=True, exist_ok=True)
     (out / "balance_rt.md").write_text(text)

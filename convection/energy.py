@@ -55,7 +55,7 @@ from convection.boundary import (
     side_tag,
     temperature_dirichlet_bcs,
 )
-from convection.petsc_options import set_owned_options
+from convection.petsc_options import destroy_petsc_objects, set_owned_options
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -186,6 +186,11 @@ class EnergySolver:
         set_owned_options(self, self._prefix, options)
         self.ksp = PETSc.KSP().create(mesh.comm)
         self.ksp.setOptionsPrefix(self._prefix)
+
+    def destroy(self) -> None:
+        """Free the PETSc solver, matrices and vectors now (collective; see
+        :func:`convection.petsc_options.destroy_petsc_objects`)."""
+        destroy_petsc_objects(self, ('ksp', '_A', '_b'))
 
     # ------------------------------------------------------------------ forms
     def residual(self, T_new: Any, T_n: Any, T_nm1: Any, u: Any, w: Any, dt: Any, coef: Any) -> Any:

@@ -67,6 +67,12 @@ class _Solvers(NamedTuple):
     composition: dolfinx.fem.Function | None
     composition_solver: EnergySolver | None
 
+    def destroy(self) -> None:
+        """Free the solvers' PETSc objects (collective)."""
+        for solver in (self.stokes, self.energy, self.composition_solver):
+            if solver is not None:
+                solver.destroy()
+
 
 @dataclass(frozen=True)
 class RankLoads:
@@ -254,8 +260,9 @@ class Simulation:
         self._build(new_mesh)
         if initial:
             self._set_initial_fields()
-            return before, self.num_cells
-        self._carry_fields(old)
+        else:
+            self._carry_fields(old)
+        old.destroy()
         return before, self.num_cells
 
     def _solvers(self) -> _Solvers:
@@ -318,6 +325,7 @@ class Simulation:
         old = self._solvers()
         self._build(new_mesh)
         self._carry_fields(old)
+        old.destroy()
         return before, self._rank_loads()
 
     # ------------------------------------------------------------------ time loop
@@ -456,6 +464,8 @@ class Simulation:
             writer.close()
             balance_log.close()
             progress.close()
+            # The solvers are done; free them now, on every rank together, not in the garbage collector.
+            self._solvers().destroy()
         if written_step != self.step:
             fields.write(self._fields(), self.t)
         fields.close()

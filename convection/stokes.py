@@ -37,7 +37,7 @@ from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import VelocityBC, box_bounds, side_names, velocity_dirichlet_bcs
-from convection.petsc_options import set_owned_options
+from convection.petsc_options import destroy_petsc_objects, set_owned_options
 
 STOKES_SOLVERS: dict[str, str] = {
     "direct": "MUMPS LU on the monolithic Taylor-Hood system",
@@ -233,6 +233,11 @@ class StokesSolver:
         return is_u, is_p
 
     # ------------------------------------------------------------------ solve
+    def destroy(self) -> None:
+        """Free the PETSc solver, matrices and vectors now (collective; see
+        :func:`convection.petsc_options.destroy_petsc_objects`)."""
+        destroy_petsc_objects(self, ('ksp', '_A', '_P', '_b', '_x', '_null_space'))
+
     def solve(self, T: Any, C: Any = None) -> StokesResult:
         """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
 

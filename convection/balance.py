@@ -5,10 +5,10 @@ A partition method maps per-cell data to an owner rank per cell. Registry :data:
 - ``morton``: cells sorted along a Morton (Z-order) curve of their midpoints, cut into contiguous
   blocks of equal load (:func:`block_owners`) — the space-filling-curve partition of p4est-based
   codes such as ASPECT;
-- ``rcb``: recursive coordinate bisection that cuts each part at the load median, choosing at every
-  cut the axis that keeps *both* the cells and the particles most evenly split (a two-constraint
-  geometric partition: for an interface refined along one axis it cuts across the interface, so
-  every rank gets its share of fine cells and of coarse, particle-rich cells).
+- ``rcb``: recursive coordinate bisection; every cut (axis and position) minimises the worst
+  imbalance of the cells, the particles and the load 1 + W n_particles on its two sides (a
+  multi-constraint geometric partition: for an interface refined along one axis it cuts across the
+  interface, so every rank gets its share of fine cells and of coarse, particle-rich cells).
 
 :func:`owner_partitioner` hands fixed owners to ``dolfinx.mesh.create_mesh`` (cells sharing a
 facet with another rank's cells are ghosted there, as ``GhostMode.shared_facet`` requires). The
@@ -96,11 +96,11 @@ def morton_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64
 
 def rcb_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
                particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float) -> npt.NDArray[np.int32]:
-    """Recursive coordinate bisection at the median of ``cells + W particles``, axis by two constraints.
+    """Recursive coordinate bisection balancing cells, particles and the load ``cells + W particles``.
 
-    Each part is split into ``k // 2`` and ``k - k // 2`` parts at the load fraction between them,
-    along the axis whose cut gives the smallest worst ratio (share / target share) of cells and
-    of particles (first axis on ties). Arguments and result as :func:`morton_owners`.
+    Each part is split into ``k // 2`` and ``k - k // 2`` parts; of all cut positions along all axes
+    the one with the smallest worst ratio (share / target share) of cells, particles and load is
+    taken (first axis on ties). Arguments and result as :func:`morton_owners`.
     """
     load = cells + particle_weight * particles
     if np.any(load <= 0.0):
@@ -117,18 +117,18 @@ def rcb_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
         best: tuple[float, np.ndarray, np.ndarray] | None = None
         for axis in range(points.shape[1]):
             order = items[np.argsort(points[items, axis], kind="stable")]
-            w = load[order]
-            centre = (np.cumsum(w) - 0.5 * w) / w.sum()
-            cut = int(np.searchsorted(centre, fraction))
-            left, right = order[:cut], order[cut:]
-            score = 0.0
-            for quantity in (cells, particles):
-                total = quantity[items].sum()
-                if total > 0:
-                    score = max(score, quantity[left].sum() / (fraction * total),
-                                quantity[right].sum() / ((1.0 - fraction) * total))
-            if best is None or score < best[0] - 1e-12:
-                best = (score, left, right)
+            # Worst ratio (share / target share) of cells, particles and load for every cut position.
+            score = np.zeros(order.size + 1)
+            for quantity in (cells, particles, load):
+                q = quantity[order]
+                total = q.sum()
+                if total <= 0:
+                    continue
+                left = np.concatenate(([0.0], np.cumsum(q))) / total
+                score = np.maximum(score, np.maximum(left / fraction, (1.0 - left) / (1.0 - fraction)))
+            cut = int(np.argmin(score[1:-1])) + 1 if order.size > 1 else order.size
+            if best is None or score[cut] < best[0] - 1e-12:
+                best = (float(score[cut]), order[:cut], order[cut:])
         assert best is not None
         stack.append((best[1], k_left, first))
         stack.append((best[2], k - k_left, first + k_left))

@@ -202,12 +202,16 @@ def test_balanced_run_matches_unbalanced_run(tmp_path_factory):
 
         with open(base / "balanced" / "balance.csv", newline="") as f:
             rows = list(csv.DictReader(f))
-        log = {key: np.array([float(r[key]) for r in rows]) for key in ("step", "load_imbalance_before",
-                                                                         "load_imbalance_after")}
+        log = {key: np.array([float(r[key]) for r in rows]) for key in rows[0]
+               if key == "step" or "imbalance" in key}
+        worst = {when: np.max([log[f"{kind}_imbalance_{when}"] for kind in ("cell", "particle", "load")], axis=0)
+                 for when in ("before", "after")}
         stats = read_statistics(base / "balanced" / "statistics.csv")
         ok = ok and np.array_equal(log["step"], [0, 3, 6, 9, 12])
-        ok = ok and bool(np.all(log["load_imbalance_after"] <= log["load_imbalance_before"] + 1e-12))
-        ok = ok and bool(np.all(log["load_imbalance_after"] < 1.15)) and bool(np.all(stats["n_lost"] == 0))
+        # The first repartition fixes the base mesh's cell imbalance; after every repartition cells,
+        # particles and load are all within 15 % (this 8 x 8 base mesh is coarse for 3 ranks).
+        ok = ok and worst["before"][0] > 1.2 and worst["after"][0] < worst["before"][0]
+        ok = ok and bool(np.all(worst["after"] < 1.15)) and bool(np.all(stats["n_lost"] == 0))
         ok = ok and not (base / "never" / "balance.csv").exists()  # imbalance never reaches 50
         with open(base / "whenever" / "balance.csv", newline="") as f:
             steps = [int(r["step"]) for r in csv.DictReader(f)]

@@ -10,7 +10,7 @@ import ufl
 from mpi4py import MPI
 
 from convection.boundary import side_axis, side_names
-from convection.energy import EnergySolver
+from convection.transport import TransportSolver
 
 
 class TemperatureStats(NamedTuple):
@@ -59,7 +59,7 @@ def temperature_stats(T: dolfinx.fem.Function) -> TemperatureStats:
     )
 
 
-def nusselt(energy_solver: EnergySolver, u: dolfinx.fem.Function, side: str = "top") -> float:
+def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str = "top") -> float:
     """Nusselt number through ``side`` from the consistent boundary flux. Collective.
 
     With ``a`` the coordinate axis normal to ``side``, ``L`` the box extent along ``a``, ``A`` the
@@ -69,7 +69,7 @@ def nusselt(energy_solver: EnergySolver, u: dolfinx.fem.Function, side: str = "t
         Nu = (q_a / A) / (dT / L),    q_a = -int_side grad T . e_a ds,
 
     where ``int_side grad T . n ds`` is the consistent (weak-form residual) flux of
-    :meth:`EnergySolver.boundary_flux`. For the unit-height Blankenbach box with ``T = 0`` on top
+    :meth:`TransportSolver.boundary_flux`. For the unit-height Blankenbach box with ``T = 0`` on top
     this is ``Nu = -(int_top dT/dz dx) / (int_bottom T dx)``; the conduction profile gives 1.
 
     Args:
@@ -121,7 +121,7 @@ class RunDiagnostics:
             equation.
     """
 
-    def __init__(self, u: dolfinx.fem.Function, energy_solver: EnergySolver, /, *, side: str = "top",
+    def __init__(self, u: dolfinx.fem.Function, energy_solver: TransportSolver, /, *, side: str = "top",
                  nusselt: bool = True) -> None:
         self.u = u
         self.with_nusselt = nusselt

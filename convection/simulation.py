@@ -3,7 +3,7 @@
 Per step (Boussinesq, see :mod:`convection.approximation`):
 
 1. dt from the CFL number of the current velocity (:func:`convection.timestep.cfl_timestep`);
-2. advance the temperature by dt with the current velocity (:class:`convection.energy.EnergySolver`);
+2. advance the temperature by dt with the current velocity (:class:`convection.transport.TransportSolver`);
 3. solve Stokes with the new temperature and the composition field (:class:`convection.stokes.StokesSolver`);
 4. statistics row (time, dt, vrms, Nusselt, T mean/min/max, cells), progress, field output;
 5. every ``adaptivity.every`` steps: rebuild the mesh from the base mesh (:mod:`convection.adaptivity`)
@@ -40,7 +40,7 @@ from convection.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.boundary import TemperatureBC, VelocityBC, side_names
 from convection.config import dump_config, expression_constants
 from convection.diagnostics import RunDiagnostics
-from convection.energy import EnergySolver
+from convection.transport import TransportSolver
 from convection.expressions import Expression
 from convection.mesh import BoxSpec, create_box_mesh
 from convection.output import FieldOutput
@@ -63,9 +63,9 @@ class _Solvers(NamedTuple):
     """The solvers and fields of one mesh (kept while their values move to a new mesh)."""
 
     stokes: StokesSolver
-    energy: EnergySolver
+    energy: TransportSolver
     composition: dolfinx.fem.Function | None
-    composition_solver: EnergySolver | None
+    composition_solver: TransportSolver | None
 
     def destroy(self) -> None:
         """Free the solvers' PETSc objects (collective)."""
@@ -207,18 +207,18 @@ class Simulation:
             mesh, self.approximation, bcs=self.velocity_bcs, degree=cfg["stokes"]["degree"],
             solver=cfg["stokes"]["solver"], petsc_options=cfg["stokes"]["petsc_options"],
         )
-        self.energy = EnergySolver(
+        self.energy = TransportSolver(
             mesh, self.approximation, bcs=self.temperature_bcs, degree=cfg["energy"]["degree"],
             stabilisation=cfg["energy"]["stabilisation"],
         )
         self.diagnostics = RunDiagnostics(self.stokes.u, self.energy, side="top",
                                           nusselt=cfg["energy"]["enabled"])
         self.composition: dolfinx.fem.Function | None = None
-        self.composition_solver: EnergySolver | None = None
+        self.composition_solver: TransportSolver | None = None
         if self.initial_composition is not None:
             degree = cfg["composition"]["degree"]
             if cfg["composition"]["source"] == "field":  # advected like T, without diffusion or heating
-                self.composition_solver = EnergySolver(
+                self.composition_solver = TransportSolver(
                     mesh, self.approximation, bcs={}, degree=degree, stabilisation=cfg["energy"]["stabilisation"],
                     diffusivity=0.0, heating=False, name="composition",
                 )

@@ -14,7 +14,7 @@ from mpi4py import MPI
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import TemperatureBC
 from convection.diagnostics import nusselt, temperature_stats, vrms
-from convection.energy import EnergySolver
+from convection.transport import TransportSolver
 from convection.timestep import cfl_timestep
 
 
@@ -54,7 +54,7 @@ def test_temperature_stats_exact():
 
 def _conduction_solver(mesh, height, comm_steps=0):
     bcs = {"bottom": TemperatureBC("dirichlet", 1.0), "top": TemperatureBC("dirichlet", 0.0)}
-    energy = EnergySolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs)
+    energy = TransportSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs)
     gdim = mesh.geometry.dim
     energy.set_initial(lambda x: 1.0 - x[gdim - 1] / height)
     return energy
@@ -84,7 +84,7 @@ def _cellular_steady_state(comm, n=12):
     sin(pi z)); returns (energy solver, velocity)."""
     mesh = dolfinx.mesh.create_unit_square(comm, n, n)
     bcs = {"bottom": TemperatureBC("dirichlet", 1.0), "top": TemperatureBC("dirichlet", 0.0)}
-    energy = EnergySolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs)
+    energy = TransportSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs)
     energy.set_initial(lambda x: 1.0 - x[1])
     u = dolfinx.fem.Function(_vector_p2(mesh))
     amp = 20.0

@@ -9,7 +9,7 @@ import dolfinx.mesh
 
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import TemperatureBC
-from convection.energy import EnergySolver
+from convection.transport import TransportSolver
 
 
 def test_options_released_when_solvers_are_dropped():
@@ -18,6 +18,6 @@ def test_options_released_when_solvers_are_dropped():
     bcs = {"bottom": TemperatureBC("dirichlet", 1.0), "top": TemperatureBC("dirichlet", 0.0)}
     before = len(PETSc.Options().getAll())
     for _ in range(150):  # PETSc allows 512 options; each solver sets 4 or more
-        EnergySolver(mesh, approx, bcs=bcs)
+        TransportSolver(mesh, approx, bcs=bcs)
         gc.collect()
     assert len(PETSc.Options().getAll()) <= before + 20

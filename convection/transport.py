@@ -1,6 +1,7 @@
-"""Temperature (energy) equation: continuous Galerkin P(k) with SUPG and variable-step BDF2.
+"""Transport (advection-diffusion) of a scalar field: continuous Galerkin P(k), SUPG, variable-step BDF2.
 
-Equation::
+Used for the temperature (the energy equation) and, with zero diffusivity and no heating, for
+advected composition fields. Equation::
 
     dT/dt + u . grad T = kappa lap T + H,
 
@@ -12,7 +13,7 @@ and ``omega = dt_n / dt_{n-1}``::
     (a0 T^{n+1} + a1 T^n + a2 T^{n-1}) / dt_n + u* . grad T^{n+1} - lap T^{n+1} - H = 0,
     a0 = (1 + 2 omega) / (1 + omega),   a1 = -(1 + omega),   a2 = omega^2 / (1 + omega),
 
-which is second order for any step ratio. The velocity ``u`` passed to :meth:`EnergySolver.step`
+which is second order for any step ratio. The velocity ``u`` passed to :meth:`TransportSolver.step`
 is the latest one (``u^n``, computed from ``T^n``); to keep the coupled scheme second order it is
 extrapolated to the new time level, ``u* = (1 + omega) u^n - omega u^{n-1}``, when the previous
 velocity is known (``velocity_extrapolation=True``, the default); otherwise ``u* = u^n``.
@@ -31,7 +32,7 @@ for the exact solution), so it does not disturb solutions it can represent exact
 
 The same residual ``F`` evaluated at the current solution and tested with a function that is 1 on
 one side's dofs gives the consistent boundary flux ``int_side grad T . n ds``
-(:meth:`EnergySolver.boundary_flux`).
+(:meth:`TransportSolver.boundary_flux`).
 """
 
 from __future__ import annotations
@@ -63,17 +64,17 @@ STABILISATIONS: dict[str, str] = {
 }
 """Registry of advection stabilisations (lowercase name -> one-line description)."""
 
-ENERGY_SOLVERS: dict[str, str] = {
+TRANSPORT_SOLVERS: dict[str, str] = {
     "iterative": "GMRES + BoomerAMG",
     "direct": "MUMPS LU",
 }
-"""Registry of linear solvers for the energy equation (lowercase name -> one-line description)."""
+"""Registry of linear solvers for the transport equation (lowercase name -> one-line description)."""
 
 _instance_counter = itertools.count()
 
 
-class EnergyResult(NamedTuple):
-    """Outcome of :meth:`EnergySolver.step`.
+class TransportResult(NamedTuple):
+    """Outcome of :meth:`TransportSolver.step`.
 
     Attributes:
         iterations: Krylov iterations (1 for the direct solver).
@@ -99,7 +100,7 @@ def _default_options(solver: str) -> dict[str, Any]:
     }
 
 
-class EnergySolver:
+class TransportSolver:
     """Advection-diffusion solver for the temperature (equations in the module docstring).
 
     Args:
@@ -145,8 +146,8 @@ class EnergySolver:
             raise ValueError(
                 f"Unknown stabilisation {stabilisation!r}; valid names: {sorted(STABILISATIONS)}"
             )
-        if solver not in ENERGY_SOLVERS:
-            raise ValueError(f"Unknown energy solver {solver!r}; valid names: {sorted(ENERGY_SOLVERS)}")
+        if solver not in TRANSPORT_SOLVERS:
+            raise ValueError(f"Unknown energy solver {solver!r}; valid names: {sorted(TRANSPORT_SOLVERS)}")
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)
@@ -252,7 +253,7 @@ class EnergySolver:
         self._u_prev = None
         self._coef_last.value[:] = 0.0
 
-    def step(self, u: dolfinx.fem.Function, dt: float) -> EnergyResult:
+    def step(self, u: dolfinx.fem.Function, dt: float) -> TransportResult:
         """Advance ``T`` by ``dt`` with the latest velocity ``u``. Collective.
 
         Args:
@@ -306,7 +307,7 @@ class EnergySolver:
         self.dt_old = dt
         self.steps += 1
         iterations = self.ksp.getIterationNumber() if self.solver == "iterative" else 1
-        return EnergyResult(int(iterations), order, float(dt))
+        return TransportResult(int(iterations), order, float(dt))
 
     # ------------------------------------------------------------------ fluxes
     def boundary_flux(self, u: dolfinx.fem.Function, side: str) -> float:
@@ -344,7 +345,7 @@ class EnergySolver:
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(
         self,
-        old: "EnergySolver",
+        old: "TransportSolver",
         transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
     ) -> None:
         """Copy the full time history (``T``, ``T_old``, ``T_old2``, previous velocity, previous

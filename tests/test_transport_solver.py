@@ -11,7 +11,7 @@ from mpi4py import MPI
 
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import SIDES_2D, TemperatureBC
-from convection.energy import EnergySolver
+from convection.transport import TransportSolver
 
 A_ADV = 2.0
 LAMBDA = 2 * np.pi**2 + A_ADV**2 / 4
@@ -43,7 +43,7 @@ def _l2(comm, expr) -> float:
 
 def _decay_error(n, degree, dts, comm=MPI.COMM_WORLD, stabilisation="supg"):
     mesh = dolfinx.mesh.create_unit_square(comm, n, n)
-    energy = EnergySolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=ZERO_SIDES, degree=degree,
+    energy = TransportSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=ZERO_SIDES, degree=degree,
                           stabilisation=stabilisation)
     energy.set_initial(_decaying_mode(0.0))
     u = _velocity(mesh, _uniform_flow)
@@ -73,7 +73,7 @@ def _boundary_layer(n: int, stabilisation: str, a: float = 40.0):
     L2 error and the overshoot max(T) - 1."""
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, n, n)
     bcs = {"left": TemperatureBC("dirichlet", 1.0), "right": TemperatureBC("dirichlet", 0.0)}
-    energy = EnergySolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs,
+    energy = TransportSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs,
                           stabilisation=stabilisation)
     energy.set_initial(lambda x: 1.0 - x[0])
     u = _velocity(mesh, lambda x: np.vstack([np.full(x.shape[1], a), np.zeros(x.shape[1])]))
@@ -108,7 +108,7 @@ def test_supg_keeps_conduction_profile_exact_under_shear():
     conduction profile to round-off (SUPG is consistent; P2 represents T exactly)."""
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 8, 8)
     bcs = {"bottom": TemperatureBC("dirichlet", 1.0), "top": TemperatureBC("dirichlet", 0.0)}
-    energy = EnergySolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs)
+    energy = TransportSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=bcs)
     energy.set_initial(lambda x: 1.0 - x[1])
     u = _velocity(mesh, lambda x: np.vstack([50 * np.sin(np.pi * x[1]), np.zeros(x.shape[1])]))
     for dt in (0.01, 0.02, 0.005):
@@ -121,7 +121,7 @@ def test_internal_heating_steady_state():
     """lap T = -H, T = 0 at z = 0, 1: T = H z (1 - z) / 2 (quadratic: exact in P2)."""
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
     bcs = {"bottom": TemperatureBC("dirichlet", 0.0), "top": TemperatureBC("dirichlet", 0.0)}
-    energy = EnergySolver(mesh, BoussinesqApproximation(Ra=1.0, H=3.0), bcs=bcs, solver="direct")
+    energy = TransportSolver(mesh, BoussinesqApproximation(Ra=1.0, H=3.0), bcs=bcs, solver="direct")
     energy.set_initial(lambda x: np.zeros(x.shape[1]))
     u = _velocity(mesh, lambda x: np.vstack([np.ones(x.shape[1]), np.zeros(x.shape[1])]))
     for _ in range(2):
@@ -135,15 +135,15 @@ def test_transfer_from_continues_bdf2_history():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 8, 8)
     approx = BoussinesqApproximation(Ra=1.0)
     dts = _steps(6, 1.7, 0.03)
-    reference = EnergySolver(mesh, approx, bcs=ZERO_SIDES)
-    first = EnergySolver(mesh, approx, bcs=ZERO_SIDES)
+    reference = TransportSolver(mesh, approx, bcs=ZERO_SIDES)
+    first = TransportSolver(mesh, approx, bcs=ZERO_SIDES)
     for solver in (reference, first):
         solver.set_initial(_decaying_mode(0.0))
     u = _velocity(mesh, _uniform_flow)
     for dt in dts[:3]:
         reference.step(u, dt)
         first.step(u, dt)
-    second = EnergySolver(mesh, approx, bcs=ZERO_SIDES)
+    second = TransportSolver(mesh, approx, bcs=ZERO_SIDES)
     second.transfer_from(first, lambda src, dst: dst.interpolate(src))
     assert second.dt_old == first.dt_old and second.steps == 3
     u2 = _velocity(mesh, _uniform_flow)  # a different velocity Function, as after remeshing
@@ -157,9 +157,9 @@ def test_unknown_names_are_rejected():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 2, 2)
     approx = BoussinesqApproximation(Ra=1.0)
     with pytest.raises(ValueError, match="valid names"):
-        EnergySolver(mesh, approx, bcs={}, stabilisation="upwind")
+        TransportSolver(mesh, approx, bcs={}, stabilisation="upwind")
     with pytest.raises(ValueError, match="valid names"):
-        EnergySolver(mesh, approx, bcs={}, solver="magic")
+        TransportSolver(mesh, approx, bcs={}, solver="magic")
     with pytest.raises(ValueError, match="valid names"):
         TemperatureBC("robin", 1.0)
 

@@ -2,11 +2,12 @@
 
 Equations (``e_z`` is the last coordinate axis, pointing "up")::
 
-    -div(2 eta(T, C) eps(u)) + grad p = (Ra T - Rb C) e_z,      div u = 0,
+    -div(2 eta(T, C) eps(u)) + grad p = (Ra T - sum_i Rb_i C_i) e_z,      div u = 0,
     dT/dt + u . grad T = lap T + H,
 
 with ``eps(u) = (grad u + grad u^T) / 2``, thermal Rayleigh number ``Ra``, compositional (buoyancy)
-Rayleigh number ``Rb``, nondimensional internal heating ``H`` and viscosity ``eta(T, C)`` given by a
+Rayleigh numbers ``Rb_i`` of the materials with volume fractions ``C_i`` (one material: ``Rb C``),
+nondimensional internal heating ``H`` and viscosity ``eta(T, C)`` given by a
 :class:`ViscosityLaw`.
 """
 
@@ -45,21 +46,44 @@ def _as_ufl(value: Any) -> Any:
     return value
 
 
+def fractions(C: Any) -> tuple[Any, ...]:
+    """The material fractions ``(C_1, ..., C_n)`` of a composition argument.
+
+    ``C`` is ``None`` (no material: ``()``), one field/expression/number (one material, the
+    two-material case ``C`` / ``1 - C``) or a sequence of them (one per material).
+    """
+    if C is None:
+        return ()
+    if isinstance(C, (list, tuple)):
+        return tuple(C)
+    return (C,)
+
+
 @dataclass(frozen=True)
 class ViscosityLaw:
-    """Viscosity law ``eta(T, C)``.
+    """Viscosity law ``eta(T, C_1, ..., C_n)``.
+
+    The domain holds a background material and ``n`` materials with volume fractions ``C_i``
+    (clipped to ``[0, 1]``; the background has ``C_0 = 1 - sum_i C_i``). Their viscosities are
+    mixed, weighted by volume fraction, by ``mixing``::
+
+        arithmetic:  eta = C_0 eta_0 + sum_i C_i eta_i
+        geometric:   eta = eta_0 exp(sum_i C_i ln(eta_i / eta_0))
+        harmonic:    1 / eta = C_0 / eta_0 + sum_i C_i / eta_i
+
+    With one material this is the classic two-material rule in ``C`` and ``1 - C``.
 
     Attributes:
-        material_viscosities: ``(eta_0, eta_1)``: the ``C = 0`` material has viscosity ``eta_0``,
-            the ``C = 1`` material ``eta_1``; they are mixed by ``mixing`` with ``C`` clipped to
-            ``[0, 1]``. ``None`` means reference viscosity 1 regardless of ``C``.
+        material_viscosities: ``(eta_0, eta_1, ..., eta_n)``: the background's viscosity, then one
+            per material, in the order of the fractions passed to :meth:`__call__`. ``None``
+            means reference viscosity 1 regardless of ``C``.
         mixing: name in :data:`MIXING_RULES` (``"geometric"`` | ``"arithmetic"`` | ``"harmonic"``).
         temperature_law: name in :data:`TEMPERATURE_LAWS` (``"none"`` | ``"frank_kamenetskii"``,
             which multiplies the viscosity by ``exp(-gamma T)``).
         gamma: Frank-Kamenetskii parameter (``ln`` of the thermal viscosity contrast).
     """
 
-    material_viscosities: tuple[float, float] | None = None
+    material_viscosities: tuple[float, ...] | None = None
     mixing: str = "geometric"
     temperature_law: str = "none"
     gamma: float = 0.0
@@ -68,39 +92,51 @@ class ViscosityLaw:
         _check_name(self.mixing, MIXING_RULES, "viscosity mixing rule")
         _check_name(self.temperature_law, TEMPERATURE_LAWS, "viscosity temperature law")
         if self.material_viscosities is not None:
-            if len(self.material_viscosities) != 2 or min(self.material_viscosities) <= 0.0:
-                raise ValueError("material_viscosities must be two positive numbers (eta_0, eta_1)")
+            if len(self.material_viscosities) < 2 or min(self.material_viscosities) <= 0.0:
+                raise ValueError("material_viscosities must be at least two positive numbers (eta_0, eta_1, ...)")
 
     @property
     def is_constant(self) -> bool:
         """True when ``eta`` depends on neither ``T`` nor ``C``."""
         composition_free = (
             self.material_viscosities is None
-            or self.material_viscosities[0] == self.material_viscosities[1]
+            or len(set(self.material_viscosities)) == 1
         )
         temperature_free = self.temperature_law == "none" or self.gamma == 0.0
         return composition_free and temperature_free
 
     def __call__(self, T: Any, C: Any) -> Any:
-        """UFL expression of the viscosity for temperature ``T`` and composition ``C``."""
+        """UFL expression of the viscosity for temperature ``T`` and composition ``C``
+        (see :func:`fractions`; one fraction per material after the background)."""
         if self.material_viscosities is None:
             eta = ufl.as_ufl(1.0)
         else:
-            eta0, eta1 = (float(v) for v in self.material_viscosities)
-            if eta0 == eta1:
+            eta0, *etas = (float(v) for v in self.material_viscosities)
+            if all(e == eta0 for e in etas):
                 eta = ufl.as_ufl(eta0)
             else:
-                c = _as_ufl(C)
-                c = ufl.min_value(ufl.max_value(c, 0.0), 1.0)
+                cs = fractions(C)
+                if len(cs) != len(etas):
+                    raise ValueError(f"the viscosity law has {len(etas)} material(s), got {len(cs)} fraction(s)")
+                cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
+                background = 1.0 - _sum(cs)
                 if self.mixing == "geometric":
-                    eta = eta0 * ufl.exp(c * ufl.ln(eta1 / eta0))
+                    eta = eta0 * ufl.exp(_sum([c * ufl.ln(e / eta0) for c, e in zip(cs, etas)]))
                 elif self.mixing == "arithmetic":
-                    eta = (1.0 - c) * eta0 + c * eta1
+                    eta = background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
                 else:
-                    eta = 1.0 / ((1.0 - c) / eta0 + c / eta1)
+                    eta = 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
         if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
             eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
         return eta
+
+
+def _sum(terms: list[Any]) -> Any:
+    """``terms[0] + terms[1] + ...`` (left to right, so one term is returned as it is)."""
+    total = terms[0]
+    for term in terms[1:]:
+        total = total + term
+    return total
 
 
 class BoussinesqApproximation:
@@ -108,7 +144,8 @@ class BoussinesqApproximation:
 
     Args:
         Ra: thermal Rayleigh number.
-        Rb: compositional Rayleigh number (buoyancy ``-Rb C e_z``).
+        Rb: compositional Rayleigh number (buoyancy ``-Rb C e_z``), or one per material
+            (buoyancy ``-sum_i Rb_i C_i e_z``) in the order of the fractions (:func:`fractions`).
         H: nondimensional internal heating rate.
         viscosity: viscosity law ``eta(T, C)``.
     """
@@ -118,12 +155,12 @@ class BoussinesqApproximation:
         /,
         *,
         Ra: float,
-        Rb: float = 0.0,
+        Rb: float | tuple[float, ...] = 0.0,
         H: float = 0.0,
         viscosity: ViscosityLaw = ViscosityLaw(),
     ) -> None:
         self.Ra = float(Ra)
-        self.Rb = float(Rb)
+        self.Rb: float | tuple[float, ...] = tuple(float(r) for r in Rb) if isinstance(Rb, (list, tuple)) else float(Rb)
         self.H = float(H)
         self.viscosity_law = viscosity
 
@@ -137,10 +174,15 @@ class BoussinesqApproximation:
         return self.viscosity_law(T, C)
 
     def buoyancy(self, T: Any, C: Any, gdim: int) -> Any:
-        """UFL vector expression ``(Ra T - Rb C) e_z`` of length ``gdim`` (``C = None`` -> 0)."""
+        """UFL vector expression ``(Ra T - sum_i Rb_i C_i) e_z`` of length ``gdim`` (``C = None`` -> 0)."""
         magnitude = self.Ra * _as_ufl(T)
-        if self.Rb != 0.0 and C is not None:
-            magnitude = magnitude - self.Rb * _as_ufl(C)
+        cs = fractions(C)
+        rbs = self.Rb if isinstance(self.Rb, tuple) else (self.Rb,) * len(cs)
+        if cs and len(rbs) != len(cs):
+            raise ValueError(f"{len(rbs)} compositional Rayleigh number(s) for {len(cs)} material fraction(s)")
+        for rb, c in zip(rbs, cs):
+            if rb != 0.0:
+                magnitude = magnitude - rb * _as_ufl(c)
         return ufl.as_vector([0.0] * (gdim - 1) + [magnitude])
 
     def __repr__(self) -> str:

@@ -48,6 +48,13 @@ STOKES_SOLVERS: dict[str, str] = {
 _instance_counter = itertools.count()
 
 
+def _same_objects(a: Any, b: Any) -> bool:
+    """True when ``a`` and ``b`` are the same objects, element by element for tuples and lists."""
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
+        return len(a) == len(b) and all(_same_objects(x, y) for x, y in zip(a, b))
+    return a is b
+
+
 class StokesResult(NamedTuple):
     """Outcome of :meth:`StokesSolver.solve`.
 
@@ -243,13 +250,15 @@ class StokesSolver:
 
         Args:
             T: temperature (Function, UFL expression or number).
-            C: composition (Function of any degree, UFL expression, number or ``None`` = 0).
+            C: composition: ``None``, one material fraction (Function of any degree, UFL
+                expression or number) or a tuple of them, one per material (see
+                :func:`convection.approximation.fractions`).
 
         Returns:
             Iteration count and true residual norm.
         """
         key = (T, C)
-        if self._forms_key is None or self._forms_key[0] is not T or self._forms_key[1] is not C:
+        if self._forms_key is None or not _same_objects(self._forms_key, key):
             self._build_forms(T, C)
             self._forms_key = key
             if self._A is None:

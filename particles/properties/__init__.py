@@ -125,6 +125,30 @@ class PropertyManager:
             swarm.add_property(prop.column, prop.size(swarm.gdim))
 
     @property
+    def context(self) -> PropertyContext:
+        """The last context given (fields and time that new particles are initialised from)."""
+        return self._context
+
+    def set_context(self, context: PropertyContext, /) -> None:
+        """Remember ``context`` for later :meth:`initialise_new` calls."""
+        self._bind(context)
+
+    def attach(self, swarm: Swarm, /) -> None:
+        """Manage ``swarm`` instead (the same particles on a new mesh, e.g. after
+        :func:`particles.adaptivity.move_to_mesh`). Evaluators are rebuilt for the new mesh and the
+        remembered context keeps its time but drops its fields (they live on the old mesh).
+
+        Raises:
+            ValueError: ``swarm`` lacks a managed property's columns.
+        """
+        for prop in self.properties:
+            if not swarm.has_property(prop.column) or swarm.layout(prop.column).size != prop.size(swarm.gdim):
+                raise ValueError(f"the swarm lacks the columns of particle property {prop.column!r}")
+        self.swarm = swarm
+        self._evaluators = EvaluatorCache()
+        self._context = PropertyContext(time=self._context.time, dt=self._context.dt, evaluators=self._evaluators)
+
+    @property
     def names(self) -> list[str]:
         """Column names of the managed properties, in order."""
         return [p.column for p in self.properties]

@@ -1,0 +1,490 @@
+"""The particle world of one run: one object owning every particle component (ASPECT's Particle::Manager).
+
+A :class:`ParticleManager` owns the swarm and the components that act on it, each chosen by name
+from its registry (:mod:`particles.generation`, :mod:`particles.advection`,
+:mod:`particles.properties`, :mod:`particles.interpolation`) or given as an object:
+
+- a generator, run once at construction;
+- an integrator (Runge-Kutta tableau) advancing positions and the properties that obey an ODE;
+- a :class:`~particles.properties.PropertyManager` for the properties every particle carries;
+- an interpolator that turns properties into mesh fields (:meth:`ParticleManager.track`);
+- optional population bounds (:class:`~particles.population.PopulationControl`), applied at
+  creation, after every advection step and after every change of mesh;
+- an optional :class:`~particles.output.ParticleWriter` with an :class:`OutputSchedule`.
+
+A time step from ``t`` to ``t + dt`` takes two collective calls::
+
+    manager.advance(u_old, u_new, dt, step=n)         # advect (+ property ODEs) -> bounds -> mesh fields
+    ...                                               # the caller solves for the fields at t + dt
+    manager.update(PropertyContext(time=t + dt, dt=dt, u_new=u, temperature=T), step=n + 1)
+                                                      # property updates -> output when due
+
+The split lets a coupled code rebuild the mesh fields (e.g. composition) from the advected
+particles *before* it solves for the new velocity, and then sample the new solution into the
+properties. :meth:`ParticleManager.to_mesh` carries everything to a new mesh (after adaptation or
+repartitioning), then applies the population bounds again.
+
+New particles made by population control copy every property from the nearest older particle of
+their cell (from neighbouring cells' averages in a cell that had none; both across ranks, so the
+result does not depend on the rank count, :func:`particles.population.copy_nearest`); properties
+whose new-particle policy is ``"reinitialise"`` are then evaluated afresh at the new particles.
+
+This module never imports ``convection``; it works on any DOLFINx mesh.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+import dolfinx.fem
+import dolfinx.mesh
+
+from particles.adaptivity import move_to_mesh
+from particles.advection import Advector, get_integrator
+from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
+from particles.interpolation import CellAverage, Interpolator, get_interpolator
+from particles.output import OutputRecord, ParticleWriter
+from particles.population import PopulationControl, PopulationStats, copy_nearest
+from particles.properties import PROPERTIES, ParticleProperty, PropertyContext, PropertyManager, create_property
+from particles.swarm import Swarm
+
+__all__ = [
+    "AdvanceReport",
+    "OutputSchedule",
+    "ParticleManager",
+    "PointFunction",
+    "build_generator",
+    "build_properties",
+    "particles_per_cell_summary",
+]
+
+PointFunction = Callable[[npt.NDArray[np.float64]], npt.ArrayLike]
+"""``f(x)``: points shape=(m, gdim) -> values shape=(m,): a property source or generator density."""
+
+MakeFunction = Callable[[str], PointFunction]
+"""Turns a text (e.g. a config expression such as ``"z > 0.5"``) into a :data:`PointFunction`."""
+
+# Parameters that take a callable of the position; a config may give them as text.
+_FUNCTION_PARAMETERS = ("function", "source", "density")
+
+TIMING_PHASES: tuple[str, ...] = (
+    "particle_advection", "particle_sort", "particle_migration", "particle_population",
+    "particle_properties", "particle_interpolation", "particle_output",
+)
+"""Phases of :attr:`ParticleManager.timings` (seconds, summed over calls on this rank)."""
+
+
+@dataclass(frozen=True)
+class OutputSchedule:
+    """When particles are written.
+
+    Attributes:
+        every_steps: Write every this many steps (None: not by steps).
+        every_time: Write at the first step at or after every multiple of this time (None: not by
+            time). With both, either condition writes.
+    """
+
+    every_steps: int | None = None
+    every_time: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.every_steps is not None and self.every_steps < 1:
+            raise ValueError(f"every_steps must be >= 1, got {self.every_steps}")
+        if self.every_time is not None and not self.every_time > 0.0:
+            raise ValueError(f"every_time must be > 0, got {self.every_time}")
+
+    @property
+    def enabled(self) -> bool:
+        return self.every_steps is not None or self.every_time is not None
+
+    def next_time(self, t: float, /) -> float:
+        """The first output time strictly after ``t`` (inf without a time interval)."""
+        if self.every_time is None:
+            return float("inf")
+        return (np.floor(t / self.every_time * (1.0 + 1e-12)) + 1.0) * self.every_time
+
+
+@dataclass(frozen=True)
+class AdvanceReport:
+    """What one :meth:`ParticleManager.advance` did (global counts).
+
+    Attributes:
+        lost: Particles that left the domain in this step.
+        sent: Particles that changed rank (sum over ranks and stages).
+        population: Population-control counts, or None without bounds.
+    """
+
+    lost: int
+    sent: int
+    population: PopulationStats | None
+
+
+def _with_functions(params: dict[str, Any], make_function: MakeFunction | None, where: str) -> dict[str, Any]:
+    """``params`` with text values of callable parameters turned into functions."""
+    out = dict(params)
+    for key in _FUNCTION_PARAMETERS:
+        if isinstance(out.get(key), str):
+            if make_function is None:
+                raise ValueError(f"{where}: {key!r} is text but no expression parser was given")
+            out[key] = make_function(out[key])
+    return out
+
+
+def build_properties(specs: Sequence[str | Mapping[str, Any] | ParticleProperty], /, *,
+                     make_function: MakeFunction | None = None) -> list[ParticleProperty]:
+    """Property objects from registry names, ``{name: ..., **parameters}`` mappings or objects.
+
+    Raises:
+        ValueError: ``"item N: ..."`` naming the first bad entry (unknown name, with the valid
+            names from :data:`particles.properties.PROPERTIES`, or bad parameters).
+    """
+    built: list[ParticleProperty] = []
+    for i, spec in enumerate(specs):
+        try:
+            if isinstance(spec, ParticleProperty):
+                built.append(spec)
+                continue
+            if isinstance(spec, str):
+                spec = {"name": spec}
+            if not isinstance(spec, Mapping) or "name" not in spec:
+                raise ValueError(f"expected a property name or {{name: ..., parameters}}, got {spec!r}")
+            params = dict(spec)
+            name = params.pop("name")
+            if name not in PROPERTIES:
+                raise ValueError(f"unknown particle property {name!r}; valid: {sorted(PROPERTIES)}")
+            built.append(create_property(name, **_with_functions(params, make_function, str(name))))
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"item {i}: {err}") from None
+    return built
+
+
+def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
+                    make_function: MakeFunction | None = None) -> Generator:
+    """A generator from ``{name: ..., **parameters}``; ``particles_per_cell`` (> 0) may replace
+    ``num_particles`` (times ``num_cells``, the global cell count).
+
+    Raises:
+        ValueError: Unknown name (listing :data:`particles.generation.GENERATORS`), bad
+            parameters, or a ``from_file`` path that is not a file.
+    """
+    if not isinstance(spec, Mapping):
+        return spec
+    params = dict(spec)
+    name = params.pop("name", None)
+    if name not in GENERATORS:
+        raise ValueError(f"unknown particle generator {name!r}; valid: {sorted(GENERATORS)}")
+    per_cell = params.pop("particles_per_cell", None)
+    if per_cell is not None:
+        if "num_particles" in params:
+            raise ValueError("give either particles_per_cell or num_particles, not both")
+        if isinstance(per_cell, bool) or not isinstance(per_cell, (int, float)) or not per_cell > 0:
+            raise ValueError(f"particles_per_cell must be a number > 0, got {per_cell!r}")
+        params["num_particles"] = int(round(per_cell * num_cells))
+    if name == "from_file" and "path" in params and not Path(str(params["path"])).is_file():
+        raise ValueError(f"particle file {str(params['path'])!r} not found")
+    return create_generator(name, **_with_functions(params, make_function, str(name)))
+
+
+def particles_per_cell_summary(swarm: Swarm, /) -> tuple[int, float, int]:
+    """Global (min, mean, max) of the particles per cell over all owned cells (collective)."""
+    counts = swarm.particles_per_cell()
+    comm = swarm.comm
+    lo = comm.allreduce(int(counts.min()) if counts.size else np.iinfo(np.int64).max, op=MPI.MIN)
+    hi = comm.allreduce(int(counts.max()) if counts.size else 0, op=MPI.MAX)
+    total, cells = comm.allreduce(np.array([counts.sum(), counts.size], dtype=np.int64), op=MPI.SUM)
+    return int(lo), float(total) / max(int(cells), 1), int(hi)
+
+
+@dataclass
+class _Tracked:
+    """A property interpolated into a mesh field: the Function is rebuilt on every mesh."""
+
+    name: str
+    component: int | None
+    function: dolfinx.fem.Function = field(repr=False)
+
+
+class ParticleManager:
+    """The particles of one run and every component acting on them (see the module docstring).
+
+    Construction is collective: it generates the particles, initialises their properties from
+    ``context`` and applies the population bounds.
+
+    Args:
+        mesh: The mesh.
+        generator: A generator object (see :func:`build_generator` for config mappings).
+        integrator: Registered Runge-Kutta integrator name (:data:`particles.advection.INTEGRATORS`).
+        properties: Properties every particle carries (objects or registered names).
+        interpolator: Particle-to-mesh interpolator for :meth:`track` (default arithmetic cell average).
+        field_degree: Degree of the tracked mesh fields (0: DG0 cell values; >= 1: Lagrange, or DG
+            for interpolators that need discontinuous targets).
+        population: Bounds on the particles per cell, or None.
+        writer: Particle output, or None.
+        output: When :meth:`update` writes (requires ``writer``).
+        context: Fields for the properties' initial values (e.g. the initial temperature).
+    """
+
+    def __init__(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        /,
+        *,
+        generator: Generator,
+        integrator: str = "rk2",
+        properties: Sequence[ParticleProperty | str] = (),
+        interpolator: Interpolator | None = None,
+        field_degree: int = 0,
+        population: PopulationControl | None = None,
+        writer: ParticleWriter | None = None,
+        output: OutputSchedule = OutputSchedule(),
+        context: PropertyContext | None = None,
+    ) -> None:
+        get_integrator(integrator)  # ValueError listing the valid names
+        if output.enabled and writer is None:
+            raise ValueError("an output schedule needs a ParticleWriter")
+        if field_degree < 0:
+            raise ValueError(f"field_degree must be >= 0, got {field_degree}")
+        self.integrator = integrator
+        self.interpolator: Interpolator = interpolator or CellAverage()
+        self.field_degree = field_degree
+        self.population = population
+        self.writer = writer
+        self.output = output
+        self.timings: dict[str, float] = dict.fromkeys(TIMING_PHASES, 0.0)
+        self.lost = 0
+        self.added = 0
+        self.removed = 0
+        self.swarm = Swarm(mesh)
+        self.properties = PropertyManager(self.swarm, properties)
+        self.generation: GenerationResult = generate(self.swarm, generator)
+        self.properties.initialise(context if context is not None else PropertyContext())
+        self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes())
+        self._tracked: dict[str, _Tracked] = {}
+        self._last_output: tuple[int, float] | None = None
+        self._next_output_time = float("inf")
+        self._bound(step=0, salt=0)
+
+    # ------------------------------------------------------------------ construction from a config
+    @classmethod
+    def from_config(
+        cls,
+        section: Mapping[str, Any],
+        mesh: dolfinx.mesh.Mesh,
+        /,
+        *,
+        directory: str | Path | None = None,
+        extra_properties: Sequence[ParticleProperty] = (),
+        make_function: MakeFunction | None = None,
+        field_degree: int = 0,
+        context: PropertyContext | None = None,
+    ) -> ParticleManager:
+        """One manager from one config section (collective).
+
+        ``section`` holds ``generator`` ({name, parameters; particles_per_cell allowed}),
+        ``integrator`` (name), ``interpolator`` ({name, parameters}), ``properties`` (list of names
+        or {name, parameters}), ``population`` ({min_per_cell, max_per_cell, seed} or None) and
+        ``output`` ({every_steps, every_time, properties, every_nth} or None); missing keys take
+        the defaults of :class:`ParticleManager`. Text values of callable parameters (``function``,
+        ``source``, ``density``) are turned into functions by ``make_function``.
+
+        Args:
+            section: The section.
+            mesh: The mesh.
+            directory: Where the particle output goes (needed if the section asks for output).
+            extra_properties: Properties the caller needs besides the section's (e.g. one
+                composition per material), carried first.
+            make_function: Text -> function of the position.
+            field_degree: Degree of tracked fields.
+            context: Fields for the initial property values.
+        """
+        num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
+        generator = build_generator(section.get("generator") or {"name": "random_uniform", "particles_per_cell": 20},
+                                    num_cells=num_cells, make_function=make_function)
+        properties = [*extra_properties, *build_properties(section.get("properties") or (), make_function=make_function)]
+        interp = dict(section.get("interpolator") or {"name": "cell_average"})
+        interpolator = get_interpolator(interp.pop("name"), **interp)
+        pop = section.get("population")
+        population = None
+        if pop:
+            population = PopulationControl(int(pop.get("min_per_cell") or 0), pop.get("max_per_cell"),
+                                           int(pop.get("seed") or 0))
+        out = section.get("output") or {}
+        schedule = OutputSchedule(out.get("every_steps"), out.get("every_time"))
+        writer = None
+        if schedule.enabled:
+            if directory is None:
+                raise ValueError("particle output needs an output directory")
+            writer = ParticleWriter(directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
+        return cls(mesh, generator=generator, integrator=str(section.get("integrator") or "rk2"),
+                   properties=properties, interpolator=interpolator, field_degree=field_degree,
+                   population=population, writer=writer, output=schedule, context=context)
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def mesh(self) -> dolfinx.mesh.Mesh:
+        return self.swarm.mesh
+
+    @property
+    def num_particles(self) -> int:
+        """Global particle count (collective)."""
+        return self.swarm.global_num_particles()
+
+    def particles_per_cell(self) -> tuple[int, float, int]:
+        """Global (min, mean, max) particles per cell (collective)."""
+        return particles_per_cell_summary(self.swarm)
+
+    @property
+    def columns(self) -> list[str]:
+        """Names of the carried properties."""
+        return self.properties.names
+
+    # ------------------------------------------------------------------ mesh fields
+    def track(self, name: str, /, *, component: int | None = None, label: str | None = None) -> dolfinx.fem.Function:
+        """Interpolate property ``name`` into a mesh field, now and after every advance and mesh
+        change (collective). Returns the Function (a new one after each :meth:`to_mesh`; ask
+        :meth:`field` for the current one).
+
+        Args:
+            name: A carried property.
+            component: Column of a multi-column property.
+            label: Field name (default ``name``, or ``name_<component>``).
+        """
+        self.swarm.layout(name)  # KeyError listing the known names
+        label = label or (name if component is None else f"{name}_{component}")
+        tracked = _Tracked(name, component, self._new_field(label))
+        self._tracked[label] = tracked
+        self._interpolate(tracked)
+        return tracked.function
+
+    def field(self, label: str, /) -> dolfinx.fem.Function:
+        """The current mesh field ``label`` (see :meth:`track`)."""
+        try:
+            return self._tracked[label].function
+        except KeyError:
+            raise KeyError(f"no tracked particle field {label!r}; tracked: {sorted(self._tracked)}") from None
+
+    def _new_field(self, label: str) -> dolfinx.fem.Function:
+        discontinuous = self.field_degree == 0 or self.interpolator.name in ("cell_average", "least_squares")
+        family = "DG" if discontinuous else "Lagrange"
+        space = dolfinx.fem.FunctionSpace(self.mesh, (family, self.field_degree))
+        return dolfinx.fem.Function(space, name=label)
+
+    def _interpolate(self, tracked: _Tracked) -> None:
+        t0 = time.perf_counter()
+        self.interpolator.interpolate(self.swarm, tracked.name, tracked.function, component=tracked.component)
+        self.timings["particle_interpolation"] += time.perf_counter() - t0
+
+    def update_fields(self) -> None:
+        """Re-interpolate every tracked field from the particles (collective)."""
+        for tracked in self._tracked.values():
+            self._interpolate(tracked)
+
+    # ------------------------------------------------------------------ time stepping
+    def advance(self, u_old: dolfinx.fem.Function, u_new: dolfinx.fem.Function, dt: float, /, *,
+                step: int = 0) -> AdvanceReport:
+        """Advect over one step (positions and ODE properties), apply the population bounds and
+        re-interpolate the tracked fields (collective).
+
+        Args:
+            u_old: Velocity at the start of the step.
+            u_new: Velocity at the end of the step (linear in time in between).
+            dt: Step length.
+            step: Number of the step being taken (keys the population's random draws).
+        """
+        stats = self._advector.step(u_old, u_new, dt)
+        self.timings["particle_advection"] += stats.evaluation_seconds
+        self.timings["particle_sort"] += stats.relocation_seconds
+        self.timings["particle_migration"] += stats.communication_seconds
+        self.lost += stats.global_lost
+        sent = self.swarm.comm.allreduce(int(stats.sent), op=MPI.SUM)
+        population = self._bound(step=step, salt=0)
+        self.update_fields()
+        return AdvanceReport(int(stats.global_lost), int(sent), population)
+
+    def update(self, context: PropertyContext, /, *, step: int, final: bool = False) -> OutputRecord | None:
+        """Refresh the properties whose policy says so and write the particles when due (collective).
+
+        Args:
+            context: Fields and time at the end of the step just taken (``context.time``).
+            step: The step number reached.
+            final: Write regardless of the schedule (end of a run) unless this step was written.
+
+        Returns:
+            The output record if the particles were written.
+        """
+        due = self._output_due(step, context.time, final)
+        t0 = time.perf_counter()
+        self.properties.update(context, at_output=due)
+        self.timings["particle_properties"] += time.perf_counter() - t0
+        return self.write(context.time, step) if due else None
+
+    def _output_due(self, step: int, t: float, final: bool) -> bool:
+        if self.writer is None or (self._last_output is not None and self._last_output[0] == step):
+            return False
+        if final or self._last_output is None:
+            return self.writer is not None and (final or self.output.enabled)
+        every = self.output.every_steps
+        return bool((every is not None and step % every == 0) or t >= self._next_output_time * (1.0 - 1e-12))
+
+    def write(self, t: float, step: int, /) -> OutputRecord:
+        """Write the particles now (collective; needs a writer)."""
+        if self.writer is None:
+            raise ValueError("this ParticleManager has no writer")
+        t0 = time.perf_counter()
+        record = self.writer.write(self.swarm, t, step)
+        self._last_output = (step, t)
+        self._next_output_time = self.output.next_time(t)
+        self.timings["particle_output"] += time.perf_counter() - t0
+        return record
+
+    # ------------------------------------------------------------------ mesh changes
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, /, *, context: PropertyContext | None = None, step: int = 0) -> int:
+        """Carry the particles to ``mesh`` (after adaptation or repartitioning), apply the population
+        bounds there and rebuild the tracked fields (collective).
+
+        Args:
+            mesh: The new mesh, covering the same domain.
+            context: Fields on the new mesh for properties that new particles evaluate afresh.
+            step: The current step number (keys the population's random draws).
+
+        Returns:
+            Particles lost in the move (global; 0 unless the meshes cover different domains).
+        """
+        t0 = time.perf_counter()
+        self.swarm, stats = move_to_mesh(self.swarm, mesh)
+        self.timings["particle_migration"] += time.perf_counter() - t0
+        self.lost += stats.lost
+        self.properties.attach(self.swarm)
+        if context is not None:
+            self.properties.set_context(context)
+        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes())
+        self._bound(step=step, salt=1)
+        for tracked in self._tracked.values():
+            tracked.function = self._new_field(tracked.function.name)
+            self._interpolate(tracked)
+        return int(stats.lost)
+
+    def _bound(self, *, step: int, salt: int) -> PopulationStats | None:
+        """Population bounds; ``salt`` separates the random draws of the calls within one step."""
+        if self.population is None:
+            return None
+        t0 = time.perf_counter()
+        stats = self.population.apply(self.swarm, step=2 * step + salt, initialise=self._initialise_new)
+        self.added += stats.global_added
+        self.removed += stats.global_removed
+        self.timings["particle_population"] += time.perf_counter() - t0
+        return stats
+
+    def _initialise_new(self, swarm: Swarm, rows: npt.NDArray[np.int64]) -> None:
+        """Population hook: copy the nearest older particle, then re-evaluate "reinitialise" properties."""
+        copy_nearest(swarm, rows)
+        for prop in self.properties.properties:
+            if prop.new_particles_policy == "reinitialise":
+                prop.initialise(swarm, rows, self.properties.context)

@@ -20,7 +20,7 @@ level, the ``coarsen_fraction`` with the smallest go down one, within [min_level
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -37,7 +37,14 @@ from convection.balance import (
 from convection.mesh import cell_volumes
 from convection.transfer import PointEvaluator
 
-__all__ = ["AdaptivityParameters", "MeshHierarchy", "kelly_indicator", "wanted_levels"]
+__all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "kelly_indicator",
+           "wanted_levels"]
+
+INDICATOR_FIELDS: dict[str, str] = {
+    "temperature": "the temperature",
+    "composition": "every material fraction",
+}
+"""Registry of the fields that can drive the refinement indicator (name -> one-line description)."""
 
 
 @dataclass(frozen=True)
@@ -246,5 +253,52 @@ class MeshHierarchy:
             mesh.topology.create_entities(1)
             edges = dolfinx.mesh.compute_incident_entities(mesh, marked, self.tdim, 1)
             mesh = dolfinx.mesh.refine(mesh, edges, redistribute=False)
+        return mesh
+
+
+class Adaptivity:
+    """The mesh-adaptivity component of a model: every ``params.every`` steps, a new mesh rebuilt
+    from the base mesh with one level more where the indicator of the chosen fields is largest and
+    one less where it is smallest (see the module docstring).
+
+    Args:
+        hierarchy: The base mesh the adapted meshes are refined from (shared with load balancing).
+        params: Levels, fractions and interval.
+        fields: Which fields drive the indicator: ``"temperature"`` and/or ``"composition"`` (every
+            material fraction); the model hands their Functions to :meth:`new_mesh`.
+    """
+
+    def __init__(self, hierarchy: MeshHierarchy, params: AdaptivityParameters, /, *,
+                 fields: Sequence[str] = ("temperature",)) -> None:
+        unknown = sorted(set(fields) - set(INDICATOR_FIELDS))
+        if unknown:
+            raise ValueError(f"unknown adaptivity fields {unknown}; valid: {list(INDICATOR_FIELDS)}")
+        self.hierarchy = hierarchy
+        self.params = params
+        self.fields = tuple(fields)
+
+    def due(self, timestep: int, /) -> bool:
+        """Whether the mesh is adapted after step ``timestep``."""
+        return timestep % self.params.every == 0
+
+    def new_mesh(self, mesh: dolfinx.mesh.Mesh, fields: Sequence[dolfinx.fem.Function], /) -> dolfinx.mesh.Mesh:
+        """The adapted mesh for the indicator of ``fields`` on ``mesh`` (collective)."""
+        indicator = kelly_indicator(fields)
+        wanted = wanted_levels(indicator, self.hierarchy.levels(mesh), self.params, mesh.comm)
+        return self.hierarchy.rebuild(mesh, wanted)
+
+    def initial_mesh(self, fields_on: Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.fem.Function]], /, *,
+                     rounds: int | None = None) -> dolfinx.mesh.Mesh:
+        """A mesh adapted to the initial condition (collective).
+
+        Starts from the base mesh refined to ``min_level`` and adapts ``rounds`` times (default
+        ``max_level - min_level``), each time to the fields that ``fields_on(mesh)`` sets from the
+        initial condition on the current mesh.
+        """
+        mesh = self.hierarchy.uniform(self.params.min_level)
+        if rounds is None:
+            rounds = self.params.max_level - self.params.min_level
+        for _ in range(rounds):
+            mesh = self.new_mesh(mesh, fields_on(mesh))
         return mesh
 

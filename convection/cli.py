@@ -83,13 +83,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(dump_config(config), end="")
         return 0
 
-    from convection.simulation import Simulation
+    from convection.factory import run_config
 
     stop = _StopFlag()
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
-    simulation = Simulation(config, comm=comm)
-    summary = simulation.run(should_stop=lambda: stop.requested)
+    summary = run_config(config, comm=comm, should_stop=lambda: stop.requested)
     # Stopped by a signal: the shell convention 128 + signal number (on the ranks that got it).
     return 128 + stop.signum if summary.reason == "stopped by signal" and stop.signum else 0
 

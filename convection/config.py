@@ -7,18 +7,28 @@ Every config has at least ``mesh.cells``, ``time.end`` and ``output.directory``.
 - ``boundary``: velocity and temperature conditions per side (left/right, bottom/top, front/back);
 - ``initial``: initial temperature and composition (closed-form expressions, see
   :mod:`convection.expressions`);
+- ``materials``: any number of named materials, each with an initial region, a compositional
+  Rayleigh number and a viscosity (instead of ``initial.composition``);
+- ``composition``: where the material fractions come from (static, field, particles);
+- ``particles``: generator, integrator, interpolator, properties, population bounds, output;
 - ``stokes``, ``energy``: discretisation and solver choices;
 - ``time``: end time, CFL number, step limits, steady-state stop;
 - ``adaptivity``: refine/coarsen between levels every N steps;
 - ``balance``: repartition across ranks with cell weights 1 + W n_particles (none/every/threshold);
-- ``output``: folder, field output interval, progress display.
+- ``diagnostics``: entrainment;
+- ``output``: folder, field output interval, statistics columns, progress display.
+
+Names that choose an implementation (solvers, mixing rules, composition sources, partitioners,
+postprocessors, particle generators, properties, ...) are checked against the implementation's
+registry, and the error lists the registry's names.
 """
 
 from __future__ import annotations
 
 import copy
+import importlib
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 import yaml
 
@@ -59,6 +69,17 @@ def _check_temperature_bc(value: Any) -> str | None:
     return f"temperature condition {value!r} must be 'insulating' or {{dirichlet: <number>}}"
 
 
+def _names(module: str, registry: str) -> Callable[[], list[str]]:
+    """The names of a registry, read when a config is checked (so the registry is the one list)."""
+    def names() -> list[str]:
+        return list(getattr(importlib.import_module(module), registry))
+    return names
+
+
+def _is_list(value: Any) -> str | None:
+    return None if isinstance(value, list) else f"expected a list, got {value!r}"
+
+
 def _sides(check, default) -> dict[str, Field]:
     return {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v))
             for side in _SIDES}
@@ -79,9 +100,12 @@ SCHEMA: dict[str, Any] = {
         "H": Field("float", 0.0, help="internal heating"),
         "viscosity": {
             "material_viscosities": Field("list[float]", None, nullable=True, length=(2,), exclusive_minimum=0.0,
-                                          help="[eta of C=0 material, eta of C=1 material]"),
-            "mixing": Field("str", "geometric", choices=("geometric", "arithmetic", "harmonic")),
-            "temperature_law": Field("str", "none", choices=("none", "frank_kamenetskii")),
+                                          help="[eta of C=0 material, eta of C=1 material] (with initial.composition)"),
+            "background": Field("float", 1.0, exclusive_minimum=0.0,
+                                help="viscosity of the background material (with the materials section)"),
+            "mixing": Field("str", "geometric", choices=_names("convection.approximation", "MIXING_RULES"),
+                            help="volume-fraction weighted mixing of the material viscosities"),
+            "temperature_law": Field("str", "none", choices=_names("convection.approximation", "TEMPERATURE_LAWS")),
             "gamma": Field("float", 0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii"),
         },
     },
@@ -95,29 +119,52 @@ SCHEMA: dict[str, Any] = {
                              help="expression in x, y, z (1 = dense/second material), or null for none"),
         "constants": Field("mapping", {}, help="named constants usable in the expressions"),
     },
+    "materials": Field("mapping", {}, items={
+        "initial": Field("str", REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")"),
+        "Rb": Field("float", 0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)"),
+        "viscosity": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                           help="viscosity of the pure material (null: physics.viscosity.background)"),
+    }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "stokes": {
         "degree": Field("int", 2, minimum=2, help="velocity degree (pressure degree - 1)"),
-        "solver": Field("str", "direct", choices=("direct", "iterative")),
+        "solver": Field("str", "direct", choices=_names("convection.stokes", "STOKES_SOLVERS")),
         "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver"),
     },
     "energy": {
         "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),
         "degree": Field("int", 2, minimum=1),
-        "stabilisation": Field("str", "supg", choices=("supg", "none")),
+        "stabilisation": Field("str", "supg", choices=_names("convection.transport", "STABILISATIONS")),
     },
     "composition": {
-        "source": Field("str", "static", choices=("static", "particles", "field"),
-                        help="static: C fixed at initial.composition; particles: averaged from advected particles; "
-                             "field: advected continuous field (SUPG, no diffusion)"),
+        "source": Field("str", "static", choices=_names("convection.composition", "COMPOSITION_SOURCES"),
+                        help="static: fractions fixed at their initial regions; particles: averaged from advected "
+                             "particles; field: advected continuous fields (SUPG, no diffusion)"),
         "degree": Field("int", 0, minimum=0, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); "
                                                   "source field needs >= 1"),
     },
     "particles": {
+        "enabled": Field("bool", None, nullable=True,
+                         help="carry particles (null: when composition.source is particles; true: also as tracers)"),
         "generator": Field("mapping", {"name": "random_uniform", "particles_per_cell": 20, "seed": 1},
                            help="generator name and parameters; particles_per_cell may replace num_particles"),
-        "integrator": Field("str", "rk2", choices=("euler", "rk2", "rk4")),
+        "integrator": Field("str", "rk2", choices=_names("particles.advection", "INTEGRATORS")),
         "interpolator": Field("mapping", {"name": "cell_average", "mean": "arithmetic"},
                               help="particle-to-mesh interpolator name and parameters"),
+        "properties": Field("any", [], check=_is_list,
+                            help="properties every particle carries: names or {name: ..., parameters}"),
+        "population": {
+            "min_per_cell": Field("int", 0, minimum=0, help="cells with fewer particles get new ones"),
+            "max_per_cell": Field("int", None, nullable=True, minimum=1,
+                                  help="cells with more particles lose some (null: never)"),
+            "seed": Field("int", 0, help="random seed of the population control"),
+        },
+        "output": {
+            "every_steps": Field("int", None, nullable=True, minimum=1, help="write particles every N steps"),
+            "every_time": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                                help="write particles at the first step after every multiple of this time"),
+            "properties": Field("list[str]", None, nullable=True, help="properties written (null: all)"),
+            "every_nth": Field("int", 1, minimum=1, help="write only particles with id % every_nth == 0"),
+        },
     },
     "time": {
         "end": Field("float", REQUIRED, exclusive_minimum=0.0, help="end time (nondimensional)"),
@@ -139,26 +186,29 @@ SCHEMA: dict[str, Any] = {
         "coarsen_fraction": Field("float", 0.3, minimum=0.0, help="fraction of cells to coarsen"),
         "initial_steps": Field("int", None, nullable=True, minimum=0,
                                help="adapt this many times to the initial condition (default max_level - min_level)"),
-        "fields": Field("list[str]", ["temperature"], choices=("temperature", "composition")),
+        "fields": Field("list[str]", ["temperature"], choices=_names("convection.adaptivity", "INDICATOR_FIELDS")),
     },
     "balance": {
-        "strategy": Field("str", "none", choices=("none", "every", "threshold"),
+        "strategy": Field("str", "none", choices=_names("convection.rebalance", "BALANCE_STRATEGIES"),
                           help="repartition the mesh: never, every N steps, or when the load imbalance exceeds a threshold"),
         "every": Field("int", 10, minimum=1, help="steps between repartitions (every) or checks (threshold)"),
         "threshold": Field("float", 1.2, minimum=1.0,
                            help="repartition when max/mean over ranks of the load (cells + W particles) exceeds this"),
         "particle_weight": Field("float", 0.01, minimum=0.0, help="W in the cell weight 1 + W n_particles(K)"),
-        "method": Field("str", "rcb", choices=("rcb", "morton"),
+        "method": Field("str", "rcb", choices=_names("convection.balance", "PARTITIONERS"),
                         help="rcb: recursive bisection balancing cells and particles; morton: space-filling-curve blocks"),
     },
     "diagnostics": {
-        "entrainment_material": Field("str", None, nullable=True, choices=("dense", "light"),
-                                      help="material whose entrainment is reported: dense (C = 1) or light (C = 0)"),
+        "entrainment_material": Field("str", None, nullable=True,
+                                      help="material whose entrainment is reported: a material name, all, or with "
+                                           "one material dense (C) or light (1 - C)"),
         "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height / its initial volume"),
     },
     "output": {
         "directory": Field("str", REQUIRED, help="output folder (statistics.csv, fields, config)"),
         "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
+        "statistics": Field("list[str]", None, nullable=True, choices=_names("convection.postprocess", "POSTPROCESSORS"),
+                            help="postprocessors whose columns statistics.csv holds (null: all that apply)"),
         "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none")),
         "progress_every": Field("int", 10, minimum=1, help="steps between progress lines"),
     },
@@ -177,11 +227,7 @@ def _check_consistency(config: dict[str, Any]) -> None:
         raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
-    composition = config["composition"]
-    if composition["source"] != "static" and config["initial"]["composition"] is None:
-        raise ConfigError(f"config key 'initial.composition': needed with composition.source: {composition['source']}")
-    if composition["source"] == "field" and composition["degree"] < 1:
-        raise ConfigError("config key 'composition.degree': an advected composition field needs degree >= 1")
+    _check_materials(config)
     needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
     if needs_simplices and mesh["cell_type"] != "simplex":
         what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"
@@ -197,7 +243,6 @@ def _check_consistency(config: dict[str, Any]) -> None:
     for name, value in config["initial"]["constants"].items():
         if not isinstance(value, (int, float)) or isinstance(value, bool):
             raise ConfigError(f"config key 'initial.constants.{name}': expected a number, got {value!r}")
-    _check_particles(config)
     for key in ("temperature", "composition"):
         text = config["initial"][key]
         if text is not None:
@@ -205,6 +250,7 @@ def _check_consistency(config: dict[str, Any]) -> None:
                 Expression(text, constants=expression_constants(config), gdim=gdim)
             except ExpressionError as err:
                 raise ConfigError(f"config key 'initial.{key}': {err}") from None
+    _check_particles(config)
 
 
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
@@ -213,25 +259,125 @@ def expression_constants(config: dict[str, Any]) -> dict[str, float]:
     return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **config["initial"]["constants"]}
 
 
+RESERVED_FIELD_NAMES = ("temperature", "velocity", "pressure", "material")
+
+
+def material_table(config: dict[str, Any]) -> tuple[list[dict[str, Any]], float]:
+    """The materials of a resolved config and the background viscosity.
+
+    Each material is ``{name, initial, Rb, viscosity}`` (``initial`` an expression text). The
+    classic two-material keys (``initial.composition``, ``physics.Rb``,
+    ``physics.viscosity.material_viscosities``) give one material named ``composition``.
+    """
+    physics = config["physics"]
+    viscosity = physics["viscosity"]
+    if config["materials"]:
+        table = [{"name": name, **spec} for name, spec in config["materials"].items()]
+        return table, viscosity["background"]
+    text = config["initial"]["composition"]
+    if text is None:
+        return [], viscosity["background"]
+    etas = viscosity["material_viscosities"]
+    return ([{"name": "composition", "initial": text, "Rb": physics["Rb"], "viscosity": etas[1] if etas else None}],
+            etas[0] if etas else viscosity["background"])
+
+
+def _check_materials(config: dict[str, Any]) -> None:
+    if config["materials"]:
+        legacy = (("initial.composition", config["initial"]["composition"] is not None),
+                  ("physics.Rb", config["physics"]["Rb"] != 0.0),
+                  ("physics.viscosity.material_viscosities", config["physics"]["viscosity"]["material_viscosities"] is not None))
+        for key, given in legacy:
+            if given:
+                raise ConfigError(f"config key '{key}': not with the materials section (give each material its "
+                                  "initial region, Rb and viscosity there)")
+        gdim = len(config["mesh"]["cells"])
+        for name, spec in config["materials"].items():
+            if name in RESERVED_FIELD_NAMES:
+                raise ConfigError(f"config key 'materials.{name}': the name is taken by a field; "
+                                  f"reserved: {list(RESERVED_FIELD_NAMES)}")
+            try:
+                Expression(spec["initial"], constants=expression_constants(config), gdim=gdim)
+            except ExpressionError as err:
+                raise ConfigError(f"config key 'materials.{name}.initial': {err}") from None
+    table, _ = material_table(config)
+    names = [m["name"] for m in table]
+    source = config["composition"]["source"]
+    if source != "static" and not table:
+        raise ConfigError(f"config key 'composition.source': {source} needs materials (the materials section or "
+                          "initial.composition)")
+    if source == "field" and config["composition"]["degree"] < 1:
+        raise ConfigError("config key 'composition.degree': an advected composition field needs degree >= 1")
+    material = config["diagnostics"]["entrainment_material"]
+    if material is not None:
+        valid = ["all", *names] + (["dense", "light"] if len(names) == 1 else [])
+        if material not in valid:
+            raise ConfigError(f"config key 'diagnostics.entrainment_material': {material!r} is not one of {valid}")
+
+
+def particles_enabled(config: dict[str, Any]) -> bool:
+    """Whether a run of ``config`` carries particles."""
+    enabled = config["particles"]["enabled"]
+    return config["composition"]["source"] == "particles" if enabled is None else bool(enabled)
+
+
+def point_function(config: dict[str, Any]) -> Callable[[str], Callable]:
+    """Text -> function of points shape=(m, gdim) (particle properties and densities of a config)."""
+    gdim = len(config["mesh"]["cells"])
+    constants = expression_constants(config)
+
+    def make(text: str) -> Callable:
+        expression = Expression(text, constants=constants, gdim=gdim)
+
+        def at(x):
+            import numpy as np
+
+            points = np.zeros((3, x.shape[0]))
+            points[:gdim] = np.asarray(x).T
+            return expression(points)
+        return at
+    return make
+
+
 def _check_particles(config: dict[str, Any]) -> None:
-    from particles.generation import GENERATORS
+    from particles.manager import build_generator, build_properties
     from particles.interpolation import INTERPOLATORS
+    from particles.population import PopulationControl
 
     section = config["particles"]
-    for key, registry in (("generator", GENERATORS), ("interpolator", INTERPOLATORS)):
-        params = dict(section[key])
-        name = params.pop("name", None)
-        if name not in registry:
-            raise ConfigError(f"config key 'particles.{key}.name': {name!r} is not one of {sorted(registry)}")
-        if key == "generator" and "particles_per_cell" in params:
-            params.pop("particles_per_cell")
-            params["num_particles"] = 1
+    if section["enabled"] is False and config["composition"]["source"] == "particles":
+        raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
+    make = point_function(config)
+    try:
+        build_generator(section["generator"], num_cells=1, make_function=make)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"config key 'particles.generator': {err}") from None
+    params = dict(section["interpolator"])
+    name = params.pop("name", None)
+    if name not in INTERPOLATORS:
+        raise ConfigError(f"config key 'particles.interpolator.name': {name!r} is not one of {sorted(INTERPOLATORS)}")
+    try:
+        INTERPOLATORS[name](**params)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"config key 'particles.interpolator': {err}") from None
+    columns = [m["name"] for m in material_table(config)[0]] if config["composition"]["source"] == "particles" else []
+    for i, spec in enumerate(section["properties"]):
         try:
-            registry[name](**params)
+            columns.append(build_properties([spec], make_function=make)[0].column)
         except (TypeError, ValueError) as err:
-            raise ConfigError(f"config key 'particles.{key}': {err}") from None
-    if config["composition"]["source"] == "particles" and config["initial"]["composition"] is None:
-        raise ConfigError("config key 'initial.composition': required when composition.source is particles")
+            raise ConfigError(f"config key 'particles.properties[{i}]': {str(err).removeprefix('item 0: ')}") from None
+    repeated = sorted({c for c in columns if columns.count(c) > 1})
+    if repeated:
+        raise ConfigError(f"config key 'particles.properties': more than one property (or material) named {repeated[0]!r}"
+                          "; give properties distinct labels")
+    pop = section["population"]
+    try:
+        PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"])
+    except ValueError as err:
+        raise ConfigError(f"config key 'particles.population': {err}") from None
+    for name in section["output"]["properties"] or ():
+        if name not in columns:
+            raise ConfigError(f"config key 'particles.output.properties': {name!r} is not carried; carried: {columns}")
 
 
 def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:

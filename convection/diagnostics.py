@@ -1,4 +1,7 @@
-"""Global diagnostics: rms velocity, Nusselt number, temperature statistics. All collective."""
+"""Global diagnostics: rms velocity, Nusselt number, temperature statistics. All collective.
+
+The statistics of a run are computed by the postprocessors of :mod:`convection.postprocess`.
+"""
 
 from __future__ import annotations
 
@@ -99,52 +102,3 @@ def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str =
     if delta_T == 0.0:
         raise ZeroDivisionError(f"No temperature difference across the {side!r} axis")
     return float((q_axis / area) * (hi - lo) / delta_T)
-
-
-class StepDiagnostics(NamedTuple):
-    """The per-step diagnostics of a run."""
-
-    vrms: float
-    nusselt: float
-    temperature: TemperatureStats
-
-
-class RunDiagnostics:
-    """vrms, Nusselt number and temperature statistics of one (Stokes, energy) pair, with the
-    forms compiled once (a run evaluates them every step; rebuild after the mesh changes).
-
-    Args:
-        u: velocity Function.
-        energy_solver: the temperature solver (Nusselt number from its consistent flux).
-        side: side for the Nusselt number.
-        nusselt: False to skip the Nusselt number (reported as NaN), e.g. without a temperature
-            equation.
-    """
-
-    def __init__(self, u: dolfinx.fem.Function, energy_solver: TransportSolver, /, *, side: str = "top",
-                 nusselt: bool = True) -> None:
-        self.u = u
-        self.with_nusselt = nusselt
-        self.energy = energy_solver
-        self.side = side
-        mesh = u.function_space.mesh
-        self._volume = _volume(mesh)
-        self._u2 = dolfinx.fem.form(ufl.inner(u, u) * ufl.dx)
-        self._T = dolfinx.fem.form(energy_solver.T * ufl.dx)
-
-    def compute(self) -> StepDiagnostics:
-        """Evaluate all diagnostics (collective)."""
-        T = self.energy.T
-        comm = T.function_space.mesh.comm
-        n_owned = T.function_space.dofmap.index_map.size_local
-        owned = T.x.array[:n_owned]
-        local = np.array([dolfinx.fem.assemble_scalar(self._u2), dolfinx.fem.assemble_scalar(self._T),
-                          -float(owned.min()) if owned.size else -np.inf,
-                          float(owned.max()) if owned.size else -np.inf])
-        sums = np.empty(2)
-        comm.Allreduce(local[:2], sums, op=MPI.SUM)
-        extremes = np.empty(2)
-        comm.Allreduce(local[2:], extremes, op=MPI.MAX)
-        stats = TemperatureStats(float(sums[1] / self._volume), float(-extremes[0]), float(extremes[1]))
-        nu = nusselt(self.energy, self.u, self.side) if self.with_nusselt else float("nan")
-        return StepDiagnostics(float(np.sqrt(sums[0] / self._volume)), nu, stats)

@@ -79,7 +79,7 @@ class Progress:
     def message(self, text: str) -> None:
         if self.mode == "bar" and self._bar is not None:
             self._bar.write(text)
-        elif self.mode == "lines":
+        elif self.mode in ("lines", "bar"):
             print(text, file=self._stream or sys.stdout, flush=True)
 
     def close(self) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Mapping, Union
 
 __all__ = ["REQUIRED", "ConfigError", "Field", "validate"]
 
@@ -28,6 +28,10 @@ class ConfigError(ValueError):
     """A configuration problem, described in one line that names the offending key."""
 
 
+Choices = Union[tuple[str, ...], Callable[[], Iterable[str]]]
+"""Allowed names: a tuple, or a callable returning them (e.g. a registry's keys, read when checked)."""
+
+
 @dataclass(frozen=True)
 class Field:
     """One leaf of the schema.
@@ -36,13 +40,16 @@ class Field:
         kind: "float", "int", "bool", "str", "list[float]", "list[int]", "list[str]", "any",
             "mapping" (free-form mapping, checked by ``check`` only).
         default: Default value, or REQUIRED.
-        choices: Allowed values for a "str" field (or each item of "list[str]").
+        choices: Allowed values for a "str" field (or each item of "list[str]"): a tuple, or a
+            callable returning the names (so a plugin registry is the one list of names).
         nullable: Whether ``null`` is allowed.
         minimum: Lower bound (inclusive) for numbers / each number of a list.
         exclusive_minimum: Lower bound (exclusive) for numbers.
         length: Allowed list lengths.
         check: Extra validation ``check(value) -> str | None`` returning a message on error.
         help: One-line description.
+        items: For kind "mapping": a schema every value of the mapping is validated against
+            (keys of the mapping are free names, e.g. material names).
     """
 
     kind: str
@@ -54,6 +61,13 @@ class Field:
     length: tuple[int, ...] | None = None
     check: Callable[[Any], str | None] | None = None
     help: str = ""
+    items: Mapping[str, Any] | None = None
+
+    def allowed(self) -> list[str] | None:
+        """The allowed names (resolving a callable), or None."""
+        if self.choices is None:
+            return None
+        return list(self.choices() if callable(self.choices) else self.choices)
 
 
 def _type_name(value: Any) -> str:
@@ -118,14 +132,20 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
         if not isinstance(value, Mapping):
             raise ConfigError(f"config key '{key}': expected a mapping, got {_type_name(value)} {value!r}")
         value = dict(value)
+        if spec.items is not None:
+            for name in value:
+                if not isinstance(name, str) or not name.isidentifier():
+                    raise ConfigError(f"config key '{key}.{name}': names must be identifiers (letters, digits, _)")
+            value = {name: validate(spec.items, item, prefix=f"{key}.{name}.") for name, item in value.items()}
     elif spec.kind != "any":
         value = _coerce_scalar(spec.kind, value, key)
         _check_bounds(spec, value, key)
-    if spec.choices is not None:
+    allowed = spec.allowed()
+    if allowed is not None:
         values = value if isinstance(value, list) else [value]
         for v in values:
-            if v not in spec.choices:
-                raise ConfigError(f"config key '{key}': {v!r} is not one of {list(spec.choices)}")
+            if v not in allowed:
+                raise ConfigError(f"config key '{key}': {v!r} is not one of {allowed}")
     if spec.check is not None:
         message = spec.check(value)
         if message:

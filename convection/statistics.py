@@ -83,21 +83,22 @@ class BalanceLog:
 
     def __init__(self, path: str | Path, /, *, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
         self.path = Path(path)
-        self._comm = comm
+        self._rank = comm.rank  # only the rank: a mesh's communicator may be freed with its mesh
         self._writer: StatisticsWriter | None = None
 
     def write(self, step: int, before: Any, after: Any) -> None:
         """Append a row; ``before``/``after`` have per-rank ``cells``, ``particles`` arrays and
         ``cell_imbalance``, ``particle_imbalance``, ``load_imbalance`` (collective)."""
-        if self._writer is None:
-            self._writer = StatisticsWriter(self.path, BALANCE_COLUMNS, comm=self._comm)
+        if self._writer is None and self._rank == 0:
+            self._writer = StatisticsWriter(self.path, BALANCE_COLUMNS, comm=MPI.COMM_SELF)
         row: dict[str, float | int | str] = {"step": step}
         for label, loads in (("before", before), ("after", after)):
             row[f"cells_{label}"] = ";".join(str(int(c)) for c in loads.cells)
             row[f"particles_{label}"] = ";".join(str(int(c)) for c in loads.particles)
             for kind in ("cell", "particle", "load"):
                 row[f"{kind}_imbalance_{label}"] = float(getattr(loads, f"{kind}_imbalance"))
-        self._writer.write(row)
+        if self._writer is not None:
+            self._writer.write(row)
 
     def close(self) -> None:
         if self._writer is not None:

@@ -25,6 +25,7 @@ Solvers (``solver=``):
 from __future__ import annotations
 
 import itertools
+import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -61,10 +62,14 @@ class StokesResult(NamedTuple):
     Attributes:
         iterations: Krylov iterations (1 for the direct solver).
         residual_norm: Euclidean norm of the true residual ``b - K x`` of the assembled system.
+        assembly_seconds: Time spent assembling the operator and the right-hand side.
+        solve_seconds: Time spent in the linear solver (with the residual check).
     """
 
     iterations: int
     residual_norm: float
+    assembly_seconds: float = 0.0
+    solve_seconds: float = 0.0
 
 
 def _default_options(solver: str) -> dict[str, Any]:
@@ -158,6 +163,7 @@ class StokesSolver:
         self._prefix = f"stokes{next(_instance_counter)}_"
         options = _default_options(solver)
         options.update(petsc_options or {})
+        self._user_options = dict(petsc_options or {})
         self._petsc_options = options
         self.ksp = PETSc.KSP().create(mesh.comm)
         self.ksp.setOptionsPrefix(self._prefix)
@@ -264,6 +270,7 @@ class StokesSolver:
             if self._A is None:
                 self._setup_linear_algebra()
 
+        t0 = time.perf_counter()
         if not self._operator_current or self.approximation.is_variable_viscosity:
             self._A.zeroEntries()
             dolfinx.fem.petsc.assemble_matrix_block(self._A, self._a, bcs=self._bcs)
@@ -282,6 +289,7 @@ class StokesSolver:
         if self._null_space is not None:
             self._null_space.remove(self._b)
 
+        t1 = time.perf_counter()
         self._pack_solution(self._x)
         self.ksp.solve(self._b, self._x)
         reason = self.ksp.getConvergedReason()
@@ -294,7 +302,9 @@ class StokesSolver:
         self._A.mult(self._x, residual)
         residual.aypx(-1.0, self._b)
         iterations = self.ksp.getIterationNumber() if self.solver == "iterative" else 1
-        return StokesResult(int(iterations), float(residual.norm()))
+        norm = float(residual.norm())
+        residual.destroy()
+        return StokesResult(int(iterations), norm, t1 - t0, time.perf_counter() - t1)
 
     def _pack_solution(self, x: PETSc.Vec) -> None:
         n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
@@ -319,6 +329,11 @@ class StokesSolver:
         self.p.x.array[:] -= mean
 
     # ------------------------------------------------------------------ adaptivity
+    def on_mesh(self, mesh: dolfinx.mesh.Mesh, /) -> "StokesSolver":
+        """A solver with the same settings on another mesh (collective; ``u``, ``p`` zero)."""
+        return StokesSolver(mesh, self.approximation, bcs=self.bcs, degree=self.degree, solver=self.solver,
+                            petsc_options=self._user_options)
+
     def transfer_from(
         self,
         old: "StokesSolver",

@@ -184,6 +184,8 @@ class TransportSolver:
         self._prefix = f"energy{next(_instance_counter)}_"
         options = _default_options(solver)
         options.update(petsc_options or {})
+        self._user_options = dict(petsc_options or {})
+        self.name = name
         set_owned_options(self, self._prefix, options)
         self.ksp = PETSc.KSP().create(mesh.comm)
         self.ksp.setOptionsPrefix(self._prefix)
@@ -299,9 +301,10 @@ class TransportSolver:
         self.T_old2.x.array[:] = self.T_old.x.array
         self.T_old.x.array[:] = self.T.x.array
         self.T.x.array[:] = self._T_new.x.array
-        if self._u_prev is None:
-            self._u_prev = dolfinx.fem.Function(u.function_space)
-        self._u_prev.x.array[:] = u.x.array
+        if self.velocity_extrapolation:
+            if self._u_prev is None:
+                self._u_prev = dolfinx.fem.Function(u.function_space)
+            self._u_prev.x.array[:] = u.x.array
         self._dt_last.value = dt
         self._coef_last.value[:] = coef
         self.dt_old = dt
@@ -343,6 +346,14 @@ class TransportSolver:
         return float(total[0]), float(total[1])
 
     # ------------------------------------------------------------------ adaptivity
+    def on_mesh(self, mesh: dolfinx.mesh.Mesh, /) -> "TransportSolver":
+        """A solver with the same settings on another mesh (collective; fields zero, no history)."""
+        return TransportSolver(
+            mesh, self.approximation, bcs=self.bcs, degree=self.degree, stabilisation=self.stabilisation,
+            solver=self.solver, petsc_options=self._user_options, velocity_extrapolation=self.velocity_extrapolation,
+            diffusivity=self.diffusivity, heating=self.heating, name=self.name,
+        )
+
     def transfer_from(
         self,
         old: "TransportSolver",

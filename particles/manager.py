@@ -312,7 +312,7 @@ class ParticleManager:
         interpolator = get_interpolator(interp.pop("name"), **interp)
         pop = section.get("population")
         population = None
-        if pop:
+        if pop and (pop.get("min_per_cell") or pop.get("max_per_cell") is not None):
             population = PopulationControl(int(pop.get("min_per_cell") or 0), pop.get("max_per_cell"),
                                            int(pop.get("seed") or 0))
         out = section.get("output") or {}

@@ -21,7 +21,8 @@ from mpi4py import MPI
 
 from convection.config import load_config
 from convection.plot import read_statistics
-from convection.simulation import Simulation
+from convection.factory import build_model, run_config
+from convection.model import Model
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("tackley_king_run", ROOT / "benchmarks" / "tackley_king" / "run.py")
@@ -37,8 +38,9 @@ def _stored():
         return {r["quantity"]: (float(r["value"]), float(r["rtol"])) for r in rows}
 
 
-def _dense_volume(sim: Simulation) -> float:
-    return float(dolfinx.fem.assemble_scalar(dolfinx.fem.form(sim.composition * ufl.dx)))
+def _dense_volume(model: Model) -> float:
+    (composition,) = model.fractions
+    return float(dolfinx.fem.assemble_scalar(dolfinx.fem.form(composition * ufl.dx)))
 
 
 def _run(out, end, extra=()):
@@ -46,10 +48,10 @@ def _run(out, end, extra=()):
         *tk.overrides("2d", tk.Member(20, 5), end), *extra,
         "output.progress=none", "output.fields_every=0", f"output.directory={out}",
     ])
-    sim = Simulation(config, comm=MPI.COMM_SELF)
+    sim = build_model(config, comm=MPI.COMM_SELF)
     dense_particles = float(sim.particles.swarm.property("composition").sum())
     volume = _dense_volume(sim)
-    sim.run()
+    run_config(config, comm=MPI.COMM_SELF, model=sim)
     return sim, read_statistics(out / "statistics.csv"), dense_particles, volume
 
 
@@ -81,7 +83,7 @@ def test_dense_material_conserved(quick_run):
     # The volume of C changes only through the sampling of mixed cells (0 < C < 1): a cell's
     # average of n particles carries a binomial error of standard deviation sqrt(C (1 - C) / n), so
     # the total has sigma = sqrt(sum |K|^2 C (1 - C) / n). Allow 4 sigma (measured: ~0.3%, ~1 sigma).
-    C = sim.composition.x.array
+    C = sim.fractions[0].x.array
     area = 1.0 / (2 * 20 * 20)
     n = stats["n_particles"][0] / (2 * 20 * 20)
     sigma = np.sqrt(np.sum(area**2 * C * (1.0 - C) / n))

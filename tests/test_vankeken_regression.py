@@ -15,7 +15,7 @@ from mpi4py import MPI
 
 from convection.config import load_config
 from convection.plot import read_statistics
-from convection.simulation import Simulation
+from convection.factory import run_config
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks" / "vanKeken"))
@@ -34,7 +34,7 @@ def quick_run(tmp_path_factory):
     config = load_config(ROOT / "configs" / "vankeken_1a.yaml", [
         *QUICK, "time.end=250", "output.progress=none", "output.fields_every=0", f"output.directory={out}",
     ])
-    Simulation(config, comm=MPI.COMM_SELF).run()
+    run_config(config, comm=MPI.COMM_SELF)
     return read_statistics(out / "statistics.csv")
 
 
@@ -101,7 +101,7 @@ def test_case2_initial_vrms(tmp_path):
     """vrms of the first Stokes solve with the analytic initial temperature and the dense layer (published ~385)."""
     config = load_config(CASE2, ["time.max_steps=0", "output.progress=none", "output.fields_every=0",
                                  f"output.directory={tmp_path}"])
-    Simulation(config, comm=MPI.COMM_SELF).run()
+    run_config(config, comm=MPI.COMM_SELF)
     stats = read_statistics(tmp_path / "statistics.csv")
     assert stats["vrms"][0] == pytest.approx(385.0, rel=0.01)
     assert stats["entrainment"][0] == 0.0
@@ -124,7 +124,7 @@ def case2_quick_values(stats):
 
 def test_case2_quick_matches_stored(tmp_path):
     config = load_config(CASE2, [*CASE2_QUICK, f"output.directory={tmp_path}"])
-    Simulation(config, comm=MPI.COMM_SELF).run()
+    run_config(config, comm=MPI.COMM_SELF)
     stats = read_statistics(tmp_path / "statistics.csv")
     assert np.all(stats["n_particles"] == stats["n_particles"][0])
     assert np.all(stats["n_lost"] == 0)
@@ -140,7 +140,7 @@ def test_1a_first_peak_within_one_percent(tmp_path):
     the published 3.0916e-3 at t = 208.99 (measured +0.15 %, +0.17 %)."""
     config = load_config(ROOT / "configs" / "vankeken_1a.yaml", [
         "time.end=260", "output.progress=none", "output.fields_every=0", f"output.directory={tmp_path}"])
-    Simulation(config, comm=MPI.COMM_SELF).run()
+    run_config(config, comm=MPI.COMM_SELF)
     m = measure(read_statistics(tmp_path / "statistics.csv"))
     assert m.peak_vrms == pytest.approx(3.0916e-3, rel=0.01)
     assert m.peak_time == pytest.approx(208.99, rel=0.01)

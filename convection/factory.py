@@ -1,0 +1,198 @@
+"""From a resolved configuration to a model and a run: one builder per YAML section.
+
+=================== ===========================================================================
+section             component
+=================== ===========================================================================
+``mesh``            base mesh (:func:`convection.mesh.create_box_mesh`)
+``physics``,        :class:`convection.materials.Materials` and the Boussinesq approximation
+``materials``
+``boundary``        velocity and temperature conditions per side
+``stokes``          :class:`convection.stokes.StokesSolver`
+``energy``          :class:`convection.transport.TransportSolver` for the temperature
+``composition``     a :data:`convection.composition.COMPOSITION_SOURCES` entry
+``particles``       :meth:`particles.manager.ParticleManager.from_config`
+``adaptivity``      :class:`convection.adaptivity.Adaptivity` (and the initial adapted mesh)
+``balance``         :class:`convection.rebalance.Balancer`
+``time``,           :class:`convection.run.RunSettings`
+``output``
+``diagnostics``,    postprocessors (:func:`convection.postprocess.create_postprocessors`)
+``output``
+=================== ===========================================================================
+
+:func:`run_config` is what ``python -m convection run`` does.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
+from mpi4py import MPI
+
+from convection.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy
+from convection.boundary import TemperatureBC, VelocityBC, side_names, temperature_dirichlet_bcs
+from convection.composition import (
+    FieldComposition, ParticleComposition, StaticComposition, composition_space, particle_properties,
+)
+from convection.config import dump_config, expression_constants, material_table, particles_enabled, point_function
+from convection.expressions import Expression
+from convection.materials import Material, Materials
+from convection.mesh import BoxSpec, create_box_mesh
+from convection.model import Model
+from convection.postprocess import create_postprocessors
+from convection.rebalance import Balancer
+from convection.run import RunSettings, RunSummary, run
+from convection.stokes import StokesSolver
+from convection.transport import TransportSolver
+from particles.manager import ParticleManager
+from particles.properties import PropertyContext
+
+__all__ = ["build_model", "materials_from_config", "run_config", "run_settings", "temperature_bcs_from_config",
+           "velocity_bcs_from_config"]
+
+
+def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
+    """Velocity conditions per side of the ``boundary.velocity`` section (null sides: traction free)."""
+    result = {}
+    for side in side_names(gdim):
+        value = section[side]
+        if value is None:
+            continue
+        if isinstance(value, dict):
+            result[side] = VelocityBC(value["kind"], tuple(float(v) for v in value.get("value") or ()) or None)
+        else:
+            result[side] = VelocityBC(value)
+    return result
+
+
+def temperature_bcs_from_config(section: dict, gdim: int) -> dict[str, TemperatureBC]:
+    """Temperature conditions per side of the ``boundary.temperature`` section."""
+    result = {}
+    for side in side_names(gdim):
+        value = section[side]
+        if value is None or value == "insulating":
+            result[side] = TemperatureBC("insulating")
+        else:
+            result[side] = TemperatureBC("dirichlet", float(value["dirichlet"]))
+    return result
+
+
+def materials_from_config(config: dict[str, Any]) -> Materials:
+    """The materials of the ``materials`` section (or of the two-material keys)."""
+    gdim = len(config["mesh"]["cells"])
+    constants = expression_constants(config)
+    table, background = material_table(config)
+    materials = tuple(Material(m["name"], Expression(m["initial"], constants=constants, gdim=gdim), Rb=m["Rb"],
+                               viscosity=m["viscosity"]) for m in table)
+    return Materials(materials, background_viscosity=background, mixing=config["physics"]["viscosity"]["mixing"])
+
+
+def run_settings(config: dict[str, Any]) -> RunSettings:
+    """The ``time`` and ``output`` sections."""
+    t, out = config["time"], config["output"]
+    return RunSettings(end=t["end"], directory=Path(out["directory"]), cfl=t["cfl"], dt_max=t["dt_max"],
+                       dt_initial=t["dt_initial"], max_steps=t["max_steps"], steady_tolerance=t["steady_state_tolerance"],
+                       steady_window=t["steady_state_window"], fields_every=out["fields_every"],
+                       progress=out["progress"], progress_every=out["progress_every"])
+
+
+def _initial_fields(config: dict[str, Any], materials: Materials,
+                    temperature_bcs: dict[str, TemperatureBC]) -> Callable[[dolfinx.mesh.Mesh], list]:
+    """The fields that drive the initial adaptation, set from the initial condition on a mesh."""
+    acfg = config["adaptivity"]
+    gdim = len(config["mesh"]["cells"])
+    initial_T = Expression(config["initial"]["temperature"], constants=expression_constants(config), gdim=gdim)
+
+    def fields_on(mesh: dolfinx.mesh.Mesh) -> list:
+        V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", config["energy"]["degree"]))
+        T = dolfinx.fem.Function(V)
+        T.interpolate(initial_T)
+        dolfinx.fem.petsc.set_bc(T.vector, temperature_dirichlet_bcs(V, temperature_bcs))
+        T.x.scatter_forward()
+        fields = [T] if "temperature" in acfg["fields"] else []
+        if "composition" in acfg["fields"] and len(materials):
+            degree = config["composition"]["degree"]
+            fields += list(StaticComposition(mesh, materials, degree=degree).fields)
+        return fields or [T]
+    return fields_on
+
+
+def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -> Model:
+    """The model of a resolved configuration (collective).
+
+    The mesh is adapted to the initial condition first (``adaptivity.initial_steps`` rounds); the
+    composition source and the particles are then created on that mesh.
+    """
+    spec = BoxSpec.from_config(config["mesh"])
+    gdim = spec.gdim
+    physics = config["physics"]
+    materials = materials_from_config(config)
+    visc = physics["viscosity"]
+    approximation = materials.approximation(Ra=physics["Ra"], H=physics["H"], temperature_law=visc["temperature_law"],
+                                            gamma=visc["gamma"])
+    velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], gdim)
+    temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], gdim)
+
+    base = create_box_mesh(comm, spec)
+    acfg, bcfg = config["adaptivity"], config["balance"]
+    hierarchy = MeshHierarchy(base) if acfg["enabled"] or bcfg["strategy"] != "none" else None
+    adaptivity = None
+    mesh = base
+    if acfg["enabled"]:
+        adaptivity = Adaptivity(hierarchy, AdaptivityParameters.from_config(acfg), fields=acfg["fields"])
+        mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs), rounds=acfg["initial_steps"])
+    balancer = None
+    if bcfg["strategy"] != "none":
+        balancer = Balancer(hierarchy, strategy=bcfg["strategy"], every=bcfg["every"], threshold=bcfg["threshold"],
+                            particle_weight=bcfg["particle_weight"], method=bcfg["method"])
+
+    scfg, ecfg = config["stokes"], config["energy"]
+    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, degree=scfg["degree"], solver=scfg["solver"],
+                          petsc_options=scfg["petsc_options"])
+    temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, degree=ecfg["degree"],
+                                  stabilisation=ecfg["stabilisation"], velocity_extrapolation=False)
+    temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
+                                       gdim=gdim))
+
+    ccfg = config["composition"]
+    particles = None
+    if particles_enabled(config):
+        extra = particle_properties(materials, gdim) if ccfg["source"] == "particles" else []
+        particles = ParticleManager.from_config(
+            config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
+            make_function=point_function(config), field_degree=ccfg["degree"],
+            context=PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p))
+    composition = None
+    if len(materials):
+        if ccfg["source"] == "particles":
+            composition = ParticleComposition(particles, materials)
+        elif ccfg["source"] == "field":
+            composition = FieldComposition(mesh, approximation, materials, degree=ccfg["degree"],
+                                           stabilisation=ecfg["stabilisation"])
+        else:
+            composition = StaticComposition(mesh, materials, degree=ccfg["degree"])
+    return Model(stokes, temperature=temperature, solve_temperature=ecfg["enabled"], composition=composition,
+                 particles=particles, adaptivity=adaptivity, balancer=balancer)
+
+
+def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+               should_stop: Callable[[], bool] = lambda: False, model: Model | None = None) -> RunSummary:
+    """Build (unless ``model`` is given, built from this config) and run a resolved configuration;
+    writes ``config.yaml`` first (collective)."""
+    start = time.monotonic()
+    directory = Path(config["output"]["directory"])
+    if comm.rank == 0:
+        directory.mkdir(parents=True, exist_ok=True)
+        (directory / "config.yaml").write_text(dump_config(config))
+    comm.barrier()
+    if model is None:
+        model = build_model(config, comm=comm)
+    diagnostics = config["diagnostics"]
+    postprocessors = create_postprocessors(model, config["output"]["statistics"], start=start,
+                                           entrainment_material=diagnostics["entrainment_material"],
+                                           entrainment_height=diagnostics["entrainment_height"])
+    return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start)

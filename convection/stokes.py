@@ -80,6 +80,10 @@ class StokesResult(NamedTuple):
     residual_norm: float
 
 
+def _default_options(solver: str) -> dict[str, Any]:
+    return dict(STOKES_SOLVERS[solver].options)
+
+
 class StokesSolver:
     """Stokes solver on a fixed mesh (see the module docstring for equations and solvers).
 
@@ -146,7 +150,8 @@ class StokesSolver:
         self._operator_current = False
 
         self._prefix = f"stokes{next(_instance_counter)}_"
-        options = STOKES_SOLVERS[solver].options_with(petsc_options)
+        options = _default_options(solver)
+        options.update(petsc_options or {})
         self._petsc_options = options
         self.ksp = PETSc.KSP().create(mesh.comm)
         self.ksp.setOptionsPrefix(self._prefix)

@@ -94,6 +94,10 @@ class TransportResult(NamedTuple):
     dt: float
 
 
+def _default_options(solver: str) -> dict[str, Any]:
+    return dict(TRANSPORT_SOLVERS[solver].options)
+
+
 class TransportSolver:
     """Advection-diffusion solver for the temperature (equations in the module docstring).
 
@@ -176,7 +180,8 @@ class TransportSolver:
         self._side_forms: dict[str, tuple[Any, Any]] = {}
 
         self._prefix = f"energy{next(_instance_counter)}_"
-        options = TRANSPORT_SOLVERS[solver].options_with(petsc_options)
+        options = _default_options(solver)
+        options.update(petsc_options or {})
         set_owned_options(self, self._prefix, options)
         self.ksp = PETSc.KSP().create(mesh.comm)
         self.ksp.setOptionsPrefix(self._prefix)

@@ -38,13 +38,33 @@ from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import VelocityBC, box_bounds, side_names, velocity_dirichlet_bcs
+from convection.petsc_options import MUMPS_LU, LinearSolver, krylov_options, linear_solvers
 from convection.petsc_options import destroy_petsc_objects, set_owned_options
 
-STOKES_SOLVERS: dict[str, str] = {
-    "direct": "MUMPS LU on the monolithic Taylor-Hood system",
-    "iterative": "MINRES + block-diagonal (BoomerAMG on velocity, Jacobi on M_p/eta) preconditioner",
-}
-"""Registry of Stokes solver kinds (lowercase name -> one-line description)."""
+STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
+    LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system", MUMPS_LU),
+    LinearSolver(
+        "iterative",
+        "MINRES + block-diagonal (BoomerAMG on velocity, Jacobi on M_p/eta) preconditioner",
+        krylov_options(
+            "minres",
+            {
+                "pc_type": "fieldsplit",
+                "pc_fieldsplit_type": "additive",
+                "fieldsplit_u_ksp_type": "preonly",
+                "fieldsplit_u_pc_type": "hypre",
+                "fieldsplit_u_pc_hypre_type": "boomeramg",
+                "fieldsplit_u_pc_hypre_boomeramg_strong_threshold": 0.7,
+                "fieldsplit_p_ksp_type": "preonly",
+                "fieldsplit_p_pc_type": "jacobi",
+            },
+            rtol=1e-10,
+            atol=1e-14,
+            max_it=2000,
+        ),
+    ),
+)
+"""Registry of Stokes solver kinds (lowercase name -> description and default PETSc options)."""
 
 _instance_counter = itertools.count()
 
@@ -73,26 +93,7 @@ class StokesResult(NamedTuple):
 
 
 def _default_options(solver: str) -> dict[str, Any]:
-    if solver == "direct":
-        return {
-            "ksp_type": "preonly",
-            "pc_type": "lu",
-            "pc_factor_mat_solver_type": "mumps",
-        }
-    return {
-        "ksp_type": "minres",
-        "ksp_rtol": 1e-10,
-        "ksp_atol": 1e-14,
-        "ksp_max_it": 2000,
-        "pc_type": "fieldsplit",
-        "pc_fieldsplit_type": "additive",
-        "fieldsplit_u_ksp_type": "preonly",
-        "fieldsplit_u_pc_type": "hypre",
-        "fieldsplit_u_pc_hypre_type": "boomeramg",
-        "fieldsplit_u_pc_hypre_boomeramg_strong_threshold": 0.7,
-        "fieldsplit_p_ksp_type": "preonly",
-        "fieldsplit_p_pc_type": "jacobi",
-    }
+    return dict(STOKES_SOLVERS[solver].options)
 
 
 class StokesSolver:

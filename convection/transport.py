@@ -56,6 +56,7 @@ from convection.boundary import (
     side_tag,
     temperature_dirichlet_bcs,
 )
+from convection.petsc_options import MUMPS_LU, LinearSolver, krylov_options, linear_solvers
 from convection.petsc_options import destroy_petsc_objects, set_owned_options
 
 STABILISATIONS: dict[str, str] = {
@@ -64,11 +65,17 @@ STABILISATIONS: dict[str, str] = {
 }
 """Registry of advection stabilisations (lowercase name -> one-line description)."""
 
-TRANSPORT_SOLVERS: dict[str, str] = {
-    "iterative": "GMRES + BoomerAMG",
-    "direct": "MUMPS LU",
-}
-"""Registry of linear solvers for the transport equation (lowercase name -> one-line description)."""
+TRANSPORT_SOLVERS: dict[str, LinearSolver] = linear_solvers(
+    LinearSolver(
+        "iterative",
+        "GMRES + BoomerAMG",
+        krylov_options("gmres", {"pc_type": "hypre", "pc_hypre_type": "boomeramg"}, rtol=1e-10, atol=1e-14,
+                       max_it=1000),
+    ),
+    LinearSolver("direct", "MUMPS LU", MUMPS_LU),
+)
+"""Registry of linear solvers for the transport equation (lowercase name -> description and default
+PETSc options)."""
 
 _instance_counter = itertools.count()
 
@@ -88,16 +95,7 @@ class TransportResult(NamedTuple):
 
 
 def _default_options(solver: str) -> dict[str, Any]:
-    if solver == "direct":
-        return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
-    return {
-        "ksp_type": "gmres",
-        "ksp_rtol": 1e-10,
-        "ksp_atol": 1e-14,
-        "ksp_max_it": 1000,
-        "pc_type": "hypre",
-        "pc_hypre_type": "boomeramg",
-    }
+    return dict(TRANSPORT_SOLVERS[solver].options)
 
 
 class TransportSolver:

@@ -38,6 +38,7 @@ import dolfinx.fem
 from particles.evaluation import Evaluator
 from particles.migration import migrate
 from particles.kernels import stage_combination
+from particles.registry import Registry
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
 
@@ -89,9 +90,9 @@ class ButcherTableau:
         return len(self.b)
 
 
-INTEGRATORS: dict[str, ButcherTableau] = {
-    t.name: t
-    for t in (
+INTEGRATORS: Registry[ButcherTableau] = Registry(
+    "integrator",
+    (
         ButcherTableau("euler", "forward Euler, first order", 1, ((0.0,),), (1.0,), (0.0,)),
         ButcherTableau(
             "rk2", "explicit midpoint rule, second order", 2, ((0.0, 0.0), (0.5, 0.0)), (0.0, 1.0), (0.0, 0.5)
@@ -104,17 +105,14 @@ INTEGRATORS: dict[str, ButcherTableau] = {
             (1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0),
             (0.0, 0.5, 0.5, 1.0),
         ),
-    )
-}
+    ),
+)
+"""Butcher tableaus by their lowercase config name."""
 
 
 def get_integrator(name: str) -> ButcherTableau:
-    """The registered tableau ``name``; ValueError lists the valid names."""
-    try:
-        return INTEGRATORS[name.lower()]
-    except KeyError:
-        valid = ", ".join(f"{k} ({v.description})" for k, v in INTEGRATORS.items())
-        raise ValueError(f"unknown particle integrator {name!r}; valid: {valid}") from None
+    """The registered tableau ``name`` (case-insensitive); ValueError lists the valid names."""
+    return INTEGRATORS.lookup(name.lower())
 
 
 @dataclass(frozen=True)

@@ -1,29 +1,75 @@
-"""Registries mapping lowercase config names to implementation classes (one per role).
+"""One registry per particle role, mapping lowercase config names to implementations.
 
-Each implementation class carries ``name`` and ``description`` class attributes and is a frozen
-dataclass of its parameters; a registry is a plain ``dict[name, class]``.
+Every entry carries ``name`` and ``description`` attributes: an implementation class (a frozen
+dataclass of its parameters, with class attributes) or a ready object such as a Butcher tableau.
+A :class:`Registry` is a ``dict[name, entry]`` that also knows its role, so ``name in REGISTRY``,
+``sorted(REGISTRY)`` and ``REGISTRY[name]`` work as on a plain dict, and an unknown name is an
+error naming the role and listing the valid names::
+
+    GENERATORS = Registry("generator", (RandomUniform, BoxLattice))
+    GENERATORS.create("random_uniform", num_particles=5, seed=1)  # == RandomUniform(5, seed=1)
+    GENERATORS.create("random")  # ValueError: unknown particle generator 'random'; valid: [...]
 """
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any, Generic, Iterable, TypeVar
 
-__all__ = ["create", "describe"]
+__all__ = ["Registry"]
 
-
-def describe(registry: Mapping[str, type], /) -> dict[str, str]:
-    """One-line description of every registered implementation, by name."""
-    return {name: cls.description for name, cls in registry.items()}
+E = TypeVar("E")
+T = TypeVar("T")
 
 
-def create(registry: Mapping[str, type], role: str, name: str, parameters: Mapping[str, Any], /) -> Any:
-    """Build the implementation registered as ``name`` with ``parameters``.
+class Registry(dict[str, E], Generic[E]):
+    """Implementations of one role by their lowercase config name.
+
+    Args:
+        role: Role name used in error messages ("generator", "interpolator", ...).
+        entries: Objects with ``name`` and ``description`` attributes, registered in order.
 
     Raises:
-        ValueError: Unknown name; the message lists the valid names of this ``role``.
+        ValueError: Two entries with the same name, or a name that is not lowercase.
     """
-    try:
-        cls = registry[name]
-    except KeyError:
-        raise ValueError(f"unknown particle {role} {name!r}; valid: {sorted(registry)}") from None
-    return cls(**parameters)
+
+    def __init__(self, role: str, entries: Iterable[E] = (), /) -> None:
+        super().__init__()
+        self.role = role
+        for entry in entries:
+            self.register(entry)
+
+    def register(self, entry: E, /) -> E:
+        """Add ``entry`` under ``entry.name`` and return it (usable as a class decorator)."""
+        name = entry.name  # type: ignore[attr-defined]
+        if name != name.lower():
+            raise ValueError(f"particle {self.role} name {name!r} is not lowercase")
+        if name in self:
+            raise ValueError(f"particle {self.role} {name!r} is registered twice")
+        self[name] = entry
+        return entry
+
+    def lookup(self, name: str, /) -> E:
+        """The entry registered as ``name``.
+
+        Raises:
+            ValueError: Unknown name; the message names the role and lists the valid names.
+        """
+        try:
+            return self[name]
+        except KeyError:
+            raise ValueError(f"unknown particle {self.role} {name!r}; valid: {sorted(self)}") from None
+
+    def create(self: Registry[type[T]], name: str, /, **parameters: Any) -> T:
+        """The implementation registered as ``name``, built with ``parameters``.
+
+        Raises:
+            ValueError: Unknown name (the message lists the valid names), or invalid parameters.
+        """
+        return self.lookup(name)(**parameters)
+
+    def describe(self) -> dict[str, str]:
+        """One-line description of every registered implementation, by name."""
+        return {name: entry.description for name, entry in self.items()}  # type: ignore[attr-defined]
+
+    def __repr__(self) -> str:
+        return f"Registry({self.role!r}, {sorted(self)})"

@@ -9,9 +9,8 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from particles import Swarm
+from _helpers import swarm_at
 from particles.advection import INTEGRATORS, Advector, get_integrator
-from particles.evaluation import locate
 
 OMEGA = 2.0 * math.pi
 RADIUS = 0.3
@@ -22,18 +21,8 @@ def _square(comm=MPI.COMM_SELF, n=8):
 
 
 def _ring_swarm(mesh, count=8):
-    swarm = Swarm(mesh)
     phi = 2 * np.pi * (np.arange(count) + 0.25) / count
-    pts = RADIUS * np.stack([np.cos(phi), np.sin(phi)], axis=1)
-    found = locate(mesh, pts, geometry=swarm.geometry)
-    mine = (found.cells >= 0) & (found.cells < swarm.num_owned_cells)
-    if mesh.comm.size > 1:  # a point on a partition boundary: keep it on the lowest rank only
-        owner = np.where(mine, mesh.comm.rank, mesh.comm.size).astype(np.int32)
-        lowest = np.empty_like(owner)
-        mesh.comm.Allreduce(owner, lowest, op=MPI.MIN)
-        mine &= lowest == mesh.comm.rank
-    swarm.add(np.flatnonzero(mine), pts[mine], found.xref[mine], found.cells[mine])
-    return swarm
+    return swarm_at(mesh, RADIUS * np.stack([np.cos(phi), np.sin(phi)], axis=1))
 
 
 def _rotation(mesh, omega=OMEGA, degree=1):

@@ -126,13 +126,8 @@ def _restart_bitwise(tmp_path, comm):
     assert _all(comm, all(np.array_equal(a, b) for a, b in zip(_local_state(reference), _local_state(swarm))))
 
 
-def test_restart_bitwise_serial(tmp_path):
-    _restart_bitwise(tmp_path, MPI.COMM_WORLD)
-
-
-@pytest.mark.mpi
-def test_restart_bitwise_parallel(tmp_path):
-    _restart_bitwise(tmp_path, MPI.COMM_WORLD)
+def test_restart_bitwise(tmp_path, world):
+    _restart_bitwise(tmp_path, world)
 
 
 def test_restore_on_another_mesh(tmp_path):
@@ -237,13 +232,8 @@ def _check_errors(tmp_path, comm):
     assert load_checkpoint(directory / "good.h5", mesh).swarm.global_num_particles() == 40
 
 
-def test_damaged_checkpoints_serial(tmp_path):
-    _check_errors(tmp_path, MPI.COMM_WORLD)
-
-
-@pytest.mark.mpi
-def test_damaged_checkpoints_parallel(tmp_path):
-    _check_errors(tmp_path, MPI.COMM_WORLD)
+def test_damaged_checkpoints(tmp_path, world):
+    _check_errors(tmp_path, world)
 
 
 def test_damaged_checkpoint_under_mpirun_does_not_hang(tmp_path):

@@ -152,13 +152,8 @@ def _subset_case(tmp_path, comm):
     assert comm.bcast(ok, root=0)
 
 
-def test_subsets_serial(tmp_path):
-    _subset_case(tmp_path, MPI.COMM_WORLD)
-
-
-@pytest.mark.mpi
-def test_subsets_parallel(tmp_path):
-    _subset_case(tmp_path, MPI.COMM_WORLD)
+def test_subsets(tmp_path, world):
+    _subset_case(tmp_path, world)
 
 
 def test_unknown_property_lists_known(tmp_path):

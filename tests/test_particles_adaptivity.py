@@ -1,8 +1,6 @@
 """Particles through 20 adaptations (refine and coarsen, rebuilt from the base mesh)."""
 
 import numpy as np
-import pytest
-from mpi4py import MPI
 
 from convection.adaptivity import MeshHierarchy
 from convection.mesh import BoxSpec, create_box_mesh
@@ -51,10 +49,5 @@ def _check_adaptations(comm):
     assert len(set(cell_counts)) > 3 and min(cell_counts) < max(cell_counts)  # refined and coarsened
 
 
-def test_twenty_adaptations_serial():
-    _check_adaptations(MPI.COMM_WORLD)
-
-
-@pytest.mark.mpi
-def test_twenty_adaptations_parallel():
-    _check_adaptations(MPI.COMM_WORLD)
+def test_twenty_adaptations(world):
+    _check_adaptations(world)

@@ -11,6 +11,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from _helpers import swarm_at
 from particles import Swarm
 from particles.advection import Advector, ParticleODE
 from particles.evaluation import locate
@@ -35,21 +36,6 @@ from particles.properties import (
 )
 
 GAMMA = 0.8
-
-
-def _swarm_at(mesh, pts):
-    """Swarm with particle i at pts[i] (a point on a partition boundary goes to the lowest rank)."""
-    swarm = Swarm(mesh)
-    pts = np.asarray(pts, dtype=np.float64)
-    found = locate(mesh, pts, geometry=swarm.geometry)
-    mine = (found.cells >= 0) & (found.cells < swarm.num_owned_cells)
-    if mesh.comm.size > 1:
-        owner = np.where(mine, mesh.comm.rank, mesh.comm.size).astype(np.int32)
-        lowest = np.empty_like(owner)
-        mesh.comm.Allreduce(owner, lowest, op=MPI.MIN)
-        mine &= lowest == mesh.comm.rank
-    swarm.add(np.flatnonzero(mine), pts[mine], found.xref[mine], found.cells[mine])
-    return swarm
 
 
 def _vector_function(mesh, degree, f):
@@ -127,7 +113,7 @@ def test_simple_shear_closed_forms(integrator, degree):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 8, 8)
     u = _shear(mesh, degree)
     x0 = _lattice()
-    swarm = _swarm_at(mesh, x0)
+    swarm = swarm_at(mesh, x0)
     manager = PropertyManager(swarm, [InitialPosition(), DeformationGradient(), IntegratedStrain(),
                                       TimeSinceCreation(), StrainRate(), Velocity()])
     manager.initialise(PropertyContext(u_new=u))
@@ -155,7 +141,7 @@ def test_simple_shear_closed_forms(integrator, degree):
 def _damage(integrator, steps, alpha=1.5, beta=2.0, t_end=1.0):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
     u = _shear(mesh)
-    swarm = _swarm_at(mesh, [[0.2, 0.3], [0.1, 0.6]])
+    swarm = swarm_at(mesh, [[0.2, 0.3], [0.1, 0.6]])
     manager = PropertyManager(swarm, [Damage(alpha=alpha, beta=beta)])
     manager.initialise()
     _run(swarm, manager, integrator, u, t_end / steps, steps)
@@ -188,7 +174,7 @@ def test_rotation_gives_rotation_matrix_and_no_strain():
     u = _vector_function(mesh, 1, lambda x: np.stack([-omega * x[1], omega * x[0]]))
     errors = []
     for steps in (10, 20):
-        swarm = _swarm_at(mesh, [[0.3, 0.1], [-0.2, 0.4]])
+        swarm = swarm_at(mesh, [[0.3, 0.1], [-0.2, 0.4]])
         manager = PropertyManager(swarm, ["deformation_gradient", "integrated_strain"])
         manager.initialise()
         _run(swarm, manager, "rk2", u, 0.5 / steps, steps)
@@ -206,7 +192,7 @@ def test_deformation_gradient_is_the_derivative_of_the_discrete_flow_map():
     x0 = np.array([[0.31, 0.27], [0.62, 0.45], [0.4, 0.71]])
     delta = 1e-6
     shifts = np.array([[0, 0], [delta, 0], [-delta, 0], [0, delta], [0, -delta]])
-    swarm = _swarm_at(mesh, (x0[:, None, :] + shifts[None]).reshape(-1, 2))
+    swarm = swarm_at(mesh, (x0[:, None, :] + shifts[None]).reshape(-1, 2))
     manager = PropertyManager(swarm, [DeformationGradient()])
     manager.initialise()
     _run(swarm, manager, "rk2", u, 0.04, 20)
@@ -220,7 +206,7 @@ def test_deformation_gradient_is_the_derivative_of_the_discrete_flow_map():
 
 def test_ode_hook_with_callable_velocity():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
-    swarm = _swarm_at(mesh, [[0.2, 0.3]])
+    swarm = swarm_at(mesh, [[0.2, 0.3]])
     swarm.add_property("y", 1, value=1.0)
     adv = Advector(swarm, integrator="rk4", odes=[ParticleODE("y", lambda s, c, y, g: -g[:, 0, 0:1] * y)])
     with pytest.raises(ValueError, match="velocity_gradient"):
@@ -311,7 +297,7 @@ def test_initialise_new_interpolates_cell_mean_and_reinitialises():
     centroid = vertices.mean(axis=1)
     occupied = np.arange(10)
     old_pts = (0.6 * centroid[occupied, None, :] + 0.4 * vertices[occupied]).reshape(-1, 2)
-    swarm = _swarm_at(mesh, old_pts)
+    swarm = swarm_at(mesh, old_pts)
     assert swarm.num_particles == 30
     u = _vector_function(mesh, 1, lambda x: np.stack([x[1], -x[0]]))
     f = lambda x: x[:, 0] + 2.0 * x[:, 1] ** 2  # noqa: E731

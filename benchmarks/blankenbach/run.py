@@ -17,9 +17,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
-import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -27,6 +24,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
+from convection.launch import run_config  # noqa: E402
 from convection.plot import read_statistics  # noqa: E402
 
 
@@ -38,15 +36,8 @@ def reference() -> dict[str, dict[str, float]]:
 
 def run_case(config: str, out: Path, ranks: int, overrides: list[str]) -> dict:
     """Run one config with the CLI under mpirun; returns summary.json plus the statistics."""
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [sys.executable, "-m", "convection", "run", str(ROOT / "configs" / config), "--output", str(out),
-           "--set", "output.progress=lines", "--set", "output.progress_every=100"]
-    for item in overrides:
-        cmd += ["--set", item]
-    if ranks > 1:
-        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
-    print("$", " ".join(cmd), flush=True)
-    subprocess.run(cmd, cwd=ROOT, env=env, check=True)
+    progress = ["output.progress=lines", "output.progress_every=100"]
+    run_config(ROOT / "configs" / config, out, ranks=ranks, overrides=[*progress, *overrides], cwd=ROOT)
     summary = json.loads((out / "summary.json").read_text())
     summary["statistics"] = read_statistics(out / "statistics.csv")
     return summary

@@ -68,6 +68,7 @@ for _path in (ROOT, HERE.parent / "performance"):
     if str(_path) not in sys.path:
         sys.path.insert(0, str(_path))
 
+from convection.launch import mpi_environment  # noqa: E402
 from convection.timestep import cfl_timestep  # noqa: E402
 from particles import Swarm  # noqa: E402
 from particles.advection import Advector  # noqa: E402
@@ -438,7 +439,7 @@ def plan(studies: list[str], ranks: list[int], strong_radial: int, weak_radial: 
 
 def run_one(spec: RunSpec, args: argparse.Namespace) -> dict:
     """Run one configuration under mpirun and parse its JSON line."""
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", PYTHONUNBUFFERED="1")
+    env = dict(mpi_environment(), PYTHONUNBUFFERED="1")
     cmd = [shutil.which("mpirun") or "mpirun", "-n", str(spec.ranks), "--bind-to", "none"]
     if args.yield_when_idle:
         cmd += ["--mca", "mpi_yield_when_idle", "1"]

@@ -27,9 +27,6 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-import os
-import shutil
-import subprocess
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -40,6 +37,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
+from convection.launch import run_config  # noqa: E402
 from convection.plot import read_statistics  # noqa: E402
 
 QUICK = ["mesh.cells=[16,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=10"]
@@ -149,16 +147,9 @@ def reference(case: str = "1a") -> dict[str, Reference]:
 
 
 def run_case(case: str, out: Path, ranks: int, overrides: list[str]) -> dict[str, np.ndarray]:
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [sys.executable, "-m", "convection", "run", str(ROOT / "configs" / CONFIGS[case]),
-           "--output", str(out), "--set", "output.progress=lines", "--set", "output.progress_every=100",
-           "--set", "output.fields_every=0"]
-    for item in overrides:
-        cmd += ["--set", item]
-    if ranks > 1:
-        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
-    print("$", " ".join(cmd), flush=True)
-    subprocess.run(cmd, cwd=ROOT, env=env, check=True)
+    """Run one case with the CLI (under mpirun for ``ranks`` > 1); returns its statistics."""
+    quiet = ["output.progress=lines", "output.progress_every=100", "output.fields_every=0"]
+    run_config(ROOT / "configs" / CONFIGS[case], out, ranks=ranks, overrides=[*quiet, *overrides], cwd=ROOT)
     return read_statistics(out / "statistics.csv")
 
 

@@ -21,7 +21,7 @@ from particles.generation.random_density import RandomDensity, RandomUniform
 from particles.generation.reference_points import ReferencePoints
 from particles.generation.shell import Shell
 from particles.swarm import Swarm
-from particles.registry import create, describe
+from particles.registry import Registry
 
 __all__ = [
     "GENERATORS",
@@ -40,24 +40,13 @@ __all__ = [
     "generate",
 ]
 
-GENERATORS: dict[str, type] = {
-    cls.name: cls for cls in (RandomUniform, RandomDensity, MetropolisHastings, BoxLattice, Shell, FromFile, ReferencePoints)
-}
+GENERATORS: Registry[type[Generator]] = Registry(
+    "generator", (RandomUniform, RandomDensity, MetropolisHastings, BoxLattice, Shell, FromFile, ReferencePoints)
+)
 """Generator classes by their lowercase config name."""
 
-
-def describe_generators() -> dict[str, str]:
-    """One-line description of every registered generator, by name."""
-    return describe(GENERATORS)
-
-
-def create_generator(name: str, /, **parameters: Any) -> Generator:
-    """The generator registered as ``name`` with the given parameters.
-
-    Raises:
-        ValueError: Unknown name (the message lists the valid names).
-    """
-    return create(GENERATORS, "generator", name, parameters)
+create_generator = GENERATORS.create
+describe_generators = GENERATORS.describe
 
 
 def generate(swarm: Swarm, generator: Generator | str, /, **parameters: Any) -> GenerationResult:

@@ -25,7 +25,7 @@ from particles.interpolation.least_squares import LeastSquares
 from particles.interpolation.nearest import Nearest
 from particles.interpolation.shape_function import ShapeFunction
 from particles.swarm import Swarm
-from particles.registry import create, describe
+from particles.registry import Registry
 
 __all__ = [
     "INTERPOLATORS",
@@ -41,24 +41,13 @@ __all__ = [
     "interpolate_to_mesh",
 ]
 
-INTERPOLATORS: dict[str, type] = {
-    cls.name: cls for cls in (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares)
-}
+INTERPOLATORS: Registry[type[Interpolator]] = Registry(
+    "interpolator", (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares)
+)
 """Interpolator classes by their lowercase config name."""
 
-
-def describe_interpolators() -> dict[str, str]:
-    """One-line description of every registered interpolator, by name."""
-    return describe(INTERPOLATORS)
-
-
-def get_interpolator(name: str, /, **parameters: Any) -> Interpolator:
-    """The interpolator registered as ``name`` with the given parameters.
-
-    Raises:
-        ValueError: Unknown name (the message lists the valid names).
-    """
-    return create(INTERPOLATORS, "interpolator", name, parameters)
+get_interpolator = INTERPOLATORS.create
+describe_interpolators = INTERPOLATORS.describe
 
 
 def interpolate_to_mesh(swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,

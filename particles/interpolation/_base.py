@@ -26,6 +26,7 @@ __all__ = [
     "gather_samples",
     "property_values",
     "write_result",
+    "write_with_cell_means",
 ]
 
 
@@ -220,3 +221,13 @@ def write_result(swarm: Swarm, space: TargetSpace, target: dolfinx.fem.Function,
     totals = comm.allreduce(local, op=MPI.SUM)
     return InterpolationStats(method, empty_cells, filled_dofs, rounds, ghost_particles,
                               int(totals[0]), int(totals[1]), int(totals[2]))
+
+
+def write_with_cell_means(swarm: Swarm, space: TargetSpace, target: dolfinx.fem.Function, method: str, *,
+                          num: npt.NDArray[np.float64], den: npt.NDArray[np.float64],
+                          values: npt.NDArray[np.float64], ghost_particles: int = 0) -> InterpolationStats:
+    """:func:`write_result` whose empty-cell rule starts from the arithmetic mean of this rank's
+    particle ``values`` (shape=(num_particles,)) in each owned cell (collective)."""
+    means, known = cell_means(swarm, values)
+    return write_result(swarm, space, target, method, num=num, den=den, cell_values=means, cell_known=known,
+                        ghost_particles=ghost_particles)

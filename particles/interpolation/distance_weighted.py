@@ -24,13 +24,7 @@ import numpy as np
 
 import dolfinx.fem
 
-from particles.interpolation._base import (
-    InterpolationStats,
-    TargetSpace,
-    cell_means,
-    gather_samples,
-    write_result,
-)
+from particles.interpolation._base import InterpolationStats, TargetSpace, gather_samples, write_with_cell_means
 from particles.interpolation._kernels import idw_accumulate
 from particles.swarm import Swarm
 
@@ -82,6 +76,5 @@ class DistanceWeighted:
         floor = self.eps * cell_diameters(swarm)
         idw_accumulate(space.dof_points(), space.dofs, samples.offsets, np.ascontiguousarray(samples.x),
                        samples.values, nb_off, nb_cells, self.use_neighbours, float(self.power), floor, num, den)
-        means, known = cell_means(swarm, samples.values[: swarm.num_particles])
-        return write_result(swarm, space, target, self.name, num=num, den=den, cell_values=means,
-                            cell_known=known, ghost_particles=samples.num_ghosts)
+        return write_with_cell_means(swarm, space, target, self.name, num=num, den=den,
+                                     values=samples.values[: swarm.num_particles], ghost_particles=samples.num_ghosts)

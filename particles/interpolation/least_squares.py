@@ -34,9 +34,8 @@ from particles.interpolation._base import (
     InterpolationStats,
     Samples,
     TargetSpace,
-    cell_means,
     gather_samples,
-    write_result,
+    write_with_cell_means,
 )
 from particles.interpolation._kernels import least_squares_moments
 from particles.interpolation.distance_weighted import cell_diameters
@@ -127,9 +126,8 @@ class LeastSquares:
         den = np.zeros(space.num_local_dofs)
         num[space.dofs] = values
         den[space.dofs] = has[:, None]
-        means, known = cell_means(swarm, samples.values[: swarm.num_particles])
-        return write_result(swarm, space, target, self.name, num=num, den=den, cell_values=means,
-                            cell_known=known, ghost_particles=samples.num_ghosts)
+        return write_with_cell_means(swarm, space, target, self.name, num=num, den=den,
+                                     values=samples.values[: swarm.num_particles], ghost_particles=samples.num_ghosts)
 
 
 def _limit(values: npt.NDArray[np.float64], centre: npt.NDArray[np.float64], lo: npt.NDArray[np.float64],

@@ -15,13 +15,7 @@ import numpy as np
 
 import dolfinx.fem
 
-from particles.interpolation._base import (
-    InterpolationStats,
-    TargetSpace,
-    cell_means,
-    property_values,
-    write_result,
-)
+from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_with_cell_means
 from particles.interpolation._kernels import nearest_values
 from particles.swarm import Swarm
 
@@ -44,6 +38,4 @@ class Nearest:
         num = np.zeros(space.num_local_dofs)
         den = np.zeros(space.num_local_dofs)
         nearest_values(space.dof_points(), space.dofs, swarm.offsets, swarm.x, v, swarm.ids, num, den)
-        means, known = cell_means(swarm, v)
-        return write_result(swarm, space, target, self.name, num=num, den=den, cell_values=means,
-                            cell_known=known, ghost_particles=0)
+        return write_with_cell_means(swarm, space, target, self.name, num=num, den=den, values=v)

@@ -24,13 +24,7 @@ import numpy as np
 
 import dolfinx.fem
 
-from particles.interpolation._base import (
-    InterpolationStats,
-    TargetSpace,
-    cell_means,
-    property_values,
-    write_result,
-)
+from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_with_cell_means
 from particles.swarm import Swarm
 
 __all__ = ["ShapeFunction"]
@@ -57,6 +51,4 @@ class ShapeFunction:
         flat = space.dofs[swarm.cells].reshape(-1)
         num = np.bincount(flat, weights=(phi * v[:, None]).reshape(-1), minlength=space.num_local_dofs)
         den = np.bincount(flat, weights=phi.reshape(-1), minlength=space.num_local_dofs)
-        means, known = cell_means(swarm, v)
-        return write_result(swarm, space, target, self.name, num=num, den=den, cell_values=means,
-                            cell_known=known, ghost_particles=0)
+        return write_with_cell_means(swarm, space, target, self.name, num=num, den=den, values=v)

@@ -18,7 +18,7 @@ gradient, integrated strain, damage) are advanced by the Advector together with 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence, Union
+from typing import Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -45,7 +45,7 @@ from particles.properties.temperature import Temperature
 from particles.properties.time_since_creation import TimeSinceCreation
 from particles.properties.velocity import Velocity
 from particles.swarm import PropertyLayout, Swarm
-from particles.registry import create, describe
+from particles.registry import Registry
 
 __all__ = [
     "NEW_PARTICLE_POLICIES",
@@ -70,30 +70,19 @@ __all__ = [
     "describe_properties",
 ]
 
-PROPERTIES: dict[str, type[ParticleProperty]] = {
-    cls.name: cls
-    for cls in (
+PROPERTIES: Registry[type[ParticleProperty]] = Registry(
+    "property",
+    (
         InitialPosition, InitialComposition, FunctionProperty, Velocity, Temperature, Pressure, StrainRate,
         IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank,
-    )
-}
+    ),
+)
 """Property classes by their lowercase config name."""
 
+create_property = PROPERTIES.create
+describe_properties = PROPERTIES.describe
+
 PropertySpec = Union[ParticleProperty, str]
-
-
-def describe_properties() -> dict[str, str]:
-    """One-line description of every registered property, by name."""
-    return describe(PROPERTIES)
-
-
-def create_property(name: str, /, **parameters: Any) -> ParticleProperty:
-    """The property registered as ``name`` with the given parameters.
-
-    Raises:
-        ValueError: Unknown name (the message lists the valid names).
-    """
-    return create(PROPERTIES, "property", name, parameters)
 
 
 class PropertyManager:

@@ -1,18 +1,20 @@
-"""Evaluation of a user-given source (Python callable of x, or a mesh Function) at particles."""
+"""Evaluation of a user-given source (Python callable of x, or a mesh Function) at particles, and the
+common base of the properties that store such a source's value under a label."""
 
 from __future__ import annotations
 
-from typing import Callable, Union
+from dataclasses import dataclass
+from typing import Callable, ClassVar, Union
 
 import numpy as np
 import numpy.typing as npt
 
 import dolfinx.fem
 
-from particles.properties._base import PropertyContext, evaluate_at
+from particles.properties._base import ParticleProperty, PropertyContext, evaluate_at, write_rows
 from particles.swarm import Swarm
 
-__all__ = ["PointFunction", "Source", "evaluate_source", "source_size"]
+__all__ = ["PointFunction", "Source", "SourceValue", "evaluate_source", "source_size"]
 
 PointFunction = Callable[[npt.NDArray[np.float64]], npt.ArrayLike]
 """``f(x)``: points shape=(m, gdim), float64 -> values shape=(m,) or (m, components)."""
@@ -39,3 +41,36 @@ def evaluate_source(
         raise ValueError(f"property {who!r}: the callable returned shape {values.shape} for {m} points, "
                          f"expected ({m},) or ({m}, {size})")
     return values.reshape(m, size)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SourceValue(ParticleProperty):
+    """Value of a user source at the particle, stored as swarm property ``label``; by default set
+    at creation only, and evaluated at the position of a particle added later.
+
+    Class attributes:
+        source_field: Name of the subclass's dataclass field that holds the source.
+
+    Attributes:
+        label: Swarm property name.
+        components: Columns produced by a callable (a Function's value size is used otherwise).
+    """
+
+    source_field: ClassVar[str] = "source"
+    default_update: ClassVar[str] = "never"
+    default_new_particles: ClassVar[str] = "reinitialise"
+
+    label: str
+    components: int = 1
+
+    @property
+    def column(self) -> str:
+        return self.label
+
+    def size(self, gdim: int) -> int:
+        return source_size(getattr(self, self.source_field), self.components)
+
+    def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
+        values = evaluate_source(getattr(self, self.source_field), swarm, rows, self.size(swarm.gdim), context,
+                                 self.label)
+        write_rows(swarm, self.column, rows, values)

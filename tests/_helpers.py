@@ -1,0 +1,31 @@
+"""Helpers shared by several test modules (``from _helpers import ...``; pytest puts tests/ on the path)."""
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+import dolfinx.mesh
+
+from particles import Swarm
+from particles.evaluation import locate
+
+
+def swarm_at(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike) -> Swarm:
+    """Swarm with particle ``i`` at ``points[i]`` (collective; the same points on every rank).
+
+    Args:
+        mesh: The mesh.
+        points: shape=(m, gdim). A point in no owned cell of any rank is left out; a point on a
+            partition boundary goes to the lowest rank that owns a cell containing it.
+    """
+    swarm = Swarm(mesh)
+    pts = np.asarray(points, dtype=np.float64)
+    found = locate(mesh, pts, geometry=swarm.geometry)
+    mine = (found.cells >= 0) & (found.cells < swarm.num_owned_cells)
+    if mesh.comm.size > 1:
+        owner = np.where(mine, mesh.comm.rank, mesh.comm.size).astype(np.int32)
+        lowest = np.empty_like(owner)
+        mesh.comm.Allreduce(owner, lowest, op=MPI.MIN)
+        mine &= lowest == mesh.comm.rank
+    swarm.add(np.flatnonzero(mine), pts[mine], found.xref[mine], found.cells[mine])
+    return swarm

@@ -13,14 +13,15 @@ default options) built from the same two pieces: :data:`MUMPS_LU` (direct) and
 
 from __future__ import annotations
 
+import itertools
 import weakref
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Mapping, Sequence
+from typing import Any, ClassVar, Iterator, Mapping, Sequence
 
 from petsc4py import PETSc
 
-__all__ = [
+__all__ = ["PetscSolver", 
     "MUMPS_LU",
     "LinearSolver",
     "destroy_petsc_objects",
@@ -103,3 +104,45 @@ def destroy_petsc_objects(owner: object, names: Sequence[str], /) -> None:
         if obj is not None:
             obj.destroy()
             setattr(owner, name, None)
+
+
+class PetscSolver:
+    """Life cycle shared by the PDE solvers: a named linear-solver setup, a PETSc KSP with its own
+    options prefix, explicit destruction, and a copy of the solver on another mesh.
+
+    Subclasses set :attr:`KIND`, :attr:`SOLVERS` (their registry of setups) and
+    :attr:`PETSC_OBJECTS`, call :meth:`_create_ksp` in their constructor and implement
+    :meth:`settings` (the keyword arguments that rebuild them).
+    """
+
+    KIND: ClassVar[str] = "pde"
+    SOLVERS: ClassVar[Mapping[str, LinearSolver]] = {}
+    PETSC_OBJECTS: ClassVar[tuple[str, ...]] = ("ksp",)
+    _instances: ClassVar[Iterator[int]] = itertools.count()
+
+    mesh: Any
+    approximation: Any
+
+    def _create_ksp(self, comm: Any, solver: str, petsc_options: Mapping[str, Any] | None) -> dict[str, Any]:
+        """Check ``solver``, create the KSP under a fresh prefix; returns the full option set."""
+        if solver not in self.SOLVERS:
+            raise ValueError(f"Unknown {self.KIND} solver {solver!r}; valid names: {sorted(self.SOLVERS)}")
+        self.solver = solver
+        self._user_options = dict(petsc_options or {})
+        self._prefix = f"{self.KIND.lower()}{next(PetscSolver._instances)}_"
+        self.ksp = PETSc.KSP().create(comm)
+        self.ksp.setOptionsPrefix(self._prefix)
+        return self.SOLVERS[solver].options_with(petsc_options)
+
+    def settings(self) -> dict[str, Any]:
+        """The keyword arguments that build this solver again (without mesh and approximation)."""
+        raise NotImplementedError
+
+    def on_mesh(self, mesh: Any, /) -> Any:
+        """A solver with the same settings on another mesh (collective; fields zero, no history)."""
+        return type(self)(mesh, self.approximation, **self.settings())
+
+    def destroy(self) -> None:
+        """Free the PETSc solver, matrices and vectors now (collective; see :func:`destroy_petsc_objects`)."""
+        destroy_petsc_objects(self, self.PETSC_OBJECTS)
+

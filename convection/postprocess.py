@@ -72,30 +72,38 @@ class _Forms:
         return self._forms
 
 
-class TimeColumns:
+class _Column:
+    """Default construction: no options; applies to every model unless :meth:`applies` says otherwise."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    columns: tuple[str, ...]
+
+    @classmethod
+    def applies(cls, model: Model) -> bool:
+        return True
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> Any:
+        return cls() if cls.applies(model) else None
+
+
+class TimeColumns(_Column):
     name: ClassVar[str] = "time"
     description: ClassVar[str] = "step number, time and the last step length"
     columns = ("step", "time", "dt")
-
-    @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> TimeColumns:
-        return cls()
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         return {"step": model.timestep, "time": model.time, "dt": model.dt_previous}
 
 
-class Velocity:
+class Velocity(_Column):
     name: ClassVar[str] = "velocity"
     description: ClassVar[str] = "root-mean-square velocity"
     columns = ("vrms",)
 
     def __init__(self) -> None:
         self._forms = _Forms()
-
-    @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> Velocity:
-        return cls()
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         u = model.stokes.u
@@ -106,14 +114,14 @@ class Velocity:
         return {"vrms": float(np.sqrt(_integral(model, forms["u2"]) / _integral(model, forms["volume"])))}
 
 
-class Nusselt:
+class Nusselt(_Column):
     name: ClassVar[str] = "nusselt"
     description: ClassVar[str] = "Nusselt numbers at the top and bottom from the consistent boundary flux"
     columns = ("nusselt", "nusselt_bottom")
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> Nusselt | None:
-        return cls() if model.solve_temperature else None
+    def applies(cls, model: Model) -> bool:
+        return model.solve_temperature
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         assert model.temperature is not None
@@ -121,7 +129,7 @@ class Nusselt:
                 "nusselt_bottom": nusselt(model.temperature, model.stokes.u, "bottom")}
 
 
-class TemperatureStatistics:
+class TemperatureStatistics(_Column):
     name: ClassVar[str] = "temperature"
     description: ClassVar[str] = "volume-mean, minimum and maximum temperature"
     columns = ("T_mean", "T_min", "T_max")
@@ -130,8 +138,8 @@ class TemperatureStatistics:
         self._forms = _Forms()
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> TemperatureStatistics | None:
-        return cls() if model.T is not None else None
+    def applies(cls, model: Model) -> bool:
+        return model.T is not None
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         T = model.T
@@ -146,40 +154,32 @@ class TemperatureStatistics:
         return {"T_mean": _integral(model, forms["T"]) / _integral(model, forms["volume"]), "T_min": lo, "T_max": hi}
 
 
-class MeshStatistics:
+class MeshStatistics(_Column):
     name: ClassVar[str] = "mesh"
     description: ClassVar[str] = "global number of cells"
     columns = ("cells",)
-
-    @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> MeshStatistics:
-        return cls()
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         return {"cells": model.num_cells}
 
 
-class StokesStatistics:
+class StokesStatistics(_Column):
     name: ClassVar[str] = "stokes"
     description: ClassVar[str] = "iterations of the last Stokes solve"
     columns = ("stokes_iterations",)
-
-    @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> StokesStatistics:
-        return cls()
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         return {"stokes_iterations": model.flow_result.iterations if model.flow_result else 0}
 
 
-class ParticleStatistics:
+class ParticleStatistics(_Column):
     name: ClassVar[str] = "particles"
     description: ClassVar[str] = "particle count, lost/added/removed particles, particles per cell min/mean/max"
     columns = ("n_particles", "n_lost", "n_added", "n_removed", "ppc_min", "ppc_mean", "ppc_max")
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> ParticleStatistics | None:
-        return cls() if model.particles is not None else None
+    def applies(cls, model: Model) -> bool:
+        return model.particles is not None
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         manager = model.particles
@@ -189,14 +189,10 @@ class ParticleStatistics:
                 "n_removed": manager.removed, "ppc_min": lo, "ppc_mean": mean, "ppc_max": hi}
 
 
-class LoadStatistics:
+class LoadStatistics(_Column):
     name: ClassVar[str] = "load"
     description: ClassVar[str] = "imbalance (max/mean over ranks) of owned cells and particles"
     columns = ("cell_imbalance", "particle_imbalance")
-
-    @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> LoadStatistics:
-        return cls()
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         swarm = model.particles.swarm if model.particles is not None else None

@@ -24,7 +24,6 @@ Solvers (``solver=``):
 
 from __future__ import annotations
 
-import itertools
 import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -38,8 +37,7 @@ from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import VelocityBC, box_bounds, side_names, velocity_dirichlet_bcs
-from convection.petsc_options import MUMPS_LU, LinearSolver, krylov_options, linear_solvers
-from convection.petsc_options import destroy_petsc_objects, set_owned_options
+from convection.petsc_options import MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options
 
 STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
     LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system", MUMPS_LU),
@@ -66,8 +64,6 @@ STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
 )
 """Registry of Stokes solver kinds (lowercase name -> description and default PETSc options)."""
 
-_instance_counter = itertools.count()
-
 
 def _same_objects(a: Any, b: Any) -> bool:
     """True when ``a`` and ``b`` are the same objects, element by element for tuples and lists."""
@@ -92,11 +88,7 @@ class StokesResult(NamedTuple):
     solve_seconds: float = 0.0
 
 
-def _default_options(solver: str) -> dict[str, Any]:
-    return dict(STOKES_SOLVERS[solver].options)
-
-
-class StokesSolver:
+class StokesSolver(PetscSolver):
     """Stokes solver on a fixed mesh (see the module docstring for equations and solvers).
 
     Args:
@@ -113,26 +105,20 @@ class StokesSolver:
         p: pressure, P(degree-1) Function (zero mean when the pressure has a null space).
     """
 
-    def __init__(
-        self,
-        mesh: dolfinx.mesh.Mesh,
-        approximation: BoussinesqApproximation,
-        /,
-        *,
-        bcs: dict[str, VelocityBC],
-        degree: int = 2,
-        solver: str = "direct",
-        petsc_options: dict | None = None,
-    ) -> None:
-        if solver not in STOKES_SOLVERS:
-            raise ValueError(f"Unknown Stokes solver {solver!r}; valid names: {sorted(STOKES_SOLVERS)}")
+    KIND = "Stokes"
+    SOLVERS = STOKES_SOLVERS
+    PETSC_OBJECTS = ("ksp", "_A", "_P", "_b", "_x", "_null_space")
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
+                 bcs: dict[str, VelocityBC], degree: int = 2, solver: str = "direct",
+                 petsc_options: dict | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)
         self.degree = degree
-        self.solver = solver
+        self._petsc_options = self._create_ksp(mesh.comm, solver, petsc_options)
         cell = mesh.ufl_cell()
         self.V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", cell, degree))
         self.Q = dolfinx.fem.FunctionSpace(mesh, ufl.FiniteElement("Lagrange", cell, degree - 1))
@@ -161,13 +147,8 @@ class StokesSolver:
         self._null_space: PETSc.NullSpace | None = None
         self._operator_current = False
 
-        self._prefix = f"stokes{next(_instance_counter)}_"
-        options = _default_options(solver)
-        options.update(petsc_options or {})
-        self._user_options = dict(petsc_options or {})
-        self._petsc_options = options
-        self.ksp = PETSc.KSP().create(mesh.comm)
-        self.ksp.setOptionsPrefix(self._prefix)
+    def settings(self) -> dict[str, Any]:
+        return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options}
 
     # ------------------------------------------------------------------ setup
     def _pressure_pin(self) -> dolfinx.fem.DirichletBCMetaClass:
@@ -247,11 +228,6 @@ class StokesSolver:
         return is_u, is_p
 
     # ------------------------------------------------------------------ solve
-    def destroy(self) -> None:
-        """Free the PETSc solver, matrices and vectors now (collective; see
-        :func:`convection.petsc_options.destroy_petsc_objects`)."""
-        destroy_petsc_objects(self, ('ksp', '_A', '_P', '_b', '_x', '_null_space'))
-
     def solve(self, T: Any, C: Any = None) -> StokesResult:
         """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
 
@@ -330,11 +306,6 @@ class StokesSolver:
         self.p.x.array[:] -= mean
 
     # ------------------------------------------------------------------ adaptivity
-    def on_mesh(self, mesh: dolfinx.mesh.Mesh, /) -> "StokesSolver":
-        """A solver with the same settings on another mesh (collective; ``u``, ``p`` zero)."""
-        return StokesSolver(mesh, self.approximation, bcs=self.bcs, degree=self.degree, solver=self.solver,
-                            petsc_options=self._user_options)
-
     def transfer_from(
         self,
         old: "StokesSolver",

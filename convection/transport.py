@@ -32,12 +32,11 @@ for the exact solution), so it does not disturb solutions it can represent exact
 
 The same residual ``F`` evaluated at the current solution and tested with a function that is 1 on
 one side's dofs gives the consistent boundary flux ``int_side grad T . n ds``
-(:meth:`TransportSolver.boundary_flux`).
+(:func:`convection.diagnostics.boundary_flux`).
 """
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -56,8 +55,9 @@ from convection.boundary import (
     side_tag,
     temperature_dirichlet_bcs,
 )
-from convection.petsc_options import MUMPS_LU, LinearSolver, krylov_options, linear_solvers
-from convection.petsc_options import destroy_petsc_objects, set_owned_options
+from convection.petsc_options import (
+    MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+)
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -77,8 +77,6 @@ TRANSPORT_SOLVERS: dict[str, LinearSolver] = linear_solvers(
 """Registry of linear solvers for the transport equation (lowercase name -> description and default
 PETSc options)."""
 
-_instance_counter = itertools.count()
-
 
 class TransportResult(NamedTuple):
     """Outcome of :meth:`TransportSolver.step`.
@@ -94,11 +92,7 @@ class TransportResult(NamedTuple):
     dt: float
 
 
-def _default_options(solver: str) -> dict[str, Any]:
-    return dict(TRANSPORT_SOLVERS[solver].options)
-
-
-class TransportSolver:
+class TransportSolver(PetscSolver):
     """Advection-diffusion solver for the temperature (equations in the module docstring).
 
     Args:
@@ -122,36 +116,25 @@ class TransportSolver:
         steps: number of steps taken.
     """
 
-    def __init__(
-        self,
-        mesh: dolfinx.mesh.Mesh,
-        approximation: BoussinesqApproximation,
-        /,
-        *,
-        bcs: dict[str, TemperatureBC],
-        degree: int = 2,
-        stabilisation: str = "supg",
-        solver: str = "iterative",
-        petsc_options: dict | None = None,
-        velocity_extrapolation: bool = True,
-        diffusivity: float = 1.0,
-        heating: bool = True,
-        name: str = "temperature",
-    ) -> None:
+    KIND = "transport"
+    SOLVERS = TRANSPORT_SOLVERS
+    PETSC_OBJECTS = ("ksp", "_A", "_b")
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
+                 bcs: dict[str, TemperatureBC], degree: int = 2, stabilisation: str = "supg",
+                 solver: str = "iterative", petsc_options: dict | None = None, velocity_extrapolation: bool = True,
+                 diffusivity: float = 1.0, heating: bool = True, name: str = "temperature") -> None:
         if diffusivity < 0.0:
             raise ValueError(f"diffusivity must not be negative, got {diffusivity}")
         if stabilisation not in STABILISATIONS:
             raise ValueError(
                 f"Unknown stabilisation {stabilisation!r}; valid names: {sorted(STABILISATIONS)}"
             )
-        if solver not in TRANSPORT_SOLVERS:
-            raise ValueError(f"Unknown energy solver {solver!r}; valid names: {sorted(TRANSPORT_SOLVERS)}")
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)
         self.degree = degree
         self.stabilisation = stabilisation
-        self.solver = solver
         self.velocity_extrapolation = velocity_extrapolation
         self.diffusivity = float(diffusivity)
         self.heating = heating
@@ -176,22 +159,15 @@ class TransportSolver:
         self._a = self._L = None
         self._A: PETSc.Mat | None = None
         self._b: PETSc.Vec | None = None
-        self._flux_forms: dict[tuple[int, str], tuple[Any, Any, Any]] = {}
-        self._side_forms: dict[str, tuple[Any, Any]] = {}
-
-        self._prefix = f"energy{next(_instance_counter)}_"
-        options = _default_options(solver)
-        options.update(petsc_options or {})
-        self._user_options = dict(petsc_options or {})
+        self.forms: dict[Any, Any] = {}  # compiled forms of diagnostics on these fields (convection.diagnostics)
         self.name = name
+        options = self._create_ksp(mesh.comm, solver, petsc_options)
         set_owned_options(self, self._prefix, options)
-        self.ksp = PETSc.KSP().create(mesh.comm)
-        self.ksp.setOptionsPrefix(self._prefix)
 
-    def destroy(self) -> None:
-        """Free the PETSc solver, matrices and vectors now (collective; see
-        :func:`convection.petsc_options.destroy_petsc_objects`)."""
-        destroy_petsc_objects(self, ('ksp', '_A', '_b'))
+    def settings(self) -> dict[str, Any]:
+        return {"bcs": self.bcs, "degree": self.degree, "stabilisation": self.stabilisation, "solver": self.solver,
+                "petsc_options": self._user_options, "velocity_extrapolation": self.velocity_extrapolation,
+                "diffusivity": self.diffusivity, "heating": self.heating, "name": self.name}
 
     # ------------------------------------------------------------------ forms
     def residual(self, T_new: Any, T_n: Any, T_nm1: Any, u: Any, w: Any, dt: Any, coef: Any) -> Any:
@@ -310,48 +286,14 @@ class TransportSolver:
         iterations = self.ksp.getIterationNumber() if self.solver == "iterative" else 1
         return TransportResult(int(iterations), order, float(dt))
 
-    # ------------------------------------------------------------------ fluxes
-    def boundary_flux(self, u: dolfinx.fem.Function, side: str) -> float:
-        """Consistent boundary flux ``int_side grad T . n ds`` (``n`` the outward normal). Collective.
-
-        Computed as the residual ``F(T; w)`` of the last step's weak form (module docstring, with
-        ``u`` as velocity and the last step's BDF time derivative; zero time derivative before
-        the first step), tested with ``w`` = 1 on the side's dofs and 0 elsewhere. For a
-        Dirichlet side this is the flux conjugate to the discrete solution, exact for fields the
-        space represents (e.g. the conduction profile).
-        """
-        key = (id(u), side)
-        if key not in self._flux_forms or self._flux_forms[key][2] is not u:
-            w = dolfinx.fem.Function(self.V)
-            w.x.array[locate_side_dofs(self.V, side)] = 1.0
-            F = self.residual(self.T, self.T_old, self.T_old2, u, w, self._dt_last, self._coef_last)
-            self._flux_forms[key] = (dolfinx.fem.form(F), w, u)
-        form = self._flux_forms[key][0]
-        return float(self.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM))
-
-    def side_integral(self, side: str) -> tuple[float, float]:
-        """``(int_side T ds, int_side 1 ds)`` over the whole mesh. Collective."""
-        if side not in self._side_forms:
-            tags = side_facet_tags(self.mesh)
-            ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=tags)(
-                side_tag(side, self.mesh.geometry.dim)
-            )
-            one = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(1.0))
-            self._side_forms[side] = (dolfinx.fem.form(self.T * ds), dolfinx.fem.form(one * ds))
-        values = np.array([dolfinx.fem.assemble_scalar(f) for f in self._side_forms[side]])
-        total = np.empty_like(values)
-        self.mesh.comm.Allreduce(values, total, op=MPI.SUM)
-        return float(total[0]), float(total[1])
+    def last_step_residual(self, u: Any, w: Any, /) -> Any:
+        """UFL residual ``F(T; w)`` of the last step taken (module docstring) with velocity ``u``:
+        the last step's BDF time derivative, zero before the first step. Tested with a function
+        that is 1 on a side's dofs it gives the consistent boundary flux
+        (:func:`convection.diagnostics.boundary_flux`)."""
+        return self.residual(self.T, self.T_old, self.T_old2, u, w, self._dt_last, self._coef_last)
 
     # ------------------------------------------------------------------ adaptivity
-    def on_mesh(self, mesh: dolfinx.mesh.Mesh, /) -> "TransportSolver":
-        """A solver with the same settings on another mesh (collective; fields zero, no history)."""
-        return TransportSolver(
-            mesh, self.approximation, bcs=self.bcs, degree=self.degree, stabilisation=self.stabilisation,
-            solver=self.solver, petsc_options=self._user_options, velocity_extrapolation=self.velocity_extrapolation,
-            diffusivity=self.diffusivity, heating=self.heating, name=self.name,
-        )
-
     def transfer_from(
         self,
         old: "TransportSolver",

@@ -267,6 +267,7 @@ class ParticleManager:
         self.properties.initialise(context if context is not None else PropertyContext())
         self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes())
         self._tracked: dict[str, _Tracked] = {}
+        self._space: dolfinx.fem.FunctionSpace | None = None
         self._last_output: tuple[int, float] | None = None
         self._next_output_time = float("inf")
         self._bound(step=0, salt=0)
@@ -371,10 +372,12 @@ class ParticleManager:
             raise KeyError(f"no tracked particle field {label!r}; tracked: {sorted(self._tracked)}") from None
 
     def _new_field(self, label: str) -> dolfinx.fem.Function:
-        discontinuous = self.field_degree == 0 or self.interpolator.name in ("cell_average", "least_squares")
-        family = "DG" if discontinuous else "Lagrange"
-        space = dolfinx.fem.FunctionSpace(self.mesh, (family, self.field_degree))
-        return dolfinx.fem.Function(space, name=label)
+        """A Function for a tracked field; all tracked fields of one mesh share one space."""
+        if self._space is None or self._space.mesh is not self.mesh:
+            discontinuous = self.field_degree == 0 or self.interpolator.name in ("cell_average", "least_squares")
+            family = "DG" if discontinuous else "Lagrange"
+            self._space = dolfinx.fem.FunctionSpace(self.mesh, (family, self.field_degree))
+        return dolfinx.fem.Function(self._space, name=label)
 
     def _interpolate(self, tracked: _Tracked) -> None:
         t0 = time.perf_counter()

@@ -8,19 +8,23 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
-import pyvista as pv
 from mpi4py import MPI
 
 import dolfinx.fem
 import dolfinx.mesh
 
 from convection.output import FieldOutput
+from convection.plot import import_pyvista
 from particles import Swarm
 from particles.generation import generate
 from particles.output import ParticleWriter
+
+if TYPE_CHECKING:
+    import pyvista as pv
 
 
 def _shared_dir(tmp_path: Path, comm: MPI.Intracomm) -> Path:
@@ -60,7 +64,7 @@ def _check_time(grid: pv.DataSet, t: float, cells: int, points: int) -> list[str
 
 def _read_series(path: Path, expected: dict[float, tuple[int, int]]) -> list[str]:
     """Failures of the series at ``path`` against {time: (global cells, global points)}."""
-    reader = pv.get_reader(str(path))
+    reader = import_pyvista().get_reader(str(path))  # not `import pyvista`: see import_pyvista
     times = list(reader.time_values)
     if not np.allclose(times, sorted(expected)):
         return [f"time values {times}, expected {sorted(expected)}"]
@@ -142,7 +146,7 @@ def _particle_series(tmp_path: Path, comm: MPI.Intracomm, vector_size: int = 3) 
         writer.write(swarm, t, step)
     errors: list[str] = []
     if comm.rank == 0:
-        reader = pv.get_reader(str(directory / "particles.xdmf"))
+        reader = import_pyvista().get_reader(str(directory / "particles.xdmf"))
         if list(reader.time_values) != list(times):
             errors.append(f"time values {reader.time_values}")
         for t in times:

@@ -1,19 +1,34 @@
 """Field output to XDMF (ParaView) on meshes that change with adaptivity.
 
-XDMF ties a time series to one mesh, so each mesh gets its own file: ``fields_000.xdmf`` for the
-first mesh, ``fields_001.xdmf`` after the first adaptation that changed the mesh, and so on (open
-them together in ParaView). Higher-degree fields are interpolated to P1 at the vertices; DG0 fields
-are written as cell data.
+XDMF as written by :class:`dolfinx.io.XDMFFile` ties a time series to one mesh, so each mesh gets
+its own file: ``fields_000.xdmf`` (+ ``.h5``) for the first mesh, ``fields_001.xdmf`` after the
+first adaptation that changed the mesh, and so on. Higher-degree fields are interpolated to P1 at
+the vertices (point data); DG0 fields are written as cell data.
+
+Beside them, ``fields.xdmf`` lists every written time in ONE Temporal collection: one Uniform grid
+per time, referencing the mesh (geometry, topology) of that time's epoch file and that time's
+function datasets in the epoch ``.h5`` files. ParaView (or ``pyvista.get_reader``) opens the whole
+run in one go, each time on its own mesh.
+
+The epoch file is closed after every write (and reopened in append mode for the next one): HDF5
+locks a file that is open for writing, and only a closed file is complete on disk, so everything
+``fields.xdmf`` references can be read at any moment, also while the run goes on. Rank 0 rewrites
+``fields.xdmf`` atomically (temporary file + ``os.replace``) after each write.
 """
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Mapping
+
+import h5py
 
 import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
+
+from particles.output import atomic_write_text
 
 __all__ = ["FieldOutput"]
 
@@ -21,9 +36,22 @@ __all__ = ["FieldOutput"]
 class FieldOutput:
     """Writes named Functions every call, starting a new file when the mesh changes (collective).
 
+    Files in ``directory``: ``{prefix}_{epoch:03d}.xdmf`` and ``.h5`` per mesh, and
+    ``{prefix}.xdmf``, the time series over all meshes. A new :class:`FieldOutput` starts a new
+    series (existing files of the same names are overwritten).
+
     Args:
-        directory: Output folder.
+        directory: Output folder (must exist).
         prefix: File name prefix.
+
+    Attributes:
+        files: The per-mesh ``.xdmf`` files written so far, in order.
+        series_path: The time series over all meshes, ``{directory}/{prefix}.xdmf``.
+
+    Example:
+        >>> out = FieldOutput("run")
+        >>> out.write({"temperature": T, "velocity": u}, t)
+        >>> out.close()
     """
 
     def __init__(self, directory: str | Path, /, *, prefix: str = "fields") -> None:
@@ -34,6 +62,8 @@ class FieldOutput:
         self._file: dolfinx.io.XDMFFile | None = None
         self._out: dict[str, dolfinx.fem.Function] = {}
         self.files: list[Path] = []
+        self.series_path = self.directory / f"{prefix}.xdmf"
+        self._grids: list[tuple[float, ET.Element]] = []
 
     def _open(self, mesh: dolfinx.mesh.Mesh) -> None:
         self.close()
@@ -63,15 +93,102 @@ class FieldOutput:
         return out
 
     def write(self, functions: Mapping[str, dolfinx.fem.Function], t: float) -> None:
-        """Write every Function (all on one mesh) at time ``t``."""
+        """Write every Function (all on one mesh) at time ``t`` (collective).
+
+        Adds ``t`` to the current mesh's file (a new file if the mesh changed since the last
+        write), closes that file, then adds a grid for ``t`` to the series ``{prefix}.xdmf``.
+        Writing a time that is already in the series replaces its grid there.
+
+        Args:
+            functions: Name -> Function; the names become the field names in the files.
+            t: Simulation time.
+
+        Raises:
+            ValueError: ``functions`` is empty.
+            RuntimeError: Rank 0 could not write the series file (raised on every rank).
+        """
+        if not functions:
+            raise ValueError("FieldOutput.write needs at least one Function")
         mesh = next(iter(functions.values())).function_space.mesh
         if mesh is not self._mesh:
             self._open(mesh)
+        elif self._file is None:
+            self._file = dolfinx.io.XDMFFile(mesh.comm, str(self.files[-1]), "a")
         assert self._file is not None
         for name, f in functions.items():
-            self._file.write_function(self._output_function(name, f), t)
+            self._file.write_function(self._output_function(name, f), float(t))
+        self.close()
+        error = None
+        if mesh.comm.rank == 0:
+            try:
+                self._add_grid(self.files[-1], list(functions), float(t))
+                atomic_write_text(self.series_path, self._series_text())
+            except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
+                error = f"{type(exc).__name__}: {exc}"
+        error = mesh.comm.bcast(error, root=0)
+        if error is not None:
+            raise RuntimeError(f"could not write {self.series_path}: {error}")
 
     def close(self) -> None:
+        """Close the current mesh's file (collective; :meth:`write` reopens it when needed)."""
         if self._file is not None:
             self._file.close()
             self._file = None
+
+    # ------------------------------------------------------------------ series (rank 0 only)
+    def _add_grid(self, epoch_file: Path, names: list[str], t: float) -> None:
+        """Append the grid of time ``t`` built from the epoch file that dolfinx just wrote."""
+        domain = ET.parse(epoch_file).getroot().find("Domain")
+        if domain is None:
+            raise ValueError(f"{epoch_file.name} has no Domain")
+        mesh_grid = next((g for g in domain.findall("Grid") if g.get("GridType") == "Uniform"), None)
+        if mesh_grid is None:
+            raise ValueError(f"{epoch_file.name} has no mesh grid")
+        grid = ET.Element("Grid", Name=f"{self.prefix}_{len(self._grids):06d}", GridType="Uniform")
+        ET.SubElement(grid, "Time", Value=repr(t))
+        for tag in ("Topology", "Geometry"):
+            node = mesh_grid.find(tag)
+            if node is None:
+                raise ValueError(f"{epoch_file.name}: mesh grid without {tag}")
+            grid.append(node)
+        collections = {g.get("Name"): g for g in domain.findall("Grid") if g.get("GridType") == "Collection"}
+        for name in names:
+            steps = collections[name].findall("Grid") if name in collections else []
+            if not steps:
+                raise ValueError(f"{epoch_file.name} has no time series '{name}'")
+            # dolfinx appended this write's time last; its Time is the double printed in full.
+            written = float(steps[-1].find("Time").get("Value"))
+            if written != t:
+                raise ValueError(f"{epoch_file.name}: last '{name}' is at t = {written!r}, expected {t!r}")
+            grid.extend(steps[-1].findall("Attribute"))
+        _declare_types(grid, self.directory)
+        self._grids = [(s, g) for s, g in self._grids if s != t] + [(t, grid)]
+
+    def _series_text(self) -> str:
+        root = ET.Element("Xdmf", Version="3.0")
+        domain = ET.SubElement(root, "Domain")
+        series = ET.SubElement(domain, "Grid", Name=self.prefix, GridType="Collection", CollectionType="Temporal")
+        series.extend(g for _, g in self._grids)
+        ET.indent(root)
+        return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _declare_types(grid: ET.Element, directory: Path) -> None:
+    """Give every HDF DataItem of ``grid`` the NumberType and Precision of its dataset.
+
+    dolfinx leaves them out, and XDMF readers then assume 4-byte floats (VTK converts the
+    doubles to float32 on reading); the datasets' own types keep the values exact.
+    """
+    items = [item for item in grid.iter("DataItem") if item.get("Format") == "HDF" and item.text]
+    files: dict[str, list[tuple[ET.Element, str]]] = {}
+    for item in items:
+        h5name, _, dataset = item.text.strip().partition(":")
+        files.setdefault(h5name, []).append((item, dataset))
+    for h5name, entries in files.items():
+        with h5py.File(directory / h5name, "r") as h5:
+            for item, dataset in entries:
+                dtype = h5[dataset].dtype
+                kind = {"f": "Float", "i": "Int", "u": "UInt"}.get(dtype.kind)
+                if kind is not None:
+                    item.set("NumberType", kind)
+                    item.set("Precision", str(dtype.itemsize))

@@ -211,7 +211,9 @@ class OutputRecord(NamedTuple):
 
 
 def _attribute_type(k: int) -> str:
-    return {1: "Scalar", 3: "Vector", 6: "Tensor6", 9: "Tensor"}.get(k, "Matrix")
+    """XDMF AttributeType of a k-column property; 2 columns (2D vectors) are declared ``Vector``,
+    which VTK's XdmfReader reads as one (zero-padded) vector per particle."""
+    return {1: "Scalar", 2: "Vector", 3: "Vector", 6: "Tensor6", 9: "Tensor"}.get(k, "Matrix")
 
 
 def _data_item(h5name: str, dataset: str, shape: tuple[int, ...], dtype: np.dtype) -> ET.Element:

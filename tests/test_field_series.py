@@ -176,10 +176,6 @@ def test_particle_series_parallel(tmp_path):
     _particle_series(tmp_path, MPI.COMM_WORLD)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "ParticleWriter declares 2-component properties AttributeType='Matrix', which VTK's XdmfReader "
-    "reads as one tuple of 2N values; declared 'Vector' (Dimensions 'N 2') VTK reads them as N "
-    "zero-padded 3-vectors"))
 @pytest.mark.filterwarnings("ignore:UnstructuredGrid mesh is not valid")
 def test_particle_series_two_component_property(tmp_path):
     _particle_series(tmp_path, MPI.COMM_WORLD, vector_size=2)

@@ -19,7 +19,7 @@ from convection.launch import cli_command, mpi_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 
-__all__ = ["ROOT", "CliRun", "read_reference", "sample", "start_cli_run"]
+__all__ = ["ROOT", "CliRun", "curves_figure", "read_reference", "sample", "start_cli_run"]
 
 # Exit codes of a run stopped by its wall-time limit: coreutils timeout (124) or the CLI's own
 # 128 + SIGTERM when the signal reached it first.
@@ -92,3 +92,25 @@ def sample(stats: dict[str, np.ndarray], key: str, times: Sequence[float], /) ->
     values = np.interp(np.asarray(times, dtype=np.float64), t, stats[key])
     values[np.asarray(times) > t[-1] * (1 + 1e-12)] = np.nan
     return values
+
+
+def curves_figure(png: Path, curves: Sequence[tuple[np.ndarray, np.ndarray, str, dict]], /, *, xlabel: str,
+                  ylabel: str, title: str = "", size: tuple[float, float] = (7.0, 4.5)) -> Path:
+    """Draw ``(x, y, label, style)`` curves (style: matplotlib keyword arguments) into ``png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=size, constrained_layout=True)
+    for x, y, label, style in curves:
+        ax.plot(x, y, label=label, **style)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+

@@ -109,7 +109,8 @@ def material_index(fractions: Sequence[dolfinx.fem.Function], /, *, name: str = 
     space = fractions[0].function_space
     out = dolfinx.fem.Function(space, name=name)
     for i, c in enumerate(fractions, start=1):
-        if c.function_space != space:
-            raise ValueError("all material fractions must live in one function space")
+        same = c.function_space.mesh is space.mesh and c.function_space.ufl_element() == space.ufl_element()
+        if not same:  # the same element on the same mesh numbers its dofs the same way
+            raise ValueError("all material fractions must live in one function space (element and mesh)")
         out.x.array[:] += i * c.x.array
     return out

@@ -29,3 +29,14 @@ def swarm_at(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike) -> Swarm:
         mine &= lowest == mesh.comm.rank
     swarm.add(np.flatnonzero(mine), pts[mine], found.xref[mine], found.cells[mine])
     return swarm
+
+
+def gathered(swarm: Swarm) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Ids, positions and property table of every particle on every rank, sorted by id (collective)."""
+    comm = swarm.comm
+    ids = np.concatenate(comm.allgather(swarm.ids))
+    x = np.concatenate(comm.allgather(swarm.x))
+    props = np.concatenate(comm.allgather(swarm.properties))
+    order = np.argsort(ids)
+    return ids[order], x[order], props[order]
+

@@ -38,6 +38,14 @@ CASES = {
     "negative end time": (["run", str(GOOD), "--set", "time.end=-1"], "time.end"),
     "bad choice": (["run", str(GOOD), "--set", "stokes.solver=magic"], "stokes.solver"),
     "bad expression": (["run", str(GOOD), "--set", "initial.temperature=1-q"], "initial.temperature"),
+    "negative particles per cell": (["run", str(GOOD), "--set", "particles.generator.particles_per_cell=-5"],
+                                    "particles.generator"),
+    "missing particle file": (["run", str(GOOD), "--set", "particles.generator={name: from_file, path: nowhere.txt}"],
+                              "'nowhere.txt' not found"),
+    "unknown particle property": (["run", str(GOOD), "--set", "particles.properties=[velocity, strain]"],
+                                  "particles.properties[1]"),
+    "unknown material key": (["run", str(GOOD), "--set", "materials={lid: {initial: 'z > 0.8', density: 1}}"],
+                             "materials.lid.density"),
 }
 
 

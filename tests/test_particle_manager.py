@@ -15,6 +15,8 @@ from particles.output import ParticleWriter
 from particles.population import PopulationControl
 from particles.properties import InitialComposition, PropertyContext
 
+from _helpers import gathered
+
 
 def _mesh(comm, n=8):
     return dolfinx.mesh.create_unit_square(comm, n, n, ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
@@ -45,16 +47,6 @@ def _manager(mesh, tmp=None, **kwargs):
     return ParticleManager(mesh, generator=build_generator({"name": "random_uniform", "particles_per_cell": 10, "seed": 3},
                                                            num_cells=mesh.topology.index_map(2).size_global),
                            context=PropertyContext(u_new=_rotation(mesh)), **kwargs)
-
-
-def _gather(manager):
-    swarm = manager.swarm
-    comm = swarm.comm
-    ids = np.concatenate(comm.allgather(swarm.ids))
-    x = np.concatenate(comm.allgather(swarm.x))
-    props = np.concatenate(comm.allgather(swarm.properties))
-    order = np.argsort(ids)
-    return ids[order], x[order], props[order]
 
 
 def _steps(manager, u, n, dt=0.05):
@@ -137,7 +129,9 @@ def test_population_bounds_after_refinement_and_output(tmp_path):
     assert manager.particles_per_cell()[0] >= 6 and manager.particles_per_cell()[2] <= 14
     written = sorted(p.name for p in tmp_path.glob("particles_*.h5"))
     assert written == ["particles_000000.h5", "particles_000002.h5", "particles_000004.h5", "particles_000005.h5"]
-    pv = pytest.importorskip("pyvista")
+    from convection.plot import import_pyvista
+
+    pv = import_pyvista()  # VTK loaded so that it works beside DOLFINx
     reader = pv.get_reader(str(tmp_path / "particles.xdmf"))
     assert len(reader.time_values) == 4
     reader.set_active_time_value(reader.time_values[-1])
@@ -152,8 +146,8 @@ def test_population_bounds_independent_of_ranks(tmp_path_factory):
     comm = MPI.COMM_WORLD
     parallel, bounds = _bounded_run(comm, None)
     serial, _ = _bounded_run(MPI.COMM_SELF, None)
-    ids_p, x_p, props_p = _gather(parallel)
-    ids_s, x_s, props_s = _gather(serial)
+    ids_p, x_p, props_p = gathered(parallel.swarm)
+    ids_s, x_s, props_s = gathered(serial.swarm)
     ok = (bounds[0] >= 6 and bounds[2] <= 14 and np.array_equal(ids_p, ids_s)
           and np.allclose(x_p, x_s, rtol=0, atol=1e-13) and np.allclose(props_p, props_s, rtol=0, atol=1e-12))
     assert comm.allreduce(ok, op=MPI.LAND)

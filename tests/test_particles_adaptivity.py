@@ -8,14 +8,7 @@ from particles import Swarm
 from particles.adaptivity import move_to_mesh
 from particles.generation import generate
 
-
-def _gathered(swarm):
-    comm = swarm.comm
-    ids = np.concatenate(comm.allgather(swarm.ids))
-    x = np.concatenate(comm.allgather(swarm.x))
-    props = np.concatenate(comm.allgather(swarm.properties))
-    order = np.argsort(ids)
-    return ids[order], x[order], props[order]
+from _helpers import gathered
 
 
 def _check_adaptations(comm):
@@ -25,7 +18,7 @@ def _check_adaptations(comm):
     swarm.add_property("tag", 2)
     generate(swarm, "random_uniform", num_particles=3000, seed=7)
     swarm.property("tag")[:] = np.column_stack([swarm.ids, swarm.x[:, 0]])
-    ids0, x0, props0 = _gathered(swarm)
+    ids0, x0, props0 = gathered(swarm)
     rng = np.random.default_rng(3)  # same stream on every rank: wanted levels from a global rule
     mesh = base
     cell_counts = []
@@ -43,7 +36,7 @@ def _check_adaptations(comm):
         assert np.all(swarm.geometry.inside(swarm.xref))
         assert np.allclose(swarm.geometry.push_forward(swarm.cells, swarm.xref), swarm.x, rtol=0, atol=1e-12)
         cell_counts.append(mesh.topology.index_map(2).size_global)
-    ids, x, props = _gathered(swarm)
+    ids, x, props = gathered(swarm)
     assert np.array_equal(ids, ids0)
     assert np.array_equal(x, x0) and np.array_equal(props, props0)
     assert len(set(cell_counts)) > 3 and min(cell_counts) < max(cell_counts)  # refined and coarsened

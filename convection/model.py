@@ -207,14 +207,15 @@ class Model:
         """Adapt the mesh once (needs ``adaptivity``) and carry everything to it. Returns the global
         cell counts before and after."""
         assert self.adaptivity is not None
+        before = self.num_cells
         with self.timers("adaptation"):
-            before = self.num_cells
             fields = []
             if "temperature" in self.adaptivity.fields and self.T is not None:
                 fields.append(self.T)
             if "composition" in self.adaptivity.fields:
                 fields.extend(self.fractions)
-            self._move_to(self.adaptivity.new_mesh(self.mesh, fields or [self._indicator_fallback()]))
+            mesh = self.adaptivity.new_mesh(self.mesh, fields or [self._indicator_fallback()])
+        self._move_to(mesh)
         return before, self.num_cells
 
     def _indicator_fallback(self) -> dolfinx.fem.Function:
@@ -233,11 +234,23 @@ class Model:
         assert self.balancer is not None
         with self.timers("balancing"):
             before = self.balancer.loads(self.mesh, self._swarm())
-            self._move_to(self.balancer.new_mesh(self.mesh, self._swarm()))
-            return before, self.balancer.loads(self.mesh, self._swarm())
+            mesh = self.balancer.new_mesh(self.mesh, self._swarm())
+        self._move_to(mesh)
+        return before, self.balancer.loads(self.mesh, self._swarm())
 
     def _move_to(self, mesh: dolfinx.mesh.Mesh) -> None:
         """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles."""
+        with self.timers("field_transfer"):
+            old = self._transfer_fields(mesh)
+        if self.particles is not None:  # the manager times its own move
+            self.particles.to_mesh(mesh, context=self.property_context(), step=self.timestep)
+        for solver in old:
+            if solver is not None:
+                solver.destroy()
+        self.mesh_version += 1
+
+    def _transfer_fields(self, mesh: dolfinx.mesh.Mesh) -> list:
+        """New solvers on ``mesh`` with the fields carried over; returns the old solvers."""
         evaluator = PointEvaluator(self.mesh)
 
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
@@ -255,12 +268,7 @@ class Model:
             self.u_previous = u_previous
         if self.composition is not None:
             self.composition.to_mesh(mesh, transfer)
-        if self.particles is not None:
-            self.particles.to_mesh(mesh, context=self.property_context(), step=self.timestep)
-        for solver in old:
-            if solver is not None:
-                solver.destroy()
-        self.mesh_version += 1
+        return old
 
     def destroy(self) -> None:
         """Free the solvers' PETSc objects now, on every rank together."""

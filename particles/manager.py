@@ -75,7 +75,7 @@ MakeFunction = Callable[[str], PointFunction]
 _FUNCTION_PARAMETERS = ("function", "source", "density")
 
 TIMING_PHASES: tuple[str, ...] = (
-    "particle_advection", "particle_sort", "particle_migration", "particle_population",
+    "particle_advection", "particle_sort", "particle_migration", "particle_mesh_change", "particle_population",
     "particle_properties", "particle_interpolation", "particle_output",
 )
 """Phases of :attr:`ParticleManager.timings` (seconds, summed over calls on this rank)."""
@@ -462,7 +462,7 @@ class ParticleManager:
         """
         t0 = time.perf_counter()
         self.swarm, stats = move_to_mesh(self.swarm, mesh)
-        self.timings["particle_migration"] += time.perf_counter() - t0
+        self.timings["particle_mesh_change"] += time.perf_counter() - t0
         self.lost += stats.lost
         self.properties.attach(self.swarm)
         if context is not None:

@@ -12,7 +12,7 @@ py="$(bash scripts/setup.sh | tail -n 1)"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 ranks="${RANKS:-2}"
 "$py" benchmarks/vanKeken/run.py --case 1a --ranks "$ranks" --end 300 --out output/vanKeken_1a \
-    --set output.fields_every=25 --set particles.output.every_time=100 \
+    --set output.fields_every=10 --set particles.output.every_time=100 \
     --set "particles.output.properties=[composition]" "$@"
 # Snapshots of the composition with the particles on top (output/vanKeken_1a/1a/snapshots/).
 "$py" -m convection.plot output/vanKeken_1a/1a --times 0 100 200 300

@@ -198,6 +198,15 @@ SCHEMA: dict[str, Any] = {
         "method": Field("str", "rcb", choices=_names("convection.balance", "PARTITIONERS"),
                         help="rcb: recursive bisection balancing cells and particles; morton: space-filling-curve blocks"),
     },
+    "blowup": {
+        "vrms_growth": Field("float", 1.0e3, nullable=True, exclusive_minimum=1.0,
+                             help="fail when vrms grows by more than this factor in one step"),
+        "max_vrms": Field("float", None, nullable=True, exclusive_minimum=0.0, help="fail when vrms exceeds this"),
+        "temperature_margin": Field("float", 1.0, nullable=True, minimum=0.0,
+                                    help="fail when T leaves the initial range widened by this many times its width"),
+        "lost_fraction": Field("float", 1.0e-3, nullable=True, minimum=0.0,
+                               help="fail when more than this fraction of the particles is lost"),
+    },
     "diagnostics": {
         "entrainment_material": Field("str", None, nullable=True,
                                       help="material whose entrainment is reported: a material name, all, or with "
@@ -209,6 +218,13 @@ SCHEMA: dict[str, Any] = {
         "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
         "statistics": Field("list[str]", None, nullable=True, choices=_names("convection.postprocess", "POSTPROCESSORS"),
                             help="postprocessors whose columns statistics.csv holds (null: all that apply)"),
+        "checkpoint": {
+            "every_steps": Field("int", None, nullable=True, minimum=1, help="write a checkpoint every N steps"),
+            "every_wall_seconds": Field("float", 3600.0, nullable=True, exclusive_minimum=0.0,
+                                        help="write a checkpoint when this much wall time passed since the last"),
+            "keep": Field("int", 2, minimum=1, help="how many of the newest checkpoints are kept"),
+            "at_end": Field("bool", True, help="also write one at the end and when stopped by a signal"),
+        },
         "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none")),
         "progress_every": Field("int", 10, minimum=1, help="steps between progress lines"),
     },

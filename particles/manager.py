@@ -229,6 +229,7 @@ class ParticleManager:
         writer: Particle output, or None.
         output: When :meth:`update` writes (requires ``writer``).
         context: Fields for the properties' initial values (e.g. the initial temperature).
+        generate_particles: False starts with no particles (e.g. to :meth:`adopt` restored ones).
     """
 
     def __init__(
@@ -245,6 +246,7 @@ class ParticleManager:
         writer: ParticleWriter | None = None,
         output: OutputSchedule = OutputSchedule(),
         context: PropertyContext | None = None,
+        generate_particles: bool = True,
     ) -> None:
         get_integrator(integrator)  # ValueError listing the valid names
         if output.enabled and writer is None:
@@ -263,14 +265,16 @@ class ParticleManager:
         self.removed = 0
         self.swarm = Swarm(mesh)
         self.properties = PropertyManager(self.swarm, properties)
-        self.generation: GenerationResult = generate(self.swarm, generator)
-        self.properties.initialise(context if context is not None else PropertyContext())
         self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes())
         self._tracked: dict[str, _Tracked] = {}
         self._space: dolfinx.fem.FunctionSpace | None = None
         self._last_output: tuple[int, float] | None = None
         self._next_output_time = float("inf")
-        self._bound(step=0, salt=0)
+        self.generation = GenerationResult(0, 0, 0)
+        if generate_particles:
+            self.generation = generate(self.swarm, generator)
+            self.properties.initialise(context if context is not None else PropertyContext())
+            self._bound(step=0, salt=0)
 
     # ------------------------------------------------------------------ construction from a config
     @classmethod
@@ -285,6 +289,7 @@ class ParticleManager:
         make_function: MakeFunction | None = None,
         field_degree: int = 0,
         context: PropertyContext | None = None,
+        generate_particles: bool = True,
     ) -> ParticleManager:
         """One manager from one config section (collective).
 
@@ -304,6 +309,7 @@ class ParticleManager:
             make_function: Text -> function of the position.
             field_degree: Degree of tracked fields.
             context: Fields for the initial property values.
+            generate_particles: False: no particles yet (see :meth:`adopt`).
         """
         num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
         generator = build_generator(section.get("generator") or {"name": "random_uniform", "particles_per_cell": 20},
@@ -325,7 +331,8 @@ class ParticleManager:
             writer = ParticleWriter(directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
         return cls(mesh, generator=generator, integrator=str(section.get("integrator") or "rk2"),
                    properties=properties, interpolator=interpolator, field_degree=field_degree,
-                   population=population, writer=writer, output=schedule, context=context)
+                   population=population, writer=writer, output=schedule, context=context,
+                   generate_particles=generate_particles)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -446,6 +453,30 @@ class ParticleManager:
         self._next_output_time = self.output.next_time(t)
         self.timings["particle_output"] += time.perf_counter() - t0
         return record
+
+    # ------------------------------------------------------------------ checkpoints
+    def counters(self) -> dict[str, Any]:
+        """What a checkpoint needs besides the swarm (JSON-able): counters, output schedule, timings."""
+        return {"lost": self.lost, "added": self.added, "removed": self.removed,
+                "last_output": list(self._last_output) if self._last_output else None,
+                "next_output_time": self._next_output_time, "timings": dict(self.timings)}
+
+    def adopt(self, swarm: Swarm, counters: dict[str, Any], /, *, context: PropertyContext) -> None:
+        """Continue with ``swarm`` (e.g. restored from a checkpoint, with this manager's property
+        columns) and the saved :meth:`counters`; rebuilds the tracked fields (collective)."""
+        self.swarm = swarm
+        self.properties.attach(swarm)
+        self.properties.set_context(context)
+        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes())
+        self.lost, self.added, self.removed = int(counters["lost"]), int(counters["added"]), int(counters["removed"])
+        last = counters["last_output"]
+        self._last_output = (int(last[0]), float(last[1])) if last else None
+        self._next_output_time = float(counters["next_output_time"])
+        self.timings.update(counters["timings"])
+        self._space = None
+        for tracked in self._tracked.values():
+            tracked.function = self._new_field(tracked.function.name)
+            self._interpolate(tracked)
 
     # ------------------------------------------------------------------ mesh changes
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, /, *, context: PropertyContext | None = None, step: int = 0) -> int:

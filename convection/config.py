@@ -93,6 +93,8 @@ SCHEMA: dict[str, Any] = {
         "upper": Field("list[float]", None, nullable=True, length=(2, 3), help="upper box corner (default 1)"),
         "cell_type": Field("str", "simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes"),
         "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left")),
+        "max_cells": Field("int", 2_000_000, minimum=1,
+                           help="refuse configs whose mesh can grow beyond this many cells (base x refinement)"),
     },
     "physics": {
         "Ra": Field("float", REQUIRED, minimum=0.0, help="thermal Rayleigh number"),
@@ -263,10 +265,49 @@ def _check_consistency(config: dict[str, Any]) -> None:
         text = config["initial"][key]
         if text is not None:
             try:
-                Expression(text, constants=expression_constants(config), gdim=gdim)
+                Expression(text, constants=expression_constants(config), gdim=gdim).check(_sample_points(lower, upper))
             except ExpressionError as err:
                 raise ConfigError(f"config key 'initial.{key}': {err}") from None
+    _check_size(config)
     _check_particles(config)
+
+
+def _sample_points(lower: list[float], upper: list[float]) -> Any:
+    """Corners, edge midpoints and centre of the box, shape=(3, n) (where expressions are checked)."""
+    import itertools
+
+    import numpy as np
+
+    axes = [np.array([lo, 0.5 * (lo + hi), hi]) for lo, hi in zip(lower, upper)]
+    points = np.array(list(itertools.product(*axes))).T
+    return np.vstack([points, np.zeros((3 - points.shape[0], points.shape[1]))])
+
+
+SIMPLICES_PER_BOX = {2: 2, 3: 6}
+
+
+def _check_size(config: dict[str, Any]) -> None:
+    """Refuse meshes (and particle counts) that would exhaust the machine, naming the estimate."""
+    mesh, adapt = config["mesh"], config["adaptivity"]
+    gdim = len(mesh["cells"])
+    base = 1
+    for n in mesh["cells"]:
+        base *= n
+    base *= SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1
+    level = adapt["max_level"] if adapt["enabled"] else 0
+    most = base * 2 ** (gdim * level)
+    if most > mesh["max_cells"]:
+        key = "adaptivity.max_level" if level else "mesh.cells"
+        raise ConfigError(f"config key '{key}': the mesh can reach {most:.3g} cells ({base} base cells, refined "
+                          f"{level} times), more than mesh.max_cells = {mesh['max_cells']}; raise mesh.max_cells "
+                          "if the machine can take it")
+    try:
+        per_cell = float(config["particles"]["generator"].get("particles_per_cell") or 0.0)
+    except (TypeError, ValueError):
+        return  # reported by the particle checks
+    if particles_enabled(config) and per_cell * most > 1e8:
+        raise ConfigError(f"config key 'particles.generator.particles_per_cell': up to {per_cell * most:.3g} particles "
+                          f"on the finest mesh (more than 1e8, several GB)")
 
 
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
@@ -312,8 +353,11 @@ def _check_materials(config: dict[str, Any]) -> None:
             if name in RESERVED_FIELD_NAMES:
                 raise ConfigError(f"config key 'materials.{name}': the name is taken by a field; "
                                   f"reserved: {list(RESERVED_FIELD_NAMES)}")
+            mesh = config["mesh"]
+            lower, upper = mesh["lower"] or [0.0] * gdim, mesh["upper"] or [1.0] * gdim
             try:
-                Expression(spec["initial"], constants=expression_constants(config), gdim=gdim)
+                Expression(spec["initial"], constants=expression_constants(config), gdim=gdim).check(
+                    _sample_points(lower, upper))
             except ExpressionError as err:
                 raise ConfigError(f"config key 'materials.{name}.initial': {err}") from None
     table, _ = material_table(config)

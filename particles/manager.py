@@ -181,6 +181,11 @@ def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
     if name not in GENERATORS:
         raise ValueError(f"unknown particle generator {name!r}; valid: {sorted(GENERATORS)}")
     per_cell = params.pop("particles_per_cell", None)
+    if isinstance(per_cell, str):  # YAML reads 1e6 as text
+        try:
+            per_cell = float(per_cell)
+        except ValueError:
+            pass
     if per_cell is not None:
         if "num_particles" in params:
             raise ValueError("give either particles_per_cell or num_particles, not both")

@@ -35,6 +35,7 @@ EXIT_CONFIG_ERROR = 2
 EXIT_RUN_FAILED = 3
 
 RESUMABLE = ("time.", "output.progress", "output.fields_every", "output.checkpoint.", "blowup.")
+_RESUMABLE_TEXT = "time.*, output.progress*, output.fields_every, output.checkpoint.*, blowup.*"
 """Config keys a resumed run may change (the rest defines the model and must stay)."""
 SAME_MODEL = ("name", "mesh", "physics", "materials", "boundary", "initial", "stokes", "energy", "composition",
               "particles", "adaptivity", "balance", "diagnostics")
@@ -56,7 +57,7 @@ def _parser() -> argparse.ArgumentParser:
     resume = sub.add_parser("resume", help="continue a run from its newest checkpoint")
     resume.add_argument("directory", help="the run's output folder")
     resume.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help=f"change a setting that does not define the model ({', '.join(RESUMABLE)})")
+                        help=f"change a setting that does not define the model ({_RESUMABLE_TEXT})")
     resume.add_argument("--checkpoint", default=None, help="a checkpoint folder (default: the newest)")
     resume.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     check = sub.add_parser("check", help="validate a configuration and print it fully resolved")
@@ -102,7 +103,7 @@ def _checked_overrides(overrides: list[str]) -> list[str]:
     for item in overrides:
         key = item.split("=", 1)[0].strip()
         if not key.startswith(RESUMABLE):
-            raise ConfigError(f"config key '{key}': cannot change when resuming (allowed: {', '.join(RESUMABLE)}...)")
+            raise ConfigError(f"config key '{key}': cannot change when resuming (allowed: {_RESUMABLE_TEXT})")
     return overrides
 
 
@@ -146,7 +147,7 @@ def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
             changed = [key for key in SAME_MODEL if saved.config.get(key) != config.get(key)]
             if changed:
                 raise ConfigError(f"config key '{changed[0]}': differs from the checkpoint's; only "
-                                  f"{', '.join(RESUMABLE)}... may change when resuming")
+                                  f"{_RESUMABLE_TEXT} may change when resuming")
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
     try:

@@ -409,7 +409,7 @@ def _check_particles(config: dict[str, Any]) -> None:
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
     make = point_function(config)
     try:
-        build_generator(section["generator"], num_cells=1, make_function=make)
+        build_generator(section["generator"], num_cells=1, make_function=make, gdim=len(config["mesh"]["cells"]))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.generator': {err}") from None
     params = dict(section["interpolator"])

@@ -16,6 +16,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from convection.model import Model, StepReport
 from convection.output import FieldOutput
@@ -117,6 +118,10 @@ def _report(report: StepReport, step: int, balance_log: BalanceLog, progress: Pr
             f"(imbalance cells {before.cell_imbalance:.3f} -> {after.cell_imbalance:.3f}, "
             f"particles {before.particle_imbalance:.3f} -> {after.particle_imbalance:.3f})"
         )
+
+
+SOLVER_ERRORS = (RuntimeError, FloatingPointError, PETSc.Error)
+"""What a failing solve raises (on every rank: convergence is decided globally)."""
 
 
 class RunFailure(RuntimeError):
@@ -262,8 +267,11 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
         report = False
     try:
         if model.flow_result is None:
-            _report(model.start(), model.timestep, out.balance, out.progress)
-        while True:
+            try:
+                _report(model.start(), model.timestep, out.balance, out.progress)
+            except SOLVER_ERRORS as err:
+                failure = " ".join(str(err).split())
+        while failure is None:
             if report:
                 previous = row
                 with model.timers("postprocess"):
@@ -289,8 +297,8 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
                 break
             try:
                 _report(model.step(_timestep(model, settings)), model.timestep, out.balance, out.progress)
-            except (RuntimeError, FloatingPointError) as err:
-                failure = f"{' '.join(str(err).split())}"
+            except SOLVER_ERRORS as err:
+                failure = " ".join(str(err).split())
                 break
         if failure is None:
             if out.written != model.timestep:

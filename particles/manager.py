@@ -165,14 +165,29 @@ def build_properties(specs: Sequence[str | Mapping[str, Any] | ParticleProperty]
     return built
 
 
+def _check_point_file(path: Path, gdim: int | None) -> None:
+    """A ``from_file`` point list must exist and have gdim (or 3, padded with zeros) columns."""
+    if not path.is_file():
+        raise ValueError(f"particle file {str(path)!r} not found")
+    if gdim is None:
+        return
+    try:
+        data = np.loadtxt(path, comments="#", ndmin=2)
+    except ValueError as err:
+        raise ValueError(f"particle file {str(path)!r}: {err}") from None
+    if data.size and data.shape[1] not in (gdim, 3):
+        raise ValueError(f"particle file {str(path)!r}: expected {gdim} columns, found {data.shape[1]}")
+
+
 def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
-                    make_function: MakeFunction | None = None) -> Generator:
+                    make_function: MakeFunction | None = None, gdim: int | None = None) -> Generator:
     """A generator from ``{name: ..., **parameters}``; ``particles_per_cell`` (> 0) may replace
     ``num_particles`` (times ``num_cells``, the global cell count).
 
     Raises:
         ValueError: Unknown name (listing :data:`particles.generation.GENERATORS`), bad
-            parameters, or a ``from_file`` path that is not a file.
+            parameters, or a ``from_file`` path that is not a file (or, given ``gdim``, has the
+            wrong number of columns).
     """
     if not isinstance(spec, Mapping):
         return spec
@@ -192,8 +207,8 @@ def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
         if isinstance(per_cell, bool) or not isinstance(per_cell, (int, float)) or not per_cell > 0:
             raise ValueError(f"particles_per_cell must be a number > 0, got {per_cell!r}")
         params["num_particles"] = int(round(per_cell * num_cells))
-    if name == "from_file" and "path" in params and not Path(str(params["path"])).is_file():
-        raise ValueError(f"particle file {str(params['path'])!r} not found")
+    if name == "from_file" and "path" in params:
+        _check_point_file(Path(str(params["path"])), gdim)
     return create_generator(name, **_with_functions(params, make_function, str(name)))
 
 

@@ -19,6 +19,7 @@ level, the ``coarsen_fraction`` with the smallest go down one, within [min_level
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -34,7 +35,6 @@ import ufl
 from convection.balance import (
     PARTITIONERS, CellLayout, create_partitioned_mesh, gather_cell_layout, partition, redistribution,
 )
-from convection.mesh import cell_volumes
 from convection.transfer import PointEvaluator
 
 __all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "MeshRecipe",
@@ -147,6 +147,18 @@ class MeshRecipe:
     owners: npt.NDArray[np.int32] | None = None
 
 
+def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int) -> npt.NDArray[np.float64]:
+    """Volumes (areas in 2D) of the first ``num_cells`` local cells of an affine simplex mesh,
+    shape=(num_cells,), from the vertex coordinates (no form to compile for every new mesh)."""
+    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+    dofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[:num_cells]
+    x = mesh.geometry.x[dofs][:, :, :gdim]
+    edges = x[:, 1:, :] - x[:, :1, :]  # shape=(num_cells, tdim, gdim)
+    if tdim == gdim:
+        return np.abs(np.linalg.det(edges)) / math.factorial(tdim)
+    return np.sqrt(np.abs(np.linalg.det(edges @ edges.transpose(0, 2, 1)))) / math.factorial(tdim)
+
+
 def _with_ghost_values(mesh: dolfinx.mesh.Mesh, owned_values: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Per-cell integers of the owned cells extended to the ghost cells (collective)."""
     V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
@@ -171,7 +183,7 @@ class MeshHierarchy:
         self.base = base
         self.tdim = base.topology.dim
         num_owned = base.topology.index_map(self.tdim).size_local
-        self.base_volume = base.comm.allreduce(float(cell_volumes(base)[:num_owned].max(initial=0.0)), op=MPI.MAX)
+        self.base_volume = base.comm.allreduce(float(_simplex_volumes(base, num_owned).max(initial=0.0)), op=MPI.MAX)
         # Rank-independent index of each local base cell (the order the base mesh was created in).
         self.base_canonical = np.asarray(base.topology.original_cell_index, dtype=np.int64)
         self._layout: CellLayout | None = None
@@ -270,7 +282,7 @@ class MeshHierarchy:
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
         """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""
         num_owned = mesh.topology.index_map(self.tdim).size_local
-        ratio = self.base_volume / cell_volumes(mesh)[:num_owned]
+        ratio = self.base_volume / _simplex_volumes(mesh, num_owned)
         return np.floor(np.log2(ratio) / self.tdim + 1e-6).astype(np.int32)
 
     def uniform(self, level: int, /) -> dolfinx.mesh.Mesh:

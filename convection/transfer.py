@@ -10,6 +10,7 @@ rank evaluates the ones it holds, and the values are combined.
 
 from __future__ import annotations
 
+import hashlib
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -30,6 +31,7 @@ class PointEvaluator:
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
         self.mesh = mesh
+        self._located: dict[bytes, npt.NDArray[np.int32]] = {}
         tdim = mesh.topology.dim
         cell_map = mesh.topology.index_map(tdim)
         cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
@@ -42,7 +44,22 @@ class PointEvaluator:
         return np.asarray(colliding.offsets, dtype=np.int32), np.asarray(colliding.array, dtype=np.int32)
 
     def locate(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
-        """First local cell containing each point (-1 where none), points shape=(n, 3)."""
+        """First local cell containing each point (-1 where none), points shape=(n, 3).
+
+        The answers for the last few point sets are remembered: the fields of one element on one
+        target mesh (u, T and its history, ...) ask for the same interpolation points.
+        """
+        key = hashlib.blake2b(np.ascontiguousarray(points).view(np.uint8), digest_size=16).digest() + \
+            np.int64(points.shape[0]).tobytes()
+        cells = self._located.get(key)
+        if cells is None:
+            cells = self._locate(points)
+            if len(self._located) >= 4:
+                self._located.pop(next(iter(self._located)))
+            self._located[key] = cells
+        return cells
+
+    def _locate(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
         candidates = dolfinx.geometry.compute_collisions(self._tree, points)
         colliding = dolfinx.geometry.compute_colliding_cells(self.mesh, candidates, points)
         offsets = colliding.offsets

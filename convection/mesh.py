@@ -29,11 +29,13 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+import dolfinx.cpp.mesh
 import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
-__all__ = ["BoxSpec", "MESH_GEOMETRIES", "MeshSpec", "ShellSpec", "cell_values", "cell_volumes", "create_box_mesh",
+__all__ = ["BoxSpec", "MESH_GEOMETRIES", "MeshSpec", "ShellSpec", "cell_diameter", "cell_values", "cell_volumes",
+           "create_box_mesh",
            "create_mesh", "create_shell_mesh", "mesh_spec_from_config"]
 
 MESH_GEOMETRIES: dict[str, str] = {
@@ -235,3 +237,25 @@ def cell_values(mesh: dolfinx.mesh.Mesh, integrand: ufl.core.expr.Expr, /) -> np
 def cell_volumes(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.float64]:
     """Volume (area in 2D) of every local cell (owned and ghost), shape=(num_local_cells,)."""
     return cell_values(mesh, ufl.as_ufl(1.0))
+
+
+def cell_diameter(mesh: dolfinx.mesh.Mesh, /) -> ufl.core.expr.Expr:
+    """Cell diameter for forms: ``ufl.CellDiameter`` on straight-sided cells; on curved cells (which
+    FFCx 0.5 cannot generate ``CellDiameter`` for) a DG0 Function of the largest vertex distance.
+    Not collective (ghost cells are computed directly)."""
+    if mesh.geometry.cmap.degree == 1:
+        return ufl.CellDiameter(mesh)
+    V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    tdim = mesh.topology.dim
+    num_cells = mesh.topology.index_map(tdim).size_local + mesh.topology.index_map(tdim).num_ghosts
+    num_vertices = dolfinx.cpp.mesh.cell_num_vertices(mesh.topology.cell_type)
+    dofmap = mesh.geometry.dofmap
+    nodes = dofmap.array.reshape(-1, dofmap.offsets[1] - dofmap.offsets[0])[:num_cells, :num_vertices]
+    x = mesh.geometry.x[nodes]
+    h = np.zeros(num_cells)
+    for i in range(num_vertices):
+        for j in range(i + 1, num_vertices):
+            h = np.maximum(h, np.linalg.norm(x[:, i] - x[:, j], axis=1))
+    f = dolfinx.fem.Function(V0, name="cell_diameter")
+    f.x.array[V0.dofmap.list.array.reshape(-1)[:num_cells]] = h
+    return f

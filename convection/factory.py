@@ -43,7 +43,7 @@ from convection.config import (
 )
 from convection.expressions import Expression
 from convection.materials import Material, Materials
-from convection.mesh import create_mesh, mesh_spec_from_config
+from convection.mesh import ShellSpec, create_mesh, mesh_spec_from_config, shell_confinement
 from convection.model import Model
 from convection.postprocess import create_postprocessors
 from convection.rebalance import Balancer
@@ -173,7 +173,8 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -
         particles = ParticleManager.from_config(
             config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
             make_function=point_function(config), field_degree=ccfg["degree"],
-            context=PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p))
+            context=PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p),
+            confine=shell_confinement(mesh, spec) if isinstance(spec, ShellSpec) else None)
     composition = None
     if len(materials):
         if ccfg["source"] == "particles":

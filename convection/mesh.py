@@ -23,7 +23,7 @@ on straight-sided meshes it would put the new boundary vertices on the chords, i
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Union
+from typing import Callable, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -36,7 +36,7 @@ import ufl
 
 __all__ = ["BoxSpec", "MESH_GEOMETRIES", "MeshSpec", "ShellSpec", "cell_diameter", "cell_values", "cell_volumes",
            "create_box_mesh",
-           "create_mesh", "create_shell_mesh", "mesh_spec_from_config"]
+           "create_mesh", "create_shell_mesh", "mesh_spec_from_config", "shell_confinement"]
 
 MESH_GEOMETRIES: dict[str, str] = {
     "box": "axis-aligned box [lower, upper] with `cells` per direction (2D or 3D)",
@@ -259,3 +259,34 @@ def cell_diameter(mesh: dolfinx.mesh.Mesh, /) -> ufl.core.expr.Expr:
     f = dolfinx.fem.Function(V0, name="cell_diameter")
     f.x.array[V0.dofmap.list.array.reshape(-1)[:num_cells]] = h
     return f
+
+
+def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> Callable[[npt.NDArray[np.float64]], None]:
+    """``confine(x)``: move points (shape=(n, gdim), in place) that lie outside the shell, or within
+    ``margin`` of its surfaces, radially to ``r_inner + margin`` / ``r_outer - margin``.
+
+    For particles (:class:`particles.manager.ParticleManager`): a straight Runge-Kutta step along a
+    curved free-slip surface ends slightly outside it. The curved cells' boundary is within
+    ``margin = 2 s^2 / r_inner`` of the true circle/sphere (``s``: the cells' largest node deviation
+    from the straight-sided cell, :attr:`particles.geometry.CellGeometry.curvature_padding`;
+    parabola versus circle), so a confined point lies in a cell. Collective (the margin is
+    allreduced).
+    """
+    from particles.geometry import CellGeometry
+
+    padding = mesh.comm.allreduce(CellGeometry(mesh).curvature_padding, op=MPI.MAX)
+    margin = 2.0 * padding**2 / spec.inner_radius + 1e-12 * spec.outer_radius
+    if mesh.geometry.cmap.degree == 1:  # straight facets: chords lie up to the sagitta inside the circle
+        margin = spec.resolution**2 / (4.0 * spec.inner_radius)
+    lower, upper = spec.inner_radius + margin, spec.outer_radius - margin
+
+    def confine(x: npt.NDArray[np.float64]) -> None:
+        if x.shape[0] == 0:
+            return
+        r = np.sqrt(np.sum(x * x, axis=1))
+        outside = (r < lower) | (r > upper)
+        if np.any(outside):
+            target = np.clip(r[outside], lower, upper)
+            x[outside] *= (target / np.where(r[outside] > 0.0, r[outside], 1.0))[:, None]
+
+    return confine

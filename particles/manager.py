@@ -229,6 +229,9 @@ class ParticleManager:
         writer: Particle output, or None.
         output: When :meth:`update` writes (requires ``writer``).
         context: Fields for the properties' initial values (e.g. the initial temperature).
+        confine: ``confine(x)`` moves positions that left the domain back inside (in place,
+            shape=(n, gdim)) before they are relocated, e.g. onto a curved boundary a Runge-Kutta
+            step crossed; None: such particles are lost (see :class:`particles.advection.Advector`).
     """
 
     def __init__(
@@ -245,8 +248,10 @@ class ParticleManager:
         writer: ParticleWriter | None = None,
         output: OutputSchedule = OutputSchedule(),
         context: PropertyContext | None = None,
+        confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
     ) -> None:
         get_integrator(integrator)  # ValueError listing the valid names
+        self.confine = confine
         if output.enabled and writer is None:
             raise ValueError("an output schedule needs a ParticleWriter")
         if field_degree < 0:
@@ -265,7 +270,7 @@ class ParticleManager:
         self.properties = PropertyManager(self.swarm, properties)
         self.generation: GenerationResult = generate(self.swarm, generator)
         self.properties.initialise(context if context is not None else PropertyContext())
-        self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes())
+        self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes(), confine=confine)
         self._tracked: dict[str, _Tracked] = {}
         self._space: dolfinx.fem.FunctionSpace | None = None
         self._last_output: tuple[int, float] | None = None
@@ -285,6 +290,7 @@ class ParticleManager:
         make_function: MakeFunction | None = None,
         field_degree: int = 0,
         context: PropertyContext | None = None,
+        confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
     ) -> ParticleManager:
         """One manager from one config section (collective).
 
@@ -304,6 +310,7 @@ class ParticleManager:
             make_function: Text -> function of the position.
             field_degree: Degree of tracked fields.
             context: Fields for the initial property values.
+            confine: Moves positions that left the domain back inside (see the class).
         """
         num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
         generator = build_generator(section.get("generator") or {"name": "random_uniform", "particles_per_cell": 20},
@@ -325,7 +332,7 @@ class ParticleManager:
             writer = ParticleWriter(directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
         return cls(mesh, generator=generator, integrator=str(section.get("integrator") or "rk2"),
                    properties=properties, interpolator=interpolator, field_degree=field_degree,
-                   population=population, writer=writer, output=schedule, context=context)
+                   population=population, writer=writer, output=schedule, context=context, confine=confine)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -467,7 +474,8 @@ class ParticleManager:
         self.properties.attach(self.swarm)
         if context is not None:
             self.properties.set_context(context)
-        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes())
+        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(),
+                                  confine=self.confine)
         self._bound(step=step, salt=1)
         for tracked in self._tracked.values():
             tracked.function = self._new_field(tracked.function.name)

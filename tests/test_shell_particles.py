@@ -85,3 +85,28 @@ def test_rigid_rotation_in_curved_annulus(world):
     expected = abs(amplification - 1.0) * np.linalg.norm(points, axis=1)
     assert np.allclose(np.linalg.norm(x - points, axis=1), expected, rtol=1e-6)
     assert np.allclose(swarm.geometry.push_forward(swarm.cells, swarm.xref), swarm.x, atol=1e-12)
+
+
+def test_confinement_keeps_particles_crossing_a_curved_boundary(world):
+    """Large RK2 steps of a rotation carry particles near the outer circle across it (straight steps
+    along a curved boundary): without confinement they are lost, with
+    :func:`convection.mesh.shell_confinement` every particle stays, inside the shell."""
+    from convection.mesh import shell_confinement
+
+    spec = ShellSpec(2, RI, RO, resolution=0.4)
+    mesh = create_shell_mesh(world, spec)
+    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    u = dolfinx.fem.Function(V)
+    u.interpolate(lambda x: np.stack([-2.0 * np.pi * x[1], 2.0 * np.pi * x[0]]))
+    phi = 2.0 * np.pi * np.arange(40) / 40
+    points = (RO - 1e-3) * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    lost = {}
+    for confine in (None, shell_confinement(mesh, spec)):
+        swarm = swarm_at(mesh, points)
+        advector = Advector(swarm, integrator="rk2", confine=confine)
+        lost[confine is None] = sum(advector.step(u, u, 0.02).global_lost for _ in range(5))
+        if confine is not None:
+            ids, x, _ = gathered(swarm)
+            r = np.linalg.norm(x, axis=1)
+            assert ids.size == points.shape[0] and np.all((r >= RI) & (r <= RO))
+    assert lost[True] > 0 and lost[False] == 0

@@ -1,6 +1,6 @@
-"""Markdown tables of the JSON results of ``analytical.py`` (``results/*.json``), for the README.
+"""Markdown tables of the JSON results of ``analytical.py`` (``measured/*.json``), for the README.
 
-Usage: ``python benchmarks/shell/tables.py [results/*.json ...]`` (default: every file in results/).
+Usage: ``python benchmarks/shell/tables.py [measured/*.json ...]`` (default: every file in measured/).
 """
 
 from __future__ import annotations
@@ -41,9 +41,11 @@ def table(document: dict, reference: dict | None = None) -> str:
 
 
 def main(paths: list[str]) -> None:
-    files = [Path(p) for p in paths] or sorted((HERE / "results").glob("*.json"))
+    files = [Path(p) for p in paths] or sorted((HERE / "measured").glob("*.json"))
     for path in files:
         document = json.loads(path.read_text())
+        if "case" not in document:  # e.g. annulus_particles.json
+            continue
         reference = None
         if document["ranks"] > 1:
             serial = path.with_name(path.name.replace(f"_np{document['ranks']}", "_np1"))

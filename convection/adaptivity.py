@@ -19,7 +19,7 @@ level, the ``coarsen_fraction`` with the smallest go down one, within [min_level
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
@@ -32,13 +32,13 @@ import dolfinx.mesh
 import ufl
 
 from convection.balance import (
-    PARTITIONERS, CellLayout, create_partitioned_mesh, gather_cell_layout, partition, redistribute,
+    PARTITIONERS, CellLayout, create_partitioned_mesh, gather_cell_layout, partition, redistribution,
 )
 from convection.mesh import cell_volumes
 from convection.transfer import PointEvaluator
 
-__all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "kelly_indicator",
-           "wanted_levels"]
+__all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "MeshRecipe",
+           "kelly_indicator", "wanted_levels"]
 
 INDICATOR_FIELDS: dict[str, str] = {
     "temperature": "the temperature",
@@ -123,6 +123,30 @@ def wanted_levels(
     return np.clip(wanted, params.min_level, params.max_level).astype(np.int32)
 
 
+@dataclass
+class MeshRecipe:
+    """How a :class:`MeshHierarchy` made its base and its latest mesh, to make both again, bit for
+    bit, on the same number of ranks (a checkpoint stores it; DOLFINx builds meshes
+    deterministically from the same input).
+
+    Attributes:
+        base_layout: The base mesh gathered on rank 0 and ``base_owners`` its owner ranks, after
+            a repartition (None: the base mesh the hierarchy was created with).
+        base_owners: Owner rank per canonical base cell (every rank), or None.
+        rounds: The latest mesh refined from the base: per refinement round the marked local
+            cells (None: a uniform round). Used when ``layout`` is None.
+        layout: The latest mesh gathered on rank 0 after a repartition, and ``owners`` the owner
+            rank of each of its cells (rank 0), or None.
+        owners: See ``layout``.
+    """
+
+    base_layout: CellLayout | None = None
+    base_owners: npt.NDArray[np.int32] | None = None
+    rounds: list[npt.NDArray[np.int32] | None] = field(default_factory=list)
+    layout: CellLayout | None = None
+    owners: npt.NDArray[np.int32] | None = None
+
+
 def _with_ghost_values(mesh: dolfinx.mesh.Mesh, owned_values: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Per-cell integers of the owned cells extended to the ghost cells (collective)."""
     V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
@@ -151,6 +175,8 @@ class MeshHierarchy:
         # Rank-independent index of each local base cell (the order the base mesh was created in).
         self.base_canonical = np.asarray(base.topology.original_cell_index, dtype=np.int64)
         self._layout: CellLayout | None = None
+        self.recipe = MeshRecipe()
+        self._element = base.ufl_domain().ufl_coordinate_element()
 
     @property
     def num_base_cells(self) -> int:
@@ -204,13 +230,42 @@ class MeshHierarchy:
             owners = partition(method, self._layout.midpoints, total[0], total[1], comm.size,
                                particle_weight=particle_weight)
         owners = comm.bcast(owners, root=0)
-        domain = ufl.Mesh(self.base.ufl_domain().ufl_coordinate_element())
-        created = create_partitioned_mesh(comm, self._layout, owners, domain)
+        created = create_partitioned_mesh(comm, self._layout, owners, self.new_domain())
         self.base, self.base_canonical = created.mesh, created.canonical
         # The refined mesh is redistributed as it is, not rebuilt from the new base: DOLFINx 0.5's
         # refinement of a repartitioned base with marks computed on another partition gave
         # inconsistent facet ownership (interior facets lost between ranks) in our tests.
-        return redistribute(mesh, owners[base_of])
+        layout, cell_owners = redistribution(mesh, owners[base_of])
+        self.recipe = MeshRecipe(self._layout, owners, [], layout, cell_owners)
+        # Not ``comm``: the old base mesh is gone, and with it its communicator.
+        return create_partitioned_mesh(mesh.comm, layout, cell_owners, self.new_domain()).mesh
+
+    def new_domain(self) -> ufl.Mesh:
+        """A new UFL domain for a mesh to create (DOLFINx ties each domain object to one mesh)."""
+        return ufl.Mesh(self._element)
+
+    def replay(self, recipe: MeshRecipe, /) -> dolfinx.mesh.Mesh:
+        """Make the base and the mesh of ``recipe`` again (collective; bit for bit on the ranks
+        it was recorded on). The hierarchy then holds that base."""
+        if recipe.base_layout is not None:
+            created = create_partitioned_mesh(self.base.comm, recipe.base_layout, recipe.base_owners, self.new_domain())
+            self.base, self.base_canonical = created.mesh, created.canonical
+            self._layout = recipe.base_layout
+        self.recipe = recipe
+        if recipe.layout is not None:
+            return create_partitioned_mesh(self.base.comm, recipe.layout, recipe.owners, self.new_domain()).mesh
+        mesh = self.base
+        for marked in recipe.rounds:
+            mesh = self._refine(mesh, marked)
+        return mesh
+
+    def _refine(self, mesh: dolfinx.mesh.Mesh, marked: npt.NDArray[np.int32] | None) -> dolfinx.mesh.Mesh:
+        """One refinement round: the marked local cells (None: every cell)."""
+        if marked is None:
+            return dolfinx.mesh.refine(mesh, redistribute=False)
+        mesh.topology.create_entities(1)
+        edges = dolfinx.mesh.compute_incident_entities(mesh, marked, self.tdim, 1)
+        return dolfinx.mesh.refine(mesh, edges, redistribute=False)
 
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
         """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""
@@ -222,7 +277,8 @@ class MeshHierarchy:
         """The base mesh refined uniformly ``level`` times (collective)."""
         mesh = self.base
         for _ in range(level):
-            mesh = dolfinx.mesh.refine(mesh, redistribute=False)
+            mesh = self._refine(mesh, None)
+        self.recipe = MeshRecipe(self.recipe.base_layout, self.recipe.base_owners, [None] * level)
         return mesh
 
     def rebuild(self, old: dolfinx.mesh.Mesh, wanted: npt.NDArray[np.int32], /) -> dolfinx.mesh.Mesh:
@@ -238,6 +294,7 @@ class MeshHierarchy:
         wanted_local = _with_ghost_values(old, wanted)
         max_wanted = old.comm.allreduce(int(wanted.max(initial=0)), op=MPI.MAX)
         mesh = self.base
+        rounds: list[npt.NDArray[np.int32] | None] = []
         for _ in range(max_wanted + 2):
             num_owned = mesh.topology.index_map(self.tdim).size_local
             cells = np.arange(num_owned, dtype=np.int32)
@@ -250,9 +307,9 @@ class MeshHierarchy:
             marked = cells[self.levels(mesh) < target]
             if mesh.comm.allreduce(marked.size, op=MPI.SUM) == 0:
                 break
-            mesh.topology.create_entities(1)
-            edges = dolfinx.mesh.compute_incident_entities(mesh, marked, self.tdim, 1)
-            mesh = dolfinx.mesh.refine(mesh, edges, redistribute=False)
+            rounds.append(marked)
+            mesh = self._refine(mesh, marked)
+        self.recipe = MeshRecipe(self.recipe.base_layout, self.recipe.base_owners, rounds)
         return mesh
 
 

@@ -32,7 +32,7 @@ import ufl
 
 __all__ = ["CellLayout", "PARTITIONERS", "WeightedMesh", "block_owners", "create_partitioned_mesh",
            "gather_cell_layout", "morton_order", "morton_owners", "owner_partitioner", "partition", "rcb_owners",
-           "redistribute"]
+           "redistribute", "redistribution"]
 
 
 def block_owners(weights: npt.NDArray[np.float64], nparts: int, /) -> npt.NDArray[np.int32]:
@@ -256,12 +256,18 @@ def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> d
         mesh: A P1 simplex mesh.
         owners: New owner rank of each owned cell, shape=(num_owned_cells,).
     """
+    layout, all_owners = redistribution(mesh, owners)
+    domain = ufl.Mesh(mesh.ufl_domain().ufl_coordinate_element())
+    return create_partitioned_mesh(mesh.comm, layout, all_owners, domain).mesh
+
+
+def redistribution(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> tuple[CellLayout, Any]:
+    """What :func:`redistribute` hands to :func:`create_partitioned_mesh`: the cells gathered on
+    rank 0 (in rank order) and their new owners (rank 0; None elsewhere). Collective."""
     comm = mesh.comm
     tdim = mesh.topology.dim
     num_owned = mesh.topology.index_map(tdim).size_local
     offset = comm.exscan(num_owned) or 0
     layout = gather_cell_layout(mesh, np.arange(offset, offset + num_owned, dtype=np.int64))
     gathered = comm.gather(np.asarray(owners, dtype=np.int32)[:num_owned], root=0)
-    all_owners = np.concatenate(gathered) if comm.rank == 0 else None
-    domain = ufl.Mesh(mesh.ufl_domain().ufl_coordinate_element())
-    return create_partitioned_mesh(comm, layout, all_owners, domain).mesh
+    return layout, (np.concatenate(gathered) if comm.rank == 0 else None)

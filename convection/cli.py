@@ -1,17 +1,28 @@
-"""Command line: ``python -m convection run configs/NAME.yaml [--set key.sub=value ...] [--output DIR]``.
+"""Command line: run, resume and check configurations.
 
-Configuration problems print one line naming the key (``error: config key 'time.end': ...``) on
-rank 0 and exit with code 2 on every rank, before any collective call, so mpirun never hangs.
-SIGINT/SIGTERM stop the run at the end of the current step with the statistics flushed.
+    python -m convection run configs/NAME.yaml [--set key.sub=value ...] [--output DIR] [--resume]
+    python -m convection resume RUN_DIR [--set time.end=...] [--checkpoint PATH]
+    python -m convection check configs/NAME.yaml [--set ...]
+
+Problems print one line on rank 0 and exit with the same code on every rank, before any
+collective call that could hang: configuration problems (naming the key) with code 2; other
+expected problems (a missing run folder, a damaged checkpoint, ...) with code 1; a run that blew
+up or whose solver failed (naming the step and what failed) with code 3. Anything unexpected
+prints one line too and stops every rank (MPI abort); ``--debug`` (or ``CONVECTION_DEBUG=1``)
+shows the traceback instead. SIGINT/SIGTERM stop the run at the end of the current step with
+everything written and a checkpoint (exit code 128 + signal number).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
-from typing import Sequence
+import traceback
+from pathlib import Path
+from typing import Any, Sequence
 
 from mpi4py import MPI
 
@@ -19,17 +30,36 @@ from convection.config import ConfigError, load_config
 
 __all__ = ["main"]
 
+EXIT_RUNTIME_ERROR = 1
 EXIT_CONFIG_ERROR = 2
+EXIT_RUN_FAILED = 3
+
+RESUMABLE = ("time.", "output.progress", "output.fields_every", "output.checkpoint.", "blowup.")
+_RESUMABLE_TEXT = "time.*, output.progress*, output.fields_every, output.checkpoint.*, blowup.*"
+"""Config keys a resumed run may change (the rest defines the model and must stay)."""
+SAME_MODEL = ("name", "mesh", "physics", "materials", "boundary", "initial", "stokes", "energy", "composition",
+              "particles", "adaptivity", "balance", "diagnostics")
+"""Sections that must equal the checkpoint's for ``run --resume``."""
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m convection", description=__doc__.split("\n")[0])
+    parser.add_argument("--debug", dest="debug_all", action="store_true", help="show tracebacks of errors")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a configuration")
     run.add_argument("config", help="YAML configuration file")
     run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                      help="override a config value, e.g. --set mesh.cells=[64,64] (repeatable)")
     run.add_argument("--output", default=None, help="output folder (overrides output.directory)")
+    run.add_argument("--resume", action="store_true",
+                     help="continue from the newest checkpoint in the output folder if there is one")
+    run.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
+    resume = sub.add_parser("resume", help="continue a run from its newest checkpoint")
+    resume.add_argument("directory", help="the run's output folder")
+    resume.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help=f"change a setting that does not define the model ({_RESUMABLE_TEXT})")
+    resume.add_argument("--checkpoint", default=None, help="a checkpoint folder (default: the newest)")
+    resume.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     check = sub.add_parser("check", help="validate a configuration and print it fully resolved")
     check.add_argument("config")
     check.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
@@ -61,36 +91,105 @@ class _WarningsOnly(logging.Filter):
         return record.levelno >= logging.WARNING
 
 
+class _Refused(Exception):
+    """An expected problem, raised on every rank alike: one line, exit code ``code``."""
+
+    def __init__(self, message: str, code: int) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def _checked_overrides(overrides: list[str]) -> list[str]:
+    for item in overrides:
+        key = item.split("=", 1)[0].strip()
+        if not key.startswith(RESUMABLE):
+            raise ConfigError(f"config key '{key}': cannot change when resuming (allowed: {_RESUMABLE_TEXT})")
+    return overrides
+
+
+def _resume(comm: MPI.Comm, directory: str, overrides: list[str], checkpoint: str | None) -> tuple[dict, Any]:
+    """The config and checkpoint to continue the run in ``directory`` from."""
+    from convection.checkpoint import latest_checkpoint, read_checkpoint
+
+    run_dir = Path(directory)
+    if not run_dir.is_dir():
+        raise _Refused(f"run folder '{run_dir}' not found", EXIT_RUNTIME_ERROR)
+    path = Path(checkpoint) if checkpoint else latest_checkpoint(run_dir)
+    if path is None:
+        raise _Refused(f"run folder '{run_dir}' has no complete checkpoint (checkpoints/checkpoint_*)", EXIT_RUNTIME_ERROR)
+    saved = read_checkpoint(path, comm)
+    config = load_config(None, [*_checked_overrides(overrides), f"output.directory={run_dir}"], document=saved.config)
+    return config, saved
+
+
+def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
+    from convection.checkpoint import latest_checkpoint, read_checkpoint
+    from convection.factory import run_config
+    from convection.run import RunFailure
+
+    stop = _StopFlag()
+    saved = None
+    if args.command == "resume":
+        config, saved = _resume(comm, args.directory, list(args.overrides), args.checkpoint)
+    else:
+        overrides = list(args.overrides)
+        if args.output is not None:
+            overrides.append(f"output.directory={args.output}")
+        config = load_config(args.config, overrides)
+        if args.command == "check":
+            if comm.rank == 0:
+                from convection.config import dump_config
+
+                print(dump_config(config), end="")
+            return 0
+        if args.resume and latest_checkpoint(config["output"]["directory"]) is not None:
+            saved = read_checkpoint(latest_checkpoint(config["output"]["directory"]), comm)
+            changed = [key for key in SAME_MODEL if saved.config.get(key) != config.get(key)]
+            if changed:
+                raise ConfigError(f"config key '{changed[0]}': differs from the checkpoint's; only "
+                                  f"{_RESUMABLE_TEXT} may change when resuming")
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    try:
+        summary = run_config(config, comm=comm, should_stop=lambda: stop.requested, resume=saved)
+    except RunFailure as err:
+        raise _Refused(f"run {err}", EXIT_RUN_FAILED) from None
+    # Stopped by a signal: the shell convention 128 + signal number (on the ranks that got it).
+    return 128 + stop.signum if summary.reason == "stopped by signal" and stop.signum else 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     logging.getLogger().setLevel(logging.WARNING)
     logging.getLogger().addFilter(_WarningsOnly())
     args = _parser().parse_args(argv)
+    debug = args.debug_all or getattr(args, "debug", False) or os.environ.get("CONVECTION_DEBUG", "") not in ("", "0")
     comm = MPI.COMM_WORLD
-    overrides = list(args.overrides)
-    if args.output is not None:
-        overrides.append(f"output.directory={args.output}")
+    from particles.checkpoint import CheckpointError
+
     try:
-        config = load_config(args.config, overrides)
+        return _run(args, comm)
     except ConfigError as err:
-        if comm.rank == 0:
-            print(f"error: {err}", file=sys.stderr, flush=True)
-        return EXIT_CONFIG_ERROR
-    if args.command == "check":
-        if comm.rank == 0:
-            from convection.config import dump_config
-
-            print(dump_config(config), end="")
-        return 0
-
-    from convection.factory import run_config
-
-    stop = _StopFlag()
-    signal.signal(signal.SIGINT, stop)
-    signal.signal(signal.SIGTERM, stop)
-    summary = run_config(config, comm=comm, should_stop=lambda: stop.requested)
-    # Stopped by a signal: the shell convention 128 + signal number (on the ranks that got it).
-    return 128 + stop.signum if summary.reason == "stopped by signal" and stop.signum else 0
+        code, message = EXIT_CONFIG_ERROR, str(err)
+    except _Refused as err:
+        code, message = err.code, str(err)
+    except CheckpointError as err:  # raised on every rank alike
+        code, message = EXIT_RUNTIME_ERROR, str(err)
+    except Exception as err:  # noqa: BLE001 - unexpected: one line (or the traceback), then stop every rank
+        if debug:
+            traceback.print_exc()
+        else:
+            where = f" (rank {comm.rank})" if comm.size > 1 else ""
+            print(f"error{where}: {type(err).__name__}: {' '.join(str(err).split())} "
+                  "(--debug shows the traceback)", file=sys.stderr, flush=True)
+        if comm.size > 1:
+            comm.Abort(EXIT_RUNTIME_ERROR)
+        return EXIT_RUNTIME_ERROR
+    if debug:
+        traceback.print_exc()
+    if comm.rank == 0:
+        print(f"error: {message}", file=sys.stderr, flush=True)
+    return code
 
 
 if __name__ == "__main__":

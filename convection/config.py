@@ -120,6 +120,8 @@ SCHEMA: dict[str, Any] = {
                             help="target cell size of an annulus/spherical shell (gmsh)"),
         "geometry_degree": Field("int", 2, choices=None, minimum=1,
                                  help="1: straight-sided cells; 2: curved cells on the circles/spheres (shells)"),
+        "max_cells": Field("int", 2_000_000, minimum=1,
+                           help="refuse configs whose mesh can grow beyond this many cells (base x refinement)"),
     },
     "physics": {
         "Ra": Field("float", REQUIRED, minimum=0.0, help="thermal Rayleigh number"),
@@ -225,6 +227,15 @@ SCHEMA: dict[str, Any] = {
         "method": Field("str", "rcb", choices=_names("convection.balance", "PARTITIONERS"),
                         help="rcb: recursive bisection balancing cells and particles; morton: space-filling-curve blocks"),
     },
+    "blowup": {
+        "vrms_growth": Field("float", 1.0e3, nullable=True, exclusive_minimum=1.0,
+                             help="fail when vrms grows by more than this factor in one step"),
+        "max_vrms": Field("float", None, nullable=True, exclusive_minimum=0.0, help="fail when vrms exceeds this"),
+        "temperature_margin": Field("float", 1.0, nullable=True, minimum=0.0,
+                                    help="fail when T leaves the initial range widened by this many times its width"),
+        "lost_fraction": Field("float", 1.0e-3, nullable=True, minimum=0.0,
+                               help="fail when more than this fraction of the particles is lost"),
+    },
     "diagnostics": {
         "entrainment_material": Field("str", None, nullable=True,
                                       help="material whose entrainment is reported: a material name, all, or with "
@@ -236,6 +247,13 @@ SCHEMA: dict[str, Any] = {
         "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
         "statistics": Field("list[str]", None, nullable=True, choices=_names("convection.postprocess", "POSTPROCESSORS"),
                             help="postprocessors whose columns statistics.csv holds (null: all that apply)"),
+        "checkpoint": {
+            "every_steps": Field("int", None, nullable=True, minimum=1, help="write a checkpoint every N steps"),
+            "every_wall_seconds": Field("float", 3600.0, nullable=True, exclusive_minimum=0.0,
+                                        help="write a checkpoint when this much wall time passed since the last"),
+            "keep": Field("int", 2, minimum=1, help="how many of the newest checkpoints are kept"),
+            "at_end": Field("bool", True, help="also write one at the end and when stopped by a signal"),
+        },
         "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none")),
         "progress_every": Field("int", 10, minimum=1, help="steps between progress lines"),
     },
@@ -336,10 +354,73 @@ def _check_boundaries_and_rest(config: dict[str, Any], gdim: int) -> None:
         text = config["initial"][key]
         if text is not None:
             try:
-                Expression(text, constants=expression_constants(config), gdim=gdim)
+                Expression(text, constants=expression_constants(config), gdim=gdim).check(_domain_points(config))
             except ExpressionError as err:
                 raise ConfigError(f"config key 'initial.{key}': {err}") from None
+    _check_size(config)
     _check_particles(config)
+
+
+def _sample_points(lower: list[float], upper: list[float]) -> Any:
+    """Corners, edge midpoints and centre of the box, shape=(3, n) (where expressions are checked)."""
+    import itertools
+
+    import numpy as np
+
+    axes = [np.array([lo, 0.5 * (lo + hi), hi]) for lo, hi in zip(lower, upper)]
+    points = np.array(list(itertools.product(*axes))).T
+    return np.vstack([points, np.zeros((3 - points.shape[0], points.shape[1]))])
+
+
+def _domain_points(config: dict[str, Any]) -> Any:
+    """Points of the config's domain where expressions are checked, shape=(3, n): the box's corners,
+    edge midpoints and centre, or a shell's inner, middle and outer radius in the axis directions."""
+    import numpy as np
+
+    mesh = config["mesh"]
+    gdim = config_gdim(config)
+    if mesh["geometry"] in _SHELLS:
+        directions = np.vstack([np.eye(gdim), -np.eye(gdim)])
+        inner, outer = mesh["radii"]
+        points = np.concatenate([r * directions for r in (inner, 0.5 * (inner + outer), outer)]).T
+        return np.vstack([points, np.zeros((3 - gdim, points.shape[1]))])
+    return _sample_points(mesh["lower"] or [0.0] * gdim, mesh["upper"] or [1.0] * gdim)
+
+
+SIMPLICES_PER_BOX = {2: 2, 3: 6}
+
+
+def _check_size(config: dict[str, Any]) -> None:
+    """Refuse meshes (and particle counts) that would exhaust the machine, naming the estimate."""
+    mesh, adapt = config["mesh"], config["adaptivity"]
+    gdim = config_gdim(config)
+    if mesh["geometry"] in _SHELLS:
+        # Shell volume over the volume of an equilateral cell of edge `resolution`.
+        inner, outer = mesh["radii"]
+        h = mesh["resolution"]
+        if gdim == 2:
+            base = int(3.141592653589793 * (outer**2 - inner**2) / (0.4330127 * h**2)) + 1
+        else:
+            base = int(4.18879020 * (outer**3 - inner**3) / (0.11785113 * h**3)) + 1
+    else:
+        base = 1
+        for n in mesh["cells"]:
+            base *= n
+        base *= SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1
+    level = adapt["max_level"] if adapt["enabled"] else 0
+    most = base * 2 ** (gdim * level)
+    if most > mesh["max_cells"]:
+        key = "adaptivity.max_level" if level else ("mesh.resolution" if mesh["geometry"] in _SHELLS else "mesh.cells")
+        raise ConfigError(f"config key '{key}': the mesh can reach {most:.3g} cells ({base} base cells, refined "
+                          f"{level} times), more than mesh.max_cells = {mesh['max_cells']}; raise mesh.max_cells "
+                          "if the machine can take it")
+    try:
+        per_cell = float(config["particles"]["generator"].get("particles_per_cell") or 0.0)
+    except (TypeError, ValueError):
+        return  # reported by the particle checks
+    if particles_enabled(config) and per_cell * most > 1e8:
+        raise ConfigError(f"config key 'particles.generator.particles_per_cell': up to {per_cell * most:.3g} particles "
+                          f"on the finest mesh (more than 1e8, several GB)")
 
 
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
@@ -389,7 +470,8 @@ def _check_materials(config: dict[str, Any]) -> None:
                 raise ConfigError(f"config key 'materials.{name}': the name is taken by a field; "
                                   f"reserved: {list(RESERVED_FIELD_NAMES)}")
             try:
-                Expression(spec["initial"], constants=expression_constants(config), gdim=gdim)
+                Expression(spec["initial"], constants=expression_constants(config), gdim=gdim).check(
+                    _domain_points(config))
             except ExpressionError as err:
                 raise ConfigError(f"config key 'materials.{name}.initial': {err}") from None
     table, _ = material_table(config)
@@ -441,7 +523,7 @@ def _check_particles(config: dict[str, Any]) -> None:
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
     make = point_function(config)
     try:
-        build_generator(section["generator"], num_cells=1, make_function=make)
+        build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.generator': {err}") from None
     params = dict(section["interpolator"])

@@ -42,6 +42,13 @@ class ExpressionError(ValueError):
     """An expression that cannot be parsed or uses something not allowed."""
 
 
+class _FloatLiterals(ast.NodeTransformer):
+    def visit_Constant(self, node: ast.Constant) -> ast.Constant:
+        if isinstance(node.value, int) and not isinstance(node.value, bool):
+            return ast.copy_location(ast.Constant(float(node.value)), node)
+        return node
+
+
 class Expression:
     """A vectorised scalar function of position compiled from a string.
 
@@ -75,7 +82,21 @@ class Expression:
                     f"unknown name {node.id!r} in {self.text!r}; use x, y, z, r, phi, theta, pi, e,"
                     f" functions {sorted(FUNCTIONS)} or constants {sorted(set(self.constants) - {'pi', 'e'})}"
                 )
+        # Integer literals become floats: Python's integer arithmetic is exact and unbounded, so
+        # "9**9**9" would compute for hours; in floating point it overflows at once (an error).
+        tree = _FloatLiterals().visit(tree)
         self._code = compile(tree, "<config expression>", "eval")
+
+    def check(self, points: npt.NDArray[np.float64], /) -> None:
+        """Evaluate at ``points`` (shape=(3, n)) and raise ExpressionError if that fails or gives
+        no finite value (e.g. an overflow such as ``9**9**9``)."""
+        try:
+            with np.errstate(all="ignore"):
+                values = self(points)
+        except (ArithmeticError, ValueError, TypeError) as err:
+            raise ExpressionError(f"cannot evaluate {self.text!r}: {err}") from None
+        if not np.any(np.isfinite(values)):
+            raise ExpressionError(f"{self.text!r} evaluates to {values[0]} in the domain")
 
     def __call__(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Evaluate at points ``x``, shape=(3, n) (DOLFINx interpolation layout); returns shape=(n,)."""

@@ -24,6 +24,7 @@ section             component
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -35,6 +36,9 @@ from mpi4py import MPI
 
 from convection.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy
 from convection.boundary import SHELL_BOUNDARIES, TemperatureBC, VelocityBC, side_names, temperature_dirichlet_bcs
+from convection.checkpoint import (
+    Checkpointer, CheckpointSettings, SavedRun, restore_mesh, restore_particles, restore_state,
+)
 from convection.composition import (
     FieldComposition, ParticleComposition, StaticComposition, composition_space, particle_properties,
 )
@@ -47,7 +51,7 @@ from convection.mesh import ShellSpec, create_mesh, mesh_spec_from_config, shell
 from convection.model import Model
 from convection.postprocess import create_postprocessors
 from convection.rebalance import Balancer
-from convection.run import RunSettings, RunSummary, run
+from convection.run import BlowUp, Resume, RunSettings, RunSummary, run
 from convection.stokes import StokesSolver
 from convection.transport import TransportSolver
 from particles.manager import ParticleManager
@@ -129,11 +133,14 @@ def _initial_fields(config: dict[str, Any], materials: Materials,
     return fields_on
 
 
-def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -> Model:
+def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+                restore: SavedRun | None = None) -> Model:
     """The model of a resolved configuration (collective).
 
     The mesh is adapted to the initial condition first (``adaptivity.initial_steps`` rounds); the
-    composition source and the particles are then created on that mesh.
+    composition source and the particles are then created on that mesh. With ``restore`` (a
+    checkpoint of a run of this config) the mesh, fields, particles and time stepping state are
+    the checkpoint's instead.
     """
     spec = mesh_spec_from_config(config["mesh"])
     gdim = spec.gdim
@@ -149,9 +156,12 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -
     acfg, bcfg = config["adaptivity"], config["balance"]
     hierarchy = MeshHierarchy(base) if acfg["enabled"] or bcfg["strategy"] != "none" else None
     adaptivity = None
-    mesh = base
+    mesh, exact = base, True
     if acfg["enabled"]:
         adaptivity = Adaptivity(hierarchy, AdaptivityParameters.from_config(acfg), fields=acfg["fields"])
+    if restore is not None:
+        mesh, exact = restore_mesh(restore, base, hierarchy)
+    elif adaptivity is not None:
         mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs), rounds=acfg["initial_steps"])
     balancer = None
     if bcfg["strategy"] != "none":
@@ -170,11 +180,16 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -
     particles = None
     if particles_enabled(config):
         extra = particle_properties(materials, gdim) if ccfg["source"] == "particles" else []
+        context = PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p)
         particles = ParticleManager.from_config(
             config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
-            make_function=point_function(config), field_degree=ccfg["degree"],
-            context=PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p),
+            make_function=point_function(config), field_degree=ccfg["degree"], context=context,
+            generate_particles=restore is None,
             confine=shell_confinement(mesh, spec) if isinstance(spec, ShellSpec) else None)
+        if restore is not None:
+            saved = restore.state["model"]
+            restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],
+                                                                       dt=saved["dt_previous"]))
     composition = None
     if len(materials):
         if ccfg["source"] == "particles":
@@ -184,14 +199,23 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -
                                            stabilisation=ecfg["stabilisation"])
         else:
             composition = StaticComposition(mesh, materials, degree=ccfg["degree"])
-    return Model(stokes, temperature=temperature, solve_temperature=ecfg["enabled"], composition=composition,
-                 particles=particles, adaptivity=adaptivity, balancer=balancer)
+    model = Model(stokes, temperature=temperature, solve_temperature=ecfg["enabled"], composition=composition,
+                  particles=particles, adaptivity=adaptivity, balancer=balancer)
+    if restore is not None:
+        restore_state(model, restore, exact=exact)
+    return model
 
 
 def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
-               should_stop: Callable[[], bool] = lambda: False, model: Model | None = None) -> RunSummary:
+               should_stop: Callable[[], bool] = lambda: False, model: Model | None = None,
+               resume: SavedRun | None = None) -> RunSummary:
     """Build (unless ``model`` is given, built from this config) and run a resolved configuration;
-    writes ``config.yaml`` first (collective)."""
+    writes ``config.yaml`` first (collective). With ``resume`` (a checkpoint of this run) the run
+    continues from it: statistics, fields and particle series go on after its step.
+
+    Raises:
+        RunFailure: The run blew up or a solver failed (on every rank).
+    """
     start = time.monotonic()
     directory = Path(config["output"]["directory"])
     if comm.rank == 0:
@@ -199,9 +223,18 @@ def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         (directory / "config.yaml").write_text(dump_config(config))
     comm.barrier()
     if model is None:
-        model = build_model(config, comm=comm)
+        model = build_model(config, comm=comm, restore=resume)
     diagnostics = config["diagnostics"]
     postprocessors = create_postprocessors(model, config["output"]["statistics"], start=start,
                                            entrainment_material=diagnostics["entrainment_material"],
                                            entrainment_height=diagnostics["entrainment_height"])
-    return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start)
+    ccfg = config["output"]["checkpoint"]
+    checkpoints = Checkpointer(CheckpointSettings(ccfg["every_steps"], ccfg["every_wall_seconds"], ccfg["keep"],
+                                                  ccfg["at_end"]), directory, config,
+                               resumed_at=model.timestep if resume is not None else None)
+    resumed = None
+    if resume is not None:
+        state = resume.state["run"]
+        resumed = Resume(float(state["wall_seconds"]), dict(state["postprocessors"]))
+    return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start,
+               checkpoints=checkpoints, blowup=BlowUp(**config["blowup"]), resume=resumed)

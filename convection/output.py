@@ -43,6 +43,9 @@ class FieldOutput:
     Args:
         directory: Output folder (must exist).
         prefix: File name prefix.
+        resume_after: Continue the series already in ``directory`` (a resumed run): its times up
+            to this one are kept, later ones dropped, and new mesh files get numbers after the
+            existing ones.
 
     Attributes:
         files: The per-mesh ``.xdmf`` files written so far, in order.
@@ -54,10 +57,11 @@ class FieldOutput:
         >>> out.close()
     """
 
-    def __init__(self, directory: str | Path, /, *, prefix: str = "fields") -> None:
+    def __init__(self, directory: str | Path, /, *, prefix: str = "fields", resume_after: float | None = None) -> None:
         self.directory = Path(directory)
         self.prefix = prefix
         self.epoch = -1
+        self._resume_after = resume_after
         self._mesh: dolfinx.mesh.Mesh | None = None
         self._file: dolfinx.io.XDMFFile | None = None
         self._out: dict[str, dolfinx.fem.Function] = {}
@@ -67,6 +71,8 @@ class FieldOutput:
 
     def _open(self, mesh: dolfinx.mesh.Mesh) -> None:
         self.close()
+        if self._resume_after is not None:
+            self._continue_series(mesh.comm)
         self.epoch += 1
         path = self.directory / f"{self.prefix}_{self.epoch:03d}.xdmf"
         self._file = dolfinx.io.XDMFFile(mesh.comm, str(path), "w")
@@ -134,6 +140,22 @@ class FieldOutput:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+    def _continue_series(self, comm) -> None:
+        """Keep the existing series up to ``resume_after``; number new files after the old ones."""
+        last = -1
+        if comm.rank == 0:
+            numbers = [int(p.stem.rsplit("_", 1)[1]) for p in self.directory.glob(f"{self.prefix}_[0-9][0-9][0-9].xdmf")]
+            last = max(numbers, default=-1)
+            if self.series_path.exists():
+                for grid in ET.parse(self.series_path).getroot().iter("Grid"):
+                    time = grid.find("Time")
+                    if grid.get("GridType") == "Uniform" and time is not None:
+                        t = float(time.get("Value"))
+                        if t <= self._resume_after * (1.0 + 1e-14):
+                            self._grids.append((t, grid))
+        self.epoch = comm.bcast(last, root=0)
+        self._resume_after = None
 
     # ------------------------------------------------------------------ series (rank 0 only)
     def _add_grid(self, epoch_file: Path, names: list[str], t: float) -> None:

@@ -252,6 +252,13 @@ class Entrainment:
                              dolfinx.fem.form(amount * ufl.dx))
         return forms
 
+    def state(self) -> dict[str, float] | None:
+        """The initial volumes (what a checkpoint keeps)."""
+        return self._initial
+
+    def restore(self, state: dict[str, float] | None) -> None:
+        self._initial = state
+
     def __call__(self, model: Model, /) -> dict[str, float]:
         forms = self._forms.get(model, lambda: self._build(model))
         if self._initial is None:

@@ -16,6 +16,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from convection.model import Model, StepReport
 from convection.output import FieldOutput
@@ -23,7 +24,7 @@ from convection.postprocess import Postprocessor
 from convection.progress import Progress
 from convection.statistics import BalanceLog, StatisticsWriter
 
-__all__ = ["RunSettings", "RunSummary", "SteadyState", "run"]
+__all__ = ["BlowUp", "Resume", "RunFailure", "RunSettings", "RunSummary", "SteadyState", "run"]
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,7 @@ def _timestep(model: Model, settings: RunSettings) -> float:
 
 
 def _report(report: StepReport, step: int, balance_log: BalanceLog, progress: Progress) -> None:
+    """Log what happened to the mesh in a step."""
     if report.adapted is not None:
         before, after = report.adapted
         progress.message(f"adapted mesh at step {step}: {before} -> {after} cells")
@@ -118,8 +120,112 @@ def _report(report: StepReport, step: int, balance_log: BalanceLog, progress: Pr
         )
 
 
+SOLVER_ERRORS = (RuntimeError, FloatingPointError, PETSc.Error)
+"""What a failing solve raises (on every rank: convergence is decided globally)."""
+
+
+class RunFailure(RuntimeError):
+    """The run cannot go on (blow-up, solver failure, lost particles); one line naming the step."""
+
+
+@dataclass(frozen=True)
+class BlowUp:
+    """When a run counts as failed (the ``blowup`` section).
+
+    Attributes:
+        vrms_growth: vrms growing by more than this factor in one step.
+        max_vrms: vrms above this (None: no bound).
+        temperature_margin: T leaving [T_min0 - m dT0, T_max0 + m dT0] (initial range dT0, at least 1).
+        lost_fraction: More than this fraction of the particles lost.
+    """
+
+    vrms_growth: float | None = 1.0e3
+    max_vrms: float | None = None
+    temperature_margin: float | None = 1.0
+    lost_fraction: float | None = 1.0e-3
+
+    def check(self, row: dict[str, float], first: dict[str, float], previous: dict[str, float] | None) -> str | None:
+        """What failed in ``row`` (None: nothing); ``first`` is the first row of the run."""
+        for key in ("vrms", "T_min", "T_max", "T_mean"):
+            if key in row and not np.isfinite(row[key]):
+                return f"{key} is {row[key]}"
+        vrms = row.get("vrms")
+        if vrms is not None and self.max_vrms is not None and vrms > self.max_vrms:
+            return f"vrms {vrms:.6g} exceeds blowup.max_vrms = {self.max_vrms:g}"
+        if vrms is not None and previous and self.vrms_growth is not None and previous["vrms"] > 0 \
+                and vrms > self.vrms_growth * previous["vrms"]:
+            return f"vrms grew from {previous['vrms']:.6g} to {vrms:.6g} in one step (more than blowup.vrms_growth)"
+        if self.temperature_margin is not None and "T_min" in row:
+            span = max(first["T_max"] - first["T_min"], 1.0) * self.temperature_margin
+            if row["T_min"] < first["T_min"] - span or row["T_max"] > first["T_max"] + span:
+                return f"temperature left [{first['T_min'] - span:.6g}, {first['T_max'] + span:.6g}]: " \
+                       f"min {row['T_min']:.6g}, max {row['T_max']:.6g}"
+        if self.lost_fraction is not None and row.get("n_lost", 0) > self.lost_fraction * max(first.get("n_particles", 0), 1):
+            return f"{int(row['n_lost'])} particles lost (more than blowup.lost_fraction = {self.lost_fraction:g})"
+        return None
+
+
+@dataclass
+class Resume:
+    """What a resumed run continues from (see :mod:`convection.checkpoint`).
+
+    Attributes:
+        wall_seconds: Wall time of the run up to the checkpoint.
+        postprocessors: Saved postprocessor states by name.
+    """
+
+    wall_seconds: float
+    postprocessors: dict[str, Any]
+
+
+class _Outputs:
+    """The files a run writes as it goes: statistics, balance log, fields, progress (collective)."""
+
+    def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool) -> None:
+        directory = Path(settings.directory)
+        after = model.timestep if resume else None
+        self.statistics = StatisticsWriter(directory / "statistics.csv", columns, comm=model.comm, resume_after_step=after)
+        self.balance = BalanceLog(directory / "balance.csv", comm=model.comm, resume_after_step=after)
+        self.fields = FieldOutput(directory, resume_after=model.time if resume else None)
+        self.progress = Progress(settings.end, mode=settings.progress, every=settings.progress_every,
+                                 enabled=model.comm.rank == 0)
+        self.fields_every = settings.fields_every
+        self.written = model.timestep if resume and settings.fields_every and model.timestep % settings.fields_every == 0 \
+            else -1
+
+    def row(self, model: Model, row: dict[str, Any]) -> None:
+        self.statistics.write(row)
+        extra = f"Nu={row['nusselt']:.5g}" if "nusselt" in row else ""
+        self.progress.update(model.timestep, model.time, model.dt_previous, row.get("vrms", np.nan), extra=extra)
+        if self.fields_every and model.timestep % self.fields_every == 0:
+            self.write_fields(model)
+
+    def write_fields(self, model: Model) -> None:
+        with model.timers("output"):
+            self.fields.write(model.fields(), model.time)
+        self.written = model.timestep
+
+    def close(self) -> None:
+        self.statistics.close()
+        self.balance.close()
+        self.progress.close()
+        self.fields.close()
+
+
+def _history(directory: Path, comm: Any) -> list[dict[str, float]]:
+    """The rows of an existing statistics.csv (rank 0 reads, every rank gets them)."""
+    rows = None
+    if comm.rank == 0:
+        import csv
+
+        with open(directory / "statistics.csv", newline="") as f:
+            rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    return comm.bcast(rows, root=0)
+
+
 def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postprocessor], /, *,
-        should_stop: Callable[[], bool] = lambda: False, start: float | None = None) -> RunSummary:
+        should_stop: Callable[[], bool] = lambda: False, start: float | None = None,
+        checkpoints: Any = None, blowup: BlowUp = BlowUp(), resume: Resume | None = None) -> RunSummary:
     """Run ``model`` to ``settings.end`` (or max_steps, steady state, or a stop request). Collective.
 
     Args:
@@ -129,32 +235,55 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
         should_stop: Polled every step on every rank (e.g. a signal flag); the run stops when it
             is True on any rank, with everything written.
         start: ``time.monotonic()`` at the start of the run (default: now).
+        checkpoints: A :class:`convection.checkpoint.Checkpointer`, or None.
+        blowup: When the run counts as failed.
+        resume: Continue a run restored from a checkpoint: its statistics, field and particle
+            series are continued after the checkpoint's step.
+
+    Raises:
+        RunFailure: The run blew up or a solver failed (summary.json says so; on every rank).
     """
     rank0 = model.comm.rank == 0
     start = time.monotonic() if start is None else start
     directory = Path(settings.directory)
     columns = [c for pp in postprocessors for c in pp.columns]
-    writer = StatisticsWriter(directory / "statistics.csv", columns, comm=model.comm)
-    fields = FieldOutput(directory)
-    progress = Progress(settings.end, mode=settings.progress, every=settings.progress_every, enabled=rank0)
-    balance_log = BalanceLog(directory / "balance.csv", comm=model.comm)
+    out = _Outputs(model, settings, columns, resume is not None)
     steady = SteadyState(settings.steady_tolerance, settings.steady_window)
-    reason = "end time"
+    reason, failure = "end time", None
     row: dict[str, Any] = {}
-    written = -1
+    first: dict[str, Any] | None = None
+    report = True
+    if resume is not None:
+        start -= resume.wall_seconds
+        history = [r for r in _history(directory, model.comm) if r["step"] <= model.timestep]
+        first, row = history[0], history[-1]
+        for old in history:
+            steady(old)
+        for pp in postprocessors:
+            if hasattr(pp, "restore") and pp.name in resume.postprocessors:
+                pp.restore(resume.postprocessors[pp.name])
+            if pp.name == "wall_time":
+                pp.start = start
+        report = False
     try:
         if model.flow_result is None:
-            _report(model.start(), model.timestep, balance_log, progress)
-        while True:
-            with model.timers("postprocess"):
-                row = {k: v for pp in postprocessors for k, v in pp(model).items()}
-            writer.write(row)
-            extra = f"Nu={row['nusselt']:.5g}" if "nusselt" in row else ""
-            progress.update(model.timestep, model.time, model.dt_previous, row.get("vrms", np.nan), extra=extra)
-            if settings.fields_every and model.timestep % settings.fields_every == 0:
-                with model.timers("output"):
-                    fields.write(model.fields(), model.time)
-                written = model.timestep
+            try:
+                _report(model.start(), model.timestep, out.balance, out.progress)
+            except SOLVER_ERRORS as err:
+                failure = " ".join(str(err).split())
+        while failure is None:
+            if report:
+                previous = row
+                with model.timers("postprocess"):
+                    row = {k: v for pp in postprocessors for k, v in pp(model).items()}
+                first = first or row
+                out.row(model, row)
+                failure = blowup.check(row, first, previous if previous is not row else None)
+                if failure:
+                    break
+                if checkpoints is not None and checkpoints.due(model):
+                    checkpoints.write(model, _state(postprocessors, start))
+            report = True
             if model.time >= settings.end * (1.0 - 1e-12):
                 break
             if settings.max_steps is not None and model.timestep >= settings.max_steps:
@@ -166,27 +295,41 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
             if model.comm.allreduce(bool(should_stop()), op=MPI.LOR):
                 reason = "stopped by signal"
                 break
-            _report(model.step(_timestep(model, settings)), model.timestep, balance_log, progress)
-        with model.timers("output"):
-            if written != model.timestep:
-                fields.write(model.fields(), model.time)
-            if model.particles is not None and model.particles.writer is not None:
-                model.particles.update(model.property_context(), step=model.timestep, final=True)
+            try:
+                _report(model.step(_timestep(model, settings)), model.timestep, out.balance, out.progress)
+            except SOLVER_ERRORS as err:
+                failure = " ".join(str(err).split())
+                break
+        if failure is None:
+            if out.written != model.timestep:
+                out.write_fields(model)
+            with model.timers("output"):
+                if model.particles is not None and model.particles.writer is not None:
+                    model.particles.update(model.property_context(), step=model.timestep, final=True)
+            if checkpoints is not None and checkpoints.settings.at_end:
+                checkpoints.write(model, _state(postprocessors, start), only_if_new=True)
     finally:
-        writer.close()
-        balance_log.close()
-        progress.close()
-        fields.close()
+        out.close()
         # The solvers are done; free them now, on every rank together, not in the garbage collector.
         model.destroy()
+    if failure is not None:
+        reason = f"failed at step {model.timestep}, t={model.time:.6g}: {failure}"
     wall = time.monotonic() - start
     timings = model.timers.summary(model.comm, extra=model.particles.timings if model.particles else None, total=wall)
     summary = RunSummary(model.timestep, model.time, float(row.get("vrms", np.nan)), float(row.get("nusselt", np.nan)),
                          model.num_cells, wall, reason, timings)
     if rank0:
         (directory / "summary.json").write_text(json.dumps(summary.as_dict(), indent=2) + "\n")
-        progress.message(f"finished ({reason}): step {summary.steps}, t={summary.time:.6g}, "
-                         f"vrms={summary.vrms:.6g}, Nu={summary.nusselt:.6g}, {summary.cells} cells, "
-                         f"{summary.wall_time:.1f} s")
-        progress.message("time per phase (max over ranks):\n" + model.timers.table(timings))
+        out.progress.message(f"finished ({reason}): step {summary.steps}, t={summary.time:.6g}, "
+                             f"vrms={summary.vrms:.6g}, Nu={summary.nusselt:.6g}, {summary.cells} cells, "
+                             f"{summary.wall_time:.1f} s")
+        out.progress.message("time per phase (max over ranks):\n" + model.timers.table(timings))
+    if failure is not None:
+        raise RunFailure(reason)
     return summary
+
+
+def _state(postprocessors: Sequence[Postprocessor], start: float) -> dict[str, Any]:
+    """The run loop's part of a checkpoint (JSON-able)."""
+    return {"wall_seconds": time.monotonic() - start,
+            "postprocessors": {pp.name: pp.state() for pp in postprocessors if hasattr(pp, "state")}}

@@ -24,9 +24,12 @@ class StatisticsWriter:
         path: The CSV file (created or truncated).
         columns: Column names in order.
         comm: Communicator; only its rank 0 touches the file.
+        resume_after_step: Continue an existing file (a resumed run): its rows up to this step
+            are kept, later ones dropped (the header must match ``columns``).
     """
 
-    def __init__(self, path: str | Path, columns: Sequence[str], /, *, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    def __init__(self, path: str | Path, columns: Sequence[str], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+                 resume_after_step: int | None = None) -> None:
         self.path = Path(path)
         self.columns = list(columns)
         self._rank = comm.rank
@@ -34,9 +37,11 @@ class StatisticsWriter:
         self._writer = None
         if self._rank == 0:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+            kept = _rows_up_to(self.path, self.columns, resume_after_step) if resume_after_step is not None else []
             self._file = open(self.path, "w", newline="")
             self._writer = csv.writer(self._file)
             self._writer.writerow(self.columns)
+            self._writer.writerows(kept)
             self._flush()
 
     def write(self, row: Mapping[str, float | int | str]) -> None:
@@ -60,6 +65,17 @@ class StatisticsWriter:
             self._writer = None
 
 
+def _rows_up_to(path: Path, columns: list[str], step: int) -> list[list[str]]:
+    """The rows of an existing CSV with ``step <= step`` (raises ValueError if its header differs)."""
+    if not path.exists():
+        raise ValueError(f"{path} is missing: cannot continue it")
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or rows[0] != columns:
+        raise ValueError(f"{path}: its columns differ from this run's; cannot continue it")
+    return [r for r in rows[1:] if r and int(float(r[0])) <= step]
+
+
 def _format(value: float | int | str) -> str:
     if isinstance(value, float):
         return repr(value)
@@ -81,10 +97,14 @@ class BalanceLog:
         comm: Communicator; rank 0 writes.
     """
 
-    def __init__(self, path: str | Path, /, *, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+    def __init__(self, path: str | Path, /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+                 resume_after_step: int | None = None) -> None:
         self.path = Path(path)
         self._rank = comm.rank  # only the rank: a mesh's communicator may be freed with its mesh
         self._writer: StatisticsWriter | None = None
+        if resume_after_step is not None and self._rank == 0 and self.path.exists():
+            self._writer = StatisticsWriter(self.path, BALANCE_COLUMNS, comm=MPI.COMM_SELF,
+                                            resume_after_step=resume_after_step)
 
     def write(self, step: int, before: Any, after: Any) -> None:
         """Append a row; ``before``/``after`` have per-rank ``cells``, ``particles`` arrays and

@@ -287,6 +287,22 @@ class TransportSolver(PetscSolver):
         iterations = self.ksp.getIterationNumber() if self.solver == "iterative" else 1
         return TransportResult(int(iterations), order, float(dt))
 
+    def history(self) -> dict[str, dolfinx.fem.Function]:
+        """The Functions of the time history: ``T`` (T^n), ``T_old``, ``T_old2``."""
+        return {"T": self.T, "T_old": self.T_old, "T_old2": self.T_old2}
+
+    def history_scalars(self) -> dict[str, Any]:
+        """The scalars of the time history (JSON-able): previous step, steps taken, last BDF step."""
+        return {"dt_old": self.dt_old, "steps": self.steps, "dt_last": float(self._dt_last.value),
+                "coef_last": [float(c) for c in self._coef_last.value]}
+
+    def restore_history_scalars(self, scalars: dict[str, Any], /) -> None:
+        """Set what :meth:`history_scalars` returned (the Functions are restored by the caller)."""
+        self.dt_old = scalars["dt_old"]
+        self.steps = int(scalars["steps"])
+        self._dt_last.value = scalars["dt_last"]
+        self._coef_last.value[:] = scalars["coef_last"]
+
     def last_step_residual(self, u: Any, w: Any, /) -> Any:
         """UFL residual ``F(T; w)`` of the last step taken (module docstring) with velocity ``u``:
         the last step's BDF time derivative, zero before the first step. Tested with a function

@@ -165,14 +165,29 @@ def build_properties(specs: Sequence[str | Mapping[str, Any] | ParticleProperty]
     return built
 
 
+def _check_point_file(path: Path, gdim: int | None) -> None:
+    """A ``from_file`` point list must exist and have gdim (or 3, padded with zeros) columns."""
+    if not path.is_file():
+        raise ValueError(f"particle file {str(path)!r} not found")
+    if gdim is None:
+        return
+    try:
+        data = np.loadtxt(path, comments="#", ndmin=2)
+    except ValueError as err:
+        raise ValueError(f"particle file {str(path)!r}: {err}") from None
+    if data.size and data.shape[1] not in (gdim, 3):
+        raise ValueError(f"particle file {str(path)!r}: expected {gdim} columns, found {data.shape[1]}")
+
+
 def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
-                    make_function: MakeFunction | None = None) -> Generator:
+                    make_function: MakeFunction | None = None, gdim: int | None = None) -> Generator:
     """A generator from ``{name: ..., **parameters}``; ``particles_per_cell`` (> 0) may replace
     ``num_particles`` (times ``num_cells``, the global cell count).
 
     Raises:
         ValueError: Unknown name (listing :data:`particles.generation.GENERATORS`), bad
-            parameters, or a ``from_file`` path that is not a file.
+            parameters, or a ``from_file`` path that is not a file (or, given ``gdim``, has the
+            wrong number of columns).
     """
     if not isinstance(spec, Mapping):
         return spec
@@ -181,14 +196,19 @@ def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
     if name not in GENERATORS:
         raise ValueError(f"unknown particle generator {name!r}; valid: {sorted(GENERATORS)}")
     per_cell = params.pop("particles_per_cell", None)
+    if isinstance(per_cell, str):  # YAML reads 1e6 as text
+        try:
+            per_cell = float(per_cell)
+        except ValueError:
+            pass
     if per_cell is not None:
         if "num_particles" in params:
             raise ValueError("give either particles_per_cell or num_particles, not both")
         if isinstance(per_cell, bool) or not isinstance(per_cell, (int, float)) or not per_cell > 0:
             raise ValueError(f"particles_per_cell must be a number > 0, got {per_cell!r}")
         params["num_particles"] = int(round(per_cell * num_cells))
-    if name == "from_file" and "path" in params and not Path(str(params["path"])).is_file():
-        raise ValueError(f"particle file {str(params['path'])!r} not found")
+    if name == "from_file" and "path" in params:
+        _check_point_file(Path(str(params["path"])), gdim)
     return create_generator(name, **_with_functions(params, make_function, str(name)))
 
 
@@ -232,6 +252,7 @@ class ParticleManager:
         confine: ``confine(x)`` moves positions that left the domain back inside (in place,
             shape=(n, gdim)) before they are relocated, e.g. onto a curved boundary a Runge-Kutta
             step crossed; None: such particles are lost (see :class:`particles.advection.Advector`).
+        generate_particles: False starts with no particles (e.g. to :meth:`adopt` restored ones).
     """
 
     def __init__(
@@ -249,6 +270,7 @@ class ParticleManager:
         output: OutputSchedule = OutputSchedule(),
         context: PropertyContext | None = None,
         confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
+        generate_particles: bool = True,
     ) -> None:
         get_integrator(integrator)  # ValueError listing the valid names
         self.confine = confine
@@ -268,14 +290,16 @@ class ParticleManager:
         self.removed = 0
         self.swarm = Swarm(mesh)
         self.properties = PropertyManager(self.swarm, properties)
-        self.generation: GenerationResult = generate(self.swarm, generator)
-        self.properties.initialise(context if context is not None else PropertyContext())
         self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes(), confine=confine)
         self._tracked: dict[str, _Tracked] = {}
         self._space: dolfinx.fem.FunctionSpace | None = None
         self._last_output: tuple[int, float] | None = None
         self._next_output_time = float("inf")
-        self._bound(step=0, salt=0)
+        self.generation = GenerationResult(0, 0, 0)
+        if generate_particles:
+            self.generation = generate(self.swarm, generator)
+            self.properties.initialise(context if context is not None else PropertyContext())
+            self._bound(step=0, salt=0)
 
     # ------------------------------------------------------------------ construction from a config
     @classmethod
@@ -291,6 +315,7 @@ class ParticleManager:
         field_degree: int = 0,
         context: PropertyContext | None = None,
         confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
+        generate_particles: bool = True,
     ) -> ParticleManager:
         """One manager from one config section (collective).
 
@@ -311,6 +336,7 @@ class ParticleManager:
             field_degree: Degree of tracked fields.
             context: Fields for the initial property values.
             confine: Moves positions that left the domain back inside (see the class).
+            generate_particles: False: no particles yet (see :meth:`adopt`).
         """
         num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
         generator = build_generator(section.get("generator") or {"name": "random_uniform", "particles_per_cell": 20},
@@ -332,7 +358,8 @@ class ParticleManager:
             writer = ParticleWriter(directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
         return cls(mesh, generator=generator, integrator=str(section.get("integrator") or "rk2"),
                    properties=properties, interpolator=interpolator, field_degree=field_degree,
-                   population=population, writer=writer, output=schedule, context=context, confine=confine)
+                   population=population, writer=writer, output=schedule, context=context,
+                   generate_particles=generate_particles, confine=confine)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -453,6 +480,31 @@ class ParticleManager:
         self._next_output_time = self.output.next_time(t)
         self.timings["particle_output"] += time.perf_counter() - t0
         return record
+
+    # ------------------------------------------------------------------ checkpoints
+    def counters(self) -> dict[str, Any]:
+        """What a checkpoint needs besides the swarm (JSON-able): counters, output schedule, timings."""
+        return {"lost": self.lost, "added": self.added, "removed": self.removed,
+                "last_output": list(self._last_output) if self._last_output else None,
+                "next_output_time": self._next_output_time, "timings": dict(self.timings)}
+
+    def adopt(self, swarm: Swarm, counters: dict[str, Any], /, *, context: PropertyContext) -> None:
+        """Continue with ``swarm`` (e.g. restored from a checkpoint, with this manager's property
+        columns) and the saved :meth:`counters`; rebuilds the tracked fields (collective)."""
+        self.swarm = swarm
+        self.properties.attach(swarm)
+        self.properties.set_context(context)
+        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(),
+                                  confine=self.confine)
+        self.lost, self.added, self.removed = int(counters["lost"]), int(counters["added"]), int(counters["removed"])
+        last = counters["last_output"]
+        self._last_output = (int(last[0]), float(last[1])) if last else None
+        self._next_output_time = float(counters["next_output_time"])
+        self.timings.update(counters["timings"])
+        self._space = None
+        for tracked in self._tracked.values():
+            tracked.function = self._new_field(tracked.function.name)
+            self._interpolate(tracked)
 
     # ------------------------------------------------------------------ mesh changes
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, /, *, context: PropertyContext | None = None, step: int = 0) -> int:

@@ -46,6 +46,11 @@ CASES = {
                                   "particles.properties[1]"),
     "unknown material key": (["run", str(GOOD), "--set", "materials={lid: {initial: 'z > 0.8', density: 1}}"],
                              "materials.lid.density"),
+    "runaway integer power": (["run", str(GOOD), "--set", "initial.temperature=9**9**9"], "initial.temperature"),
+    "runaway refinement": (["run", str(GOOD), "--set", "adaptivity.enabled=true", "--set", "adaptivity.max_level=50"],
+                           "adaptivity.max_level"),
+    "too many particles": (["run", str(GOOD), "--set", "particles.enabled=true",
+                            "--set", "particles.generator.particles_per_cell=1e7"], "particles_per_cell"),
 }
 
 

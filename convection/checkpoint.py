@@ -1,0 +1,476 @@
+"""Whole-run checkpoints: everything a run needs to go on as if it had never stopped.
+
+A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the step) holding
+
+- ``state.h5``: format and version attributes, the resolved config (YAML text), the run state
+  (JSON: step, time, previous step, Stokes iterations, the temperature and composition solvers'
+  time history scalars, the particle manager's counters, postprocessor and run-loop state, timers),
+  how the mesh was made (:class:`convection.adaptivity.MeshRecipe`: replayed on the same rank
+  count, so the mesh, its partition and its numbering come back bit for bit), the mesh's cells
+  (vertex coordinates and base cell, for a restart on another rank count), and every Function with
+  time history (``u``, ``p``, ``T^n``, ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``, advected or static
+  material fractions): owned dof values with the owned dof coordinates;
+- ``particles.h5``: the particles with their properties (:func:`particles.checkpoint.save_checkpoint`).
+
+The folder is written under a hidden temporary name and renamed when complete, so a run killed at
+any moment leaves only complete checkpoints under ``checkpoint_*`` names (at worst a stray hidden
+temporary folder, removed by the next checkpoint). Only the newest ``keep`` are kept.
+
+Restoring on the rank count it was written on replays the mesh and copies the dof values: the
+continuation is bit for bit the uninterrupted run (when the run itself is deterministic: parallel
+MUMPS factorisations are not, see the README). On another rank count the mesh is rebuilt from its
+cells and partitioned afresh, the fields are matched dof by dof through their coordinates, and the
+particles are located and migrated: the same run to round-off.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+import yaml
+from mpi4py import MPI
+from scipy.spatial import cKDTree
+
+import dolfinx.fem
+import dolfinx.mesh
+
+from convection.adaptivity import MeshHierarchy, MeshRecipe
+from convection.balance import CellLayout, create_partitioned_mesh
+from convection.model import Model
+from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from particles.manager import ParticleManager
+from particles.output import H5Sink
+from particles.properties import PropertyContext
+
+__all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpointer", "SavedRun", "latest_checkpoint",
+           "list_checkpoints", "read_checkpoint", "restore_mesh", "restore_particles", "restore_state",
+           "write_checkpoint"]
+
+FORMAT = "convection-checkpoint"
+VERSION = 1
+CONFIG_VERSION = 1
+"""Version of the config schema a checkpoint's config was written with; raise it when a change of
+the schema would change the meaning of an old config."""
+
+_NAME = "checkpoint_"
+
+
+@dataclass(frozen=True)
+class CheckpointSettings:
+    """When checkpoints are written (``output.checkpoint``).
+
+    Attributes:
+        every_steps: Every this many steps (None: not by steps).
+        every_wall_seconds: When this much wall time passed since the last one (None: not by time).
+        keep: How many of the newest checkpoints are kept.
+        at_end: Also at the end of the run and when it is stopped by a signal.
+    """
+
+    every_steps: int | None = None
+    every_wall_seconds: float | None = None
+    keep: int = 2
+    at_end: bool = True
+
+
+@dataclass
+class SavedRun:
+    """A checkpoint read back (the same on every rank; arrays are read per rank on restore).
+
+    Attributes:
+        path: The checkpoint folder.
+        config: The resolved config it was written with.
+        state: The run state (JSON-able dict, see the module docstring).
+        num_ranks: The rank count it was written on.
+    """
+
+    path: Path
+    config: dict[str, Any]
+    state: dict[str, Any]
+    num_ranks: int
+
+
+# ---------------------------------------------------------------------- listing
+def list_checkpoints(run_dir: str | os.PathLike[str], /) -> list[Path]:
+    """The complete checkpoints of a run folder, oldest first."""
+    folder = Path(run_dir) / "checkpoints"
+    found = [p for p in folder.glob(f"{_NAME}[0-9]*") if p.is_dir() and (p / "state.h5").is_file()]
+    return sorted(found, key=lambda p: int(p.name[len(_NAME):]))
+
+
+def latest_checkpoint(run_dir: str | os.PathLike[str], /) -> Path | None:
+    """The newest complete checkpoint of a run folder, or None."""
+    found = list_checkpoints(run_dir)
+    return found[-1] if found else None
+
+
+# ---------------------------------------------------------------------- what is saved
+def state_functions(model: Model) -> dict[str, dolfinx.fem.Function]:
+    """Every Function a continuation needs, by a stable name."""
+    out = {"stokes/u": model.stokes.u, "stokes/p": model.stokes.p}
+    if model.temperature is not None:
+        out.update({f"temperature/{k}": f for k, f in model.temperature.history().items()})
+    if model.u_previous is not None:
+        out["model/u_previous"] = model.u_previous
+    composition = model.composition
+    if composition is not None and hasattr(composition, "solvers"):
+        for solver in composition.solvers:
+            out.update({f"composition/{solver.name}/{k}": f for k, f in solver.history().items()})
+    elif composition is not None and composition.name == "static":
+        out.update({f"composition/{f.name}": f for f in composition.fields})
+    return out
+
+
+def model_state(model: Model) -> dict[str, Any]:
+    """The model's scalar state (JSON-able)."""
+    composition = model.composition
+    flow = model.flow_result
+    return {
+        "time": model.time, "timestep": model.timestep, "dt_previous": model.dt_previous,
+        "has_u_previous": model.u_previous is not None,
+        "flow": None if flow is None else [int(flow.iterations), float(flow.residual_norm)],
+        "temperature": model.temperature.history_scalars() if model.temperature is not None else None,
+        "composition": [s.history_scalars() for s in composition.solvers] if hasattr(composition, "solvers") else [],
+        "particles": model.particles.counters() if model.particles is not None else None,
+        "timers": {"seconds": model.timers.seconds, "calls": model.timers.calls},
+    }
+
+
+# ---------------------------------------------------------------------- write
+def _owned(f: dolfinx.fem.Function) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Owned dof values shape=(n_nodes, bs) and their coordinates shape=(n_nodes, 3)."""
+    V = f.function_space
+    n = V.dofmap.index_map.size_local
+    bs = V.dofmap.index_map_bs
+    return f.x.array[: n * bs].reshape(n, bs), V.tabulate_dof_coordinates()[:n]
+
+
+def _mesh_cells(mesh: dolfinx.mesh.Mesh, hierarchy: MeshHierarchy | None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex coordinates of the owned cells shape=(n, tdim+1, gdim) and their base cells (canonical)."""
+    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+    n = mesh.topology.index_map(tdim).size_local
+    dofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[:n]
+    corners = np.ascontiguousarray(mesh.geometry.x[dofs][:, :, :gdim])
+    base = hierarchy.base_cells(mesh) if hierarchy is not None else np.zeros(n, dtype=np.int64)
+    return corners, base
+
+
+def _write_layout(sink: H5Sink, name: str, layout: CellLayout | None, owners: Any) -> None:
+    """A layout gathered on rank 0 and its owners (rank 0's values are written)."""
+    if layout is None:
+        return
+    sink.replicated(f"{name}/points", layout.points)
+    sink.replicated(f"{name}/cells", layout.cells)
+    sink.replicated(f"{name}/midpoints", layout.midpoints)
+    sink.replicated(f"{name}/owners", None if owners is None else np.asarray(owners, dtype=np.int32))
+
+
+def _write_recipe(sink: H5Sink, recipe: MeshRecipe) -> list[str]:
+    _write_layout(sink, "recipe/base", recipe.base_layout, recipe.base_owners)
+    _write_layout(sink, "recipe/mesh", recipe.layout, recipe.owners)
+    rounds = []
+    for i, marked in enumerate(recipe.rounds):
+        kind = "uniform" if marked is None else "marked"
+        if marked is not None:
+            sink.distributed(f"recipe/round_{i}", np.asarray(marked, dtype=np.int32))
+            sink.replicated(f"recipe/round_{i}_counts", np.asarray(sink.comm.allgather(int(marked.size)), dtype=np.int64))
+        rounds.append(kind)
+    return rounds
+
+
+def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config: dict[str, Any],
+                     run_state: dict[str, Any], keep: int = 2) -> Path:
+    """Write a checkpoint of ``model`` at its current step into ``run_dir/checkpoints`` (collective,
+    atomic); keeps the newest ``keep``. ``run_state`` is the run loop's JSON-able state."""
+    comm = model.comm
+    folder = Path(run_dir) / "checkpoints"
+    final = folder / f"{_NAME}{model.timestep:06d}"
+    tmp = folder / comm.bcast(f".{final.name}.{uuid.uuid4().hex[:8]}.tmp" if comm.rank == 0 else None, root=0)
+    if comm.rank == 0:
+        for stray in folder.glob(".checkpoint_*.tmp"):
+            shutil.rmtree(stray, ignore_errors=True)
+        tmp.mkdir(parents=True)
+    comm.Barrier()
+    hierarchy = model.adaptivity.hierarchy if model.adaptivity else (model.balancer.hierarchy if model.balancer else None)
+    state = {"model": model_state(model), "run": run_state, "num_ranks": comm.size,
+             "recipe_rounds": None, "hierarchy": hierarchy is not None}
+    with H5Sink(tmp / "state.h5", comm) as sink:
+        if hierarchy is not None:
+            state["recipe_rounds"] = _write_recipe(sink, hierarchy.recipe)
+        corners, base = _mesh_cells(model.mesh, hierarchy)
+        sink.distributed("mesh/corners", corners)
+        sink.distributed("mesh/base_cells", base)
+        for name, f in state_functions(model).items():
+            values, coords = _owned(f)
+            sink.distributed(f"functions/{name}/values", values)
+            sink.distributed(f"functions/{name}/coords", coords)
+            sink.replicated(f"functions/{name}/counts", np.asarray(comm.allgather(values.shape[0]), dtype=np.int64))
+        sink.replicated("config", np.frombuffer(yaml.safe_dump(config, sort_keys=False).encode(), dtype=np.uint8))
+        sink.replicated("state", np.frombuffer(json.dumps(state).encode(), dtype=np.uint8))
+        sink.attrs(format=FORMAT, version=VERSION, config_version=CONFIG_VERSION, num_ranks=comm.size,
+                   step=model.timestep, time=model.time)
+    if model.particles is not None:
+        save_checkpoint(tmp / "particles.h5", model.particles.swarm, step=model.timestep, time=model.time)
+    comm.Barrier()
+    if comm.rank == 0:
+        if final.exists():
+            shutil.rmtree(final)
+        os.rename(tmp, final)
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        for old in list_checkpoints(run_dir)[:-keep] if keep > 0 else []:
+            shutil.rmtree(old, ignore_errors=True)
+    comm.Barrier()
+    return final
+
+
+# ---------------------------------------------------------------------- read
+def _inspect(path: Path) -> SavedRun | str:
+    """Check a checkpoint folder alone (rank 0); returns it read back, or what is wrong."""
+    if not path.is_dir():
+        return "missing (no such checkpoint folder)"
+    state_file = path / "state.h5"
+    try:
+        if not h5py.is_hdf5(state_file):
+            return "state.h5 is not an HDF5 file"
+        with h5py.File(state_file, "r") as f:
+            if f.attrs.get("format") != FORMAT:
+                return f"not a run checkpoint (format attribute {f.attrs.get('format')!r})"
+            if int(f.attrs.get("version", -1)) != VERSION:
+                return f"checkpoint format version {int(f.attrs.get('version', -1))}, this code reads {VERSION}"
+            if int(f.attrs.get("config_version", -1)) != CONFIG_VERSION:
+                return (f"written with config version {int(f.attrs.get('config_version', -1))}, this code reads "
+                        f"config version {CONFIG_VERSION}")
+            config = yaml.safe_load(f["config"][...].tobytes().decode())
+            state = json.loads(f["state"][...].tobytes().decode())
+            num_ranks = int(f.attrs["num_ranks"])
+    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError) as err:
+        return f"damaged ({' '.join(str(err).split())})"
+    if state.get("model", {}).get("particles") is not None and not (path / "particles.h5").is_file():
+        return "particles.h5 is missing"
+    return SavedRun(path, config, state, num_ranks)
+
+
+def read_checkpoint(path: str | os.PathLike[str], comm: MPI.Comm, /) -> SavedRun:
+    """Read and check a checkpoint folder (collective).
+
+    Raises:
+        CheckpointError: On every rank, one line naming the folder: missing, damaged, or written
+            by another format or config version.
+    """
+    path = Path(comm.bcast(str(path) if comm.rank == 0 else None, root=0))
+    saved = _inspect(path) if comm.rank == 0 else None
+    saved = comm.bcast(saved, root=0)
+    if isinstance(saved, str):
+        raise CheckpointError(f"checkpoint {path}: {saved}")
+    return saved
+
+
+def _slice(f: h5py.File, name: str, counts: npt.NDArray[np.int64], rank: int) -> npt.NDArray:
+    start = int(counts[:rank].sum())
+    return f[name][start: start + int(counts[rank])]
+
+
+def _read_layout(f: h5py.File, name: str, comm: MPI.Comm, num_cells: int) -> tuple[CellLayout, Any]:
+    """A saved layout and its owners (rank 0; empty arrays and None elsewhere)."""
+    if comm.rank == 0:
+        layout = CellLayout(f[f"{name}/points"][...], f[f"{name}/cells"][...], f[f"{name}/midpoints"][...],
+                            int(f[f"{name}/cells"].shape[0]))
+        return layout, f[f"{name}/owners"][...]
+    gdim = f[f"{name}/points"].shape[1]
+    tdim1 = f[f"{name}/cells"].shape[1]
+    return CellLayout(np.zeros((0, gdim)), np.zeros((0, tdim1), dtype=np.int64), np.zeros((0, gdim)), num_cells), None
+
+
+def restore_mesh(saved: SavedRun, base: dolfinx.mesh.Mesh, hierarchy: MeshHierarchy | None, /) -> tuple[dolfinx.mesh.Mesh, bool]:
+    """The checkpoint's mesh (collective): replayed on the same rank count (exact), rebuilt from its
+    cells otherwise. ``base`` is the run's base mesh made afresh from the config. Returns the mesh
+    and whether it is exact."""
+    comm = base.comm
+    exact = saved.num_ranks == comm.size
+    with h5py.File(saved.path / "state.h5", "r") as f:
+        if hierarchy is None:
+            return base, exact  # the mesh is the base mesh, made the same way on any rank count
+        if exact:
+            rounds_kind = saved.state["recipe_rounds"]
+            base_layout = base_owners = mesh_layout = mesh_owners = None
+            if "recipe/base" in f:
+                base_layout, base_owners = _read_layout(f, "recipe/base", comm, hierarchy.num_base_cells)
+                base_owners = comm.bcast(base_owners, root=0)
+            if "recipe/mesh" in f:
+                cells = int(f["mesh/base_cells"].shape[0])
+                mesh_layout, mesh_owners = _read_layout(f, "recipe/mesh", comm, cells)
+            rounds = []
+            for i, kind in enumerate(rounds_kind):
+                counts = f[f"recipe/round_{i}_counts"][...] if kind == "marked" else None
+                rounds.append(None if kind == "uniform" else _slice(f, f"recipe/round_{i}", counts, comm.rank).astype(np.int32))
+            recipe = MeshRecipe(base_layout, base_owners, rounds, mesh_layout, mesh_owners)
+            return hierarchy.replay(recipe), True
+        corners = f["mesh/corners"][...] if comm.rank == 0 else None
+        base_cells = f["mesh/base_cells"][...] if comm.rank == 0 else None
+        if "recipe/base" in f:
+            layout, _ = _read_layout(f, "recipe/base", comm, hierarchy.num_base_cells)
+            hierarchy.replay(MeshRecipe(layout, _spread_owners(layout, comm), []))
+    # The saved cells, each sent to the rank that owns its base cell, so the mesh and its base
+    # stay together (load balancing needs that).
+    base_owner = _base_owners(hierarchy)
+    n = 0 if corners is None else corners.shape[0]
+    layout = _layout_of(corners, comm, n, base.geometry.dim, hierarchy.tdim)
+    owners = base_owner[base_cells] if comm.rank == 0 else None
+    return create_partitioned_mesh(comm, layout, owners, hierarchy.new_domain()).mesh, False
+
+
+def _spread_owners(layout: CellLayout, comm: MPI.Comm) -> npt.NDArray[np.int32]:
+    """Owner ranks for a base layout on a new rank count: equal blocks of canonical cells."""
+    n = layout.num_cells
+    return (np.arange(n) * comm.size // max(n, 1)).astype(np.int32)
+
+
+def _base_owners(hierarchy: MeshHierarchy) -> npt.NDArray[np.int32]:
+    """Owner rank of every canonical base cell (collective; every rank gets all)."""
+    base = hierarchy.base
+    n = base.topology.index_map(hierarchy.tdim).size_local
+    owners = np.full(hierarchy.num_base_cells, -1, dtype=np.int32)
+    owners[hierarchy.base_canonical[:n]] = base.comm.rank
+    total = np.empty_like(owners)
+    base.comm.Allreduce(owners, total, op=MPI.MAX)
+    return total
+
+
+def _layout_of(corners: npt.NDArray | None, comm: MPI.Comm, num_cells: int, gdim: int, tdim: int) -> CellLayout:
+    """The saved cells (rank 0) as a layout; empty arrays on the other ranks."""
+    num_cells = comm.bcast(num_cells, root=0)
+    if comm.rank != 0:
+        return CellLayout(np.zeros((0, gdim)), np.zeros((0, tdim + 1), dtype=np.int64), np.zeros((0, gdim)), num_cells)
+    gdim = corners.shape[2]
+    points, inverse = np.unique(corners.reshape(-1, gdim), axis=0, return_inverse=True)
+    cells = inverse.reshape(num_cells, -1).astype(np.int64)
+    return CellLayout(points, cells, corners.mean(axis=1), num_cells)
+
+
+def restore_state(model: Model, saved: SavedRun, /, *, exact: bool) -> None:
+    """Put the checkpoint's fields and scalars into ``model`` (built on the restored mesh from the
+    checkpoint's config; the particles: :func:`restore_particles`). Collective."""
+    comm = model.comm
+    ms = saved.state["model"]
+    if ms["has_u_previous"]:
+        model.u_previous = dolfinx.fem.Function(model.stokes.u.function_space)
+    functions = state_functions(model)
+    with h5py.File(saved.path / "state.h5", "r") as f:
+        nested: dict[str, h5py.Group] = {}
+        _collect(f["functions"], "", nested)
+        missing = sorted(set(functions) - set(nested))
+        if missing:
+            raise CheckpointError(f"checkpoint {saved.path}: no saved values for {missing}")
+        for name, target in functions.items():
+            group = f[f"functions/{name}"]
+            if exact:
+                counts = group["counts"][...]
+                values = _slice(f, f"functions/{name}/values", counts, comm.rank)
+                bs = target.function_space.dofmap.index_map_bs
+                target.x.array[: values.size] = values.reshape(-1)
+                if values.size != target.function_space.dofmap.index_map.size_local * bs:
+                    raise CheckpointError(f"checkpoint {saved.path}: {name} does not fit the replayed mesh")
+            else:
+                _match_by_coordinates(target, group["coords"][...], group["values"][...])
+            target.x.scatter_forward()
+    model.time, model.timestep, model.dt_previous = ms["time"], ms["timestep"], ms["dt_previous"]
+    if ms["flow"] is not None:
+        from convection.stokes import StokesResult
+
+        model.flow_result = StokesResult(int(ms["flow"][0]), float(ms["flow"][1]))
+    if model.temperature is not None and ms["temperature"] is not None:
+        model.temperature.restore_history_scalars(ms["temperature"])
+    if ms["composition"]:
+        for solver, scalars in zip(model.composition.solvers, ms["composition"]):
+            solver.restore_history_scalars(scalars)
+    model.timers.seconds = dict(ms["timers"]["seconds"])
+    model.timers.calls = dict(ms["timers"]["calls"])
+
+
+def restore_particles(saved: SavedRun, manager: ParticleManager, context: PropertyContext, /) -> bool:
+    """Give ``manager`` the checkpoint's particles and counters (collective). Returns whether the
+    particles came back exactly (same ranks, same order)."""
+    restored = load_checkpoint(saved.path / "particles.h5", manager.mesh)
+    manager.adopt(restored.swarm, saved.state["model"]["particles"], context=context)
+    return restored.exact
+
+
+def _collect(group: h5py.Group, prefix: str, out: dict) -> None:
+    """Names of the saved functions (groups holding a ``values`` dataset)."""
+    for key, item in group.items():
+        if isinstance(item, h5py.Group):
+            if "values" in item:
+                out[f"{prefix}{key}"] = item
+            else:
+                _collect(item, f"{prefix}{key}/", out)
+
+
+def _match_by_coordinates(target: dolfinx.fem.Function, coords: npt.NDArray, values: npt.NDArray) -> None:
+    """Set every local dof of ``target`` from the saved dof at the same coordinates."""
+    V = target.function_space
+    bs = V.dofmap.index_map_bs
+    local = V.tabulate_dof_coordinates()
+    distance, index = cKDTree(coords).query(local)
+    scale = max(1.0, float(np.abs(coords).max(initial=0.0)))
+    if local.shape[0] and distance.max() > 1e-9 * scale:
+        raise CheckpointError(f"a saved field ({target.name}) does not match the mesh: a dof {distance.max():.3g} "
+                              "away from every saved one")
+    target.x.array[: local.shape[0] * bs] = values[index].reshape(-1)
+
+
+class Checkpointer:
+    """Writes the checkpoints of a run when they are due (collective decisions).
+
+    Args:
+        settings: When to write.
+        run_dir: The run's output folder.
+        config: The resolved config (stored in every checkpoint).
+        resumed_at: The step of the checkpoint a resumed run started from (not written again).
+    """
+
+    def __init__(self, settings: CheckpointSettings, run_dir: str | os.PathLike[str], config: dict[str, Any], /, *,
+                 resumed_at: int | None = None) -> None:
+        self.settings = settings
+        self.run_dir = Path(run_dir)
+        self.config = config
+        self._last_step = resumed_at
+        self._last_wall = time.monotonic()
+        self.written: list[Path] = []
+
+    def due(self, model: Model, /) -> bool:
+        """Whether a checkpoint is due after the current step (the same answer on every rank)."""
+        if model.timestep == self._last_step:
+            return False
+        every = self.settings.every_steps
+        if every is not None and model.timestep > 0 and model.timestep % every == 0:
+            return True
+        if self.settings.every_wall_seconds is None:
+            return False
+        late = time.monotonic() - self._last_wall >= self.settings.every_wall_seconds
+        return bool(model.comm.bcast(late, root=0))
+
+    def write(self, model: Model, run_state: dict[str, Any], /, *, only_if_new: bool = False) -> Path | None:
+        """Write a checkpoint now (unless ``only_if_new`` and this step has one)."""
+        if only_if_new and model.timestep == self._last_step:
+            return None
+        with model.timers("checkpoint"):
+            path = write_checkpoint(model, self.run_dir, config=self.config, run_state=run_state,
+                                    keep=self.settings.keep)
+        self._last_step = model.timestep
+        self._last_wall = time.monotonic()
+        self.written.append(path)
+        return path
+

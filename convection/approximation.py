@@ -1,8 +1,9 @@
 """Nondimensional Boussinesq approximation: material parameters and constitutive laws.
 
-Equations (``e_z`` is the last coordinate axis, pointing "up")::
+Equations (``e_up`` the "up" direction, against gravity: ``e_z``, the last coordinate axis, for
+``gravity="vertical"``; ``x / |x|``, away from the origin, for ``gravity="radial"`` in shells)::
 
-    -div(2 eta(T, C) eps(u)) + grad p = (Ra T - sum_i Rb_i C_i) e_z,      div u = 0,
+    -div(2 eta(T, C) eps(u)) + grad p = (Ra T - sum_i Rb_i C_i) e_up,      div u = 0,
     dT/dt + u . grad T = lap T + H,
 
 with ``eps(u) = (grad u + grad u^T) / 2``, thermal Rayleigh number ``Ra``, compositional (buoyancy)
@@ -24,6 +25,12 @@ MIXING_RULES: dict[str, str] = {
     "harmonic": "1/eta = (1-C)/eta_0 + C/eta_1",
 }
 """Registry of composition mixing rules (lowercase name -> one-line description)."""
+
+GRAVITY_DIRECTIONS: dict[str, str] = {
+    "vertical": "gravity along -e_z (the last axis): boxes",
+    "radial": "gravity towards the origin, g = -x/|x|: annulus and spherical shell",
+}
+"""Registry of gravity directions (lowercase name -> one-line description)."""
 
 TEMPERATURE_LAWS: dict[str, str] = {
     "none": "no temperature dependence",
@@ -148,6 +155,7 @@ class BoussinesqApproximation:
             (buoyancy ``-sum_i Rb_i C_i e_z``) in the order of the fractions (:func:`fractions`).
         H: nondimensional internal heating rate.
         viscosity: viscosity law ``eta(T, C)``.
+        gravity: name in :data:`GRAVITY_DIRECTIONS` (``"vertical"`` | ``"radial"``).
     """
 
     def __init__(
@@ -158,7 +166,10 @@ class BoussinesqApproximation:
         Rb: float | tuple[float, ...] = 0.0,
         H: float = 0.0,
         viscosity: ViscosityLaw = ViscosityLaw(),
+        gravity: str = "vertical",
     ) -> None:
+        _check_name(gravity, GRAVITY_DIRECTIONS, "gravity direction")
+        self.gravity = gravity
         self.Ra = float(Ra)
         self.Rb: float | tuple[float, ...] = tuple(float(r) for r in Rb) if isinstance(Rb, (list, tuple)) else float(Rb)
         self.H = float(H)
@@ -173,8 +184,17 @@ class BoussinesqApproximation:
         """UFL expression of ``eta(T, C)`` (``T``, ``C``: Functions, UFL expressions or numbers)."""
         return self.viscosity_law(T, C)
 
-    def buoyancy(self, T: Any, C: Any, gdim: int) -> Any:
-        """UFL vector expression ``(Ra T - sum_i Rb_i C_i) e_z`` of length ``gdim`` (``C = None`` -> 0)."""
+    def up(self, x: Any, /) -> Any:
+        """UFL unit vector ``e_up`` against gravity at the points ``x`` (``ufl.SpatialCoordinate``)."""
+        gdim = x.ufl_shape[0]
+        if self.gravity == "radial":
+            return x / ufl.sqrt(ufl.dot(x, x))
+        return ufl.as_vector([0.0] * (gdim - 1) + [1.0])
+
+    def buoyancy(self, T: Any, C: Any, gdim: int, /, *, x: Any = None) -> Any:
+        """UFL vector expression ``(Ra T - sum_i Rb_i C_i) e_up`` of length ``gdim`` (``C = None`` -> 0).
+
+        ``x`` (``ufl.SpatialCoordinate`` of the mesh) is needed for radial gravity."""
         magnitude = self.Ra * _as_ufl(T)
         cs = fractions(C)
         rbs = self.Rb if isinstance(self.Rb, tuple) else (self.Rb,) * len(cs)
@@ -183,10 +203,14 @@ class BoussinesqApproximation:
         for rb, c in zip(rbs, cs):
             if rb != 0.0:
                 magnitude = magnitude - rb * _as_ufl(c)
+        if self.gravity == "radial":
+            if x is None:
+                raise ValueError("radial gravity needs the spatial coordinate x")
+            return magnitude * self.up(x)
         return ufl.as_vector([0.0] * (gdim - 1) + [magnitude])
 
     def __repr__(self) -> str:
         return (
             f"BoussinesqApproximation(Ra={self.Ra}, Rb={self.Rb}, H={self.H}, "
-            f"viscosity={self.viscosity_law})"
+            f"viscosity={self.viscosity_law}" + (f", gravity={self.gravity!r})" if self.gravity != "vertical" else ")")
         )

@@ -1,10 +1,13 @@
 """Run configuration: the YAML schema of a convection run, loading and ``--set`` overrides.
 
-Every config has at least ``mesh.cells``, ``time.end`` and ``output.directory``. Sections:
+Every config has at least ``mesh.cells`` (or a shell ``mesh.geometry`` with ``mesh.resolution``),
+``time.end`` and ``output.directory``. Sections:
 
-- ``mesh``: box domain and cells per direction, refinement levels for adaptivity;
+- ``mesh``: the domain (``geometry``: box with cells per direction; annulus or spherical shell
+  with radii, cell size and geometry degree);
 - ``physics``: Ra, Rb, H and the viscosity law;
-- ``boundary``: velocity and temperature conditions per side (left/right, bottom/top, front/back);
+- ``boundary``: velocity and temperature conditions per side (box: left/right, bottom/top,
+  front/back; annulus and spherical shell: inner/outer);
 - ``initial``: initial temperature and composition (closed-form expressions, see
   :mod:`convection.expressions`);
 - ``materials``: any number of named materials, each with an initial region, a compositional
@@ -35,9 +38,12 @@ import yaml
 from convection.expressions import Expression, ExpressionError
 from convection.schema import REQUIRED, ConfigError, Field, validate
 
-__all__ = ["SCHEMA", "ConfigError", "dump_config", "expression_constants", "load_config", "parse_overrides"]
+__all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
+           "parse_overrides"]
 
 _SIDES = ("left", "right", "bottom", "top", "front", "back")
+_SHELL_BOUNDARIES = ("inner", "outer")
+_SHELLS = {"annulus": 2, "spherical_shell": 3}
 VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed")
 TEMPERATURE_KINDS = ("dirichlet", "insulating")
 
@@ -52,6 +58,14 @@ def _check_velocity_bc(value: Any) -> str | None:
             return f"unknown entry {sorted(extra)[0]!r}; allowed: ['kind', 'value']"
         if kind == "prescribed" and not isinstance(value.get("value"), list):
             return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
+        for component in value.get("value") or ():
+            if isinstance(component, str):
+                try:
+                    Expression(component, gdim=3)
+                except ExpressionError as err:
+                    return str(err)
+            elif not isinstance(component, (int, float)) or isinstance(component, bool):
+                return f"velocity component {component!r} must be a number or an expression"
     elif kind == "prescribed":
         return "a prescribed velocity needs the form {kind: prescribed, value: [vx, vy(, vz)]}"
     return None
@@ -81,24 +95,37 @@ def _is_list(value: Any) -> str | None:
 
 
 def _sides(check, default) -> dict[str, Field]:
-    return {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v))
-            for side in _SIDES}
+    sides = {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v))
+             for side in _SIDES}
+    for name in _SHELL_BOUNDARIES:
+        sides[name] = Field("any", default=None, nullable=True, check=lambda v: None if v is None else check(v),
+                            help=f"annulus/spherical shell {name} surface (default: {default})")
+    return sides
 
 
 SCHEMA: dict[str, Any] = {
     "name": Field("str", default="run", help="a label for the run"),
     "mesh": {
-        "cells": Field("list[int]", REQUIRED, length=(2, 3), minimum=1, help="cells per direction, e.g. [32, 32]"),
+        "geometry": Field("str", "box", choices=_names("convection.mesh", "MESH_GEOMETRIES"),
+                          help="box (cells, lower, upper), annulus or spherical_shell (radii, resolution)"),
+        "cells": Field("list[int]", None, nullable=True, length=(2, 3), minimum=1,
+                       help="cells per direction, e.g. [32, 32]"),
         "lower": Field("list[float]", None, nullable=True, length=(2, 3), help="lower box corner (default 0)"),
         "upper": Field("list[float]", None, nullable=True, length=(2, 3), help="upper box corner (default 1)"),
         "cell_type": Field("str", "simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes"),
         "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left")),
+        "radii": Field("list[float]", [1.22, 2.22], length=(2,), exclusive_minimum=0.0,
+                       help="[inner, outer] radius of an annulus/spherical shell around the origin"),
+        "resolution": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                            help="target cell size of an annulus/spherical shell (gmsh)"),
+        "geometry_degree": Field("int", 2, choices=None, minimum=1,
+                                 help="1: straight-sided cells; 2: curved cells on the circles/spheres (shells)"),
         "max_cells": Field("int", 2_000_000, minimum=1,
                            help="refuse configs whose mesh can grow beyond this many cells (base x refinement)"),
     },
     "physics": {
         "Ra": Field("float", REQUIRED, minimum=0.0, help="thermal Rayleigh number"),
-        "Rb": Field("float", 0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_z)"),
+        "Rb": Field("float", 0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_up)"),
         "H": Field("float", 0.0, help="internal heating"),
         "viscosity": {
             "material_viscosities": Field("list[float]", None, nullable=True, length=(2,), exclusive_minimum=0.0,
@@ -116,7 +143,7 @@ SCHEMA: dict[str, Any] = {
         "temperature": _sides(_check_temperature_bc, "insulating"),
     },
     "initial": {
-        "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical)"),
+        "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical), r, phi, theta"),
         "composition": Field("str", None, nullable=True,
                              help="expression in x, y, z (1 = dense/second material), or null for none"),
         "constants": Field("mapping", {}, help="named constants usable in the expressions"),
@@ -213,7 +240,7 @@ SCHEMA: dict[str, Any] = {
         "entrainment_material": Field("str", None, nullable=True,
                                       help="material whose entrainment is reported: a material name, all, or with "
                                            "one material dense (C) or light (1 - C)"),
-        "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height / its initial volume"),
+        "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height (shells: radius) / its initial volume"),
     },
     "output": {
         "directory": Field("str", REQUIRED, help="output folder (statistics.csv, fields, config)"),
@@ -233,9 +260,67 @@ SCHEMA: dict[str, Any] = {
 }
 
 
+def config_gdim(config: dict[str, Any]) -> int:
+    """Geometric dimension of a resolved config's domain (box: from ``mesh.cells``)."""
+    geometry = config["mesh"].get("geometry", "box")
+    return _SHELLS[geometry] if geometry in _SHELLS else len(config["mesh"]["cells"])
+
+
+def _resolve_boundaries(config: dict[str, Any], document: dict[str, Any]) -> None:
+    """Keep only the boundary names of the config's geometry (box sides, or the shell's inner/outer
+    with defaults free_slip / insulating); names of the other geometry given by the user are errors."""
+    shell = config["mesh"]["geometry"] in _SHELLS
+    given = (document.get("boundary") or {}) if isinstance(document.get("boundary"), dict) else {}
+    for section, default in (("velocity", "free_slip"), ("temperature", "insulating")):
+        user = given.get(section) or {}
+        wrong = [n for n in (_SIDES if shell else _SHELL_BOUNDARIES) if isinstance(user, dict) and n in user]
+        if wrong:
+            what = "a box side" if shell else "an annulus/spherical-shell boundary"
+            raise ConfigError(f"config key 'boundary.{section}.{wrong[0]}': {what}; mesh.geometry "
+                              f"{config['mesh']['geometry']} has {list(_SHELL_BOUNDARIES if shell else _SIDES)}")
+        values = config["boundary"][section]
+        if shell:
+            config["boundary"][section] = {n: default if values[n] is None and n not in user else values[n]
+                                           for n in _SHELL_BOUNDARIES}
+        else:
+            config["boundary"][section] = {n: values[n] for n in _SIDES}
+
+
+def _check_mesh(config: dict[str, Any]) -> None:
+    mesh = config["mesh"]
+    if mesh["geometry"] == "box":
+        if mesh["cells"] is None:
+            raise ConfigError("config key 'mesh.cells': required value missing (cells per direction, e.g. [32, 32])")
+        return
+    for key in ("cells", "lower", "upper"):
+        if mesh[key] is not None:
+            raise ConfigError(f"config key 'mesh.{key}': only for mesh.geometry box (a shell has radii and resolution)")
+    if mesh["resolution"] is None:
+        raise ConfigError(f"config key 'mesh.resolution': required for mesh.geometry {mesh['geometry']} "
+                          "(target cell size)")
+    inner, outer = mesh["radii"]
+    if not inner < outer:
+        raise ConfigError(f"config key 'mesh.radii': the inner radius must be below the outer one, got {mesh['radii']}")
+    if mesh["geometry_degree"] not in (1, 2):
+        raise ConfigError(f"config key 'mesh.geometry_degree': must be 1 or 2, got {mesh['geometry_degree']}")
+    if mesh["cell_type"] != "simplex":
+        raise ConfigError(f"config key 'mesh.cell_type': mesh.geometry {mesh['geometry']} has simplex cells only")
+    for key, enabled in (("adaptivity.enabled", config["adaptivity"]["enabled"]),
+                         ("balance.strategy", config["balance"]["strategy"] != "none")):
+        if enabled:
+            raise ConfigError(
+                f"config key '{key}': not available on mesh.geometry {mesh['geometry']}: DOLFINx 0.5 cannot refine "
+                "curved (second-order) cells, and refining straight-sided ones would put new boundary vertices "
+                "off the circle/sphere")
+
+
 def _check_consistency(config: dict[str, Any]) -> None:
+    _check_mesh(config)
     mesh, adapt = config["mesh"], config["adaptivity"]
-    gdim = len(mesh["cells"])
+    gdim = config_gdim(config)
+    if mesh["geometry"] in _SHELLS:
+        _check_boundaries_and_rest(config, gdim)
+        return
     for key in ("lower", "upper"):
         if mesh[key] is not None and len(mesh[key]) != gdim:
             raise ConfigError(f"config key 'mesh.{key}': needs {gdim} entries like mesh.cells")
@@ -245,12 +330,16 @@ def _check_consistency(config: dict[str, Any]) -> None:
         raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
-    _check_materials(config)
     needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
     if needs_simplices and mesh["cell_type"] != "simplex":
         what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"
         raise ConfigError(f"config key '{what}': needs mesh.cell_type: simplex (triangles/tetrahedra)")
-    if gdim == 2:
+    _check_boundaries_and_rest(config, gdim)
+
+
+def _check_boundaries_and_rest(config: dict[str, Any], gdim: int) -> None:
+    _check_materials(config)
+    if gdim == 2 and config["mesh"]["geometry"] == "box":
         for section in ("velocity", "temperature"):
             for side in ("front", "back"):
                 if config["boundary"][section][side] not in (None, "free_slip", "insulating"):
@@ -265,7 +354,7 @@ def _check_consistency(config: dict[str, Any]) -> None:
         text = config["initial"][key]
         if text is not None:
             try:
-                Expression(text, constants=expression_constants(config), gdim=gdim).check(_sample_points(lower, upper))
+                Expression(text, constants=expression_constants(config), gdim=gdim).check(_domain_points(config))
             except ExpressionError as err:
                 raise ConfigError(f"config key 'initial.{key}': {err}") from None
     _check_size(config)
@@ -283,21 +372,45 @@ def _sample_points(lower: list[float], upper: list[float]) -> Any:
     return np.vstack([points, np.zeros((3 - points.shape[0], points.shape[1]))])
 
 
+def _domain_points(config: dict[str, Any]) -> Any:
+    """Points of the config's domain where expressions are checked, shape=(3, n): the box's corners,
+    edge midpoints and centre, or a shell's inner, middle and outer radius in the axis directions."""
+    import numpy as np
+
+    mesh = config["mesh"]
+    gdim = config_gdim(config)
+    if mesh["geometry"] in _SHELLS:
+        directions = np.vstack([np.eye(gdim), -np.eye(gdim)])
+        inner, outer = mesh["radii"]
+        points = np.concatenate([r * directions for r in (inner, 0.5 * (inner + outer), outer)]).T
+        return np.vstack([points, np.zeros((3 - gdim, points.shape[1]))])
+    return _sample_points(mesh["lower"] or [0.0] * gdim, mesh["upper"] or [1.0] * gdim)
+
+
 SIMPLICES_PER_BOX = {2: 2, 3: 6}
 
 
 def _check_size(config: dict[str, Any]) -> None:
     """Refuse meshes (and particle counts) that would exhaust the machine, naming the estimate."""
     mesh, adapt = config["mesh"], config["adaptivity"]
-    gdim = len(mesh["cells"])
-    base = 1
-    for n in mesh["cells"]:
-        base *= n
-    base *= SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1
+    gdim = config_gdim(config)
+    if mesh["geometry"] in _SHELLS:
+        # Shell volume over the volume of an equilateral cell of edge `resolution`.
+        inner, outer = mesh["radii"]
+        h = mesh["resolution"]
+        if gdim == 2:
+            base = int(3.141592653589793 * (outer**2 - inner**2) / (0.4330127 * h**2)) + 1
+        else:
+            base = int(4.18879020 * (outer**3 - inner**3) / (0.11785113 * h**3)) + 1
+    else:
+        base = 1
+        for n in mesh["cells"]:
+            base *= n
+        base *= SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1
     level = adapt["max_level"] if adapt["enabled"] else 0
     most = base * 2 ** (gdim * level)
     if most > mesh["max_cells"]:
-        key = "adaptivity.max_level" if level else "mesh.cells"
+        key = "adaptivity.max_level" if level else ("mesh.resolution" if mesh["geometry"] in _SHELLS else "mesh.cells")
         raise ConfigError(f"config key '{key}': the mesh can reach {most:.3g} cells ({base} base cells, refined "
                           f"{level} times), more than mesh.max_cells = {mesh['max_cells']}; raise mesh.max_cells "
                           "if the machine can take it")
@@ -313,7 +426,10 @@ def _check_size(config: dict[str, Any]) -> None:
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
     """Constants available in initial-condition expressions: Ra, Rb, H and initial.constants."""
     physics = config["physics"]
-    return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **config["initial"]["constants"]}
+    shell = {}
+    if config["mesh"].get("geometry", "box") in _SHELLS:
+        shell = dict(zip(("r_inner", "r_outer"), config["mesh"]["radii"]))
+    return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **shell, **config["initial"]["constants"]}
 
 
 RESERVED_FIELD_NAMES = ("temperature", "velocity", "pressure", "material")
@@ -348,16 +464,14 @@ def _check_materials(config: dict[str, Any]) -> None:
             if given:
                 raise ConfigError(f"config key '{key}': not with the materials section (give each material its "
                                   "initial region, Rb and viscosity there)")
-        gdim = len(config["mesh"]["cells"])
+        gdim = config_gdim(config)
         for name, spec in config["materials"].items():
             if name in RESERVED_FIELD_NAMES:
                 raise ConfigError(f"config key 'materials.{name}': the name is taken by a field; "
                                   f"reserved: {list(RESERVED_FIELD_NAMES)}")
-            mesh = config["mesh"]
-            lower, upper = mesh["lower"] or [0.0] * gdim, mesh["upper"] or [1.0] * gdim
             try:
                 Expression(spec["initial"], constants=expression_constants(config), gdim=gdim).check(
-                    _sample_points(lower, upper))
+                    _domain_points(config))
             except ExpressionError as err:
                 raise ConfigError(f"config key 'materials.{name}.initial': {err}") from None
     table, _ = material_table(config)
@@ -383,7 +497,7 @@ def particles_enabled(config: dict[str, Any]) -> bool:
 
 def point_function(config: dict[str, Any]) -> Callable[[str], Callable]:
     """Text -> function of points shape=(m, gdim) (particle properties and densities of a config)."""
-    gdim = len(config["mesh"]["cells"])
+    gdim = config_gdim(config)
     constants = expression_constants(config)
 
     def make(text: str) -> Callable:
@@ -409,7 +523,7 @@ def _check_particles(config: dict[str, Any]) -> None:
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
     make = point_function(config)
     try:
-        build_generator(section["generator"], num_cells=1, make_function=make, gdim=len(config["mesh"]["cells"]))
+        build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.generator': {err}") from None
     params = dict(section["interpolator"])
@@ -502,6 +616,7 @@ def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, docum
     for key_path, value in parse_overrides(overrides):
         _apply_override(document, key_path, value)
     config = validate(SCHEMA, document)
+    _resolve_boundaries(config, document)
     _check_consistency(config)
     return config
 

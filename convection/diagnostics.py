@@ -12,7 +12,9 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from convection.boundary import locate_side_dofs, side_axis, side_facet_tags, side_names, side_tag
+from convection.boundary import (
+    SHELL_BOUNDARIES, boundary_measure, locate_side_dofs, shell_radii, side_axis, side_facet_tags, side_names, side_tag,
+)
 from convection.transport import TransportSolver
 
 
@@ -85,7 +87,10 @@ def side_integral(solver: TransportSolver, side: str) -> tuple[float, float]:
     key = ("side", side)
     if key not in solver.forms:
         mesh = solver.mesh
-        ds = ufl.Measure("ds", domain=mesh, subdomain_data=side_facet_tags(mesh))(side_tag(side, mesh.geometry.dim))
+        if side in SHELL_BOUNDARIES:
+            ds = boundary_measure(mesh, side)
+        else:
+            ds = ufl.Measure("ds", domain=mesh, subdomain_data=side_facet_tags(mesh))(side_tag(side, mesh.geometry.dim))
         one = dolfinx.fem.Constant(mesh, np.float64(1.0))
         solver.forms[key] = (dolfinx.fem.form(solver.T * ds), dolfinx.fem.form(one * ds))
     values = np.array([dolfinx.fem.assemble_scalar(f) for f in solver.forms[key]])
@@ -112,6 +117,8 @@ def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str =
         u: velocity used in the residual.
         side: side name (default ``"top"``).
     """
+    if side in SHELL_BOUNDARIES:
+        return shell_nusselt(energy_solver, u, side)
     mesh = energy_solver.mesh
     gdim = mesh.geometry.dim
     axis, upper = side_axis(side, gdim)
@@ -134,3 +141,41 @@ def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str =
     if delta_T == 0.0:
         raise ZeroDivisionError(f"No temperature difference across the {side!r} axis")
     return float((q_axis / area) * (hi - lo) / delta_T)
+
+
+def conductive_heat_flow(inner_radius: float, outer_radius: float, delta_T: float, gdim: int) -> float:
+    """Heat flow ``Q`` through an annulus (per unit length, ``gdim = 2``) or spherical shell by pure
+    conduction with temperature difference ``delta_T`` (inner minus outer)::
+
+        2D:  Q = 2 pi delta_T / ln(r_o / r_i),      3D:  Q = 4 pi r_i r_o delta_T / (r_o - r_i).
+    """
+    ri, ro = inner_radius, outer_radius
+    if gdim == 2:
+        return float(2.0 * np.pi * delta_T / np.log(ro / ri))
+    return float(4.0 * np.pi * ri * ro * delta_T / (ro - ri))
+
+
+def shell_nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, boundary: str = "outer") -> float:
+    """Nusselt number through the ``inner`` or ``outer`` surface of an annulus/spherical shell. Collective.
+
+    The heat flow out through the outer surface, ``Q_outer = -int_outer grad T . n ds``, or in
+    through the inner one, ``Q_inner = int_inner grad T . n ds`` (``n`` the outward normal; consistent
+    fluxes of :func:`boundary_flux`), divided by the conductive heat flow
+    (:func:`conductive_heat_flow`) of the difference of the surface-averaged temperatures,
+    ``dT = <T>_inner - <T>_outer``. Both are 1 for the conduction profile and equal at steady state
+    without internal heating.
+    """
+    if boundary not in SHELL_BOUNDARIES:
+        raise ValueError(f"Unknown shell boundary {boundary!r}; valid names: {list(SHELL_BOUNDARIES)}")
+    mesh = energy_solver.mesh
+    flux_out = boundary_flux(energy_solver, u, boundary)
+    heat_flow = -flux_out if boundary == "outer" else flux_out
+    means = []
+    for name in SHELL_BOUNDARIES:
+        integral, measure = side_integral(energy_solver, name)
+        means.append(integral / measure)
+    delta_T = means[0] - means[1]
+    if delta_T == 0.0:
+        raise ZeroDivisionError("No temperature difference between the inner and outer surfaces")
+    inner, outer = shell_radii(mesh)
+    return float(heat_flow / conductive_heat_flow(inner, outer, delta_T, mesh.geometry.dim))

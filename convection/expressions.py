@@ -4,6 +4,10 @@ Expressions are parsed with :mod:`ast` and may use only the coordinates ``x, y, 
 ``pi`` and ``e``, user constants given in the config, arithmetic, comparisons (which give 0/1), and
 the functions in :data:`FUNCTIONS`. The vertical coordinate is always ``z``: in 2D, where DOLFINx
 names the coordinates (x, y), ``z`` is the same as ``y`` (so ``"1 - z"`` is conductive in 2D and 3D).
+For annuli and spherical shells the spherical coordinates around the origin are available too:
+the radius ``r = |x|``, the longitude ``phi = atan2(y, x)`` in (-pi, pi] and, in 3D, the
+colatitude ``theta = acos(z / r)`` in [0, pi] (pi/2 in 2D), so e.g. ``"(r_outer - r) / (r_outer -
+r_inner)"`` is a linear profile across a shell (``r_inner``, ``r_outer``: constants of shell configs).
 Anything else is rejected when the config is read, with a
 message naming the unknown symbol.
 """
@@ -25,7 +29,7 @@ FUNCTIONS = {
     "max": np.maximum, "where": np.where, "clip": np.clip, "floor": np.floor,
     "erf": np.vectorize(math.erf, otypes=[float]), "erfc": np.vectorize(math.erfc, otypes=[float]),
 }
-_COORDINATES = ("x", "y", "z")
+_COORDINATES = ("x", "y", "z", "r", "phi", "theta")
 _ALLOWED_NODES = (
     ast.Expression, ast.BinOp, ast.UnaryOp, ast.Compare, ast.BoolOp, ast.Call, ast.Name, ast.Load,
     ast.Constant, ast.IfExp, ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow, ast.Mod, ast.USub,
@@ -75,7 +79,7 @@ class Expression:
                 node.id in FUNCTIONS or node.id in self.constants or node.id in _COORDINATES
             ):
                 raise ExpressionError(
-                    f"unknown name {node.id!r} in {self.text!r}; use x, y, z, pi, e,"
+                    f"unknown name {node.id!r} in {self.text!r}; use x, y, z, r, phi, theta, pi, e,"
                     f" functions {sorted(FUNCTIONS)} or constants {sorted(set(self.constants) - {'pi', 'e'})}"
                 )
         # Integer literals become floats: Python's integer arithmetic is exact and unbounded, so
@@ -99,6 +103,16 @@ class Expression:
         namespace = dict(FUNCTIONS)
         namespace.update(self.constants)
         namespace.update({"x": x[0], "y": x[1], "z": x[self.gdim - 1]})
+        names = self._code.co_names
+        if "r" in names or "theta" in names:
+            r = np.sqrt(np.sum(x[: self.gdim] ** 2, axis=0))
+            namespace["r"] = r
+            if "theta" in names:
+                z = x[2] if self.gdim == 3 else np.zeros_like(r)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    namespace["theta"] = np.arccos(np.clip(np.where(r > 0, z / np.where(r > 0, r, 1.0), 0.0), -1.0, 1.0))
+        if "phi" in names:
+            namespace["phi"] = np.arctan2(x[1], x[0])
         value = eval(self._code, {"__builtins__": {}}, namespace)  # noqa: S307 - names checked above
         return np.broadcast_to(np.asarray(value, dtype=np.float64), x.shape[1:]).copy()
 

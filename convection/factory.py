@@ -3,7 +3,7 @@
 =================== ===========================================================================
 section             component
 =================== ===========================================================================
-``mesh``            base mesh (:func:`convection.mesh.create_box_mesh`)
+``mesh``            base mesh (:func:`convection.mesh.create_mesh`: box, annulus, spherical shell)
 ``physics``,        :class:`convection.materials.Materials` and the Boussinesq approximation
 ``materials``
 ``boundary``        velocity and temperature conditions per side
@@ -35,17 +35,19 @@ import dolfinx.mesh
 from mpi4py import MPI
 
 from convection.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy
-from convection.boundary import TemperatureBC, VelocityBC, side_names, temperature_dirichlet_bcs
+from convection.boundary import SHELL_BOUNDARIES, TemperatureBC, VelocityBC, side_names, temperature_dirichlet_bcs
 from convection.checkpoint import (
     Checkpointer, CheckpointSettings, SavedRun, restore_mesh, restore_particles, restore_state,
 )
 from convection.composition import (
     FieldComposition, ParticleComposition, StaticComposition, composition_space, particle_properties,
 )
-from convection.config import dump_config, expression_constants, material_table, particles_enabled, point_function
+from convection.config import (
+    config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
+)
 from convection.expressions import Expression
 from convection.materials import Material, Materials
-from convection.mesh import BoxSpec, create_box_mesh
+from convection.mesh import ShellSpec, create_mesh, mesh_spec_from_config, shell_confinement
 from convection.model import Model
 from convection.postprocess import create_postprocessors
 from convection.rebalance import Balancer
@@ -59,15 +61,21 @@ __all__ = ["build_model", "materials_from_config", "run_config", "run_settings",
            "velocity_bcs_from_config"]
 
 
+def _names(section: dict, gdim: int) -> tuple[str, ...]:
+    """The boundary names of a resolved ``boundary.*`` section: the shell's, or the box sides."""
+    return SHELL_BOUNDARIES if any(n in section for n in SHELL_BOUNDARIES) else side_names(gdim)
+
+
 def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
     """Velocity conditions per side of the ``boundary.velocity`` section (null sides: traction free)."""
     result = {}
-    for side in side_names(gdim):
+    for side in _names(section, gdim):
         value = section[side]
         if value is None:
             continue
         if isinstance(value, dict):
-            result[side] = VelocityBC(value["kind"], tuple(float(v) for v in value.get("value") or ()) or None)
+            components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
+            result[side] = VelocityBC(value["kind"], components or None)
         else:
             result[side] = VelocityBC(value)
     return result
@@ -76,7 +84,7 @@ def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
 def temperature_bcs_from_config(section: dict, gdim: int) -> dict[str, TemperatureBC]:
     """Temperature conditions per side of the ``boundary.temperature`` section."""
     result = {}
-    for side in side_names(gdim):
+    for side in _names(section, gdim):
         value = section[side]
         if value is None or value == "insulating":
             result[side] = TemperatureBC("insulating")
@@ -87,7 +95,7 @@ def temperature_bcs_from_config(section: dict, gdim: int) -> dict[str, Temperatu
 
 def materials_from_config(config: dict[str, Any]) -> Materials:
     """The materials of the ``materials`` section (or of the two-material keys)."""
-    gdim = len(config["mesh"]["cells"])
+    gdim = config_gdim(config)
     constants = expression_constants(config)
     table, background = material_table(config)
     materials = tuple(Material(m["name"], Expression(m["initial"], constants=constants, gdim=gdim), Rb=m["Rb"],
@@ -108,7 +116,7 @@ def _initial_fields(config: dict[str, Any], materials: Materials,
                     temperature_bcs: dict[str, TemperatureBC]) -> Callable[[dolfinx.mesh.Mesh], list]:
     """The fields that drive the initial adaptation, set from the initial condition on a mesh."""
     acfg = config["adaptivity"]
-    gdim = len(config["mesh"]["cells"])
+    gdim = config_gdim(config)
     initial_T = Expression(config["initial"]["temperature"], constants=expression_constants(config), gdim=gdim)
 
     def fields_on(mesh: dolfinx.mesh.Mesh) -> list:
@@ -134,17 +142,17 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     checkpoint of a run of this config) the mesh, fields, particles and time stepping state are
     the checkpoint's instead.
     """
-    spec = BoxSpec.from_config(config["mesh"])
+    spec = mesh_spec_from_config(config["mesh"])
     gdim = spec.gdim
     physics = config["physics"]
     materials = materials_from_config(config)
     visc = physics["viscosity"]
     approximation = materials.approximation(Ra=physics["Ra"], H=physics["H"], temperature_law=visc["temperature_law"],
-                                            gamma=visc["gamma"])
+                                            gamma=visc["gamma"], gravity=spec.gravity)
     velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], gdim)
     temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], gdim)
 
-    base = create_box_mesh(comm, spec)
+    base = create_mesh(comm, spec)
     acfg, bcfg = config["adaptivity"], config["balance"]
     hierarchy = MeshHierarchy(base) if acfg["enabled"] or bcfg["strategy"] != "none" else None
     adaptivity = None
@@ -176,7 +184,8 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         particles = ParticleManager.from_config(
             config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
             make_function=point_function(config), field_degree=ccfg["degree"], context=context,
-            generate_particles=restore is None)
+            generate_particles=restore is None,
+            confine=shell_confinement(mesh, spec) if isinstance(spec, ShellSpec) else None)
         if restore is not None:
             saved = restore.state["model"]
             restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],

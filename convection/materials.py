@@ -91,10 +91,10 @@ class Materials:
                             gamma=gamma)
 
     def approximation(self, *, Ra: float, H: float = 0.0, temperature_law: str = "none",
-                      gamma: float = 0.0) -> BoussinesqApproximation:
+                      gamma: float = 0.0, gravity: str = "vertical") -> BoussinesqApproximation:
         """The Boussinesq approximation with these materials' buoyancy and viscosity."""
         rb = tuple(m.Rb for m in self.materials)
-        return BoussinesqApproximation(Ra=Ra, Rb=rb if rb else 0.0, H=H,
+        return BoussinesqApproximation(Ra=Ra, Rb=rb if rb else 0.0, H=H, gravity=gravity,
                                        viscosity=self.viscosity_law(temperature_law=temperature_law, gamma=gamma))
 
 

@@ -9,7 +9,8 @@ name            columns
 =============== =======================================================================
 ``time``        step, time, dt
 ``velocity``    vrms = sqrt(int |u|^2 dx / |Omega|)
-``nusselt``     nusselt (top), nusselt_bottom: consistent boundary-flux Nusselt numbers
+``nusselt``     nusselt (top), nusselt_bottom: consistent boundary-flux Nusselt numbers (shells:
+                outer and inner surface)
 ``temperature`` T_mean (volume average), T_min, T_max (nodal)
 ``mesh``        cells (global)
 ``stokes``      stokes_iterations
@@ -37,6 +38,7 @@ from mpi4py import MPI
 
 import dolfinx.fem
 
+from convection.boundary import is_shell
 from convection.diagnostics import nusselt
 from convection.model import Model
 from convection.rebalance import RankLoads
@@ -116,7 +118,8 @@ class Velocity(_Column):
 
 class Nusselt(_Column):
     name: ClassVar[str] = "nusselt"
-    description: ClassVar[str] = "Nusselt numbers at the top and bottom from the consistent boundary flux"
+    description: ClassVar[str] = ("Nusselt numbers at the top and bottom (shells: outer and inner surface) from the "
+                                  "consistent boundary flux")
     columns = ("nusselt", "nusselt_bottom")
 
     @classmethod
@@ -125,8 +128,9 @@ class Nusselt(_Column):
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         assert model.temperature is not None
-        return {"nusselt": nusselt(model.temperature, model.stokes.u, "top"),
-                "nusselt_bottom": nusselt(model.temperature, model.stokes.u, "bottom")}
+        top, bottom = ("outer", "inner") if is_shell(model.temperature.bcs) else ("top", "bottom")
+        return {"nusselt": nusselt(model.temperature, model.stokes.u, top),
+                "nusselt_bottom": nusselt(model.temperature, model.stokes.u, bottom)}
 
 
 class TemperatureStatistics(_Column):
@@ -201,7 +205,8 @@ class LoadStatistics(_Column):
 
 
 class Entrainment:
-    """Volume of a material above ``height`` divided by its volume at the first call.
+    """Volume of a material above ``height`` (in shells: outside the radius ``height``) divided by its
+    volume at the first call.
 
     ``material``: a material name; ``all`` (one column per material); or, with exactly one
     material, ``dense`` (its fraction C) or ``light`` (the background, 1 - C).
@@ -236,7 +241,9 @@ class Entrainment:
         return cls(amounts, float(options.get("entrainment_height", 0.2)))
 
     def _build(self, model: Model) -> dict[str, Any]:
-        z = ufl.SpatialCoordinate(model.mesh)[model.mesh.geometry.dim - 1]
+        x = ufl.SpatialCoordinate(model.mesh)
+        # The height is the radius in shells (radial gravity), else the last coordinate.
+        z = ufl.sqrt(ufl.dot(x, x)) if model.stokes.approximation.gravity == "radial" else x[model.mesh.geometry.dim - 1]
         forms = {}
         for column, (i, light) in self.amounts.items():
             C = model.fractions[i]

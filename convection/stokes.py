@@ -7,11 +7,20 @@ Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in 
 
 on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1). With a variable viscosity the
 cell integrals use a quadrature of degree ``3 k``. Boundary conditions are
-:class:`~convection.boundary.VelocityBC` per box side; free slip is a zero Dirichlet condition on
-the normal velocity component. When every side fixes the normal velocity the pressure is only
-defined up to a constant: the constant-pressure null space is attached to the operator (iterative
-solver) or removed by pinning one pressure dof (direct solver, exact because the system is
-consistent), and the pressure is then normalised to zero mean, ``int p dx = 0``.
+:class:`~convection.boundary.VelocityBC` per box side or shell boundary (``inner``/``outer``); on
+a box side free slip is a zero Dirichlet condition on the normal velocity component, on a curved
+shell boundary it is imposed weakly by symmetric Nitsche terms
+(:func:`convection.boundary.nitsche_free_slip`, penalty ``nitsche_penalty eta / h``). When every
+side fixes the normal velocity the pressure is only defined up to a constant: the
+constant-pressure null space is attached to the operator (iterative solver) or removed by pinning
+one pressure dof (direct solver, exact because the system is consistent), and the pressure is then
+normalised to zero mean, ``int p dx = 0``. When both shell boundaries are free slip, rigid
+rotations about the origin (one in 2D, three in 3D) also solve the homogeneous problem; the
+solution's rotational part (its L2 projection onto the rotations) is removed after every solve.
+The rotations are only nearly in the discrete null space (``u . n`` of a rotation vanishes on the
+circle, not exactly on the curved cells' boundary, so the Nitsche penalty pins them weakly with a
+small eigenvalue): the operator is regular, so they are not given to PETSc as a null space (MINRES
+stagnates with an inexact one).
 
 Solvers (``solver=``):
     ``"direct"``: MUMPS LU of the monolithic (block) system; the factorisation is reused while the
@@ -36,7 +45,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
-from convection.boundary import VelocityBC, box_bounds, side_names, velocity_dirichlet_bcs
+from convection.boundary import (
+    VelocityBC, boundary_names, box_bounds, free_slip_boundaries, has_rotation_null_space, is_shell,
+    nitsche_free_slip, velocity_dirichlet_bcs,
+)
 from convection.petsc_options import MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options
 
 STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
@@ -99,6 +111,8 @@ class StokesSolver(PetscSolver):
         degree: velocity degree ``k >= 2``; the pressure has degree ``k - 1``.
         solver: ``"direct"`` | ``"iterative"``.
         petsc_options: extra PETSc options overriding the defaults (without prefix).
+        nitsche_penalty: penalty factor of the weak free-slip condition on curved boundaries
+            (default ``10 (degree + 1)^2``).
 
     Attributes:
         u: velocity, vector P(degree) Function.
@@ -111,13 +125,14 @@ class StokesSolver(PetscSolver):
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
                  bcs: dict[str, VelocityBC], degree: int = 2, solver: str = "direct",
-                 petsc_options: dict | None = None) -> None:
+                 petsc_options: dict | None = None, nitsche_penalty: float | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)
         self.degree = degree
+        self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
         self._petsc_options = self._create_ksp(mesh.comm, solver, petsc_options)
         cell = mesh.ufl_cell()
         self.V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", cell, degree))
@@ -126,7 +141,11 @@ class StokesSolver(PetscSolver):
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 
         gdim = mesh.geometry.dim
-        self.has_pressure_null_space = all(s in self.bcs for s in side_names(gdim))
+        self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(gdim, self.bcs))
+        self.has_rotation_null_space = has_rotation_null_space(self.bcs)
+        self._rotations: list[dolfinx.fem.Function] = []
+        self._rotation_forms: tuple[list, list] | None = None
+        self._rotation_gram: np.ndarray | None = None
         self._bcs = velocity_dirichlet_bcs(self.V, self.bcs)
         self._pinned = self.has_pressure_null_space and solver == "direct"
         if self._pinned:
@@ -148,11 +167,17 @@ class StokesSolver(PetscSolver):
         self._operator_current = False
 
     def settings(self) -> dict[str, Any]:
-        return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options}
+        return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
+                "nitsche_penalty": self.nitsche_penalty}
 
     # ------------------------------------------------------------------ setup
     def _pressure_pin(self) -> dolfinx.fem.DirichletBCMetaClass:
-        """Zero Dirichlet condition on the pressure dof(s) at the lower box corner."""
+        """Zero Dirichlet condition on the pressure dof(s) at the lower box corner (on a shell: on
+        the pressure dof numbered 0 globally, whichever point that is)."""
+        if is_shell(self.bcs):
+            owns_first = self.mesh.comm.rank == 0 and self.Q.dofmap.index_map.size_local > 0
+            dofs = np.arange(1 if owns_first else 0, dtype=np.int32)
+            return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, self.Q)
         lower = box_bounds(self.mesh).lower
         tol = 1e-10 * float(np.max(box_bounds(self.mesh).upper - lower))
         gdim = self.mesh.geometry.dim
@@ -167,7 +192,7 @@ class StokesSolver(PetscSolver):
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
         eta = self.approximation.viscosity(T, C)
-        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim)
+        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
         zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
         # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
         metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
@@ -177,6 +202,13 @@ class StokesSolver(PetscSolver):
              -ufl.inner(p, ufl.div(v)) * dx],
             [-ufl.inner(ufl.div(u), q) * dx, None],
         ]
+        curved = free_slip_boundaries(self.bcs)
+        if curved:
+            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+                                        metadata=metadata)
+            a[0][0] += nitsche.a_uu
+            a[0][1] += nitsche.a_up
+            a[1][0] += nitsche.a_pu
         if self._pinned:
             a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
         self._a = dolfinx.fem.form(a)
@@ -274,6 +306,7 @@ class StokesSolver(PetscSolver):
             raise RuntimeError(f"Stokes solver did not converge (PETSc reason {reason})")
         self._unpack_solution(self._x)
         self._normalise_pressure()
+        self._remove_rotations()
 
         residual = self._b.duplicate()
         self._A.mult(self._x, residual)
@@ -304,6 +337,45 @@ class StokesSolver(PetscSolver):
             dolfinx.fem.assemble_scalar(self._p_integral), op=MPI.SUM
         ) / self._volume
         self.p.x.array[:] -= mean
+
+    def _rotation_fields(self) -> list[dolfinx.fem.Function]:
+        """Rigid rotations about the origin in ``V`` (exact: they are linear), when both shell
+        boundaries are free slip: ``(-y, x)`` in 2D; ``e_i x x`` for i = x, y, z in 3D."""
+        if not self.has_rotation_null_space or self._rotations:
+            return self._rotations
+        gdim = self.mesh.geometry.dim
+        if gdim == 2:
+            fields = [lambda x: np.stack([-x[1], x[0]])]
+        else:
+            zero = lambda x: np.zeros(x.shape[1])  # noqa: E731
+            fields = [lambda x: np.stack([zero(x), -x[2], x[1]]), lambda x: np.stack([x[2], zero(x), -x[0]]),
+                      lambda x: np.stack([-x[1], x[0], zero(x)])]
+        for field in fields:
+            rotation = dolfinx.fem.Function(self.V)
+            rotation.interpolate(field)
+            self._rotations.append(rotation)
+        return self._rotations
+
+    def _remove_rotations(self) -> None:
+        """Subtract the L2 projection of ``u`` onto the rigid rotations (free slip on both shell
+        boundaries). Collective."""
+        rotations = self._rotation_fields()
+        if not rotations:
+            return
+        if self._rotation_forms is None:
+            self._rotation_forms = (
+                [[dolfinx.fem.form(ufl.inner(a, b) * ufl.dx) for b in rotations] for a in rotations],
+                [dolfinx.fem.form(ufl.inner(self.u, a) * ufl.dx) for a in rotations],
+            )
+            gram_forms = self._rotation_forms[0]
+            local = np.array([[dolfinx.fem.assemble_scalar(f) for f in row] for row in gram_forms])
+            self._rotation_gram = np.empty_like(local)
+            self.mesh.comm.Allreduce(local, self._rotation_gram, op=MPI.SUM)
+        local = np.array([dolfinx.fem.assemble_scalar(f) for f in self._rotation_forms[1]])
+        moments = np.empty_like(local)
+        self.mesh.comm.Allreduce(local, moments, op=MPI.SUM)
+        for coefficient, rotation in zip(np.linalg.solve(self._rotation_gram, moments), rotations):
+            self.u.x.array[:] -= coefficient * rotation.x.array
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(

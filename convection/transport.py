@@ -48,6 +48,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
+from convection.mesh import cell_diameter
 from convection.boundary import (
     TemperatureBC,
     locate_side_dofs,
@@ -184,7 +185,7 @@ class TransportSolver(PetscSolver):
         if H != 0.0:
             F -= H * w * dx
         if self.stabilisation == "supg":
-            h = ufl.CellDiameter(self.mesh) / self.degree
+            h = cell_diameter(self.mesh) / self.degree
             u_norm = ufl.sqrt(ufl.dot(u, u) + 1e-30)
             tau = ((2.0 * coef[0] / dt) ** 2 + (2.0 * u_norm / h) ** 2 + 9.0 * (4.0 * kappa / h**2) ** 2) ** -0.5
             strong = dtT + ufl.dot(u, ufl.grad(T_new)) - H

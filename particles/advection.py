@@ -13,6 +13,10 @@ After every stage position the particle's cell and reference position are update
 needed later travel with the particle as temporary property columns, removed after the step.
 The last slope is used at once and never stored, so Euler needs no stage columns at all.
 
+An optional ``confine(x)`` moves stage positions that left the domain back inside before they are
+relocated (e.g. onto a curved boundary that a straight Runge-Kutta step crossed; the domain owner
+supplies it, see :func:`convection.mesh.shell_confinement`); without it such particles are lost.
+
 Quantities integrated alongside the positions (deformation gradient, accumulated strain, damage)
 are given as :class:`ParticleODE` objects: property ``y`` obeys ``dy/dt = rhs(swarm, c, y, L)``
 with ``L = grad u`` at the stage position, interpolated linearly in time like the velocity. The
@@ -152,14 +156,18 @@ class Advector:
         swarm: The particles (sorted, all in owned cells).
         integrator: Registry name: ``"euler"``, ``"rk2"`` or ``"rk4"``.
         odes: Properties integrated alongside the positions with the same tableau.
+        confine: ``confine(x)`` moves positions (shape=(n, gdim), in place) that left the domain
+            back inside, before every relocation; None: particles outside are lost.
 
     Example:
         >>> adv = Advector(swarm, integrator="rk2", odes=[ParticleODE("F", rhs)])
         >>> stats = adv.step(u_old, u_new, dt)
     """
 
-    def __init__(self, swarm: Swarm, /, *, integrator: str = "rk2", odes: Sequence[ParticleODE] = ()) -> None:
+    def __init__(self, swarm: Swarm, /, *, integrator: str = "rk2", odes: Sequence[ParticleODE] = (),
+                 confine: Callable[[npt.NDArray[np.float64]], None] | None = None) -> None:
         self.swarm = swarm
+        self.confine = confine
         self.tableau = get_integrator(integrator)
         self.odes: tuple[ParticleODE, ...] = tuple(odes)
         names = [ode.name for ode in self.odes]
@@ -340,8 +348,10 @@ class Advector:
             self._set_state(out)
 
     def _move(self, timer: _Timer, moved: list[int]) -> TransportStats:
-        """Relocate after positions changed, then migrate; accumulates counts into ``moved``."""
+        """Confine (if set), relocate after positions changed, then migrate; accumulates counts into ``moved``."""
         t0 = time.perf_counter()
+        if self.confine is not None:
+            self.confine(self.swarm.x)
         stats = relocate(self.swarm)
         t1 = time.perf_counter()
         timer.relocation += t1 - t0

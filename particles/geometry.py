@@ -12,6 +12,13 @@ without calling back into DOLFINx:
 
 Non-affine cells (quadrilaterals, hexahedra, degree-2 geometry) are pulled back with a vectorised
 Newton iteration on the basix coordinate element.
+
+Curved (degree-2) cells are located without DOLFINx's ``compute_colliding_cells``: in DOLFINx 0.5
+it measures the distance to the cell's vertex simplex only, so it misses points in the part of a
+cell that bulges beyond its straight edges (near a convex curved boundary) and accepts points
+between a straight edge and a concave curved one (outside the domain). Instead the bounding boxes
+are padded by the cells' largest bulge (:attr:`CellGeometry.curvature_padding`) and every
+candidate cell is tested by Newton pull-back and the reference-cell inside test.
 """
 
 from __future__ import annotations
@@ -101,9 +108,22 @@ class CellGeometry:
             self.J = self.jacobians(np.arange(self.num_local_cells, dtype=np.int32),
                                     np.tile(basix.geometry(self.basix_cell).mean(axis=0), (self.num_local_cells, 1)))
         self.K = np.ascontiguousarray(np.linalg.pinv(self.J))
+        self.curvature_padding: float = self._curvature_padding()
         self._build_adjacency()
         self._tree: dolfinx.geometry.BoundingBoxTree | None = None
         self._c2c: tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]] | None = None
+
+    def _curvature_padding(self) -> float:
+        """Largest distance of a geometry node from its position in the straight-sided (degree-1)
+        cell: bounds how far a curved cell reaches beyond the box of its vertices (0 when
+        ``degree == 1``; exact for quadratic edges, whose bulge peaks at the midpoint node)."""
+        if self.degree == 1 or self.num_local_cells == 0:
+            return 0.0
+        linear = basix.create_element(basix.ElementFamily.P, self.basix_cell, 1, basix.LagrangeVariant.equispaced)
+        phi = linear.tabulate(0, self.coordinate_element.points)[0, :, :, 0]
+        vertices = self.coords[self.nodes[:, : self.num_vertices]]
+        straight = np.einsum("nv,cvg->cng", phi, vertices)
+        return float(np.linalg.norm(self.coords[self.nodes] - straight, axis=2).max())
 
     def _build_adjacency(self) -> None:
         nv = self.num_vertices
@@ -164,14 +184,20 @@ class CellGeometry:
         xref = np.einsum("mtg,mg->mt", self.K[cells], x - self.centres[cells])
         xref += basix.geometry(self.basix_cell).mean(axis=0)
         active = np.arange(cells.shape[0])
+        square = self.gdim == self.tdim
         for _ in range(max_iterations):
             if active.size == 0:
                 break
             c, X = cells[active], xref[active]
             r = x[active] - self.push_forward(c, X)
-            dX = np.einsum("mtg,mg->mt", np.linalg.pinv(self.jacobians(c, X)), r)
+            J = self.jacobians(c, X)
+            # Square Jacobians: a batched LU solve (an SVD-based pseudo-inverse is ~10x slower).
+            dX = np.linalg.solve(J, r[:, :, None])[:, :, 0] if square else np.einsum("mtg,mg->mt", np.linalg.pinv(J), r)
             xref[active] = X + dX
-            active = active[np.linalg.norm(dX, axis=1) > 1e-14]
+            step = np.linalg.norm(dX, axis=1)
+            # Converged (Newton is quadratic: after a step below 1e-12 the error is at round-off,
+            # where smaller steps are not reached), or far outside the reference cell.
+            active = active[(step > 1e-12) & (np.abs(xref[active]).max(axis=1) < 1e3)]
         return xref
 
     def inside(self, xref: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
@@ -186,19 +212,24 @@ class CellGeometry:
     def tree(self) -> dolfinx.geometry.BoundingBoxTree:
         """Bounding-box tree over all local (owned + ghost) cells, built on first use."""
         if self._tree is None:
-            self._tree = dolfinx.geometry.BoundingBoxTree(
-                self.mesh, self.tdim, np.arange(self.num_local_cells, dtype=np.int32)
-            )
+            cells = np.arange(self.num_local_cells, dtype=np.int32)
+            if self.degree > 1:
+                padding = 1.01 * self.curvature_padding + 1e-12 * float(np.abs(self.coords).max(initial=1.0))
+                self._tree = dolfinx.geometry.BoundingBoxTree(self.mesh, self.tdim, cells, padding=padding)
+            else:
+                self._tree = dolfinx.geometry.BoundingBoxTree(self.mesh, self.tdim, cells)
         return self._tree
 
-    def locate(self, points: npt.ArrayLike) -> Located:
+    def locate(self, points: npt.ArrayLike, *, owned_only: bool = False) -> Located:
         """Find a local cell containing each point with the bounding-box tree, and pull back.
 
         Among several colliding cells (point on a shared facet) the lowest local index is
-        taken, which prefers owned cells over ghosts.
+        taken, which prefers owned cells over ghosts. Curved cells are tested by pull-back
+        (module docstring).
 
         Args:
             points: Physical points, shape=(m, gdim).
+            owned_only: Search the owned cells only (ghosts count as not found).
 
         Returns:
             :class:`Located` with cells (-1 where no local cell contains the point) and xref.
@@ -212,15 +243,51 @@ class CellGeometry:
         p3 = np.zeros((m, 3), dtype=np.float64)
         p3[:, : self.gdim] = pts
         candidates = dolfinx.geometry.compute_collisions(self.tree, p3)
+        if self.degree > 1:
+            return self._locate_curved(candidates, pts, owned_only)
         colliding = dolfinx.geometry.compute_colliding_cells(self.mesh, candidates, p3)
         offsets = np.asarray(colliding.offsets)
         links = np.asarray(colliding.array, dtype=np.int32)
+        if owned_only:
+            offsets, links = _restrict(offsets, links, links < self.num_owned_cells)
         counts = np.diff(offsets)
         hit = counts > 0
         if np.any(hit):
             cells[hit] = np.minimum.reduceat(links, offsets[:-1][hit])
             xref[hit] = self.pull_back(cells[hit], pts[hit])
         return Located(cells, xref)
+
+    def _locate_curved(self, candidates, pts: npt.NDArray[np.float64], owned_only: bool) -> Located:
+        """:meth:`locate` for curved cells: pull back into every candidate, keep the lowest cell
+        whose reference cell contains the point."""
+        m = pts.shape[0]
+        offsets = np.asarray(candidates.offsets, dtype=np.int64)
+        links = np.asarray(candidates.array, dtype=np.int32)
+        if owned_only:
+            offsets, links = _restrict(offsets, links, links < self.num_owned_cells)
+        point_of = np.repeat(np.arange(m), np.diff(offsets))
+        X = self.pull_back(links, pts[point_of])
+        ok = self.inside(X)
+        cells = np.full(m, -1, dtype=np.int32)
+        xref = np.zeros((m, self.tdim), dtype=np.float64)
+        pairs = np.flatnonzero(ok)
+        if pairs.size:
+            # Lowest cell per point: sort the accepted pairs by (point, cell), take each point's first.
+            order = pairs[np.lexsort((links[pairs], point_of[pairs]))]
+            first = order[np.r_[True, point_of[order][1:] != point_of[order][:-1]]]
+            cells[point_of[first]] = links[first]
+            xref[point_of[first]] = X[first]
+        return Located(cells, xref)
+
+
+def _restrict(offsets: npt.NDArray[np.int64], links: npt.NDArray[np.int32], keep: npt.NDArray[np.bool_]
+              ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+    """The CSR adjacency ``(offsets, links)`` with only the links where ``keep`` is true."""
+    segment = np.repeat(np.arange(offsets.size - 1), np.diff(offsets))
+    counts = np.bincount(segment[keep], minlength=offsets.size - 1)
+    new_offsets = np.zeros_like(offsets)
+    np.cumsum(counts, out=new_offsets[1:])
+    return new_offsets, links[keep]
 
 
 def cell_geometry(mesh: dolfinx.mesh.Mesh, /, *, tol: float = 1e-12) -> CellGeometry:

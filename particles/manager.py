@@ -249,6 +249,9 @@ class ParticleManager:
         writer: Particle output, or None.
         output: When :meth:`update` writes (requires ``writer``).
         context: Fields for the properties' initial values (e.g. the initial temperature).
+        confine: ``confine(x)`` moves positions that left the domain back inside (in place,
+            shape=(n, gdim)) before they are relocated, e.g. onto a curved boundary a Runge-Kutta
+            step crossed; None: such particles are lost (see :class:`particles.advection.Advector`).
         generate_particles: False starts with no particles (e.g. to :meth:`adopt` restored ones).
     """
 
@@ -266,9 +269,11 @@ class ParticleManager:
         writer: ParticleWriter | None = None,
         output: OutputSchedule = OutputSchedule(),
         context: PropertyContext | None = None,
+        confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
         generate_particles: bool = True,
     ) -> None:
         get_integrator(integrator)  # ValueError listing the valid names
+        self.confine = confine
         if output.enabled and writer is None:
             raise ValueError("an output schedule needs a ParticleWriter")
         if field_degree < 0:
@@ -285,7 +290,7 @@ class ParticleManager:
         self.removed = 0
         self.swarm = Swarm(mesh)
         self.properties = PropertyManager(self.swarm, properties)
-        self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes())
+        self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes(), confine=confine)
         self._tracked: dict[str, _Tracked] = {}
         self._space: dolfinx.fem.FunctionSpace | None = None
         self._last_output: tuple[int, float] | None = None
@@ -309,6 +314,7 @@ class ParticleManager:
         make_function: MakeFunction | None = None,
         field_degree: int = 0,
         context: PropertyContext | None = None,
+        confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
         generate_particles: bool = True,
     ) -> ParticleManager:
         """One manager from one config section (collective).
@@ -329,6 +335,7 @@ class ParticleManager:
             make_function: Text -> function of the position.
             field_degree: Degree of tracked fields.
             context: Fields for the initial property values.
+            confine: Moves positions that left the domain back inside (see the class).
             generate_particles: False: no particles yet (see :meth:`adopt`).
         """
         num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
@@ -352,7 +359,7 @@ class ParticleManager:
         return cls(mesh, generator=generator, integrator=str(section.get("integrator") or "rk2"),
                    properties=properties, interpolator=interpolator, field_degree=field_degree,
                    population=population, writer=writer, output=schedule, context=context,
-                   generate_particles=generate_particles)
+                   generate_particles=generate_particles, confine=confine)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -487,7 +494,8 @@ class ParticleManager:
         self.swarm = swarm
         self.properties.attach(swarm)
         self.properties.set_context(context)
-        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes())
+        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(),
+                                  confine=self.confine)
         self.lost, self.added, self.removed = int(counters["lost"]), int(counters["added"]), int(counters["removed"])
         last = counters["last_output"]
         self._last_output = (int(last[0]), float(last[1])) if last else None
@@ -518,7 +526,8 @@ class ParticleManager:
         self.properties.attach(self.swarm)
         if context is not None:
             self.properties.set_context(context)
-        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes())
+        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(),
+                                  confine=self.confine)
         self._bound(step=step, salt=1)
         for tracked in self._tracked.values():
             tracked.function = self._new_field(tracked.function.name)

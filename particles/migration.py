@@ -232,7 +232,7 @@ class Migrator:
         for src in sorted(received):
             t = received[src]
             batch = _Unpacked(swarm, t)
-            loc = locate_owned(self.mesh, batch.x)
+            loc = locate_owned(self.mesh, batch.x, geometry=swarm.geometry)
             sole = batch.global_cells == 1
             kept.append((t[sole & (loc.cells >= 0)], loc.xref[sole & (loc.cells >= 0)], loc.cells[sole & (loc.cells >= 0)]))
             lost += int(np.count_nonzero(sole & (loc.cells < 0)))

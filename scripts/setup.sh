@@ -6,9 +6,11 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 
 # Off-screen pictures (pyvista/VTK) need Mesa's EGL and software rasteriser; VTK loads them at run time.
-apt_packages=(python3-dolfinx python3-h5py-mpi python3-venv python3-pip python3-yaml python3-scipy
+# gmsh meshes the annulus/spherical-shell geometries (convection/mesh.py); Debian's build works with
+# DOLFINx 0.5's gmshio, including second-order (curved) cells.
+apt_packages=(python3-dolfinx python3-h5py-mpi python3-venv python3-pip python3-yaml python3-scipy python3-gmsh
               libegl1 libegl-mesa0 libgl1-mesa-dri)
-if ! /usr/bin/python3 -c "import dolfinx, h5py, yaml, scipy" >/dev/null 2>&1 \
+if ! /usr/bin/python3 -c "import dolfinx, h5py, yaml, scipy, gmsh" >/dev/null 2>&1 \
         || ! ldconfig -p | grep -q 'libEGL_mesa.so.0'; then
     echo "[setup] installing Debian packages: ${apt_packages[*]}" >&2
     export DEBIAN_FRONTEND=noninteractive

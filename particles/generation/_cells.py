@@ -107,14 +107,17 @@ def pull_back(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], x: npt.NDAr
     return out
 
 
-def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike) -> OwnedLocation:
+def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, *, geometry=None) -> OwnedLocation:
     """Find, for each point, an owned cell of this rank that contains it (not collective).
 
-    A point on a face shared by several owned cells gets the lowest local cell index.
+    A point on a face shared by several owned cells gets the lowest local cell index. Curved
+    (degree-2) cells are searched by :meth:`particles.geometry.CellGeometry.locate` (pull-back
+    into every candidate), as DOLFINx 0.5's collision test only knows their vertex simplex.
 
     Args:
         mesh: The mesh.
         x: Points, shape=(m, gdim), float64.
+        geometry: The mesh's :class:`particles.geometry.CellGeometry` to reuse for curved cells.
 
     Returns:
         The cells (-1 where no owned cell contains the point) and reference coordinates.
@@ -126,6 +129,14 @@ def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike) -> OwnedLocation:
     xref = np.full((m, tdim), np.nan)
     num_owned = mesh.topology.index_map(tdim).size_local
     if m == 0 or num_owned == 0:
+        return OwnedLocation(cells, xref)
+    if mesh.geometry.cmap.degree > 1:
+        from particles.geometry import CellGeometry
+
+        found = (geometry if geometry is not None else CellGeometry(mesh)).locate(x, owned_only=True)
+        hit = found.cells >= 0
+        cells[hit] = found.cells[hit]
+        xref[hit] = found.xref[hit]
         return OwnedLocation(cells, xref)
     points = np.zeros((m, 3))
     points[:, :gdim] = x

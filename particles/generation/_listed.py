@@ -37,7 +37,7 @@ def insert_listed_points(swarm: Swarm, x: npt.NDArray[np.float64], index: npt.ND
     """
     comm = swarm.comm
     base = first_free_id(swarm)
-    loc = locate_owned(swarm.mesh, x)
+    loc = locate_owned(swarm.mesh, x, geometry=swarm.geometry)
     found = loc.cells >= 0
     if comm.size > 1:
         boxes = comm.allgather(owned_box(swarm.mesh))

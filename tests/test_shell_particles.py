@@ -1,0 +1,112 @@
+"""Particles on a curved (second-order) annulus mesh: location near curved boundaries, generation,
+rigid-rotation advection across ranks with no particle lost."""
+
+import math
+
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+import dolfinx.fem
+
+pytest.importorskip("gmsh")
+
+from _helpers import gathered, swarm_at  # noqa: E402
+from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from particles import Swarm  # noqa: E402
+from particles.advection import Advector  # noqa: E402
+from particles.generation import generate  # noqa: E402
+from particles.generation.metropolis_hastings import MetropolisHastings  # noqa: E402
+from particles.generation._cells import locate_owned  # noqa: E402
+from particles.geometry import CellGeometry  # noqa: E402
+
+RI, RO = 1.22, 2.22
+
+
+def _annulus(comm, resolution=0.4):
+    return create_shell_mesh(comm, ShellSpec(2, RI, RO, resolution=resolution))
+
+
+def _count(comm, mask):
+    return comm.allreduce(int(np.count_nonzero(mask)), op=MPI.SUM)
+
+
+def test_curved_cells_located_by_pull_back(world):
+    """Points just inside the outer circle (in the part of a cell bulging beyond its straight edge)
+    are found; points just inside the hole (between a straight edge and the inner circle) are not."""
+    mesh = _annulus(world)
+    geometry = CellGeometry(mesh)
+    assert geometry.curvature_padding > 1e-3  # the cells are curved
+    angles = np.linspace(0.0, 2.0 * np.pi, 1001)[:-1]
+    for radius, expected in ((RO - 1e-4, angles.size), (RI + 1e-6, angles.size), (1.7, angles.size),
+                             (RI - 1e-4, 0), (RO + 1e-4, 0)):
+        points = radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        found = geometry.locate(points, owned_only=True)
+        assert _count(world, found.cells >= 0) == expected, radius
+        hit = found.cells >= 0
+        assert np.allclose(geometry.push_forward(found.cells[hit], found.xref[hit]), points[hit], atol=1e-12)
+        owned = locate_owned(mesh, points)
+        assert np.array_equal(owned.cells, found.cells)
+
+
+def test_generated_particles_inside_the_shell(world):
+    mesh = _annulus(world)
+    swarm = Swarm(mesh)
+    generate(swarm, MetropolisHastings(2000, seed=3))  # random_uniform needs affine cells
+    r = np.linalg.norm(swarm.x, axis=1)
+    assert _count(world, (r < RI - 1e-12) | (r > RO + 1e-12)) == 0
+    assert world.allreduce(swarm.num_particles) == 2000
+    assert np.allclose(swarm.geometry.push_forward(swarm.cells, swarm.xref), swarm.x, atol=1e-12)
+
+
+def test_rigid_rotation_in_curved_annulus(world):
+    """One revolution of u = 2 pi (-y, x) with RK2: every particle is kept, stays in the shell, and
+    its error is RK2's closed-form amplification error |A^n - 1| r (the field is exact in P2)."""
+    mesh = _annulus(world)
+    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    u = dolfinx.fem.Function(V)
+    u.interpolate(lambda x: np.stack([-2.0 * np.pi * x[1], 2.0 * np.pi * x[0]]))
+    radii = np.array([RI + 1e-3, 1.5, 1.9, RO - 2e-3])
+    phi = 2.0 * np.pi * (np.arange(24) + 0.3) / 24
+    points = np.concatenate([r * np.stack([np.cos(phi), np.sin(phi)], axis=1) for r in radii])
+    swarm = swarm_at(mesh, points)
+    assert world.allreduce(swarm.num_particles) == points.shape[0]
+    steps = 100
+    advector = Advector(swarm, integrator="rk2")
+    lost = 0
+    for _ in range(steps):
+        lost += advector.step(u, u, 1.0 / steps).global_lost
+    swarm.check_invariants()
+    ids, x, _ = gathered(swarm)
+    assert lost == 0 and np.array_equal(ids, np.arange(points.shape[0]))
+    z = 1j * 2.0 * np.pi / steps
+    amplification = (1.0 + z + z * z / 2.0) ** steps
+    expected = abs(amplification - 1.0) * np.linalg.norm(points, axis=1)
+    assert np.allclose(np.linalg.norm(x - points, axis=1), expected, rtol=1e-6)
+    assert np.allclose(swarm.geometry.push_forward(swarm.cells, swarm.xref), swarm.x, atol=1e-12)
+
+
+def test_confinement_keeps_particles_crossing_a_curved_boundary(world):
+    """Large RK2 steps of a rotation carry particles near the outer circle across it (straight steps
+    along a curved boundary): without confinement they are lost, with
+    :func:`convection.mesh.shell_confinement` every particle stays, inside the shell."""
+    from convection.mesh import shell_confinement
+
+    spec = ShellSpec(2, RI, RO, resolution=0.4)
+    mesh = create_shell_mesh(world, spec)
+    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    u = dolfinx.fem.Function(V)
+    u.interpolate(lambda x: np.stack([-2.0 * np.pi * x[1], 2.0 * np.pi * x[0]]))
+    phi = 2.0 * np.pi * np.arange(40) / 40
+    points = (RO - 1e-3) * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    lost = {}
+    for confine in (None, shell_confinement(mesh, spec)):
+        swarm = swarm_at(mesh, points)
+        advector = Advector(swarm, integrator="rk2", confine=confine)
+        lost[confine is None] = sum(advector.step(u, u, 0.02).global_lost for _ in range(5))
+        if confine is not None:
+            ids, x, _ = gathered(swarm)
+            r = np.linalg.norm(x, axis=1)
+            assert ids.size == points.shape[0] and np.all((r >= RI) & (r <= RO))
+    assert lost[True] > 0 and lost[False] == 0

@@ -1,0 +1,121 @@
+"""Stokes in an annulus with curved (P2) cells: convergence orders against Kramer et al.'s analytical
+solutions (``assess``), free-slip null spaces (constant pressure, rigid rotation), rank independence."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+import dolfinx.fem
+
+pytest.importorskip("gmsh")
+pytest.importorskip("assess")
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "shell"))
+
+from analytical import Case, fitted_order, run_level  # noqa: E402
+from convection.approximation import BoussinesqApproximation  # noqa: E402
+from convection.boundary import VelocityBC  # noqa: E402
+from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from convection.stokes import StokesSolver  # noqa: E402
+
+COARSE = 0.4  # gmsh cell size of level 0; levels 0, 1, 2 take a few seconds
+
+
+@pytest.mark.parametrize("kind, velocity_order, pressure_order", [
+    ("smooth_free_slip", 2.8, 1.8),
+    ("smooth_zero_slip", 2.8, 1.8),
+])
+def test_p2p1_orders_in_curved_annulus(kind, velocity_order, pressure_order):
+    """Taylor-Hood on second-order geometry: velocity O(h^3), pressure O(h^2) in L2, for free slip
+    (Nitsche) as for zero slip."""
+    case = Case(kind, dim=2, n=2, k=3)
+    results = [run_level(case, level, COARSE, comm=MPI.COMM_WORLD) for level in (0, 1, 2)]
+    h = [r.h for r in results]
+    assert fitted_order(h, [r.velocity_error for r in results]) > velocity_order, results
+    assert fitted_order(h, [r.pressure_error for r in results]) > pressure_order, results
+    assert results[-1].velocity_error < 2e-3 and results[-1].pressure_error < 2e-2
+
+
+def test_straight_cells_limit_free_slip():
+    """The reason for curved cells: on straight-sided cells the discrete normal jumps at every
+    boundary vertex, and the free-slip velocity converges at first order at best."""
+    case = Case("smooth_free_slip", dim=2, n=2, k=3)
+    results = [run_level(case, level, COARSE, comm=MPI.COMM_WORLD, geometry_degree=1) for level in (0, 1, 2)]
+    assert fitted_order([r.h for r in results], [r.velocity_error for r in results]) < 1.5
+
+
+def _free_slip_solver(comm, solver="direct"):
+    mesh = create_shell_mesh(comm, ShellSpec(2, resolution=0.3))
+    bcs = {"inner": VelocityBC("free_slip"), "outer": VelocityBC("free_slip")}
+    return StokesSolver(mesh, BoussinesqApproximation(Ra=1.0, gravity="radial"), bcs=bcs, solver=solver)
+
+
+def _integral(mesh, expr):
+    return mesh.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr * ufl.dx)), op=MPI.SUM)
+
+
+@pytest.mark.parametrize("solver", ["direct", "iterative"])
+def test_free_slip_null_spaces(solver):
+    """Both surfaces free slip: the solution has no rigid rotation (zero angular momentum) and zero
+    mean pressure, for the direct (pressure pinned) and the iterative (null space) solver; a
+    forcing that is itself a rigid rotation's pressure-free body force gives no flow."""
+    stokes = _free_slip_solver(MPI.COMM_WORLD, solver)
+    assert stokes.has_pressure_null_space and stokes.has_rotation_null_space
+    mesh = stokes.mesh
+    x = ufl.SpatialCoordinate(mesh)
+    r = ufl.sqrt(ufl.dot(x, x))
+    T = ufl.cos(3 * ufl.atan_2(x[1], x[0])) * (r - 1.22) * (2.22 - r)
+    stokes.solve(T)
+    u, p = stokes.u, stokes.p
+    rotation = ufl.as_vector([-x[1], x[0]])
+    speed = np.sqrt(_integral(mesh, ufl.inner(u, u)))
+    assert speed > 1e-3
+    assert abs(_integral(mesh, ufl.inner(u, rotation))) < 1e-10 * speed
+    assert abs(_integral(mesh, p)) < 1e-10
+    # Free slip holds weakly: the normal velocity is small compared with the flow.
+    n_out = x / r
+    boundary_normal = np.sqrt(mesh.comm.allreduce(dolfinx.fem.assemble_scalar(
+        dolfinx.fem.form(ufl.dot(u, n_out) ** 2 * ufl.ds)), op=MPI.SUM))
+    assert boundary_normal < 1e-2 * speed
+    stokes.destroy()
+
+
+def test_one_free_slip_surface_keeps_rotation_fixed():
+    """Free slip outside, no slip inside: no rotational null space, and the constant pressure is
+    still the only pressure null space."""
+    mesh = create_shell_mesh(MPI.COMM_WORLD, ShellSpec(2, resolution=0.3))
+    bcs = {"inner": VelocityBC("no_slip"), "outer": VelocityBC("free_slip")}
+    stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=1.0, gravity="radial"), bcs=bcs)
+    assert stokes.has_pressure_null_space and not stokes.has_rotation_null_space
+    stokes.destroy()
+
+
+def test_prescribed_rotation_on_both_surfaces_is_rigid():
+    """Prescribed tangential velocity omega (-y, x) on both surfaces and no buoyancy: the rigid
+    rotation is the exact solution, reproduced to round-off (it is linear, so exact in P2)."""
+    mesh = create_shell_mesh(MPI.COMM_WORLD, ShellSpec(2, resolution=0.3))
+    rotation = VelocityBC("prescribed", ("-0.5 * y", "0.5 * x"))
+    stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=0.0, gravity="radial"),
+                          bcs={"inner": rotation, "outer": rotation})
+    stokes.solve(0.0)
+    x = ufl.SpatialCoordinate(mesh)
+    exact = 0.5 * ufl.as_vector([-x[1], x[0]])
+    error = np.sqrt(_integral(mesh, ufl.inner(stokes.u - exact, stokes.u - exact)))
+    assert error < 1e-10
+    assert np.sqrt(_integral(mesh, stokes.p ** 2)) < 1e-9
+    stokes.destroy()
+
+
+@pytest.mark.mpi
+def test_errors_rank_independent():
+    """The same errors on all ranks together as on one rank alone (round-off)."""
+    case = Case("smooth_free_slip", dim=2, n=2, k=3)
+    parallel = run_level(case, 1, COARSE, comm=MPI.COMM_WORLD)
+    serial = run_level(case, 1, COARSE, comm=MPI.COMM_SELF)
+    assert parallel.cells == serial.cells
+    assert parallel.velocity_error == pytest.approx(serial.velocity_error, rel=1e-8)
+    assert parallel.pressure_error == pytest.approx(serial.pressure_error, rel=1e-8)

@@ -4,9 +4,11 @@ After particles moved, each one sits in an owned cell (nothing to do), in a ghos
 is known from the cell index map: send it there), or in no local cell at all (``cells == -1``).
 Ghost-cell particles travel by non-blocking point-to-point messages to neighbour ranks only: first
 one count per neighbour, then one float64 buffer per neighbour whose rows hold the particle id, the
-*global* cell index as a hint, the position, the reference position and every property column
-(ids and cell indices are carried bit-for-bit as int64 reinterpreted as float64). The receiver
-turns the global cell index into its local owned index and inserts the batch.
+*global* cell index as a hint, the position, the reference position, every property column and
+the swarm's stage table (ids and cell indices are carried bit-for-bit as int64 reinterpreted as
+float64). The receiver turns the global cell index into its local owned index and appends the
+batch; the sender only marks the departed rows. One sort at the end places the new rows and drops
+the departed ones, so apart from that sort a migration costs O(particles sent + received).
 
 Unlocated particles take a global fallback: every rank publishes the bounding box of its owned
 cells once; a particle goes to all other ranks whose box contains it (the only collective step,
@@ -14,7 +16,7 @@ an Alltoall of counts); a sole candidate keeps it if one of its owned cells cont
 several candidates, they answer found/not found and the lowest rank that found it keeps it.
 Particles nobody found are removed and counted as lost.
 
-Integrator stage data travels as property columns, so a particle that changes rank in the middle
+Integrator stage data travels in the stage table, so a particle that changes rank in the middle
 of a Runge-Kutta step carries its stages with it.
 """
 
@@ -26,9 +28,11 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+import dolfinx.geometry
 import dolfinx.mesh
 
-from particles.generation._cells import OwnedLocation, locate_owned, owned_box
+from particles.generation._cells import OwnedLocation, locate_owned, owned_box, owned_cell_tree
+from particles.kernels import rows_outside
 from particles.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
@@ -63,8 +67,9 @@ class MigrationStats:
 
 
 def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], global_cells: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
-    """Rows of particles as one float64 table: [id, global cell, x, xref, properties]."""
-    table = np.empty((rows.shape[0], 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns))
+    """Rows of particles as one float64 table: [id, global cell, x, xref, properties, stage table]."""
+    ncols = swarm.num_property_columns
+    table = np.empty((rows.shape[0], 2 + swarm.gdim + swarm.tdim + ncols + swarm.stage_width))
     table[:, 0] = swarm.ids[rows].view(np.float64)
     table[:, 1] = np.ascontiguousarray(global_cells, dtype=np.int64).view(np.float64)
     c = 2
@@ -72,13 +77,15 @@ def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], global_cells: npt.NDArray[n
     c += swarm.gdim
     table[:, c : c + swarm.tdim] = swarm.xref[rows]
     c += swarm.tdim
-    table[:, c:] = swarm.properties[rows]
+    table[:, c : c + ncols] = swarm.properties[rows]
+    table[:, c + ncols :] = swarm.stage[rows]
     return table
 
 
 class _Unpacked:
     def __init__(self, swarm: Swarm, table: npt.NDArray[np.float64]) -> None:
-        table = np.ascontiguousarray(table).reshape(-1, 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns)
+        ncols = swarm.num_property_columns
+        table = np.ascontiguousarray(table).reshape(-1, 2 + swarm.gdim + swarm.tdim + ncols + swarm.stage_width)
         self.ids = np.ascontiguousarray(table[:, 0]).view(np.int64)
         self.global_cells = np.ascontiguousarray(table[:, 1]).view(np.int64)
         c = 2
@@ -86,7 +93,8 @@ class _Unpacked:
         c += swarm.gdim
         self.xref = table[:, c : c + swarm.tdim]
         c += swarm.tdim
-        self.properties = table[:, c:]
+        self.properties = table[:, c : c + ncols]
+        self.stage = table[:, c + ncols :]
 
 
 class Migrator:
@@ -116,6 +124,7 @@ class Migrator:
         graph.Free()
         self.neighbours = np.union1d(out_ranks, np.asarray(sources, dtype=np.int32)).astype(np.int32)
         self.owned_boxes = self._gather_boxes(gdim)
+        self._owned_tree: dolfinx.geometry.BoundingBoxTree | None = None
 
     def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
         box = owned_box(self.mesh)
@@ -156,54 +165,78 @@ class Migrator:
         return recv
 
     # ------------------------------------------------------------------ migration
-    def migrate(self, swarm: Swarm, /) -> MigrationStats:
+    def migrate(self, swarm: Swarm, /, *, sort: bool = True) -> MigrationStats:
         """Move ghost-cell particles to their owners and resolve unlocated ones (collective).
+
+        Leaving particles are only marked (:meth:`Swarm.discard_rows`) and arriving ones appended
+        (:meth:`Swarm.append_rows`); one sort at the end places the new rows and drops the marked
+        ones, so the work besides that sort is O(particles sent + received). Collectives: one
+        allreduce of two counts (every call, when more than one rank), plus the fallback's
+        Alltoall and a second allreduce only when some rank has unlocated particles.
 
         Args:
             swarm: Particles on ``self.mesh``; ``cells`` may hold owned, ghost or -1 entries.
+            sort: Sort the swarm at the end. False leaves the arrived rows unsorted and the
+                departed ones marked, for a caller that sorts next anyway.
 
         Returns:
             Local and global counts of sent, received, fallback and lost particles.
         """
         if swarm.mesh is not self.mesh:
             raise ValueError("the swarm lives on a different mesh than this Migrator")
-        ncols = 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns
-        cells = swarm.cells
-        ghost = cells >= self.num_owned_cells
-        sent = int(np.count_nonzero(ghost))
-        received = 0
+        ncols = 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns + swarm.stage_width
+        outside = rows_outside(swarm.cells, self.num_owned_cells)
+        cells = swarm.cells[outside]
+        ghost_rows = outside[cells >= self.num_owned_cells]
+        unlocated_rows = outside[cells < 0]
+        sent = int(ghost_rows.shape[0])
         tables: dict[int, npt.NDArray[np.float64]] = {}
         if sent:
-            rows = np.flatnonzero(ghost)
-            g = cells[rows] - self.num_owned_cells
+            g = swarm.cells[ghost_rows] - self.num_owned_cells
             owners = self.ghost_owners[g]
-            table = _pack(swarm, rows, self.ghost_globals[g])
+            table = _pack(swarm, ghost_rows, self.ghost_globals[g])
             for r in np.unique(owners):
                 tables[int(r)] = table[owners == r]
         incoming = self._neighbour_exchange(tables, ncols) if self.comm.size > 1 else []
-        if sent:
-            swarm.remove(ghost)
+        swarm.discard_rows(ghost_rows)
+        received = 0
         if incoming:
             batch = _Unpacked(swarm, np.concatenate(incoming))
             local = batch.global_cells - self.cell_range[0]
             if np.any((local < 0) | (local >= self.num_owned_cells)):
                 raise RuntimeError("migration received a particle for a cell this rank does not own")
-            swarm.add(batch.ids, batch.x, batch.xref, local.astype(np.int32), batch.properties)
+            swarm.append_rows(batch.ids, batch.x, batch.xref, local.astype(np.int32), batch.properties, batch.stage)
             received += batch.ids.shape[0]
 
-        unlocated = swarm.cells < 0
-        n_unlocated = int(np.count_nonzero(unlocated))
+        n_unlocated = int(unlocated_rows.shape[0])
         fallback_sent = lost = 0
         if self.comm.size == 1:
-            lost = swarm.remove(unlocated)
-        elif self.comm.allreduce(n_unlocated, op=MPI.SUM) > 0:
-            fallback_sent, fb_received, lost = self._fallback(swarm, unlocated, ncols)
-            received += fb_received
-        totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64), op=MPI.SUM)
+            swarm.discard_rows(unlocated_rows)
+            lost = n_unlocated
+            totals = np.array([sent, received, 0, lost], dtype=np.int64)
+        else:
+            first = self.comm.allreduce(np.array([sent, n_unlocated], dtype=np.int64), op=MPI.SUM)
+            if first[1] > 0:
+                fallback_sent, fb_received, lost = self._fallback(swarm, unlocated_rows, ncols)
+                received += fb_received
+                totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64),
+                                             op=MPI.SUM)
+            else:  # every particle sent to a neighbour arrived there
+                totals = np.array([first[0], first[0], 0, 0], dtype=np.int64)
+        if sort:
+            swarm.sort()
         return MigrationStats(sent, received, fallback_sent, lost, *(int(t) for t in totals))
 
-    def _fallback(self, swarm: Swarm, unlocated: npt.NDArray[np.bool_], ncols: int) -> tuple[int, int, int]:
-        """Global search for unlocated particles (collective). Returns (offered, received, lost).
+    @property
+    def owned_tree(self) -> dolfinx.geometry.BoundingBoxTree:
+        """Bounding-box tree of this rank's owned cells, built on first use (for the fallback)."""
+        if self._owned_tree is None:
+            self._owned_tree = owned_cell_tree(self.mesh)
+        return self._owned_tree
+
+    def _fallback(self, swarm: Swarm, rows: npt.NDArray[np.int64], ncols: int) -> tuple[int, int, int]:
+        """Global search for the unlocated particles in ``rows`` (collective). Returns (offered,
+        received, lost).
 
         Round 1 (the only collective one) offers each particle to every other rank whose owned box
         contains it, together with the number of candidates. A sole candidate decides alone: it
@@ -213,7 +246,6 @@ class Migrator:
         are point-to-point between the pairs of round 1.
         """
         rank = self.comm.rank
-        rows = np.flatnonzero(unlocated)
         x = swarm.x[rows]
         lower, upper = self.owned_boxes[:, 0, :], self.owned_boxes[:, 1, :]
         finite = self.owned_boxes[np.isfinite(self.owned_boxes)]
@@ -222,7 +254,7 @@ class Migrator:
         inside[:, rank] = False
         num_candidates = inside.sum(axis=1)
         table = _pack(swarm, rows, num_candidates.astype(np.int64))
-        swarm.remove(unlocated)
+        swarm.discard_rows(rows)
         offers = {r: np.flatnonzero(inside[:, r]) for r in range(self.comm.size) if inside[:, r].any()}
         received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
         lost = int(np.count_nonzero(num_candidates == 0))
@@ -232,7 +264,7 @@ class Migrator:
         for src in sorted(received):
             t = received[src]
             batch = _Unpacked(swarm, t)
-            loc = locate_owned(self.mesh, batch.x)
+            loc = locate_owned(self.mesh, batch.x, tree=self.owned_tree)
             sole = batch.global_cells == 1
             kept.append((t[sole & (loc.cells >= 0)], loc.xref[sole & (loc.cells >= 0)], loc.cells[sole & (loc.cells >= 0)]))
             lost += int(np.count_nonzero(sole & (loc.cells < 0)))
@@ -256,7 +288,7 @@ class Migrator:
         for t, xref, cells in kept:
             if t.shape[0]:
                 batch = _Unpacked(swarm, t)
-                swarm.add(batch.ids, batch.x, xref, cells, batch.properties)
+                swarm.append_rows(batch.ids, batch.x, xref, cells, batch.properties, batch.stage)
                 n_in += t.shape[0]
         offered = int(np.count_nonzero(num_candidates > 0))
         return offered, n_in, lost
@@ -280,7 +312,7 @@ def migrator_for(mesh: dolfinx.mesh.Mesh, /) -> Migrator:
     return migrator
 
 
-def migrate(swarm: Swarm, /, *, migrator: Migrator | None = None) -> MigrationStats:
+def migrate(swarm: Swarm, /, *, migrator: Migrator | None = None, sort: bool = True) -> MigrationStats:
     """Send every particle to the rank owning its cell; drop particles outside the domain (collective).
 
     Particles in ghost cells go to the ghost's owner (neighbour messages); particles with
@@ -290,8 +322,9 @@ def migrate(swarm: Swarm, /, *, migrator: Migrator | None = None) -> MigrationSt
     Args:
         swarm: The particles.
         migrator: The mesh's communication pattern; by default :func:`migrator_for` (cached).
+        sort: Sort the swarm at the end (see :meth:`Migrator.migrate`).
 
     Returns:
         Local and global counts.
     """
-    return (migrator or migrator_for(swarm.mesh)).migrate(swarm)
+    return (migrator or migrator_for(swarm.mesh)).migrate(swarm, sort=sort)

@@ -23,6 +23,7 @@ __all__ = [
     "is_affine_simplex",
     "locate_owned",
     "owned_box",
+    "owned_cell_tree",
     "pull_back",
     "push_forward",
 ]
@@ -107,7 +108,14 @@ def pull_back(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], x: npt.NDAr
     return out
 
 
-def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike) -> OwnedLocation:
+def owned_cell_tree(mesh: dolfinx.mesh.Mesh) -> dolfinx.geometry.BoundingBoxTree:
+    """Bounding-box tree over this rank's owned cells (not collective)."""
+    num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    return dolfinx.geometry.BoundingBoxTree(mesh, mesh.topology.dim, np.arange(num_owned, dtype=np.int32))
+
+
+def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, /, *,
+                 tree: dolfinx.geometry.BoundingBoxTree | None = None) -> OwnedLocation:
     """Find, for each point, an owned cell of this rank that contains it (not collective).
 
     A point on a face shared by several owned cells gets the lowest local cell index.
@@ -115,6 +123,7 @@ def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike) -> OwnedLocation:
     Args:
         mesh: The mesh.
         x: Points, shape=(m, gdim), float64.
+        tree: :func:`owned_cell_tree` of ``mesh``, to reuse (built for this call if omitted).
 
     Returns:
         The cells (-1 where no owned cell contains the point) and reference coordinates.
@@ -129,7 +138,8 @@ def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike) -> OwnedLocation:
         return OwnedLocation(cells, xref)
     points = np.zeros((m, 3))
     points[:, :gdim] = x
-    tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim, np.arange(num_owned, dtype=np.int32))
+    if tree is None:
+        tree = owned_cell_tree(mesh)
     candidates = dolfinx.geometry.compute_collisions(tree, points)
     colliding = dolfinx.geometry.compute_colliding_cells(mesh, candidates, points)
     offsets = np.asarray(colliding.offsets)

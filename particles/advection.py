@@ -9,7 +9,7 @@ linearly in time in between: stage ``i`` of a Butcher tableau ``(a, b, c)`` uses
 
 After every stage position the particle's cell and reference position are updated
 (:func:`particles.transport.relocate`) and particles that left this rank's cells are migrated
-(:func:`particles.migration.migrate`); the start position ``x_0`` and the slopes ``k_j`` still
+(:func:`particles.migration.migrate`; the swarm is sorted by cell once, after the last stage); the start position ``x_0`` and the slopes ``k_j`` still
 needed later travel with the particle in the swarm's stage table (:meth:`Swarm.stage_table`,
 kept allocated from step to step). A slope needed only for the next stage position is pushed
 into the position at once and never stored, so Euler needs no stage columns and the midpoint
@@ -351,7 +351,9 @@ class Advector:
                         t0 = time.perf_counter()
                         self._combine(tab.a[i], stored, block, dt, w, upto=i)
                         timer.evaluation += time.perf_counter() - t0
-                    transport = transport + self._move(timer, moved)
+                    # (with ODEs or a callable velocity every stage sorts, so user callbacks never
+                    # see discarded rows)
+                    transport = transport + self._move(timer, moved, last=not fused)
                 pushed = False
                 t0 = time.perf_counter()
                 if fused and (i == s - 1 or i not in block):
@@ -377,7 +379,7 @@ class Advector:
                         y += (dt * tab.b[i]) * k
                     self._set_state(y)
                 timer.evaluation += time.perf_counter() - t0
-            transport = transport + self._move(timer, moved)
+            transport = transport + self._move(timer, moved, last=True)
         finally:
             swarm.release_stage_table()
         return AdvectionStats(transport, moved[0], moved[1], moved[2], moved[3],
@@ -401,15 +403,20 @@ class Advector:
         if self.odes:
             self._set_state(out)
 
-    def _move(self, timer: _Timer, moved: list[int]) -> TransportStats:
-        """Relocate after positions changed, migrate, then sort once; accumulates counts into
-        ``moved``. The sort places both the particles that changed cell and those that arrived."""
+    def _move(self, timer: _Timer, moved: list[int], *, last: bool) -> TransportStats:
+        """Relocate after positions changed and migrate; accumulates counts into ``moved``.
+
+        Only the move after the last stage sorts: the stages in between need each particle's cell
+        and reference position, not the cell order, so particles that arrived stay appended and
+        departed ones stay marked (the kernels skip them) until that one sort places and drops
+        them all."""
         t0 = time.perf_counter()
         stats = relocate(self.swarm, sort=False)
         t1 = time.perf_counter()
         mig = _migrate(self.swarm)
         t2 = time.perf_counter()
-        self.swarm.sort()
+        if last:
+            self.swarm.sort()
         timer.relocation += (t1 - t0) + (time.perf_counter() - t2)
         timer.communication += t2 - t1
         for idx, value in enumerate(mig):

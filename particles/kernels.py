@@ -15,6 +15,7 @@ __all__ = [
     "STAYED",
     "NEIGHBOUR",
     "UNRESOLVED",
+    "SKIPPED",
     "count_buckets",
     "evaluate_simplex_p12",
     "gather_particles",
@@ -28,6 +29,8 @@ __all__ = [
 STAYED = 0
 NEIGHBOUR = 1
 UNRESOLVED = 2
+SKIPPED = 3
+"""Relocation status of a discarded row (left untouched)."""
 DEAD = -2
 """Cell index of a row discarded since the last sort (sent away or lost); the next sort drops it."""
 
@@ -225,12 +228,16 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
         alpha, beta: ``out = beta * out + alpha * u(x)`` (beta == 0 ignores the old ``out``,
         so an explicit Euler push is ``alpha = dt, beta = 1, out = x``).
         out: shape=(n, bs), updated in place.
+
+    Rows with ``cells < 0`` (discarded, see :data:`DEAD`) are skipped.
     """
     n = cells.shape[0]
     tdim = xref.shape[1]
     if tdim == 2 and degree == 1:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             L = 1.0 - X - Y
@@ -243,6 +250,8 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
         # components costs about a third more); same arithmetic as the general branch below.
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             L = 1.0 - X - Y
@@ -263,6 +272,8 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
     elif tdim == 2:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             L = 1.0 - X - Y
@@ -277,6 +288,8 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
     elif degree == 1:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             Z = xref[p, 2]
@@ -288,6 +301,8 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
     else:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             Z = xref[p, 2]
@@ -451,9 +466,9 @@ def relocate_affine_simplex(
     a cell); then the cells around the cell vertex closest to the point, ordered by descending
     ``(x - v) . (centre(K') - v)`` (seed paper section 2.4), then the remaining vertex neighbours of
     the old cell. ``status`` gets STAYED, NEIGHBOUR or UNRESOLVED (cell == -1 on input, or not found:
-    left for the bounding-box fallback; ``cells`` is then unchanged). Every resolved particle adds 1
-    to ``counts[bucket]`` (shape=(num_owned + 2,), see :func:`count_buckets`); unresolved ones are
-    not counted. Returns ``(counts per status shape=(3,), resolved buckets non-decreasing)``.
+    left for the bounding-box fallback; ``cells`` is then unchanged), or SKIPPED for a discarded row
+    (:data:`DEAD`). Every resolved or discarded particle adds 1 to ``counts[bucket]``
+    (shape=(num_owned + 2,), see :func:`count_buckets`); unresolved ones are not counted. Returns ``(counts per status shape=(3,), resolved buckets non-decreasing)``.
     """
     res = np.zeros(3, dtype=np.int64)
     tdim = K.shape[1]
@@ -465,8 +480,12 @@ def relocate_affine_simplex(
     for p in range(x.shape[0]):
         c = cells[p]
         if c < 0:
-            status[p] = UNRESOLVED
-            res[UNRESOLVED] += 1
+            if c == DEAD:  # discarded since the last sort: leave it for the sort to drop
+                status[p] = SKIPPED
+                counts[num_owned + 1] += 1
+            else:
+                status[p] = UNRESOLVED
+                res[UNRESOLVED] += 1
             already = False
             continue
         px = x[p, 0]

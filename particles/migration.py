@@ -32,7 +32,6 @@ import dolfinx.geometry
 import dolfinx.mesh
 
 from particles.generation._cells import OwnedLocation, locate_owned, owned_box, owned_cell_tree
-from particles.kernels import rows_outside
 from particles.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
@@ -185,7 +184,7 @@ class Migrator:
         if swarm.mesh is not self.mesh:
             raise ValueError("the swarm lives on a different mesh than this Migrator")
         ncols = 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns + swarm.stage_width
-        outside = rows_outside(swarm.cells, self.num_owned_cells)
+        outside = swarm.outside_rows()
         cells = swarm.cells[outside]
         ghost_rows = outside[cells >= self.num_owned_cells]
         unlocated_rows = outside[cells < 0]

@@ -31,7 +31,9 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from particles.geometry import CellGeometry
-from particles.kernels import DEAD, count_buckets, gather_particles, scatter_particles, sort_destinations
+from particles.kernels import (
+    DEAD, count_buckets, gather_particles, rows_outside, scatter_particles, sort_destinations,
+)
 
 __all__ = ["PropertyLayout", "Swarm"]
 
@@ -337,6 +339,15 @@ class Swarm:
             counts[self.num_owned_cells] += int(np.count_nonzero((cells >= self.num_owned_cells) | (cells == -1)))
             counts[self.num_owned_cells + 1] += int(np.count_nonzero(cells < -1))
             self._pending = (counts, False)
+
+    def outside_rows(self) -> npt.NDArray[np.int64]:
+        """Rows whose particle is in a ghost cell or unlocated (cells >= num_owned_cells or -1),
+        in row order, shape=(m,), int64. O(1) when the counts handed over by the last relocation
+        (:meth:`set_pending_counts`) say there are none, else one scan; so ``cells`` must not be
+        changed between a relocation with ``sort=False`` and the migration that follows it."""
+        if self._pending is not None and self._pending[0][self.num_owned_cells] == 0:
+            return np.empty(0, dtype=np.int64)
+        return rows_outside(self.cells, self.num_owned_cells)
 
     def discard_rows(self, rows: npt.NDArray[np.integer]) -> None:
         """Mark ``rows`` (currently in ghost cells or unlocated) as removed, in O(len(rows)); the

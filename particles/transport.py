@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from particles.geometry import CellGeometry
-from particles.kernels import NEIGHBOUR, STAYED, UNRESOLVED, relocate_affine_simplex
+from particles.kernels import DEAD, NEIGHBOUR, SKIPPED, STAYED, UNRESOLVED, relocate_affine_simplex
 from particles.swarm import Swarm
 
 __all__ = ["TransportStats", "relocate"]
@@ -52,6 +52,7 @@ class TransportStats(NamedTuple):
 def _relocate_general(geom: CellGeometry, x, cells, xref, status) -> None:
     """Vectorised relocation for non-affine cells (same contract as the compiled kernel)."""
     status[:] = UNRESOLVED
+    status[cells == DEAD] = SKIPPED
     valid = np.flatnonzero(cells >= 0)
     X = geom.pull_back(cells[valid], x[valid])
     ok = geom.inside(X)
@@ -80,6 +81,8 @@ def _relocate_general(geom: CellGeometry, x, cells, xref, status) -> None:
 def relocate(swarm: Swarm, /, *, sort: bool = True) -> TransportStats:
     """Update ``cells`` and ``xref`` of all particles after ``swarm.x`` changed (local, not collective).
 
+    Rows discarded since the last sort (:meth:`Swarm.discard_rows`) are left alone.
+
     Args:
         swarm: The particles; ``cells`` holds the cell before the move (or -1).
         sort: Re-sort the swarm by cell afterwards. With False the particles per cell counted
@@ -104,7 +107,7 @@ def relocate(swarm: Swarm, /, *, sort: bool = True) -> TransportStats:
         )
     else:
         _relocate_general(geom, swarm.x, swarm.cells, swarm.xref, status)
-        counts, in_order = np.bincount(status, minlength=3), False
+        counts, in_order = np.bincount(status, minlength=4), False
     rows = np.flatnonzero(status == UNRESOLVED) if counts[UNRESOLVED] else np.empty(0, dtype=np.int64)
     found = 0
     if rows.size:

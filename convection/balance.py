@@ -13,7 +13,9 @@ from __future__ import annotations
 from particles.balance import (
     CellLayout, WeightedMesh, create_partitioned_mesh, gather_cell_layout, owner_partitioner, redistribute,
 )
-from particles.partition import PARTITIONERS, PartitionMethod, block_owners, morton_order, morton_owners, partition, rcb_owners
+from particles.partition import (
+    PARTITIONERS, PartitionMethod, block_owners, morton_order, morton_owners, partition, rcb_owners,
+)
 
 __all__ = ["CellLayout", "PARTITIONERS", "PartitionMethod", "WeightedMesh", "block_owners", "create_partitioned_mesh",
            "gather_cell_layout", "morton_order", "morton_owners", "owner_partitioner", "partition", "rcb_owners",

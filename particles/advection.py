@@ -9,11 +9,12 @@ linearly in time in between: stage ``i`` of a Butcher tableau ``(a, b, c)`` uses
 
 After every stage position the particle's cell and reference position are updated
 (:func:`particles.transport.relocate`) and particles that left this rank's cells are migrated
-(:func:`particles.migration.migrate`; the swarm is sorted by cell once, after the last stage); the start position ``x_0`` and the slopes ``k_j`` still
-needed later travel with the particle in the swarm's stage table (:meth:`Swarm.stage_table`,
-kept allocated from step to step). A slope needed only for the next stage position is pushed
-into the position at once and never stored, so Euler needs no stage columns and the midpoint
-rule only ``x_0``.
+(:func:`particles.migration.migrate`; the swarm is sorted by cell once, after the last stage);
+the start position ``x_0`` and the slopes ``k_j`` still needed later travel with the particle in
+the swarm's stage table (:meth:`Swarm.stage_table`, kept allocated from step to step). A slope
+needed only for the next stage position is pushed into the position at once and never stored, so
+Euler needs no stage columns and the midpoint rule only ``x_0``. A stage at ``0 < c < 1``
+evaluates the velocity from time-interpolated coefficients, once (the field is linear in them).
 
 Quantities integrated alongside the positions (deformation gradient, accumulated strain, damage)
 are given as :class:`ParticleODE` objects: property ``y`` obeys ``dy/dt = rhs(swarm, c, y, L)``

@@ -468,7 +468,8 @@ def relocate_affine_simplex(
     the old cell. ``status`` gets STAYED, NEIGHBOUR or UNRESOLVED (cell == -1 on input, or not found:
     left for the bounding-box fallback; ``cells`` is then unchanged), or SKIPPED for a discarded row
     (:data:`DEAD`). Every resolved or discarded particle adds 1 to ``counts[bucket]``
-    (shape=(num_owned + 2,), see :func:`count_buckets`); unresolved ones are not counted. Returns ``(counts per status shape=(3,), resolved buckets non-decreasing)``.
+    (shape=(num_owned + 2,), see :func:`count_buckets`); unresolved ones are not counted. Returns
+    ``(counts per status shape=(3,), whether the counted rows are in bucket order)``.
     """
     res = np.zeros(3, dtype=np.int64)
     tdim = K.shape[1]

@@ -39,6 +39,8 @@ __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
 _TAG_COUNT = 7301
 _TAG_DATA = 7302
 _TAG_REPLY = 7303
+_TAG_NB_REPLY = 7304
+_TAG_NB_VERDICT = 7305
 _CACHE_ATTR = "_particles_migrator"
 
 
@@ -123,6 +125,8 @@ class Migrator:
         graph.Free()
         self.neighbours = np.union1d(out_ranks, np.asarray(sources, dtype=np.int32)).astype(np.int32)
         self.owned_boxes = self._gather_boxes(gdim)
+        self._is_neighbour = np.zeros(self.comm.size, dtype=bool)
+        self._is_neighbour[self.neighbours] = True
         self._owned_tree: dolfinx.geometry.BoundingBoxTree | None = None
 
     def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
@@ -132,8 +136,9 @@ class Migrator:
         return boxes
 
     # ------------------------------------------------------------------ exchange helpers
-    def _neighbour_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int) -> list[npt.NDArray[np.float64]]:
-        """Send tables[r] to every neighbour r (empty if absent); return the received tables."""
+    def _neighbour_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int
+                            ) -> dict[int, npt.NDArray[np.float64]]:
+        """Send tables[r] to every neighbour r (empty if absent); return {source: table} (non-empty)."""
         comm = self.comm
         nbrs = [int(r) for r in self.neighbours]
         send_counts = {r: np.array([tables[r].shape[0] if r in tables else 0], dtype=np.int64) for r in nbrs}
@@ -146,7 +151,7 @@ class Migrator:
         reqs += [comm.Isend(np.ascontiguousarray(tables[r]), dest=r, tag=_TAG_DATA)
                  for r in nbrs if send_counts[r][0] > 0]
         MPI.Request.Waitall(reqs)
-        return [recv[r] for r in sorted(recv)]
+        return recv
 
     def _sparse_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int
                          ) -> dict[int, npt.NDArray[np.float64]]:
@@ -169,9 +174,12 @@ class Migrator:
 
         Leaving particles are only marked (:meth:`Swarm.discard_rows`) and arriving ones appended
         (:meth:`Swarm.append_rows`); one sort at the end places the new rows and drops the marked
-        ones, so the work besides that sort is O(particles sent + received). Collectives: one
-        allreduce of two counts (every call, when more than one rank), plus the fallback's
-        Alltoall and a second allreduce only when some rank has unlocated particles.
+        ones, so the work besides that sort is O(particles sent + received). An unlocated particle
+        whose candidate ranks (owned bounding box contains it) are all neighbours is offered to
+        them in the same messages as the ghost-cell particles and decided point-to-point. The only
+        collective in the common case is one allreduce of five counts; the global fallback (an
+        Alltoall and a second allreduce) runs only when some particle has a candidate rank that is
+        not a neighbour.
 
         Args:
             swarm: Particles on ``self.mesh``; ``cells`` may hold owned, ghost or -1 entries.
@@ -189,42 +197,95 @@ class Migrator:
         ghost_rows = outside[cells >= self.num_owned_cells]
         unlocated_rows = outside[cells < 0]
         sent = int(ghost_rows.shape[0])
-        tables: dict[int, npt.NDArray[np.float64]] = {}
+        if self.comm.size == 1:
+            swarm.discard_rows(unlocated_rows)
+            lost = int(unlocated_rows.shape[0])
+            if sort:
+                swarm.sort()
+            return MigrationStats(sent, 0, 0, lost, sent, 0, 0, lost)
+
+        # Unlocated particles: offered to neighbours here if every candidate rank is one.
+        inside = self._box_candidates(swarm.x[unlocated_rows])
+        num_candidates = inside.sum(axis=1)
+        local = np.all(~inside | self._is_neighbour[None, :], axis=1) & (num_candidates > 0)
+        offer_rows, offer_inside = unlocated_rows[local], inside[local]
+        global_rows = unlocated_rows[~local & (num_candidates > 0)]
+        lost = int(np.count_nonzero(num_candidates == 0))
+        swarm.discard_rows(unlocated_rows[num_candidates == 0])
+
+        parts: dict[int, list[npt.NDArray[np.float64]]] = {}
         if sent:
             g = swarm.cells[ghost_rows] - self.num_owned_cells
             owners = self.ghost_owners[g]
             table = _pack(swarm, ghost_rows, self.ghost_globals[g])
             for r in np.unique(owners):
-                tables[int(r)] = table[owners == r]
-        incoming = self._neighbour_exchange(tables, ncols) if self.comm.size > 1 else []
+                parts.setdefault(int(r), []).append(table[owners == r])
+        if offer_rows.size:
+            # the hint column carries -(number of candidates) for an offer
+            table = _pack(swarm, offer_rows, -offer_inside.sum(axis=1).astype(np.int64))
+            for r in np.flatnonzero(offer_inside.any(axis=0)):
+                parts.setdefault(int(r), []).append(table[offer_inside[:, r]])
+        tables = {r: np.concatenate(p) if len(p) > 1 else p[0] for r, p in parts.items()}
+        incoming = self._neighbour_exchange(tables, ncols)
         swarm.discard_rows(ghost_rows)
+        swarm.discard_rows(offer_rows)
         received = 0
-        if incoming:
-            batch = _Unpacked(swarm, np.concatenate(incoming))
-            local = batch.global_cells - self.cell_range[0]
-            if np.any((local < 0) | (local >= self.num_owned_cells)):
+        offers_in: dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]] = {}
+        handed = []
+        for src in sorted(incoming):
+            t = incoming[src]
+            hint = np.ascontiguousarray(t[:, 1]).view(np.int64)
+            if np.any(hint >= 0):
+                handed.append(t[hint >= 0])
+            if np.any(hint < 0):
+                offers_in[src] = (t[hint < 0], -hint[hint < 0])
+        if handed:
+            batch = _Unpacked(swarm, np.concatenate(handed))
+            local_cells = batch.global_cells - self.cell_range[0]
+            if np.any((local_cells < 0) | (local_cells >= self.num_owned_cells)):
                 raise RuntimeError("migration received a particle for a cell this rank does not own")
-            swarm.append_rows(batch.ids, batch.x, batch.xref, local.astype(np.int32), batch.properties, batch.stage)
+            swarm.append_rows(batch.ids, batch.x, batch.xref, local_cells.astype(np.int32), batch.properties,
+                              batch.stage)
             received += batch.ids.shape[0]
+        kept, nb_lost = self._decide(swarm, offer_inside, offers_in, (_TAG_NB_REPLY, _TAG_NB_VERDICT))
+        received += self._append_kept(swarm, kept)
+        lost += nb_lost
+        fallback_sent = int(offer_rows.shape[0])
 
-        n_unlocated = int(unlocated_rows.shape[0])
-        fallback_sent = lost = 0
-        if self.comm.size == 1:
-            swarm.discard_rows(unlocated_rows)
-            lost = n_unlocated
-            totals = np.array([sent, received, 0, lost], dtype=np.int64)
+        first = self.comm.allreduce(
+            np.array([sent, received, fallback_sent, lost, global_rows.shape[0]], dtype=np.int64), op=MPI.SUM)
+        if first[4] > 0:
+            fb_sent, fb_received, fb_lost = self._fallback(swarm, global_rows, ncols)
+            fallback_sent += fb_sent
+            received += fb_received
+            lost += fb_lost
+            totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64),
+                                         op=MPI.SUM)
         else:
-            first = self.comm.allreduce(np.array([sent, n_unlocated], dtype=np.int64), op=MPI.SUM)
-            if first[1] > 0:
-                fallback_sent, fb_received, lost = self._fallback(swarm, unlocated_rows, ncols)
-                received += fb_received
-                totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64),
-                                             op=MPI.SUM)
-            else:  # every particle sent to a neighbour arrived there
-                totals = np.array([first[0], first[0], 0, 0], dtype=np.int64)
+            totals = first[:4]
         if sort:
             swarm.sort()
         return MigrationStats(sent, received, fallback_sent, lost, *(int(t) for t in totals))
+
+    def _box_candidates(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+        """Other ranks whose owned bounding box contains each point, shape=(m, size), bool."""
+        lower, upper = self.owned_boxes[:, 0, :], self.owned_boxes[:, 1, :]
+        finite = self.owned_boxes[np.isfinite(self.owned_boxes)]
+        tol = 1e-12 * max(1.0, float(np.abs(finite).max(initial=1.0)))
+        inside = np.all((x[:, None, :] >= lower[None] - tol) & (x[:, None, :] <= upper[None] + tol), axis=2)
+        inside[:, self.comm.rank] = False
+        return inside
+
+    @staticmethod
+    def _append_kept(swarm: Swarm, kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
+                                                    npt.NDArray[np.int32]]]) -> int:
+        n_in = 0
+        for t, xref, cells in kept:
+            if t.shape[0]:
+                batch = _Unpacked(swarm, t)
+                swarm.append_rows(batch.ids, batch.x, xref, cells, batch.properties, batch.stage)
+                n_in += t.shape[0]
+        return n_in
 
     @property
     def owned_tree(self) -> dolfinx.geometry.BoundingBoxTree:
@@ -238,66 +299,77 @@ class Migrator:
         received, lost).
 
         Round 1 (the only collective one) offers each particle to every other rank whose owned box
-        contains it, together with the number of candidates. A sole candidate decides alone: it
-        keeps the particle if one of its owned cells contains it, else counts it lost. For
-        particles with several candidates, the candidates answer found/not found (round 2) and the
-        offering rank tells each candidate whether it is the lowest finder (round 3); both rounds
-        are point-to-point between the pairs of round 1.
+        contains it, together with the number of candidates; :meth:`_decide` settles the rest
+        point-to-point.
         """
-        rank = self.comm.rank
-        x = swarm.x[rows]
-        lower, upper = self.owned_boxes[:, 0, :], self.owned_boxes[:, 1, :]
-        finite = self.owned_boxes[np.isfinite(self.owned_boxes)]
-        tol = 1e-12 * max(1.0, float(np.abs(finite).max(initial=1.0)))
-        inside = np.all((x[:, None, :] >= lower[None] - tol) & (x[:, None, :] <= upper[None] + tol), axis=2)
-        inside[:, rank] = False
+        inside = self._box_candidates(swarm.x[rows])
         num_candidates = inside.sum(axis=1)
         table = _pack(swarm, rows, num_candidates.astype(np.int64))
         swarm.discard_rows(rows)
         offers = {r: np.flatnonzero(inside[:, r]) for r in range(self.comm.size) if inside[:, r].any()}
         received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
-        lost = int(np.count_nonzero(num_candidates == 0))
+        decided = {src: (t, np.ascontiguousarray(t[:, 1]).view(np.int64)) for src, t in received.items()}
+        kept, lost = self._decide(swarm, inside, decided, (_TAG_REPLY, _TAG_REPLY))
+        lost += int(np.count_nonzero(num_candidates == 0))
+        offered = int(np.count_nonzero(num_candidates > 0))
+        return offered, self._append_kept(swarm, kept), lost
+
+    def _decide(
+        self,
+        swarm: Swarm,
+        inside: npt.NDArray[np.bool_],
+        received: dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]],
+        tags: tuple[int, int],
+    ) -> tuple[list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]], int]:
+        """Settle offered particles point-to-point between the pairs of an offer round.
+
+        ``inside`` (shape=(m, size)) says to which ranks this rank offered each of its ``m``
+        particles (in row order per rank); ``received`` holds, per source, the offered rows and
+        their number of candidates. A sole candidate decides alone: it keeps the particle if one
+        of its owned cells contains it, else counts it lost. For particles with several
+        candidates, the candidates answer found/not found and the offering rank tells each
+        candidate whether it is the lowest finder (or counts the particle lost if none found it).
+
+        Returns the kept rows (table, xref, owned cell) per batch and the particles lost here.
+        """
+        num_candidates = inside.sum(axis=1)
+        lost = 0
         kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]] = []
         shared: dict[int, tuple[npt.NDArray[np.int64], OwnedLocation]] = {}
         answers: dict[int, npt.NDArray[np.float64]] = {}
         for src in sorted(received):
-            t = received[src]
+            t, candidates = received[src]
             batch = _Unpacked(swarm, t)
             loc = locate_owned(self.mesh, batch.x, tree=self.owned_tree)
-            sole = batch.global_cells == 1
-            kept.append((t[sole & (loc.cells >= 0)], loc.xref[sole & (loc.cells >= 0)], loc.cells[sole & (loc.cells >= 0)]))
+            sole = candidates == 1
+            found = sole & (loc.cells >= 0)
+            kept.append((t[found], loc.xref[found], loc.cells[found]))
             lost += int(np.count_nonzero(sole & (loc.cells < 0)))
             if (~sole).any():
                 shared[src] = (np.flatnonzero(~sole), loc)
                 answers[src] = (loc.cells[~sole] >= 0).astype(np.float64)[:, None]
+        offers = {r: np.flatnonzero(inside[:, r]) for r in range(inside.shape[1]) if inside[:, r].any()}
         multi = {r: idx[num_candidates[idx] > 1] for r, idx in offers.items()}
         multi = {r: idx for r, idx in multi.items() if idx.size}
-        replies = self._known_exchange(answers, {r: idx.shape[0] for r, idx in multi.items()})
-        keeper = np.full(rows.shape[0], self.comm.size, dtype=np.int64)
+        replies = self._known_exchange(answers, {r: idx.shape[0] for r, idx in multi.items()}, tags[0])
+        keeper = np.full(inside.shape[0], self.comm.size, dtype=np.int64)
         for r in sorted(replies, reverse=True):
             keeper[multi[r][replies[r][:, 0] > 0]] = r
         lost += int(np.count_nonzero((keeper == self.comm.size) & (num_candidates > 1)))
         decisions = {r: (keeper[idx] == r).astype(np.float64)[:, None] for r, idx in multi.items()}
-        verdicts = self._known_exchange(decisions, {r: a.shape[0] for r, a in answers.items()})
+        verdicts = self._known_exchange(decisions, {r: a.shape[0] for r, a in answers.items()}, tags[1])
         for src in sorted(verdicts):
             rows_shared, loc = shared[src]
             sel = rows_shared[verdicts[src][:, 0] > 0]
-            kept.append((received[src][sel], loc.xref[sel], loc.cells[sel]))
-        n_in = 0
-        for t, xref, cells in kept:
-            if t.shape[0]:
-                batch = _Unpacked(swarm, t)
-                swarm.append_rows(batch.ids, batch.x, xref, cells, batch.properties, batch.stage)
-                n_in += t.shape[0]
-        offered = int(np.count_nonzero(num_candidates > 0))
-        return offered, n_in, lost
+            kept.append((received[src][0][sel], loc.xref[sel], loc.cells[sel]))
+        return kept, lost
 
-    def _known_exchange(self, tables: dict[int, npt.NDArray[np.float64]], expected: dict[int, int]
+    def _known_exchange(self, tables: dict[int, npt.NDArray[np.float64]], expected: dict[int, int], tag: int
                         ) -> dict[int, npt.NDArray[np.float64]]:
         """Point-to-point exchange of one-column tables when both sides know the sizes."""
         recv = {r: np.empty((n, 1)) for r, n in expected.items() if n > 0}
-        reqs = [self.comm.Irecv(recv[r], source=r, tag=_TAG_REPLY) for r in recv]
-        reqs += [self.comm.Isend(np.ascontiguousarray(t), dest=r, tag=_TAG_REPLY) for r, t in tables.items() if t.shape[0]]
+        reqs = [self.comm.Irecv(recv[r], source=r, tag=tag) for r in recv]
+        reqs += [self.comm.Isend(np.ascontiguousarray(t), dest=r, tag=tag) for r, t in tables.items() if t.shape[0]]
         MPI.Request.Waitall(reqs)
         return recv
 

@@ -330,7 +330,8 @@ class Swarm:
             if stage is None:
                 self._stage[n:end, : self._stage_width] = 0.0
             else:
-                self._stage[n:end, : self._stage_width] = np.asarray(stage, dtype=np.float64).reshape(m, -1)
+                self._stage[n:end, : self._stage_width] = np.asarray(stage, dtype=np.float64).reshape(
+                    m, self._stage_width)
         self._n = end
         if self._pending is not None and m:
             counts, _ = self._pending

@@ -135,3 +135,13 @@ def test_column_assignment_checks_the_length(mesh):
     swarm.x = swarm.x + 0.0
     with pytest.raises(ValueError, match="shape"):
         swarm.x = np.zeros((11, 2))
+
+
+def test_append_nothing_with_a_stage_table(mesh):
+    swarm = Swarm(mesh)
+    rng = np.random.default_rng(8)
+    swarm.add(*_random_batch(rng, swarm, 10, 0))
+    swarm.stage_table(2)[:] = 1.0
+    swarm.append_rows(np.empty(0), np.empty((0, 2)), np.empty((0, 2)), np.empty(0), np.empty((0, 0)),
+                      np.empty((0, 2)))
+    assert swarm.num_particles == 10 and np.all(swarm.stage == 1.0)

@@ -116,7 +116,7 @@ def run_particles(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, ste
     t0 = time.perf_counter()
     if args.balance:
         options = {} if args.balance_method != "rcb" else {
-            "balance": tuple(args.balance_quantities), "axes": None if args.balance_axes is None else tuple(args.balance_axes)}
+            "balance": tuple(args.balance_quantities), "axes": tuple(args.balance_axes)}
         swarm = rebalance(swarm, particle_weight=args.particle_weight, method=args.balance_method, **options)
         mesh = swarm.mesh
     t_balance = time.perf_counter() - t0

@@ -293,16 +293,19 @@ class MeshHierarchy:
         self.recipe = MeshRecipe(self.recipe.base_layout, self.recipe.base_owners, [None] * level)
         return mesh
 
-    def rebuild(self, old: dolfinx.mesh.Mesh, wanted: npt.NDArray[np.int32], /) -> dolfinx.mesh.Mesh:
+    def rebuild(self, old: dolfinx.mesh.Mesh, wanted: npt.NDArray[np.int32], /, *,
+                locator: PointEvaluator | None = None) -> dolfinx.mesh.Mesh:
         """A mesh refined from the base so each cell reaches the wanted level of ``old`` at its midpoint.
 
         Args:
             old: The current mesh (any partition: points not found on this rank are looked up on all ranks).
             wanted: Wanted level per owned cell of ``old``, shape=(num_owned_cells of old,).
+            locator: A :class:`PointEvaluator` of ``old`` to reuse (built here if omitted).
 
         Collective.
         """
-        locator = PointEvaluator(old)
+        if locator is None or locator.mesh is not old:
+            locator = PointEvaluator(old)
         wanted_local = _with_ghost_values(old, wanted)
         max_wanted = old.comm.allreduce(int(wanted.max(initial=0)), op=MPI.MAX)
         mesh = self.base
@@ -350,11 +353,13 @@ class Adaptivity:
         """Whether the mesh is adapted after step ``timestep``."""
         return timestep % self.params.every == 0
 
-    def new_mesh(self, mesh: dolfinx.mesh.Mesh, fields: Sequence[dolfinx.fem.Function], /) -> dolfinx.mesh.Mesh:
-        """The adapted mesh for the indicator of ``fields`` on ``mesh`` (collective)."""
+    def new_mesh(self, mesh: dolfinx.mesh.Mesh, fields: Sequence[dolfinx.fem.Function], /, *,
+                 locator: PointEvaluator | None = None) -> dolfinx.mesh.Mesh:
+        """The adapted mesh for the indicator of ``fields`` on ``mesh`` (collective); ``locator``:
+        a :class:`PointEvaluator` of ``mesh`` to reuse."""
         indicator = kelly_indicator(fields)
         wanted = wanted_levels(indicator, self.hierarchy.levels(mesh), self.params, mesh.comm)
-        return self.hierarchy.rebuild(mesh, wanted)
+        return self.hierarchy.rebuild(mesh, wanted, locator=locator)
 
     def initial_mesh(self, fields_on: Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.fem.Function]], /, *,
                      rounds: int | None = None) -> dolfinx.mesh.Mesh:

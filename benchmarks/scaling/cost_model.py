@@ -38,9 +38,12 @@ class Constants:
     mig_unlocated_share: float = 0.17  # share of crossing particles that take the offer path (3D)
     crossing_coeff: float = 0.27       # crossing fraction per stage = coeff / m, m = (cells/6)^(1/3)
     # --- O(P) code paths (measure_constants.py loops, fake P on one process), seconds per unit
-    decide_loop_per_rank_s: float = 2.0e-6    # Migrator._decide: for r in range(P), every migration
-    box_candidates_per_rank_s: float = 37e-9  # Migrator._box_candidates with m = 0 (per rank of P)
-    box_candidates_per_pair_s: float = 80e-9  # per (unlocated particle, rank) pair
+    decide_loop_per_rank_s: float = 1.2e-6    # Migrator._decide: for r in range(P), every migration
+                                              # (real method at fake P: 15 ms at 12 288; the bare
+                                              # expression 25-45 ms)
+    box_candidates_per_rank_s: float = 36e-9  # Migrator._box_candidates with m = 0 (per rank of P)
+    box_candidates_per_pair_s: float = 60e-9  # per (unlocated particle, rank) pair (real method:
+                                              # 117 ms at m = 160, P = 12 288)
     rankloads_per_rank_s: float = 0.17e-6     # RankLoads zip over the allgathered P tuples
     quantile_per_value_s: float = 68e-9       # np.quantile over the allgathered indicator
     keyorder_per_pair_s: float = 11e-9        # key_order_offsets: P masks over m keys

@@ -194,7 +194,28 @@ def migration_cost() -> None:
 # ---------------------------------------------------------------------------------------- O(P) loops
 def python_loops() -> None:
     """The code paths whose cost grows with the number of ranks P, run with fake P on one process."""
+    import dolfinx.mesh
+
+    from particles import Swarm
+    from particles.migration import Migrator
+
     comm = MPI.COMM_WORLD
+    # The real Migrator methods on one rank with the allgathered boxes replaced by P boxes.
+    mesh = dolfinx.mesh.create_unit_cube(comm, 4, 4, 4)
+    migrator = Migrator(mesh)
+    swarm = Swarm(mesh)
+    for P in (12, 768, 12288):
+        rng = np.random.default_rng(4)
+        lo = rng.random((P, 3)) * 0.9
+        migrator.owned_boxes = np.stack([lo, lo + 0.1], axis=1)
+        migrator._is_neighbour = np.zeros(P, dtype=bool)
+        real = {}
+        for m in (0, 160):
+            xq = rng.random((m, 3))
+            real[f"Migrator._box_candidates_m{m}"] = _best(lambda: migrator._box_candidates(xq), 5)
+        empty = np.zeros((0, P), dtype=bool)
+        real["Migrator._decide_m0"] = _best(lambda: migrator._decide(swarm, empty, {}, (1, 2)), 5)
+        _emit(comm, {"what": "real_migrator_paths", "P": P, **real})
     for P in (12, 96, 768, 3072, 12288):
         # Migrator._decide: {r: ... for r in range(inside.shape[1]) if inside[:, r].any()} with m = 0
         # unlocated particles (every migration on more than one rank).

@@ -159,9 +159,13 @@ def _gather_midpoints(base: dolfinx.mesh.Mesh, canonical: npt.NDArray[np.int64])
     input of the partition decision, gdim numbers per base cell."""
     tdim, gdim = base.topology.dim, base.geometry.dim
     num_owned = canonical.shape[0]
-    # The mean of the vertex coordinates in geometry order, as the partition has always seen them.
+    # The mean of the vertex coordinates taken in a fixed (lexicographic) order of the vertices, so
+    # the bits do not depend on the order a mesh lists them in (a replayed base may list them
+    # otherwise than the base the uninterrupted run gathered them from).
     dofs = base.geometry.dofmap.array.reshape(-1, tdim + 1)[:num_owned]
-    midpoints = base.geometry.x[dofs][:, :, :gdim].mean(axis=1)
+    corners = base.geometry.x[dofs][:, :, :gdim]
+    order = np.lexsort(corners.transpose(2, 0, 1)[::-1], axis=-1)  # per cell, by x then y (then z)
+    midpoints = np.take_along_axis(corners, order[:, :, None], axis=1).mean(axis=1)
     gathered = base.comm.gather((np.asarray(canonical, dtype=np.int64), midpoints), root=0)
     if base.comm.rank != 0:
         return None

@@ -3,8 +3,10 @@ distributed one (every rank hands ``create_mesh`` its own cells).
 
     mpirun -n 2 python benchmarks/scaling/repartition_memory.py gathered --cells 224
     mpirun -n 2 python benchmarks/scaling/repartition_memory.py distributed --cells 224
+    mpirun -n 2 python benchmarks/scaling/repartition_memory.py distributed --dim 3 --cells 26
 
-A unit square of 2 * cells^2 triangles is redistributed to diagonal bands. Per rank it prints the
+A unit square of 2 n^2 triangles (or a unit cube of 6 n^3 tetrahedra) is redistributed to diagonal
+bands. Per rank it prints the
 rows handed to ``create_mesh`` (cells and nodes), the owned cells before and after, and the peak
 resident memory during the repartition above the resident memory before it (VmHWM reset through
 ``/proc/self/clear_refs`` just before, Linux).
@@ -35,13 +37,15 @@ def _status(key: str) -> int:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("path", choices=["gathered", "distributed"])
-    parser.add_argument("--cells", type=int, default=224, help="cells per side (2 n^2 triangles)")
+    parser.add_argument("--cells", type=int, default=224, help="cells per side n")
+    parser.add_argument("--dim", type=int, choices=[2, 3], default=2)
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
-    mesh = dolfinx.mesh.create_unit_square(comm, args.cells, args.cells)
-    num_owned = mesh.topology.index_map(2).size_local
-    mid = dolfinx.mesh.compute_midpoints(mesh, 2, np.arange(num_owned, dtype=np.int32))
-    owners = np.minimum((mid[:, 0] + mid[:, 1]) / 2.0 * comm.size, comm.size - 1).astype(np.int32)
+    n, d = args.cells, args.dim
+    mesh = (dolfinx.mesh.create_unit_square(comm, n, n) if d == 2 else dolfinx.mesh.create_unit_cube(comm, n, n, n))
+    num_owned = mesh.topology.index_map(d).size_local
+    mid = dolfinx.mesh.compute_midpoints(mesh, d, np.arange(num_owned, dtype=np.int32))
+    owners = np.minimum(mid[:, :d].sum(axis=1) / d * comm.size, comm.size - 1).astype(np.int32)
     passed = []
     original = dolfinx.mesh.create_mesh
 
@@ -65,10 +69,10 @@ def main() -> None:
         new = redistribute(mesh, owners)
     seconds = time.perf_counter() - t0
     peak = _status("VmHWM:") - rss0
-    rows = comm.gather((comm.rank, passed, num_owned, new.topology.index_map(2).size_local,
-                        new.topology.index_map(2).num_ghosts, peak, seconds), root=0)
+    rows = comm.gather((comm.rank, passed, num_owned, new.topology.index_map(d).size_local,
+                        new.topology.index_map(d).num_ghosts, peak, seconds), root=0)
     if comm.rank == 0:
-        print(f"{args.path}: {mesh.topology.index_map(2).size_global} cells on {comm.size} ranks")
+        print(f"{args.path}: {mesh.topology.index_map(d).size_global} cells on {comm.size} ranks")
         for rank, p, before, after, ghosts, kb, s in rows:
             print(f"  rank {rank}: create_mesh got {p[0][0]} cells, {p[0][1]} nodes; owned cells {before} -> {after} "
                   f"(+{ghosts} ghosts); peak RSS above start {kb / 1024:.1f} MiB; {s:.2f} s")

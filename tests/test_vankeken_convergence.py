@@ -10,7 +10,9 @@ from convection.config import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks" / "vanKeken"))
-from convergence import DEFAULT_END, DEFAULT_HALF_WIDTH, Resolution, resolutions, run_overrides  # noqa: E402
+from convergence import (  # noqa: E402
+    DEFAULT_END, DEFAULT_HALF_WIDTH, Resolution, jitter, publish_section, resolutions, run_overrides,
+)
 from run import CONFIGS, fitted_peak, peak, reference  # noqa: E402
 
 
@@ -48,6 +50,10 @@ def test_resolutions_zip_and_product():
         resolutions([16, 24], [10], zip_lists=True)
     with pytest.raises(ValueError):
         resolutions([16, 24], [10, 20], min_ppc=[5, 10])
+    steps = resolutions([32, 32], [20, 20], zip_lists=True, min_ppc=[10], cfl=[1.0, 0.5])
+    assert [r.cfl for r in steps] == [1.0, 0.5] and steps[0].name != steps[1].name
+    with pytest.raises(ValueError):
+        resolutions([32, 32], [20, 20], cfl=[1.0, 0.5])
 
 
 def test_fitted_peak_averages_jitter_that_biases_the_three_point_peak():
@@ -71,3 +77,29 @@ def test_fitted_peak_averages_jitter_that_biases_the_three_point_peak():
     # on a noiseless parabola the fit is exact
     exact = fitted_peak(t, 1.0 - (t - 47.3) ** 2, 3.0)
     assert exact.vrms == pytest.approx(1.0, abs=1e-9) and exact.time == pytest.approx(47.3, abs=1e-2)
+
+
+def test_publish_section_replaces_only_its_own_section(tmp_path):
+    md = tmp_path / "convergence_1c.md"
+    publish_section(md, "Mesh", "| a |\n")
+    publish_section(md, "Particles", "| b |\n")
+    publish_section(md, "Mesh", "| c |\n")  # replaced in place, the other section kept
+    text = md.read_text()
+    assert text == "## Mesh\n\n| c |\n\n## Particles\n\n| b |\n\n"
+
+
+def test_jitter_measures_the_noise_and_splits_adaptation_steps():
+    """On a linear ramp with 1 % noise, plus 3 % extra noise at every 10th step, the jitter is ~1 % at
+    the other steps and larger at the adaptation steps; a noiseless ramp has none."""
+    rng = np.random.default_rng(5)
+    step = np.arange(2000)
+    t = 0.1 * step
+    noise = 0.01 * rng.standard_normal(step.size)
+    noise[step % 10 == 0] += 0.03 * rng.standard_normal(int(np.count_nonzero(step % 10 == 0)))
+    stats = {"time": t, "step": step.astype(float), "vrms": (1.0 + 0.01 * t) * (1 + noise)}
+    other, at = jitter(stats, (10.0, 190.0), 10)
+    # 2 of the 9 other steps have an adaptation step as a neighbour, whose extra noise enters once
+    assert other == pytest.approx(np.sqrt(0.01**2 + 2 / 9 * 0.03**2 / 6), rel=0.1)
+    assert at > 1.5 * other
+    clean = jitter({**stats, "vrms": 1.0 + 0.01 * t}, (10.0, 190.0), 10)
+    assert max(clean) < 1e-12

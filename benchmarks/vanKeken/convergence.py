@@ -3,8 +3,9 @@
 Usage::
 
     python benchmarks/vanKeken/convergence.py [--case 1a|1b|1c] [--cells 16 24 32] [--ppc 10 20 40]
-        [--zip] [--min-ppc M ...] [--max-level L] [--cfl C] [--end T] [--fit-half-width W]
-        [--ranks 2] [--out DIR] [--no-run | --skip-existing] [--name NAME] [--publish] [--set KEY=VALUE ...]
+        [--zip] [--min-ppc M ...] [--max-level L] [--cfl C ...] [--end T] [--fit-half-width W]
+        [--ranks 2] [--out DIR] [--no-run | --skip-existing] [--name NAME]
+        [--publish [--section TITLE]] [--publish-plot] [--set KEY=VALUE ...]
 
 Runs ``configs/vankeken_<case>.yaml`` (adaptive, levels 0 to ``--max-level`` on the base mesh) for
 every combination of base mesh ``N x N`` and particles per initial cell (``--zip``: the i-th mesh
@@ -13,7 +14,8 @@ peak: 300 for 1a, peak near t = 209; 120 for 1b, near 73; 80 for 1c, near 51).
 
 Resolution knobs besides the mesh and the particle count: ``--min-ppc`` (population control: cells
 with fewer particles get new ones, which copy the composition of the nearest particle of the cell;
-one value, or one per run with ``--zip``), ``--max-level`` (adaptive levels) and ``--cfl``.
+one value, or one per run with ``--zip``), ``--max-level`` (adaptive levels) and ``--cfl`` (one
+value, or one per run with ``--zip``).
 
 For every run, ``<out>/convergence_<case>.md`` (1a: ``convergence.md``) gets the first peak measured
 two ways: the largest sample refined by a parabola through it and its two neighbours (run.py's
@@ -23,9 +25,11 @@ which averages the step-to-step jitter of a noisy curve; its standard error and 
 about it; the errors of both against ``reference.csv``; the change of the fitted peak from the
 previous row (successive refinements when the rows are a ``--zip`` sequence); cells, particles,
 steps, ranks, wall time and the load average of the machine before and after the run. ``<out>/
-convergence_<case>.png`` shows vrms against time around the peak for every run. ``--publish`` also
-copies both files into benchmarks/vanKeken/; ``--name`` changes their basename (several
-studies in one ``--out``). ``--no-run`` only re-measures existing
+convergence_<case>.png`` shows vrms against time around the peak for every run. ``--name`` changes
+their basename (several studies in one ``--out``). ``--publish`` copies the table into
+benchmarks/vanKeken/, or with ``--section TITLE`` writes it as the section ``## TITLE`` of
+benchmarks/vanKeken/convergence_<case>.md (several studies in one file); ``--publish-plot`` copies
+the plot. ``--no-run`` only re-measures existing
 ``<out>/<run>/statistics.csv`` (runs without one are left out). Wall times depend on the load.
 """
 
@@ -35,6 +39,7 @@ import argparse
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import time as _time
@@ -90,20 +95,23 @@ class Resolution(NamedTuple):
 
 
 def resolutions(cells: list[int], ppc: list[int], *, zip_lists: bool = False, min_ppc: list[int] | None = None,
-                max_level: int | None = None, cfl: float | None = None) -> list[Resolution]:
+                max_level: int | None = None, cfl: list[float] | None = None) -> list[Resolution]:
     """The runs: every (cells, ppc) pair, or with ``zip_lists`` the i-th of each list (the lists then
-    have equal lengths; ``min_ppc`` has one value or one per run)."""
+    have equal lengths; ``min_ppc`` and ``cfl`` have one value or one per run)."""
     min_ppc = min_ppc or [0]
+    cfl = cfl or [None]
     if zip_lists:
         if len(cells) != len(ppc):
             raise ValueError(f"--zip needs as many --ppc ({len(ppc)}) as --cells ({len(cells)})")
-        if len(min_ppc) not in (1, len(cells)):
-            raise ValueError(f"--min-ppc needs 1 or {len(cells)} values, got {len(min_ppc)}")
+        for name, values in (("--min-ppc", min_ppc), ("--cfl", cfl)):
+            if len(values) not in (1, len(cells)):
+                raise ValueError(f"{name} needs 1 or {len(cells)} values, got {len(values)}")
         mins = min_ppc * len(cells) if len(min_ppc) == 1 else min_ppc
-        return [Resolution(n, p, m, max_level, cfl) for n, p, m in zip(cells, ppc, mins)]
-    if len(min_ppc) != 1:
-        raise ValueError("several --min-ppc values need --zip")
-    return [Resolution(n, p, min_ppc[0], max_level, cfl) for n in cells for p in ppc]
+        cfls = cfl * len(cells) if len(cfl) == 1 else cfl
+        return [Resolution(n, p, m, max_level, c) for n, p, m, c in zip(cells, ppc, mins, cfls)]
+    if len(min_ppc) != 1 or len(cfl) != 1:
+        raise ValueError("several --min-ppc or --cfl values need --zip")
+    return [Resolution(n, p, min_ppc[0], max_level, cfl[0]) for n in cells for p in ppc]
 
 
 def run_overrides(case: str, res: Resolution, end: float, extra: list[str] = ()) -> list[str]:
@@ -140,6 +148,23 @@ def measure_run(stats: dict[str, np.ndarray], res: Resolution, half_width: float
     return Row(res, stats, raw.vrms, raw.time, fit.vrms, fit.time, fit.stderr, fit.scatter, *load, ranks)
 
 
+def jitter(stats: dict[str, np.ndarray], window: tuple[float, float], every: int) -> tuple[float, float]:
+    """Step-to-step jitter of vrms in ``window``: root mean square of (v[i+1] - 2 v[i] + v[i-1]) /
+    (v[i] sqrt(6)) (the relative standard deviation of independent noise on a locally linear curve),
+    over the steps that are not adaptation steps and over the adaptation steps (step divisible by
+    ``every``)."""
+    t, v, step = stats["time"], stats["vrms"], stats["step"].astype(int)
+    d2 = ((v[2:] - 2 * v[1:-1] + v[:-2]) / (v[1:-1] * math.sqrt(6))) ** 2
+    inside = (t[1:-1] >= window[0]) & (t[1:-1] <= window[1])
+    adapted = step[1:-1] % max(every, 1) == 0
+    other, at = inside & ~adapted, inside & adapted
+    return (math.sqrt(d2[other].mean()) if other.any() else math.nan, math.sqrt(d2[at].mean()) if at.any() else math.nan)
+
+
+def _load(before: float, after: float) -> str:
+    return f"{before:.1f}/{after:.1f}" if math.isfinite(before) and math.isfinite(after) else "-"
+
+
 def table(case: str, rows: list[Row], half_width: float) -> str:
     """Markdown table of the runs (in order; the change is against the previous row)."""
     ref = reference(case)
@@ -148,12 +173,14 @@ def table(case: str, rows: list[Row], half_width: float) -> str:
         f"Case {case}, first vrms peak; published {rv:g} at t = {rt:g}. 'fit': least-squares cubic through the "
         f"samples within {half_width:g} of the peak (± its standard error; scatter = the samples' standard "
         "deviation about the fit); '3-point': parabola through the largest sample and its neighbours. "
-        "'change' = fitted peak against the previous row.",
+        "'change' = fitted peak against the previous row. 'jitter': step-to-step noise of vrms over the "
+        "10 time units before the fitted peak (rms of the second difference / (vrms √6)), at steps without / "
+        "with a mesh adaptation.",
         "",
         "| base mesh | levels | particles/cell (min) | CFL | peak vrms (fit) | rel. error | change | peak time (fit) | "
-        "rel. error | change | scatter | peak vrms (3-point) | rel. error | peak time (3-point) | cells (max) | "
+        "rel. error | change | scatter | jitter (other/adaptation steps) | peak vrms (3-point) | rel. error | peak time (3-point) | cells (max) | "
         "particles (start/end) | steps | ranks | wall time [s] | load before/after |",
-        "|---" * 20 + "|",
+        "|---" * 21 + "|",
     ]
     prev: Row | None = None
     for r in rows:
@@ -161,16 +188,18 @@ def table(case: str, rows: list[Row], half_width: float) -> str:
         config = load_config(ROOT / "configs" / CONFIGS[case], r.res.overrides())
         level = f"{config['adaptivity']['min_level']}-{config['adaptivity']['max_level']}"
         cfl = f"{config['time']['cfl']:g}"
+        every = int(config["adaptivity"]["every"]) if config["adaptivity"]["enabled"] else 0
+        j_other, j_adapt = jitter(s, (r.fit_time - 10.0, r.fit_time), every or 10**9)
         minimum = f" ({r.res.min_ppc})" if r.res.min_ppc else ""
         dv = f"{(r.fit_vrms - prev.fit_vrms) / prev.fit_vrms:+.2%}" if prev else "-"
         dt = f"{(r.fit_time - prev.fit_time) / prev.fit_time:+.2%}" if prev else "-"
         lines.append(
             f"| {r.res.cells}x{r.res.cells} | {level} | {r.res.ppc}{minimum} | {cfl} | "
             f"{r.fit_vrms:.5e} ± {r.fit_stderr:.1e} | {(r.fit_vrms - rv) / rv:+.2%} | {dv} | {r.fit_time:.2f} | "
-            f"{(r.fit_time - rt) / rt:+.2%} | {dt} | {r.scatter / r.fit_vrms:.1%} | {r.three_point_vrms:.5e} | "
+            f"{(r.fit_time - rt) / rt:+.2%} | {dt} | {r.scatter / r.fit_vrms:.1%} | {j_other:.2%}/{j_adapt:.2%} | {r.three_point_vrms:.5e} | "
             f"{(r.three_point_vrms - rv) / rv:+.2%} | {r.three_point_time:.2f} | {int(s['cells'].max())} | "
             f"{int(s['n_particles'][0])}/{int(s['n_particles'][-1])} | {int(s['step'][-1])} | "
-            f"{r.ranks or '-'} | {s['wall_time'][-1]:.0f} | {r.load_before:.1f}/{r.load_after:.1f} |")
+            f"{r.ranks or '-'} | {s['wall_time'][-1]:.0f} | {_load(r.load_before, r.load_after)} |")
         prev = r
     return "\n".join(lines) + "\n"
 
@@ -206,6 +235,20 @@ def plot(case: str, rows: list[Row], half_width: float, png: Path) -> None:
     plt.close(fig)
 
 
+def publish_section(path: Path, title: str, text: str) -> None:
+    """Write ``text`` under the heading ``## title`` of the markdown file ``path``: replaces the
+    section of that title (up to the next ``## `` heading) or appends it; other sections are kept."""
+    block = f"## {title}\n\n{text.rstrip()}\n\n"
+    old = path.read_text() if path.is_file() else ""
+    parts = [part for part in re.split(r"(?m)^(?=## )", old) if part]
+    heading = f"## {title}\n"
+    if any(part.startswith(heading) for part in parts):
+        parts = [block if part.startswith(heading) else part for part in parts]
+    else:
+        parts.append(block)
+    path.write_text("".join(parts))
+
+
 def _finished(folder: Path, end: float) -> bool:
     """Whether ``folder`` holds a statistics.csv that reaches ``end``."""
     path = folder / "statistics.csv"
@@ -224,7 +267,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--min-ppc", type=int, nargs="+", default=None,
                         help="population control: min particles per cell")
     parser.add_argument("--max-level", type=int, default=None, help="adaptive levels (default: the config's)")
-    parser.add_argument("--cfl", type=float, default=None, help="CFL number (default: the config's)")
+    parser.add_argument("--cfl", type=float, nargs="+", default=None,
+                        help="CFL number (default: the config's; one per run with --zip)")
     parser.add_argument("--end", type=float, default=None, help="end time (default: just past the first peak)")
     parser.add_argument("--fit-half-width", type=float, default=None, help="time window of the peak fit (each side)")
     parser.add_argument("--ranks", type=int, default=2)
@@ -233,7 +277,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--skip-existing", action="store_true",
                         help="re-measure runs whose statistics.csv already reaches --end instead of running them")
     parser.add_argument("--name", default=None, help="basename of the table and plot (default: convergence[_<case>])")
-    parser.add_argument("--publish", action="store_true", help="copy the table and plot into benchmarks/vanKeken/")
+    parser.add_argument("--publish", action="store_true", help="copy the table into benchmarks/vanKeken/")
+    parser.add_argument("--section", default=None,
+                        help="with --publish: write the table as the section '## SECTION' of "
+                             "benchmarks/vanKeken/convergence[_<case>].md (replacing a section of that title)")
+    parser.add_argument("--publish-plot", action="store_true", help="copy the plot into benchmarks/vanKeken/")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="extra config override")
     args = parser.parse_args(argv)
     case = args.case
@@ -271,9 +319,16 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     print(f"wrote {md} and {png}")
     if args.publish:
-        for path in (md, png):
-            shutil.copy(path, HERE / path.name)
-        print(f"copied both into {HERE}")
+        if args.section:
+            target = HERE / f"convergence{suffix}.md"
+            publish_section(target, args.section, text)
+            print(f"wrote section '{args.section}' of {target}")
+        else:
+            shutil.copy(md, HERE / md.name)
+            print(f"copied {md.name} into {HERE}")
+    if args.publish_plot:
+        shutil.copy(png, HERE / png.name)
+        print(f"copied {png.name} into {HERE}")
     return 0
 
 

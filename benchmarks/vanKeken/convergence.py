@@ -22,15 +22,17 @@ two ways: the largest sample refined by a parabola through it and its two neighb
 :func:`run.peak`, the measure of results_1*.md) and a least-squares cubic through the samples within
 ``--fit-half-width`` of the peak (:func:`run.fitted_peak`, default 2 time units for 1b/1c, 20 for 1a),
 which averages the step-to-step jitter of a noisy curve; its standard error and the samples' scatter
-about it; the errors of both against ``reference.csv``; the change of the fitted peak from the
+about it; the jitter itself over the 10 time units before the peak (:func:`jitter`, at steps without
+and with a mesh adaptation); the errors of both against ``reference.csv``; the change of the fitted peak from the
 previous row (successive refinements when the rows are a ``--zip`` sequence); cells, particles,
 steps, ranks, wall time and the load average of the machine before and after the run. ``<out>/
 convergence_<case>.png`` shows vrms against time around the peak for every run. ``--name`` changes
 their basename (several studies in one ``--out``). ``--publish`` copies the table into
 benchmarks/vanKeken/, or with ``--section TITLE`` writes it as the section ``## TITLE`` of
 benchmarks/vanKeken/convergence_<case>.md (several studies in one file); ``--publish-plot`` copies
-the plot. ``--no-run`` only re-measures existing
-``<out>/<run>/statistics.csv`` (runs without one are left out). Wall times depend on the load.
+the plot. ``--no-run`` only re-measures existing ``<out>/<run>/statistics.csv`` (runs without one
+that reaches ``--end`` are left out); ``--skip-existing`` re-measures those and runs the others.
+Wall times depend on the load.
 """
 
 from __future__ import annotations
@@ -297,7 +299,8 @@ def main(argv: list[str] | None = None) -> int:
         info = folder / "load.json"
         done = _finished(folder, end)
         if args.no_run or (args.skip_existing and done):
-            if not (folder / "statistics.csv").is_file():
+            if not done:
+                print(f"left out {folder}: no statistics.csv reaching t = {end:g}", flush=True)
                 continue
             stats = read_statistics(folder / "statistics.csv")
             meta = json.loads(info.read_text()) if info.is_file() else {}

@@ -93,6 +93,66 @@ def peak(t: np.ndarray, v: np.ndarray, window: tuple[float, float] | None = None
     return Peak(peak_v, peak_t)
 
 
+class FittedPeak(NamedTuple):
+    """A vrms maximum from a least-squares polynomial over a time window around it.
+
+    Attributes:
+        vrms, time: Maximum of the fitted polynomial and where it is.
+        stderr: Standard error of the fitted value at ``time`` (from the fit's covariance, i.e. from
+            the residual scatter, assuming independent samples; NaN with too few samples).
+        scatter: Standard deviation of the samples about the fit (the step-to-step noise).
+        samples: Number of samples in the final window.
+    """
+
+    vrms: float
+    time: float
+    stderr: float
+    scatter: float
+    samples: int
+
+
+def fitted_peak(t: np.ndarray, v: np.ndarray, half_width: float, *, degree: int = 3,
+                window: tuple[float, float] | None = None, iterations: int = 20) -> FittedPeak:
+    """Maximum of a least-squares polynomial of ``degree`` through the samples with
+    ``|t - t*| <= half_width``, where ``t*`` starts at the largest sample (in ``window``, all samples
+    for None) and is moved to the fitted maximum until it settles.
+
+    A noisy series (step-to-step jitter of the samples) makes the largest sample, and a parabola
+    through it and its two neighbours (:func:`peak`), an upward-biased estimate of the maximum;
+    the least-squares fit averages the jitter over the window.
+    """
+    inside = np.ones(len(t), dtype=bool) if window is None else (t >= window[0]) & (t <= window[1])
+    idx = np.flatnonzero(inside)
+    if len(idx) == 0:
+        return FittedPeak(math.nan, math.nan, math.nan, math.nan, 0)
+    centre = float(t[idx[np.argmax(v[idx])]])
+    for _ in range(iterations):
+        sel = np.flatnonzero(np.abs(t - centre) <= half_width)
+        if len(sel) < degree + 2:
+            raise ValueError(f"only {len(sel)} samples within {half_width} of t = {centre:.4g} "
+                             f"for a degree-{degree} fit")
+        coeffs = np.polyfit(t[sel] - centre, v[sel], degree)
+        grid = np.linspace(-half_width, half_width, 4001)
+        j = int(np.argmax(np.polyval(coeffs, grid)))
+        new = centre + float(grid[j])
+        if abs(new - centre) <= 1e-6 * max(1.0, abs(centre)):
+            break
+        centre = new
+    sel = np.flatnonzero(np.abs(t - centre) <= half_width)
+    x = t[sel] - centre
+    coeffs = np.polyfit(x, v[sel], degree)
+    grid = np.linspace(float(x.min()), float(x.max()), 4001)
+    fit = np.polyval(coeffs, grid)
+    j = int(np.argmax(fit))
+    scatter = float(np.std(v[sel] - np.polyval(coeffs, x), ddof=degree + 1))
+    stderr = math.nan
+    if len(sel) > degree + 2:
+        _, cov = np.polyfit(x, v[sel], degree, cov=True)
+        basis = grid[j] ** np.arange(degree, -1, -1)
+        stderr = float(math.sqrt(max(basis @ cov @ basis, 0.0)))
+    return FittedPeak(float(fit[j]), centre + float(grid[j]), stderr, scatter, len(sel))
+
+
 def value_at(stats: dict[str, np.ndarray], key: str, time: float) -> float:
     """Column ``key`` interpolated linearly to ``time`` (NaN if the run did not get there)."""
     t = stats["time"]

@@ -110,3 +110,32 @@ def test_confinement_keeps_particles_crossing_a_curved_boundary(world):
             r = np.linalg.norm(x, axis=1)
             assert ids.size == points.shape[0] and np.all((r >= RI) & (r <= RO))
     assert lost[True] > 0 and lost[False] == 0
+
+
+@pytest.mark.parametrize("gdim, resolution", [(2, 0.3), (3, 0.5)])
+def test_confinement_on_straight_cells_puts_points_in_cells(world, gdim, resolution):
+    """Straight-sided shells: confined points lie in the mesh (none in the inscribed hole, none outside
+    the outer polygon/polyhedron), points already inside stay where they are, and the outer bound
+    is within a sagitta of the circle/sphere."""
+    from particles.evaluation import locate
+    from convection.mesh import shell_confinement
+
+    spec = ShellSpec(gdim, RI, RO, resolution=resolution, geometry_degree=1)
+    mesh = create_shell_mesh(world, spec)
+    confine = shell_confinement(mesh, spec)
+    rng = np.random.default_rng(4)
+    direction = rng.normal(size=(4000, gdim))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    r = rng.uniform(0.95 * RI, 1.05 * RO, size=4000)
+    points = r[:, None] * direction
+    confined = points.copy()
+    confine(confined)
+    radius = np.linalg.norm(confined, axis=1)
+    moved = np.any(confined != points, axis=1)
+    assert np.all(radius >= RI * (1 - 1e-12)) and np.all(radius < RO)
+    assert not np.any(moved & (r > RI * 1.001) & (r < RO - resolution**2))
+    assert radius.max() > RO - 2.0 * resolution**2 / RO  # the bound is not more than a sagitta or so inside
+    found = locate(mesh, confined, geometry=Swarm(mesh).geometry).cells >= 0
+    owners = np.zeros(found.shape, dtype=np.int32)
+    world.Allreduce(found.astype(np.int32), owners, op=MPI.SUM)
+    assert np.all(owners >= 1)

@@ -1,0 +1,70 @@
+"""Plate-like prescribed surface velocities (convection/plates.py) and their config section."""
+
+import numpy as np
+import pytest
+
+from convection.config import ConfigError, load_config
+from convection.factory import velocity_bcs_from_config
+from convection.plates import Plate, PlateVelocity, unit_vector
+
+PLATES = (Plate((0.0, 0.0), 2.0, (90.0, 30.0)), Plate((180.0, 0.0), -1.0, (0.0, 90.0)),
+          Plate((0.0, 90.0), 0.5, (45.0, 0.0)))
+
+
+def _sphere_points(n, radius, seed=0):
+    x = np.random.default_rng(seed).normal(size=(3, n))
+    return radius * x / np.linalg.norm(x, axis=0)
+
+
+def test_plate_velocity_is_tangent_and_rigid_inside_each_plate():
+    field = PlateVelocity(PLATES, width=0.05)
+    x = _sphere_points(500, 2.2)
+    u = field(x)
+    assert u.shape == (3, 500)
+    assert np.allclose(np.sum(u * x, axis=0), 0.0, atol=1e-12)
+    w = field.weights(x)
+    assert np.allclose(w.sum(axis=0), 1.0)
+    for k, plate in enumerate(PLATES):  # at a plate's centre the velocity is its rigid rotation
+        c = 2.2 * plate.centre_vector[:, None]
+        rigid = plate.rate * np.cross(plate.pole_vector, c[:, 0])
+        assert np.allclose(field(c)[:, 0], rigid, atol=1e-9 * 2.2 * abs(plate.rate))
+        assert field.weights(c)[k, 0] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_plate_boundary_is_smooth_over_the_width():
+    """Halfway between two plate centres both weigh 1/2; 0.02 rad towards one centre the angles
+    differ by 0.04 = width / 5, so the weights are 1 / (1 + e^(-+0.2))."""
+    field = PlateVelocity(PLATES[:2], width=0.2)
+    mid = unit_vector(90.0, 0.0)[:, None]
+    assert np.allclose(field.weights(mid)[:, 0], [0.5, 0.5])
+    near = unit_vector(90.0 - np.degrees(0.02), 0.0)[:, None]
+    expected = 1.0 / (1.0 + np.exp(-0.2))
+    assert field.weights(near)[0, 0] == pytest.approx(expected, rel=1e-9)
+
+
+def test_plates_in_2d_are_arcs_rotating_about_z():
+    field = PlateVelocity((Plate((0.0,), 1.0), Plate((180.0,), -3.0)), width=0.05, gdim=2)
+    x = np.array([[1.5, -1.5], [0.0, 0.0], [0.0, 0.0]])
+    assert np.allclose(field(x), [[0.0, 0.0], [1.5, 4.5]])
+
+
+def _shell_config(outer, tmp_path):
+    document = {"mesh": {"geometry": "spherical_shell", "radii": [1.22, 2.22], "resolution": 0.5},
+                "physics": {"Ra": 1e4}, "time": {"end": 0.1}, "output": {"directory": str(tmp_path)},
+                "boundary": {"velocity": {"inner": "free_slip", "outer": outer}}}
+    return load_config(None, document=document)
+
+
+def test_plates_config_section_builds_a_prescribed_callable(tmp_path):
+    outer = {"kind": "plates", "width": 0.1, "plates": [{"centre": [0, 0], "pole": [90, 30], "rate": 2.0},
+                                                      {"centre": [180, 0], "rate": -1}]}
+    config = _shell_config(outer, tmp_path)
+    bcs = velocity_bcs_from_config(config["boundary"]["velocity"], 3)
+    assert bcs["inner"].kind == "free_slip" and bcs["outer"].kind == "prescribed"
+    assert isinstance(bcs["outer"].value, PlateVelocity) and len(bcs["outer"].value.plates) == 2
+    for bad, needle in (({"kind": "plates"}, "needs 'plates"),
+                        ({"kind": "plates", "plates": [{"centre": [0, 0]}]}, r"plates\[0\]: needs centre and rate"),
+                        ({"kind": "plates", "plates": [{"centre": [0, 0], "rate": 1, "speed": 2}]}, "'speed'"),
+                        ({"kind": "plates", "width": -1, "plates": [{"centre": [0, 0], "rate": 1}]}, "positive")):
+        with pytest.raises(ConfigError, match=f"boundary.velocity.outer.*{needle}"):
+            _shell_config(bad, tmp_path)

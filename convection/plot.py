@@ -19,8 +19,9 @@ plane.
 
 A spherical shell (3D, hollow around the origin) also gets a perspective ``shell_*.png`` (the seed
 paper's picture of section 4.2): the temperature on the equatorial plane z = 0, the core as a grey
-sphere, and the particles of the northern hemisphere in the inner half of the shell as points
-coloured by ``--particle-property`` (default ``displacement`` when the particles carry it).
+sphere, and the particles of the northern hemisphere (within ``--particle-radius``
+of the centre if given) as points coloured by ``--particle-property`` (default ``displacement`` when
+the particles carry it).
 """
 
 from __future__ import annotations
@@ -367,6 +368,7 @@ def plot_snapshots(
     field: str | None = None,
     particle_property: str | None = None,
     *,
+    particle_radius: float | None = None,
     log: Callable[[str], None] | None = print,
 ) -> list[Path]:
     """Draw composition (with particles) and temperature pictures into ``directory/snapshots``.
@@ -381,7 +383,9 @@ def plot_snapshots(
         field: Field of the composition picture (default: ``material``, ``composition``, or the
             first other scalar field that is not temperature, pressure or velocity).
         particle_property: Particle property that colours the particles (vectors: magnitude);
-            default black particles.
+            default black particles (spherical shells: ``displacement`` if the particles carry it).
+        particle_radius: Spherical shells: draw only the particles within this distance of the
+            centre (default all of the northern hemisphere).
         log: Receives one line per skipped picture (default ``print``; None: silent).
 
     Returns:
@@ -413,7 +417,8 @@ def plot_snapshots(
                                                 cell_size, out_dir / f"{name}_{stem}.png"))
         radii = _shell_radii(data)
         if radii is not None and "temperature" in data.point_data.keys():
-            written.append(_shell_picture(data, radii, t, particles, particle_property, out_dir / f"shell_{stem}.png"))
+            written.append(_shell_picture(data, radii, t, particles, particle_property, out_dir / f"shell_{stem}.png",
+                                          max_radius=particle_radius))
         if "temperature" not in data.point_data.keys() and "temperature" not in data.cell_data.keys():
             say(f"t = {_time_label(t)}: no temperature field; no temperature picture")
         elif _is_constant(_values(data, "temperature")):
@@ -492,8 +497,9 @@ _SHELL_CAMERA = np.array([1.6, -2.2, 1.5])  # view direction, from above the equ
 
 
 def _shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, particles: _Series | None,
-                   particle_property: str | None, path: Path) -> Path:
-    """Perspective view of a spherical shell: equatorial temperature slice, core, particles near it."""
+                   particle_property: str | None, path: Path, max_radius: float | None = None) -> Path:
+    """Perspective view of a spherical shell: equatorial temperature slice, the core, the
+    particles of the northern hemisphere (within ``max_radius`` of the centre if given)."""
     pv = import_pyvista()
     inner, outer = radii
     plotter = pv.Plotter(off_screen=True, window_size=_SHELL_SIZE)
@@ -518,18 +524,22 @@ def _shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, parti
             raise ValueError(f"no particle property '{name}' in {particles.path.name}; properties: "
                              f"{', '.join(names)}{unread}")
         points = np.asarray(cloud.points, dtype=np.float64)
-        keep = (points[:, 2] >= 0.0) & (np.linalg.norm(points, axis=1) <= 0.5 * (inner + outer))
+        keep = points[:, 2] >= 0.0
+        if max_radius is not None:
+            keep &= np.linalg.norm(points, axis=1) <= max_radius
         shown = pv.PolyData(points[keep])
+        size = float(np.clip(7.5 - np.log10(max(int(keep.sum()), 1)), 2.5, 5.0))
         if name is None:
-            plotter.add_points(shown, color="black", point_size=3.0, render_points_as_spheres=True)
+            plotter.add_points(shown, color="black", point_size=size, render_points_as_spheres=True)
         else:
             colour = _values(cloud, name)[keep]
             shown.point_data["_colour"] = colour
             label = name if np.asarray(cloud.point_data[name]).ndim == 1 else f"{name} magnitude"
-            plotter.add_points(shown, scalars="_colour", cmap="viridis", clim=_clim(colour), point_size=4.0,
+            plotter.add_points(shown, scalars="_colour", cmap="viridis", clim=_clim(colour), point_size=size,
                                render_points_as_spheres=True,
                                scalar_bar_args=dict(bar, title=f"particles: {label}", position_x=0.56))
-        title += f"; {int(keep.sum())} particles (z >= 0, r <= {0.5 * (inner + outer):.3g})"
+        where = "z >= 0" + (f", r <= {max_radius:.4g}" if max_radius is not None else "")
+        title += f"; {int(keep.sum())} particles ({where})"
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
             title += f" at t = {_time_label(tp)}"
     plotter.add_text(title, position="upper_edge", font_size=10, color="black")
@@ -558,6 +568,9 @@ def main(argv: list[str] | None = None) -> int:
                              "the first other scalar field)")
     parser.add_argument("--particle-property", default=None, metavar="NAME",
                         help="particle property that colours the particles (default: black particles)")
+    parser.add_argument("--particle-radius", type=float, default=None, metavar="R",
+                        help="spherical shells: draw only particles within R of the centre (default: all of the "
+                             "northern hemisphere)")
     args = parser.parse_args(argv)
     directory = Path(args.directory)
     print(plot_run(directory, args.png))
@@ -565,7 +578,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no fields.xdmf in {directory}: no snapshots")
         return 0
     try:
-        paths = plot_snapshots(directory, args.times, args.field, args.particle_property)
+        paths = plot_snapshots(directory, args.times, args.field, args.particle_property,
+                               particle_radius=args.particle_radius)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

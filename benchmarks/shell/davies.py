@@ -70,7 +70,8 @@ def run_case(case: str, resolution: float, *, output: Path, ranks: int, extra: l
     final = {k: float(stats[k][-1]) for k in COLUMNS}
     window = max(1, len(stats["time"]) // 10)
     drift = {k: float(abs(stats[k][-1] - stats[k][-window]) / max(abs(stats[k][-1]), 1e-300)) for k in COLUMNS}
-    return {"case": case, "resolution": resolution, "ranks": ranks, "steps": int(stats["step"][-1]),
+    return {"case": case, "resolution": resolution, "ranks": ranks, "cells": int(stats["cells"][-1]),
+            "steps": int(stats["step"][-1]),
             "time": float(stats["time"][-1]), "final": final, "drift_last_tenth": drift,
             "wall_seconds": time.time() - start, "overrides": overrides}
 
@@ -81,17 +82,18 @@ def load_measured() -> list[dict]:
 
 def table(records: list[dict]) -> str:
     """Markdown table: every measured case and size, with the reference row of each case."""
-    head = ("| case | mesh size | steps | end time | <T> | Nu_T (outer) | Nu_B (inner) | vrms | "
+    head = ("| case | mesh size | cells | steps | end time | <T> | Nu_T (outer) | Nu_B (inner) | vrms | "
             "largest deviation from the reference |")
     rows = [head, "|" + "---|" * (head.count("|") - 1)]
     for case in sorted({r["case"] for r in records}):
         ref = CASES[case]["reference"]
-        rows.append(f"| {case} {CASES[case]['name']} | reference (ASPECT) | | | {ref['T_mean']} | {ref['nusselt']} "
+        rows.append(f"| {case} {CASES[case]['name']} | reference (ASPECT) | | | | {ref['T_mean']} | {ref['nusselt']} "
                     f"| {ref['nusselt_bottom']} | {ref['vrms']} | |")
         for r in sorted((r for r in records if r["case"] == case), key=lambda r: -r["resolution"]):
             f = r["final"]
             worst = max(COLUMNS, key=lambda k: abs(f[k] / ref[k] - 1.0))
-            rows.append(f"| {case} | {r['resolution']:g} | {r['steps']} | {r['time']:.3g} | {f['T_mean']:.4f} "
+            rows.append(f"| {case} | {r['resolution']:g} | {r.get('cells', '')} | {r['steps']} | {r['time']:.3g} "
+                        f"| {f['T_mean']:.4f} "
                         f"| {f['nusselt']:.4f} | {f['nusselt_bottom']:.4f} | {f['vrms']:.3f} "
                         f"| {100 * (f[worst] / ref[worst] - 1.0):+.2f} % ({worst}) |")
     return "\n".join(rows) + "\n"

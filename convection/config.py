@@ -166,8 +166,9 @@ SCHEMA: dict[str, Any] = {
     }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "stokes": {
         "degree": Field("int", 2, minimum=2, help="velocity degree (pressure degree - 1)"),
-        "solver": Field("str", "direct", choices=_names("convection.stokes", "STOKES_SOLVERS")),
-        "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver"),
+        "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_NAMES"),
+                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D, direct (MUMPS) in 2D"),
+        "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6)"),
     },
     "energy": {
         "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),

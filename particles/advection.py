@@ -9,9 +9,12 @@ linearly in time in between: stage ``i`` of a Butcher tableau ``(a, b, c)`` uses
 
 After every stage position the particle's cell and reference position are updated
 (:func:`particles.transport.relocate`) and particles that left this rank's cells are migrated
-(:func:`particles.migration.migrate`); the start position ``x_0`` and the slopes ``k_j`` still
-needed later travel with the particle as temporary property columns, removed after the step.
-The last slope is used at once and never stored, so Euler needs no stage columns at all.
+(:func:`particles.migration.migrate`; the swarm is sorted by cell once, after the last stage);
+the start position ``x_0`` and the slopes ``k_j`` still needed later travel with the particle in
+the swarm's stage table (:meth:`Swarm.stage_table`, kept allocated from step to step). A slope
+needed only for the next stage position is pushed into the position at once and never stored, so
+Euler needs no stage columns and the midpoint rule only ``x_0``. A stage at ``0 < c < 1``
+evaluates the velocity from time-interpolated coefficients, once (the field is linear in them).
 
 An optional ``confine(x)`` moves stage positions that left the domain back inside before they are
 relocated (e.g. onto a curved boundary that a straight Runge-Kutta step crossed; the domain owner
@@ -21,7 +24,7 @@ Quantities integrated alongside the positions (deformation gradient, accumulated
 are given as :class:`ParticleODE` objects: property ``y`` obeys ``dy/dt = rhs(swarm, c, y, L)``
 with ``L = grad u`` at the stage position, interpolated linearly in time like the velocity. The
 state ``[x, y_1, y_2, ...]`` is advanced by the same tableau, and the start state and stage slopes
-of every ``y`` travel in the same temporary property columns as those of ``x``.
+of every ``y`` travel in the same stage table as those of ``x``.
 
 With linear-in-time velocity the scheme keeps order ``min(p, 2)`` for time-dependent fields
 (the interpolation error is O(dt^2)); for steady fields, or with an exact time-dependent callable
@@ -47,8 +50,6 @@ from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
 
 __all__ = ["AdvectionStats", "Advector", "ButcherTableau", "INTEGRATORS", "ParticleODE", "get_integrator"]
-
-_STAGE_PROPERTY = "_rk_stage_data"
 
 OdeRhs = Callable[[Swarm, float, npt.NDArray[np.float64], npt.NDArray[np.float64]], npt.ArrayLike]
 """``rhs(swarm, c, y, grad_u) -> dy/dt``: stage node ``c`` in [0, 1], ``y`` shape=(n, size),
@@ -173,9 +174,8 @@ class Advector:
         names = [ode.name for ode in self.odes]
         if len(set(names)) != len(names):
             raise ValueError(f"ODE properties must be distinct, got {names}")
-        if _STAGE_PROPERTY in names:
-            raise ValueError(f"{_STAGE_PROPERTY!r} is reserved for stage data")
         self._evaluators: dict[int, Evaluator] = {}
+        self._blends: dict[int, dolfinx.fem.Function] = {}
 
     def _evaluator(self, V: dolfinx.fem.FunctionSpace) -> Evaluator:
         ev = self._evaluators.get(id(V))
@@ -197,27 +197,52 @@ class Advector:
         if ev_old.value_size != self.swarm.gdim or ev_new.value_size != self.swarm.gdim:
             raise ValueError("the velocity must have gdim components")
 
+        def at(c: float) -> tuple[Evaluator, dolfinx.fem.Function] | None:
+            """The velocity at stage node c as one Function (None: blend two evaluations)."""
+            if c == 0.0 or u_new is u_old:
+                return ev_old, u_old
+            if c == 1.0:
+                return ev_new, u_new
+            if ev_new is not ev_old:
+                return None
+            # u is linear in its coefficients: interpolating the coefficients in time gives the
+            # same field as blending two evaluations (up to round-off), at the cost of one.
+            if c not in blended:
+                w = self._blend_function(u_old.function_space)
+                np.multiply(u_old.x.array, 1.0 - c, out=w.x.array)
+                w.x.array[:] += c * u_new.x.array
+                blended[c] = w
+            return ev_old, blended[c]
+
+        blended: dict[float, dolfinx.fem.Function] = {}
+
         def blend(c: float, kind: str) -> npt.NDArray[np.float64]:
             s = self.swarm
-            f_old, f_new = getattr(ev_old, kind), getattr(ev_new, kind)
-            if c == 0.0 or u_new is u_old:
-                return f_old(u_old, s.cells, s.xref)
-            if c == 1.0:
-                return f_new(u_new, s.cells, s.xref)
-            return (1.0 - c) * f_old(u_old, s.cells, s.xref) + c * f_new(u_new, s.cells, s.xref)
+            one = at(c)
+            if one is not None:
+                return getattr(one[0], kind)(one[1], s.cells, s.xref)
+            return ((1.0 - c) * getattr(ev_old, kind)(u_old, s.cells, s.xref)
+                    + c * getattr(ev_new, kind)(u_new, s.cells, s.xref))
 
         def push(c: float, alpha: float) -> None:
             """x += alpha u(c) at the current cells/xref, fused into the evaluation kernel."""
             s = self.swarm
-            if c == 0.0 or u_new is u_old:
-                ev_old.values(u_old, s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
-            elif c == 1.0:
-                ev_new.values(u_new, s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
+            one = at(c)
+            if one is not None:
+                one[0].values(one[1], s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
             else:
                 ev_old.values(u_old, s.cells, s.xref, out=s.x, alpha=alpha * (1.0 - c), beta=1.0)
                 ev_new.values(u_new, s.cells, s.xref, out=s.x, alpha=alpha * c, beta=1.0)
 
         return self._advance(lambda c: blend(c, "values"), lambda c: blend(c, "gradients"), dt, push=push)
+
+    def _blend_function(self, V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.Function:
+        """A scratch Function in ``V`` for time-interpolated velocity coefficients (kept)."""
+        w = self._blends.get(id(V))
+        if w is None or w.function_space is not V:
+            w = dolfinx.fem.Function(V)
+            self._blends[id(V)] = w
+        return w
 
     def step_callable(
         self,
@@ -283,6 +308,16 @@ class Advector:
             parts.append(dy.reshape(y.shape))
         return np.concatenate(parts, axis=1)
 
+    def _stored_slopes(self, fused: bool) -> tuple[int, ...]:
+        """Stages ``j < s - 1`` whose slope is kept in the stage table. With the fused push, a slope
+        needed only for the next stage position is pushed into ``x`` directly instead."""
+        tab = self.tableau
+        s = tab.stages
+        if not fused:
+            return tuple(range(s - 1))
+        return tuple(j for j in range(s - 1)
+                     if tab.b[j] != 0.0 or any(tab.a[m][j] != 0.0 for m in range(j + 2, s)))
+
     def _advance(
         self,
         velocity: Callable[[float], npt.NDArray[np.float64]],
@@ -292,71 +327,108 @@ class Advector:
         push: Callable[[float, float], None] | None = None,
     ) -> AdvectionStats:
         """Run the stages. ``push(c, alpha)``, if given, does ``x += alpha k(c)`` in place from the
-        current cells/xref (fused evaluation); it is used for the last stage when no ODEs ride along."""
+        current cells/xref (fused evaluation); it is used when no ODEs ride along, for the last
+        stage and for every stage whose slope is needed only for the next stage position.
+
+        The start state and the stored slopes live in the swarm's stage table (block 0: start
+        state, then one block of ``w`` columns per stored slope), which the swarm keeps allocated
+        from step to step."""
         swarm, tab = self.swarm, self.tableau
         s = tab.stages
         w = swarm.gdim + sum(swarm.layout(ode.name).size for ode in self.odes)
         fused = push is not None and not self.odes
+        stored = self._stored_slopes(fused)
+        block = {j: 1 + q for q, j in enumerate(stored)}
         timer = _Timer()
         transport = TransportStats(0, 0, 0, 0)
         moved = [0, 0, 0, 0]
         if s > 1:
-            swarm.add_property(_STAGE_PROPERTY, w * s)
-            swarm.property(_STAGE_PROPERTY)[:, :w] = self._state()
+            table = swarm.stage_table(w * (1 + len(stored)))
+            table[:, : swarm.gdim] = swarm.x
+            col = swarm.gdim
+            for ode in self.odes:
+                lay = swarm.layout(ode.name)
+                table[:, col : col + lay.size] = swarm.properties[:, lay.columns]
+                col += lay.size
         try:
+            pushed = False  # x already holds the next stage position (set by a fused push)
             for i in range(s):
                 if i > 0:
-                    t0 = time.perf_counter()
-                    self._combine([dt * tab.a[i][j] for j in range(i)], w)
-                    timer.evaluation += time.perf_counter() - t0
-                    transport = transport + self._move(timer, moved)
+                    if not pushed:
+                        t0 = time.perf_counter()
+                        self._combine(tab.a[i], stored, block, dt, w, upto=i)
+                        timer.evaluation += time.perf_counter() - t0
+                    # (with ODEs or a callable velocity every stage sorts, so user callbacks never
+                    # see discarded rows)
+                    transport = transport + self._move(timer, moved, last=not fused)
+                pushed = False
                 t0 = time.perf_counter()
-                if i == s - 1 and fused:
+                if fused and (i == s - 1 or i not in block):
                     assert push is not None
-                    if s > 1:  # x = x0 + dt sum_{j<i} b_j k_j; cells/xref still hold the stage point
-                        self._combine([dt * tab.b[j] for j in range(i)], w)
-                    push(tab.c[i], dt * tab.b[i])
+                    # x = x0 + dt sum_j coef_j k_j over the stored slopes, then x += dt coef_i k_i
+                    # from the current cells/xref (still those of stage i)
+                    coef = tab.b if i == s - 1 else tab.a[i + 1]
+                    if i > 0:  # (at stage 0, x is the start state already)
+                        self._combine(coef, stored, block, dt, w, upto=i)
+                    push(tab.c[i], dt * coef[i])
+                    pushed = i < s - 1
                     timer.evaluation += time.perf_counter() - t0
                     continue
                 k = self._slope(velocity, gradient, tab.c[i])
                 if i < s - 1:
-                    swarm.property(_STAGE_PROPERTY)[:, w * (i + 1) : w * (i + 2)] = k
+                    swarm.stage[:, w * block[i] : w * (block[i] + 1)] = k
                 else:
                     if s == 1:
                         y = self._state() + (dt * tab.b[0]) * k
                     else:
                         y = np.empty((swarm.num_particles, w))
-                        stage_combination(swarm.properties, swarm.layout(_STAGE_PROPERTY).start, w,
-                                          np.array([dt * tab.b[j] for j in range(i)]), y)
+                        stage_combination(swarm.stage, 0, w, self._coefficients(tab.b, stored, dt, i), y)
                         y += (dt * tab.b[i]) * k
                     self._set_state(y)
                 timer.evaluation += time.perf_counter() - t0
-            transport = transport + self._move(timer, moved)
+            transport = transport + self._move(timer, moved, last=True)
         finally:
-            if swarm.has_property(_STAGE_PROPERTY):
-                swarm.remove_property(_STAGE_PROPERTY)
+            swarm.release_stage_table()
         return AdvectionStats(transport, moved[0], moved[1], moved[2], moved[3],
                               timer.evaluation, timer.relocation, timer.communication)
 
-    def _combine(self, coefs: list[float], w: int) -> None:
-        """Set the state to the start state plus ``sum_j coefs[j] k_j`` from the stage columns."""
+    @staticmethod
+    def _coefficients(row: Sequence[float], stored: Sequence[int], dt: float, upto: int) -> npt.NDArray[np.float64]:
+        """``dt * row[j]`` for the stored slopes ``j < upto``, in stage-table order."""
+        return np.array([dt * row[j] for j in stored if j < upto], dtype=np.float64)
+
+    def _combine(self, row: Sequence[float], stored: Sequence[int], block: dict[int, int], dt: float, w: int,
+                 *, upto: int) -> None:
+        """Set the state to the start state plus ``dt sum_j row[j] k_j`` over the stored slopes
+        ``j < upto``."""
         swarm = self.swarm
-        start = swarm.layout(_STAGE_PROPERTY).start
+        coefs = self._coefficients(row, stored, dt, upto)
+        if any(row[j] != 0.0 for j in range(upto) if j not in block):
+            raise AssertionError("a stage combination needs a slope that was not stored")
         out = swarm.x if not self.odes else np.empty((swarm.num_particles, w))
-        stage_combination(swarm.properties, start, w, np.asarray(coefs, dtype=np.float64), out)
+        stage_combination(swarm.stage, 0, w, coefs, out)
         if self.odes:
             self._set_state(out)
 
-    def _move(self, timer: _Timer, moved: list[int]) -> TransportStats:
-        """Confine (if set), relocate after positions changed, then migrate; accumulates counts into ``moved``."""
+    def _move(self, timer: _Timer, moved: list[int], *, last: bool) -> TransportStats:
+        """Confine (if set), relocate after positions changed and migrate; accumulates counts into
+        ``moved``.
+
+        Only the move after the last stage sorts: the stages in between need each particle's cell
+        and reference position, not the cell order, so particles that arrived stay appended and
+        departed ones stay marked (the kernels skip them) until that one sort places and drops
+        them all."""
         t0 = time.perf_counter()
         if self.confine is not None:
             self.confine(self.swarm.x)
-        stats = relocate(self.swarm)
+        stats = relocate(self.swarm, sort=False)
         t1 = time.perf_counter()
-        timer.relocation += t1 - t0
         mig = _migrate(self.swarm)
-        timer.communication += time.perf_counter() - t1
+        t2 = time.perf_counter()
+        if last:
+            self.swarm.sort()
+        timer.relocation += (t1 - t0) + (time.perf_counter() - t2)
+        timer.communication += t2 - t1
         for idx, value in enumerate(mig):
             moved[idx] += value
         return stats
@@ -365,5 +437,5 @@ class Advector:
 def _migrate(swarm: Swarm) -> tuple[int, int, int, int]:
     """Hand particles that left this rank's cells to their owners; returns (sent, received,
     lost, global_lost)."""
-    stats = migrate(swarm)
+    stats = migrate(swarm, sort=False)
     return stats.sent, stats.received, stats.lost, stats.global_lost

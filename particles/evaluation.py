@@ -86,7 +86,8 @@ class Evaluator:
 
         Args:
             u: Function in ``V``.
-            cells: Local cells (>= 0), shape=(n,), int32.
+            cells: Local cells, shape=(n,), int32; rows with cells < 0 (discarded particles)
+                get unspecified values (the compiled kernel leaves ``out`` unchanged there).
             xref: Reference coordinates, shape=(n, tdim).
             out: Result array, shape=(n, value_size), C-contiguous float64 (allocated if None).
             alpha: Scale of the values.
@@ -112,7 +113,7 @@ class Evaluator:
             )
             return out
         phi = self.element.tabulate(0, np.ascontiguousarray(xref, dtype=np.float64))[0, :, :, 0]
-        local = coeffs.reshape(-1, self.bs)[self.dofs[cells]]
+        local = coeffs.reshape(-1, self.bs)[self.dofs[np.maximum(cells, 0)]]
         vals = np.einsum("nd,ndb->nb", phi, local)
         if beta == 0.0:
             np.multiply(vals, alpha, out=out)
@@ -140,6 +141,7 @@ class Evaluator:
         gdim = self.geometry.gdim
         if n == 0:
             return np.empty((0, self.bs, gdim), dtype=np.float64)
+        cells = np.maximum(cells, 0)  # (discarded rows, cells < 0: values unspecified)
         dphi = self.element.tabulate(1, xref)[1:, :, :, 0]
         local = coeffs.reshape(-1, self.bs)[self.dofs[cells]]
         ref_grad = np.einsum("tnd,ndb->nbt", dphi, local)

@@ -7,7 +7,7 @@ without calling back into DOLFINx:
 - for affine simplices, the map ``x = origin + J X`` and its inverse ``X = K (x - origin)``
   precomputed per cell;
 - the vertex-to-cell adjacency (CSR) and the cell centres, used to order the neighbour search of
-  the transport step (seed paper 2.4);
+  the transport step (seed paper 2.4), and the facet neighbours of simplices for its first guess;
 - a lazily built DOLFINx bounding-box tree for the global fallback search.
 
 Non-affine cells (quadrilaterals, hexahedra, degree-2 geometry) are pulled back with a vectorised
@@ -112,6 +112,7 @@ class CellGeometry:
         self._build_adjacency()
         self._tree: dolfinx.geometry.BoundingBoxTree | None = None
         self._c2c: tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]] | None = None
+        self._facet_nbrs: npt.NDArray[np.int32] | None = None
 
     def _curvature_padding(self) -> float:
         """Largest distance of a geometry node from its position in the straight-sided (degree-1)
@@ -153,6 +154,27 @@ class CellGeometry:
             np.cumsum(np.bincount(pairs[:, 0], minlength=self.num_local_cells), out=offsets[1:])
             self._c2c = (offsets, pairs[:, 1].astype(np.int32))
         return self._c2c
+
+    @property
+    def facet_neighbours(self) -> npt.NDArray[np.int32]:
+        """Local cell across the facet opposite each vertex of each cell (the facet that vertex's
+        barycentric coordinate measures), shape=(num_local_cells, num_vertices), int32; -1 on the
+        boundary of this rank's owned + ghost cells. Built on first use (simplices)."""
+        if self._facet_nbrs is None:
+            nv, nc = self.num_vertices, self.num_local_cells
+            verts = self.nodes[:, :nv].astype(np.int64)
+            faces = np.concatenate([np.sort(np.delete(verts, i, axis=1), axis=1) for i in range(nv)])
+            cell = np.tile(np.arange(nc, dtype=np.int64), nv)
+            local = np.repeat(np.arange(nv, dtype=np.int64), nc)
+            order = np.lexsort(faces.T[::-1])
+            f = faces[order]
+            same = np.flatnonzero(np.all(f[1:] == f[:-1], axis=1))
+            a, b = order[same], order[same + 1]
+            nbrs = np.full((nc, nv), -1, dtype=np.int32)
+            nbrs[cell[a], local[a]] = cell[b]
+            nbrs[cell[b], local[b]] = cell[a]
+            self._facet_nbrs = nbrs
+        return self._facet_nbrs
 
     # ------------------------------------------------------------------ maps
     def jacobians(self, cells: npt.NDArray[np.int32], xref: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

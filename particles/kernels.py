@@ -1,4 +1,4 @@
-"""Numba kernels of the particle hot paths: cell ordering, P1/P2 simplex evaluation, relocation.
+"""Numba kernels of the particle hot paths: counting sort by cell, P1/P2 simplex evaluation, relocation.
 
 Each kernel is one compiled loop over particles (no per-particle Python). The kernels only see
 flat NumPy arrays; the Python layers (:mod:`particles.swarm`, :mod:`particles.evaluation`,
@@ -11,56 +11,204 @@ import numba
 import numpy as np
 
 __all__ = [
+    "DEAD",
     "STAYED",
     "NEIGHBOUR",
     "UNRESOLVED",
-    "cell_order",
+    "SKIPPED",
+    "count_buckets",
     "evaluate_simplex_p12",
-    "permute_particles",
+    "gather_particles",
     "relocate_affine_simplex",
+    "rows_outside",
+    "scatter_particles",
+    "sort_destinations",
     "stage_combination",
 ]
 
 STAYED = 0
 NEIGHBOUR = 1
 UNRESOLVED = 2
+SKIPPED = 3
+"""Relocation status of a discarded row (left untouched)."""
+DEAD = -2
+"""Cell index of a row discarded since the last sort (sent away or lost); the next sort drops it."""
 
 
 @numba.njit(cache=True)
-def cell_order(cells, num_owned):  # pragma: no cover - compiled
-    """Counting sort by cell: returns ``(order, offsets, already_sorted)``.
+def _bucket(k, num_owned):  # pragma: no cover - compiled
+    """Sort bucket of cell index ``k``: the owned cell itself, ``num_owned`` for a ghost cell or
+    an unlocated particle (-1), ``num_owned + 1`` for a discarded row (:data:`DEAD`)."""
+    if k >= num_owned or k == -1:
+        return num_owned
+    if k < 0:
+        return num_owned + 1
+    return k
 
-    Cells outside ``[0, num_owned)`` sort last. ``order`` (int64, stable) is empty when the input
-    is already sorted. ``offsets`` has shape (num_owned + 1,) and counts only owned cells.
+
+@numba.njit(cache=True)
+def count_buckets(cells, num_owned, counts):  # pragma: no cover - compiled
+    """Add each row's bucket (see :func:`_bucket`) to ``counts`` (shape=(num_owned + 2,), int64).
+
+    Returns True if the buckets are already non-decreasing (and no row is discarded).
     """
-    n = cells.shape[0]
-    counts = np.zeros(num_owned + 1, dtype=np.int64)
     already = True
     prev = -1
-    for p in range(n):
-        k = cells[p]
-        if k < 0 or k >= num_owned:
-            k = num_owned
+    for p in range(cells.shape[0]):
+        k = _bucket(cells[p], num_owned)
         counts[k] += 1
         if k < prev:
             already = False
         prev = k
-    offsets = np.zeros(num_owned + 1, dtype=np.int64)
-    for k in range(num_owned):
-        offsets[k + 1] = offsets[k] + counts[k]
-    if already:
-        return np.empty(0, dtype=np.int64), offsets, True
-    pos = np.empty(num_owned + 1, dtype=np.int64)
-    for k in range(num_owned + 1):
-        pos[k] = offsets[k] if k < num_owned else offsets[num_owned]
-    order = np.empty(n, dtype=np.int64)
+    return already and counts[num_owned + 1] == 0
+
+
+@numba.njit(cache=True)
+def _scatter_1d(dest, a, out):  # pragma: no cover - compiled
+    for p in range(dest.shape[0]):
+        d = dest[p]
+        if d >= 0:
+            out[d] = a[p]
+
+
+@numba.njit(cache=True)
+def _scatter_2d(dest, a, out):  # pragma: no cover - compiled
+    """out[dest[p]] = a[p] for dest[p] >= 0; the column count is branched on outside the loops
+    (a runtime-length inner loop, or a helper call per row, costs about twice the copy)."""
+    m = a.shape[1]
+    if m == 0:
+        return
+    if m == 2:
+        for p in range(dest.shape[0]):
+            d = dest[p]
+            if d >= 0:
+                out[d, 0] = a[p, 0]
+                out[d, 1] = a[p, 1]
+    elif m == 3:
+        for p in range(dest.shape[0]):
+            d = dest[p]
+            if d >= 0:
+                out[d, 0] = a[p, 0]
+                out[d, 1] = a[p, 1]
+                out[d, 2] = a[p, 2]
+    else:
+        for p in range(dest.shape[0]):
+            d = dest[p]
+            if d >= 0:
+                for j in range(m):
+                    out[d, j] = a[p, j]
+
+
+@numba.njit(cache=True)
+def _gather_1d(rows, a, out):  # pragma: no cover - compiled
+    for d in range(rows.shape[0]):
+        out[d] = a[rows[d]]
+
+
+@numba.njit(cache=True)
+def _gather_2d(rows, a, out):  # pragma: no cover - compiled
+    m = a.shape[1]
+    if m == 0:
+        return
+    if m == 2:
+        for d in range(rows.shape[0]):
+            p = rows[d]
+            out[d, 0] = a[p, 0]
+            out[d, 1] = a[p, 1]
+    elif m == 3:
+        for d in range(rows.shape[0]):
+            p = rows[d]
+            out[d, 0] = a[p, 0]
+            out[d, 1] = a[p, 1]
+            out[d, 2] = a[p, 2]
+    else:
+        for d in range(rows.shape[0]):
+            p = rows[d]
+            for j in range(m):
+                out[d, j] = a[p, j]
+
+
+@numba.njit(cache=True)
+def sort_destinations(num_owned, counts, cells, dest):  # pragma: no cover - compiled
+    """Counting sort by cell, second half: the row each particle goes to, into ``dest`` (shape=(n,),
+    int64).
+
+    ``counts`` holds the rows per bucket (:func:`count_buckets`, or counted on the fly by the
+    relocation kernel). Rows keep their relative order within a bucket (stable); rows of owned
+    cells come first, by cell, then ghost/unlocated rows; discarded rows get -1. Returns False if
+    ``counts`` do not match ``cells`` (then recount), else True.
+    """
+    nb = num_owned + 1
+    n = cells.shape[0]
+    pos = np.empty(nb, dtype=np.int64)
+    end = np.empty(nb, dtype=np.int64)
+    s = 0
+    for k in range(nb):
+        pos[k] = s
+        s += counts[k]
+        end[k] = s
+    if s + counts[nb] != n:
+        return False
     for p in range(n):
         k = cells[p]
-        if k < 0 or k >= num_owned:
+        if k >= num_owned or k == -1:
             k = num_owned
-        order[pos[k]] = p
-        pos[k] += 1
-    return order, offsets, False
+        elif k < 0:
+            dest[p] = -1
+            continue
+        d = pos[k]
+        if d >= end[k]:
+            return False
+        pos[k] = d + 1
+        dest[p] = d
+    for k in range(nb):
+        if pos[k] != end[k]:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def scatter_particles(
+    dest, ids, x, xref, cells, props, stage, ids_out, x_out, xref_out, cells_out, props_out, stage_out
+):  # pragma: no cover - compiled
+    """Row ``p`` of every per-particle array into row ``dest[p]`` of the outputs (skipped if -1)."""
+    _scatter_1d(dest, ids, ids_out)
+    _scatter_1d(dest, cells, cells_out)
+    _scatter_2d(dest, x, x_out)
+    _scatter_2d(dest, xref, xref_out)
+    _scatter_2d(dest, props, props_out)
+    _scatter_2d(dest, stage, stage_out)
+
+
+@numba.njit(cache=True)
+def gather_particles(
+    rows, ids, x, xref, cells, props, stage, ids_out, x_out, xref_out, cells_out, props_out, stage_out
+):  # pragma: no cover - compiled
+    """Row ``rows[i]`` of every per-particle array into row ``i`` of the preallocated outputs."""
+    _gather_1d(rows, ids, ids_out)
+    _gather_1d(rows, cells, cells_out)
+    _gather_2d(rows, x, x_out)
+    _gather_2d(rows, xref, xref_out)
+    _gather_2d(rows, props, props_out)
+    _gather_2d(rows, stage, stage_out)
+
+
+@numba.njit(cache=True)
+def rows_outside(cells, num_owned):  # pragma: no cover - compiled
+    """Rows whose cell is a ghost cell or -1 (not owned, not discarded), int64, in row order."""
+    m = 0
+    for p in range(cells.shape[0]):
+        k = cells[p]
+        if k >= num_owned or k == -1:
+            m += 1
+    rows = np.empty(m, dtype=np.int64)
+    m = 0
+    for p in range(cells.shape[0]):
+        k = cells[p]
+        if k >= num_owned or k == -1:
+            rows[m] = p
+            m += 1
+    return rows
 
 
 @numba.njit(cache=True)
@@ -80,12 +228,16 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
         alpha, beta: ``out = beta * out + alpha * u(x)`` (beta == 0 ignores the old ``out``,
         so an explicit Euler push is ``alpha = dt, beta = 1, out = x``).
         out: shape=(n, bs), updated in place.
+
+    Rows with ``cells < 0`` (discarded, see :data:`DEAD`) are skipped.
     """
     n = cells.shape[0]
     tdim = xref.shape[1]
     if tdim == 2 and degree == 1:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             L = 1.0 - X - Y
@@ -93,9 +245,35 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
             for b in range(bs):
                 v = L * coeffs[d0 + b] + X * coeffs[d1 + b] + Y * coeffs[d2 + b]
                 out[p, b] = alpha * v + (beta * out[p, b] if beta != 0.0 else 0.0)
+    elif tdim == 2 and bs == 2:
+        # The velocity case, with both components written out (a runtime-length loop over the
+        # components costs about a third more); same arithmetic as the general branch below.
+        for p in range(n):
+            c = cells[p]
+            if c < 0:
+                continue
+            X = xref[p, 0]
+            Y = xref[p, 1]
+            L = 1.0 - X - Y
+            f0, f1, f2 = L * (2.0 * L - 1.0), X * (2.0 * X - 1.0), Y * (2.0 * Y - 1.0)
+            f3, f4, f5 = 4.0 * X * Y, 4.0 * L * Y, 4.0 * L * X
+            d0, d1, d2 = dofs[c, 0] * 2, dofs[c, 1] * 2, dofs[c, 2] * 2
+            d3, d4, d5 = dofs[c, 3] * 2, dofs[c, 4] * 2, dofs[c, 5] * 2
+            v0 = (f0 * coeffs[d0] + f1 * coeffs[d1] + f2 * coeffs[d2]
+                  + f3 * coeffs[d3] + f4 * coeffs[d4] + f5 * coeffs[d5])
+            v1 = (f0 * coeffs[d0 + 1] + f1 * coeffs[d1 + 1] + f2 * coeffs[d2 + 1]
+                  + f3 * coeffs[d3 + 1] + f4 * coeffs[d4 + 1] + f5 * coeffs[d5 + 1])
+            if beta != 0.0:
+                out[p, 0] = alpha * v0 + beta * out[p, 0]
+                out[p, 1] = alpha * v1 + beta * out[p, 1]
+            else:
+                out[p, 0] = alpha * v0 + 0.0
+                out[p, 1] = alpha * v1 + 0.0
     elif tdim == 2:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             L = 1.0 - X - Y
@@ -110,6 +288,8 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
     elif degree == 1:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             Z = xref[p, 2]
@@ -121,6 +301,8 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
     else:
         for p in range(n):
             c = cells[p]
+            if c < 0:
+                continue
             X = xref[p, 0]
             Y = xref[p, 1]
             Z = xref[p, 2]
@@ -136,49 +318,6 @@ def evaluate_simplex_p12(cells, xref, dofs, coeffs, bs, degree, alpha, beta, out
                      + f6 * coeffs[dofs[c, 6] * bs + b] + f7 * coeffs[dofs[c, 7] * bs + b]
                      + f8 * coeffs[dofs[c, 8] * bs + b] + f9 * coeffs[dofs[c, 9] * bs + b])
                 out[p, b] = alpha * v + (beta * out[p, b] if beta != 0.0 else 0.0)
-
-
-@numba.njit(cache=True)
-def _pull_back_inside(c, x, p, origin, K, tol, xr):  # pragma: no cover
-    """Reference coordinates of particle p in affine simplex c (into xr); True if inside.
-
-    Written out for gdim == tdim in 2D and 3D (the hot cases), generic loops otherwise.
-    """
-    tdim = K.shape[1]
-    gdim = K.shape[2]
-    if tdim == 2 and gdim == 2:
-        a = x[p, 0] - origin[c, 0]
-        b = x[p, 1] - origin[c, 1]
-        X = K[c, 0, 0] * a + K[c, 0, 1] * b
-        Y = K[c, 1, 0] * a + K[c, 1, 1] * b
-        xr[0] = X
-        xr[1] = Y
-        return X >= -tol and Y >= -tol and X + Y <= 1.0 + tol
-    if tdim == 3 and gdim == 3:
-        a = x[p, 0] - origin[c, 0]
-        b = x[p, 1] - origin[c, 1]
-        d = x[p, 2] - origin[c, 2]
-        X = K[c, 0, 0] * a + K[c, 0, 1] * b + K[c, 0, 2] * d
-        Y = K[c, 1, 0] * a + K[c, 1, 1] * b + K[c, 1, 2] * d
-        Z = K[c, 2, 0] * a + K[c, 2, 1] * b + K[c, 2, 2] * d
-        xr[0] = X
-        xr[1] = Y
-        xr[2] = Z
-        return X >= -tol and Y >= -tol and Z >= -tol and X + Y + Z <= 1.0 + tol
-    s = 0.0
-    ok = True
-    for i in range(tdim):
-        acc = 0.0
-        for j in range(gdim):
-            acc += K[c, i, j] * (x[p, j] - origin[c, j])
-        xr[i] = acc
-        s += acc
-        if acc < -tol:
-            ok = False
-    if s > 1.0 + tol:
-        ok = False
-    return ok
-
 
 
 @numba.njit(cache=True)
@@ -299,147 +438,149 @@ def _search_vertex_neighbours(
 
 
 @numba.njit(cache=True)
-def _stay_pass(x, cells, xref, origin, K, tol, status):  # pragma: no cover
-    """First pass: particles still inside their cell get their new xref and STAYED; returns their count."""
-    n = x.shape[0]
-    tdim = K.shape[1]
-    gdim = K.shape[2]
-    stayed = 0
-    if tdim == 2 and gdim == 2:
-        for p in range(n):
-            c = cells[p]
-            if c < 0:
-                status[p] = UNRESOLVED
-                continue
-            a = x[p, 0] - origin[c, 0]
-            b = x[p, 1] - origin[c, 1]
-            X = K[c, 0, 0] * a + K[c, 0, 1] * b
-            Y = K[c, 1, 0] * a + K[c, 1, 1] * b
-            if X >= -tol and Y >= -tol and X + Y <= 1.0 + tol:
-                xref[p, 0] = X
-                xref[p, 1] = Y
-                status[p] = STAYED
-                stayed += 1
-            else:
-                status[p] = UNRESOLVED
-    elif tdim == 3 and gdim == 3:
-        for p in range(n):
-            c = cells[p]
-            if c < 0:
-                status[p] = UNRESOLVED
-                continue
-            a = x[p, 0] - origin[c, 0]
-            b = x[p, 1] - origin[c, 1]
-            d = x[p, 2] - origin[c, 2]
-            X = K[c, 0, 0] * a + K[c, 0, 1] * b + K[c, 0, 2] * d
-            Y = K[c, 1, 0] * a + K[c, 1, 1] * b + K[c, 1, 2] * d
-            Z = K[c, 2, 0] * a + K[c, 2, 1] * b + K[c, 2, 2] * d
-            if X >= -tol and Y >= -tol and Z >= -tol and X + Y + Z <= 1.0 + tol:
-                xref[p, 0] = X
-                xref[p, 1] = Y
-                xref[p, 2] = Z
-                status[p] = STAYED
-                stayed += 1
-            else:
-                status[p] = UNRESOLVED
-    else:
-        xr = np.empty(tdim)
-        for p in range(n):
-            c = cells[p]
-            if c >= 0 and _pull_back_inside(c, x, p, origin, K, tol, xr):
-                for i in range(tdim):
-                    xref[p, i] = xr[i]
-                status[p] = STAYED
-                stayed += 1
-            else:
-                status[p] = UNRESOLVED
-    return stayed
+def _walk_candidate(facet_nbrs, c, L0, L1, L2, L3, tdim):  # pragma: no cover
+    """The cell across the facet of ``c`` whose barycentric coordinate is most negative (or -1)."""
+    i = 0
+    m = L0
+    if L1 < m:
+        i = 1
+        m = L1
+    if L2 < m:
+        i = 2
+        m = L2
+    if tdim == 3 and L3 < m:
+        i = 3
+    return facet_nbrs[c, i]
 
 
 @numba.njit(cache=True)
 def relocate_affine_simplex(
-    x, cells, xref, origin, K, nodes, coords, v2c_off, v2c_cells, centres, nv, max_valence, tol, status
+    x, cells, xref, origin, K, nodes, coords, v2c_off, v2c_cells, centres, facet_nbrs, nv, max_valence, tol,
+    num_owned, status, counts
 ):  # pragma: no cover
-    """Update ``cells``/``xref`` of particles at new positions ``x`` (affine simplices).
+    """Update ``cells``/``xref`` of particles at new positions ``x`` (affine simplices, gdim == tdim
+    in {2, 3}) and count the particles per sort bucket, in one pass.
 
-    Per particle: test the current cell; if the point left it, test the cells around the cell
-    vertex closest to the point, ordered by descending ``(x - v) . (centre(K') - v)``
-    (seed paper section 2.4), then the remaining vertex neighbours of the old cell. ``status``
-    gets STAYED, NEIGHBOUR or UNRESOLVED (cell == -1 on input, or not found: left for the
-    bounding-box fallback; ``cells`` is then unchanged). Returns the counts per status, shape=(3,).
-    Two passes: a tight loop for the
-    particles that stayed (most of them), then the search for the others.
+    Per particle: test the current cell; if the point left it, test the cell across the facet with
+    the most negative barycentric coordinate (``facet_nbrs``, the usual case for a move shorter than
+    a cell); then the cells around the cell vertex closest to the point, ordered by descending
+    ``(x - v) . (centre(K') - v)`` (seed paper section 2.4), then the remaining vertex neighbours of
+    the old cell. ``status`` gets STAYED, NEIGHBOUR or UNRESOLVED (cell == -1 on input, or not found:
+    left for the bounding-box fallback; ``cells`` is then unchanged), or SKIPPED for a discarded row
+    (:data:`DEAD`). Every resolved or discarded particle adds 1 to ``counts[bucket]``
+    (shape=(num_owned + 2,), see :func:`count_buckets`); unresolved ones are not counted. Returns
+    ``(counts per status shape=(3,), whether the counted rows are in bucket order)``.
     """
-    counts = np.zeros(3, dtype=np.int64)
-    counts[STAYED] = _stay_pass(x, cells, xref, origin, K, tol, status)
-    counts[UNRESOLVED] = x.shape[0] - counts[STAYED]
+    res = np.zeros(3, dtype=np.int64)
     tdim = K.shape[1]
     xr = np.empty(tdim)
-    cand = np.empty(max_valence, dtype=np.int32)
-    score = np.empty(max_valence)
+    cand = np.empty(max(max_valence, 1), dtype=np.int32)
+    score = np.empty(max(max_valence, 1))
+    already = True
+    prev = -1
     for p in range(x.shape[0]):
         c = cells[p]
-        if status[p] != UNRESOLVED or c < 0:
+        if c < 0:
+            if c == DEAD:  # discarded since the last sort: leave it for the sort to drop
+                status[p] = SKIPPED
+                counts[num_owned + 1] += 1
+            else:
+                status[p] = UNRESOLVED
+                res[UNRESOLVED] += 1
+            already = False
             continue
-        found = _search_vertex_neighbours(
-            p, c, x, origin, K, nodes, coords, v2c_off, v2c_cells, centres, nv, tol, xr, cand, score
-        )
-        if found >= 0:
-            cells[p] = found
-            status[p] = NEIGHBOUR
-            counts[NEIGHBOUR] += 1
-            counts[UNRESOLVED] -= 1
-            for i in range(tdim):
-                xref[p, i] = xr[i]
-    return counts
-
+        px = x[p, 0]
+        py = x[p, 1]
+        a = px - origin[c, 0]
+        b = py - origin[c, 1]
+        if tdim == 2:
+            X = K[c, 0, 0] * a + K[c, 0, 1] * b
+            Y = K[c, 1, 0] * a + K[c, 1, 1] * b
+            Z = 0.0
+            inside = X >= -tol and Y >= -tol and X + Y <= 1.0 + tol
+        else:
+            pz = x[p, 2]
+            e = pz - origin[c, 2]
+            X = K[c, 0, 0] * a + K[c, 0, 1] * b + K[c, 0, 2] * e
+            Y = K[c, 1, 0] * a + K[c, 1, 1] * b + K[c, 1, 2] * e
+            Z = K[c, 2, 0] * a + K[c, 2, 1] * b + K[c, 2, 2] * e
+            inside = X >= -tol and Y >= -tol and Z >= -tol and X + Y + Z <= 1.0 + tol
+        found = -1
+        if inside:
+            found = c
+            status[p] = STAYED
+            res[STAYED] += 1
+        else:
+            f = _walk_candidate(facet_nbrs, c, 1.0 - X - Y - Z, X, Y, Z, tdim)
+            if f >= 0:
+                inside, X, Y, Z = _pull_back_tuple(f, px, py, x[p, 2] if tdim == 3 else 0.0, origin, K, tol)
+                if inside:
+                    found = f
+            if found < 0:
+                found = _search_vertex_neighbours(
+                    p, c, x, origin, K, nodes, coords, v2c_off, v2c_cells, centres, nv, tol, xr, cand, score
+                )
+                if found >= 0:
+                    X = xr[0]
+                    Y = xr[1]
+                    if tdim == 3:
+                        Z = xr[2]
+            if found >= 0:
+                cells[p] = found
+                status[p] = NEIGHBOUR
+                res[NEIGHBOUR] += 1
+            else:
+                status[p] = UNRESOLVED
+                res[UNRESOLVED] += 1
+                already = False
+                continue
+        xref[p, 0] = X
+        xref[p, 1] = Y
+        if tdim == 3:
+            xref[p, 2] = Z
+        k = found if found < num_owned else num_owned
+        counts[k] += 1
+        if k < prev:
+            already = False
+        prev = k
+    return res, already
 
 
 @numba.njit(cache=True)
 def stage_combination(table, start, width, coefs, out):  # pragma: no cover
-    """Runge-Kutta stage sum from stage columns of the property table, in one pass.
+    """Runge-Kutta stage sum from stage columns of a table, in one pass.
 
     ``out[p, i] = table[p, start + i] + sum_j coefs[j] * table[p, start + width * (j + 1) + i]``
     for ``i < width``: the start state plus the weighted stage slopes stored after it.
-    (Several times faster than the same NumPy expression on strided column views.)
+    (Several times faster than the same NumPy expression on strided column views; widths 2 and
+    3, the positions, are written out.)
     """
-    for p in range(table.shape[0]):
-        for i in range(width):
-            acc = table[p, start + i]
-            for j in range(coefs.shape[0]):
-                acc += coefs[j] * table[p, start + width * (j + 1) + i]
-            out[p, i] = acc
-
-
-@numba.njit(cache=True)
-def _permute_rows(order, a, out):  # pragma: no cover
-    """out[i] = a[order[i]] for a 2-D array; 1-3 columns written out (runtime-length inner loops
-    are much slower here)."""
-    m = a.shape[1]
-    if m == 2:
-        for i in range(order.shape[0]):
-            r = order[i]
-            out[i, 0] = a[r, 0]
-            out[i, 1] = a[r, 1]
-    elif m == 3:
-        for i in range(order.shape[0]):
-            r = order[i]
-            out[i, 0] = a[r, 0]
-            out[i, 1] = a[r, 1]
-            out[i, 2] = a[r, 2]
+    nc = coefs.shape[0]
+    if width == 2:
+        for p in range(table.shape[0]):
+            a0 = table[p, start]
+            a1 = table[p, start + 1]
+            for j in range(nc):
+                a0 += coefs[j] * table[p, start + 2 * (j + 1)]
+                a1 += coefs[j] * table[p, start + 2 * (j + 1) + 1]
+            out[p, 0] = a0
+            out[p, 1] = a1
+    elif width == 3:
+        for p in range(table.shape[0]):
+            a0 = table[p, start]
+            a1 = table[p, start + 1]
+            a2 = table[p, start + 2]
+            for j in range(nc):
+                a0 += coefs[j] * table[p, start + 3 * (j + 1)]
+                a1 += coefs[j] * table[p, start + 3 * (j + 1) + 1]
+                a2 += coefs[j] * table[p, start + 3 * (j + 1) + 2]
+            out[p, 0] = a0
+            out[p, 1] = a1
+            out[p, 2] = a2
     else:
-        for i in range(order.shape[0]):
-            r = order[i]
-            for j in range(m):
-                out[i, j] = a[r, j]
-
-
-@numba.njit(cache=True)
-def permute_particles(order, ids, x, xref, cells, ids_out, x_out, xref_out, cells_out):  # pragma: no cover
-    """Write row ``order[i]`` of ids, x, xref, cells into row i of the preallocated outputs."""
-    for i in range(order.shape[0]):
-        r = order[i]
-        ids_out[i] = ids[r]
-        cells_out[i] = cells[r]
-    _permute_rows(order, x, x_out)
-    _permute_rows(order, xref, xref_out)
+        for p in range(table.shape[0]):
+            for i in range(width):
+                acc = table[p, start + i]
+                for j in range(nc):
+                    acc += coefs[j] * table[p, start + width * (j + 1) + i]
+                out[p, i] = acc

@@ -4,9 +4,11 @@ After particles moved, each one sits in an owned cell (nothing to do), in a ghos
 is known from the cell index map: send it there), or in no local cell at all (``cells == -1``).
 Ghost-cell particles travel by non-blocking point-to-point messages to neighbour ranks only: first
 one count per neighbour, then one float64 buffer per neighbour whose rows hold the particle id, the
-*global* cell index as a hint, the position, the reference position and every property column
-(ids and cell indices are carried bit-for-bit as int64 reinterpreted as float64). The receiver
-turns the global cell index into its local owned index and inserts the batch.
+*global* cell index as a hint, the position, the reference position, every property column and
+the swarm's stage table (ids and cell indices are carried bit-for-bit as int64 reinterpreted as
+float64). The receiver turns the global cell index into its local owned index and appends the
+batch; the sender only marks the departed rows. One sort at the end places the new rows and drops
+the departed ones, so apart from that sort a migration costs O(particles sent + received).
 
 Unlocated particles take a global fallback: every rank publishes the bounding box of its owned
 cells once; a particle goes to all other ranks whose box contains it (the only collective step,
@@ -14,7 +16,7 @@ an Alltoall of counts); a sole candidate keeps it if one of its owned cells cont
 several candidates, they answer found/not found and the lowest rank that found it keeps it.
 Particles nobody found are removed and counted as lost.
 
-Integrator stage data travels as property columns, so a particle that changes rank in the middle
+Integrator stage data travels in the stage table, so a particle that changes rank in the middle
 of a Runge-Kutta step carries its stages with it.
 """
 
@@ -26,9 +28,10 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+import dolfinx.geometry
 import dolfinx.mesh
 
-from particles.generation._cells import OwnedLocation, locate_owned, owned_box
+from particles.generation._cells import OwnedLocation, locate_owned, owned_box, owned_cell_tree
 from particles.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
@@ -36,6 +39,8 @@ __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
 _TAG_COUNT = 7301
 _TAG_DATA = 7302
 _TAG_REPLY = 7303
+_TAG_NB_REPLY = 7304
+_TAG_NB_VERDICT = 7305
 _CACHE_ATTR = "_particles_migrator"
 
 
@@ -63,8 +68,9 @@ class MigrationStats:
 
 
 def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], global_cells: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
-    """Rows of particles as one float64 table: [id, global cell, x, xref, properties]."""
-    table = np.empty((rows.shape[0], 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns))
+    """Rows of particles as one float64 table: [id, global cell, x, xref, properties, stage table]."""
+    ncols = swarm.num_property_columns
+    table = np.empty((rows.shape[0], 2 + swarm.gdim + swarm.tdim + ncols + swarm.stage_width))
     table[:, 0] = swarm.ids[rows].view(np.float64)
     table[:, 1] = np.ascontiguousarray(global_cells, dtype=np.int64).view(np.float64)
     c = 2
@@ -72,13 +78,15 @@ def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], global_cells: npt.NDArray[n
     c += swarm.gdim
     table[:, c : c + swarm.tdim] = swarm.xref[rows]
     c += swarm.tdim
-    table[:, c:] = swarm.properties[rows]
+    table[:, c : c + ncols] = swarm.properties[rows]
+    table[:, c + ncols :] = swarm.stage[rows]
     return table
 
 
 class _Unpacked:
     def __init__(self, swarm: Swarm, table: npt.NDArray[np.float64]) -> None:
-        table = np.ascontiguousarray(table).reshape(-1, 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns)
+        ncols = swarm.num_property_columns
+        table = np.ascontiguousarray(table).reshape(-1, 2 + swarm.gdim + swarm.tdim + ncols + swarm.stage_width)
         self.ids = np.ascontiguousarray(table[:, 0]).view(np.int64)
         self.global_cells = np.ascontiguousarray(table[:, 1]).view(np.int64)
         c = 2
@@ -86,7 +94,8 @@ class _Unpacked:
         c += swarm.gdim
         self.xref = table[:, c : c + swarm.tdim]
         c += swarm.tdim
-        self.properties = table[:, c:]
+        self.properties = table[:, c : c + ncols]
+        self.stage = table[:, c + ncols :]
 
 
 class Migrator:
@@ -116,6 +125,9 @@ class Migrator:
         graph.Free()
         self.neighbours = np.union1d(out_ranks, np.asarray(sources, dtype=np.int32)).astype(np.int32)
         self.owned_boxes = self._gather_boxes(gdim)
+        self._is_neighbour = np.zeros(self.comm.size, dtype=bool)
+        self._is_neighbour[self.neighbours] = True
+        self._owned_tree: dolfinx.geometry.BoundingBoxTree | None = None
 
     def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
         box = owned_box(self.mesh)
@@ -124,8 +136,9 @@ class Migrator:
         return boxes
 
     # ------------------------------------------------------------------ exchange helpers
-    def _neighbour_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int) -> list[npt.NDArray[np.float64]]:
-        """Send tables[r] to every neighbour r (empty if absent); return the received tables."""
+    def _neighbour_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int
+                            ) -> dict[int, npt.NDArray[np.float64]]:
+        """Send tables[r] to every neighbour r (empty if absent); return {source: table} (non-empty)."""
         comm = self.comm
         nbrs = [int(r) for r in self.neighbours]
         send_counts = {r: np.array([tables[r].shape[0] if r in tables else 0], dtype=np.int64) for r in nbrs}
@@ -138,7 +151,7 @@ class Migrator:
         reqs += [comm.Isend(np.ascontiguousarray(tables[r]), dest=r, tag=_TAG_DATA)
                  for r in nbrs if send_counts[r][0] > 0]
         MPI.Request.Waitall(reqs)
-        return [recv[r] for r in sorted(recv)]
+        return recv
 
     def _sparse_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int
                          ) -> dict[int, npt.NDArray[np.float64]]:
@@ -156,117 +169,207 @@ class Migrator:
         return recv
 
     # ------------------------------------------------------------------ migration
-    def migrate(self, swarm: Swarm, /) -> MigrationStats:
+    def migrate(self, swarm: Swarm, /, *, sort: bool = True) -> MigrationStats:
         """Move ghost-cell particles to their owners and resolve unlocated ones (collective).
+
+        Leaving particles are only marked (:meth:`Swarm.discard_rows`) and arriving ones appended
+        (:meth:`Swarm.append_rows`); one sort at the end places the new rows and drops the marked
+        ones, so the work besides that sort is O(particles sent + received). An unlocated particle
+        whose candidate ranks (owned bounding box contains it) are all neighbours is offered to
+        them in the same messages as the ghost-cell particles and decided point-to-point. The only
+        collective in the common case is one allreduce of five counts; the global fallback (an
+        Alltoall and a second allreduce) runs only when some particle has a candidate rank that is
+        not a neighbour.
 
         Args:
             swarm: Particles on ``self.mesh``; ``cells`` may hold owned, ghost or -1 entries.
+            sort: Sort the swarm at the end. False leaves the arrived rows unsorted and the
+                departed ones marked, for a caller that sorts next anyway.
 
         Returns:
             Local and global counts of sent, received, fallback and lost particles.
         """
         if swarm.mesh is not self.mesh:
             raise ValueError("the swarm lives on a different mesh than this Migrator")
-        ncols = 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns
-        cells = swarm.cells
-        ghost = cells >= self.num_owned_cells
-        sent = int(np.count_nonzero(ghost))
-        received = 0
-        tables: dict[int, npt.NDArray[np.float64]] = {}
-        if sent:
-            rows = np.flatnonzero(ghost)
-            g = cells[rows] - self.num_owned_cells
-            owners = self.ghost_owners[g]
-            table = _pack(swarm, rows, self.ghost_globals[g])
-            for r in np.unique(owners):
-                tables[int(r)] = table[owners == r]
-        incoming = self._neighbour_exchange(tables, ncols) if self.comm.size > 1 else []
-        if sent:
-            swarm.remove(ghost)
-        if incoming:
-            batch = _Unpacked(swarm, np.concatenate(incoming))
-            local = batch.global_cells - self.cell_range[0]
-            if np.any((local < 0) | (local >= self.num_owned_cells)):
-                raise RuntimeError("migration received a particle for a cell this rank does not own")
-            swarm.add(batch.ids, batch.x, batch.xref, local.astype(np.int32), batch.properties)
-            received += batch.ids.shape[0]
-
-        unlocated = swarm.cells < 0
-        n_unlocated = int(np.count_nonzero(unlocated))
-        fallback_sent = lost = 0
+        ncols = 2 + swarm.gdim + swarm.tdim + swarm.num_property_columns + swarm.stage_width
+        outside = swarm.outside_rows()
+        cells = swarm.cells[outside]
+        ghost_rows = outside[cells >= self.num_owned_cells]
+        unlocated_rows = outside[cells < 0]
+        sent = int(ghost_rows.shape[0])
         if self.comm.size == 1:
-            lost = swarm.remove(unlocated)
-        elif self.comm.allreduce(n_unlocated, op=MPI.SUM) > 0:
-            fallback_sent, fb_received, lost = self._fallback(swarm, unlocated, ncols)
+            swarm.discard_rows(unlocated_rows)
+            lost = int(unlocated_rows.shape[0])
+            if sort:
+                swarm.sort()
+            return MigrationStats(sent, 0, 0, lost, sent, 0, 0, lost)
+
+        # Unlocated particles: offered to neighbours here if every candidate rank is one.
+        inside = self._box_candidates(swarm.x[unlocated_rows])
+        num_candidates = inside.sum(axis=1)
+        local = np.all(~inside | self._is_neighbour[None, :], axis=1) & (num_candidates > 0)
+        offer_rows, offer_inside = unlocated_rows[local], inside[local]
+        global_rows = unlocated_rows[~local & (num_candidates > 0)]
+        lost = int(np.count_nonzero(num_candidates == 0))
+        swarm.discard_rows(unlocated_rows[num_candidates == 0])
+
+        parts: dict[int, list[npt.NDArray[np.float64]]] = {}
+        if sent:
+            g = swarm.cells[ghost_rows] - self.num_owned_cells
+            owners = self.ghost_owners[g]
+            table = _pack(swarm, ghost_rows, self.ghost_globals[g])
+            for r in np.unique(owners):
+                parts.setdefault(int(r), []).append(table[owners == r])
+        if offer_rows.size:
+            # the hint column carries -(number of candidates) for an offer
+            table = _pack(swarm, offer_rows, -offer_inside.sum(axis=1).astype(np.int64))
+            for r in np.flatnonzero(offer_inside.any(axis=0)):
+                parts.setdefault(int(r), []).append(table[offer_inside[:, r]])
+        tables = {r: np.concatenate(p) if len(p) > 1 else p[0] for r, p in parts.items()}
+        incoming = self._neighbour_exchange(tables, ncols)
+        swarm.discard_rows(ghost_rows)
+        swarm.discard_rows(offer_rows)
+        received = 0
+        offers_in: dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]] = {}
+        handed = []
+        for src in sorted(incoming):
+            t = incoming[src]
+            hint = np.ascontiguousarray(t[:, 1]).view(np.int64)
+            if np.any(hint >= 0):
+                handed.append(t[hint >= 0])
+            if np.any(hint < 0):
+                offers_in[src] = (t[hint < 0], -hint[hint < 0])
+        if handed:
+            batch = _Unpacked(swarm, np.concatenate(handed))
+            local_cells = batch.global_cells - self.cell_range[0]
+            if np.any((local_cells < 0) | (local_cells >= self.num_owned_cells)):
+                raise RuntimeError("migration received a particle for a cell this rank does not own")
+            swarm.append_rows(batch.ids, batch.x, batch.xref, local_cells.astype(np.int32), batch.properties,
+                              batch.stage)
+            received += batch.ids.shape[0]
+        kept, nb_lost = self._decide(swarm, offer_inside, offers_in, (_TAG_NB_REPLY, _TAG_NB_VERDICT))
+        received += self._append_kept(swarm, kept)
+        lost += nb_lost
+        fallback_sent = int(offer_rows.shape[0])
+
+        first = self.comm.allreduce(
+            np.array([sent, received, fallback_sent, lost, global_rows.shape[0]], dtype=np.int64), op=MPI.SUM)
+        if first[4] > 0:
+            fb_sent, fb_received, fb_lost = self._fallback(swarm, global_rows, ncols)
+            fallback_sent += fb_sent
             received += fb_received
-        totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64), op=MPI.SUM)
+            lost += fb_lost
+            totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64),
+                                         op=MPI.SUM)
+        else:
+            totals = first[:4]
+        if sort:
+            swarm.sort()
         return MigrationStats(sent, received, fallback_sent, lost, *(int(t) for t in totals))
 
-    def _fallback(self, swarm: Swarm, unlocated: npt.NDArray[np.bool_], ncols: int) -> tuple[int, int, int]:
-        """Global search for unlocated particles (collective). Returns (offered, received, lost).
-
-        Round 1 (the only collective one) offers each particle to every other rank whose owned box
-        contains it, together with the number of candidates. A sole candidate decides alone: it
-        keeps the particle if one of its owned cells contains it, else counts it lost. For
-        particles with several candidates, the candidates answer found/not found (round 2) and the
-        offering rank tells each candidate whether it is the lowest finder (round 3); both rounds
-        are point-to-point between the pairs of round 1.
-        """
-        rank = self.comm.rank
-        rows = np.flatnonzero(unlocated)
-        x = swarm.x[rows]
+    def _box_candidates(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+        """Other ranks whose owned bounding box contains each point, shape=(m, size), bool."""
         lower, upper = self.owned_boxes[:, 0, :], self.owned_boxes[:, 1, :]
         finite = self.owned_boxes[np.isfinite(self.owned_boxes)]
         tol = 1e-12 * max(1.0, float(np.abs(finite).max(initial=1.0)))
         inside = np.all((x[:, None, :] >= lower[None] - tol) & (x[:, None, :] <= upper[None] + tol), axis=2)
-        inside[:, rank] = False
-        num_candidates = inside.sum(axis=1)
-        table = _pack(swarm, rows, num_candidates.astype(np.int64))
-        swarm.remove(unlocated)
-        offers = {r: np.flatnonzero(inside[:, r]) for r in range(self.comm.size) if inside[:, r].any()}
-        received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
-        lost = int(np.count_nonzero(num_candidates == 0))
-        kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]] = []
-        shared: dict[int, tuple[npt.NDArray[np.int64], OwnedLocation]] = {}
-        answers: dict[int, npt.NDArray[np.float64]] = {}
-        for src in sorted(received):
-            t = received[src]
-            batch = _Unpacked(swarm, t)
-            loc = locate_owned(self.mesh, batch.x, geometry=swarm.geometry)
-            sole = batch.global_cells == 1
-            kept.append((t[sole & (loc.cells >= 0)], loc.xref[sole & (loc.cells >= 0)], loc.cells[sole & (loc.cells >= 0)]))
-            lost += int(np.count_nonzero(sole & (loc.cells < 0)))
-            if (~sole).any():
-                shared[src] = (np.flatnonzero(~sole), loc)
-                answers[src] = (loc.cells[~sole] >= 0).astype(np.float64)[:, None]
-        multi = {r: idx[num_candidates[idx] > 1] for r, idx in offers.items()}
-        multi = {r: idx for r, idx in multi.items() if idx.size}
-        replies = self._known_exchange(answers, {r: idx.shape[0] for r, idx in multi.items()})
-        keeper = np.full(rows.shape[0], self.comm.size, dtype=np.int64)
-        for r in sorted(replies, reverse=True):
-            keeper[multi[r][replies[r][:, 0] > 0]] = r
-        lost += int(np.count_nonzero((keeper == self.comm.size) & (num_candidates > 1)))
-        decisions = {r: (keeper[idx] == r).astype(np.float64)[:, None] for r, idx in multi.items()}
-        verdicts = self._known_exchange(decisions, {r: a.shape[0] for r, a in answers.items()})
-        for src in sorted(verdicts):
-            rows_shared, loc = shared[src]
-            sel = rows_shared[verdicts[src][:, 0] > 0]
-            kept.append((received[src][sel], loc.xref[sel], loc.cells[sel]))
+        inside[:, self.comm.rank] = False
+        return inside
+
+    @staticmethod
+    def _append_kept(swarm: Swarm, kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
+                                                    npt.NDArray[np.int32]]]) -> int:
         n_in = 0
         for t, xref, cells in kept:
             if t.shape[0]:
                 batch = _Unpacked(swarm, t)
-                swarm.add(batch.ids, batch.x, xref, cells, batch.properties)
+                swarm.append_rows(batch.ids, batch.x, xref, cells, batch.properties, batch.stage)
                 n_in += t.shape[0]
-        offered = int(np.count_nonzero(num_candidates > 0))
-        return offered, n_in, lost
+        return n_in
 
-    def _known_exchange(self, tables: dict[int, npt.NDArray[np.float64]], expected: dict[int, int]
+    @property
+    def owned_tree(self) -> dolfinx.geometry.BoundingBoxTree:
+        """Bounding-box tree of this rank's owned cells, built on first use (for the fallback)."""
+        if self._owned_tree is None:
+            self._owned_tree = owned_cell_tree(self.mesh)
+        return self._owned_tree
+
+    def _fallback(self, swarm: Swarm, rows: npt.NDArray[np.int64], ncols: int) -> tuple[int, int, int]:
+        """Global search for the unlocated particles in ``rows`` (collective). Returns (offered,
+        received, lost).
+
+        Round 1 (the only collective one) offers each particle to every other rank whose owned box
+        contains it, together with the number of candidates; :meth:`_decide` settles the rest
+        point-to-point.
+        """
+        inside = self._box_candidates(swarm.x[rows])
+        num_candidates = inside.sum(axis=1)
+        table = _pack(swarm, rows, num_candidates.astype(np.int64))
+        swarm.discard_rows(rows)
+        offers = {r: np.flatnonzero(inside[:, r]) for r in range(self.comm.size) if inside[:, r].any()}
+        received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
+        decided = {src: (t, np.ascontiguousarray(t[:, 1]).view(np.int64)) for src, t in received.items()}
+        kept, lost = self._decide(swarm, inside, decided, (_TAG_REPLY, _TAG_REPLY))
+        lost += int(np.count_nonzero(num_candidates == 0))
+        offered = int(np.count_nonzero(num_candidates > 0))
+        return offered, self._append_kept(swarm, kept), lost
+
+    def _decide(
+        self,
+        swarm: Swarm,
+        inside: npt.NDArray[np.bool_],
+        received: dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]],
+        tags: tuple[int, int],
+    ) -> tuple[list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]], int]:
+        """Settle offered particles point-to-point between the pairs of an offer round.
+
+        ``inside`` (shape=(m, size)) says to which ranks this rank offered each of its ``m``
+        particles (in row order per rank); ``received`` holds, per source, the offered rows and
+        their number of candidates. A sole candidate decides alone: it keeps the particle if one
+        of its owned cells contains it, else counts it lost. For particles with several
+        candidates, the candidates answer found/not found and the offering rank tells each
+        candidate whether it is the lowest finder (or counts the particle lost if none found it).
+
+        Returns the kept rows (table, xref, owned cell) per batch and the particles lost here.
+        """
+        num_candidates = inside.sum(axis=1)
+        lost = 0
+        kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]] = []
+        shared: dict[int, tuple[npt.NDArray[np.int64], OwnedLocation]] = {}
+        answers: dict[int, npt.NDArray[np.float64]] = {}
+        for src in sorted(received):
+            t, candidates = received[src]
+            batch = _Unpacked(swarm, t)
+            loc = locate_owned(self.mesh, batch.x, tree=self.owned_tree, geometry=swarm.geometry)
+            sole = candidates == 1
+            found = sole & (loc.cells >= 0)
+            kept.append((t[found], loc.xref[found], loc.cells[found]))
+            lost += int(np.count_nonzero(sole & (loc.cells < 0)))
+            if (~sole).any():
+                shared[src] = (np.flatnonzero(~sole), loc)
+                answers[src] = (loc.cells[~sole] >= 0).astype(np.float64)[:, None]
+        offers = {r: np.flatnonzero(inside[:, r]) for r in range(inside.shape[1]) if inside[:, r].any()}
+        multi = {r: idx[num_candidates[idx] > 1] for r, idx in offers.items()}
+        multi = {r: idx for r, idx in multi.items() if idx.size}
+        replies = self._known_exchange(answers, {r: idx.shape[0] for r, idx in multi.items()}, tags[0])
+        keeper = np.full(inside.shape[0], self.comm.size, dtype=np.int64)
+        for r in sorted(replies, reverse=True):
+            keeper[multi[r][replies[r][:, 0] > 0]] = r
+        lost += int(np.count_nonzero((keeper == self.comm.size) & (num_candidates > 1)))
+        decisions = {r: (keeper[idx] == r).astype(np.float64)[:, None] for r, idx in multi.items()}
+        verdicts = self._known_exchange(decisions, {r: a.shape[0] for r, a in answers.items()}, tags[1])
+        for src in sorted(verdicts):
+            rows_shared, loc = shared[src]
+            sel = rows_shared[verdicts[src][:, 0] > 0]
+            kept.append((received[src][0][sel], loc.xref[sel], loc.cells[sel]))
+        return kept, lost
+
+    def _known_exchange(self, tables: dict[int, npt.NDArray[np.float64]], expected: dict[int, int], tag: int
                         ) -> dict[int, npt.NDArray[np.float64]]:
         """Point-to-point exchange of one-column tables when both sides know the sizes."""
         recv = {r: np.empty((n, 1)) for r, n in expected.items() if n > 0}
-        reqs = [self.comm.Irecv(recv[r], source=r, tag=_TAG_REPLY) for r in recv]
-        reqs += [self.comm.Isend(np.ascontiguousarray(t), dest=r, tag=_TAG_REPLY) for r, t in tables.items() if t.shape[0]]
+        reqs = [self.comm.Irecv(recv[r], source=r, tag=tag) for r in recv]
+        reqs += [self.comm.Isend(np.ascontiguousarray(t), dest=r, tag=tag) for r, t in tables.items() if t.shape[0]]
         MPI.Request.Waitall(reqs)
         return recv
 
@@ -280,7 +383,7 @@ def migrator_for(mesh: dolfinx.mesh.Mesh, /) -> Migrator:
     return migrator
 
 
-def migrate(swarm: Swarm, /, *, migrator: Migrator | None = None) -> MigrationStats:
+def migrate(swarm: Swarm, /, *, migrator: Migrator | None = None, sort: bool = True) -> MigrationStats:
     """Send every particle to the rank owning its cell; drop particles outside the domain (collective).
 
     Particles in ghost cells go to the ghost's owner (neighbour messages); particles with
@@ -290,8 +393,9 @@ def migrate(swarm: Swarm, /, *, migrator: Migrator | None = None) -> MigrationSt
     Args:
         swarm: The particles.
         migrator: The mesh's communication pattern; by default :func:`migrator_for` (cached).
+        sort: Sort the swarm at the end (see :meth:`Migrator.migrate`).
 
     Returns:
         Local and global counts.
     """
-    return (migrator or migrator_for(swarm.mesh)).migrate(swarm)
+    return (migrator or migrator_for(swarm.mesh)).migrate(swarm, sort=sort)

@@ -166,3 +166,62 @@ def test_fallback_points_on_partition_boundaries_kept_once():
     assert stats.global_lost == np.count_nonzero(finder < 0)
     if comm.size > 2:
         assert np.any(found_by.sum(axis=0) > 1)  # the tie rule was exercised
+
+
+@pytest.mark.mpi
+def test_migrate_without_sort_then_sort_matches_sorted_migration():
+    """migrate(sort=False) leaves arrived rows appended and departed rows marked; the sort after it
+    gives exactly what migrate() gives (same rows in the same order), and the stage table travels."""
+    comm = MPI.COMM_WORLD
+    results = []
+    mesh = dolfinx.mesh.create_unit_square(comm, 12, 12)
+    for sort in (True, False):
+        swarm = _midpoint_swarm(mesh)
+        swarm.x = _moved(swarm.ids, swarm.x)
+        swarm.cells = _locate_local(mesh, swarm.x)
+        inside = swarm.cells >= 0
+        swarm.xref = np.full_like(swarm.xref, np.nan)
+        swarm.xref[inside] = pull_back(mesh, swarm.cells[inside], swarm.x[inside])
+        swarm.stage_table(3)[:] = swarm.ids[:, None] * np.array([1.0, -1.0, 0.5])
+        n_before = swarm.num_particles
+        stats = migrate(swarm, sort=sort)
+        if not sort:
+            assert swarm.num_particles == n_before + stats.received  # departed rows still counted
+            swarm.sort()
+        results.append((swarm.ids.copy(), swarm.x.copy(), swarm.stage.copy(), swarm.offsets.copy(), stats))
+        ok = _check_owned_and_contained(swarm)
+        ok &= bool(np.array_equal(swarm.stage, swarm.ids[:, None] * np.array([1.0, -1.0, 0.5])))
+        assert comm.allreduce(ok, op=MPI.LAND)
+    for a, b in zip(results[0][:4], results[1][:4]):
+        np.testing.assert_array_equal(a, b)
+    assert results[0][4] == results[1][4]
+
+
+@pytest.mark.mpi
+def test_unlocated_particles_settled_by_neighbours_without_the_global_fallback(monkeypatch):
+    """On two ranks the other rank is every unlocated particle's only candidate and a neighbour: the
+    particles travel with the ghost-cell messages and the collective fallback never runs."""
+    comm = MPI.COMM_WORLD
+    if comm.size != 2:
+        pytest.skip("needs exactly two ranks")
+    calls = []
+    original = Migrator._fallback
+    monkeypatch.setattr(Migrator, "_fallback", lambda self, *a: calls.append(1) or original(self, *a))
+    mesh = dolfinx.mesh.create_unit_square(comm, 12, 12)
+    swarm = _midpoint_swarm(mesh)
+    ids0 = _gather_ids(comm, swarm.ids)
+    swarm.x = 1.0 - swarm.x  # point reflection: most particles land far from their rank's cells
+    swarm.cells = _locate_local(mesh, swarm.x)
+    inside = swarm.cells >= 0
+    swarm.xref = np.full_like(swarm.xref, np.nan)
+    swarm.xref[inside] = pull_back(mesh, swarm.cells[inside], swarm.x[inside])
+    swarm.sort()
+    n_unlocated = comm.allreduce(int(np.count_nonzero(~inside)), op=MPI.SUM)
+    stats = migrate(swarm, migrator=Migrator(mesh))
+    assert n_unlocated > 0 and stats.global_fallback_sent == n_unlocated
+    assert comm.allreduce(len(calls), op=MPI.SUM) == 0
+    assert stats.global_lost == 0
+    np.testing.assert_array_equal(_gather_ids(comm, swarm.ids), ids0)
+    assert comm.allreduce(_check_owned_and_contained(swarm), op=MPI.LAND)
+    ok = bool(np.allclose(swarm.property("tag"), np.stack([2.0 * swarm.ids, -1.0 * swarm.ids], axis=1)))
+    assert comm.allreduce(ok, op=MPI.LAND)

@@ -48,15 +48,16 @@ def _manufactured(kind: str, x):
     return u, p, eta, C, law, FREE_SLIP
 
 
-def _errors(n: int, kind: str, solver: str, comm=MPI.COMM_WORLD, Ra: float = 10.0):
-    """L2 errors of velocity and (mean-free) pressure, and the solve result, on an n x n mesh."""
+def _errors(n: int, kind: str, solver: str, comm=MPI.COMM_WORLD, Ra: float = 10.0, petsc_options=None):
+    """L2 errors of velocity and (mean-free) pressure, the solve result and the solver, on an n x n
+    mesh."""
     mesh = dolfinx.mesh.create_unit_square(comm, n, n)
     x = ufl.SpatialCoordinate(mesh)
     u_ex, p_ex, eta, C, law, bcs = _manufactured(kind, x)
     force = -ufl.div(2 * eta * ufl.sym(ufl.grad(u_ex))) + ufl.grad(p_ex)
     assert _integral(comm, force[0] ** 2 * ufl.dx) < 1e-20  # the force really is vertical
     approx = BoussinesqApproximation(Ra=Ra, viscosity=law)
-    stokes = StokesSolver(mesh, approx, bcs=bcs, solver=solver)
+    stokes = StokesSolver(mesh, approx, bcs=bcs, solver=solver, petsc_options=petsc_options)
     result = stokes.solve(force[1] / Ra, C)
     e_u = np.sqrt(_integral(comm, ufl.inner(stokes.u - u_ex, stokes.u - u_ex) * ufl.dx))
     p_mean_ex = _integral(comm, p_ex * ufl.dx)
@@ -81,13 +82,26 @@ def test_taylor_hood_convergence_orders_direct(kind):
     assert max(r[2].residual_norm for r in results) < 1e-9
 
 
+def _norm(comm, f) -> float:
+    return float(np.sqrt(_integral(comm, ufl.inner(f, f) * ufl.dx)))
+
+
+@pytest.mark.parametrize("solver", ["iterative", "iterative_gamg"])
 @pytest.mark.parametrize("kind", ["no_slip", "free_slip", "variable_viscosity"])
-def test_iterative_matches_direct(kind):
-    e_u_d, e_p_d, _, _ = _errors(16, kind, "direct")
-    e_u_i, e_p_i, result, _ = _errors(16, kind, "iterative")
+def test_iterative_matches_direct_to_the_solver_tolerance(kind, solver):
+    """The relative residual tolerance rtol bounds the distance to the MUMPS solution: measured
+    below 10 rtol (relative L2) for velocity and pressure."""
+    rtol = 1e-8
+    e_u_d, e_p_d, _, direct = _errors(16, kind, "direct")
+    e_u_i, e_p_i, result, stokes = _errors(16, kind, solver, petsc_options={"ksp_rtol": rtol})
+    comm = MPI.COMM_WORLD
     assert result.iterations < 200
-    assert abs(e_u_i - e_u_d) < 1e-6 * e_u_d
-    assert abs(e_p_i - e_p_d) < 1e-6 * e_p_d
+    for mine, theirs in ((stokes.u, direct.u), (stokes.p, direct.p)):
+        reference = mine.copy()  # the same mesh built again: the same dof layout
+        reference.x.array[:] = theirs.x.array
+        assert _norm(comm, mine - reference) < 30 * rtol * _norm(comm, reference)
+    assert abs(e_u_i - e_u_d) < 1e-4 * e_u_d
+    assert abs(e_p_i - e_p_d) < 1e-4 * e_p_d
 
 
 def test_iterative_convergence_order():
@@ -112,7 +126,8 @@ def test_hydrostatic_state_is_exact(gdim, solver):
         sides = SIDES_3D
     Ra = 7.0
     stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=Ra),
-                          bcs={s: VelocityBC("free_slip") for s in sides}, solver=solver)
+                          bcs={s: VelocityBC("free_slip") for s in sides}, solver=solver,
+                          petsc_options={"ksp_rtol": 1e-10} if solver == "iterative" else None)
     stokes.solve(1.0, None)
     z = ufl.SpatialCoordinate(mesh)[gdim - 1]
     assert _integral(comm, ufl.inner(stokes.u, stokes.u) * ufl.dx) < 1e-16
@@ -124,7 +139,7 @@ def test_prescribed_uniform_flow_3d():
     mesh = dolfinx.mesh.create_unit_cube(comm, 3, 3, 3)
     value = (1.0, -0.5, 0.25)
     stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=0.0),
-                          bcs={s: VelocityBC("prescribed", value) for s in SIDES_3D})
+                          bcs={s: VelocityBC("prescribed", value) for s in SIDES_3D}, solver="direct")
     stokes.solve(0.0, None)
     u_ex = ufl.as_vector(value)
     assert _integral(comm, ufl.inner(stokes.u - u_ex, stokes.u - u_ex) * ufl.dx) < 1e-20
@@ -170,15 +185,17 @@ def test_transfer_from_copies_state():
 @pytest.mark.mpi
 @pytest.mark.parametrize("solver", ["direct", "iterative"])
 def test_parallel_errors_equal_serial(solver):
-    e_u, e_p, _, _ = _errors(16, "variable_viscosity", solver, comm=MPI.COMM_WORLD)
+    options = {"ksp_rtol": 1e-11} if solver == "iterative" else None
+    e_u, e_p, _, _ = _errors(16, "variable_viscosity", solver, comm=MPI.COMM_WORLD, petsc_options=options)
     e_u_s, e_p_s, _, _ = _errors(16, "variable_viscosity", "direct", comm=MPI.COMM_SELF)
     assert abs(e_u - e_u_s) < 1e-7 * e_u_s
     assert abs(e_p - e_p_s) < 1e-7 * e_p_s
 
 
-def test_3d_variable_viscosity_iterative_matches_direct():
+@pytest.mark.parametrize("solver", ["iterative", "iterative_gamg"])
+def test_3d_variable_viscosity_iterative_matches_direct(solver):
     """Frank-Kamenetskii viscosity (contrast 100) with a composition layer in a free-slip cube:
-    both solvers give the same velocity field."""
+    the iterative solvers give MUMPS's velocity field to within their tolerance."""
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_unit_cube(comm, 4, 4, 4)
     x = ufl.SpatialCoordinate(mesh)
@@ -187,13 +204,13 @@ def test_3d_variable_viscosity_iterative_matches_direct():
     law = ViscosityLaw((1.0, 10.0), temperature_law="frank_kamenetskii", gamma=np.log(100.0))
     approx = BoussinesqApproximation(Ra=1e4, Rb=5e3, viscosity=law)
     bcs = {s: VelocityBC("free_slip") for s in SIDES_3D}
+    rtol = 1e-8
     solutions = []
-    for solver in ("direct", "iterative"):
-        stokes = StokesSolver(mesh, approx, bcs=bcs, solver=solver)
+    for name, options in (("direct", None), (solver, {"ksp_rtol": rtol})):
+        stokes = StokesSolver(mesh, approx, bcs=bcs, solver=name, petsc_options=options)
         result = stokes.solve(T, C)
         solutions.append(stokes.u)
         assert result.iterations < 300
-    du = solutions[0] - solutions[1]
-    norm = _integral(comm, ufl.inner(solutions[0], solutions[0]) * ufl.dx)
+    norm = _norm(comm, solutions[0])
     assert norm > 1.0
-    assert _integral(comm, ufl.inner(du, du) * ufl.dx) < 1e-12 * norm
+    assert _norm(comm, solutions[0] - solutions[1]) < 30 * rtol * norm

@@ -50,3 +50,98 @@ def test_remove_and_property_columns(mesh):
     swarm.check_invariants()
     with pytest.raises(KeyError, match="known"):
         swarm.property("nope")
+
+
+def test_appended_rows_are_placed_by_the_next_sort_stably(mesh):
+    rng = np.random.default_rng(3)
+    swarm = Swarm(mesh)
+    swarm.add_property("c", 1)
+    ids, x, xref, cells = _random_batch(rng, swarm, 60, 0)
+    swarm.add(ids, x, xref, cells, properties=ids[:, None].astype(float))
+    before = swarm.ids.copy()
+    ids2, x2, xref2, cells2 = _random_batch(rng, swarm, 30, 100)
+    swarm.append_rows(ids2, x2, xref2, cells2, ids2[:, None].astype(float))
+    assert swarm.num_particles == 90 and np.array_equal(swarm.ids[60:], ids2)  # appended, unsorted
+    swarm.sort()
+    swarm.check_invariants()
+    assert np.array_equal(swarm.property("c")[:, 0], swarm.ids.astype(float))
+    for k in range(swarm.num_owned_cells):
+        # within a cell: the old rows in their order, then the appended ones in theirs
+        got = swarm.ids[swarm.cell_slice(k)]
+        old = before[np.isin(before, got)]
+        new = ids2[cells2 == k]
+        assert np.array_equal(got, np.concatenate([old, new]))
+
+
+def test_discarded_rows_are_dropped_by_the_next_sort(mesh):
+    rng = np.random.default_rng(4)
+    swarm = Swarm(mesh)
+    ids, x, xref, cells = _random_batch(rng, swarm, 80, 0)
+    swarm.add(ids, x, xref, cells)
+    leaving = np.arange(0, 80, 7)
+    left = swarm.ids[leaving].copy()
+    swarm.cells[leaving] = -1  # e.g. left the rank's cells
+    swarm.discard_rows(leaving)
+    ids2, x2, xref2, cells2 = _random_batch(rng, swarm, 5, 500)
+    swarm.append_rows(ids2, x2, xref2, cells2)
+    swarm.sort()
+    swarm.check_invariants()
+    assert swarm.num_particles == 80 - leaving.size + 5
+    assert set(swarm.ids) == (set(range(80)) - set(left)) | set(ids2)
+
+
+def test_stale_pending_counts_are_detected(mesh):
+    rng = np.random.default_rng(5)
+    swarm = Swarm(mesh)
+    ids, x, xref, cells = _random_batch(rng, swarm, 100, 0)
+    swarm.add(ids, x, xref, cells)
+    counts = np.zeros(swarm.num_owned_cells + 2, dtype=np.int64)
+    counts[: swarm.num_owned_cells] = swarm.particles_per_cell()
+    swarm.set_pending_counts(counts, False)
+    swarm.cells[:] = rng.integers(0, swarm.num_owned_cells, 100)  # changed behind the counts' back
+    swarm.sort()
+    swarm.check_invariants()
+    assert sorted(swarm.ids) == list(range(100))
+    with pytest.raises(ValueError, match="shape"):
+        swarm.set_pending_counts(np.zeros(3, dtype=np.int64), False)
+
+
+def test_stage_table_travels_and_is_kept_allocated(mesh):
+    rng = np.random.default_rng(6)
+    swarm = Swarm(mesh)
+    ids, x, xref, cells = _random_batch(rng, swarm, 200, 0)
+    swarm.add(ids, x, xref, cells)
+    addresses = set()
+    for step in range(4):
+        table = swarm.stage_table(3)
+        table[:] = swarm.ids[:, None] * np.array([1.0, 2.0, 3.0])
+        addresses.add(table.__array_interface__["data"][0])
+        del table  # a view held across the sort would (rightly) keep its buffer from being reused
+        swarm.cells[:] = rng.integers(0, swarm.num_owned_cells, swarm.num_particles)
+        swarm.sort()
+        assert np.array_equal(swarm.stage, swarm.ids[:, None] * np.array([1.0, 2.0, 3.0]))
+        swarm.take(np.arange(0, swarm.num_particles, 2) if step == 2 else np.arange(swarm.num_particles))
+        assert np.array_equal(swarm.stage, swarm.ids[:, None] * np.array([1.0, 2.0, 3.0]))
+        swarm.release_stage_table()
+        assert swarm.stage.shape == (swarm.num_particles, 0) and swarm.property_names == []
+    swarm.check_invariants()
+    assert len(addresses) <= 2  # the current and the spare buffer, not a new one per step
+
+
+def test_column_assignment_checks_the_length(mesh):
+    swarm = Swarm(mesh)
+    rng = np.random.default_rng(7)
+    swarm.add(*_random_batch(rng, swarm, 10, 0))
+    swarm.x = swarm.x + 0.0
+    with pytest.raises(ValueError, match="shape"):
+        swarm.x = np.zeros((11, 2))
+
+
+def test_append_nothing_with_a_stage_table(mesh):
+    swarm = Swarm(mesh)
+    rng = np.random.default_rng(8)
+    swarm.add(*_random_batch(rng, swarm, 10, 0))
+    swarm.stage_table(2)[:] = 1.0
+    swarm.append_rows(np.empty(0), np.empty((0, 2)), np.empty((0, 2)), np.empty(0), np.empty((0, 0)),
+                      np.empty((0, 2)))
+    assert swarm.num_particles == 10 and np.all(swarm.stage == 1.0)

@@ -120,8 +120,9 @@ def test_sort_reuses_buffers_but_never_overwrites_held_arrays():
         assert np.array_equal(held, expected) and np.array_equal(held_view, expected_view)
         assert np.all(np.diff(swarm.cells) >= 0)
     del held, held_view
-    spare_x = id(swarm._spare[1])  # an id, not a reference (a reference would block the reuse)
+    # the address of the released buffer, not a reference (a reference would block the reuse)
+    spare_x = swarm._spare[1].__array_interface__["data"][0]
     swarm.cells[:] = rng.integers(0, swarm.num_owned_cells, swarm.num_particles)
     swarm.sort()
-    assert id(swarm.x) == spare_x  # released buffers are reused
+    assert swarm.x.__array_interface__["data"][0] == spare_x  # released buffers are reused
     swarm.check_invariants()

@@ -14,6 +14,10 @@ the slowest rank each), ``cpu_seconds`` (process CPU time of the loop: on a shar
 gap to ``seconds`` is time the process waited for a core), and ``warmup_seconds``, the numba compilation (or cache load) and first
 DOLFINx calls, done on a small copy of the problem before the timed loop.
 
+``--balance`` repartitions the mesh before the timed loop with cell loads ``1 + W n_particles``
+(:func:`particles.balance.rebalance`; the particles sit in a small annulus, so the default cell
+partition gives nearly all of them to one rank) and builds the velocity space on the new mesh.
+
 ``--naive`` runs the straightforward DOLFINx way instead (serial only): every step a bounding-box
 collision search, ``compute_colliding_cells`` and ``Function.eval`` for every particle, Euler.
 
@@ -37,7 +41,9 @@ import dolfinx.mesh
 
 from particles import Swarm
 from particles.advection import INTEGRATORS, Advector
+from particles.balance import rebalance
 from particles.evaluation import locate
+from particles.partition import PARTITIONERS
 
 DT = 0.002
 CENTRE = np.array([0.5, 0.75])
@@ -106,12 +112,19 @@ def place(mesh: dolfinx.mesh.Mesh, n: int, seed: int) -> Swarm:
 
 def run_particles(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, steps: int) -> dict:
     """Advect with the particles package; returns the timings of this rank."""
+    swarm = place(mesh, n, args.seed)
+    t0 = time.perf_counter()
+    if args.balance:
+        options = {} if args.balance_method != "rcb" else {
+            "balance": tuple(args.balance_quantities), "axes": tuple(args.balance_axes)}
+        swarm = rebalance(swarm, particle_weight=args.particle_weight, method=args.balance_method, **options)
+        mesh = swarm.mesh
+    t_balance = time.perf_counter() - t0
     V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", args.degree))
     u_old, u_new = dolfinx.fem.Function(V), dolfinx.fem.Function(V)
     field = Vortex(0.0)
     interpolate = NodalInterpolation(V)
     interpolate(u_new, field)
-    swarm = place(mesh, n, args.seed)
     advector = Advector(swarm, integrator=args.integrator)
     t_interp = t_eval = t_reloc = t_comm = 0.0
     loop = 0.0
@@ -141,7 +154,8 @@ def run_particles(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, ste
     return {
         "seconds": loop, "cpu_seconds": cpu, "field_interpolation": t_interp, "evaluation_push": t_eval,
         "relocation": t_reloc, "communication": t_comm, "lost": lost, "paths": paths, "sorted": sorted_every_step,
-        "final": swarm.num_particles, "initial": n,
+        "final": swarm.num_particles, "initial": n, "balance_seconds": t_balance,
+        "particles_per_rank": swarm.num_particles, "cells_per_rank": swarm.num_owned_cells,
     }
 
 
@@ -180,7 +194,8 @@ def run_naive(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, steps: 
         "seconds": loop, "cpu_seconds": time.process_time() - cpu0, "field_interpolation": t_interp,
         "evaluation_push": t_eval, "relocation": t_search,
         "communication": 0.0, "lost": lost, "paths": np.zeros(4, dtype=np.int64), "sorted": False,
-        "final": x.shape[0], "initial": n,
+        "final": x.shape[0], "initial": n, "balance_seconds": 0.0,
+        "particles_per_rank": x.shape[0], "cells_per_rank": mesh.topology.index_map(2).size_local,
     }
 
 
@@ -193,11 +208,22 @@ def main() -> None:
     parser.add_argument("--integrator", default="euler", choices=sorted(INTEGRATORS))
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--naive", action="store_true", help="plain DOLFINx search + eval every step (serial)")
+    parser.add_argument("--balance", action="store_true",
+                        help="repartition the mesh for the particles before the timed loop (particles.balance.rebalance)")
+    parser.add_argument("--balance-method", default="rcb", choices=sorted(PARTITIONERS))
+    parser.add_argument("--particle-weight", type=float, default=1.0, help="W in the cell load 1 + W n_particles")
+    parser.add_argument("--balance-quantities", nargs="+", default=["load"], choices=["cells", "particles", "load"],
+                        help="what every rcb cut balances (convection runs use all three)")
+    parser.add_argument("--balance-axes", nargs="+", type=int, default=[1],
+                        help="axes rcb cuts may be perpendicular to (1: horizontal cuts, parallel to the vortex's "
+                             "flow through the annulus; 0 1: any)")
     args = parser.parse_args()
 
     comm = MPI.COMM_WORLD
     if args.naive and comm.size > 1:
         raise SystemExit("--naive runs on one rank only")
+    if args.naive and args.balance:
+        raise SystemExit("--balance applies to the particle runs only")
     mesh = dolfinx.mesh.create_unit_square(comm, args.cells, args.cells)
     runner = run_naive if args.naive else run_particles
 
@@ -209,6 +235,7 @@ def main() -> None:
     slowest = {k: comm.allreduce(local[k], op=MPI.MAX)
                for k in ("seconds", "cpu_seconds", "field_interpolation", "evaluation_push", "relocation", "communication")}
     paths = comm.allreduce(local["paths"], op=MPI.SUM)
+    per_rank = comm.allgather((local["particles_per_rank"], local["cells_per_rank"]))
     final = comm.allreduce(local["final"], op=MPI.SUM)
     result = {
         "method": "naive" if args.naive else "particles",
@@ -223,6 +250,11 @@ def main() -> None:
         "ranks": comm.size,
         **slowest,
         "warmup_seconds": warmup,
+        "balance": (f"{args.balance_method} W={args.particle_weight:g} balance={','.join(args.balance_quantities)} "
+                    f"axes={','.join(map(str, args.balance_axes))}") if args.balance else "none",
+        "balance_seconds": comm.allreduce(local["balance_seconds"], op=MPI.MAX),
+        "particles_per_rank_final": [p for p, _ in per_rank],
+        "cells_per_rank": [c for _, c in per_rank],
         "transport_paths": dict(zip(("stayed", "neighbour", "fallback", "not_found"), (int(p) for p in paths))),
         "sorted_after_every_step": bool(comm.allreduce(bool(local["sorted"]), op=MPI.LAND)),
         "load_average_1min": os.getloadavg()[0],

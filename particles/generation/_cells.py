@@ -23,6 +23,7 @@ __all__ = [
     "is_affine_simplex",
     "locate_owned",
     "owned_box",
+    "owned_cell_tree",
     "pull_back",
     "push_forward",
 ]
@@ -62,6 +63,14 @@ def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:
     if num_owned:
         x = mesh.geometry.x[np.unique(geometry_dofmap(mesh)[:num_owned]), :gdim]
         box[0], box[1] = x.min(axis=0), x.max(axis=0)
+        if mesh.geometry.cmap.degree > 1:
+            # A curved cell bulges beyond the box of its nodes (an arc between two boundary
+            # nodes passes outside their coordinate range): pad by the largest bulge.
+            from particles.geometry import CellGeometry
+
+            pad = 1.01 * CellGeometry(mesh).curvature_padding
+            box[0] -= pad
+            box[1] += pad
     return box
 
 
@@ -107,7 +116,14 @@ def pull_back(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], x: npt.NDAr
     return out
 
 
-def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, *, geometry=None) -> OwnedLocation:
+def owned_cell_tree(mesh: dolfinx.mesh.Mesh) -> dolfinx.geometry.BoundingBoxTree:
+    """Bounding-box tree over this rank's owned cells (not collective)."""
+    num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    return dolfinx.geometry.BoundingBoxTree(mesh, mesh.topology.dim, np.arange(num_owned, dtype=np.int32))
+
+
+def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, /, *,
+                 tree: dolfinx.geometry.BoundingBoxTree | None = None, geometry=None) -> OwnedLocation:
     """Find, for each point, an owned cell of this rank that contains it (not collective).
 
     A point on a face shared by several owned cells gets the lowest local cell index. Curved
@@ -117,6 +133,7 @@ def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, *, geometry=None) ->
     Args:
         mesh: The mesh.
         x: Points, shape=(m, gdim), float64.
+        tree: :func:`owned_cell_tree` of ``mesh``, to reuse (built for this call if omitted).
         geometry: The mesh's :class:`particles.geometry.CellGeometry` to reuse for curved cells.
 
     Returns:
@@ -140,7 +157,8 @@ def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, *, geometry=None) ->
         return OwnedLocation(cells, xref)
     points = np.zeros((m, 3))
     points[:, :gdim] = x
-    tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim, np.arange(num_owned, dtype=np.int32))
+    if tree is None:
+        tree = owned_cell_tree(mesh)
     candidates = dolfinx.geometry.compute_collisions(tree, points)
     colliding = dolfinx.geometry.compute_colliding_cells(mesh, candidates, points)
     offsets = np.asarray(colliding.offsets)

@@ -26,7 +26,8 @@ What a step costs depends on what changes between steps. By default the viscosit
 ``eta = exp(-gamma T)`` at ``T = 0``: the viscosity is 1, but the solver treats it as variable, so
 the operator is assembled and the solver set up again at every step (the MUMPS factorisation, or
 the AMG hierarchy), as in a convection run with temperature-dependent viscosity; the iterative
-solver starts from a zero guess. ``--constant-viscosity`` lets the solver reuse its factorisation,
+solver starts from a zero guess. ``--solver auto`` (the default, as ``stokes.solver`` of a run) is
+MUMPS in 2D and FGMRES with the block Schur preconditioner (BoomerAMG on the velocity) in 3D. ``--constant-viscosity`` lets the solver reuse its factorisation,
 as an isoviscous run does (then a step is one right-hand side assembly and back-substitution).
 
 ``particles_per_cell * cells`` particles are placed with ``random_uniform`` and advected with RK2
@@ -48,7 +49,7 @@ Each phase is summed over the steps per rank; the report gives the slowest rank'
 Usage (the driver runs every configuration under ``mpirun`` and collects one JSON line per run)::
 
     python benchmarks/scaling/circular.py                          # 2D strong + weak, ranks 1 2 4
-    python benchmarks/scaling/circular.py --dim 3 --steps 20       # spherical shell, MUMPS
+    python benchmarks/scaling/circular.py --dim 3 --steps 20       # spherical shell, FGMRES + AMG
     mpirun -n 2 python benchmarks/scaling/circular.py --worker --radial 32    # one 2D run
     mpirun -n 2 python benchmarks/scaling/circular.py --worker --dim 3 --resolution 0.2
 
@@ -86,7 +87,7 @@ from convection.approximation import BoussinesqApproximation, ViscosityLaw  # no
 from convection.boundary import VelocityBC  # noqa: E402
 from convection.launch import mpi_environment  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh, shell_confinement  # noqa: E402
-from convection.stokes import StokesSolver  # noqa: E402
+from convection.stokes import STOKES_SOLVER_NAMES, StokesSolver  # noqa: E402
 from convection.timestep import cfl_timestep  # noqa: E402
 from particles import Swarm  # noqa: E402
 from particles.advection import Advector  # noqa: E402
@@ -254,12 +255,13 @@ class StokesFlow:
     Args:
         mesh: The shell mesh.
         flow: Boundary rotations (and the exact solution).
-        solver: ``"direct"`` (MUMPS) or ``"iterative"`` (:data:`convection.stokes.STOKES_SOLVERS`).
+        solver: a name in :data:`convection.stokes.STOKES_SOLVER_NAMES` (``"auto"``: MUMPS in 2D,
+            FGMRES + block Schur preconditioner in 3D).
         variable_viscosity: Treat the (unit) viscosity as variable: reassemble and set the solver up
             at every step (see the module docstring).
     """
 
-    def __init__(self, mesh: dolfinx.mesh.Mesh, flow: CouetteFlow, /, *, solver: str = "direct",
+    def __init__(self, mesh: dolfinx.mesh.Mesh, flow: CouetteFlow, /, *, solver: str = "auto",
                  variable_viscosity: bool = True) -> None:
         law = ViscosityLaw(temperature_law="frank_kamenetskii", gamma=1.0) if variable_viscosity else ViscosityLaw()
         approximation = BoussinesqApproximation(Ra=0.0, viscosity=law, gravity="radial")
@@ -344,7 +346,7 @@ class PhaseTimes(NamedTuple):
 
 def setup_problem(
     mesh: dolfinx.mesh.Mesh, /, *, particles_per_cell: float, flow: CouetteFlow | None = None,
-    solver: str = "direct", variable_viscosity: bool = True, cfl: float = 0.5, integrator: str = "rk2",
+    solver: str = "auto", variable_viscosity: bool = True, cfl: float = 0.5, integrator: str = "rk2",
     seed: int = 0,
 ) -> CircularProblem:
     """Stokes flow (solved once here), ``particles_per_cell * cells`` random_uniform particles kept in
@@ -460,7 +462,7 @@ def worker(args: argparse.Namespace) -> dict:
         "steps": args.steps,
         **slowest,
         "particle_updates_per_second": n * args.steps / slowest["particle_seconds"] if slowest["particle_seconds"] else 0.0,
-        "solver": args.solver,
+        "solver": problem.flow.stokes.solver,
         "variable_viscosity": args.variable_viscosity,
         "stokes_dofs": problem.flow.num_dofs,
         "stokes_iterations": problem.flow.iterations,
@@ -615,7 +617,10 @@ def report(records: list[dict], args: argparse.Namespace) -> str:
     mpi = "waiting ranks yield the core (`--mca mpi_yield_when_idle 1`)" if args.yield_when_idle else "waiting ranks spin"
     domain = (f"Structured annulus {R_IN} <= r <= {R_OUT}" if args.dim == 2
               else f"Spherical shell {R_IN} <= r <= {R_OUT} (gmsh, straight-sided tetrahedra)")
-    solve = (f"Stokes P2-P1 {args.solver} ({'MUMPS' if args.solver == 'direct' else 'MINRES + BoomerAMG'}), "
+    solver = records[0]["solver"] if records else args.solver
+    names = {"direct": "MUMPS", "iterative": "FGMRES + block Schur preconditioner, BoomerAMG on velocity",
+             "iterative_gamg": "FGMRES + block Schur preconditioner, GAMG on velocity"}
+    solve = (f"Stokes P2-P1 {solver} ({names.get(solver, solver)}), "
              + ("operator reassembled and solver set up again every step (variable-viscosity path), zero initial guess"
                 if args.variable_viscosity else "factorisation / preconditioner reused (constant viscosity)"))
     parts = [
@@ -694,7 +699,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--omega-inner", type=float, default=-1.0, help="rotation rate of the inner surface")
     parser.add_argument("--omega-outer", type=float, default=1.0, help="rotation rate of the outer surface")
     parser.add_argument("--integrator", default="rk2")
-    parser.add_argument("--solver", default="direct", choices=("direct", "iterative"), help="Stokes solver")
+    parser.add_argument("--solver", default="auto", choices=STOKES_SOLVER_NAMES,
+                        help="Stokes solver (auto: direct in 2D, iterative in 3D)")
     parser.add_argument("--constant-viscosity", dest="variable_viscosity", action="store_false",
                         help="let the Stokes solver reuse its factorisation / preconditioner between steps")
     parser.add_argument("--no-solve", dest="solve", action="store_false",

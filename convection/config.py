@@ -167,7 +167,8 @@ SCHEMA: dict[str, Any] = {
     "stokes": {
         "degree": Field("int", 2, minimum=2, help="velocity degree (pressure degree - 1)"),
         "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_NAMES"),
-                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D, direct (MUMPS) in 2D"),
+                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
+                        "free slip on both surfaces), direct (MUMPS) in 2D"),
         "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6)"),
     },
     "energy": {

@@ -27,8 +27,9 @@ What a step costs depends on what changes between steps. By default the viscosit
 the operator is assembled and the solver set up again at every step (the MUMPS factorisation, or
 the AMG hierarchy), as in a convection run with temperature-dependent viscosity; the iterative
 solver starts from a zero guess. ``--solver auto`` (the default, as ``stokes.solver`` of a run) is
-MUMPS in 2D and FGMRES with the block Schur preconditioner (BoomerAMG on the velocity) in 3D. ``--constant-viscosity`` lets the solver reuse its factorisation,
-as an isoviscous run does (then a step is one right-hand side assembly and back-substitution).
+MUMPS in 2D and FGMRES with the block Schur preconditioner (BoomerAMG on the velocity) in 3D.
+``--constant-viscosity`` lets the solver reuse its factorisation, as an isoviscous run does (then a
+step is one right-hand side assembly and back-substitution).
 
 ``particles_per_cell * cells`` particles are placed with ``random_uniform`` and advected with RK2
 in the solved velocity at a fixed CFL number (``convection.timestep.cfl_timestep``: shortest edge

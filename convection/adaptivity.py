@@ -32,9 +32,7 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
-from convection.balance import (
-    PARTITIONERS, CellLayout, create_partitioned_mesh, gather_cell_layout, partition, redistribution,
-)
+from convection.balance import PARTITIONERS, MeshPiece, create_mesh_from_piece, mesh_piece, partition
 from convection.transfer import PointEvaluator
 
 __all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "MeshRecipe",
@@ -127,24 +125,21 @@ def wanted_levels(
 class MeshRecipe:
     """How a :class:`MeshHierarchy` made its base and its latest mesh, to make both again, bit for
     bit, on the same number of ranks (a checkpoint stores it; DOLFINx builds meshes
-    deterministically from the same input).
+    deterministically from the same input). Every rank holds its own part only.
 
     Attributes:
-        base_layout: The base mesh gathered on rank 0 and ``base_owners`` its owner ranks, after
-            a repartition (None: the base mesh the hierarchy was created with).
-        base_owners: Owner rank per canonical base cell (every rank), or None.
+        base: This rank's piece of the base mesh handed to ``create_mesh`` at the latest
+            repartition (its cells, nodes, new owners and canonical indices), or None: the base
+            mesh the hierarchy was created with.
         rounds: The latest mesh refined from the base: per refinement round the marked local
-            cells (None: a uniform round). Used when ``layout`` is None.
-        layout: The latest mesh gathered on rank 0 after a repartition, and ``owners`` the owner
-            rank of each of its cells (rank 0), or None.
-        owners: See ``layout``.
+            cells (None: a uniform round). Used when ``mesh`` is None.
+        mesh: This rank's piece of the latest mesh handed to ``create_mesh`` at a repartition, or
+            None.
     """
 
-    base_layout: CellLayout | None = None
-    base_owners: npt.NDArray[np.int32] | None = None
+    base: MeshPiece | None = None
     rounds: list[npt.NDArray[np.int32] | None] = field(default_factory=list)
-    layout: CellLayout | None = None
-    owners: npt.NDArray[np.int32] | None = None
+    mesh: MeshPiece | None = None
 
 
 def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int) -> npt.NDArray[np.float64]:
@@ -157,6 +152,29 @@ def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int) -> npt.NDArray[np.
     if tdim == gdim:
         return np.abs(np.linalg.det(edges)) / math.factorial(tdim)
     return np.sqrt(np.abs(np.linalg.det(edges @ edges.transpose(0, 2, 1)))) / math.factorial(tdim)
+
+
+def _gather_midpoints(base: dolfinx.mesh.Mesh, canonical: npt.NDArray[np.int64]) -> npt.NDArray[np.float64] | None:
+    """Midpoints of all base cells by canonical index on rank 0 (None elsewhere; collective): the
+    input of the partition decision, gdim numbers per base cell."""
+    tdim, gdim = base.topology.dim, base.geometry.dim
+    num_owned = canonical.shape[0]
+    # The mean of the vertex coordinates taken in a fixed (lexicographic) order of the vertices, so
+    # the bits do not depend on the order a mesh lists them in (a replayed base may list them
+    # otherwise than the base the uninterrupted run gathered them from).
+    dofs = base.geometry.dofmap.array.reshape(-1, tdim + 1)[:num_owned]
+    corners = base.geometry.x[dofs][:, :, :gdim]
+    order = np.lexsort(corners.transpose(2, 0, 1)[::-1], axis=-1)  # per cell, by x then y (then z)
+    midpoints = np.take_along_axis(corners, order[:, :, None], axis=1).mean(axis=1)
+    gathered = base.comm.gather((np.asarray(canonical, dtype=np.int64), midpoints), root=0)
+    if base.comm.rank != 0:
+        return None
+    index = np.concatenate([g[0] for g in gathered])
+    if not np.array_equal(np.sort(index), np.arange(index.size)):
+        raise ValueError("canonical cell indices are not a permutation of the global cells")
+    out = np.empty((index.size, gdim))
+    out[index] = np.concatenate([g[1] for g in gathered])
+    return out
 
 
 def _with_ghost_values(mesh: dolfinx.mesh.Mesh, owned_values: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
@@ -186,7 +204,9 @@ class MeshHierarchy:
         self.base_volume = base.comm.allreduce(float(_simplex_volumes(base, num_owned).max(initial=0.0)), op=MPI.MAX)
         # Rank-independent index of each local base cell (the order the base mesh was created in).
         self.base_canonical = np.asarray(base.topology.original_cell_index, dtype=np.int64)
-        self._layout: CellLayout | None = None
+        # Rank 0: the base cells' midpoints by canonical index (the partition's input), once gathered.
+        self._midpoints: npt.NDArray[np.float64] | None = None
+        self._have_midpoints = False
         self.recipe = MeshRecipe()
         self._element = base.ufl_domain().ufl_coordinate_element()
 
@@ -216,6 +236,11 @@ class MeshHierarchy:
         every cell of ``mesh`` goes with its base cell, so later rebuilds (:meth:`rebuild`) keep
         each region on its rank.
 
+        The partition decision runs on rank 0 with the base cells' midpoints, cell and particle
+        counts (O(base cells), the coarse mesh) and the owner of every base cell is broadcast. The
+        meshes are not gathered: every rank hands its own base cells and its own cells of ``mesh``
+        to ``create_mesh`` (:func:`convection.balance.create_mesh_from_piece`).
+
         Args:
             mesh: The current mesh, refined from the current base.
             particles: Particles in each owned cell of ``mesh``, shape=(num_owned_cells,).
@@ -228,9 +253,10 @@ class MeshHierarchy:
         comm = self.base.comm
         if method not in PARTITIONERS:
             raise ValueError(f"unknown partition method {method!r}; valid names: {sorted(PARTITIONERS)}")
-        if self._layout is None:
-            num_owned = self.base.topology.index_map(self.tdim).size_local
-            self._layout = gather_cell_layout(self.base, self.base_canonical[:num_owned])
+        num_base_owned = self.base.topology.index_map(self.tdim).size_local
+        if not self._have_midpoints:  # the same on every rank (None on ranks > 0)
+            self._midpoints = _gather_midpoints(self.base, self.base_canonical[:num_base_owned])
+            self._have_midpoints = True
         base_of = self.base_cells(mesh)
         counts = np.zeros((2, self.num_base_cells))
         counts[0] = np.bincount(base_of, minlength=self.num_base_cells)
@@ -239,18 +265,20 @@ class MeshHierarchy:
         comm.Reduce(counts, total, op=MPI.SUM, root=0)
         owners = None
         if comm.rank == 0:
-            owners = partition(method, self._layout.midpoints, total[0], total[1], comm.size,
+            owners = partition(method, self._midpoints, total[0], total[1], comm.size,
                                particle_weight=particle_weight)
         owners = comm.bcast(owners, root=0)
-        created = create_partitioned_mesh(comm, self._layout, owners, self.new_domain())
+        canonical = self.base_canonical[:num_base_owned]
+        base_piece = mesh_piece(self.base, owners[canonical], canonical)
+        created = create_mesh_from_piece(comm, base_piece, self.new_domain())
         self.base, self.base_canonical = created.mesh, created.canonical
         # The refined mesh is redistributed as it is, not rebuilt from the new base: DOLFINx 0.5's
         # refinement of a repartitioned base with marks computed on another partition gave
         # inconsistent facet ownership (interior facets lost between ranks) in our tests.
-        layout, cell_owners = redistribution(mesh, owners[base_of])
-        self.recipe = MeshRecipe(self._layout, owners, [], layout, cell_owners)
+        piece = mesh_piece(mesh, owners[base_of])
+        self.recipe = MeshRecipe(base_piece, [], piece)
         # Not ``comm``: the old base mesh is gone, and with it its communicator.
-        return create_partitioned_mesh(mesh.comm, layout, cell_owners, self.new_domain()).mesh
+        return create_mesh_from_piece(mesh.comm, piece, self.new_domain()).mesh
 
     def new_domain(self) -> ufl.Mesh:
         """A new UFL domain for a mesh to create (DOLFINx ties each domain object to one mesh)."""
@@ -259,13 +287,12 @@ class MeshHierarchy:
     def replay(self, recipe: MeshRecipe, /) -> dolfinx.mesh.Mesh:
         """Make the base and the mesh of ``recipe`` again (collective; bit for bit on the ranks
         it was recorded on). The hierarchy then holds that base."""
-        if recipe.base_layout is not None:
-            created = create_partitioned_mesh(self.base.comm, recipe.base_layout, recipe.base_owners, self.new_domain())
+        if recipe.base is not None:
+            created = create_mesh_from_piece(self.base.comm, recipe.base, self.new_domain())
             self.base, self.base_canonical = created.mesh, created.canonical
-            self._layout = recipe.base_layout
         self.recipe = recipe
-        if recipe.layout is not None:
-            return create_partitioned_mesh(self.base.comm, recipe.layout, recipe.owners, self.new_domain()).mesh
+        if recipe.mesh is not None:
+            return create_mesh_from_piece(self.base.comm, recipe.mesh, self.new_domain()).mesh
         mesh = self.base
         for marked in recipe.rounds:
             mesh = self._refine(mesh, marked)
@@ -290,19 +317,22 @@ class MeshHierarchy:
         mesh = self.base
         for _ in range(level):
             mesh = self._refine(mesh, None)
-        self.recipe = MeshRecipe(self.recipe.base_layout, self.recipe.base_owners, [None] * level)
+        self.recipe = MeshRecipe(self.recipe.base, [None] * level)
         return mesh
 
-    def rebuild(self, old: dolfinx.mesh.Mesh, wanted: npt.NDArray[np.int32], /) -> dolfinx.mesh.Mesh:
+    def rebuild(self, old: dolfinx.mesh.Mesh, wanted: npt.NDArray[np.int32], /, *,
+                locator: PointEvaluator | None = None) -> dolfinx.mesh.Mesh:
         """A mesh refined from the base so each cell reaches the wanted level of ``old`` at its midpoint.
 
         Args:
             old: The current mesh (any partition: points not found on this rank are looked up on all ranks).
             wanted: Wanted level per owned cell of ``old``, shape=(num_owned_cells of old,).
+            locator: A :class:`PointEvaluator` of ``old`` to reuse (built here if omitted).
 
         Collective.
         """
-        locator = PointEvaluator(old)
+        if locator is None or locator.mesh is not old:
+            locator = PointEvaluator(old)
         wanted_local = _with_ghost_values(old, wanted)
         max_wanted = old.comm.allreduce(int(wanted.max(initial=0)), op=MPI.MAX)
         mesh = self.base
@@ -321,7 +351,7 @@ class MeshHierarchy:
                 break
             rounds.append(marked)
             mesh = self._refine(mesh, marked)
-        self.recipe = MeshRecipe(self.recipe.base_layout, self.recipe.base_owners, rounds)
+        self.recipe = MeshRecipe(self.recipe.base, rounds)
         return mesh
 
 
@@ -350,11 +380,13 @@ class Adaptivity:
         """Whether the mesh is adapted after step ``timestep``."""
         return timestep % self.params.every == 0
 
-    def new_mesh(self, mesh: dolfinx.mesh.Mesh, fields: Sequence[dolfinx.fem.Function], /) -> dolfinx.mesh.Mesh:
-        """The adapted mesh for the indicator of ``fields`` on ``mesh`` (collective)."""
+    def new_mesh(self, mesh: dolfinx.mesh.Mesh, fields: Sequence[dolfinx.fem.Function], /, *,
+                 locator: PointEvaluator | None = None) -> dolfinx.mesh.Mesh:
+        """The adapted mesh for the indicator of ``fields`` on ``mesh`` (collective); ``locator``:
+        a :class:`PointEvaluator` of ``mesh`` to reuse."""
         indicator = kelly_indicator(fields)
         wanted = wanted_levels(indicator, self.hierarchy.levels(mesh), self.params, mesh.comm)
-        return self.hierarchy.rebuild(mesh, wanted)
+        return self.hierarchy.rebuild(mesh, wanted, locator=locator)
 
     def initial_mesh(self, fields_on: Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.fem.Function]], /, *,
                      rounds: int | None = None) -> dolfinx.mesh.Mesh:

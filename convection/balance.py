@@ -11,13 +11,13 @@ adaptive run.
 from __future__ import annotations
 
 from particles.balance import (
-    CellLayout, WeightedMesh, create_partitioned_mesh, gather_cell_layout, owner_partitioner, redistribute,
-    redistribution,
+    CellLayout, MeshPiece, WeightedMesh, create_mesh_from_piece, create_partitioned_mesh, gather_cell_layout,
+    mesh_piece, owner_partitioner, pull, redistribute, redistribution,
 )
 from particles.partition import (
     PARTITIONERS, PartitionMethod, block_owners, morton_order, morton_owners, partition, rcb_owners,
 )
 
-__all__ = ["CellLayout", "PARTITIONERS", "PartitionMethod", "WeightedMesh", "block_owners", "create_partitioned_mesh",
-           "gather_cell_layout", "morton_order", "morton_owners", "owner_partitioner", "partition", "rcb_owners",
-           "redistribute", "redistribution"]
+__all__ = ["CellLayout", "MeshPiece", "PARTITIONERS", "PartitionMethod", "WeightedMesh", "block_owners",
+           "create_mesh_from_piece", "create_partitioned_mesh", "gather_cell_layout", "mesh_piece", "morton_order",
+           "morton_owners", "owner_partitioner", "partition", "pull", "rcb_owners", "redistribute", "redistribution"]

@@ -5,9 +5,10 @@ A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the
 - ``state.h5``: format and version attributes, the resolved config (YAML text), the run state
   (JSON: step, time, previous step, Stokes iterations, the temperature and composition solvers'
   time history scalars, the particle manager's counters, postprocessor and run-loop state, timers),
-  how the mesh was made (:class:`convection.adaptivity.MeshRecipe`: replayed on the same rank
-  count, so the mesh, its partition and its numbering come back bit for bit), the mesh's cells
-  (vertex coordinates and base cell, for a restart on another rank count), and every Function with
+  how the mesh was made (:class:`convection.adaptivity.MeshRecipe`: every rank's pieces handed to
+  ``create_mesh`` at the latest repartition, replayed on the same rank count, so the mesh, its
+  partition and its numbering come back bit for bit), the mesh's cells (global vertex indices, the
+  owned vertex coordinates and the base cell, for a restart on another rank count), and every Function with
   time history (``u``, ``p``, ``T^n``, ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``, advected or static
   material fractions): owned dof values with the owned dof coordinates;
 - ``particles.h5``: the particles with their properties (:func:`particles.checkpoint.save_checkpoint`).
@@ -19,7 +20,8 @@ temporary folder, removed by the next checkpoint). Only the newest ``keep`` are 
 Restoring on the rank count it was written on replays the mesh and copies the dof values: the
 continuation is bit for bit the uninterrupted run (when the run itself is deterministic: parallel
 MUMPS factorisations are not, see the README). On another rank count the mesh is rebuilt from its
-cells and partitioned afresh, the fields are matched dof by dof through their coordinates, and the
+cells and partitioned afresh (each rank reads an equal block of the saved cells and vertices and
+hands them to ``create_mesh``; no rank reads all of them), the fields are matched dof by dof through their coordinates, and the
 particles are located and migrated: the same run to round-off.
 """
 
@@ -45,7 +47,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.adaptivity import MeshHierarchy, MeshRecipe
-from convection.balance import CellLayout, create_partitioned_mesh
+from convection.balance import MeshPiece, create_mesh_from_piece, mesh_piece
 from convection.model import Model
 from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.manager import ParticleManager
@@ -57,7 +59,7 @@ __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpoin
            "write_checkpoint"]
 
 FORMAT = "convection-checkpoint"
-VERSION = 1
+VERSION = 2  # 2: the recipe and the mesh's cells as distributed pieces (1: gathered on rank 0)
 CONFIG_VERSION = 1
 """Version of the config schema a checkpoint's config was written with; raise it when a change of
 the schema would change the meaning of an old config."""
@@ -154,29 +156,28 @@ def _owned(f: dolfinx.fem.Function) -> tuple[npt.NDArray[np.float64], npt.NDArra
     return f.x.array[: n * bs].reshape(n, bs), V.tabulate_dof_coordinates()[:n]
 
 
-def _mesh_cells(mesh: dolfinx.mesh.Mesh, hierarchy: MeshHierarchy | None) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex coordinates of the owned cells shape=(n, tdim+1, gdim) and their base cells (canonical)."""
-    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
-    n = mesh.topology.index_map(tdim).size_local
-    dofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[:n]
-    corners = np.ascontiguousarray(mesh.geometry.x[dofs][:, :, :gdim])
-    base = hierarchy.base_cells(mesh) if hierarchy is not None else np.zeros(n, dtype=np.int64)
-    return corners, base
-
-
-def _write_layout(sink: H5Sink, name: str, layout: CellLayout | None, owners: Any) -> None:
-    """A layout gathered on rank 0 and its owners (rank 0's values are written)."""
-    if layout is None:
+def _write_piece(sink: H5Sink, name: str, piece: MeshPiece | None) -> None:
+    """Every rank's piece (:class:`convection.balance.MeshPiece`), concatenated in rank order, with
+    the row counts per rank (the cells' global vertex indices stay valid: the vertex blocks are
+    concatenated in the same order)."""
+    flag = sink.comm.allreduce(int(piece is not None), op=MPI.MAX)
+    if not flag:
         return
-    sink.replicated(f"{name}/points", layout.points)
-    sink.replicated(f"{name}/cells", layout.cells)
-    sink.replicated(f"{name}/midpoints", layout.midpoints)
-    sink.replicated(f"{name}/owners", None if owners is None else np.asarray(owners, dtype=np.int32))
+    comm = sink.comm
+    sink.distributed(f"{name}/cells", piece.cells)
+    sink.distributed(f"{name}/x", piece.x)
+    sink.distributed(f"{name}/owners", piece.owners)
+    canonical = piece.canonical
+    has_canonical = comm.allreduce(int(canonical is not None), op=MPI.MAX)
+    if has_canonical:
+        sink.distributed(f"{name}/canonical", canonical)
+    sink.replicated(f"{name}/cell_counts", np.asarray(comm.allgather(piece.cells.shape[0]), dtype=np.int64))
+    sink.replicated(f"{name}/x_counts", np.asarray(comm.allgather(piece.x.shape[0]), dtype=np.int64))
 
 
 def _write_recipe(sink: H5Sink, recipe: MeshRecipe) -> list[str]:
-    _write_layout(sink, "recipe/base", recipe.base_layout, recipe.base_owners)
-    _write_layout(sink, "recipe/mesh", recipe.layout, recipe.owners)
+    _write_piece(sink, "recipe/base", recipe.base)
+    _write_piece(sink, "recipe/mesh", recipe.mesh)
     rounds = []
     for i, marked in enumerate(recipe.rounds):
         kind = "uniform" if marked is None else "marked"
@@ -206,9 +207,13 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
     with H5Sink(tmp / "state.h5", comm) as sink:
         if hierarchy is not None:
             state["recipe_rounds"] = _write_recipe(sink, hierarchy.recipe)
-        corners, base = _mesh_cells(model.mesh, hierarchy)
-        sink.distributed("mesh/corners", corners)
-        sink.distributed("mesh/base_cells", base)
+        mesh = model.mesh
+        n = mesh.topology.index_map(mesh.topology.dim).size_local
+        cells = mesh_piece(mesh, np.zeros(n, dtype=np.int32))  # the owners are chosen on restore
+        sink.distributed("mesh/cells", cells.cells)
+        sink.distributed("mesh/x", cells.x)
+        sink.distributed("mesh/base_cells", hierarchy.base_cells(mesh) if hierarchy is not None
+                         else np.zeros(n, dtype=np.int64))
         for name, f in state_functions(model).items():
             values, coords = _owned(f)
             sink.distributed(f"functions/{name}/values", values)
@@ -283,21 +288,28 @@ def _slice(f: h5py.File, name: str, counts: npt.NDArray[np.int64], rank: int) ->
     return f[name][start: start + int(counts[rank])]
 
 
-def _read_layout(f: h5py.File, name: str, comm: MPI.Comm, num_cells: int) -> tuple[CellLayout, Any]:
-    """A saved layout and its owners (rank 0; empty arrays and None elsewhere)."""
-    if comm.rank == 0:
-        layout = CellLayout(f[f"{name}/points"][...], f[f"{name}/cells"][...], f[f"{name}/midpoints"][...],
-                            int(f[f"{name}/cells"].shape[0]))
-        return layout, f[f"{name}/owners"][...]
-    gdim = f[f"{name}/points"].shape[1]
-    tdim1 = f[f"{name}/cells"].shape[1]
-    return CellLayout(np.zeros((0, gdim)), np.zeros((0, tdim1), dtype=np.int64), np.zeros((0, gdim)), num_cells), None
+def _read_piece(f: h5py.File, name: str, comm: MPI.Comm) -> MeshPiece:
+    """This rank's piece as it was written (the same rank count)."""
+    cell_counts, x_counts = f[f"{name}/cell_counts"][...], f[f"{name}/x_counts"][...]
+    canonical = _slice(f, f"{name}/canonical", cell_counts, comm.rank) if f"{name}/canonical" in f else None
+    return MeshPiece(_slice(f, f"{name}/cells", cell_counts, comm.rank), _slice(f, f"{name}/x", x_counts, comm.rank),
+                     _slice(f, f"{name}/owners", cell_counts, comm.rank).astype(np.int32), canonical)
+
+
+def _block(f: h5py.File, name: str, comm: MPI.Comm) -> npt.NDArray:
+    """This rank's equal block of rows of a dataset (another rank count than it was written on)."""
+    total = int(f[name].shape[0])
+    return f[name][total * comm.rank // comm.size: total * (comm.rank + 1) // comm.size]
 
 
 def restore_mesh(saved: SavedRun, base: dolfinx.mesh.Mesh, hierarchy: MeshHierarchy | None, /) -> tuple[dolfinx.mesh.Mesh, bool]:
     """The checkpoint's mesh (collective): replayed on the same rank count (exact), rebuilt from its
     cells otherwise. ``base`` is the run's base mesh made afresh from the config. Returns the mesh
-    and whether it is exact."""
+    and whether it is exact.
+
+    Every rank reads only its own rows: its pieces of the recipe (the same rank count), or an equal
+    block of the saved cells and vertices (another rank count; the base cells then go to ranks in
+    equal blocks of canonical index and every cell to the rank of its base cell)."""
     comm = base.comm
     exact = saved.num_ranks == comm.size
     with h5py.File(saved.path / "state.h5", "r") as f:
@@ -305,41 +317,30 @@ def restore_mesh(saved: SavedRun, base: dolfinx.mesh.Mesh, hierarchy: MeshHierar
             return base, exact  # the mesh is the base mesh, made the same way on any rank count
         if exact:
             rounds_kind = saved.state["recipe_rounds"]
-            base_layout = base_owners = mesh_layout = mesh_owners = None
-            if "recipe/base" in f:
-                base_layout, base_owners = _read_layout(f, "recipe/base", comm, hierarchy.num_base_cells)
-                base_owners = comm.bcast(base_owners, root=0)
-            if "recipe/mesh" in f:
-                cells = int(f["mesh/base_cells"].shape[0])
-                mesh_layout, mesh_owners = _read_layout(f, "recipe/mesh", comm, cells)
+            base_piece = _read_piece(f, "recipe/base", comm) if "recipe/base" in f else None
+            mesh_piece_ = _read_piece(f, "recipe/mesh", comm) if "recipe/mesh" in f else None
             rounds = []
             for i, kind in enumerate(rounds_kind):
                 counts = f[f"recipe/round_{i}_counts"][...] if kind == "marked" else None
                 rounds.append(None if kind == "uniform" else _slice(f, f"recipe/round_{i}", counts, comm.rank).astype(np.int32))
-            recipe = MeshRecipe(base_layout, base_owners, rounds, mesh_layout, mesh_owners)
-            return hierarchy.replay(recipe), True
-        corners = f["mesh/corners"][...] if comm.rank == 0 else None
-        base_cells = f["mesh/base_cells"][...] if comm.rank == 0 else None
+            return hierarchy.replay(MeshRecipe(base_piece, rounds, mesh_piece_)), True
         if "recipe/base" in f:
-            layout, _ = _read_layout(f, "recipe/base", comm, hierarchy.num_base_cells)
-            hierarchy.replay(MeshRecipe(layout, _spread_owners(layout, comm), []))
+            # The saved base pieces, read in equal blocks: the global vertex numbering of the
+            # concatenated pieces holds on any rank count.
+            canonical = _block(f, "recipe/base/canonical", comm).astype(np.int64)
+            owners = (canonical * comm.size // max(hierarchy.num_base_cells, 1)).astype(np.int32)
+            hierarchy.replay(MeshRecipe(MeshPiece(_block(f, "recipe/base/cells", comm), _block(f, "recipe/base/x", comm),
+                                                  owners, canonical), []))
+        cells, x = _block(f, "mesh/cells", comm), _block(f, "mesh/x", comm)
+        base_cells = _block(f, "mesh/base_cells", comm)
     # The saved cells, each sent to the rank that owns its base cell, so the mesh and its base
     # stay together (load balancing needs that).
-    base_owner = _base_owners(hierarchy)
-    n = 0 if corners is None else corners.shape[0]
-    layout = _layout_of(corners, comm, n, base.geometry.dim, hierarchy.tdim)
-    owners = base_owner[base_cells] if comm.rank == 0 else None
-    return create_partitioned_mesh(comm, layout, owners, hierarchy.new_domain()).mesh, False
-
-
-def _spread_owners(layout: CellLayout, comm: MPI.Comm) -> npt.NDArray[np.int32]:
-    """Owner ranks for a base layout on a new rank count: equal blocks of canonical cells."""
-    n = layout.num_cells
-    return (np.arange(n) * comm.size // max(n, 1)).astype(np.int32)
+    owners = _base_owners(hierarchy)[base_cells]
+    return create_mesh_from_piece(comm, MeshPiece(cells, x, owners), hierarchy.new_domain()).mesh, False
 
 
 def _base_owners(hierarchy: MeshHierarchy) -> npt.NDArray[np.int32]:
-    """Owner rank of every canonical base cell (collective; every rank gets all)."""
+    """Owner rank of every canonical base cell (collective; every rank gets all: O(base cells))."""
     base = hierarchy.base
     n = base.topology.index_map(hierarchy.tdim).size_local
     owners = np.full(hierarchy.num_base_cells, -1, dtype=np.int32)
@@ -347,17 +348,6 @@ def _base_owners(hierarchy: MeshHierarchy) -> npt.NDArray[np.int32]:
     total = np.empty_like(owners)
     base.comm.Allreduce(owners, total, op=MPI.MAX)
     return total
-
-
-def _layout_of(corners: npt.NDArray | None, comm: MPI.Comm, num_cells: int, gdim: int, tdim: int) -> CellLayout:
-    """The saved cells (rank 0) as a layout; empty arrays on the other ranks."""
-    num_cells = comm.bcast(num_cells, root=0)
-    if comm.rank != 0:
-        return CellLayout(np.zeros((0, gdim)), np.zeros((0, tdim + 1), dtype=np.int64), np.zeros((0, gdim)), num_cells)
-    gdim = corners.shape[2]
-    points, inverse = np.unique(corners.reshape(-1, gdim), axis=0, return_inverse=True)
-    cells = inverse.reshape(num_cells, -1).astype(np.int64)
-    return CellLayout(points, cells, corners.mean(axis=1), num_cells)
 
 
 def restore_state(model: Model, saved: SavedRun, /, *, exact: bool) -> None:

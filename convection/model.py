@@ -99,6 +99,7 @@ class Model:
         self.u_previous: dolfinx.fem.Function | None = None
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
+        self._point_evaluator: PointEvaluator | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -214,9 +215,18 @@ class Model:
                 fields.append(self.T)
             if "composition" in self.adaptivity.fields:
                 fields.extend(self.fractions)
-            mesh = self.adaptivity.new_mesh(self.mesh, fields or [self._indicator_fallback()])
+            mesh = self.adaptivity.new_mesh(self.mesh, fields or [self._indicator_fallback()], locator=self._locator())
         self._move_to(mesh)
         return before, self.num_cells
+
+    def _locator(self) -> PointEvaluator:
+        """Point location and evaluation on the current mesh (built once per mesh; shares the
+        particles' cell geometry when they live on it)."""
+        if self._point_evaluator is None or self._point_evaluator.mesh is not self.mesh:
+            swarm = self._swarm()
+            geometry = swarm.geometry if swarm is not None and swarm.mesh is self.mesh else None
+            self._point_evaluator = PointEvaluator(self.mesh, geometry=geometry)
+        return self._point_evaluator
 
     def _indicator_fallback(self) -> dolfinx.fem.Function:
         return self.T if self.T is not None else self.stokes.u
@@ -247,11 +257,12 @@ class Model:
         for solver in old:
             if solver is not None:
                 solver.destroy()
+        self._point_evaluator = None  # it holds the old mesh
         self.mesh_version += 1
 
     def _transfer_fields(self, mesh: dolfinx.mesh.Mesh) -> list:
         """New solvers on ``mesh`` with the fields carried over; returns the old solvers."""
-        evaluator = PointEvaluator(self.mesh)
+        evaluator = self._locator()
 
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
             transfer_function(src, dst, evaluator=evaluator)

@@ -50,16 +50,16 @@ from typing import Any, NamedTuple
 
 import dolfinx
 import dolfinx.fem.petsc
-import dolfinx.la
 import numpy as np
 import ufl
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import (
-    VelocityBC, boundary_names, box_bounds, free_slip_boundaries, has_rotation_null_space, is_shell,
-    nitsche_free_slip, velocity_dirichlet_bcs,
+    VelocityBC, boundary_names, free_slip_boundaries, has_rotation_null_space, nitsche_free_slip, velocity_dirichlet_bcs,
+)
+from convection.nullspace import (
+    PressureMean, RigidRotations, constant_pressure_null_space, pressure_pin, rigid_body_modes,
 )
 from convection.petsc_options import MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options
 
@@ -164,36 +164,6 @@ def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
     return name
 
 
-def rigid_body_modes(V: dolfinx.fem.FunctionSpace) -> PETSc.NullSpace:
-    """The rigid-body modes of the vector space ``V`` as an orthonormal PETSc near-null space.
-
-    Three modes in 2D (two translations, one rotation), six in 3D (three of each), built from the
-    coordinates of ``V``'s owned nodes. The vectors have ``V``'s owned layout (block size gdim),
-    the layout of the velocity block of the Stokes operator. Collective.
-    """
-    gdim = V.mesh.geometry.dim
-    index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
-    n_nodes = index_map.size_local
-    x = V.tabulate_dof_coordinates()[:n_nodes, :gdim]
-    comm = V.mesh.comm
-    centre = comm.allreduce(x.sum(axis=0), op=MPI.SUM) / index_map.size_global
-    x = x - centre  # rotations about the centre are better conditioned (the same centre on all ranks)
-    vectors = [PETSc.Vec().createMPI((n_nodes * bs, PETSc.DECIDE), bsize=bs, comm=comm)
-               for _ in range(3 if gdim == 2 else 6)]
-    values = [v.getArray() for v in vectors]
-    for axis in range(gdim):
-        values[axis][axis::bs] = 1.0
-    if gdim == 2:
-        values[2][0::bs], values[2][1::bs] = -x[:, 1], x[:, 0]
-    else:
-        for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):  # rotation in the (i, j) plane
-            values[3 + k][i::bs], values[3 + k][j::bs] = -x[:, j], x[:, i]
-    for v in vectors:
-        v.assemble()
-    dolfinx.la.orthonormalize(vectors)
-    return PETSc.NullSpace().create(vectors=vectors, comm=comm)
-
-
 def _same_objects(a: Any, b: Any) -> bool:
     """True when ``a`` and ``b`` are the same objects, element by element for tuples and lists."""
     if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
@@ -270,19 +240,12 @@ class StokesSolver(PetscSolver):
 
         gdim = mesh.geometry.dim
         self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(gdim, self.bcs))
-        self._rotations: list[dolfinx.fem.Function] = []
-        self._rotation_forms: tuple[list, list] | None = None
-        self._rotation_gram: np.ndarray | None = None
+        self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
+        self._pressure_mean = PressureMean(self.p) if self.has_pressure_null_space else None
         self._bcs = velocity_dirichlet_bcs(self.V, self.bcs)
         self._pinned = self.has_pressure_null_space and not self.is_iterative
         if self._pinned:
-            self._bcs.append(self._pressure_pin())
-
-        one = dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0))
-        self._volume = mesh.comm.allreduce(
-            dolfinx.fem.assemble_scalar(dolfinx.fem.form(one * ufl.dx(domain=mesh))), op=MPI.SUM
-        )
-        self._p_integral = dolfinx.fem.form(self.p * ufl.dx)
+            self._bcs.append(pressure_pin(self.Q, self.bcs))
 
         self._forms_key: tuple[Any, Any] | None = None
         self._a = self._L = self._a_pc = None
@@ -299,23 +262,6 @@ class StokesSolver(PetscSolver):
                 "nitsche_penalty": self.nitsche_penalty}
 
     # ------------------------------------------------------------------ setup
-    def _pressure_pin(self) -> dolfinx.fem.DirichletBCMetaClass:
-        """Zero Dirichlet condition on the pressure dof(s) at the lower box corner (on a shell: on
-        the pressure dof numbered 0 globally, whichever point that is)."""
-        if is_shell(self.bcs):
-            owns_first = self.mesh.comm.rank == 0 and self.Q.dofmap.index_map.size_local > 0
-            dofs = np.arange(1 if owns_first else 0, dtype=np.int32)
-            return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, self.Q)
-        lower = box_bounds(self.mesh).lower
-        tol = 1e-10 * float(np.max(box_bounds(self.mesh).upper - lower))
-        gdim = self.mesh.geometry.dim
-
-        def corner(x: np.ndarray) -> np.ndarray:
-            return np.all(np.abs(x[:gdim] - lower[:, None]) <= tol, axis=0)
-
-        dofs = dolfinx.fem.locate_dofs_geometrical(self.Q, corner)
-        return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, self.Q)
-
     def _build_forms(self, T: Any, C: Any) -> None:
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
@@ -359,12 +305,8 @@ class StokesSolver(PetscSolver):
         if self.is_iterative:
             self._P = dolfinx.fem.petsc.create_matrix_block(self._a_pc)
         if self.has_pressure_null_space and self.is_iterative:
-            null_vec = self._b.duplicate()
-            null_vec.set(0.0)
             n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-            null_vec.array[n_u:] = 1.0
-            null_vec.normalize()
-            self._null_space = PETSc.NullSpace().create(vectors=[null_vec], comm=self.mesh.comm)
+            self._null_space = constant_pressure_null_space(self._b, n_u)
 
         set_owned_options(self, self._prefix, self._petsc_options)
         if self.is_iterative:
@@ -447,8 +389,10 @@ class StokesSolver(PetscSolver):
         if reason < 0:
             raise RuntimeError(f"Stokes solver did not converge (PETSc reason {reason})")
         self._unpack_solution(self._x)
-        self._normalise_pressure()
-        self._remove_rotations()
+        if self._pressure_mean is not None:
+            self._pressure_mean.normalise()
+        if self._rotations is not None:
+            self._rotations.remove(self.u)
 
         residual = self._b.duplicate()
         self._A.mult(self._x, residual)
@@ -492,53 +436,6 @@ class StokesSolver(PetscSolver):
         self.p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
         self.u.x.scatter_forward()
         self.p.x.scatter_forward()
-
-    def _normalise_pressure(self) -> None:
-        if not self.has_pressure_null_space:
-            return
-        mean = self.mesh.comm.allreduce(
-            dolfinx.fem.assemble_scalar(self._p_integral), op=MPI.SUM
-        ) / self._volume
-        self.p.x.array[:] -= mean
-
-    def _rotation_fields(self) -> list[dolfinx.fem.Function]:
-        """Rigid rotations about the origin in ``V`` (exact: they are linear), when both shell
-        boundaries are free slip: ``(-y, x)`` in 2D; ``e_i x x`` for i = x, y, z in 3D."""
-        if not self.has_rotation_null_space or self._rotations:
-            return self._rotations
-        gdim = self.mesh.geometry.dim
-        if gdim == 2:
-            fields = [lambda x: np.stack([-x[1], x[0]])]
-        else:
-            zero = lambda x: np.zeros(x.shape[1])  # noqa: E731
-            fields = [lambda x: np.stack([zero(x), -x[2], x[1]]), lambda x: np.stack([x[2], zero(x), -x[0]]),
-                      lambda x: np.stack([-x[1], x[0], zero(x)])]
-        for field in fields:
-            rotation = dolfinx.fem.Function(self.V)
-            rotation.interpolate(field)
-            self._rotations.append(rotation)
-        return self._rotations
-
-    def _remove_rotations(self) -> None:
-        """Subtract the L2 projection of ``u`` onto the rigid rotations (free slip on both shell
-        boundaries). Collective."""
-        rotations = self._rotation_fields()
-        if not rotations:
-            return
-        if self._rotation_forms is None:
-            self._rotation_forms = (
-                [[dolfinx.fem.form(ufl.inner(a, b) * ufl.dx) for b in rotations] for a in rotations],
-                [dolfinx.fem.form(ufl.inner(self.u, a) * ufl.dx) for a in rotations],
-            )
-            gram_forms = self._rotation_forms[0]
-            local = np.array([[dolfinx.fem.assemble_scalar(f) for f in row] for row in gram_forms])
-            self._rotation_gram = np.empty_like(local)
-            self.mesh.comm.Allreduce(local, self._rotation_gram, op=MPI.SUM)
-        local = np.array([dolfinx.fem.assemble_scalar(f) for f in self._rotation_forms[1]])
-        moments = np.empty_like(local)
-        self.mesh.comm.Allreduce(local, moments, op=MPI.SUM)
-        for coefficient, rotation in zip(np.linalg.solve(self._rotation_gram, moments), rotations):
-            self.u.x.array[:] -= coefficient * rotation.x.array
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(

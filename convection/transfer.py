@@ -2,7 +2,7 @@
 
 DOLFINx 0.5 has no ``interpolate_nonmatching_meshes``: the new Function is interpolated from a
 callable that evaluates the old Function at the new interpolation points. Points are searched in
-this rank's part of the old mesh first (a bounding-box tree); meshes rebuilt from the same
+this rank's part of the old mesh first (a bounding-box tree and pull-back); meshes rebuilt from the same
 distributed base mesh without redistribution (see :mod:`convection.adaptivity`) find every point
 locally. Points not found locally are resolved collectively: they are shared with all ranks, each
 rank evaluates the ones it holds, and the values are combined.
@@ -16,8 +16,10 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 import dolfinx.fem
-import dolfinx.geometry
 import dolfinx.mesh
+
+from particles.evaluation import Evaluator
+from particles.geometry import CellGeometry, Located
 
 __all__ = ["PointEvaluator", "transfer_function"]
 
@@ -25,48 +27,60 @@ __all__ = ["PointEvaluator", "transfer_function"]
 class PointEvaluator:
     """Evaluate Functions on a fixed mesh at arbitrary points (collective for missing points).
 
+    Points are located by :class:`particles.geometry.CellGeometry` (bounding-box candidates tested
+    by pull-back; among several containing cells the lowest local index) and Lagrange P1/P2
+    values come from the particles' compiled evaluation kernel at the reference coordinates
+    found (:class:`particles.evaluation.Evaluator`), so the fields of one element on one target
+    mesh share one search.
+
     Args:
         mesh: The mesh the source Functions live on.
+        geometry: Its :class:`CellGeometry`, if one exists already (e.g. the particles' swarm's).
     """
 
-    def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
+    def __init__(self, mesh: dolfinx.mesh.Mesh, /, *, geometry: CellGeometry | None = None) -> None:
         self.mesh = mesh
-        self._located: dict[bytes, npt.NDArray[np.int32]] = {}
-        tdim = mesh.topology.dim
-        cell_map = mesh.topology.index_map(tdim)
-        cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
-        self._tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim, cells, padding=1e-12)
+        self.geometry = geometry if geometry is not None else CellGeometry(mesh)
+        if self.geometry.mesh is not mesh:
+            raise ValueError("the geometry belongs to another mesh")
+        self._located: dict[bytes, Located] = {}
+        self._evaluators: dict[int, Evaluator] = {}
 
-    def colliding(self, points: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    def colliding(self, points: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
         """All local cells containing each point, as CSR (offsets shape=(n+1,), cells), points shape=(n, 3)."""
-        candidates = dolfinx.geometry.compute_collisions(self._tree, points)
-        colliding = dolfinx.geometry.compute_colliding_cells(self.mesh, candidates, points)
-        return np.asarray(colliding.offsets, dtype=np.int32), np.asarray(colliding.array, dtype=np.int32)
+        offsets, cells, _ = self.geometry.colliding(points[:, : self.geometry.gdim])
+        return offsets, cells
 
     def locate(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
-        """First local cell containing each point (-1 where none), points shape=(n, 3).
+        """Lowest local cell containing each point (-1 where none), points shape=(n, 3)."""
+        return self._locate(points).cells
+
+    def _locate(self, points: npt.NDArray[np.float64]) -> Located:
+        """Cells and reference coordinates of ``points`` (shape=(n, 3)).
 
         The answers for the last few point sets are remembered: the fields of one element on one
         target mesh (u, T and its history, ...) ask for the same interpolation points.
         """
         key = hashlib.blake2b(np.ascontiguousarray(points).view(np.uint8), digest_size=16).digest() + \
             np.int64(points.shape[0]).tobytes()
-        cells = self._located.get(key)
-        if cells is None:
-            cells = self._locate(points)
+        found = self._located.get(key)
+        if found is None:
+            found = self.geometry.locate(points[:, : self.geometry.gdim])
             if len(self._located) >= 4:
                 self._located.pop(next(iter(self._located)))
-            self._located[key] = cells
-        return cells
+            self._located[key] = found
+        return found
 
-    def _locate(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
-        candidates = dolfinx.geometry.compute_collisions(self._tree, points)
-        colliding = dolfinx.geometry.compute_colliding_cells(self.mesh, candidates, points)
-        offsets = colliding.offsets
-        found = offsets[1:] > offsets[:-1]
-        cells = np.full(points.shape[0], -1, dtype=np.int32)
-        cells[found] = colliding.array[offsets[:-1][found]]
-        return cells
+    def _values(self, function: dolfinx.fem.Function, found: Located, rows: npt.NDArray[np.int64],
+                value_size: int) -> npt.NDArray[np.float64]:
+        """Values of ``function`` at the located points ``rows``, shape=(len(rows), value_size)."""
+        V = function.function_space
+        evaluator = self._evaluators.get(id(V))
+        if evaluator is None or evaluator.V is not V:
+            evaluator = self._evaluators[id(V)] = Evaluator(V, geometry=self.geometry)
+        values = evaluator.values(function, np.ascontiguousarray(found.cells[rows]),
+                                  np.ascontiguousarray(found.xref[rows]))
+        return values.reshape(-1, value_size)
 
     def max_over_colliding(self, points: npt.NDArray[np.float64], values: npt.NDArray[np.int32], /, *,
                            default: int = -1) -> npt.NDArray[np.int32]:
@@ -124,21 +138,21 @@ class PointEvaluator:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         value_size = int(np.prod(function.ufl_shape)) if function.ufl_shape else 1
         values = np.zeros((points.shape[0], value_size))
-        cells = self.locate(points)
-        found = cells >= 0
-        if np.any(found):
-            values[found] = function.eval(points[found], cells[found]).reshape(-1, value_size)
-        missing = np.flatnonzero(~found)
+        located = self._locate(points)
+        found = np.flatnonzero(located.cells >= 0)
+        if found.size:
+            values[found] = self._values(function, located, found, value_size)
+        missing = np.flatnonzero(located.cells < 0)
         if comm.allreduce(missing.size, op=MPI.SUM) == 0:
             return values
         # Collective fallback: share the missing points with every rank.
         all_points = comm.allgather(points[missing])
         gathered = np.concatenate(all_points) if all_points else np.empty((0, 3))
-        gcells = self.locate(gathered)
-        gfound = gcells >= 0
+        glocated = self._locate(gathered)
+        gfound = glocated.cells >= 0
         gvalues = np.zeros((gathered.shape[0], value_size))
         if np.any(gfound):
-            gvalues[gfound] = function.eval(gathered[gfound], gcells[gfound]).reshape(-1, value_size)
+            gvalues[gfound] = self._values(function, glocated, np.flatnonzero(gfound), value_size)
         # Owner of each value: lowest rank that found it.
         rank_found = np.where(gfound, comm.rank, comm.size).astype(np.int32)
         owner = np.empty_like(rank_found)

@@ -7,11 +7,19 @@ mesh anew on that partition and moves the particles to it (:func:`particles.adap
 Functions on the old mesh are the caller's to carry over (or to rebuild on ``swarm.mesh``).
 
 The building blocks are shared with the convection code's adaptive meshes
-(``convection.adaptivity.MeshHierarchy.repartition``): :func:`owner_partitioner` hands fixed
-owners to ``dolfinx.mesh.create_mesh`` (cells sharing a facet with another rank's cells are ghosted
-there, as ``GhostMode.shared_facet`` requires). The methods need every cell's data: the mesh is
-gathered whole on rank 0 (:class:`CellLayout`), which suits meshes of up to a few million cells;
-memory on rank 0 is O(global cells).
+(``convection.adaptivity.MeshHierarchy.repartition``). The mesh is created anew *distributed*:
+every rank hands ``dolfinx.mesh.create_mesh`` only its own cells (:class:`MeshPiece`: their
+vertices as global geometry node indices of the current mesh, its own block of node coordinates,
+the owner chosen for each cell), and :func:`owner_partitioner` sends each cell to its owner (and,
+as ``GhostMode.shared_facet`` requires, to the ranks owning a facet neighbour, asked for across
+ranks). Memory per rank stays O(cells per rank); the rank-independent (canonical) index of each
+cell travels along (:func:`create_mesh_from_piece`).
+
+What still goes through rank 0 is the partition *decision* (:func:`cell_owners`: one midpoint and
+one particle count per cell are gathered there and the partitioner runs serially), O(global cells)
+small data on rank 0. :func:`gather_cell_layout` and :func:`create_partitioned_mesh` (the whole
+mesh gathered on rank 0, the path used before) are kept only for the cost-model measurement of that
+path (``benchmarks/scaling/measure_constants.py serialmesh``); nothing else uses them.
 """
 
 from __future__ import annotations
@@ -31,16 +39,66 @@ from particles.adaptivity import move_to_mesh
 from particles.partition import PARTITIONERS, partition
 from particles.swarm import Swarm
 
-__all__ = ["CellLayout", "WeightedMesh", "cell_owners", "create_partitioned_mesh", "gather_cell_layout",
-           "owner_partitioner", "rebalance", "redistribute", "redistribution"]
+__all__ = ["CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "create_mesh_from_piece",
+           "create_partitioned_mesh", "gather_cell_layout", "mesh_piece", "owner_partitioner", "pull",
+           "rebalance", "redistribute", "redistribution"]
+
+
+def _starts(comm: MPI.Comm, n: int) -> npt.NDArray[np.int64]:
+    """First global index of every rank's block of ``n`` rows and the total, shape=(size + 1,)
+    (an allgather of one integer per rank)."""
+    return np.concatenate([[0], np.cumsum(comm.allgather(int(n)))]).astype(np.int64)
+
+
+def pull(comm: MPI.Comm, wanted: npt.ArrayLike, values: npt.NDArray, starts: npt.NDArray[np.int64], /) -> npt.NDArray:
+    """Values of rows held on other ranks, by global row index (collective).
+
+    Rank r holds ``values`` for the global rows ``starts[r] <= i < starts[r + 1]``. Each rank sends
+    its requests to the ranks holding them and gets the values back: an ``Alltoall`` of the request
+    counts (O(ranks) integers per rank) and two ``Alltoallv`` of the requests and answers.
+
+    Args:
+        comm: The communicator.
+        wanted: Global row indices, shape=(m,).
+        values: This rank's rows, shape=(starts[rank + 1] - starts[rank], ...).
+        starts: Row offsets of all ranks, shape=(size + 1,) (see ``_starts``).
+
+    Returns:
+        ``values`` of the wanted rows, shape=(m, ...), in the order of ``wanted``.
+    """
+    wanted = np.asarray(wanted, dtype=np.int64).reshape(-1)
+    values = np.ascontiguousarray(values)
+    size = comm.size
+    holder = np.searchsorted(starts, wanted, side="right") - 1
+    if wanted.size and (holder.min() < 0 or holder.max() >= size):
+        raise ValueError("pull: a wanted row lies outside every rank's range")
+    order = np.argsort(holder, kind="stable")
+    send_counts = np.bincount(holder, minlength=size).astype(np.int32)
+    recv_counts = np.empty(size, dtype=np.int32)
+    comm.Alltoall(send_counts, recv_counts)
+    requests = np.empty(int(recv_counts.sum()), dtype=np.int64)
+    comm.Alltoallv([wanted[order], send_counts], [requests, recv_counts])
+    trailing = values.shape[1:]
+    width = int(np.prod(trailing, dtype=np.int64))
+    reply = np.ascontiguousarray(values[requests - starts[comm.rank]]).reshape(-1)
+    answers = np.empty(wanted.size * width, dtype=values.dtype)
+    comm.Alltoallv([reply, recv_counts * width], [answers, send_counts * width])
+    out = np.empty((wanted.size, *trailing), dtype=values.dtype)
+    out[order] = answers.reshape((wanted.size, *trailing))
+    return out
 
 
 def owner_partitioner(owners: npt.NDArray[np.int32], /) -> Callable[..., Any]:
     """A cell partitioner for ``dolfinx.mesh.create_mesh(..., partitioner=...)`` with fixed owners.
 
+    Every rank may pass cells (each its own share; the dual graph DOLFINx builds links them by
+    global input index, rank r's cells numbered from the sum of the counts of ranks < r). When
+    ghosting, a cell also goes to the owners of its facet neighbours; the owners of neighbours
+    passed by another rank are asked for with :func:`pull`.
+
     Args:
         owners: Owner rank of each cell this rank passes to ``create_mesh``, in the same order,
-            shape=(num_cells_passed,) (all cells on one rank, none elsewhere).
+            shape=(num_cells_passed,).
     """
     owners = np.asarray(owners, dtype=np.int32)
 
@@ -50,23 +108,35 @@ def owner_partitioner(owners: npt.NDArray[np.int32], /) -> Callable[..., Any]:
             raise ValueError(f"owner partitioner: {owners.shape[0]} owners for {n} cells on this rank")
         if n and (owners.min() < 0 or owners.max() >= nparts):
             raise ValueError(f"owner partitioner: owners must lie in [0, {nparts})")
-        destinations: list[int] = []
-        offsets = [0]
-        for i in range(n):
-            destinations.append(int(owners[i]))
-            if ghosting:
-                others = {int(owners[j]) for j in graph.links(i) if 0 <= j < n} - {int(owners[i])}
-                destinations.extend(sorted(others))
-            offsets.append(len(destinations))
-        return dolfinx.cpp.graph.AdjacencyList_int32(
-            np.asarray(destinations, dtype=np.int32), np.asarray(offsets, dtype=np.int32)
-        )
+        if not ghosting:
+            return dolfinx.cpp.graph.AdjacencyList_int32(owners.copy())
+        starts = _starts(comm, n)
+        first = starts[comm.rank]
+        links = np.asarray(graph.array, dtype=np.int64)
+        source = np.repeat(np.arange(n, dtype=np.int64), np.diff(np.asarray(graph.offsets, dtype=np.int64)))
+        mine = (links >= first) & (links < first + n)
+        neighbour = np.empty(links.size, dtype=np.int32)
+        neighbour[mine] = owners[links[mine] - first]
+        neighbour[~mine] = pull(comm, links[~mine], owners, starts)  # collective: every rank calls it
+        # Per cell: its owner, then the other owners among its neighbours in increasing order.
+        keys = np.unique(source * nparts + neighbour)
+        cell, rank = keys // nparts, (keys % nparts).astype(np.int32)
+        other = rank != owners[cell]
+        cell, rank = cell[other], rank[other]
+        offsets = np.zeros(n + 1, dtype=np.int32)
+        offsets[1:] = np.cumsum(1 + np.bincount(cell, minlength=n))
+        destinations = np.empty(int(offsets[-1]), dtype=np.int32)
+        destinations[offsets[:-1]] = owners
+        within = np.arange(cell.size) - np.searchsorted(cell, cell)
+        destinations[offsets[cell] + 1 + within] = rank
+        return dolfinx.cpp.graph.AdjacencyList_int32(destinations, offsets)
 
     return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner)
 
 
 class CellLayout(NamedTuple):
-    """A simplex mesh held whole on rank 0 (empty arrays elsewhere), cells in canonical order.
+    """A simplex mesh held whole on rank 0 (empty arrays elsewhere), cells in canonical order
+    (the gathered path, kept for ``benchmarks/scaling/measure_constants.py serialmesh`` only).
 
     Attributes:
         points: Vertex coordinates, shape=(num_points, gdim) (rank 0).
@@ -82,7 +152,8 @@ class CellLayout(NamedTuple):
 
 
 def gather_cell_layout(mesh: dolfinx.mesh.Mesh, canonical: npt.NDArray[np.int64], /) -> CellLayout:
-    """Gather a P1 simplex mesh on rank 0 (collective).
+    """Gather a P1 simplex mesh on rank 0 (collective; memory O(global cells) on rank 0, which
+    repartitioning no longer does: see :func:`mesh_piece`).
 
     Args:
         mesh: The distributed mesh.
@@ -119,7 +190,8 @@ class WeightedMesh(NamedTuple):
 
 def create_partitioned_mesh(comm: MPI.Comm, layout: CellLayout, owners: npt.NDArray[np.int32] | None,
                             domain: ufl.Mesh, /) -> WeightedMesh:
-    """Distribute ``layout`` with the given owner of each canonical cell (collective).
+    """Distribute ``layout`` with the given owner of each canonical cell (collective; every cell
+    passes through rank 0, see :func:`create_mesh_from_piece` for the distributed path).
 
     Args:
         comm: Communicator of the new mesh.
@@ -134,31 +206,95 @@ def create_partitioned_mesh(comm: MPI.Comm, layout: CellLayout, owners: npt.NDAr
     return WeightedMesh(mesh, np.asarray(mesh.topology.original_cell_index, dtype=np.int64))
 
 
+class MeshPiece(NamedTuple):
+    """One rank's share of a mesh to create (:func:`create_mesh_from_piece`): its own cells only.
+
+    Attributes:
+        cells: Geometry nodes of each cell as global node indices, shape=(num_cells, nodes_per_cell),
+            int64.
+        x: This rank's block of node coordinates, shape=(num_nodes, gdim): global nodes
+            ``offset .. offset + num_nodes - 1``, ``offset`` the sum of the blocks of lower ranks.
+        owners: Owner rank chosen for each cell, shape=(num_cells,), int32.
+        canonical: Rank-independent index of each cell, shape=(num_cells,), int64, or None (then
+            the index of a cell is its position in the concatenation of the pieces in rank order).
+    """
+
+    cells: npt.NDArray[np.int64]
+    x: npt.NDArray[np.float64]
+    owners: npt.NDArray[np.int32]
+    canonical: npt.NDArray[np.int64] | None = None
+
+
+def mesh_piece(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], canonical: npt.NDArray[np.int64] | None = None,
+               /) -> MeshPiece:
+    """This rank's owned cells of ``mesh`` and owned geometry nodes, numbered by the geometry's
+    global node indices, with the new owner of each cell (not collective).
+
+    Args:
+        mesh: A mesh with an affine (P1) coordinate element.
+        owners: New owner rank of each owned cell, shape=(num_owned_cells,).
+        canonical: Rank-independent index of each owned cell, shape=(num_owned_cells,), or None.
+    """
+    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+    num_owned = mesh.topology.index_map(tdim).size_local
+    nodes = mesh.geometry.index_map()
+    dofmap = mesh.geometry.dofmap
+    dofs = dofmap.array.reshape(dofmap.num_nodes, -1)[:num_owned]
+    cells = np.asarray(nodes.local_to_global(np.ascontiguousarray(dofs, dtype=np.int32).reshape(-1)),
+                       dtype=np.int64).reshape(num_owned, -1)
+    x = np.array(mesh.geometry.x[: nodes.size_local, :gdim])
+    owners = np.asarray(owners, dtype=np.int32)[:num_owned].copy()
+    if owners.shape[0] != num_owned:
+        raise ValueError(f"{owners.shape[0]} owners for {num_owned} owned cells")
+    if canonical is not None:
+        canonical = np.asarray(canonical, dtype=np.int64)[:num_owned].copy()
+    return MeshPiece(cells, x, owners, canonical)
+
+
+def create_mesh_from_piece(comm: MPI.Comm, piece: MeshPiece, domain: ufl.Mesh, /) -> WeightedMesh:
+    """The mesh made of every rank's piece, each cell on the owner its piece names (collective).
+
+    Ghost mode ``shared_facet``. The same pieces on the same ranks give the same mesh, numbering
+    and all (DOLFINx builds meshes deterministically from the same input).
+
+    Args:
+        comm: Communicator of the new mesh.
+        piece: This rank's cells (:func:`mesh_piece`).
+        domain: The coordinate element (``ufl.Mesh``) of the mesh.
+
+    Returns:
+        The mesh and the canonical index of each of its local cells (owned and ghost), fetched from
+        the rank that passed the cell.
+    """
+    mesh = dolfinx.mesh.create_mesh(comm, piece.cells, piece.x, domain,
+                                    ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
+                                    partitioner=owner_partitioner(piece.owners))
+    original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)
+    if piece.canonical is None:
+        return WeightedMesh(mesh, original)
+    starts = _starts(comm, piece.cells.shape[0])
+    return WeightedMesh(mesh, pull(comm, original, piece.canonical, starts))
+
+
 def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> dolfinx.mesh.Mesh:
     """The same cells, distributed so each owned cell of ``mesh`` goes to ``owners`` (collective).
 
-    The cells are gathered on rank 0 and the mesh is created anew (DOLFINx 0.5 has no in-place
-    redistribution), which gives it a fresh, consistent parallel topology.
+    Every rank hands its own cells to ``create_mesh`` (:func:`redistribution`); DOLFINx 0.5 has no
+    in-place redistribution, and creating the mesh anew gives it a fresh, consistent parallel
+    topology.
 
     Args:
         mesh: A P1 simplex mesh.
         owners: New owner rank of each owned cell, shape=(num_owned_cells,).
     """
-    layout, all_owners = redistribution(mesh, owners)
     domain = ufl.Mesh(mesh.ufl_domain().ufl_coordinate_element())
-    return create_partitioned_mesh(mesh.comm, layout, all_owners, domain).mesh
+    return create_mesh_from_piece(mesh.comm, redistribution(mesh, owners), domain).mesh
 
 
-def redistribution(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> tuple[CellLayout, Any]:
-    """What :func:`redistribute` hands to :func:`create_partitioned_mesh`: the cells gathered on
-    rank 0 (in rank order) and their new owners (rank 0; None elsewhere). Collective."""
-    comm = mesh.comm
-    tdim = mesh.topology.dim
-    num_owned = mesh.topology.index_map(tdim).size_local
-    offset = comm.exscan(num_owned) or 0
-    layout = gather_cell_layout(mesh, np.arange(offset, offset + num_owned, dtype=np.int64))
-    gathered = comm.gather(np.asarray(owners, dtype=np.int32)[:num_owned], root=0)
-    return layout, (np.concatenate(gathered) if comm.rank == 0 else None)
+def redistribution(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> MeshPiece:
+    """What :func:`redistribute` hands to :func:`create_mesh_from_piece` on this rank: its owned
+    cells and nodes (:func:`mesh_piece`) with their new owners. Not collective."""
+    return mesh_piece(mesh, owners)
 
 
 def cell_owners(mesh: dolfinx.mesh.Mesh, particles_per_cell: npt.ArrayLike, /, *, particle_weight: float = 1.0,
@@ -167,7 +303,8 @@ def cell_owners(mesh: dolfinx.mesh.Mesh, particles_per_cell: npt.ArrayLike, /, *
 
     The cell midpoints and particle counts are gathered on rank 0, partitioned there by ``method``
     (:data:`particles.partition.PARTITIONERS`) with the load ``1 + W n_particles`` per cell, and
-    the owners scattered back.
+    the owners scattered back: the partition decision is serial, on O(global cells) small data
+    (gdim + 1 numbers per cell); the mesh itself is never gathered (:func:`redistribute`).
 
     Args:
         mesh: The mesh.

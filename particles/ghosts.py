@@ -31,6 +31,7 @@ from mpi4py import MPI
 import dolfinx.la
 import dolfinx.mesh
 
+from particles.geometry import unique_pairs
 from particles.swarm import PropertyLayout, Swarm
 
 __all__ = ["GhostExchange", "GhostParticles", "exchange_ghosts", "ghost_exchange_for", "vertex_complete"]
@@ -157,7 +158,7 @@ class GhostExchange:
         own_pairs = [np.stack([mine[mine < num_owned_v], np.full(np.count_nonzero(mine < num_owned_v), rank)], axis=1)]
         for r, t in claims.items():
             own_pairs.append(np.stack([t[:, 0] - v_start, np.full(t.shape[0], r)], axis=1))
-        pairs = np.unique(np.concatenate(own_pairs).astype(np.int64), axis=0)
+        pairs = unique_pairs(np.concatenate(own_pairs))
         # Answer each claimant with all (global vertex, rank) pairs of the vertices it claimed.
         replies = {}
         for r, t in claims.items():
@@ -170,7 +171,7 @@ class GhostExchange:
             order = np.argsort(g_of)
             pos = order[np.searchsorted(g_of, got[:, 0], sorter=order)]
             result.append(np.stack([ghost_v[pos].astype(np.int64), got[:, 1]], axis=1))
-        return np.unique(np.concatenate(result), axis=0)
+        return unique_pairs(np.concatenate(result))
 
     def _build_halo(self, local_vertices: npt.NDArray[np.int32], touching: npt.NDArray[np.int64], cmap) -> None:
         rank, nv, n_owned = self.comm.rank, self.num_cell_vertices, self.num_owned_cells
@@ -183,7 +184,7 @@ class GhostExchange:
         lo, hi = np.searchsorted(tv, vert, "left"), np.searchsorted(tv, vert, "right")
         lengths = hi - lo
         idx = np.repeat(lo - (np.cumsum(lengths) - lengths), lengths) + np.arange(int(lengths.sum()))
-        pairs = np.unique(np.stack([np.repeat(cell_of, lengths), tr[idx]], axis=1), axis=0)
+        pairs = unique_pairs(np.stack([np.repeat(cell_of, lengths), tr[idx]], axis=1))
         self.neighbours = np.unique(pairs[:, 1]).astype(np.int32)
         self.send_cells = {int(r): pairs[pairs[:, 1] == r, 0].astype(np.int32) for r in self.neighbours}
         tables = {r: np.concatenate([(c.astype(np.int64) + self.cell_start)[:, None], self.owned_vertex_globals[c]],
@@ -216,7 +217,7 @@ class GhostExchange:
         starts, lengths = v_off[own_vid], counts[own_vid]
         idx = np.repeat(starts - (np.cumsum(lengths) - lengths), lengths) + np.arange(int(lengths.sum()))
         owner_cell = np.repeat(np.repeat(np.arange(n_owned, dtype=np.int64), nv), lengths)
-        nb = np.unique(np.stack([owner_cell, c_sorted[idx]], axis=1), axis=0)
+        nb = unique_pairs(np.stack([owner_cell, c_sorted[idx]], axis=1))
         nb = nb[nb[:, 0] != nb[:, 1]]
         del v_sorted
         self.neighbour_offsets = np.zeros(n_owned + 1, dtype=np.int64)

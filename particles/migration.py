@@ -252,15 +252,13 @@ class Migrator:
         lost += nb_lost
         fallback_sent = int(offer_rows.shape[0])
 
-        first = self.comm.allreduce(
-            np.array([sent, received, fallback_sent, lost, global_rows.shape[0]], dtype=np.int64), op=MPI.SUM)
+        first = _sum_over_ranks(self.comm, [sent, received, fallback_sent, lost, global_rows.shape[0]])
         if first[4] > 0:
             fb_sent, fb_received, fb_lost = self._fallback(swarm, global_rows, ncols)
             fallback_sent += fb_sent
             received += fb_received
             lost += fb_lost
-            totals = self.comm.allreduce(np.array([sent, received, fallback_sent, lost], dtype=np.int64),
-                                         op=MPI.SUM)
+            totals = _sum_over_ranks(self.comm, [sent, received, fallback_sent, lost])
         else:
             totals = first[:4]
         if sort:
@@ -306,7 +304,7 @@ class Migrator:
         num_candidates = inside.sum(axis=1)
         table = _pack(swarm, rows, num_candidates.astype(np.int64))
         swarm.discard_rows(rows)
-        offers = {r: np.flatnonzero(inside[:, r]) for r in range(self.comm.size) if inside[:, r].any()}
+        offers = {int(r): np.flatnonzero(inside[:, r]) for r in np.flatnonzero(inside.any(axis=0))}
         received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
         decided = {src: (t, np.ascontiguousarray(t[:, 1]).view(np.int64)) for src, t in received.items()}
         kept, lost = self._decide(swarm, inside, decided, (_TAG_REPLY, _TAG_REPLY))
@@ -348,7 +346,7 @@ class Migrator:
             if (~sole).any():
                 shared[src] = (np.flatnonzero(~sole), loc)
                 answers[src] = (loc.cells[~sole] >= 0).astype(np.float64)[:, None]
-        offers = {r: np.flatnonzero(inside[:, r]) for r in range(inside.shape[1]) if inside[:, r].any()}
+        offers = {int(r): np.flatnonzero(inside[:, r]) for r in np.flatnonzero(inside.any(axis=0))}
         multi = {r: idx[num_candidates[idx] > 1] for r, idx in offers.items()}
         multi = {r: idx for r, idx in multi.items() if idx.size}
         replies = self._known_exchange(answers, {r: idx.shape[0] for r, idx in multi.items()}, tags[0])
@@ -372,6 +370,14 @@ class Migrator:
         reqs += [self.comm.Isend(np.ascontiguousarray(t), dest=r, tag=tag) for r, t in tables.items() if t.shape[0]]
         MPI.Request.Waitall(reqs)
         return recv
+
+
+def _sum_over_ranks(comm: MPI.Comm, counts: list[int]) -> npt.NDArray[np.int64]:
+    """Element-wise sum of ``counts`` over all ranks (collective; one buffer Allreduce, no pickling)."""
+    local = np.array(counts, dtype=np.int64)
+    total = np.empty_like(local)
+    comm.Allreduce(local, total, op=MPI.SUM)
+    return total
 
 
 def migrator_for(mesh: dolfinx.mesh.Mesh, /) -> Migrator:

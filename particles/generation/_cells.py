@@ -134,7 +134,8 @@ def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, /, *,
         mesh: The mesh.
         x: Points, shape=(m, gdim), float64.
         tree: :func:`owned_cell_tree` of ``mesh``, to reuse (built for this call if omitted).
-        geometry: The mesh's :class:`particles.geometry.CellGeometry` to reuse for curved cells.
+        geometry: The mesh's :class:`particles.geometry.CellGeometry`: when given (always for
+            curved cells) its tree and pull-back test are used instead of ``tree``.
 
     Returns:
         The cells (-1 where no owned cell contains the point) and reference coordinates.
@@ -147,7 +148,7 @@ def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, /, *,
     num_owned = mesh.topology.index_map(tdim).size_local
     if m == 0 or num_owned == 0:
         return OwnedLocation(cells, xref)
-    if mesh.geometry.cmap.degree > 1:
+    if geometry is not None or mesh.geometry.cmap.degree > 1:
         from particles.geometry import CellGeometry
 
         found = (geometry if geometry is not None else CellGeometry(mesh)).locate(x, owned_only=True)

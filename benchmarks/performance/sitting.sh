@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# One side-by-side sitting against deal.II's step-68 (issue 12's table): every run ROUNDS times,
+# interleaved, with the 1-minute load average printed before each run.
+# Usage: bash benchmarks/performance/sitting.sh [ROUNDS]      (from the repository root)
+set -uo pipefail
+ROUNDS=${1:-3}
+PY=${PYTHON:-python3}
+STEP68=${STEP68:-../shared/bench/step68.sh}
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+V="benchmarks/performance/vortex.py --cells 64 --particles 393216 --steps 50"
+RATE='import json,sys; print("rate=%.0f" % json.loads([l for l in sys.stdin if l.startswith("{")][-1])["particle_updates_per_second"])'
+run() {
+  local label=$1; shift
+  printf '%s load=%s %-34s ' "$(date +%H:%M:%S)" "$(cut -d' ' -f1 /proc/loadavg)" "$label"
+  "$@"
+}
+for r in $(seq "$ROUNDS"); do
+  run "deal.II step-68, 1 rank" bash "$STEP68" 6 8 0.1 2 1
+  run "ours euler, 1 rank" bash -c "$PY $V --integrator euler | $PY -c '$RATE'"
+  run "ours rk2, 1 rank" bash -c "$PY $V --integrator rk2 | $PY -c '$RATE'"
+  run "deal.II step-68, 2 ranks" bash "$STEP68" 6 8 0.1 2 2
+  run "ours euler, 2 ranks --balance" bash -c "mpirun -n 2 $PY $V --integrator euler --balance | $PY -c '$RATE'"
+  run "ours euler, 2 ranks" bash -c "mpirun -n 2 $PY $V --integrator euler | $PY -c '$RATE'"
+done

@@ -52,6 +52,7 @@ import dolfinx
 import dolfinx.fem.petsc
 import numpy as np
 import ufl
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation

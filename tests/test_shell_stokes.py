@@ -137,7 +137,10 @@ def test_spherical_shell_default_solver_converges_to_the_direct_solution(world, 
     iterations, once more from its own solution (warm start) in fewer, and matches MUMPS. The plates'
     discrete flux is not zero (a tangent field on cells that only approximate the sphere): MUMPS
     matches only because its pinned system gets the same consistent continuity right-hand side
-    (7e-5 apart before)."""
+    (7e-5 apart before). On several ranks MUMPS itself is less accurate (no iterative refinement:
+    4e-6 to 6e-5 from the iterative solutions on 3 ranks, which agree with each other to 1e-9), so
+    there the iterative solution is held against the other AMG's at a tight tolerance instead, and
+    against MUMPS only loosely."""
     mesh = create_shell_mesh(world, ShellSpec(3, 1.22, 2.22, resolution=0.6))
     bcs = {"inner": VelocityBC("free_slip"), "outer": VelocityBC("free_slip") if outer == "free_slip" else _plates_bc()}
     x = ufl.SpatialCoordinate(mesh)
@@ -153,7 +156,14 @@ def test_spherical_shell_default_solver_converges_to_the_direct_solution(world, 
     assert iterative.solve(T).iterations < max(cold // 2, 1)
     scale = np.sqrt(_integral(mesh, ufl.inner(direct.u, direct.u)))
     difference = np.sqrt(_integral(mesh, ufl.inner(iterative.u - direct.u, iterative.u - direct.u)))
-    assert scale > 1.0 and difference < 1e-5 * scale
+    assert scale > 1.0 and difference < (1e-5 if world.size == 1 else 1e-3) * scale
+    if world.size > 1:
+        other = StokesSolver(mesh, approximation, bcs=bcs, petsc_options={"ksp_rtol": 1e-10},
+                             solver="iterative_gamg" if expected == "iterative" else "iterative")
+        other.solve(T)
+        solvers["other"] = other
+        difference = np.sqrt(_integral(mesh, ufl.inner(iterative.u - other.u, iterative.u - other.u)))
+        assert difference < 1e-5 * scale
     if outer == "free_slip":  # the rotations are removed after the solve
         for axis in np.eye(3):
             assert abs(_integral(mesh, ufl.inner(iterative.u, ufl.cross(ufl.as_vector(axis), x)))) < 1e-8 * scale

@@ -17,7 +17,7 @@ are strong (nodal) conditions there too.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -55,11 +55,12 @@ class VelocityBC:
         kind: ``"free_slip"`` | ``"no_slip"`` | ``"prescribed"``.
         value: for ``"prescribed"``, the velocity (length ``gdim``): numbers (a constant vector)
             or expression texts (:mod:`convection.expressions`, e.g. ``("-y", "x")``, a rigid
-            rotation) per component.
+            rotation) per component; or a callable ``f(x)`` from points shape=(3, n) to
+            shape=(gdim, n) (e.g. :class:`convection.plates.PlateVelocity`).
     """
 
     kind: str
-    value: tuple[float | str, ...] | None = None
+    value: tuple[float | str, ...] | Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in VELOCITY_BC_KINDS:
@@ -314,7 +315,7 @@ def velocity_dirichlet_bcs(
             axis, _ = side_axis(side, gdim)
             dofs = dolfinx.fem.locate_dofs_topological(V.sub(axis), fdim, facets)
             out.append(dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(axis)))
-        elif bc.kind == "prescribed" and any(isinstance(c, str) for c in bc.value):
+        elif bc.kind == "prescribed" and (callable(bc.value) or any(isinstance(c, str) for c in bc.value)):
             dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
             out.append(dolfinx.fem.dirichletbc(_velocity_function(V, bc.value), dofs))
         else:
@@ -327,11 +328,17 @@ def velocity_dirichlet_bcs(
     return out
 
 
-def _velocity_function(V: dolfinx.fem.FunctionSpace, value: tuple[float | str, ...]) -> dolfinx.fem.Function:
-    """The velocity ``value`` (numbers or expression texts per component) interpolated into ``V``."""
+def _velocity_function(V: dolfinx.fem.FunctionSpace, value: Any) -> dolfinx.fem.Function:
+    """The velocity ``value`` (numbers or expression texts per component, or a callable on points)
+    interpolated into ``V``."""
     from convection.expressions import Expression
 
     gdim = V.mesh.geometry.dim
+    if callable(value):
+        f = dolfinx.fem.Function(V)
+        f.interpolate(value)
+        f.x.scatter_forward()
+        return f
     if len(value) != gdim:
         raise ValueError(f"A prescribed velocity needs {gdim} components, got {len(value)}")
     components = [Expression(str(c), gdim=gdim) for c in value]

@@ -44,7 +44,7 @@ __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_co
 _SIDES = ("left", "right", "bottom", "top", "front", "back")
 _SHELL_BOUNDARIES = ("inner", "outer")
 _SHELLS = {"annulus": 2, "spherical_shell": 3}
-VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed")
+VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates")
 TEMPERATURE_KINDS = ("dirichlet", "insulating")
 
 
@@ -52,6 +52,16 @@ def _check_velocity_bc(value: Any) -> str | None:
     kind = value.get("kind") if isinstance(value, dict) else value
     if kind not in VELOCITY_KINDS:
         return f"velocity condition {value!r} is not one of {list(VELOCITY_KINDS)} (or {{kind: prescribed, value: [..]}})"
+    if kind == "plates":
+        if not isinstance(value, dict):
+            return "a plates velocity needs the form {kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
+        from convection.plates import PlateVelocity
+
+        try:
+            PlateVelocity.from_config(value, 3)
+        except ValueError as err:
+            return str(err)
+        return None
     if isinstance(value, dict):
         extra = set(value) - {"kind", "value"}
         if extra:
@@ -157,7 +167,8 @@ SCHEMA: dict[str, Any] = {
     "stokes": {
         "degree": Field("int", 2, minimum=2, help="velocity degree (pressure degree - 1)"),
         "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_NAMES"),
-                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D, direct (MUMPS) in 2D"),
+                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
+                        "free slip on both surfaces), direct (MUMPS) in 2D"),
         "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6)"),
     },
     "energy": {
@@ -536,11 +547,18 @@ def _check_particles(config: dict[str, Any]) -> None:
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.interpolator': {err}") from None
     columns = [m["name"] for m in material_table(config)[0]] if config["composition"]["source"] == "particles" else []
+    built = []
     for i, spec in enumerate(section["properties"]):
         try:
-            columns.append(build_properties([spec], make_function=make)[0].column)
+            built.append(build_properties([spec], make_function=make)[0])
         except (TypeError, ValueError) as err:
             raise ConfigError(f"config key 'particles.properties[{i}]': {str(err).removeprefix('item 0: ')}") from None
+        columns.append(built[-1].column)
+    for i, prop in enumerate(built):
+        missing = [c for c in prop.requires() if c not in columns]
+        if missing:
+            raise ConfigError(f"config key 'particles.properties[{i}]': {prop.column!r} needs the particle property "
+                              f"{missing[0]!r}; add it to particles.properties")
     repeated = sorted({c for c in columns if columns.count(c) > 1})
     if repeated:
         raise ConfigError(f"config key 'particles.properties': more than one property (or material) named {repeated[0]!r}"

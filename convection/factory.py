@@ -49,6 +49,7 @@ from convection.expressions import Expression
 from convection.materials import Material, Materials
 from convection.mesh import ShellSpec, create_mesh, mesh_spec_from_config, shell_confinement
 from convection.model import Model
+from convection.plates import PlateVelocity
 from convection.postprocess import create_postprocessors
 from convection.rebalance import Balancer
 from convection.run import BlowUp, Resume, RunSettings, RunSummary, run
@@ -73,7 +74,9 @@ def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
         value = section[side]
         if value is None:
             continue
-        if isinstance(value, dict):
+        if isinstance(value, dict) and value["kind"] == "plates":
+            result[side] = VelocityBC("prescribed", PlateVelocity.from_config(value, gdim))
+        elif isinstance(value, dict):
             components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
             result[side] = VelocityBC(value["kind"], components or None)
         else:

@@ -273,16 +273,21 @@ def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> Callable[[
     curved free-slip surface ends slightly outside it. The curved cells' boundary is within
     ``margin = 2 s^2 / r_inner`` of the true circle/sphere (``s``: the cells' largest node deviation
     from the straight-sided cell, :attr:`particles.geometry.CellGeometry.curvature_padding`;
-    parabola versus circle), so a confined point lies in a cell. Collective (the margin is
-    allreduced).
+    parabola versus circle), so a confined point lies in a cell. Straight-sided cells (vertices on
+    the circles/spheres) need no margin at the inner surface (the hole they leave is a polygon or
+    polyhedron inscribed in the inner circle/sphere, so ``|x| >= r_inner`` is inside the mesh); at
+    the outer surface the bound is the smallest distance from the origin to an outer boundary
+    facet's line/plane. Collective (the bounds are allreduced).
     """
-    from particles.geometry import CellGeometry
+    if mesh.geometry.cmap.degree == 1:
+        lower = spec.inner_radius * (1.0 + 1e-12)
+        upper = _outer_facet_distance(mesh, spec) * (1.0 - 1e-12)
+    else:
+        from particles.geometry import CellGeometry
 
-    padding = mesh.comm.allreduce(CellGeometry(mesh).curvature_padding, op=MPI.MAX)
-    margin = 2.0 * padding**2 / spec.inner_radius + 1e-12 * spec.outer_radius
-    if mesh.geometry.cmap.degree == 1:  # straight facets: chords lie up to the sagitta inside the circle
-        margin = spec.resolution**2 / (4.0 * spec.inner_radius)
-    lower, upper = spec.inner_radius + margin, spec.outer_radius - margin
+        padding = mesh.comm.allreduce(CellGeometry(mesh).curvature_padding, op=MPI.MAX)
+        margin = 2.0 * padding**2 / spec.inner_radius + 1e-12 * spec.outer_radius
+        lower, upper = spec.inner_radius + margin, spec.outer_radius - margin
 
     def confine(x: npt.NDArray[np.float64]) -> None:
         if x.shape[0] == 0:
@@ -294,3 +299,28 @@ def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> Callable[[
             x[outside] *= (target / np.where(r[outside] > 0.0, r[outside], 1.0))[:, None]
 
     return confine
+
+
+def _outer_facet_distance(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> float:
+    """Smallest distance from the origin to the line (2D) or plane (3D) of a straight-sided boundary
+    facet on the outer circle/sphere, over all ranks (collective)."""
+    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    tol = 1e-8 * spec.outer_radius
+
+    def on_outer(x: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+        return np.abs(np.linalg.norm(x[:gdim], axis=0) - spec.outer_radius) <= tol
+
+    facets = dolfinx.mesh.locate_entities_boundary(mesh, tdim - 1, on_outer)
+    local = spec.outer_radius
+    if facets.size:
+        cpp_mesh = getattr(mesh, "_mesh", mesh)  # DOLFINx 0.5 (Debian) wraps the C++ mesh
+        nodes = dolfinx.cpp.mesh.entities_to_geometry(cpp_mesh, tdim - 1, facets, False)
+        x = mesh.geometry.x[nodes][:, :, :gdim]
+        if gdim == 2:
+            normal = np.stack([x[:, 1, 1] - x[:, 0, 1], x[:, 0, 0] - x[:, 1, 0]], axis=1)
+        else:
+            normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+        normal /= np.linalg.norm(normal, axis=1)[:, None]
+        local = float(np.min(np.abs(np.sum(normal * x[:, 0], axis=1))))
+    return float(mesh.comm.allreduce(local, op=MPI.MIN))

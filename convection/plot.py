@@ -16,6 +16,12 @@ first, middle and last written time; a requested time snaps to the nearest writt
 2D meshes are seen from +z. 3D meshes are cut by the vertical plane y = (centre of the domain): the
 picture is that x-z section seen from -y, with the particles within one typical cell size of the
 plane.
+
+A spherical shell (3D, hollow around the origin) also gets a perspective ``shell_*.png`` (the seed
+paper's picture of section 4.2): the temperature on the equatorial plane z = 0, the core as a grey
+sphere, and the particles of the northern hemisphere (within ``--particle-radius``
+of the centre if given) as points coloured by ``--particle-property`` (default ``displacement`` when
+the particles carry it).
 """
 
 from __future__ import annotations
@@ -362,6 +368,7 @@ def plot_snapshots(
     field: str | None = None,
     particle_property: str | None = None,
     *,
+    particle_radius: float | None = None,
     log: Callable[[str], None] | None = print,
 ) -> list[Path]:
     """Draw composition (with particles) and temperature pictures into ``directory/snapshots``.
@@ -376,7 +383,9 @@ def plot_snapshots(
         field: Field of the composition picture (default: ``material``, ``composition``, or the
             first other scalar field that is not temperature, pressure or velocity).
         particle_property: Particle property that colours the particles (vectors: magnitude);
-            default black particles.
+            default black particles (spherical shells: ``displacement`` if the particles carry it).
+        particle_radius: Spherical shells: draw only the particles within this distance of the
+            centre (default all of the northern hemisphere).
         log: Receives one line per skipped picture (default ``print``; None: silent).
 
     Returns:
@@ -406,6 +415,10 @@ def plot_snapshots(
         else:
             written.append(_composition_picture(section, view, plane, name, t, particles, particle_property,
                                                 cell_size, out_dir / f"{name}_{stem}.png"))
+        radii = _shell_radii(data)
+        if radii is not None and "temperature" in data.point_data.keys():
+            written.append(_shell_picture(data, radii, t, particles, particle_property, out_dir / f"shell_{stem}.png",
+                                          max_radius=particle_radius))
         if "temperature" not in data.point_data.keys() and "temperature" not in data.cell_data.keys():
             say(f"t = {_time_label(t)}: no temperature field; no temperature picture")
         elif _is_constant(_values(data, "temperature")):
@@ -468,6 +481,81 @@ def _temperature_picture(data: pv.DataSet, view: _View, plane: float | None, t: 
                              scalar_bar_args=picture.bar("temperature", 0))
     return picture.save(f"temperature at t = {_time_label(t)}{_plane_label(plane)}", path)
 
+def _shell_radii(data: pv.DataSet) -> tuple[float, float] | None:
+    """(inner, outer) radius if ``data`` is a 3D shell around the origin (its points keep away from
+    the origin by more than a fifth of their largest radius), else None."""
+    points = np.asarray(data.points, dtype=np.float64)
+    if points.size == 0 or np.ptp(points[:, 2]) <= 1e-12 * np.ptp(points):
+        return None
+    r = np.linalg.norm(points, axis=1)
+    inner, outer = float(r.min()), float(r.max())
+    return (inner, outer) if inner > 0.2 * outer else None
+
+
+_SHELL_SIZE = (1000, 860)
+_SHELL_CAMERA = np.array([1.6, -2.2, 1.5])  # view direction, from above the equator
+
+
+def _shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, particles: _Series | None,
+                   particle_property: str | None, path: Path, max_radius: float | None = None) -> Path:
+    """Perspective view of a spherical shell: equatorial temperature slice, the core, the
+    particles of the northern hemisphere (within ``max_radius`` of the centre if given)."""
+    pv = import_pyvista()
+    inner, outer = radii
+    plotter = pv.Plotter(off_screen=True, window_size=_SHELL_SIZE)
+    plotter.set_background("white")
+    bar = {"vertical": False, "height": 0.06, "width": 0.38, "position_y": 0.03, "color": "black",
+           "title_font_size": 14, "label_font_size": 12, "fmt": "%.3g", "n_labels": 5}
+    section = data.slice(normal="z", origin=(0.0, 0.0, 0.0))
+    values = _values(section, "temperature")
+    plotter.add_mesh(section, scalars="temperature", cmap="coolwarm", clim=_clim(values), lighting=False,
+                     scalar_bar_args=dict(bar, title="temperature (equatorial plane)", position_x=0.06))
+    plotter.add_mesh(pv.Sphere(radius=inner, theta_resolution=96, phi_resolution=48), color="lightgrey",
+                     smooth_shading=True)
+    title = f"spherical shell at t = {_time_label(t)}"
+    if particles is not None and particles.times.size:
+        tp = particles.nearest(t)
+        cloud, dropped = particles.read(tp)
+        names = list(cloud.point_data.keys())
+        name = particle_property if particle_property is not None else ("displacement" if "displacement" in names
+                                                                         else None)
+        if name is not None and name not in names:
+            unread = f" (VTK could not read: {', '.join(dropped)})" if dropped else ""
+            raise ValueError(f"no particle property '{name}' in {particles.path.name}; properties: "
+                             f"{', '.join(names)}{unread}")
+        points = np.asarray(cloud.points, dtype=np.float64)
+        keep = points[:, 2] >= 0.0
+        if max_radius is not None:
+            keep &= np.linalg.norm(points, axis=1) <= max_radius
+        shown = pv.PolyData(points[keep])
+        size = float(np.clip(7.5 - np.log10(max(int(keep.sum()), 1)), 2.5, 5.0))
+        if name is None:
+            plotter.add_points(shown, color="black", point_size=size, render_points_as_spheres=True)
+        else:
+            colour = _values(cloud, name)[keep]
+            shown.point_data["_colour"] = colour
+            label = name if np.asarray(cloud.point_data[name]).ndim == 1 else f"{name} magnitude"
+            plotter.add_points(shown, scalars="_colour", cmap="viridis", clim=_clim(colour), point_size=size,
+                               render_points_as_spheres=True,
+                               scalar_bar_args=dict(bar, title=f"particles: {label}", position_x=0.56))
+        where = "z >= 0" + (f", r <= {max_radius:.4g}" if max_radius is not None else "")
+        title += f"; {int(keep.sum())} particles ({where})"
+        if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
+            title += f" at t = {_time_label(tp)}"
+    plotter.add_text(title, position="upper_edge", font_size=10, color="black")
+    for scalar_bar in plotter.scalar_bars.values():
+        scalar_bar.SetTextPositionToPrecedeScalarBar()
+    direction = _SHELL_CAMERA / np.linalg.norm(_SHELL_CAMERA)
+    plotter.camera.focal_point = (0.0, 0.0, -0.12 * outer)
+    plotter.camera.position = tuple(3.4 * outer * direction)
+    plotter.camera.up = (0.0, 0.0, 1.0)
+    plotter.camera.view_angle = 30.0
+    plotter.renderer.reset_camera_clipping_range()
+    plotter.screenshot(str(path))
+    plotter.close()
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m convection.plot", description=__doc__.split("\n")[0])
     parser.add_argument("directory", help="run directory")
@@ -480,6 +568,9 @@ def main(argv: list[str] | None = None) -> int:
                              "the first other scalar field)")
     parser.add_argument("--particle-property", default=None, metavar="NAME",
                         help="particle property that colours the particles (default: black particles)")
+    parser.add_argument("--particle-radius", type=float, default=None, metavar="R",
+                        help="spherical shells: draw only particles within R of the centre (default: all of the "
+                             "northern hemisphere)")
     args = parser.parse_args(argv)
     directory = Path(args.directory)
     print(plot_run(directory, args.png))
@@ -487,7 +578,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no fields.xdmf in {directory}: no snapshots")
         return 0
     try:
-        paths = plot_snapshots(directory, args.times, args.field, args.particle_property)
+        paths = plot_snapshots(directory, args.times, args.field, args.particle_property,
+                               particle_radius=args.particle_radius)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

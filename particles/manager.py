@@ -50,10 +50,12 @@ from particles.adaptivity import move_to_mesh
 from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
 from particles.interpolation import CellAverage, Interpolator, get_interpolator
+from particles.migration import migrate
 from particles.output import OutputRecord, ParticleWriter
 from particles.population import PopulationControl, PopulationStats, copy_nearest
 from particles.properties import PROPERTIES, ParticleProperty, PropertyContext, PropertyManager, create_property
 from particles.swarm import Swarm
+from particles.transport import relocate
 
 __all__ = [
     "AdvanceReport",
@@ -298,8 +300,26 @@ class ParticleManager:
         self.generation = GenerationResult(0, 0, 0)
         if generate_particles:
             self.generation = generate(self.swarm, generator)
+            if confine is not None:
+                self._confine_generated()
             self.properties.initialise(context if context is not None else PropertyContext())
             self._bound(step=0, salt=0)
+
+    def _confine_generated(self) -> None:
+        """Apply ``confine`` to freshly generated positions (collective).
+
+        A generator samples the mesh's cells, and the cells may reach outside the region ``confine``
+        keeps particles in (straight-sided shell cells cover part of the inscribed hole, r < r_inner);
+        without this the first step would move such particles there, a jump their displacement
+        would record. Moved particles are relocated (and migrated, should one change rank); a
+        confined point lies in a cell, so none is lost."""
+        x = self.swarm.x
+        before = x.copy()
+        self.confine(x)
+        moved = self.swarm.comm.allreduce(int(np.count_nonzero(np.any(x != before, axis=1))), op=MPI.SUM)
+        if moved:
+            relocate(self.swarm, sort=False)
+            self.lost += migrate(self.swarm, sort=True).global_lost
 
     # ------------------------------------------------------------------ construction from a config
     @classmethod

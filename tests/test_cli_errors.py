@@ -44,6 +44,10 @@ CASES = {
                               "'nowhere.txt' not found"),
     "unknown particle property": (["run", str(GOOD), "--set", "particles.properties=[velocity, strain]"],
                                   "particles.properties[1]"),
+    "property without the one it reads": (["run", str(GOOD), "--set", "particles.enabled=true",
+                                           "--set", "particles.properties=[velocity, displacement]"],
+                                          "particles.properties[1]': 'displacement' needs the particle property "
+                                          "'initial_position'"),
     "unknown material key": (["run", str(GOOD), "--set", "materials={lid: {initial: 'z > 0.8', density: 1}}"],
                              "materials.lid.density"),
     "runaway integer power": (["run", str(GOOD), "--set", "initial.temperature=9**9**9"], "initial.temperature"),

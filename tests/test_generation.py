@@ -282,3 +282,15 @@ def test_same_particles_on_any_number_of_ranks_3d(gen):
     np.testing.assert_array_equal(ids, np.arange(result.num_global))
     np.testing.assert_array_equal(ids, serial.ids[sorder])
     np.testing.assert_array_equal(x, serial.x[sorder])
+
+
+def test_metropolis_hastings_keeps_to_the_support_of_the_density():
+    """A density that is 1 in a thin strip x < 0.05 and 0 elsewhere covers the first column of cells
+    only in part (cells 1/3 wide): every particle lies in the strip, none in the rest of those cells."""
+    def rho(x):
+        return (x[:, 0] < 0.05).astype(np.float64)
+
+    swarm, _, ok = _run(MPI.COMM_SELF, MetropolisHastings(600, density=rho, seed=5, quadrature_degree=8),
+                        lambda c: _square(c, 3))
+    assert ok and swarm.num_particles == 600
+    assert np.all(swarm.x[:, 0] < 0.05)

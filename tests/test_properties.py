@@ -20,6 +20,7 @@ from particles.properties import (
     PROPERTIES,
     Damage,
     DeformationGradient,
+    Displacement,
     FunctionProperty,
     InitialComposition,
     InitialPosition,
@@ -79,6 +80,7 @@ def test_registry_lists_names_and_rejects_bad_policies():
     assert set(PROPERTIES) == {
         "initial_position", "initial_composition", "function", "velocity", "temperature", "pressure",
         "strain_rate", "integrated_strain", "deformation_gradient", "damage", "time_since_creation", "rank",
+        "displacement",
     }
     assert all(cls.description for cls in PROPERTIES.values())
     with pytest.raises(ValueError, match="damage.*deformation_gradient.*velocity"):
@@ -136,6 +138,41 @@ def test_simple_shear_closed_forms(integrator, degree):
     np.testing.assert_allclose(vel[:, 0], GAMMA * swarm.x[:, 1], atol=1e-12)
     np.testing.assert_allclose(vel[:, 1], 0.0, atol=1e-12)
     assert swarm.property_names == manager.names  # stage columns removed
+
+
+def test_displacement_is_distance_from_initial_position_in_shear_and_rotation():
+    """Simple shear u = (g y, 0): |x - x0| = g y0 t for every scheme. Rigid rotation by pi: the
+    displacement is the diameter of each particle's circle, 2 |x0 - c| (the straight distance, not
+    the path). Listed before initial_position, it is still computed after it."""
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 8, 8)
+    x0 = _lattice()
+    swarm = swarm_at(mesh, x0)
+    manager = PropertyManager(swarm, ["displacement", "initial_position"])
+    assert manager.names == ["initial_position", "displacement"]
+    manager.initialise(PropertyContext(u_new=_shear(mesh)))
+    np.testing.assert_array_equal(manager.values("displacement"), 0.0)
+    dt, steps = 0.05, 10
+    _run(swarm, manager, "rk2", _shear(mesh), dt, steps)
+    start = x0[swarm.ids]
+    np.testing.assert_allclose(manager.values("displacement")[:, 0], GAMMA * start[:, 1] * dt * steps, atol=1e-12)
+
+    centre = np.array([0.5, 0.5])
+    rotation = _vector_function(mesh, 2, lambda x: np.stack([-(x[1] - 0.5), x[0] - 0.5]))
+    points = centre + np.array([[0.1, 0.0], [0.0, -0.2], [0.15, 0.15]])
+    swarm = swarm_at(mesh, points)
+    manager = PropertyManager(swarm, [InitialPosition(), Displacement()])
+    manager.initialise(PropertyContext(u_new=rotation))
+    _run(swarm, manager, "rk4", rotation, np.pi / 200, 200)
+    expected = 2.0 * np.linalg.norm(points[swarm.ids] - centre, axis=1)
+    np.testing.assert_allclose(manager.values("displacement")[:, 0], expected, rtol=1e-6)
+
+
+def test_displacement_needs_initial_position():
+    swarm = Swarm(dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2))
+    with pytest.raises(ValueError, match="'displacement' needs the property 'initial_position'"):
+        PropertyManager(swarm, ["displacement", "velocity"])
+    with pytest.raises(ValueError, match="initial_position"):
+        Displacement().initialise(swarm, np.arange(0), PropertyContext())
 
 
 def _damage(integrator, steps, alpha=1.5, beta=2.0, t_end=1.0):

@@ -1,5 +1,6 @@
-"""The annulus scaling benchmark (benchmarks/scaling/circular.py): mesh, flows, and a short
-collective run that keeps every particle."""
+"""The circular-flow scaling benchmark (benchmarks/scaling/circular.py): annulus mesh, the Couette
+flow and its Stokes solve, and short collective runs (annulus, spherical shell) that keep every
+particle."""
 
 import math
 import sys
@@ -60,54 +61,87 @@ def test_annulus_area_converges_at_second_order():
     assert 1.8 < order < 2.2
 
 
-def test_wall_flow_vanishes_on_the_circles_and_unknown_flow_lists_names():
-    flow = circular.WallFlow()
-    theta = np.linspace(0.0, 2.0 * np.pi, 7)
-    for r in (circular.R_IN, circular.R_OUT):
-        assert np.allclose(flow(np.stack([r * np.cos(theta), r * np.sin(theta)])), 0.0, atol=1e-15)
-    inside = flow(np.array([[0.8], [0.0]]))
-    assert inside[0, 0] == 0.0 and inside[1, 0] > 0.0
-    with pytest.raises(ValueError, match="rigid.*wall|wall.*rigid"):
-        circular.create_flow("spiral")
+@pytest.mark.parametrize("dim", [2, 3])
+def test_couette_flow_rotates_the_surfaces_and_is_tangential(dim):
+    flow = circular.CouetteFlow(dim, omega_inner=-1.0, omega_outer=2.0)
+    assert np.allclose(flow.angular_velocity(np.array([circular.R_IN, circular.R_OUT])), [-1.0, 2.0])
+    x = np.random.default_rng(1).normal(size=(3, 7))
+    if dim == 2:
+        x[2] = 0.0
+    u = flow(x)
+    assert u.shape == (dim, 7)
+    assert np.allclose(np.sum(u * x[:dim], axis=0), 0.0, atol=1e-14)
+    assert set(flow.boundary_conditions()) == {"inner", "outer"}
 
 
-def test_stand_in_solve_converges_to_the_radial_solution():
-    solver = circular.PoissonStandIn(circular.create_annulus(MPI.COMM_SELF, 6))
-    assert solver.solve() > 0
-    assert solver.max_error() < 1e-3
+def test_stokes_solve_reproduces_couette_flow_at_second_order():
+    """The Stokes solution with rotations prescribed on both circles is the Couette flow, up to the
+    polygonal boundary (second order in h)."""
+    errors = []
+    for radial in (4, 8):
+        flow = circular.StokesFlow(circular.create_annulus(MPI.COMM_SELF, radial), circular.CouetteFlow(2))
+        assembly, solve = flow.solve()
+        assert assembly > 0.0 and solve > 0.0
+        errors.append(flow.max_error())
+    assert errors[0] < 2e-2
+    assert 1.8 < math.log2(errors[0] / errors[1]) < 2.2
 
+
+
+def test_spherical_shell_solve_is_iterative_by_default_and_agrees_with_mumps():
+    """In 3D the default ('auto') is FGMRES + block Schur preconditioner; with rotations prescribed on
+    both spheres it converges in a few tens of iterations to MUMPS's solution."""
+    mesh = circular.create_domain(MPI.COMM_SELF, 3, 0.35)
+    flows = {name: circular.StokesFlow(mesh, circular.CouetteFlow(3), solver=name) for name in ("auto", "direct")}
+    for flow in flows.values():
+        flow.solve()
+    iterative, direct = flows["auto"], flows["direct"]
+    assert iterative.stokes.solver == "iterative" and 5 < iterative.iterations < 100
+    difference = np.max(np.abs(iterative.velocity.x.array - direct.velocity.x.array))
+    assert difference < 1e-5 * np.max(np.abs(direct.velocity.x.array))
+    assert iterative.max_error() == pytest.approx(direct.max_error(), rel=1e-6)
 
 @pytest.mark.mpi
-def test_short_collective_run_keeps_every_particle():
+@pytest.mark.parametrize("dim, size", [(2, 6), (3, 0.35)])
+def test_short_collective_run_keeps_every_particle(dim, size):
     comm = MPI.COMM_WORLD
-    mesh = circular.create_annulus(comm, 6)
-    problem = circular.setup_problem(mesh, particles_per_cell=4, flow="wall", cfl=0.5, integrator="rk2", seed=3)
+    mesh = circular.create_domain(comm, dim, size)
+    problem = circular.setup_problem(mesh, particles_per_cell=4, cfl=0.5, integrator="rk2", seed=3)
     ids_before = np.sort(np.concatenate(comm.allgather(problem.swarm.ids)))
-    times = circular.advance(problem, 12)
+    times = circular.advance(problem, 6)
     ids_after = np.sort(np.concatenate(comm.allgather(problem.swarm.ids)))
     swarm = problem.swarm
     in_owned = comm.allreduce(bool(np.all((swarm.cells >= 0) & (swarm.cells < swarm.num_owned_cells))), op=MPI.LAND)
     sent = comm.allreduce(times.sent, op=MPI.SUM)
     moved = comm.allreduce(times.changed_cell, op=MPI.SUM)
-    assert ids_before.shape[0] == problem.num_particles == 4 * mesh.topology.index_map(2).size_global
+    r_min, r_max = circular._radii_range(swarm)
+    assert ids_before.shape[0] == problem.num_particles == 4 * mesh.topology.index_map(dim).size_global
     assert np.array_equal(ids_before, np.arange(problem.num_particles))
     assert np.array_equal(ids_before, ids_after)
     assert times.lost == 0
     assert in_owned
     assert moved > 0
     assert (sent > 0) == (comm.size > 1)
+    assert times.assemble > 0.0 and times.solve > 0.0
+    assert circular.R_IN <= r_min and r_max < circular.R_OUT
 
 
 def test_weak_plan_keeps_cells_per_rank_and_efficiency_is_relative_to_one_rank():
     runs = circular.plan(["strong", "weak"], [1, 2, 4], 32, 24)
-    assert [r.radial for r in runs if r.study == "strong"] == [32, 32, 32]
+    assert [r.size for r in runs if r.study == "strong"] == [32, 32, 32]
     weak = [r for r in runs if r.study == "weak"]
-    cells = [2 * r.radial * circular.angular_divisions(r.radial) for r in weak]
+    cells = [2 * r.size * circular.angular_divisions(r.size) for r in weak]
     assert np.allclose(np.array(cells) / (cells[0] * np.array([1, 2, 4])), 1.0, atol=0.01)
-    base = {"ranks": 1, "particles": 100, "loop_seconds": 8.0, "particle_seconds": 4.0}
+    weak_3d = [r.size for r in circular.plan(["weak"], [1, 2, 4], 0.2, 0.25, dim=3)]
+    assert np.allclose(0.25**3 / np.array(weak_3d) ** 3, [1, 2, 4], rtol=1e-3)
+    base = {"ranks": 1, "particles": 100, "loop_seconds": 8.0, "particle_seconds": 4.0, "stokes_dofs": 10,
+            "stokes_seconds": 3.0}
     strong = [dict(base, study="strong"), dict(base, study="strong", ranks=2, loop_seconds=5.0, particle_seconds=2.0)]
     circular.efficiencies(strong)
     assert strong[1]["efficiency"] == pytest.approx(0.8) and strong[1]["particle_efficiency"] == pytest.approx(1.0)
-    weak_recs = [dict(base, study="weak"), dict(base, study="weak", ranks=2, particles=210, loop_seconds=10.0)]
+    weak_recs = [dict(base, study="weak"), dict(base, study="weak", ranks=2, particles=210, loop_seconds=10.0,
+                                                  stokes_dofs=20, stokes_seconds=4.0)]
     circular.efficiencies(weak_recs)
     assert weak_recs[1]["efficiency"] == pytest.approx(8.0 * 1.05 / 10.0)
+    assert weak_recs[1]["stokes_efficiency"] == pytest.approx(3.0 / 4.0)
+    assert strong[1]["stokes_efficiency"] == pytest.approx(0.5)

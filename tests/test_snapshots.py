@@ -163,3 +163,36 @@ def test_cli_draws_summary_and_snapshots(tmp_path, capsys):
                        str(directory / "snapshots" / "temperature_0002_t2.png")]
     assert all(Path(p).stat().st_size > 3_000 for p in printed)
     assert main([str(directory), "--field", "density"]) == 2
+
+
+def test_spherical_shell_view_with_particles_coloured_by_displacement(tmp_path):
+    """A spherical shell gets a perspective picture: the equatorial temperature slice (hot inside: red
+    near the core, blue outside) and the particles near the core in viridis by displacement."""
+    pytest.importorskip("gmsh")
+    from convection.mesh import ShellSpec, create_shell_mesh
+
+    mesh = create_shell_mesh(MPI.COMM_SELF, ShellSpec(3, 1.22, 2.22, resolution=0.6, geometry_degree=1))
+    T = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1)), name="temperature")
+    T.interpolate(lambda x: 2.22 - np.linalg.norm(x, axis=0))
+    out = FieldOutput(tmp_path)
+    out.write({"temperature": T}, 0.0)
+    out.close()
+    swarm = Swarm(mesh)
+    swarm.add_property("displacement")
+    generate(swarm, "metropolis_hastings", num_particles=3000, seed=2,
+             density=lambda x: (np.linalg.norm(x, axis=1) < 1.5).astype(np.float64))
+    swarm.property("displacement")[:, 0] = swarm.x[:, 0]
+    ParticleWriter(tmp_path).write(swarm, 0.0, 0)
+    paths = plot_snapshots(tmp_path, log=None)
+    assert [p.name for p in paths] == ["shell_0000_t0.png", "temperature_0000_t0.png"]
+    image = imread(paths[0])
+    assert image.shape[:2] == (860, 1000) and _colours(image) > 200
+    r, g, b = np.moveaxis(image[int(0.08 * image.shape[0]) : int(0.85 * image.shape[0]), :, :3], -1, 0)
+    assert ((r > 0.6) & (g < 0.35) & (b < 0.35)).sum() > 500  # hot slice next to the core
+    assert ((b > 0.6) & (r < 0.4) & (g < 0.6)).sum() > 500  # cold slice outside
+    viridis = colormaps["viridis"](np.linspace(0.0, 1.0, 16))[:, :3]
+    pixels = image[..., :3].reshape(-1, 3)
+    near = np.min(np.linalg.norm(pixels[:, None, :] - viridis[None, :, :], axis=2), axis=1) < 0.04
+    assert near.sum() > 300  # particles
+    with pytest.raises(ValueError, match="properties: id, rank, displacement"):
+        plot_snapshots(tmp_path, particle_property="density", log=None)

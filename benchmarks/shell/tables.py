@@ -18,8 +18,10 @@ def table(document: dict, reference: dict | None = None) -> str:
     case = document["case"]
     harmonic = f"n = {case['n']}" if case["dim"] == 2 else f"l = {case['n']}, m = {case['m']}"
     forcing = f", k = {case['k']}" if case["kind"].startswith("smooth") else ""
+    solver = document.get("solver", "direct")
+    solver = "" if solver == "direct" else f", Stokes solver {document.get('solver_resolved', solver)}"
     lines = [f"**{case['kind']}, {case['dim']}D, {harmonic}{forcing}, {document['ranks']} rank(s), "
-             f"geometry degree {document['geometry_degree']}**", ""]
+             f"geometry degree {document['geometry_degree']}{solver}**", ""]
     header = "| level | cells | h | dofs | velocity error | pressure error | solve [s] |"
     rule = "|---:|---:|---:|---:|---:|---:|---:|"
     if reference is not None:

@@ -5,9 +5,11 @@ As in the seed paper, particle counts per cell come from the cell integrals of t
 Metropolis-Hastings chain in the reference cell with target ``g(X) = rho(Phi_K(X)) |det J_K(X)|``,
 which is the density pulled back to the reference cell (so curved and non-affine cells are
 sampled correctly). Proposals are independent uniform points of the reference cell; a proposal
-``X'`` is accepted when ``u g(X) < g(X')`` (always while ``g(X) = 0``). After ``burn_in`` steps every ``thinning``-th state is
-kept. Each cell's chain draws from the cell's own random stream, so the result does not depend on
-the number of ranks.
+``X'`` is accepted when ``u g(X) < g(X')``. A chain starts at the first of up to
+``_START_TRIES`` uniform points where ``g > 0`` (a cell that the density covers only in part would
+otherwise keep states outside the density's support), and never leaves the support afterwards.
+After ``burn_in`` steps every ``thinning``-th state is kept. Each cell's chain draws from the
+cell's own random stream, so the result does not depend on the number of ranks.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from particles.swarm import Swarm
 __all__ = ["MetropolisHastings"]
 
 _STREAM = 2
+_START_TRIES = 1000
+_START_COUNTER = 1 << 40  # stream positions of the start search, far from the chain's own
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,17 @@ class MetropolisHastings:
         tdim = maps.tdim
         state = uniform_reference_points(maps.basix_cell, uniforms(streams[chains], np.ones(chains.shape[0]), tdim))
         g = self._target(maps, chains, state)
+        outside = np.flatnonzero(g <= 0)
+        for k in range(_START_TRIES):
+            if outside.size == 0:
+                break
+            u = uniforms(streams[chains[outside]], np.full(outside.shape[0], _START_COUNTER + k), tdim)
+            proposal = uniform_reference_points(maps.basix_cell, u)
+            g_new = self._target(maps, chains[outside], proposal)
+            hit = g_new > 0
+            state[outside[hit]] = proposal[hit]
+            g[outside[hit]] = g_new[hit]
+            outside = outside[~hit]
         steps = self.burn_in + counts[chains] * self.thinning
         samples = np.empty((int(counts.sum()), tdim))
         start = (np.cumsum(counts) - counts)[chains]

@@ -34,6 +34,7 @@ from particles.properties._base import (
 from particles.properties._interpolate import interpolate_from_neighbours
 from particles.properties.damage import Damage
 from particles.properties.deformation_gradient import DeformationGradient
+from particles.properties.displacement import Displacement
 from particles.properties.function import FunctionProperty
 from particles.properties.initial_composition import InitialComposition
 from particles.properties.initial_position import InitialPosition
@@ -53,6 +54,7 @@ __all__ = [
     "UPDATE_POLICIES",
     "Damage",
     "DeformationGradient",
+    "Displacement",
     "FunctionProperty",
     "InitialComposition",
     "InitialPosition",
@@ -67,6 +69,7 @@ __all__ = [
     "TimeSinceCreation",
     "Velocity",
     "create_property",
+    "dependency_order",
     "describe_properties",
 ]
 
@@ -74,7 +77,7 @@ PROPERTIES: Registry[type[ParticleProperty]] = Registry(
     "property",
     (
         InitialPosition, InitialComposition, FunctionProperty, Velocity, Temperature, Pressure, StrainRate,
-        IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank,
+        IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank, Displacement,
     ),
 )
 """Property classes by their lowercase config name."""
@@ -85,6 +88,31 @@ describe_properties = PROPERTIES.describe
 PropertySpec = Union[ParticleProperty, str]
 
 
+def dependency_order(properties: Sequence[ParticleProperty], /) -> list[ParticleProperty]:
+    """``properties`` with every property after the ones it requires (stable otherwise).
+
+    Raises:
+        ValueError: A required property is missing (or the requirements form a cycle).
+    """
+    columns = {p.column for p in properties}
+    for prop in properties:
+        missing = [c for c in prop.requires() if c not in columns]
+        if missing:
+            raise ValueError(f"particle property {prop.column!r} needs the propert{'ies' if len(missing) > 1 else 'y'} "
+                             f"{', '.join(repr(c) for c in missing)}; add {'them' if len(missing) > 1 else 'it'} "
+                             "to the properties")
+    ordered: list[ParticleProperty] = []
+    pending = list(properties)
+    while pending:
+        placed = {p.column for p in ordered}
+        ready = next((p for p in pending if set(p.requires()) <= placed), None)
+        if ready is None:
+            raise ValueError(f"particle properties require each other in a cycle: {[p.column for p in pending]}")
+        ordered.append(ready)
+        pending.remove(ready)
+    return ordered
+
+
 class PropertyManager:
     """The properties carried by every particle of one swarm.
 
@@ -92,12 +120,16 @@ class PropertyManager:
     the last context it was given, so :meth:`initialise_new` (the ``initialise(swarm, rows)`` hook
     of population control) can re-evaluate fields at new particles.
 
+    Properties that read other properties (:meth:`ParticleProperty.requires`, e.g. ``displacement``
+    reads ``initial_position``) are placed after them, otherwise the given order is kept.
+
     Args:
         swarm: The swarm.
         properties: Property objects or registered names (built with default parameters).
 
     Raises:
-        ValueError: Two properties with the same column name, or an unknown name.
+        ValueError: Two properties with the same column name, an unknown name, or a property whose
+            required property is missing.
     """
 
     def __init__(self, swarm: Swarm, properties: Sequence[PropertySpec], /) -> None:
@@ -107,7 +139,7 @@ class PropertyManager:
         duplicates = sorted({c for c in columns if columns.count(c) > 1})
         if duplicates:
             raise ValueError(f"particle properties share column names {duplicates}; give them distinct labels")
-        self.properties: tuple[ParticleProperty, ...] = tuple(built)
+        self.properties: tuple[ParticleProperty, ...] = tuple(dependency_order(built))
         self._evaluators = EvaluatorCache()
         self._context = PropertyContext(evaluators=self._evaluators)
         for prop in self.properties:

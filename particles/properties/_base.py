@@ -187,6 +187,10 @@ class ParticleProperty:
         """Number of scalar columns on a mesh of geometric dimension ``gdim``."""
         return 1
 
+    def requires(self) -> tuple[str, ...]:
+        """Columns of other properties this one reads (the property manager fills them first)."""
+        return ()
+
     def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
         """Fill the columns of the particles ``rows`` (int array, shape=(m,)) at their positions."""
         raise NotImplementedError

@@ -4,6 +4,9 @@ start; the rigid-body near-null space; the "auto" choice."""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 import ufl
@@ -11,10 +14,13 @@ import dolfinx
 import dolfinx.fem.petsc
 from mpi4py import MPI
 
-from convection.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.approximation import BoussinesqApproximation
 from convection.boundary import SIDES_2D, SIDES_3D, VelocityBC
 from convection.config import SCHEMA
 from convection.stokes import STOKES_SOLVER_NAMES, StokesSolver, resolve_solver, rigid_body_modes
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "performance"))
+import stokes3d  # noqa: E402  (the benchmark's problem)
 
 FREE_SLIP_3D = {side: VelocityBC("free_slip") for side in SIDES_3D}
 
@@ -25,30 +31,14 @@ def _norm(comm, f) -> float:
 
 
 def _cube_problem(n: int, viscosity: str, comm=MPI.COMM_WORLD, shift: float = 0.0):
-    """Unit cube of n^3 cubes (6 tets each), Ra = 1e6, T as in the 3D thick-layer config.
-
-    viscosity: "constant"; "temperature" (eta = exp(-ln(1000) T), T = 1 - z + wave: a smooth 1e3
-    contrast); "layer" (eta = 1000 in the cells below z = 0.4 + wave: a sharp 1e3 contrast).
-    Returns (mesh, T Function, C or None, approximation).
-    """
+    """Unit cube of n^3 cubes (6 tets each), Ra = 1e6, the problem of benchmarks/performance/stokes3d.py:
+    T as in the 3D thick-layer config, viscosity "constant"; "temperature" (a smooth 1e3 contrast);
+    "layer" (a sharp 1e3 contrast). Returns (mesh, T Function, C or None, approximation)."""
     mesh = dolfinx.mesh.create_unit_cube(comm, n, n, n)
-    base = 1.0 if viscosity == "temperature" else 0.5
-
-    def temperature(x):
-        wave = 0.1 * np.sin(np.pi * x[2]) * np.cos(np.pi * (x[0] - shift)) * np.cos(np.pi * x[1])
-        return base - (x[2] if viscosity == "temperature" else 0.0) + wave
-
-    T = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)))
-    T.interpolate(temperature)
-    C = None
-    law = ViscosityLaw()
-    if viscosity == "temperature":
-        law = ViscosityLaw(temperature_law="frank_kamenetskii", gamma=np.log(1000.0))
-    elif viscosity == "layer":
-        C = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
-        C.interpolate(lambda x: (x[2] <= 0.4 + 0.05 * np.cos(np.pi * x[0]) * np.cos(np.pi * x[1])).astype(float))
-        law = ViscosityLaw((1.0, 1000.0))
-    return mesh, T, C, BoussinesqApproximation(Ra=1e6, viscosity=law)
+    T, C, approximation = stokes3d.problem(mesh, viscosity)
+    if shift:
+        T.interpolate(stokes3d.temperature(viscosity, shift))
+    return mesh, T, C, approximation
 
 
 def _iterations_by_size(viscosity: str, sizes=(4, 6, 8), solver: str = "iterative") -> list[int]:

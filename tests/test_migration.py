@@ -72,18 +72,24 @@ def _check_owned_and_contained(swarm):
     return ok
 
 
-def _run_migration(comm, ghost_mode=dolfinx.mesh.GhostMode.shared_facet):
-    mesh = dolfinx.mesh.create_unit_square(comm, 12, 12, ghost_mode=ghost_mode)
-    swarm = _midpoint_swarm(mesh)
-    n0 = swarm.global_num_particles()
-    ids0 = _gather_ids(comm, swarm.ids)
-    swarm.x = _moved(swarm.ids, swarm.x)
+def _move_and_locate_locally(comm, mesh, swarm, x) -> int:
+    """Move the particles to ``x``, locate them in this rank's local cells only (-1 elsewhere),
+    sort; returns the global number left unlocated (for migration to resolve)."""
+    swarm.x = x
     swarm.cells = _locate_local(mesh, swarm.x)
     inside = swarm.cells >= 0
     swarm.xref = np.full_like(swarm.xref, np.nan)
     swarm.xref[inside] = pull_back(mesh, swarm.cells[inside], swarm.x[inside])
     swarm.sort()
-    n_unlocated = comm.allreduce(int(np.count_nonzero(~inside)), op=MPI.SUM)
+    return comm.allreduce(int(np.count_nonzero(~inside)), op=MPI.SUM)
+
+
+def _run_migration(comm, ghost_mode=dolfinx.mesh.GhostMode.shared_facet):
+    mesh = dolfinx.mesh.create_unit_square(comm, 12, 12, ghost_mode=ghost_mode)
+    swarm = _midpoint_swarm(mesh)
+    n0 = swarm.global_num_particles()
+    ids0 = _gather_ids(comm, swarm.ids)
+    n_unlocated = _move_and_locate_locally(comm, mesh, swarm, _moved(swarm.ids, swarm.x))
     stats = migrate(swarm)
     return mesh, swarm, n0, ids0, stats, n_unlocated
 
@@ -210,13 +216,8 @@ def test_unlocated_particles_settled_by_neighbours_without_the_global_fallback(m
     mesh = dolfinx.mesh.create_unit_square(comm, 12, 12)
     swarm = _midpoint_swarm(mesh)
     ids0 = _gather_ids(comm, swarm.ids)
-    swarm.x = 1.0 - swarm.x  # point reflection: most particles land far from their rank's cells
-    swarm.cells = _locate_local(mesh, swarm.x)
-    inside = swarm.cells >= 0
-    swarm.xref = np.full_like(swarm.xref, np.nan)
-    swarm.xref[inside] = pull_back(mesh, swarm.cells[inside], swarm.x[inside])
-    swarm.sort()
-    n_unlocated = comm.allreduce(int(np.count_nonzero(~inside)), op=MPI.SUM)
+    # point reflection: most particles land far from their rank's cells
+    n_unlocated = _move_and_locate_locally(comm, mesh, swarm, 1.0 - swarm.x)
     stats = migrate(swarm, migrator=Migrator(mesh))
     assert n_unlocated > 0 and stats.global_fallback_sent == n_unlocated
     assert comm.allreduce(len(calls), op=MPI.SUM) == 0

@@ -157,7 +157,7 @@ def _interface_measure(mesh: dolfinx.mesh.Mesh):
 
 def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degree: int = 2,
               geometry_degree: int = 2, solver: str = "direct", nitsche_penalty: float | None = None,
-              ) -> LevelResult:
+              petsc_options: dict | None = None) -> LevelResult:
     """Solve one mesh level and measure the errors (collective)."""
     h_target = resolution / 2**level
     spec = ShellSpec(case.dim, R_INNER, R_OUTER, resolution=h_target, geometry_degree=geometry_degree,
@@ -167,7 +167,8 @@ def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degr
     kind = "free_slip" if case.free_slip else "no_slip"
     bcs = {"inner": VelocityBC(kind), "outer": VelocityBC(kind)}
     approximation = BoussinesqApproximation(Ra=1.0, gravity="radial")
-    stokes = StokesSolver(mesh, approximation, bcs=bcs, degree=degree, solver=solver, nitsche_penalty=nitsche_penalty)
+    stokes = StokesSolver(mesh, approximation, bcs=bcs, degree=degree, solver=solver, nitsche_penalty=nitsche_penalty,
+                          petsc_options=petsc_options)
     x = ufl.SpatialCoordinate(mesh)
     if case.smooth:
         # rho' = (r / R_p)^k * angular; interpolated at degree k + 2 to keep the forcing error small.
@@ -248,13 +249,16 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--geometry-degree", type=int, default=2, choices=(1, 2))
     parser.add_argument("--solver", default="direct")
     parser.add_argument("--nitsche-penalty", type=float, default=None)
+    parser.add_argument("--petsc-options", type=json.loads, default=None,
+                        help='extra Stokes PETSc options as JSON, e.g. \'{"mat_mumps_icntl_10": -2}\'')
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
     case = Case(args.kind, args.dim, args.n, args.m, args.k)
     resolution = args.resolution if args.resolution is not None else (0.2 if args.dim == 2 else 0.5)
     results = [run_level(case, level, resolution, comm=comm, degree=args.degree,
                          geometry_degree=args.geometry_degree, solver=args.solver,
-                         nitsche_penalty=args.nitsche_penalty) for level in args.levels]
+                         nitsche_penalty=args.nitsche_penalty, petsc_options=args.petsc_options)
+               for level in args.levels]
     h = [r.h for r in results]
     document = {
         "case": asdict(case), "ranks": comm.size, "degree": args.degree, "geometry_degree": args.geometry_degree,

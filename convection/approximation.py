@@ -191,10 +191,8 @@ class BoussinesqApproximation:
             return x / ufl.sqrt(ufl.dot(x, x))
         return ufl.as_vector([0.0] * (gdim - 1) + [1.0])
 
-    def buoyancy(self, T: Any, C: Any, gdim: int, /, *, x: Any = None) -> Any:
-        """UFL vector expression ``(Ra T - sum_i Rb_i C_i) e_up`` of length ``gdim`` (``C = None`` -> 0).
-
-        ``x`` (``ufl.SpatialCoordinate`` of the mesh) is needed for radial gravity."""
+    def density(self, T: Any, C: Any) -> Any:
+        """UFL scalar ``Ra T - sum_i Rb_i C_i``, the buoyancy's magnitude along ``e_up`` (``C = None`` -> 0)."""
         magnitude = self.Ra * _as_ufl(T)
         cs = fractions(C)
         rbs = self.Rb if isinstance(self.Rb, tuple) else (self.Rb,) * len(cs)
@@ -203,6 +201,13 @@ class BoussinesqApproximation:
         for rb, c in zip(rbs, cs):
             if rb != 0.0:
                 magnitude = magnitude - rb * _as_ufl(c)
+        return magnitude
+
+    def buoyancy(self, T: Any, C: Any, gdim: int, /, *, x: Any = None) -> Any:
+        """UFL vector expression ``(Ra T - sum_i Rb_i C_i) e_up`` of length ``gdim`` (``C = None`` -> 0).
+
+        ``x`` (``ufl.SpatialCoordinate`` of the mesh) is needed for radial gravity."""
+        magnitude = self.density(T, C)
         if self.gravity == "radial":
             if x is None:
                 raise ValueError("radial gravity needs the spatial coordinate x")

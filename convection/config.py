@@ -170,6 +170,11 @@ SCHEMA: dict[str, Any] = {
                         help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
                         "free slip on both surfaces), direct (MUMPS) in 2D"),
         "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6)"),
+        "buoyancy_theta": Field("float", 0.0, minimum=0.0,
+                                check=lambda v: None if v <= 1.0 else f"must be <= 1, got {v}",
+                                help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
+                                     "t + theta dt along the flow (semi-implicit, stabilises dense interfaces against "
+                                     "the 'drunken sailor' oscillation; 0.5 is a good choice)"),
     },
     "energy": {
         "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),
@@ -213,6 +218,10 @@ SCHEMA: dict[str, Any] = {
         "dt_max": Field("float", None, nullable=True, exclusive_minimum=0.0),
         "dt_initial": Field("float", None, nullable=True, exclusive_minimum=0.0,
                             help="first step when the initial velocity is zero"),
+        "max_increase": Field("float", None, nullable=True, exclusive_minimum=1.0,
+                              help="a step is at most this many times the previous one (null: no limit); keeps the "
+                                   "velocity extrapolation u* = (1 + w) u^n - w u^(n-1), w = dt/dt_previous, tame "
+                                   "after a fast initial transient"),
         "max_steps": Field("int", None, nullable=True, minimum=0),
         "steady_state_tolerance": Field("float", None, nullable=True, exclusive_minimum=0.0,
                                         help="stop when Nu and vrms change by less than this (relative) per unit step window"),

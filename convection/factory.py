@@ -110,7 +110,7 @@ def run_settings(config: dict[str, Any]) -> RunSettings:
     """The ``time`` and ``output`` sections."""
     t, out = config["time"], config["output"]
     return RunSettings(end=t["end"], directory=Path(out["directory"]), cfl=t["cfl"], dt_max=t["dt_max"],
-                       dt_initial=t["dt_initial"], max_steps=t["max_steps"], steady_tolerance=t["steady_state_tolerance"],
+                       dt_initial=t["dt_initial"], max_increase=t["max_increase"], max_steps=t["max_steps"], steady_tolerance=t["steady_state_tolerance"],
                        steady_window=t["steady_state_window"], fields_every=out["fields_every"],
                        progress=out["progress"], progress_every=out["progress_every"])
 
@@ -173,7 +173,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
 
     scfg, ecfg = config["stokes"], config["energy"]
     stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, degree=scfg["degree"], solver=scfg["solver"],
-                          petsc_options=scfg["petsc_options"])
+                          petsc_options=scfg["petsc_options"], buoyancy_theta=scfg["buoyancy_theta"])
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, degree=ecfg["degree"],
                                   stabilisation=ecfg["stabilisation"], velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),

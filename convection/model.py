@@ -145,7 +145,9 @@ class Model:
     # ------------------------------------------------------------------ time stepping
     def solve_flow(self) -> StokesResult:
         """Solve Stokes for the current temperature and fractions."""
-        result = self.stokes.solve(self.T if self.T is not None else 0.0, self.fractions or None)
+        # dt: the step just taken predicts the coming one (for a semi-implicit buoyancy).
+        result = self.stokes.solve(self.T if self.T is not None else 0.0, self.fractions or None,
+                                   dt=self.dt_previous)
         self.timers.add("stokes_assembly", result.assembly_seconds)
         self.timers.add("stokes_solve", result.solve_seconds)
         self.flow_result = result

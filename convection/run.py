@@ -36,6 +36,7 @@ class RunSettings:
         cfl: Courant number of the step.
         dt_max: Largest step, or None.
         dt_initial: Step used while the velocity is zero, or None.
+        max_increase: A step is at most this factor times the previous one, or None.
         max_steps: Stop after this many steps, or None.
         steady_tolerance: Stop when vrms and Nu change by less than this (relative) over
             ``steady_window`` steps, or None.
@@ -51,6 +52,7 @@ class RunSettings:
     cfl: float = 1.0
     dt_max: float | None = None
     dt_initial: float | None = None
+    max_increase: float | None = None
     max_steps: int | None = None
     steady_tolerance: float | None = None
     steady_window: int = 20
@@ -101,6 +103,8 @@ def _timestep(model: Model, settings: RunSettings) -> float:
         dt = settings.dt_initial or settings.dt_max or 0.0
         if dt <= 0.0:
             raise RuntimeError("the velocity is zero and neither time.dt_initial nor time.dt_max is set")
+    if settings.max_increase is not None and model.dt_previous > 0.0:
+        dt = min(dt, settings.max_increase * model.dt_previous)
     return min(dt, settings.end - model.time)
 
 

@@ -56,6 +56,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
+from convection.buoyancy import SemiImplicitBuoyancy
 from convection.boundary import (
     VelocityBC, boundary_names, free_slip_boundaries, has_rotation_null_space, nitsche_free_slip, velocity_dirichlet_bcs,
 )
@@ -207,6 +208,9 @@ class StokesSolver(PetscSolver):
             ``{"ksp_rtol": 1e-6}``.
         nitsche_penalty: penalty factor of the weak free-slip condition on curved boundaries
             (default ``10 (degree + 1)^2``).
+        buoyancy_theta: 0 (the default): the buoyancy of the current fields; ``0 < theta <= 1``:
+            the buoyancy predicted at ``t + theta dt`` along the flow
+            (:class:`convection.buoyancy.SemiImplicitBuoyancy`; ``dt`` is given to :meth:`solve`).
 
     Attributes:
         u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
@@ -221,7 +225,8 @@ class StokesSolver(PetscSolver):
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
                  bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
-                 petsc_options: dict | None = None, nitsche_penalty: float | None = None) -> None:
+                 petsc_options: dict | None = None, nitsche_penalty: float | None = None,
+                 buoyancy_theta: float = 0.0) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.mesh = mesh
@@ -230,6 +235,9 @@ class StokesSolver(PetscSolver):
         self.degree = degree
         self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
         self.has_rotation_null_space = has_rotation_null_space(self.bcs)
+        self.buoyancy_theta = float(buoyancy_theta)
+        self._semi_implicit = (SemiImplicitBuoyancy(mesh, approximation, self.buoyancy_theta)
+                               if self.buoyancy_theta != 0.0 else None)
         self._petsc_options = self._create_ksp(
             mesh.comm, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space), petsc_options)
         self.is_iterative = self.solver != "direct"
@@ -260,7 +268,7 @@ class StokesSolver(PetscSolver):
 
     def settings(self) -> dict[str, Any]:
         return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
-                "nitsche_penalty": self.nitsche_penalty}
+                "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta}
 
     # ------------------------------------------------------------------ setup
     def _build_forms(self, T: Any, C: Any) -> None:
@@ -286,6 +294,9 @@ class StokesSolver(PetscSolver):
             a[1][0] += nitsche.a_pu
         if self._pinned:
             a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
+        a_pc00 = a[0][0]
+        if self._semi_implicit is not None:
+            a[0][0] = a[0][0] + self._semi_implicit.form(T, C, u, v, dx)
         self._a = dolfinx.fem.form(a)
         # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
         zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
@@ -295,7 +306,7 @@ class StokesSolver(PetscSolver):
         if self.is_iterative:
             # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
             self._a_pc = dolfinx.fem.form(
-                [[a[0][0], None], [None, -ufl.inner(p, q) / eta * dx]]
+                [[a_pc00, None], [None, -ufl.inner(p, q) / eta * dx]]
             )
         self._operator_current = False
 
@@ -337,7 +348,7 @@ class StokesSolver(PetscSolver):
         return is_u, is_p
 
     # ------------------------------------------------------------------ solve
-    def solve(self, T: Any, C: Any = None) -> StokesResult:
+    def solve(self, T: Any, C: Any = None, /, *, dt: float = 0.0) -> StokesResult:
         """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
 
         Args:
@@ -345,6 +356,8 @@ class StokesSolver(PetscSolver):
             C: composition: ``None``, one material fraction (Function of any degree, UFL
                 expression or number) or a tuple of them, one per material (see
                 :func:`convection.approximation.fractions`).
+            dt: the coming step, for a semi-implicit buoyancy (``buoyancy_theta > 0``); ignored
+                otherwise.
 
         Returns:
             Iteration count, true residual norm and timings. An iterative solve starts from the
@@ -358,12 +371,18 @@ class StokesSolver(PetscSolver):
                 self._setup_linear_algebra()
 
         t0 = time.perf_counter()
-        if not self._operator_current or self.approximation.is_variable_viscosity:
+        refresh = not self._operator_current or self.approximation.is_variable_viscosity
+        if self._semi_implicit is not None:
+            self._semi_implicit.update(dt)
+        if refresh or self._semi_implicit is not None:
+            # The semi-implicit term changes A with the fields and dt; the preconditioning matrix
+            # P (without the term) and hence the preconditioner stay while the viscosity is constant.
             self._A.zeroEntries()
             dolfinx.fem.petsc.assemble_matrix_block(self._A, self._a, bcs=self._bcs)
             self._A.assemble()
             if self._null_space is not None:
                 self._A.setNullSpace(self._null_space)
+        if refresh:
             if self._P is not None:
                 self._P.zeroEntries()
                 dolfinx.fem.petsc.assemble_matrix_block(self._P, self._a_pc, bcs=self._bcs)

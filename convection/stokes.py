@@ -64,6 +64,9 @@ from convection.nullspace import (
     PressureMean, RigidRotations, constant_pressure_null_space, pressure_pin, rigid_body_modes,
 )
 from convection.petsc_options import MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options
+from convection import jit_cache
+
+jit_cache.install()  # forms and elements compiled once per process (see the module)
 
 _BOOMERAMG_SYSTEMS: dict[str, Any] = {
     # Systems AMG ("unknown" approach: PETSc passes the block size gdim as hypre's number of

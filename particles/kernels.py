@@ -584,3 +584,29 @@ def stage_combination(table, start, width, coefs, out):  # pragma: no cover
                 for j in range(nc):
                     acc += coefs[j] * table[p, start + width * (j + 1) + i]
                 out[p, i] = acc
+
+
+@numba.njit(cache=True)
+def locate_among_candidates(offsets, links, x, origin, K, tol, limit, cells, xref):  # pragma: no cover
+    """For each point ``x[i]`` (shape=(m, gdim), affine simplices, gdim == tdim in {2, 3}) the lowest
+    cell below ``limit`` among its candidates ``links[offsets[i]:offsets[i+1]]`` that contains it
+    (-1 if none) into ``cells[i]``, its reference coordinates into ``xref[i]``."""
+    m = x.shape[0]
+    gdim = x.shape[1]
+    for i in range(m):
+        px = x[i, 0]
+        py = x[i, 1]
+        pz = x[i, 2] if gdim == 3 else 0.0
+        best = -1
+        for j in range(offsets[i], offsets[i + 1]):
+            c = links[j]
+            if c >= limit or (best >= 0 and c > best):
+                continue
+            inside, X, Y, Z = _pull_back_tuple(c, px, py, pz, origin, K, tol)
+            if inside:
+                best = c
+                xref[i, 0] = X
+                xref[i, 1] = Y
+                if gdim == 3:
+                    xref[i, 2] = Z
+        cells[i] = best

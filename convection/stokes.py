@@ -49,6 +49,7 @@ from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import dolfinx
+import dolfinx.cpp as _cpp
 import dolfinx.fem.petsc
 import numpy as np
 import ufl
@@ -224,7 +225,7 @@ class StokesSolver(PetscSolver):
 
     KIND = "Stokes"
     SOLVERS = STOKES_SOLVERS
-    PETSC_OBJECTS = ("ksp", "_A", "_P", "_b", "_x", "_null_space", "_near_null_space")
+    PETSC_OBJECTS = ("ksp", "_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
                  bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
@@ -260,8 +261,10 @@ class StokesSolver(PetscSolver):
             self._bcs.append(pressure_pin(self.Q, self.bcs))
 
         self._forms_key: tuple[Any, Any] | None = None
-        self._a = self._L = self._a_pc = None
+        self._a = self._L = self._a_pc = self._a_lift = None
         self._A: PETSc.Mat | None = None
+        self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
+        self._a_si = None  # the semi-implicit term (velocity block form), or None
         self._P: PETSc.Mat | None = None
         self._b: PETSc.Vec | None = None
         self._x: PETSc.Vec | None = None
@@ -297,10 +300,14 @@ class StokesSolver(PetscSolver):
             a[1][0] += nitsche.a_pu
         if self._pinned:
             a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
-        a_pc00 = a[0][0]
-        if self._semi_implicit is not None:
-            a[0][0] = a[0][0] + self._semi_implicit.form(T, C, u, v, dx)
         self._a = dolfinx.fem.form(a)
+        self._a_lift = self._a
+        if self._semi_implicit is not None:
+            # Assembled on its own into a copy of the fixed operator every solve; the lifting of
+            # the boundary values uses the whole operator.
+            term = self._semi_implicit.form(T, C, u, v, dx)
+            self._a_si = dolfinx.fem.form(term)
+            self._a_lift = dolfinx.fem.form([[a[0][0] + term, a[0][1]], [a[1][0], a[1][1]]])
         # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
         zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
         self._L = dolfinx.fem.form(
@@ -309,12 +316,14 @@ class StokesSolver(PetscSolver):
         if self.is_iterative:
             # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
             self._a_pc = dolfinx.fem.form(
-                [[a_pc00, None], [None, -ufl.inner(p, q) / eta * dx]]
+                [[a[0][0], None], [None, -ufl.inner(p, q) / eta * dx]]
             )
         self._operator_current = False
 
     def _setup_linear_algebra(self) -> None:
         self._A = dolfinx.fem.petsc.create_matrix_block(self._a)
+        if self._semi_implicit is not None:
+            self._A0 = dolfinx.fem.petsc.create_matrix_block(self._a)
         self._b = dolfinx.fem.petsc.create_vector_block(self._L)
         self._x = self._b.duplicate()
         if self.is_iterative:
@@ -375,14 +384,22 @@ class StokesSolver(PetscSolver):
 
         t0 = time.perf_counter()
         refresh = not self._operator_current or self.approximation.is_variable_viscosity
+        fixed = self._A if self._semi_implicit is None else self._A0
+        if refresh:
+            fixed.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix_block(fixed, self._a, bcs=self._bcs)
+            fixed.assemble()
         if self._semi_implicit is not None:
+            # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
+            # preconditioning matrix P (without the term), hence the preconditioner, stays while the
+            # viscosity is constant.
             self._semi_implicit.update(dt)
+            if not self._A.isAssembled():  # once: A gets A0's nonzero pattern
+                dolfinx.fem.petsc.assemble_matrix_block(self._A, self._a, bcs=self._bcs)
+                self._A.assemble()
+            self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            self._add_velocity_block(self._a_si)
         if refresh or self._semi_implicit is not None:
-            # The semi-implicit term changes A with the fields and dt; the preconditioning matrix
-            # P (without the term) and hence the preconditioner stay while the viscosity is constant.
-            self._A.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix_block(self._A, self._a, bcs=self._bcs)
-            self._A.assemble()
             if self._null_space is not None:
                 self._A.setNullSpace(self._null_space)
         if refresh:
@@ -396,7 +413,7 @@ class StokesSolver(PetscSolver):
             b_local.set(0.0)
         # The pin (last in _bcs) is left out of the right-hand side: its value 0 lifts nothing, and
         # its row keeps the value _consistent_continuity needs.
-        dolfinx.fem.petsc.assemble_vector_block(self._b, self._L, self._a,
+        dolfinx.fem.petsc.assemble_vector_block(self._b, self._L, self._a_lift,
                                                 bcs=self._bcs[:-1] if self._pinned else self._bcs)
         if self._null_space is not None:
             self._null_space.remove(self._b)
@@ -424,6 +441,17 @@ class StokesSolver(PetscSolver):
         norm = float(residual.norm())
         residual.destroy()
         return StokesResult(int(iterations), norm, t1 - t0, time.perf_counter() - t1, t2 - t1)
+
+    def _add_velocity_block(self, form: dolfinx.fem.FormMetaClass) -> None:
+        """Add a velocity-velocity form to A's (0, 0) block, skipping the Dirichlet rows and columns
+        (their unit diagonal is already in A). Collective."""
+        spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
+        is_local = _cpp.la.petsc.create_index_sets(spaces)
+        block = self._A.getLocalSubMatrix(is_local[0], is_local[0])
+        _cpp.fem.petsc.assemble_matrix(block, form, _cpp.fem.pack_constants(form),
+                                       _cpp.fem.pack_coefficients(form), self._bcs, True)
+        self._A.restoreLocalSubMatrix(is_local[0], is_local[0], block)
+        self._A.assemble()
 
     def _consistent_continuity(self) -> None:
         """Make the continuity right-hand side sum to zero, then zero the pinned row (direct solver

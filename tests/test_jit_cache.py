@@ -66,3 +66,16 @@ def test_cache_on_several_ranks(counted):
     test_each_form_and_element_is_compiled_once_per_process(counted)
     sizes = MPI.COMM_WORLD.allgather(jit_cache.cached())
     assert len(set(sizes)) == 1
+
+
+@pytest.mark.mpi
+def test_a_form_compiled_on_one_rank_alone_is_no_hit_for_all_ranks(counted):
+    """Collective: rank 0 compiles a form on COMM_SELF first; the same form made by every rank
+    afterwards still goes through DOLFINx's collective compile on all of them (no hang)."""
+    comm = MPI.COMM_WORLD
+    if comm.rank == 0:
+        _mass(dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2), 3)
+    before = len(counted)
+    assert _mass(dolfinx.mesh.create_unit_square(comm, 3, 3), 3) == pytest.approx(4.0 / 3.0, rel=1e-13)
+    assert len(counted) > before  # compiled for the world group on every rank, rank 0 included
+    assert comm.allreduce(1) == comm.size  # the ranks are still in step

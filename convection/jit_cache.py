@@ -12,11 +12,12 @@ recurs and does not shrink with more ranks (measured: van Keken 1a to t = 300, 6
 keys on (the form's signature, the element's representation, the compiler options), so a form or
 element compiled once in the process is handed out again without touching the disk. The compiled
 objects are immutable C structures; FFCx's disk cache hands out the same library for the same key.
-An entry counts only for the processes that compiled it together: the key holds the ranks (in
-``MPI.COMM_WORLD``) of the communicator it was compiled on. Creation is collective over that
-communicator, so its ranks hit or miss together and DOLFINx's collective runs on every miss; a
-form made by rank 0 alone (``MPI.COMM_SELF``) is not a hit for the same form made by all ranks
-later, which would leave rank 0 out of the others' collective (found as a hang in the tests).
+The ranks decide together whether to use their entries (one allreduce, as DOLFINx's own path
+has): UFL's signature of the same form can differ between ranks (operands are ordered by object
+counters, which differ where a rank made objects alone, e.g. a serial reference on rank 0), so a
+rank-local hit could leave one rank out of the others' collective compile (found as a hang in the
+tests). On a hit everywhere the compiled objects are handed out; otherwise every rank takes
+DOLFINx's path and remembers the result.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from __future__ import annotations
 from typing import Any
 
 import dolfinx.jit
+import numpy as np
 import ufl
 from mpi4py import MPI
 
@@ -31,18 +33,11 @@ _ORIGINAL = dolfinx.jit.ffcx_jit
 _CACHE: dict[tuple[Any, ...], Any] = {}
 
 
-def _members(comm: MPI.Comm) -> tuple[int, ...]:
-    """The ``MPI.COMM_WORLD`` ranks of the processes in ``comm`` (local: no communication)."""
-    if comm.size == MPI.COMM_WORLD.size:
-        return ("world",)  # every process (the usual case; no group translation needed)
-    return tuple(MPI.Group.Translate_ranks(comm.group, list(range(comm.size)), MPI.COMM_WORLD.group))
-
-
-def _key(comm: MPI.Comm, ufl_object: Any, options: dict[str, Any]) -> tuple[Any, ...] | None:
+def _key(ufl_object: Any, options: dict[str, Any]) -> tuple[Any, ...] | None:
     if isinstance(ufl_object, ufl.Form):
-        return ("form", _members(comm), ufl_object.signature(), repr(sorted(options.items())))
+        return ("form", ufl_object.signature(), repr(sorted(options.items())))
     if isinstance(ufl_object, ufl.FiniteElementBase):
-        return ("element", _members(comm), repr(ufl_object), repr(sorted(options.items())))
+        return ("element", repr(ufl_object), repr(sorted(options.items())))
     return None  # expressions: compiled rarely, passed through
 
 
@@ -50,9 +45,15 @@ def _cached_ffcx_jit(comm: Any, ufl_object: Any, form_compiler_params: dict | No
                      jit_params: dict | None = None) -> Any:
     options = {"form_compiler_params": repr(sorted((form_compiler_params or {}).items())),
                "jit_params": repr(sorted((jit_params or {}).items()))}
-    key = _key(comm, ufl_object, options)
-    if key is not None and key in _CACHE:
-        return _CACHE[key]
+    key = _key(ufl_object, options)
+    if key is not None:
+        hit = key in _CACHE
+        if comm.size > 1:
+            everywhere = np.zeros(1, dtype=np.int32)
+            comm.Allreduce(np.array([hit], dtype=np.int32), everywhere, op=MPI.MIN)
+            hit = bool(everywhere[0])
+        if hit:
+            return _CACHE[key]
     result = _ORIGINAL(comm, ufl_object, form_compiler_params=form_compiler_params, jit_params=jit_params)
     if key is not None:
         _CACHE[key] = result

@@ -77,7 +77,8 @@ def test_annulus_layer_keeps_particles_inside_and_matches_one_rank(world, tmp_pa
     for step, (ids, x, c) in _particles(base / "one").items():
         assert np.array_equal(ids, particles[step][0]) and np.array_equal(c, particles[step][2])
         # MUMPS factorises with a dynamic schedule on > 1 rank: velocities differ from the serial
-        # run's in the last digits; positions measured 0 to 8e-11 apart after 2 steps in repeated
-        # runs, once above 1e-9 (a CI failure at the earlier 1e-9 bound)
+        # run's in the last digits; positions measured 0 to 8e-11 apart after 2 steps in most runs,
+        # 2.385e-7 in 2 of 12 runs on 2 ranks (the same value each time, with this session's code
+        # and with the code before it: one alternative schedule), so the bound is 1e-6.
         difference = float(np.abs(x - particles[step][1]).max(initial=0.0))
-        assert difference <= 1e-7, (step, difference)
+        assert difference <= 1e-6, (step, difference)

@@ -101,15 +101,8 @@ class PointEvaluator:
         comm = self.mesh.comm
         num_owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        offsets, cells = self.colliding(points)
-        result = np.full(points.shape[0], default, dtype=np.int32)
-        hit = offsets[1:] > offsets[:-1]
-        if np.any(hit):
-            result[hit] = np.maximum.reduceat(values[cells], offsets[:-1][hit])
-        ghost_hit = np.zeros(points.shape[0], dtype=bool)
-        if cells.size:
-            is_ghost = (cells >= num_owned).astype(np.int64)
-            ghost_hit[hit] = np.add.reduceat(is_ghost, offsets[:-1][hit]) > 0
+        result, hit, ghost_hit = self.geometry.max_over_containing(points[:, : self.geometry.gdim], values,
+                                                                   default=default)
         uncertain = np.flatnonzero(~hit | ghost_hit)
         if comm.allreduce(uncertain.size, op=MPI.SUM) == 0:
             return result

@@ -289,6 +289,43 @@ class CellGeometry:
             xref[hit] = X[first]
         return Located(cells, xref)
 
+    def max_over_containing(self, points: npt.ArrayLike, values: npt.NDArray[np.int32], /, *, default: int = -1
+                            ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+        """The largest ``values[c]`` over the local cells ``c`` containing each point.
+
+        Args:
+            points: Physical points, shape=(m, gdim).
+            values: One integer per local cell (owned and ghost), shape=(num_local_cells,).
+            default: Result for points in no local cell.
+
+        Returns:
+            ``(largest, hit, touches_ghost)``, each shape=(m,): the largest value (``default``
+            where no local cell contains the point), whether one does, whether a ghost cell does.
+        """
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, self.gdim))
+        m = pts.shape[0]
+        values = np.ascontiguousarray(values, dtype=np.int32)
+        largest = np.full(m, default, dtype=np.int32)
+        hit = np.zeros(m, dtype=np.bool_)
+        ghost = np.zeros(m, dtype=np.bool_)
+        if m == 0:
+            return largest, hit, ghost
+        if self.affine and self.gdim == self.tdim and self.gdim in (2, 3):
+            p3 = np.zeros((m, 3), dtype=np.float64)
+            p3[:, : self.gdim] = pts
+            candidates = dolfinx.geometry.compute_collisions(self.tree, p3)
+            kernels.max_among_candidates(np.asarray(candidates.offsets, dtype=np.int64),
+                                         np.asarray(candidates.array, dtype=np.int32), pts, self.origin, self.K,
+                                         self.tol, values, self.num_owned_cells, largest, hit, ghost)
+            return largest, hit, ghost
+        offsets, cells, _ = self.colliding(pts)
+        hit = offsets[1:] > offsets[:-1]
+        if np.any(hit):
+            largest[hit] = np.maximum.reduceat(values[cells], offsets[:-1][hit])
+            is_ghost = (cells >= self.num_owned_cells).astype(np.int64)
+            ghost[hit] = np.add.reduceat(is_ghost, offsets[:-1][hit]) > 0
+        return largest, hit, ghost
+
     def colliding(self, points: npt.ArrayLike, *, owned_only: bool = False
                   ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], npt.NDArray[np.float64]]:
         """Every local cell containing each point (see :meth:`locate` for the test).

@@ -610,3 +610,26 @@ def locate_among_candidates(offsets, links, x, origin, K, tol, limit, cells, xre
                 if gdim == 3:
                     xref[i, 2] = Z
         cells[i] = best
+
+
+@numba.njit(cache=True)
+def max_among_candidates(offsets, links, x, origin, K, tol, values, num_owned, best, hit, ghost):  # pragma: no cover
+    """For each point ``x[i]`` (affine simplices, gdim == tdim in {2, 3}): the largest ``values[c]``
+    over its candidate cells ``links[offsets[i]:offsets[i+1]]`` that contain it (into ``best[i]``,
+    left as given where none does), whether any does (``hit[i]``) and whether any of those is a
+    ghost, ``c >= num_owned`` (``ghost[i]``)."""
+    m = x.shape[0]
+    gdim = x.shape[1]
+    for i in range(m):
+        px = x[i, 0]
+        py = x[i, 1]
+        pz = x[i, 2] if gdim == 3 else 0.0
+        for j in range(offsets[i], offsets[i + 1]):
+            c = links[j]
+            inside, X, Y, Z = _pull_back_tuple(c, px, py, pz, origin, K, tol)
+            if inside:
+                if not hit[i] or values[c] > best[i]:
+                    best[i] = values[c]
+                hit[i] = True
+                if c >= num_owned:
+                    ghost[i] = True

@@ -146,3 +146,23 @@ def test_evaluation_distributed():
     comm.Allreduce(MPI.IN_PLACE, hits, op=MPI.MAX)
     assert comm.allreduce(err, op=MPI.MAX) < 1e-10
     assert int(hits.sum()) == 400
+
+
+@pytest.mark.parametrize("gdim", [2, 3])
+def test_compiled_locate_and_max_match_the_vectorised_path(gdim):
+    """The compiled candidate tests of affine cells (locate, max_over_containing) give the cells,
+    values and flags of the general vectorised path, points on shared facets and vertices included."""
+    comm = MPI.COMM_WORLD
+    mesh = (dolfinx.mesh.create_unit_square(comm, 9, 7) if gdim == 2 else dolfinx.mesh.create_unit_cube(comm, 4, 3, 5))
+    rng = np.random.default_rng(5)
+    points = np.vstack([rng.uniform(-0.1, 1.1, (3000, gdim)), mesh.geometry.x[:, :gdim]])
+    fast = CellGeometry(mesh)
+    general = CellGeometry(mesh)
+    general.affine = False  # Newton pull-back and numpy reductions
+    values = rng.integers(0, 9, fast.num_local_cells).astype(np.int32)
+    a, b = fast.locate(points), general.locate(points)
+    assert np.array_equal(a.cells, b.cells) and np.any(a.cells >= 0) and np.any(a.cells < 0)
+    assert np.allclose(a.xref, b.xref, atol=1e-12)
+    for x, y in zip(fast.max_over_containing(points, values, default=-3),
+                    general.max_over_containing(points, values, default=-3)):
+        assert np.array_equal(x, y)

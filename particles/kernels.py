@@ -587,16 +587,19 @@ def stage_combination(table, start, width, coefs, out):  # pragma: no cover
 
 
 @numba.njit(cache=True)
+def _point(x, i):  # pragma: no cover
+    """Point ``i`` of ``x`` (shape=(m, 2 or 3)) as three coordinates (z = 0 in 2D)."""
+    return x[i, 0], x[i, 1], (x[i, 2] if x.shape[1] == 3 else 0.0)
+
+
+@numba.njit(cache=True)
 def locate_among_candidates(offsets, links, x, origin, K, tol, limit, cells, xref):  # pragma: no cover
     """For each point ``x[i]`` (shape=(m, gdim), affine simplices, gdim == tdim in {2, 3}) the lowest
     cell below ``limit`` among its candidates ``links[offsets[i]:offsets[i+1]]`` that contains it
     (-1 if none) into ``cells[i]``, its reference coordinates into ``xref[i]``."""
-    m = x.shape[0]
     gdim = x.shape[1]
-    for i in range(m):
-        px = x[i, 0]
-        py = x[i, 1]
-        pz = x[i, 2] if gdim == 3 else 0.0
+    for i in range(x.shape[0]):
+        px, py, pz = _point(x, i)
         best = -1
         for j in range(offsets[i], offsets[i + 1]):
             c = links[j]
@@ -618,12 +621,8 @@ def max_among_candidates(offsets, links, x, origin, K, tol, values, num_owned, b
     over its candidate cells ``links[offsets[i]:offsets[i+1]]`` that contain it (into ``best[i]``,
     left as given where none does), whether any does (``hit[i]``) and whether any of those is a
     ghost, ``c >= num_owned`` (``ghost[i]``)."""
-    m = x.shape[0]
-    gdim = x.shape[1]
-    for i in range(m):
-        px = x[i, 0]
-        py = x[i, 1]
-        pz = x[i, 2] if gdim == 3 else 0.0
+    for i in range(x.shape[0]):
+        px, py, pz = _point(x, i)
         for j in range(offsets[i], offsets[i + 1]):
             c = links[j]
             inside, X, Y, Z = _pull_back_tuple(c, px, py, pz, origin, K, tol)

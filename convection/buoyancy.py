@@ -21,8 +21,9 @@ its term is an anti-stiffness of size ``theta dt Ra |d T / d z|`` that can make 
 indefinite once the step is large against the boundary layers' response. The kept term is
 symmetric positive semi-definite for any step and vanishes with ``dt`` (first-order consistent).
 (Measured on the 3D thick layer at 8^3, 45-50 CFL steps to t = 0.0015: the full term ran as
-stably, vrms within ~15 % of the kept one's, 32-53 FGMRES iterations against 32-46.) It changes with the fields every step; the iterative solver keeps its
-preconditioner (built without the term) while the viscosity is constant.
+stably, vrms within ~15 % of the kept one's, 32-53 FGMRES iterations against 32-46.) It changes
+with the fields every step; the iterative solver keeps its preconditioner (built without the
+term) while the viscosity is constant.
 
 Material fractions held in discontinuous spaces (the cell averages of particles) have their
 gradient on the facets; they enter the term through their lumped L2 projection onto continuous P1,

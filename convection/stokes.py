@@ -225,7 +225,7 @@ class StokesSolver(PetscSolver):
 
     KIND = "Stokes"
     SOLVERS = STOKES_SOLVERS
-    PETSC_OBJECTS = ("ksp", "_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space")
+    PETSC_OBJECTS = ("ksp", "_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
                  bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
@@ -265,6 +265,7 @@ class StokesSolver(PetscSolver):
         self._A: PETSc.Mat | None = None
         self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
         self._a_si = None  # the semi-implicit term (velocity block form), or None
+        self._is_velocity_local: PETSc.IS | None = None
         self._P: PETSc.Mat | None = None
         self._b: PETSc.Vec | None = None
         self._x: PETSc.Vec | None = None
@@ -445,12 +446,14 @@ class StokesSolver(PetscSolver):
     def _add_velocity_block(self, form: dolfinx.fem.FormMetaClass) -> None:
         """Add a velocity-velocity form to A's (0, 0) block, skipping the Dirichlet rows and columns
         (their unit diagonal is already in A). Collective."""
-        spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
-        is_local = _cpp.la.petsc.create_index_sets(spaces)
-        block = self._A.getLocalSubMatrix(is_local[0], is_local[0])
+        if self._is_velocity_local is None:  # the velocity rows in A's local (block) numbering
+            spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
+            self._is_velocity_local = _cpp.la.petsc.create_index_sets(spaces)[0]
+        rows = self._is_velocity_local
+        block = self._A.getLocalSubMatrix(rows, rows)
         _cpp.fem.petsc.assemble_matrix(block, form, _cpp.fem.pack_constants(form),
                                        _cpp.fem.pack_coefficients(form), self._bcs, True)
-        self._A.restoreLocalSubMatrix(is_local[0], is_local[0], block)
+        self._A.restoreLocalSubMatrix(rows, rows, block)
         self._A.assemble()
 
     def _consistent_continuity(self) -> None:

@@ -34,6 +34,7 @@ import ufl
 
 from convection.balance import PARTITIONERS, MeshPiece, create_mesh_from_piece, mesh_piece, partition
 from convection.transfer import PointEvaluator
+from particles.geometry import Candidates
 
 __all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "MeshRecipe",
            "kelly_indicator", "wanted_levels"]
@@ -209,6 +210,10 @@ class MeshHierarchy:
         self._have_midpoints = False
         self.recipe = MeshRecipe()
         self._element = base.ufl_domain().ufl_coordinate_element()
+        # (base, mesh, local base cell of each owned cell) for the last meshes asked about: an
+        # adaptation asks about the old mesh, each refinement round's mesh and the new one.
+        self._base_of: list[tuple[dolfinx.mesh.Mesh, dolfinx.mesh.Mesh, npt.NDArray[np.int32]]] = []
+        self._base_locator: PointEvaluator | None = None
 
     @property
     def num_base_cells(self) -> int:
@@ -220,12 +225,54 @@ class MeshHierarchy:
         ``mesh`` must be refined from the current base without redistribution (a cell's midpoint
         then lies in an owned base cell of the same rank). Returns shape=(num_owned_cells,), int64.
         """
-        num_owned = mesh.topology.index_map(self.tdim).size_local
-        midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, np.arange(num_owned, dtype=np.int32))
-        local = PointEvaluator(self.base).locate(midpoints)
+        local = self._local_base_cells(mesh)
         if np.any(local < 0):
             raise RuntimeError("a cell lies outside this rank's base cells: mesh not refined from this base")
         return self.base_canonical[local]
+
+    def _local_base_cells(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
+        """Local index of the base cell containing each owned cell's midpoint (-1: none on this
+        rank), shape=(num_owned_cells,); remembered for the last four meshes (not collective)."""
+        for base, known, local in self._base_of:
+            if base is self.base and known is mesh:
+                return local
+        num_owned = mesh.topology.index_map(self.tdim).size_local
+        midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, np.arange(num_owned, dtype=np.int32))
+        if self._base_locator is None or self._base_locator.mesh is not self.base:
+            self._base_locator = PointEvaluator(self.base)
+        local = self._base_locator.locate(midpoints)
+        self._base_of = [*self._base_of[-3:], (self.base, mesh, local)]
+        return local
+
+    def candidates(self, search: dolfinx.mesh.Mesh, where: dolfinx.mesh.Mesh,
+                   cells: npt.NDArray[np.int32], /) -> Candidates | None:
+        """Where to look in ``search`` for points lying in the cells ``cells`` of ``where``: the owned
+        cells of ``search`` that descend from the same base cell (not collective).
+
+        Both meshes must be refined from the current base without redistribution (as
+        :meth:`rebuild` and :meth:`repartition` make them): each owned cell then lies in an owned
+        base cell of its rank, and a point inside a base cell lies only in cells descending from
+        it. Points in ghost cells of ``where`` get no candidates. Returns None when the meshes are
+        not related so on this rank.
+
+        Args:
+            search: The mesh to search.
+            where: The mesh the points lie in.
+            cells: The local cell of ``where`` holding each point, shape=(m,).
+        """
+        where_base = self._local_base_cells(where)
+        search_base = self._local_base_cells(search)
+        if np.any(where_base < 0) or np.any(search_base < 0):
+            return None
+        index_map = self.base.topology.index_map(self.tdim)
+        num_groups = index_map.size_local + index_map.num_ghosts + 1  # the last one is empty
+        offsets = np.zeros(num_groups + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum(np.bincount(search_base, minlength=num_groups))
+        cells = np.asarray(cells)
+        owned = cells < where_base.size
+        groups = np.full(cells.size, num_groups - 1, dtype=np.int64)
+        groups[owned] = where_base[cells[owned]]
+        return Candidates(groups, offsets, np.argsort(search_base, kind="stable").astype(np.int32))
 
     def repartition(self, mesh: dolfinx.mesh.Mesh, particles: npt.NDArray[np.float64], /, *,
                     particle_weight: float = 0.01, method: str = "rcb") -> dolfinx.mesh.Mesh:
@@ -345,7 +392,10 @@ class MeshHierarchy:
             # facet of the old mesh must not take whichever neighbour the local numbering lists
             # first, or the result would depend on the partition. After a repartition of the base
             # the old cells may live on other ranks: the query falls back to all ranks.
-            target = locator.max_over_colliding(midpoints, wanted_local, default=0)
+            # Candidates: the old cells of each midpoint's base cell (a midpoint lies inside its
+            # base cell, so they hold every old cell containing it).
+            target = locator.max_over_colliding(midpoints, wanted_local, default=0,
+                                                candidates=self.candidates(old, mesh, cells))
             marked = cells[self.levels(mesh) < target]
             if mesh.comm.allreduce(marked.size, op=MPI.SUM) == 0:
                 break

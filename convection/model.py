@@ -30,7 +30,10 @@ loop in Python (see ``demos/``).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
 
 import dolfinx.fem
 import dolfinx.mesh
@@ -44,6 +47,7 @@ from convection.timestep import cfl_timestep
 from convection.timing import Timers
 from convection.transfer import PointEvaluator, transfer_function
 from convection.transport import TransportSolver
+from particles.geometry import Candidates
 from particles.manager import ParticleManager
 from particles.properties import PropertyContext
 
@@ -218,7 +222,12 @@ class Model:
             if "composition" in self.adaptivity.fields:
                 fields.extend(self.fractions)
             mesh = self.adaptivity.new_mesh(self.mesh, fields or [self._indicator_fallback()], locator=self._locator())
-        self._move_to(mesh)
+            # Both meshes are refined from one base: each particle is looked for first among the
+            # new cells of its old cell's base cell, not with a bounding-box search of the new mesh.
+            swarm = self._swarm()
+            candidates = None if swarm is None else \
+                self.adaptivity.hierarchy.candidates(mesh, self.mesh, swarm.cells)
+        self._move_to(mesh, candidates=candidates, nested=True)
         return before, self.num_cells
 
     def _locator(self) -> PointEvaluator:
@@ -250,24 +259,37 @@ class Model:
         self._move_to(mesh)
         return before, self.balancer.loads(self.mesh, self._swarm())
 
-    def _move_to(self, mesh: dolfinx.mesh.Mesh) -> None:
-        """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles."""
+    def _move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Candidates | None = None,
+                 nested: bool = False) -> None:
+        """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles
+        (``candidates``: where to look for each particle first, see ``ParticleManager.to_mesh``;
+        ``nested``: both meshes are refined from the adaptivity's base mesh, so the fields' nodes are
+        looked for among the old cells of their base cell first)."""
+        nodes_in = None
+        if nested and self.adaptivity is not None:
+            hierarchy, old_mesh = self.adaptivity.hierarchy, self.mesh
+
+            def nodes_in(cells: npt.NDArray[np.int32]) -> Candidates | None:
+                return hierarchy.candidates(old_mesh, mesh, cells)
+
         with self.timers("field_transfer"):
-            old = self._transfer_fields(mesh)
+            old = self._transfer_fields(mesh, nodes_in)
         if self.particles is not None:  # the manager times its own move
-            self.particles.to_mesh(mesh, context=self.property_context(), step=self.timestep)
+            self.particles.to_mesh(mesh, context=self.property_context(), step=self.timestep, candidates=candidates)
         for solver in old:
             if solver is not None:
                 solver.destroy()
         self._point_evaluator = None  # it holds the old mesh
         self.mesh_version += 1
 
-    def _transfer_fields(self, mesh: dolfinx.mesh.Mesh) -> list:
-        """New solvers on ``mesh`` with the fields carried over; returns the old solvers."""
+    def _transfer_fields(self, mesh: dolfinx.mesh.Mesh,
+                         candidates: Callable[[npt.NDArray[np.int32]], Candidates | None] | None = None) -> list:
+        """New solvers on ``mesh`` with the fields carried over; returns the old solvers
+        (``candidates``: see :func:`convection.transfer.transfer_function`)."""
         evaluator = self._locator()
 
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
-            transfer_function(src, dst, evaluator=evaluator)
+            transfer_function(src, dst, evaluator=evaluator, candidates=candidates)
 
         old = [self.stokes, self.temperature]
         self.stokes = self.stokes.on_mesh(mesh)

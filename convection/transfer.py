@@ -11,6 +11,8 @@ rank evaluates the ones it holds, and the values are combined.
 from __future__ import annotations
 
 import hashlib
+from typing import Callable
+
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -19,7 +21,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from particles.evaluation import Evaluator
-from particles.geometry import CellGeometry, Located
+from particles.geometry import Candidates, CellGeometry, Located
 
 __all__ = ["PointEvaluator", "transfer_function"]
 
@@ -55,8 +57,9 @@ class PointEvaluator:
         """Lowest local cell containing each point (-1 where none), points shape=(n, 3)."""
         return self._locate(points).cells
 
-    def _locate(self, points: npt.NDArray[np.float64]) -> Located:
-        """Cells and reference coordinates of ``points`` (shape=(n, 3)).
+    def _locate(self, points: npt.NDArray[np.float64], candidates: Candidates | None = None) -> Located:
+        """Cells and reference coordinates of ``points`` (shape=(n, 3); ``candidates``: cells to
+        test first, see :meth:`CellGeometry.locate`).
 
         The answers for the last few point sets are remembered: the fields of one element on one
         target mesh (u, T and its history, ...) ask for the same interpolation points.
@@ -65,7 +68,7 @@ class PointEvaluator:
             np.int64(points.shape[0]).tobytes()
         found = self._located.get(key)
         if found is None:
-            found = self.geometry.locate(points[:, : self.geometry.gdim])
+            found = self.geometry.locate(points[:, : self.geometry.gdim], candidates=candidates)
             if len(self._located) >= 4:
                 self._located.pop(next(iter(self._located)))
             self._located[key] = found
@@ -83,7 +86,7 @@ class PointEvaluator:
         return values.reshape(-1, value_size)
 
     def max_over_colliding(self, points: npt.NDArray[np.float64], values: npt.NDArray[np.int32], /, *,
-                           default: int = -1) -> npt.NDArray[np.int32]:
+                           default: int = -1, candidates: Candidates | None = None) -> npt.NDArray[np.int32]:
         """Largest value among all cells of the (distributed) mesh that contain each point.
 
         Collective. Points whose colliding cells are all owned here are answered locally; points
@@ -94,6 +97,8 @@ class PointEvaluator:
             points: shape=(n, 3).
             values: One integer per local cell (owned and ghost), shape=(num_local_cells,).
             default: Result for points in no cell.
+            candidates: Local cells that hold every cell containing each point they hit (see
+                :meth:`CellGeometry.max_over_containing`).
 
         Returns:
             shape=(n,), int32.
@@ -102,7 +107,7 @@ class PointEvaluator:
         num_owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         result, hit, ghost_hit = self.geometry.max_over_containing(points[:, : self.geometry.gdim], values,
-                                                                   default=default)
+                                                                   default=default, candidates=candidates)
         uncertain = np.flatnonzero(~hit | ghost_hit)
         if comm.allreduce(uncertain.size, op=MPI.SUM) == 0:
             return result
@@ -122,16 +127,18 @@ class PointEvaluator:
         result[uncertain] = total[start: start + uncertain.size]
         return result
 
-    def evaluate(self, function: dolfinx.fem.Function, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    def evaluate(self, function: dolfinx.fem.Function, points: npt.NDArray[np.float64], /, *,
+                 candidates: Candidates | None = None) -> npt.NDArray[np.float64]:
         """Values of ``function`` at ``points`` (shape=(n, 3)); returns shape=(n, value_size).
 
         Collective: every rank must call it (with its own, possibly empty, point set).
+        ``candidates``: local cells to test first for each point (:meth:`CellGeometry.locate`).
         """
         comm = self.mesh.comm
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         value_size = int(np.prod(function.ufl_shape)) if function.ufl_shape else 1
         values = np.zeros((points.shape[0], value_size))
-        located = self._locate(points)
+        located = self._locate(points, candidates)
         found = np.flatnonzero(located.cells >= 0)
         if found.size:
             values[found] = self._values(function, located, found, value_size)
@@ -161,6 +168,18 @@ class PointEvaluator:
         return values
 
 
+def _node_cells(V: dolfinx.fem.FunctionSpace) -> npt.NDArray[np.int32]:
+    """A local cell holding each local (unblocked) dof, shape=(num_local_dofs,): the lowest-numbered
+    one, so an owned cell wherever one holds it (cells are written from the last to the first;
+    owned cells are numbered before ghosts)."""
+    index_map = V.dofmap.index_map
+    offsets = V.dofmap.list.offsets
+    cell_of_entry = np.repeat(np.arange(offsets.size - 1, dtype=np.int32), np.diff(offsets))[::-1]
+    cells = np.full(index_map.size_local + index_map.num_ghosts, -1, dtype=np.int32)
+    cells[V.dofmap.list.array[::-1]] = cell_of_entry
+    return cells
+
+
 def _nodal(V: dolfinx.fem.FunctionSpace) -> bool:
     """True for (blocked) Lagrange spaces, whose dofs are the values at the dof coordinates."""
     element = V.ufl_element()
@@ -170,7 +189,8 @@ def _nodal(V: dolfinx.fem.FunctionSpace) -> bool:
 
 
 def transfer_function(
-    source: dolfinx.fem.Function, target: dolfinx.fem.Function, /, *, evaluator: PointEvaluator | None = None
+    source: dolfinx.fem.Function, target: dolfinx.fem.Function, /, *, evaluator: PointEvaluator | None = None,
+    candidates: Callable[[npt.NDArray[np.int32]], Candidates | None] | None = None,
 ) -> None:
     """Interpolate ``source`` (on mesh A) into ``target`` (on mesh B): target = I_B(source).
 
@@ -178,13 +198,18 @@ def transfer_function(
     A Lagrange target takes the source's values at its owned dof coordinates, each node once
     (``Function.interpolate`` would visit a P2 node once per cell around it: three times as many
     points in 2D); other elements go through ``Function.interpolate``.
+
+    ``candidates`` maps the local cell of mesh B holding each point to the cells of mesh A to test
+    first (e.g. :meth:`convection.adaptivity.MeshHierarchy.candidates` for nested meshes); points
+    not found among them are searched with the bounding-box tree.
     """
     evaluator = evaluator or PointEvaluator(source.function_space.mesh)
     V = target.function_space
     if _nodal(V):
         n = V.dofmap.index_map.size_local
         nodes = V.tabulate_dof_coordinates()[:n]
-        target.x.array[: n * V.dofmap.index_map_bs] = evaluator.evaluate(source, nodes).reshape(-1)
+        first = None if candidates is None else candidates(_node_cells(V)[:n])
+        target.x.array[: n * V.dofmap.index_map_bs] = evaluator.evaluate(source, nodes, candidates=first).reshape(-1)
         target.x.scatter_forward()
         return
     mesh = V.mesh

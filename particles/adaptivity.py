@@ -18,6 +18,7 @@ import numpy as np
 
 import dolfinx.mesh
 
+from particles.geometry import Candidates
 from particles.migration import migrate
 from particles.swarm import Swarm
 
@@ -38,12 +39,16 @@ class MeshChangeStats(NamedTuple):
     lost: int
 
 
-def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /) -> tuple[Swarm, MeshChangeStats]:
+def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /, *,
+                 candidates: Candidates | None = None) -> tuple[Swarm, MeshChangeStats]:
     """A swarm on ``mesh`` holding all particles of ``swarm`` (ids, positions, properties). Collective.
 
     Args:
         swarm: Particles on the old mesh (all in owned cells).
         mesh: The new mesh, covering the same domain.
+        candidates: Cells of ``mesh`` to search first for each particle (see
+            :meth:`particles.geometry.CellGeometry.locate`); the others are found with the
+            bounding-box tree.
 
     Returns:
         The new swarm (same property layout) and the move's statistics.
@@ -52,7 +57,7 @@ def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /) -> tuple[Swarm, MeshC
     for name in swarm.property_names:
         lay = swarm.layout(name)
         new.add_property(name, lay.size)
-    located = new.geometry.locate(swarm.x)
+    located = new.geometry.locate(swarm.x, candidates=candidates)
     cells = located.cells
     local = (cells >= 0) & (cells < new.num_owned_cells)
     new.add(swarm.ids, swarm.x, located.xref, cells, swarm.properties)

@@ -36,7 +36,7 @@ import dolfinx.mesh
 
 from particles import kernels
 
-__all__ = ["CellGeometry", "Located", "cell_geometry", "locate"]
+__all__ = ["Candidates", "CellGeometry", "Located", "cell_geometry", "locate"]
 
 _BASIX_CELL = {
     dolfinx.mesh.CellType.interval: basix.CellType.interval,
@@ -58,6 +58,21 @@ class Located(NamedTuple):
 
     cells: npt.NDArray[np.int32]
     xref: npt.NDArray[np.float64]
+
+
+class Candidates(NamedTuple):
+    """Cells to search first, shared by groups of points (e.g. the cells of a new mesh refined from
+    the base cell each point's old cell descends from).
+
+    Attributes:
+        groups: The candidate group of each point, shape=(m,), int64 in [0, G).
+        offsets: Group ``g``'s cells are ``cells[offsets[g]:offsets[g + 1]]``, shape=(G + 1,), int64.
+        cells: Local cell indices, shape=(offsets[-1],), int32.
+    """
+
+    groups: npt.NDArray[np.int64]
+    offsets: npt.NDArray[np.int64]
+    cells: npt.NDArray[np.int32]
 
 
 class CellGeometry:
@@ -247,7 +262,8 @@ class CellGeometry:
             self._tree = dolfinx.geometry.BoundingBoxTree(self.mesh, self.tdim, cells, padding=padding)
         return self._tree
 
-    def locate(self, points: npt.ArrayLike, *, owned_only: bool = False) -> Located:
+    def locate(self, points: npt.ArrayLike, *, owned_only: bool = False,
+               candidates: Candidates | None = None) -> Located:
         """Find a local cell containing each point with the bounding-box tree, and pull back.
 
         Among several containing cells (point on a shared facet) the lowest local index is taken,
@@ -258,6 +274,11 @@ class CellGeometry:
         Args:
             points: Physical points, shape=(m, gdim).
             owned_only: Search the owned cells only (ghosts count as not found).
+            candidates: Cells to test first (affine simplices; ignored otherwise): a point found
+                in one of its candidates takes the lowest such cell, the others are searched with
+                the tree. With every containing cell among the candidates the result is that of
+                the tree alone; a point on a facet between candidates and other cells may take
+                another (equally containing) cell.
 
         Returns:
             :class:`Located` with cells (-1 where no local cell contains the point) and xref.
@@ -267,15 +288,23 @@ class CellGeometry:
         cells = np.full(m, -1, dtype=np.int32)
         xref = np.zeros((m, self.tdim), dtype=np.float64)
         if self.affine and self.gdim == self.tdim and self.gdim in (2, 3) and m > 0:
-            # One compiled pass over the tree's candidates (the vectorised path below costs ~5
-            # numpy temporaries per candidate).
-            p3 = np.zeros((m, 3), dtype=np.float64)
-            p3[:, : self.gdim] = pts
-            candidates = dolfinx.geometry.compute_collisions(self.tree, p3)
+            # One compiled pass over the candidates (the vectorised path below costs ~5 numpy
+            # temporaries per candidate).
+            pts = np.ascontiguousarray(pts)
             limit = self.num_owned_cells if owned_only else self.num_local_cells
-            kernels.locate_among_candidates(np.asarray(candidates.offsets, dtype=np.int64),
-                                            np.asarray(candidates.array, dtype=np.int32), np.ascontiguousarray(pts),
-                                            self.origin, self.K, self.tol, limit, cells, xref)
+            if candidates is None:
+                self._locate_with_tree(pts, limit, cells, xref)
+                return Located(cells, xref)
+            kernels.locate_among_candidates(
+                np.ascontiguousarray(candidates.groups, dtype=np.int64),
+                np.ascontiguousarray(candidates.offsets, dtype=np.int64),
+                np.ascontiguousarray(candidates.cells, dtype=np.int32),
+                pts, self.origin, self.K, self.tol, limit, cells, xref)
+            todo = np.flatnonzero(cells < 0)
+            if todo.size:
+                sub_cells, sub_xref = cells[todo], xref[todo]
+                self._locate_with_tree(pts[todo], limit, sub_cells, sub_xref)
+                cells[todo], xref[todo] = sub_cells, sub_xref
             return Located(cells, xref)
         offsets, links, X = self.colliding(pts, owned_only=owned_only)
         hit = offsets[1:] > offsets[:-1]
@@ -289,7 +318,18 @@ class CellGeometry:
             xref[hit] = X[first]
         return Located(cells, xref)
 
-    def max_over_containing(self, points: npt.ArrayLike, values: npt.NDArray[np.int32], /, *, default: int = -1
+    def _locate_with_tree(self, pts: npt.NDArray[np.float64], limit: int, cells: npt.NDArray[np.int32],
+                          xref: npt.NDArray[np.float64]) -> None:
+        """The compiled affine search over the tree's candidates, into ``cells`` and ``xref``."""
+        p3 = np.zeros((pts.shape[0], 3), dtype=np.float64)
+        p3[:, : self.gdim] = pts
+        found = dolfinx.geometry.compute_collisions(self.tree, p3)
+        kernels.locate_among_candidates(np.arange(pts.shape[0], dtype=np.int64),
+                                        np.asarray(found.offsets, dtype=np.int64), np.asarray(found.array, dtype=np.int32),
+                                        pts, self.origin, self.K, self.tol, limit, cells, xref)
+
+    def max_over_containing(self, points: npt.ArrayLike, values: npt.NDArray[np.int32], /, *, default: int = -1,
+                            candidates: Candidates | None = None
                             ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
         """The largest ``values[c]`` over the local cells ``c`` containing each point.
 
@@ -297,6 +337,9 @@ class CellGeometry:
             points: Physical points, shape=(m, gdim).
             values: One integer per local cell (owned and ghost), shape=(num_local_cells,).
             default: Result for points in no local cell.
+            candidates: Cells to test first (affine simplices; ignored otherwise). A point contained
+                in one of its candidates is answered from them alone, so they must hold every
+                cell containing it; the other points are searched with the tree.
 
         Returns:
             ``(largest, hit, touches_ghost)``, each shape=(m,): the largest value (``default``
@@ -311,12 +354,24 @@ class CellGeometry:
         if m == 0:
             return largest, hit, ghost
         if self.affine and self.gdim == self.tdim and self.gdim in (2, 3):
-            p3 = np.zeros((m, 3), dtype=np.float64)
-            p3[:, : self.gdim] = pts
-            candidates = dolfinx.geometry.compute_collisions(self.tree, p3)
-            kernels.max_among_candidates(np.asarray(candidates.offsets, dtype=np.int64),
-                                         np.asarray(candidates.array, dtype=np.int32), pts, self.origin, self.K,
-                                         self.tol, values, self.num_owned_cells, largest, hit, ghost)
+            todo = np.arange(m)
+            if candidates is not None:
+                kernels.max_among_candidates(
+                    np.ascontiguousarray(candidates.groups, dtype=np.int64),
+                    np.ascontiguousarray(candidates.offsets, dtype=np.int64),
+                    np.ascontiguousarray(candidates.cells, dtype=np.int32),
+                    pts, self.origin, self.K, self.tol, values, self.num_owned_cells, largest, hit, ghost)
+                todo = np.flatnonzero(~hit)
+            if todo.size:
+                p3 = np.zeros((todo.size, 3), dtype=np.float64)
+                p3[:, : self.gdim] = pts[todo]
+                found = dolfinx.geometry.compute_collisions(self.tree, p3)
+                sub = largest[todo], hit[todo], ghost[todo]
+                kernels.max_among_candidates(np.arange(todo.size, dtype=np.int64),
+                                             np.asarray(found.offsets, dtype=np.int64),
+                                             np.asarray(found.array, dtype=np.int32), p3[:, : self.gdim].copy(),
+                                             self.origin, self.K, self.tol, values, self.num_owned_cells, *sub)
+                largest[todo], hit[todo], ghost[todo] = sub
             return largest, hit, ghost
         offsets, cells, _ = self.colliding(pts)
         hit = offsets[1:] > offsets[:-1]

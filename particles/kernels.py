@@ -593,15 +593,17 @@ def _point(x, i):  # pragma: no cover
 
 
 @numba.njit(cache=True)
-def locate_among_candidates(offsets, links, x, origin, K, tol, limit, cells, xref):  # pragma: no cover
+def locate_among_candidates(groups, offsets, links, x, origin, K, tol, limit, cells, xref):  # pragma: no cover
     """For each point ``x[i]`` (shape=(m, gdim), affine simplices, gdim == tdim in {2, 3}) the lowest
-    cell below ``limit`` among its candidates ``links[offsets[i]:offsets[i+1]]`` that contains it
-    (-1 if none) into ``cells[i]``, its reference coordinates into ``xref[i]``."""
+    cell below ``limit`` among its candidates ``links[offsets[g]:offsets[g+1]]``, ``g = groups[i]``
+    (points may share a candidate row), that contains it (-1 if none) into ``cells[i]``, its
+    reference coordinates into ``xref[i]``."""
     gdim = x.shape[1]
     for i in range(x.shape[0]):
         px, py, pz = _point(x, i)
         best = -1
-        for j in range(offsets[i], offsets[i + 1]):
+        g = groups[i]
+        for j in range(offsets[g], offsets[g + 1]):
             c = links[j]
             if c >= limit or (best >= 0 and c > best):
                 continue
@@ -616,14 +618,15 @@ def locate_among_candidates(offsets, links, x, origin, K, tol, limit, cells, xre
 
 
 @numba.njit(cache=True)
-def max_among_candidates(offsets, links, x, origin, K, tol, values, num_owned, best, hit, ghost):  # pragma: no cover
+def max_among_candidates(groups, offsets, links, x, origin, K, tol, values, num_owned, best, hit, ghost):  # pragma: no cover
     """For each point ``x[i]`` (affine simplices, gdim == tdim in {2, 3}): the largest ``values[c]``
-    over its candidate cells ``links[offsets[i]:offsets[i+1]]`` that contain it (into ``best[i]``,
-    left as given where none does), whether any does (``hit[i]``) and whether any of those is a
-    ghost, ``c >= num_owned`` (``ghost[i]``)."""
+    over its candidate cells ``links[offsets[g]:offsets[g+1]]``, ``g = groups[i]``, that contain it
+    (into ``best[i]``, left as given where none does), whether any does (``hit[i]``) and whether
+    any of those is a ghost, ``c >= num_owned`` (``ghost[i]``)."""
     for i in range(x.shape[0]):
         px, py, pz = _point(x, i)
-        for j in range(offsets[i], offsets[i + 1]):
+        g = groups[i]
+        for j in range(offsets[g], offsets[g + 1]):
             c = links[j]
             inside, X, Y, Z = _pull_back_tuple(c, px, py, pz, origin, K, tol)
             if inside:

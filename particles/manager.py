@@ -49,6 +49,7 @@ import dolfinx.mesh
 from particles.adaptivity import move_to_mesh
 from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
+from particles.geometry import Candidates
 from particles.interpolation import CellAverage, Interpolator, get_interpolator
 from particles.migration import migrate
 from particles.output import OutputRecord, ParticleWriter
@@ -527,7 +528,8 @@ class ParticleManager:
             self._interpolate(tracked)
 
     # ------------------------------------------------------------------ mesh changes
-    def to_mesh(self, mesh: dolfinx.mesh.Mesh, /, *, context: PropertyContext | None = None, step: int = 0) -> int:
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, /, *, context: PropertyContext | None = None, step: int = 0,
+                candidates: Candidates | None = None) -> int:
         """Carry the particles to ``mesh`` (after adaptation or repartitioning), apply the population
         bounds there and rebuild the tracked fields (collective).
 
@@ -535,12 +537,14 @@ class ParticleManager:
             mesh: The new mesh, covering the same domain.
             context: Fields on the new mesh for properties that new particles evaluate afresh.
             step: The current step number (keys the population's random draws).
+            candidates: Cells of ``mesh`` to search first for each particle, in the order of
+                ``self.swarm`` (:func:`particles.adaptivity.move_to_mesh`).
 
         Returns:
             Particles lost in the move (global; 0 unless the meshes cover different domains).
         """
         t0 = time.perf_counter()
-        self.swarm, stats = move_to_mesh(self.swarm, mesh)
+        self.swarm, stats = move_to_mesh(self.swarm, mesh, candidates=candidates)
         self.timings["particle_mesh_change"] += time.perf_counter() - t0
         self.lost += stats.lost
         self.properties.attach(self.swarm)

@@ -9,7 +9,8 @@ import dolfinx.mesh
 
 from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels
 from convection.mesh import BoxSpec, cell_volumes, create_box_mesh
-from convection.transfer import transfer_function
+from convection.transfer import PointEvaluator, transfer_function
+from particles.geometry import CellGeometry
 
 
 def _front(x):
@@ -93,6 +94,32 @@ def _check_transfer(comm):
         assert verr < 1e-12
 
 
+def _check_nested_transfer(comm, monkeypatch):
+    """Between two meshes rebuilt from one base, each node is found among the old cells of its base
+    cell (no bounding-box search) and the transfer equals the one by bounding-box search."""
+    base = create_box_mesh(comm, BoxSpec((6, 6), (0.0, 0.0), (1.0, 1.0)))
+    hierarchy = MeshHierarchy(base)
+    levels = np.zeros(base.topology.index_map(2).size_local, dtype=np.int32)
+    midpoints = dolfinx.mesh.compute_midpoints(base, 2, np.arange(levels.size, dtype=np.int32))
+    old = hierarchy.rebuild(base, np.where(midpoints[:, 0] < 0.5, 2, 0).astype(np.int32))
+    midpoints = dolfinx.mesh.compute_midpoints(old, 2, np.arange(old.topology.index_map(2).size_local, dtype=np.int32))
+    new = hierarchy.rebuild(old, np.where(midpoints[:, 1] < 0.4, 2, 0).astype(np.int32))
+    evaluator = PointEvaluator(old)
+    for element in (("Lagrange", 2), ("DG", 0)):
+        src = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(old, element))
+        src.interpolate(_front)
+        searched = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(new, element))
+        transfer_function(src, searched, evaluator=PointEvaluator(old))
+        nested = dolfinx.fem.Function(searched.function_space)
+        with monkeypatch.context() as patch:
+            patch.setattr(CellGeometry, "_locate_with_tree", lambda *args: pytest.fail("tree search"))
+            transfer_function(src, nested, evaluator=evaluator,
+                              candidates=lambda cells: hierarchy.candidates(old, new, cells))
+        err = comm.allreduce(float(np.abs(nested.x.array - searched.x.array).max(initial=0.0)), op=MPI.MAX)
+        assert err < 1e-14
+    assert comm.allreduce(new.topology.index_map(2).size_local, op=MPI.SUM) > 4 * 72
+
+
 def test_adaptation_refines_front_and_coarsens_back():
     _check_adaptation(MPI.COMM_WORLD)
 
@@ -109,3 +136,7 @@ def test_adaptation_parallel():
 @pytest.mark.mpi
 def test_transfer_parallel():
     _check_transfer(MPI.COMM_WORLD)
+
+
+def test_nested_transfer(world, monkeypatch):
+    _check_nested_transfer(world, monkeypatch)

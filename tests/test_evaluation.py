@@ -8,7 +8,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from particles.evaluation import Evaluator, evaluate, evaluate_gradient, locate
-from particles.geometry import CellGeometry
+from particles.geometry import Candidates, CellGeometry
 
 
 def _poly(degree, x, shift=0.0):
@@ -166,3 +166,22 @@ def test_compiled_locate_and_max_match_the_vectorised_path(gdim):
     for x, y in zip(fast.max_over_containing(points, values, default=-3),
                     general.max_over_containing(points, values, default=-3)):
         assert np.array_equal(x, y)
+
+
+def test_locate_with_candidates_falls_back_to_the_tree():
+    """Candidates are tried first; points they miss (wrong or empty groups) are found by the tree,
+    so the result is the tree's whenever the candidates hold each point's only containing cell."""
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 8, 6)
+    geometry = CellGeometry(mesh)
+    rng = np.random.default_rng(2)
+    points = rng.uniform(0.0, 1.0, (500, 2))
+    tree = geometry.locate(points)
+    n = geometry.num_local_cells
+    # group 0: every point's true cell alone (via groups = point index); then wrong cells, then none
+    exact = Candidates(np.arange(500), np.arange(501), tree.cells.copy())
+    wrong = Candidates(np.zeros(500, dtype=np.int64), np.array([0, 3]), np.array([n - 1, n - 2, n - 3], dtype=np.int32))
+    empty = Candidates(np.zeros(500, dtype=np.int64), np.array([0, 0]), np.zeros(0, dtype=np.int32))
+    for candidates in (exact, wrong, empty):
+        got = geometry.locate(points, candidates=candidates)
+        assert np.array_equal(got.cells, tree.cells)
+        assert np.allclose(got.xref, tree.xref, atol=1e-14)

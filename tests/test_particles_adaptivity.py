@@ -7,6 +7,7 @@ from convection.mesh import BoxSpec, create_box_mesh
 from particles import Swarm
 from particles.adaptivity import move_to_mesh
 from particles.generation import generate
+from particles.geometry import CellGeometry
 
 from _helpers import gathered
 
@@ -28,8 +29,20 @@ def _check_adaptations(comm):
         midpoints = swarm.geometry.push_forward(np.arange(swarm.num_owned_cells, dtype=np.int32),
                                                 np.full((swarm.num_owned_cells, 2), 1.0 / 3.0))
         wanted = np.where(np.abs(midpoints[:, 1] - centre) < 0.15, depth, 0).astype(np.int32)
-        mesh = hierarchy.rebuild(mesh, wanted)
-        swarm, stats = move_to_mesh(swarm, mesh)
+        old, mesh = mesh, hierarchy.rebuild(mesh, wanted)
+        candidates = hierarchy.candidates(mesh, old, swarm.cells)
+        assert candidates is not None
+        # Every particle's cell in the new mesh (bounding-box search) is among its candidates:
+        # the new cells refined from the base cell its old cell came from.
+        found = CellGeometry(mesh).locate(swarm.x, owned_only=True).cells
+        group_of = np.full(mesh.topology.index_map(2).size_local, -1)
+        group_of[candidates.cells] = np.repeat(np.arange(candidates.offsets.size - 1), np.diff(candidates.offsets))
+        assert np.all(found >= 0) and np.array_equal(group_of[found], candidates.groups)
+        # So the move with candidates gives the cells of the move without.
+        from_tree = move_to_mesh(swarm, mesh)[0]
+        swarm, stats = move_to_mesh(swarm, mesh, candidates=candidates)
+        assert np.array_equal(swarm.ids, from_tree.ids) and np.array_equal(swarm.cells, from_tree.cells)
+        assert np.array_equal(swarm.xref, from_tree.xref)
         assert stats.lost == 0
         swarm.check_invariants()
         # each particle's cell truly contains it, with a consistent reference position

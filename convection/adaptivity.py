@@ -5,7 +5,10 @@ level* per cell of the current mesh and rebuilds the mesh from the coarse base m
 by level the cells whose level is below the wanted level found at their midpoint. The refinement
 keeps each cell on the rank of its base ancestor (``redistribute=False``), so old and new meshes
 cover the same part of the domain on every rank and fields move between them without communication
-(see :mod:`convection.transfer`).
+(see :mod:`convection.transfer`). The nesting also replaces the bounding-box search between the two
+meshes: a point inside a base cell lies only in cells descending from it, so particles, the nodes
+of transferred fields and the refinement rounds' midpoints are looked for among those cells first
+(:meth:`MeshHierarchy.candidates`).
 
 The level of a simplex is measured from its volume: ``level = floor(log2(V_base / V) / tdim)``, so a
 cell split uniformly once is level 1 and a cell only bisected for conformity stays at its level.

@@ -265,10 +265,11 @@ class MeshHierarchy:
         """
         where_base = self._local_base_cells(where)
         search_base = self._local_base_cells(search)
-        if np.any(where_base < 0) or np.any(search_base < 0):
-            return None
-        index_map = self.base.topology.index_map(self.tdim)
-        num_groups = index_map.size_local + index_map.num_ghosts + 1  # the last one is empty
+        num_base_owned = self.base.topology.index_map(self.tdim).size_local
+        for base_of in (where_base, search_base):
+            if np.any((base_of < 0) | (base_of >= num_base_owned)):  # not refined from this rank's base cells
+                return None
+        num_groups = num_base_owned + 1  # the last one is empty
         offsets = np.zeros(num_groups + 1, dtype=np.int64)
         offsets[1:] = np.cumsum(np.bincount(search_base, minlength=num_groups))
         cells = np.asarray(cells)

@@ -57,9 +57,10 @@ class PointEvaluator:
         """Lowest local cell containing each point (-1 where none), points shape=(n, 3)."""
         return self._locate(points).cells
 
-    def _locate(self, points: npt.NDArray[np.float64], candidates: Candidates | None = None) -> Located:
-        """Cells and reference coordinates of ``points`` (shape=(n, 3); ``candidates``: cells to
-        test first, see :meth:`CellGeometry.locate`).
+    def _locate(self, points: npt.NDArray[np.float64],
+                candidates: Callable[[], Candidates | None] | None = None) -> Located:
+        """Cells and reference coordinates of ``points`` (shape=(n, 3); ``candidates``: makes the
+        cells to test first, see :meth:`CellGeometry.locate`, called only if the points are new).
 
         The answers for the last few point sets are remembered: the fields of one element on one
         target mesh (u, T and its history, ...) ask for the same interpolation points.
@@ -68,7 +69,8 @@ class PointEvaluator:
             np.int64(points.shape[0]).tobytes()
         found = self._located.get(key)
         if found is None:
-            found = self.geometry.locate(points[:, : self.geometry.gdim], candidates=candidates)
+            found = self.geometry.locate(points[:, : self.geometry.gdim],
+                                         candidates=None if candidates is None else candidates())
             if len(self._located) >= 4:
                 self._located.pop(next(iter(self._located)))
             self._located[key] = found
@@ -128,11 +130,12 @@ class PointEvaluator:
         return result
 
     def evaluate(self, function: dolfinx.fem.Function, points: npt.NDArray[np.float64], /, *,
-                 candidates: Candidates | None = None) -> npt.NDArray[np.float64]:
+                 candidates: Callable[[], Candidates | None] | None = None) -> npt.NDArray[np.float64]:
         """Values of ``function`` at ``points`` (shape=(n, 3)); returns shape=(n, value_size).
 
         Collective: every rank must call it (with its own, possibly empty, point set).
-        ``candidates``: local cells to test first for each point (:meth:`CellGeometry.locate`).
+        ``candidates`` makes the local cells to test first for each point
+        (:meth:`CellGeometry.locate`); it is called only when these points were not located before.
         """
         comm = self.mesh.comm
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
@@ -208,7 +211,7 @@ def transfer_function(
     if _nodal(V):
         n = V.dofmap.index_map.size_local
         nodes = V.tabulate_dof_coordinates()[:n]
-        first = None if candidates is None else candidates(_node_cells(V)[:n])
+        first = None if candidates is None else (lambda: candidates(_node_cells(V)[:n]))
         target.x.array[: n * V.dofmap.index_map_bs] = evaluator.evaluate(source, nodes, candidates=first).reshape(-1)
         target.x.scatter_forward()
         return

@@ -25,7 +25,7 @@ a convex curved boundary) and accepts points between a straight edge and a conca
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import basix
 import numpy as np
@@ -292,19 +292,14 @@ class CellGeometry:
             # temporaries per candidate).
             pts = np.ascontiguousarray(pts)
             limit = self.num_owned_cells if owned_only else self.num_local_cells
-            if candidates is None:
-                self._locate_with_tree(pts, limit, cells, xref)
-                return Located(cells, xref)
-            kernels.locate_among_candidates(
-                np.ascontiguousarray(candidates.groups, dtype=np.int64),
-                np.ascontiguousarray(candidates.offsets, dtype=np.int64),
-                np.ascontiguousarray(candidates.cells, dtype=np.int32),
-                pts, self.origin, self.K, self.tol, limit, cells, xref)
-            todo = np.flatnonzero(cells < 0)
-            if todo.size:
-                sub_cells, sub_xref = cells[todo], xref[todo]
-                self._locate_with_tree(pts[todo], limit, sub_cells, sub_xref)
-                cells[todo], xref[todo] = sub_cells, sub_xref
+
+            def search(rows: slice | npt.NDArray[np.int64], among: Candidates) -> None:
+                found, found_xref = cells[rows], xref[rows]
+                kernels.locate_among_candidates(*among, pts[rows], self.origin, self.K, self.tol, limit,
+                                                found, found_xref)
+                cells[rows], xref[rows] = found, found_xref
+
+            self._first_then_tree(pts, candidates, search, lambda: cells < 0)
             return Located(cells, xref)
         offsets, links, X = self.colliding(pts, owned_only=owned_only)
         hit = offsets[1:] > offsets[:-1]
@@ -318,15 +313,27 @@ class CellGeometry:
             xref[hit] = X[first]
         return Located(cells, xref)
 
-    def _locate_with_tree(self, pts: npt.NDArray[np.float64], limit: int, cells: npt.NDArray[np.int32],
-                          xref: npt.NDArray[np.float64]) -> None:
-        """The compiled affine search over the tree's candidates, into ``cells`` and ``xref``."""
+    def _tree_candidates(self, pts: npt.NDArray[np.float64]) -> Candidates:
+        """The bounding-box tree's candidate cells of each point (one group per point)."""
         p3 = np.zeros((pts.shape[0], 3), dtype=np.float64)
         p3[:, : self.gdim] = pts
         found = dolfinx.geometry.compute_collisions(self.tree, p3)
-        kernels.locate_among_candidates(np.arange(pts.shape[0], dtype=np.int64),
-                                        np.asarray(found.offsets, dtype=np.int64), np.asarray(found.array, dtype=np.int32),
-                                        pts, self.origin, self.K, self.tol, limit, cells, xref)
+        return Candidates(np.arange(pts.shape[0], dtype=np.int64), np.asarray(found.offsets, dtype=np.int64),
+                          np.asarray(found.array, dtype=np.int32))
+
+    def _first_then_tree(self, pts: npt.NDArray[np.float64], candidates: Candidates | None,
+                         search: Callable[[slice | npt.NDArray[np.int64], Candidates], None],
+                         missed: Callable[[], npt.NDArray[np.bool_]]) -> None:
+        """Run ``search(rows, candidates)`` on every point with the given candidates, then on the
+        points ``missed()`` still flags with the tree's candidates (on all points without any)."""
+        rows: slice | npt.NDArray[np.int64] = slice(None)
+        if candidates is not None:
+            search(rows, Candidates(*(np.ascontiguousarray(a, dtype=t) for a, t in
+                                      zip(candidates, (np.int64, np.int64, np.int32)))))
+            rows = np.flatnonzero(missed())
+            if rows.size == 0:
+                return
+        search(rows, self._tree_candidates(np.ascontiguousarray(pts[rows])))
 
     def max_over_containing(self, points: npt.ArrayLike, values: npt.NDArray[np.int32], /, *, default: int = -1,
                             candidates: Candidates | None = None
@@ -354,24 +361,13 @@ class CellGeometry:
         if m == 0:
             return largest, hit, ghost
         if self.affine and self.gdim == self.tdim and self.gdim in (2, 3):
-            todo = np.arange(m)
-            if candidates is not None:
-                kernels.max_among_candidates(
-                    np.ascontiguousarray(candidates.groups, dtype=np.int64),
-                    np.ascontiguousarray(candidates.offsets, dtype=np.int64),
-                    np.ascontiguousarray(candidates.cells, dtype=np.int32),
-                    pts, self.origin, self.K, self.tol, values, self.num_owned_cells, largest, hit, ghost)
-                todo = np.flatnonzero(~hit)
-            if todo.size:
-                p3 = np.zeros((todo.size, 3), dtype=np.float64)
-                p3[:, : self.gdim] = pts[todo]
-                found = dolfinx.geometry.compute_collisions(self.tree, p3)
-                sub = largest[todo], hit[todo], ghost[todo]
-                kernels.max_among_candidates(np.arange(todo.size, dtype=np.int64),
-                                             np.asarray(found.offsets, dtype=np.int64),
-                                             np.asarray(found.array, dtype=np.int32), p3[:, : self.gdim].copy(),
-                                             self.origin, self.K, self.tol, values, self.num_owned_cells, *sub)
-                largest[todo], hit[todo], ghost[todo] = sub
+            def search(rows: slice | npt.NDArray[np.int64], among: Candidates) -> None:
+                out = largest[rows], hit[rows], ghost[rows]
+                kernels.max_among_candidates(*among, pts[rows], self.origin, self.K, self.tol, values,
+                                             self.num_owned_cells, *out)
+                largest[rows], hit[rows], ghost[rows] = out
+
+            self._first_then_tree(pts, candidates, search, lambda: ~hit)
             return largest, hit, ghost
         offsets, cells, _ = self.colliding(pts)
         hit = offsets[1:] > offsets[:-1]

@@ -112,7 +112,7 @@ def _check_nested_transfer(comm, monkeypatch):
         transfer_function(src, searched, evaluator=PointEvaluator(old))
         nested = dolfinx.fem.Function(searched.function_space)
         with monkeypatch.context() as patch:
-            patch.setattr(CellGeometry, "_locate_with_tree", lambda *args: pytest.fail("tree search"))
+            patch.setattr(CellGeometry, "_tree_candidates", lambda *args: pytest.fail("tree search"))
             transfer_function(src, nested, evaluator=evaluator,
                               candidates=lambda cells: hierarchy.candidates(old, new, cells))
         err = comm.allreduce(float(np.abs(nested.x.array - searched.x.array).max(initial=0.0)), op=MPI.MAX)

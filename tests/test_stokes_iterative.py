@@ -72,12 +72,17 @@ def test_iterations_flat_in_h_parallel(viscosity):
 
 
 def _check_matches_mumps(viscosity: str, solver: str, rtol: float, n: int = 4, reference: str = "direct") -> None:
-    """The distance to the reference solution (relative L2) is a modest multiple of rtol: measured
-    up to ~10 rtol with the smooth contrast and ~60 rtol with the sharp one. The reference is MUMPS,
-    or (in parallel, where MUMPS without iterative refinement is only 4e-6 to 6e-5 accurate) the
-    other iterative solver at rtol 1e-11."""
+    """The distance to the reference solution (relative L2) is a modest multiple of rtol. The
+    reference is MUMPS, or (in parallel, where MUMPS without iterative refinement is only 4e-6 to
+    6e-5 accurate) the other iterative solver at rtol 1e-11.
+
+    The residual bounds the error only through the operator's conditioning, which the viscosity
+    contrast worsens: measured up to ~10 rtol with the smooth contrast; with the sharp one 38–76
+    rtol in ten 2-rank runs on the development machine (the partition and BoomerAMG's parallel
+    setup vary run to run) and 122 rtol once on the CI machine, hence 300. A wrong operator or a
+    lost ghost update gives errors of order one."""
     comm = MPI.COMM_WORLD
-    factor = 100 if viscosity == "layer" else 30
+    factor = 300 if viscosity == "layer" else 30
     mesh, T, C, approx = _cube_problem(n, viscosity)
     options = {"ksp_rtol": 1e-11} if reference != "direct" else None
     direct = StokesSolver(mesh, approx, bcs=FREE_SLIP_3D, solver=reference, petsc_options=options)

@@ -39,7 +39,7 @@ from particles.adaptivity import move_to_mesh
 from particles.partition import PARTITIONERS, partition
 from particles.swarm import Swarm
 
-__all__ = ["CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "create_mesh_from_piece",
+__all__ = ["GHOST_LAYERS", "CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "create_mesh_from_piece",
            "create_partitioned_mesh", "gather_cell_layout", "mesh_piece", "owner_partitioner", "pull",
            "rebalance", "redistribute", "redistribution"]
 
@@ -88,19 +88,31 @@ def pull(comm: MPI.Comm, wanted: npt.ArrayLike, values: npt.NDArray, starts: npt
     return out
 
 
-def owner_partitioner(owners: npt.NDArray[np.int32], /) -> Callable[..., Any]:
+GHOST_LAYERS = ("facet", "vertex")
+
+
+def owner_partitioner(owners: npt.NDArray[np.int32], /, *, vertices: npt.NDArray[np.int64] | None = None
+                      ) -> Callable[..., Any]:
     """A cell partitioner for ``dolfinx.mesh.create_mesh(..., partitioner=...)`` with fixed owners.
 
     Every rank may pass cells (each its own share; the dual graph DOLFINx builds links them by
     global input index, rank r's cells numbered from the sum of the counts of ranks < r). When
-    ghosting, a cell also goes to the owners of its facet neighbours; the owners of neighbours
-    passed by another rank are asked for with :func:`pull`.
+    ghosting, a cell also goes to the ranks that own a cell sharing a facet with it (``vertices``
+    None: the owners of its dual-graph neighbours, those passed by another rank asked for with
+    :func:`pull`) or sharing a vertex with it (``vertices`` given: :func:`_vertex_sharing_owners`).
+    The vertex layer is the one deal.II (and so ASPECT) keeps: every cell that touches an owned
+    cell is local, so a particle that crosses a partition boundary at a corner lands in a ghost
+    cell and is handed on by its neighbour message instead of a search on the receiving rank.
 
     Args:
         owners: Owner rank of each cell this rank passes to ``create_mesh``, in the same order,
             shape=(num_cells_passed,).
+        vertices: Global vertex indices of those cells (the first ``tdim + 1`` geometry nodes of
+            a simplex), shape=(num_cells_passed, tdim + 1), int64; None for the facet layer.
     """
     owners = np.asarray(owners, dtype=np.int32)
+    if vertices is not None:
+        vertices = np.asarray(vertices, dtype=np.int64).reshape(owners.shape[0], -1)
 
     def graph_partitioner(comm: Any, nparts: int, graph: Any, ghosting: bool) -> Any:
         n = graph.num_nodes
@@ -110,14 +122,17 @@ def owner_partitioner(owners: npt.NDArray[np.int32], /) -> Callable[..., Any]:
             raise ValueError(f"owner partitioner: owners must lie in [0, {nparts})")
         if not ghosting:
             return dolfinx.cpp.graph.AdjacencyList_int32(owners.copy())
-        starts = _starts(comm, n)
-        first = starts[comm.rank]
-        links = np.asarray(graph.array, dtype=np.int64)
-        source = np.repeat(np.arange(n, dtype=np.int64), np.diff(np.asarray(graph.offsets, dtype=np.int64)))
-        mine = (links >= first) & (links < first + n)
-        neighbour = np.empty(links.size, dtype=np.int32)
-        neighbour[mine] = owners[links[mine] - first]
-        neighbour[~mine] = pull(comm, links[~mine], owners, starts)  # collective: every rank calls it
+        if vertices is not None:
+            source, neighbour = _vertex_sharing_owners(comm, vertices, owners)
+        else:
+            starts = _starts(comm, n)
+            first = starts[comm.rank]
+            links = np.asarray(graph.array, dtype=np.int64)
+            source = np.repeat(np.arange(n, dtype=np.int64), np.diff(np.asarray(graph.offsets, dtype=np.int64)))
+            mine = (links >= first) & (links < first + n)
+            neighbour = np.empty(links.size, dtype=np.int32)
+            neighbour[mine] = owners[links[mine] - first]
+            neighbour[~mine] = pull(comm, links[~mine], owners, starts)  # collective: every rank calls it
         # Per cell: its owner, then the other owners among its neighbours in increasing order.
         keys = np.unique(source * nparts + neighbour)
         cell, rank = keys // nparts, (keys % nparts).astype(np.int32)
@@ -132,6 +147,58 @@ def owner_partitioner(owners: npt.NDArray[np.int32], /) -> Callable[..., Any]:
         return dolfinx.cpp.graph.AdjacencyList_int32(destinations, offsets)
 
     return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner)
+
+
+def _expand(keys: npt.NDArray[np.int64], table: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.int64],
+                                                                               npt.NDArray[np.int64]]:
+    """For each entry of ``keys``, the positions of its equal entries in the sorted ``table``:
+    returns (index into keys, index into table), one pair per match."""
+    first = np.searchsorted(table, keys, side="left")
+    count = np.searchsorted(table, keys, side="right") - first
+    which = np.repeat(np.arange(keys.size, dtype=np.int64), count)
+    ends = np.cumsum(count)
+    position = np.repeat(first, count) + np.arange(which.size, dtype=np.int64) - np.repeat(ends - count, count)
+    return which, position
+
+
+def _exchange_rows(comm: MPI.Comm, rows: npt.NDArray[np.int64], dest: npt.NDArray[np.int64]
+                   ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Send each int64 row (shape=(m, w)) to rank ``dest``; returns the rows received and the rank
+    each came from (collective: an Alltoall of counts and one Alltoallv)."""
+    size, width = comm.size, rows.shape[1]
+    order = np.argsort(dest, kind="stable")
+    send_counts = np.bincount(dest, minlength=size).astype(np.int32)
+    recv_counts = np.empty(size, dtype=np.int32)
+    comm.Alltoall(send_counts, recv_counts)
+    received = np.empty((int(recv_counts.sum()), width), dtype=np.int64)
+    comm.Alltoallv([np.ascontiguousarray(rows[order]).reshape(-1), send_counts * width],
+                   [received.reshape(-1), recv_counts * width])
+    return received, np.repeat(np.arange(size, dtype=np.int64), recv_counts)
+
+
+def _vertex_sharing_owners(comm: MPI.Comm, vertices: npt.NDArray[np.int64], owners: npt.NDArray[np.int32]
+                           ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+    """For each cell passed on this rank, the owners of all cells sharing a vertex with it
+    (collective; memory O(cells passed here + their vertices)).
+
+    Each vertex has a home rank (index mod size) that learns the owners of the cells around it
+    and tells them back to every rank that passed one of those cells: two rounds of an Alltoall
+    of counts and an Alltoallv.
+
+    Returns (cell, owner) pairs, cell as an index into ``vertices``' rows, int64 and int32.
+    """
+    n, per_cell = vertices.shape
+    v = vertices.reshape(-1)
+    o = np.repeat(owners.astype(np.int64), per_cell)
+    pairs = np.unique(np.stack([v, o], axis=1), axis=0)  # (vertex, owner)
+    received, source = _exchange_rows(comm, pairs, pairs[:, 0] % comm.size)
+    known = np.unique(received, axis=0)  # sorted by vertex, then owner
+    asking = np.unique(np.stack([received[:, 0], source], axis=1), axis=0)  # (vertex, rank that asked)
+    which, position = _expand(asking[:, 0], known[:, 0])
+    answers, _ = _exchange_rows(comm, known[position], asking[which, 1])
+    answers = answers[np.lexsort((answers[:, 1], answers[:, 0]))]
+    which, position = _expand(v, answers[:, 0])
+    return which // per_cell, answers[position, 1].astype(np.int32)
 
 
 class CellLayout(NamedTuple):
@@ -251,24 +318,32 @@ def mesh_piece(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], canonical
     return MeshPiece(cells, x, owners, canonical)
 
 
-def create_mesh_from_piece(comm: MPI.Comm, piece: MeshPiece, domain: ufl.Mesh, /) -> WeightedMesh:
+def create_mesh_from_piece(comm: MPI.Comm, piece: MeshPiece, domain: ufl.Mesh, /, *,
+                           ghost_layer: str = "facet") -> WeightedMesh:
     """The mesh made of every rank's piece, each cell on the owner its piece names (collective).
 
-    Ghost mode ``shared_facet``. The same pieces on the same ranks give the same mesh, numbering
-    and all (DOLFINx builds meshes deterministically from the same input).
+    The same pieces on the same ranks give the same mesh, numbering and all (DOLFINx builds
+    meshes deterministically from the same input).
 
     Args:
         comm: Communicator of the new mesh.
         piece: This rank's cells (:func:`mesh_piece`).
         domain: The coordinate element (``ufl.Mesh``) of the mesh.
+        ghost_layer: Which cells of other ranks each rank also holds (:data:`GHOST_LAYERS`):
+            ``"facet"``, those sharing a facet with an owned cell (DOLFINx's ``shared_facet``);
+            ``"vertex"``, those sharing a vertex (deal.II's ghost layer, see
+            :func:`owner_partitioner`).
 
     Returns:
         The mesh and the canonical index of each of its local cells (owned and ghost), fetched from
         the rank that passed the cell.
     """
+    if ghost_layer not in GHOST_LAYERS:
+        raise ValueError(f"unknown ghost layer {ghost_layer!r}; valid names: {list(GHOST_LAYERS)}")
+    vertices = piece.cells[:, : domain.topological_dimension() + 1] if ghost_layer == "vertex" else None
     mesh = dolfinx.mesh.create_mesh(comm, piece.cells, piece.x, domain,
                                     ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
-                                    partitioner=owner_partitioner(piece.owners))
+                                    partitioner=owner_partitioner(piece.owners, vertices=vertices))
     original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)
     if piece.canonical is None:
         return WeightedMesh(mesh, original)
@@ -276,7 +351,8 @@ def create_mesh_from_piece(comm: MPI.Comm, piece: MeshPiece, domain: ufl.Mesh, /
     return WeightedMesh(mesh, pull(comm, original, piece.canonical, starts))
 
 
-def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> dolfinx.mesh.Mesh:
+def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /, *,
+                 ghost_layer: str = "facet") -> dolfinx.mesh.Mesh:
     """The same cells, distributed so each owned cell of ``mesh`` goes to ``owners`` (collective).
 
     Every rank hands its own cells to ``create_mesh`` (:func:`redistribution`); DOLFINx 0.5 has no
@@ -286,9 +362,10 @@ def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> d
     Args:
         mesh: A P1 simplex mesh.
         owners: New owner rank of each owned cell, shape=(num_owned_cells,).
+        ghost_layer: ``"facet"`` or ``"vertex"`` (:func:`create_mesh_from_piece`).
     """
     domain = ufl.Mesh(mesh.ufl_domain().ufl_coordinate_element())
-    return create_mesh_from_piece(mesh.comm, redistribution(mesh, owners), domain).mesh
+    return create_mesh_from_piece(mesh.comm, redistribution(mesh, owners), domain, ghost_layer=ghost_layer).mesh
 
 
 def redistribution(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /) -> MeshPiece:
@@ -336,12 +413,13 @@ def cell_owners(mesh: dolfinx.mesh.Mesh, particles_per_cell: npt.ArrayLike, /, *
     return np.asarray(comm.scatter(pieces, root=0), dtype=np.int32)
 
 
-def rebalance(swarm: Swarm, /, *, particle_weight: float = 1.0, method: str = "rcb", **options: Any) -> Swarm:
+def rebalance(swarm: Swarm, /, *, particle_weight: float = 1.0, method: str = "rcb", ghost_layer: str = "vertex",
+              **options: Any) -> Swarm:
     """The particles of ``swarm`` on their mesh repartitioned for cell loads ``1 + W n_particles``
     (collective).
 
     The mesh is created anew on the partition :func:`cell_owners` chooses (same cells and
-    vertices, ghost mode ``shared_facet``), and every particle (id, position, properties) is moved
+    vertices; by default with the vertex ghost layer, see :func:`owner_partitioner`), and every particle (id, position, properties) is moved
     to the rank owning its cell there. With ``rcb`` every cut balances the load ``1 + W n`` alone
     (``balance=("load",)`` unless given), so ranks get equal work rather than equal cells and equal
     particles at once (what the convection runs ask of it). Functions on the old mesh are not carried over: build them
@@ -352,6 +430,8 @@ def rebalance(swarm: Swarm, /, *, particle_weight: float = 1.0, method: str = "r
         swarm: The particles (sorted, in owned cells) on a P1 simplex mesh.
         particle_weight: W, the cost of a particle relative to a cell.
         method: Partition method name (:data:`particles.partition.PARTITIONERS`).
+        ghost_layer: ``"vertex"`` (every cell touching an owned cell is local, as in deal.II: a
+            particle crossing a partition corner lands in a ghost cell) or ``"facet"``.
         options: Method options, e.g. ``balance=("load",)`` or ``axes=(1,)`` for ``rcb``
             (:func:`particles.partition.rcb_owners`).
 
@@ -368,7 +448,7 @@ def rebalance(swarm: Swarm, /, *, particle_weight: float = 1.0, method: str = "r
                          **options)
     if swarm.comm.size == 1:
         return swarm
-    mesh = redistribute(swarm.mesh, owners)
+    mesh = redistribute(swarm.mesh, owners, ghost_layer=ghost_layer)
     moved, stats = move_to_mesh(swarm, mesh)
     if stats.lost:
         raise RuntimeError(f"rebalance lost {stats.lost} particles (the new mesh must cover the old one)")

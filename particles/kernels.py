@@ -635,3 +635,75 @@ def max_among_candidates(groups, offsets, links, x, origin, K, tol, values, num_
                 hit[i] = True
                 if c >= num_owned:
                     ghost[i] = True
+
+
+@numba.njit(cache=True)
+def pack_by_slot(rows, slots, nslots, ids_bits, hints, x, xref, props, stage):  # pragma: no cover - compiled
+    """Rows of particles as one float64 table grouped by destination slot (stable within a slot).
+
+    ``rows`` (shape=(m,)) are the particles to pack, ``slots`` (shape=(m,), 0 <= slot < nslots)
+    their destinations, ``ids_bits`` the swarm's ids viewed as float64 (shape=(n,)), ``hints``
+    (shape=(m,), float64 bits) the second column. Columns: [id, hint, x, xref, properties, stage].
+    Returns the table, shape=(m, 2 + gdim + tdim + ncols + stage_width), and the first row of
+    every slot, shape=(nslots + 1,).
+    """
+    m = rows.shape[0]
+    gdim, tdim, ncols, nstage = x.shape[1], xref.shape[1], props.shape[1], stage.shape[1]
+    offsets = np.zeros(nslots + 1, dtype=np.int64)
+    for i in range(m):
+        offsets[slots[i] + 1] += 1
+    for s in range(nslots):
+        offsets[s + 1] += offsets[s]
+    fill = offsets[:-1].copy()
+    table = np.empty((m, 2 + gdim + tdim + ncols + nstage))
+    for i in range(m):
+        r, row = rows[i], fill[slots[i]]
+        fill[slots[i]] += 1
+        table[row, 0] = ids_bits[r]
+        table[row, 1] = hints[i]
+        c = 2
+        for d in range(gdim):
+            table[row, c + d] = x[r, d]
+        c += gdim
+        for d in range(tdim):
+            table[row, c + d] = xref[r, d]
+        c += tdim
+        for d in range(ncols):
+            table[row, c + d] = props[r, d]
+        c += ncols
+        for d in range(nstage):
+            table[row, c + d] = stage[r, d]
+    return table, offsets
+
+
+@numba.njit(cache=True)
+def append_packed(table, cells, start, ids_bits, x, xref, cells_out, props, stage, counts, num_owned):  # pragma: no cover
+    """Write the rows of a :func:`pack_by_slot` table (shape=(m, ncols)) into the swarm's buffers
+    from row ``start`` on, with the given cells (shape=(m,), int32); ``counts`` (shape=(num_owned
+    + 2,), or empty) gets one more particle per owned cell, or in the ghost/unlocated bucket."""
+    gdim, tdim, ncols, nstage = x.shape[1], xref.shape[1], props.shape[1], stage.shape[1]
+    track = counts.shape[0] > 0
+    for i in range(table.shape[0]):
+        r = start + i
+        ids_bits[r] = table[i, 0]
+        c = 2
+        for d in range(gdim):
+            x[r, d] = table[i, c + d]
+        c += gdim
+        for d in range(tdim):
+            xref[r, d] = table[i, c + d]
+        c += tdim
+        for d in range(ncols):
+            props[r, d] = table[i, c + d]
+        c += ncols
+        for d in range(nstage):
+            stage[r, d] = table[i, c + d]
+        k = cells[i]
+        cells_out[r] = k
+        if track:
+            if 0 <= k < num_owned:
+                counts[k] += 1
+            elif k >= num_owned or k == -1:
+                counts[num_owned] += 1
+            else:
+                counts[num_owned + 1] += 1

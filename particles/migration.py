@@ -2,11 +2,11 @@
 
 After particles moved, each one sits in an owned cell (nothing to do), in a ghost cell (its owner
 is known from the cell index map: send it there), or in no local cell at all (``cells == -1``).
-Ghost-cell particles travel by non-blocking point-to-point messages to neighbour ranks only: first
-one count per neighbour, then one float64 buffer per neighbour whose rows hold the particle id, the
-*global* cell index as a hint, the position, the reference position, every property column and
-the swarm's stage table (ids and cell indices are carried bit-for-bit as int64 reinterpreted as
-float64). The receiver turns the global cell index into its local owned index and appends the
+Ghost-cell particles travel by non-blocking point-to-point messages to neighbour ranks only: one
+float64 buffer per neighbour (empty ones too; the receiver reads the size from the matched probe),
+packed by a compiled kernel, whose rows hold the particle id, the *global* cell index as a hint,
+the position, the reference position, every property column and the swarm's stage table (ids and
+cell indices are carried bit-for-bit as int64 reinterpreted as float64). The receiver turns the global cell index into its local owned index and appends the
 batch; the sender only marks the departed rows. One sort at the end places the new rows and drops
 the departed ones, so apart from that sort a migration costs O(particles sent + received).
 
@@ -32,6 +32,7 @@ import dolfinx.geometry
 import dolfinx.mesh
 
 from particles.generation._cells import OwnedLocation, locate_owned, owned_box, owned_cell_tree
+from particles.kernels import pack_by_slot
 from particles.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
@@ -127,6 +128,12 @@ class Migrator:
         self.owned_boxes = self._gather_boxes(gdim)
         self._is_neighbour = np.zeros(self.comm.size, dtype=bool)
         self._is_neighbour[self.neighbours] = True
+        # Per ghost cell: the position of its owner among the neighbours, and its global index as
+        # the float64 bits the messages carry.
+        self._slot_of_rank = np.full(self.comm.size, -1, dtype=np.int64)
+        self._slot_of_rank[self.neighbours] = np.arange(self.neighbours.shape[0])
+        self._ghost_slots = self._slot_of_rank[self.ghost_owners]
+        self._ghost_hints = np.ascontiguousarray(self.ghost_globals, dtype=np.int64).view(np.float64)
         self._owned_tree: dolfinx.geometry.BoundingBoxTree | None = None
 
     def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
@@ -136,20 +143,24 @@ class Migrator:
         return boxes
 
     # ------------------------------------------------------------------ exchange helpers
-    def _neighbour_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int
+    def _neighbour_exchange(self, table: npt.NDArray[np.float64], offsets: npt.NDArray[np.int64]
                             ) -> dict[int, npt.NDArray[np.float64]]:
-        """Send tables[r] to every neighbour r (empty if absent); return {source: table} (non-empty)."""
+        """Send rows ``offsets[s]:offsets[s + 1]`` of ``table`` to neighbour ``s`` (one message
+        each, empty ones included); return {source: table} of the non-empty ones received. The
+        receiver learns a message's size from the message itself (matched probe), so one round
+        trip suffices."""
         comm = self.comm
-        nbrs = [int(r) for r in self.neighbours]
-        send_counts = {r: np.array([tables[r].shape[0] if r in tables else 0], dtype=np.int64) for r in nbrs}
-        recv_counts = {r: np.zeros(1, dtype=np.int64) for r in nbrs}
-        reqs = [comm.Irecv(recv_counts[r], source=r, tag=_TAG_COUNT) for r in nbrs]
-        reqs += [comm.Isend(send_counts[r], dest=r, tag=_TAG_COUNT) for r in nbrs]
-        MPI.Request.Waitall(reqs)
-        recv = {r: np.empty((int(recv_counts[r][0]), ncols)) for r in nbrs if recv_counts[r][0] > 0}
-        reqs = [comm.Irecv(recv[r], source=r, tag=_TAG_DATA) for r in recv]
-        reqs += [comm.Isend(np.ascontiguousarray(tables[r]), dest=r, tag=_TAG_DATA)
-                 for r in nbrs if send_counts[r][0] > 0]
+        ncols = table.shape[1]
+        reqs = [comm.Isend(table[offsets[s]: offsets[s + 1]], dest=int(r), tag=_TAG_DATA)
+                for s, r in enumerate(self.neighbours)]
+        recv: dict[int, npt.NDArray[np.float64]] = {}
+        status = MPI.Status()
+        for r in self.neighbours:
+            message = comm.Mprobe(source=int(r), tag=_TAG_DATA, status=status)
+            buffer = np.empty((status.Get_count(MPI.DOUBLE) // ncols, ncols))
+            message.Recv(buffer)
+            if buffer.shape[0]:
+                recv[int(r)] = buffer
         MPI.Request.Waitall(reqs)
         return recv
 
@@ -205,28 +216,32 @@ class Migrator:
             return MigrationStats(sent, 0, 0, lost, sent, 0, 0, lost)
 
         # Unlocated particles: offered to neighbours here if every candidate rank is one.
-        inside = self._box_candidates(swarm.x[unlocated_rows])
-        num_candidates = inside.sum(axis=1)
-        local = np.all(~inside | self._is_neighbour[None, :], axis=1) & (num_candidates > 0)
-        offer_rows, offer_inside = unlocated_rows[local], inside[local]
-        global_rows = unlocated_rows[~local & (num_candidates > 0)]
-        lost = int(np.count_nonzero(num_candidates == 0))
-        swarm.discard_rows(unlocated_rows[num_candidates == 0])
+        lost = 0
+        offer_rows = global_rows = np.empty(0, dtype=np.int64)
+        offer_inside = np.zeros((0, self.comm.size), dtype=bool)
+        if unlocated_rows.size:
+            inside = self._box_candidates(swarm.x[unlocated_rows])
+            num_candidates = inside.sum(axis=1)
+            local = np.all(~inside | self._is_neighbour[None, :], axis=1) & (num_candidates > 0)
+            offer_rows, offer_inside = unlocated_rows[local], inside[local]
+            global_rows = unlocated_rows[~local & (num_candidates > 0)]
+            lost = int(np.count_nonzero(num_candidates == 0))
+            swarm.discard_rows(unlocated_rows[num_candidates == 0])
 
-        parts: dict[int, list[npt.NDArray[np.float64]]] = {}
-        if sent:
-            g = swarm.cells[ghost_rows] - self.num_owned_cells
-            owners = self.ghost_owners[g]
-            table = _pack(swarm, ghost_rows, self.ghost_globals[g])
-            for r in np.unique(owners):
-                parts.setdefault(int(r), []).append(table[owners == r])
+        # One table, grouped by neighbour: the ghost-cell particles (global cell as the hint), then
+        # one copy of each offered particle per candidate (-(number of candidates) as the hint).
+        g = swarm.cells[ghost_rows] - self.num_owned_cells
+        rows, slots, hints = ghost_rows, self._ghost_slots[g], self._ghost_hints[g]
         if offer_rows.size:
-            # the hint column carries -(number of candidates) for an offer
-            table = _pack(swarm, offer_rows, -offer_inside.sum(axis=1).astype(np.int64))
-            for r in np.flatnonzero(offer_inside.any(axis=0)):
-                parts.setdefault(int(r), []).append(table[offer_inside[:, r]])
-        tables = {r: np.concatenate(p) if len(p) > 1 else p[0] for r, p in parts.items()}
-        incoming = self._neighbour_exchange(tables, ncols)
+            which, ranks = np.nonzero(offer_inside)
+            minus = -offer_inside.sum(axis=1).astype(np.int64)
+            rows = np.concatenate([rows, offer_rows[which]])
+            slots = np.concatenate([slots, self._slot_of_rank[ranks]])
+            hints = np.concatenate([hints, minus[which].view(np.float64)])
+        table, offsets = pack_by_slot(rows, slots, self.neighbours.shape[0], swarm.ids.view(np.float64),
+                                      np.ascontiguousarray(hints), swarm.x, swarm.xref, swarm.properties,
+                                      swarm.stage if swarm.stage_width else np.empty((swarm.num_particles, 0)))
+        incoming = self._neighbour_exchange(table, offsets)
         swarm.discard_rows(ghost_rows)
         swarm.discard_rows(offer_rows)
         received = 0
@@ -235,20 +250,23 @@ class Migrator:
         for src in sorted(incoming):
             t = incoming[src]
             hint = np.ascontiguousarray(t[:, 1]).view(np.int64)
-            if np.any(hint >= 0):
-                handed.append(t[hint >= 0])
-            if np.any(hint < 0):
-                offers_in[src] = (t[hint < 0], -hint[hint < 0])
+            offered = hint < 0
+            if not offered.any():
+                handed.append(t)
+                continue
+            handed.append(t[~offered])
+            offers_in[src] = (t[offered], -hint[offered])
         if handed:
-            batch = _Unpacked(swarm, np.concatenate(handed))
-            local_cells = batch.global_cells - self.cell_range[0]
+            table = np.concatenate(handed) if len(handed) > 1 else handed[0]
+            local_cells = np.ascontiguousarray(table[:, 1]).view(np.int64) - self.cell_range[0]
             if np.any((local_cells < 0) | (local_cells >= self.num_owned_cells)):
                 raise RuntimeError("migration received a particle for a cell this rank does not own")
-            swarm.append_rows(batch.ids, batch.x, batch.xref, local_cells.astype(np.int32), batch.properties,
-                              batch.stage)
-            received += batch.ids.shape[0]
-        kept, nb_lost = self._decide(swarm, offer_inside, offers_in, (_TAG_NB_REPLY, _TAG_NB_VERDICT))
-        received += self._append_kept(swarm, kept)
+            swarm.append_packed(table, local_cells.astype(np.int32))
+            received += table.shape[0]
+        nb_lost = 0
+        if offer_rows.size or offers_in:
+            kept, nb_lost = self._decide(swarm, offer_inside, offers_in, (_TAG_NB_REPLY, _TAG_NB_VERDICT))
+            received += self._append_kept(swarm, kept)
         lost += nb_lost
         fallback_sent = int(offer_rows.shape[0])
 

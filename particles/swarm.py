@@ -32,7 +32,7 @@ import dolfinx.mesh
 
 from particles.geometry import CellGeometry
 from particles.kernels import (
-    DEAD, count_buckets, gather_particles, rows_outside, scatter_particles, sort_destinations,
+    DEAD, append_packed, count_buckets, gather_particles, rows_outside, scatter_particles, sort_destinations,
 )
 
 __all__ = ["PropertyLayout", "Swarm"]
@@ -339,6 +339,25 @@ class Swarm:
             counts[: self.num_owned_cells] += np.bincount(cells[owned], minlength=self.num_owned_cells)
             counts[self.num_owned_cells] += int(np.count_nonzero((cells >= self.num_owned_cells) | (cells == -1)))
             counts[self.num_owned_cells + 1] += int(np.count_nonzero(cells < -1))
+            self._pending = (counts, False)
+
+    def append_packed(self, table: npt.NDArray[np.float64], cells: npt.NDArray[np.int32], /) -> None:
+        """Append the particles of a message table (the rows :func:`particles.kernels.pack_by_slot`
+        makes: [id bits, hint, x, xref, properties, stage], shape=(m, 2 + gdim + tdim + columns +
+        stage_width)) in the given cells (shape=(m,)), unsorted, in one compiled pass; as
+        :meth:`append_rows`."""
+        m = table.shape[0]
+        width = 2 + self.gdim + self.tdim + self.num_property_columns + self._stage_width
+        if table.shape != (m, width) or cells.shape != (m,):
+            raise ValueError(f"a packed table of shape (m, {width}) and m cells expected")
+        n = self._n
+        self._reserve(n + m)
+        counts = self._pending[0] if self._pending is not None else np.empty(0, dtype=np.int64)
+        stage = self._stage[:, : self._stage_width] if self._stage_width else np.empty((self._ids.shape[0], 0))
+        append_packed(np.ascontiguousarray(table), np.asarray(cells, dtype=np.int32), n, self._ids.view(np.float64),
+                      self._x, self._xref, self._cells, self._props, stage, counts, self.num_owned_cells)
+        self._n = n + m
+        if self._pending is not None and m:
             self._pending = (counts, False)
 
     def outside_rows(self) -> npt.NDArray[np.int64]:

@@ -123,3 +123,45 @@ def test_cell_owners_are_collective_and_complete():
     assert owners.shape == (num_owned,) and owners.dtype == np.int32
     total = np.bincount(np.concatenate(comm.allgather(owners)), minlength=comm.size)
     assert total.sum() == 200 and total.max() / total.mean() < 1.05
+
+
+def _touching_cells_missing(mesh) -> int:
+    """Cells of other ranks that share a vertex with an owned cell but are not local here: the
+    number of cells around each vertex of an owned cell, counted over all ranks (owned cells, summed
+    into a P1 vector) minus the local (owned and ghost) cells around it."""
+    import dolfinx.fem
+    import dolfinx.la
+
+    V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1))
+    tdim = mesh.topology.dim
+    num_owned = mesh.topology.index_map(tdim).size_local
+    num_local = num_owned + mesh.topology.index_map(tdim).num_ghosts
+    dofs = np.array([V.dofmap.cell_dofs(c) for c in range(num_local)])
+    total = dolfinx.fem.Function(V)
+    np.add.at(total.x.array, dofs[:num_owned].reshape(-1), 1.0)
+    total.x.scatter_reverse(dolfinx.la.ScatterMode.add)
+    total.x.scatter_forward()
+    local = np.zeros_like(total.x.array)
+    np.add.at(local, dofs.reshape(-1), 1.0)
+    touched = np.unique(dofs[:num_owned])
+    return int(np.sum(total.x.array[touched] - local[touched]))
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ghost_layer", ["vertex", "facet"])
+def test_vertex_ghost_layer_holds_every_touching_cell(ghost_layer):
+    """With the vertex layer every cell that touches an owned cell is local (so a particle that
+    crosses a partition corner lands in a ghost cell); the facet layer misses the cells that touch
+    only at a corner, which this check must see."""
+    comm = MPI.COMM_WORLD
+    if comm.size == 1:
+        pytest.skip("needs several ranks")
+    mesh = dolfinx.mesh.create_unit_square(comm, 16, 16)
+    new = rebalance(_corner_swarm(mesh), ghost_layer=ghost_layer)
+    missing = comm.allreduce(_touching_cells_missing(new.mesh), op=MPI.SUM)
+    if ghost_layer == "vertex":
+        assert missing == 0
+    else:
+        assert missing > 0
+    with pytest.raises(ValueError, match="ghost layer"):
+        rebalance(new, ghost_layer="edge")

@@ -145,3 +145,52 @@ def test_append_nothing_with_a_stage_table(mesh):
     swarm.append_rows(np.empty(0), np.empty((0, 2)), np.empty((0, 2)), np.empty(0), np.empty((0, 0)),
                       np.empty((0, 2)))
     assert swarm.num_particles == 10 and np.all(swarm.stage == 1.0)
+
+
+@pytest.mark.parametrize("stage_width", [0, 2])
+def test_packed_rows_round_trip(mesh, stage_width):
+    """pack_by_slot groups rows by destination (stable within one) with every column; append_packed
+    writes them back as appended rows, keeping the pending counts of the next sort right."""
+    from particles.kernels import pack_by_slot
+
+    rng = np.random.default_rng(8)
+    source = Swarm(mesh)
+    source.add_property("c", 3)
+    ids, x, xref, cells = _random_batch(rng, source, 50, 0)
+    source.add(ids, x, xref, cells, properties=rng.random((50, 3)))
+    stage = source.stage_table(stage_width) if stage_width else np.empty((50, 0))
+    stage[:] = rng.random(stage.shape)
+    rows = np.array([3, 17, 5, 40, 22, 9], dtype=np.int64)
+    slots = np.array([1, 0, 1, 2, 0, 1], dtype=np.int64)
+    hints = np.arange(6, dtype=np.int64).view(np.float64)
+    table, offsets = pack_by_slot(rows, slots, 3, source.ids.view(np.float64), hints, source.x, source.xref,
+                                  source.properties, stage)
+    assert list(offsets) == [0, 2, 5, 6]
+    order = np.array([1, 4, 0, 2, 5, 3])  # slot 0, then 1, then 2, each in row order
+    assert np.array_equal(table[:, 0].view(np.int64), source.ids[rows[order]])
+    assert np.array_equal(table[:, 1].view(np.int64), order)
+
+    target = Swarm(mesh)
+    target.add_property("c", 3)
+    if stage_width:
+        target.stage_table(stage_width)
+    ids2, x2, xref2, cells2 = _random_batch(rng, target, 20, 100)
+    target.add(ids2, x2, xref2, cells2)
+    counts = np.zeros(target.num_owned_cells + 2, dtype=np.int64)
+    counts[: target.num_owned_cells] = target.particles_per_cell()
+    target.set_pending_counts(counts, True)
+    new_cells = rng.integers(0, target.num_owned_cells, 6).astype(np.int32)
+    target.append_packed(table, new_cells)
+    assert target.num_particles == 26
+    assert np.array_equal(target.ids[20:], source.ids[rows[order]])
+    assert np.array_equal(target.x[20:], source.x[rows[order]])
+    assert np.array_equal(target.xref[20:], source.xref[rows[order]])
+    assert np.array_equal(target.properties[20:], source.properties[rows[order]])
+    assert np.array_equal(target.stage[20:], stage[rows[order]])
+    assert np.array_equal(target.cells[20:], new_cells)
+    pending = target._pending[0].copy()
+    target.sort()  # with the pending counts: they must describe the appended rows
+    target.check_invariants()
+    assert np.array_equal(pending[: target.num_owned_cells], target.particles_per_cell())
+    with pytest.raises(ValueError, match="packed table"):
+        target.append_packed(table[:, :-1], new_cells)

@@ -41,8 +41,8 @@ def _timed(name: str, function):
 for _name in ("_neighbour_exchange", "_decide", "_box_candidates"):
     setattr(migration.Migrator, _name, _timed(_name, getattr(migration.Migrator, _name)))
 migration._sum_over_ranks = _timed("count_allreduce", migration._sum_over_ranks)
-migration._pack = _timed("pack", migration._pack)
-for _name in ("outside_rows", "discard_rows", "append_rows"):
+migration.pack_by_slot = _timed("pack", migration.pack_by_slot)
+for _name in ("outside_rows", "discard_rows", "append_rows", "append_packed"):
     setattr(swarm_module.Swarm, _name, _timed(_name, getattr(swarm_module.Swarm, _name)))
 _migrate = advection._migrate
 

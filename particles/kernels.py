@@ -456,7 +456,7 @@ def _walk_candidate(facet_nbrs, c, L0, L1, L2, L3, tdim):  # pragma: no cover
 @numba.njit(cache=True)
 def relocate_affine_simplex(
     x, cells, xref, origin, K, nodes, coords, v2c_off, v2c_cells, centres, facet_nbrs, nv, max_valence, tol,
-    num_owned, status, counts
+    num_owned, status, counts, outside
 ):  # pragma: no cover
     """Update ``cells``/``xref`` of particles at new positions ``x`` (affine simplices, gdim == tdim
     in {2, 3}) and count the particles per sort bucket, in one pass.
@@ -468,10 +468,12 @@ def relocate_affine_simplex(
     the old cell. ``status`` gets STAYED, NEIGHBOUR or UNRESOLVED (cell == -1 on input, or not found:
     left for the bounding-box fallback; ``cells`` is then unchanged), or SKIPPED for a discarded row
     (:data:`DEAD`). Every resolved or discarded particle adds 1 to ``counts[bucket]``
-    (shape=(num_owned + 2,), see :func:`count_buckets`); unresolved ones are not counted. Returns
-    ``(counts per status shape=(3,), whether the counted rows are in bucket order)``.
+    (shape=(num_owned + 2,), see :func:`count_buckets`); unresolved ones are not counted. The rows
+    of the resolved particles now in a ghost cell are written, in row order, to the start of
+    ``outside`` (shape=(n,), int64). Returns ``(counts per status and then the number of those
+    rows, shape=(4,), whether the counted rows are in bucket order)``.
     """
-    res = np.zeros(3, dtype=np.int64)
+    res = np.zeros(4, dtype=np.int64)
     tdim = K.shape[1]
     xr = np.empty(tdim)
     cand = np.empty(max(max_valence, 1), dtype=np.int32)
@@ -540,6 +542,9 @@ def relocate_affine_simplex(
             xref[p, 2] = Z
         k = found if found < num_owned else num_owned
         counts[k] += 1
+        if k == num_owned:
+            outside[res[3]] = p
+            res[3] += 1
         if k < prev:
             already = False
         prev = k

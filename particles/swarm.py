@@ -105,6 +105,9 @@ class Swarm:
         # Rows per sort bucket (owned cells, then ghost/unlocated, then discarded) and whether the
         # rows are in bucket order, when known from the last relocation; None: count in sort().
         self._pending: tuple[npt.NDArray[np.int64], bool] | None = None
+        # The rows in a ghost cell or unlocated (a superset: discarded ones are filtered out), when
+        # known from the last relocation; None: scan in outside_rows(). Valid while _pending is.
+        self._outside: npt.NDArray[np.int64] | None = None
         self._dest = np.empty(0, dtype=np.int64)  # sort destinations, reused
 
     @property
@@ -337,9 +340,12 @@ class Swarm:
             counts, _ = self._pending
             owned = (cells >= 0) & (cells < self.num_owned_cells)
             counts[: self.num_owned_cells] += np.bincount(cells[owned], minlength=self.num_owned_cells)
-            counts[self.num_owned_cells] += int(np.count_nonzero((cells >= self.num_owned_cells) | (cells == -1)))
+            outside = int(np.count_nonzero((cells >= self.num_owned_cells) | (cells == -1)))
+            counts[self.num_owned_cells] += outside
             counts[self.num_owned_cells + 1] += int(np.count_nonzero(cells < -1))
             self._pending = (counts, False)
+            if outside:
+                self._outside = None
 
     def append_packed(self, table: npt.NDArray[np.float64], cells: npt.NDArray[np.int32], /) -> None:
         """Append the particles of a message table (the rows :func:`particles.kernels.pack_by_slot`
@@ -353,20 +359,27 @@ class Swarm:
         n = self._n
         self._reserve(n + m)
         counts = self._pending[0] if self._pending is not None else np.empty(0, dtype=np.int64)
+        outside_before = int(counts[self.num_owned_cells]) if counts.size else 0
         stage = self._stage[:, : self._stage_width] if self._stage_width else np.empty((self._ids.shape[0], 0))
         append_packed(np.ascontiguousarray(table), np.asarray(cells, dtype=np.int32), n, self._ids.view(np.float64),
                       self._x, self._xref, self._cells, self._props, stage, counts, self.num_owned_cells)
         self._n = n + m
         if self._pending is not None and m:
             self._pending = (counts, False)
+            if counts[self.num_owned_cells] != outside_before:
+                self._outside = None
 
     def outside_rows(self) -> npt.NDArray[np.int64]:
         """Rows whose particle is in a ghost cell or unlocated (cells >= num_owned_cells or -1),
-        in row order, shape=(m,), int64. O(1) when the counts handed over by the last relocation
-        (:meth:`set_pending_counts`) say there are none, else one scan; so ``cells`` must not be
-        changed between a relocation with ``sort=False`` and the migration that follows it."""
-        if self._pending is not None and self._pending[0][self.num_owned_cells] == 0:
-            return np.empty(0, dtype=np.int64)
+        in row order, shape=(m,), int64. O(m) when the last relocation handed over its counts and
+        rows (:meth:`set_pending_counts`), else one scan; so ``cells`` must not be changed between
+        a relocation with ``sort=False`` and the migration that follows it."""
+        if self._pending is not None:
+            if self._pending[0][self.num_owned_cells] == 0:
+                return np.empty(0, dtype=np.int64)
+            if self._outside is not None:
+                cells = self._cells[self._outside]
+                return self._outside[(cells >= self.num_owned_cells) | (cells == -1)]
         return rows_outside(self.cells, self.num_owned_cells)
 
     def discard_rows(self, rows: npt.NDArray[np.integer]) -> None:
@@ -436,16 +449,19 @@ class Swarm:
             self._install(buffers, n_out)
         self._set_offsets(counts)
 
-    def set_pending_counts(self, counts: npt.NDArray[np.int64], in_order: bool, /) -> None:
+    def set_pending_counts(self, counts: npt.NDArray[np.int64], in_order: bool,
+                           outside: npt.NDArray[np.int64] | None = None, /) -> None:
         """Hand the next :meth:`sort` the rows per bucket, shape=(num_owned_cells + 2,) (owned
         cells, ghost/unlocated, discarded), counted while the cells were computed, and whether
         the rows are in bucket order, so the sort skips its counting pass. Row appends and
         discards keep them up to date; counts that no longer match the cells are detected by the
-        sort, which then counts afresh."""
+        sort, which then counts afresh. ``outside`` (shape=(m,), increasing) lists every row then
+        in a ghost cell or unlocated, so :meth:`outside_rows` need not scan all rows."""
         counts = np.asarray(counts, dtype=np.int64)
         if counts.shape != (self.num_owned_cells + 2,):
             raise ValueError(f"counts must have shape {(self.num_owned_cells + 2,)}")
         self._pending = (counts, bool(in_order))
+        self._outside = None if outside is None else np.asarray(outside, dtype=np.int64)
 
     # ------------------------------------------------------------------ buffers
     def _in_use(self) -> tuple[str, ...]:

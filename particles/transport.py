@@ -98,13 +98,16 @@ def relocate(swarm: Swarm, /, *, sort: bool = True) -> TransportStats:
     status = np.empty(n, dtype=np.int8)
     num_owned = swarm.num_owned_cells
     buckets: np.ndarray | None = None
+    outside: np.ndarray | None = None
     if geom.affine and geom.gdim == geom.tdim and geom.tdim in (2, 3):
         buckets = np.zeros(num_owned + 2, dtype=np.int64)
+        outside = np.empty(n, dtype=np.int64)
         counts, in_order = relocate_affine_simplex(
             swarm.x, swarm.cells, swarm.xref, geom.origin, geom.K, geom.nodes, geom.coords,
             geom.v2c_offsets, geom.v2c_cells, geom.centres, geom.facet_neighbours, geom.num_vertices,
-            max(geom.max_valence, 1), geom.tol, num_owned, status, buckets,
+            max(geom.max_valence, 1), geom.tol, num_owned, status, buckets, outside,
         )
+        outside = outside[: counts[3]]
     else:
         _relocate_general(geom, swarm.x, swarm.cells, swarm.xref, status)
         counts, in_order = np.bincount(status, minlength=4), False
@@ -120,8 +123,10 @@ def relocate(swarm: Swarm, /, *, sort: bool = True) -> TransportStats:
             buckets += np.bincount(np.where((loc.cells >= 0) & (loc.cells < num_owned), loc.cells, num_owned),
                                    minlength=num_owned + 2)
             in_order = False
+        if outside is not None:
+            outside = np.union1d(outside, rows[(loc.cells < 0) | (loc.cells >= num_owned)])
     if buckets is not None:
-        swarm.set_pending_counts(buckets, bool(in_order))
+        swarm.set_pending_counts(buckets, bool(in_order), outside)
     if sort:
         swarm.sort()
     return TransportStats(int(counts[STAYED]), int(counts[NEIGHBOUR]), found, int(rows.size) - found)

@@ -109,6 +109,32 @@ def test_relocate_then_migrate_distributed():
     assert all_ids.shape[0] == total == np.unique(all_ids).shape[0]
 
 
+@pytest.mark.mpi
+@pytest.mark.parametrize("kind", ["triangle", "tetrahedron"])
+def test_relocation_hands_over_the_outside_rows(kind):
+    """After a relocation without sort, outside_rows() (the rows the relocation listed: ghost cells
+    from the kernel, -1 or ghost from the bounding-box fallback) equals a scan of all rows, also
+    after some of them were discarded; serially the fallback's -1 rows are the only ones."""
+    from particles.kernels import rows_outside
+
+    comm = MPI.COMM_WORLD
+    mesh = _mesh(kind, comm)
+    rng = np.random.default_rng(3 + comm.rank)
+    swarm = _swarm(mesh, 3000, rng)
+    swarm.x[:] = swarm.x + 0.3 * (rng.random(swarm.x.shape) - 0.5)  # some leave the rank, some the box
+    relocate(swarm, sort=False)
+    scanned = rows_outside(swarm.cells, swarm.num_owned_cells)
+    listed = swarm.outside_rows()
+    assert swarm._outside is not None  # the listed path, not the scan
+    assert np.array_equal(listed, scanned)
+    assert comm.allreduce(scanned.size, op=MPI.SUM) > 0
+    swarm.discard_rows(scanned[::3])
+    assert np.array_equal(swarm.outside_rows(), rows_outside(swarm.cells, swarm.num_owned_cells))
+    swarm.discard_rows(swarm.outside_rows())
+    swarm.sort()  # with the counts kept up to date through the discards
+    swarm.check_invariants()
+
+
 def test_sort_reuses_buffers_but_never_overwrites_held_arrays():
     rng = np.random.default_rng(4)
     swarm = _swarm(_mesh("triangle"), 600, rng)

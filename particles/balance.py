@@ -10,9 +10,10 @@ The building blocks are shared with the convection code's adaptive meshes
 (``convection.adaptivity.MeshHierarchy.repartition``). The mesh is created anew *distributed*:
 every rank hands ``dolfinx.mesh.create_mesh`` only its own cells (:class:`MeshPiece`: their
 vertices as global geometry node indices of the current mesh, its own block of node coordinates,
-the owner chosen for each cell), and :func:`owner_partitioner` sends each cell to its owner (and,
-as ``GhostMode.shared_facet`` requires, to the ranks owning a facet neighbour, asked for across
-ranks). Memory per rank stays O(cells per rank); the rank-independent (canonical) index of each
+the owner chosen for each cell), and :func:`owner_partitioner` sends each cell to its owner and,
+as ghost, to the ranks owning a cell that shares a facet with it (DOLFINx's ``shared_facet``) or,
+for :func:`rebalance` by default, a vertex (deal.II's ghost layer: a particle that crosses a
+partition corner then lands in a ghost cell). Memory per rank stays O(cells per rank); the rank-independent (canonical) index of each
 cell travels along (:func:`create_mesh_from_piece`).
 
 What still goes through rank 0 is the partition *decision* (:func:`cell_owners`: one midpoint and

@@ -13,8 +13,8 @@ vertices as global geometry node indices of the current mesh, its own block of n
 the owner chosen for each cell), and :func:`owner_partitioner` sends each cell to its owner and,
 as ghost, to the ranks owning a cell that shares a facet with it (DOLFINx's ``shared_facet``) or,
 for :func:`rebalance` by default, a vertex (deal.II's ghost layer: a particle that crosses a
-partition corner then lands in a ghost cell). Memory per rank stays O(cells per rank); the rank-independent (canonical) index of each
-cell travels along (:func:`create_mesh_from_piece`).
+partition corner then lands in a ghost cell). Memory per rank stays O(cells per rank); the
+rank-independent (canonical) index of each cell travels along (:func:`create_mesh_from_piece`).
 
 What still goes through rank 0 is the partition *decision* (:func:`cell_owners`: one midpoint and
 one particle count per cell are gathered there and the partitioner runs serially), O(global cells)
@@ -420,8 +420,8 @@ def rebalance(swarm: Swarm, /, *, particle_weight: float = 1.0, method: str = "r
     (collective).
 
     The mesh is created anew on the partition :func:`cell_owners` chooses (same cells and
-    vertices; by default with the vertex ghost layer, see :func:`owner_partitioner`), and every particle (id, position, properties) is moved
-    to the rank owning its cell there. With ``rcb`` every cut balances the load ``1 + W n`` alone
+    vertices; by default with the vertex ghost layer, see :func:`owner_partitioner`), and every
+    particle (id, position, properties) is moved to the rank owning its cell there. With ``rcb`` every cut balances the load ``1 + W n`` alone
     (``balance=("load",)`` unless given), so ranks get equal work rather than equal cells and equal
     particles at once (what the convection runs ask of it). Functions on the old mesh are not carried over: build them
     again on ``result.mesh`` (or interpolate them across). On one rank the swarm itself is

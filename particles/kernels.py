@@ -682,7 +682,8 @@ def pack_by_slot(rows, slots, nslots, ids_bits, hints, x, xref, props, stage):  
 
 
 @numba.njit(cache=True)
-def append_packed(table, cells, start, ids_bits, x, xref, cells_out, props, stage, counts, num_owned):  # pragma: no cover
+def append_packed(table, cells, start, ids_bits, x, xref, cells_out, props, stage, counts,
+                  num_owned):  # pragma: no cover - compiled
     """Write the rows of a :func:`pack_by_slot` table (shape=(m, ncols)) into the swarm's buffers
     from row ``start`` on, with the given cells (shape=(m,), int32); ``counts`` (shape=(num_owned
     + 2,), or empty) gets one more particle per owned cell, or in the ghost/unlocated bucket."""

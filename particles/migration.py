@@ -6,8 +6,9 @@ Ghost-cell particles travel by non-blocking point-to-point messages to neighbour
 float64 buffer per neighbour (empty ones too; the receiver reads the size from the matched probe),
 packed by a compiled kernel, whose rows hold the particle id, the *global* cell index as a hint,
 the position, the reference position, every property column and the swarm's stage table (ids and
-cell indices are carried bit-for-bit as int64 reinterpreted as float64). The receiver turns the global cell index into its local owned index and appends the
-batch; the sender only marks the departed rows. One sort at the end places the new rows and drops
+cell indices are carried bit-for-bit as int64 reinterpreted as float64). The receiver turns the
+global cell index into its local owned index and appends the batch in one compiled pass; the
+sender only marks the departed rows. One sort at the end places the new rows and drops
 the departed ones, so apart from that sort a migration costs O(particles sent + received).
 
 Unlocated particles take a global fallback: every rank publishes the bounding box of its owned
@@ -37,7 +38,6 @@ from particles.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
 
-_TAG_COUNT = 7301
 _TAG_DATA = 7302
 _TAG_REPLY = 7303
 _TAG_NB_REPLY = 7304

@@ -480,7 +480,10 @@ class Swarm:
         return ids[:n], x[:n], xref[:n], cells[:n], props[:n], stage[:n, :w] if w else np.empty((n, 0))
 
     def _install(self, buffers: tuple[npt.NDArray, ...], n: int) -> None:
-        """Make the output buffers of a permutation current; the old ones become spare."""
+        """Make the output buffers of a permutation current; the old ones become spare. Counts and
+        rows handed over by a relocation describe the old rows, so they are dropped."""
+        self._pending = None
+        self._outside = None
         old = self._buffers()
         if self._stage_width:
             current, spare = buffers, old

@@ -134,6 +134,12 @@ def test_relocation_hands_over_the_outside_rows(kind):
     swarm.sort()  # with the counts kept up to date through the discards
     swarm.check_invariants()
 
+    # A permutation between the relocation and the migration (take) drops the handed-over rows.
+    swarm.x[:] = swarm.x + 0.3 * (rng.random(swarm.x.shape) - 0.5)
+    relocate(swarm, sort=False)
+    swarm.take(np.arange(swarm.num_particles)[::-1])
+    assert np.array_equal(swarm.outside_rows(), rows_outside(swarm.cells, swarm.num_owned_cells))
+
 
 def test_sort_reuses_buffers_but_never_overwrites_held_arrays():
     rng = np.random.default_rng(4)

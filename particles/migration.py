@@ -68,35 +68,19 @@ class MigrationStats:
     global_lost: int
 
 
-def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], global_cells: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
-    """Rows of particles as one float64 table: [id, global cell, x, xref, properties, stage table]."""
-    ncols = swarm.num_property_columns
-    table = np.empty((rows.shape[0], 2 + swarm.gdim + swarm.tdim + ncols + swarm.stage_width))
-    table[:, 0] = swarm.ids[rows].view(np.float64)
-    table[:, 1] = np.ascontiguousarray(global_cells, dtype=np.int64).view(np.float64)
-    c = 2
-    table[:, c : c + swarm.gdim] = swarm.x[rows]
-    c += swarm.gdim
-    table[:, c : c + swarm.tdim] = swarm.xref[rows]
-    c += swarm.tdim
-    table[:, c : c + ncols] = swarm.properties[rows]
-    table[:, c + ncols :] = swarm.stage[rows]
-    return table
+def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], slots: npt.NDArray[np.int64], nslots: int,
+          hints: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    """Rows of particles as one float64 table [id, hint, x, xref, properties, stage] grouped by
+    destination slot (:func:`particles.kernels.pack_by_slot`), with the first row of every slot."""
+    stage = swarm.stage if swarm.stage_width else np.empty((swarm.num_particles, 0))
+    return pack_by_slot(np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(slots, dtype=np.int64),
+                        nslots, swarm.ids.view(np.float64), np.ascontiguousarray(hints, dtype=np.float64),
+                        swarm.x, swarm.xref, swarm.properties, stage)
 
 
-class _Unpacked:
-    def __init__(self, swarm: Swarm, table: npt.NDArray[np.float64]) -> None:
-        ncols = swarm.num_property_columns
-        table = np.ascontiguousarray(table).reshape(-1, 2 + swarm.gdim + swarm.tdim + ncols + swarm.stage_width)
-        self.ids = np.ascontiguousarray(table[:, 0]).view(np.int64)
-        self.global_cells = np.ascontiguousarray(table[:, 1]).view(np.int64)
-        c = 2
-        self.x = table[:, c : c + swarm.gdim]
-        c += swarm.gdim
-        self.xref = table[:, c : c + swarm.tdim]
-        c += swarm.tdim
-        self.properties = table[:, c : c + ncols]
-        self.stage = table[:, c + ncols :]
+def _positions(swarm: Swarm, table: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The positions in a packed table, shape=(m, gdim)."""
+    return table[:, 2: 2 + swarm.gdim]
 
 
 class Migrator:
@@ -238,9 +222,7 @@ class Migrator:
             rows = np.concatenate([rows, offer_rows[which]])
             slots = np.concatenate([slots, self._slot_of_rank[ranks]])
             hints = np.concatenate([hints, minus[which].view(np.float64)])
-        table, offsets = pack_by_slot(rows, slots, self.neighbours.shape[0], swarm.ids.view(np.float64),
-                                      np.ascontiguousarray(hints), swarm.x, swarm.xref, swarm.properties,
-                                      swarm.stage if swarm.stage_width else np.empty((swarm.num_particles, 0)))
+        table, offsets = _pack(swarm, rows, slots, self.neighbours.shape[0], hints)
         incoming = self._neighbour_exchange(table, offsets)
         swarm.discard_rows(ghost_rows)
         swarm.discard_rows(offer_rows)
@@ -295,11 +277,14 @@ class Migrator:
     @staticmethod
     def _append_kept(swarm: Swarm, kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
                                                     npt.NDArray[np.int32]]]) -> int:
+        """Append the kept rows of packed tables with the reference positions and owned cells found
+        here (the offering rank did not know them). Returns how many."""
         n_in = 0
         for t, xref, cells in kept:
             if t.shape[0]:
-                batch = _Unpacked(swarm, t)
-                swarm.append_rows(batch.ids, batch.x, xref, cells, batch.properties, batch.stage)
+                t = t.copy()
+                t[:, 2 + swarm.gdim: 2 + swarm.gdim + swarm.tdim] = xref
+                swarm.append_packed(t, np.asarray(cells, dtype=np.int32))
                 n_in += t.shape[0]
         return n_in
 
@@ -320,7 +305,8 @@ class Migrator:
         """
         inside = self._box_candidates(swarm.x[rows])
         num_candidates = inside.sum(axis=1)
-        table = _pack(swarm, rows, num_candidates.astype(np.int64))
+        table, _ = _pack(swarm, rows, np.zeros(rows.shape[0], dtype=np.int64), 1,
+                         num_candidates.astype(np.int64).view(np.float64))
         swarm.discard_rows(rows)
         offers = {int(r): np.flatnonzero(inside[:, r]) for r in np.flatnonzero(inside.any(axis=0))}
         received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
@@ -355,8 +341,7 @@ class Migrator:
         answers: dict[int, npt.NDArray[np.float64]] = {}
         for src in sorted(received):
             t, candidates = received[src]
-            batch = _Unpacked(swarm, t)
-            loc = locate_owned(self.mesh, batch.x, tree=self.owned_tree, geometry=swarm.geometry)
+            loc = locate_owned(self.mesh, _positions(swarm, t), tree=self.owned_tree, geometry=swarm.geometry)
             sole = candidates == 1
             found = sole & (loc.cells >= 0)
             kept.append((t[found], loc.xref[found], loc.cells[found]))

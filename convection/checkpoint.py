@@ -49,6 +49,7 @@ import dolfinx.mesh
 from convection.adaptivity import MeshHierarchy, MeshRecipe
 from convection.balance import MeshPiece, create_mesh_from_piece, mesh_piece
 from convection.model import Model
+from particles.balance import cell_owners_by_input, mesh_fingerprint
 from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.manager import ParticleManager
 from particles.output import H5Sink
@@ -188,6 +189,20 @@ def _write_recipe(sink: H5Sink, recipe: MeshRecipe) -> list[str]:
     return rounds
 
 
+def _write_partition(sink: H5Sink, mesh: dolfinx.mesh.Mesh, hierarchy: MeshHierarchy | None) -> None:
+    """What a restore on the same ranks needs to rebuild the mesh exactly and to prove it did: the
+    owner of every cell of the mesh ``create_mesh`` made (by input index, when the run still stands
+    on it: no repartition since), and every rank's fingerprint of the base and of the current mesh."""
+    comm = sink.comm
+    created = mesh if hierarchy is None else hierarchy.base
+    if hierarchy is None or hierarchy.recipe.base is None:
+        owners = cell_owners_by_input(created)
+        sink.distributed("mesh/created_owners", owners if owners is not None else np.zeros(0, dtype=np.int32))
+    for name, which in (("base", created), ("mesh", mesh)):
+        digests = comm.allgather(np.frombuffer(mesh_fingerprint(which), dtype=np.uint8))
+        sink.replicated(f"mesh/fingerprints/{name}", np.stack(digests))
+
+
 def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config: dict[str, Any],
                      run_state: dict[str, Any], keep: int = 2) -> Path:
     """Write a checkpoint of ``model`` at its current step into ``run_dir/checkpoints`` (collective,
@@ -214,6 +229,7 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
         sink.distributed("mesh/x", cells.x)
         sink.distributed("mesh/base_cells", hierarchy.base_cells(mesh) if hierarchy is not None
                          else np.zeros(n, dtype=np.int64))
+        _write_partition(sink, mesh, hierarchy)
         for name, f in state_functions(model).items():
             values, coords = _owned(f)
             sink.distributed(f"functions/{name}/values", values)
@@ -302,28 +318,59 @@ def _block(f: h5py.File, name: str, comm: MPI.Comm) -> npt.NDArray:
     return f[name][total * comm.rank // comm.size: total * (comm.rank + 1) // comm.size]
 
 
-def restore_mesh(saved: SavedRun, base: dolfinx.mesh.Mesh, hierarchy: MeshHierarchy | None, /) -> tuple[dolfinx.mesh.Mesh, bool]:
-    """The checkpoint's mesh (collective): replayed on the same rank count (exact), rebuilt from its
-    cells otherwise. ``base`` is the run's base mesh made afresh from the config. Returns the mesh
-    and whether it is exact.
+@dataclass
+class RestoredMesh:
+    """The mesh a checkpoint's run stood on, made again (:func:`restore_mesh`).
 
-    Every rank reads only its own rows: its pieces of the recipe (the same rank count), or an equal
-    block of the saved cells and vertices (another rank count; the base cells then go to ranks in
-    equal blocks of canonical index and every cell to the rank of its base cell)."""
-    comm = base.comm
-    exact = saved.num_ranks == comm.size
+    Attributes:
+        mesh: The mesh.
+        hierarchy: Its base mesh and levels (None: the run had no adaptivity or balancing).
+        exact: True when the mesh, its partition and numbering are the saved ones (then the saved
+            dof values are copied and the run continues bit for bit); False when it was rebuilt
+            from the saved cells (the fields are matched by coordinates).
+        note: Why an exact restore was not possible on the rank count it was written on (one
+            line), or None.
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    hierarchy: MeshHierarchy | None
+    exact: bool
+    note: str | None = None
+
+
+def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np.int32] | None], dolfinx.mesh.Mesh],
+                 /, *, hierarchical: bool) -> RestoredMesh:
+    """The checkpoint's mesh (collective).
+
+    On the rank count it was written on the mesh is made as the run made it: the base mesh with the
+    saved owner of every cell imposed (``make_base(owners)``, owners by input index on rank 0), or
+    the saved base pieces of the latest repartition, then the saved refinement rounds or pieces
+    (:class:`convection.adaptivity.MeshRecipe`). The result must have the saved fingerprint on every
+    rank (:func:`particles.balance.mesh_fingerprint`); otherwise, and on another rank count, the mesh
+    is rebuilt from the saved cells and partitioned afresh (each rank reads an equal block of the
+    saved cells and vertices; no rank reads all; the base cells go to ranks in equal blocks of
+    canonical index and every cell to the rank of its base cell), and the result says why in
+    ``note``.
+
+    Args:
+        saved: The checkpoint.
+        comm: The run's communicator.
+        make_base: Makes the config's base mesh, on the given partition (None: its own choice).
+        hierarchical: Whether the run has a :class:`convection.adaptivity.MeshHierarchy`
+            (adaptivity or balancing).
+    """
+    note = None
+    if saved.num_ranks == comm.size:
+        restored = _replay(saved, comm, make_base, hierarchical)
+        if isinstance(restored, RestoredMesh):
+            return restored
+        note = (f"checkpoint {saved.path}: {restored}, so the continuation is the same run to round-off, "
+                f"not bit for bit (fields matched by coordinates, particles located again)")
+    base = make_base(None)
+    hierarchy = MeshHierarchy(base) if hierarchical else None
+    if hierarchy is None:
+        return RestoredMesh(base, None, False, note)  # the base mesh, made the same way on any rank count
     with h5py.File(saved.path / "state.h5", "r") as f:
-        if hierarchy is None:
-            return base, exact  # the mesh is the base mesh, made the same way on any rank count
-        if exact:
-            rounds_kind = saved.state["recipe_rounds"]
-            base_piece = _read_piece(f, "recipe/base", comm) if "recipe/base" in f else None
-            mesh_piece_ = _read_piece(f, "recipe/mesh", comm) if "recipe/mesh" in f else None
-            rounds = []
-            for i, kind in enumerate(rounds_kind):
-                counts = f[f"recipe/round_{i}_counts"][...] if kind == "marked" else None
-                rounds.append(None if kind == "uniform" else _slice(f, f"recipe/round_{i}", counts, comm.rank).astype(np.int32))
-            return hierarchy.replay(MeshRecipe(base_piece, rounds, mesh_piece_)), True
         if "recipe/base" in f:
             # The saved base pieces, read in equal blocks: the global vertex numbering of the
             # concatenated pieces holds on any rank count.
@@ -336,7 +383,39 @@ def restore_mesh(saved: SavedRun, base: dolfinx.mesh.Mesh, hierarchy: MeshHierar
     # The saved cells, each sent to the rank that owns its base cell, so the mesh and its base
     # stay together (load balancing needs that).
     owners = _base_owners(hierarchy)[base_cells]
-    return create_mesh_from_piece(comm, MeshPiece(cells, x, owners), hierarchy.new_domain()).mesh, False
+    mesh = create_mesh_from_piece(comm, MeshPiece(cells, x, owners), hierarchy.new_domain()).mesh
+    return RestoredMesh(mesh, hierarchy, False, note)
+
+
+def _replay(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np.int32] | None], dolfinx.mesh.Mesh],
+            hierarchical: bool) -> RestoredMesh | str:
+    """The saved mesh made again on the same ranks, checked against the saved fingerprints; or why
+    not (collective; the same answer on every rank)."""
+    with h5py.File(saved.path / "state.h5", "r") as f:
+        if "mesh/fingerprints/mesh" not in f:
+            return "it holds no mesh fingerprints (written by an older version)"
+        expected = {name: f[f"mesh/fingerprints/{name}"][comm.rank].tobytes() for name in ("base", "mesh")}
+        owners = None
+        if comm.rank == 0 and "mesh/created_owners" in f:
+            owners = f["mesh/created_owners"][...].astype(np.int32)
+        pieces = {name: _read_piece(f, f"recipe/{name}", comm) if f"recipe/{name}" in f else None for name in ("base", "mesh")}
+        rounds = []
+        for i, kind in enumerate(saved.state["recipe_rounds"] or []):
+            counts = f[f"recipe/round_{i}_counts"][...] if kind == "marked" else None
+            rounds.append(None if kind == "uniform" else _slice(f, f"recipe/round_{i}", counts, comm.rank).astype(np.int32))
+    # A checkpoint after a repartition rebuilds its base from the saved pieces, not from the config.
+    base = make_base(owners if pieces["base"] is None else None)
+    hierarchy = MeshHierarchy(base) if hierarchical else None
+    if hierarchy is not None and pieces["base"] is not None:
+        hierarchy.replay(MeshRecipe(pieces["base"], []))  # the base only
+    created = base if hierarchy is None else hierarchy.base
+    if not comm.allreduce(mesh_fingerprint(created) == expected["base"], op=MPI.LAND):
+        return f"its base mesh could not be made again on {comm.size} ranks as it was saved"
+    mesh = base if hierarchy is None else hierarchy.replay(MeshRecipe(pieces["base"], rounds, pieces["mesh"]),
+                                                           base=False)
+    if not comm.allreduce(mesh_fingerprint(mesh) == expected["mesh"], op=MPI.LAND):
+        return f"its mesh could not be made again on {comm.size} ranks as it was saved"
+    return RestoredMesh(mesh, hierarchy, True)
 
 
 def _base_owners(hierarchy: MeshHierarchy) -> npt.NDArray[np.int32]:

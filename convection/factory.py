@@ -25,6 +25,7 @@ section             component
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -155,17 +156,24 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], gdim)
     temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], gdim)
 
-    base = create_mesh(comm, spec)
     acfg, bcfg = config["adaptivity"], config["balance"]
-    hierarchy = MeshHierarchy(base) if acfg["enabled"] or bcfg["strategy"] != "none" else None
+    hierarchical = acfg["enabled"] or bcfg["strategy"] != "none"
+    exact = True
+    if restore is not None:
+        restored = restore_mesh(restore, comm, lambda owners: create_mesh(comm, spec, owners=owners),
+                                hierarchical=hierarchical)
+        mesh, hierarchy, exact = restored.mesh, restored.hierarchy, restored.exact
+        if restored.note is not None and comm.rank == 0:
+            print(f"note: {restored.note}", file=sys.stderr, flush=True)
+    else:
+        mesh = create_mesh(comm, spec)
+        hierarchy = MeshHierarchy(mesh) if hierarchical else None
     adaptivity = None
-    mesh, exact = base, True
     if acfg["enabled"]:
         adaptivity = Adaptivity(hierarchy, AdaptivityParameters.from_config(acfg), fields=acfg["fields"])
-    if restore is not None:
-        mesh, exact = restore_mesh(restore, base, hierarchy)
-    elif adaptivity is not None:
-        mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs), rounds=acfg["initial_steps"])
+        if restore is None:
+            mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs),
+                                           rounds=acfg["initial_steps"])
     balancer = None
     if bcfg["strategy"] != "none":
         balancer = Balancer(hierarchy, strategy=bcfg["strategy"], every=bcfg["every"], threshold=bcfg["threshold"],

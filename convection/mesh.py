@@ -34,6 +34,8 @@ import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
+from particles.balance import create_reproducible_mesh
+
 __all__ = ["BoxSpec", "MESH_GEOMETRIES", "MeshSpec", "ShellSpec", "cell_diameter", "cell_values", "cell_volumes",
            "create_box_mesh",
            "create_mesh", "create_shell_mesh", "mesh_spec_from_config", "shell_confinement"]
@@ -148,15 +150,25 @@ def mesh_spec_from_config(mesh_config: dict) -> MeshSpec:
     return BoxSpec.from_config(mesh_config) if geometry == "box" else ShellSpec.from_config(mesh_config)
 
 
-def create_mesh(comm: MPI.Comm, spec: MeshSpec, /) -> dolfinx.mesh.Mesh:
-    """Create the (coarse, base) mesh described by ``spec`` (collective)."""
+def create_mesh(comm: MPI.Comm, spec: MeshSpec, /, *, owners: npt.NDArray[np.int32] | None = None
+                ) -> dolfinx.mesh.Mesh:
+    """Create the (coarse, base) mesh described by ``spec`` (collective) on a reproducible
+    partition (:func:`particles.balance.create_reproducible_mesh`: the same mesh, numbering and
+    all, in every run on the same ranks); ``owners``: a partition to impose (owner rank per cell
+    by input index, on rank 0), e.g. the one a checkpoint saved."""
     if isinstance(spec, ShellSpec):
-        return create_shell_mesh(comm, spec)
-    return create_box_mesh(comm, spec)
+        return create_shell_mesh(comm, spec, owners=owners)
+    return create_box_mesh(comm, spec, owners=owners)
 
 
-def create_box_mesh(comm: MPI.Comm, spec: BoxSpec, /) -> dolfinx.mesh.Mesh:
-    """Create the (coarse, base) mesh described by ``spec`` (collective)."""
+def create_box_mesh(comm: MPI.Comm, spec: BoxSpec, /, *, owners: npt.NDArray[np.int32] | None = None
+                    ) -> dolfinx.mesh.Mesh:
+    """Create the (coarse, base) mesh described by ``spec`` (collective; partition as in :func:`create_mesh`)."""
+    return create_reproducible_mesh(comm, lambda c: _box(c, spec), owners=owners)
+
+
+def _box(comm: MPI.Comm, spec: BoxSpec) -> dolfinx.mesh.Mesh:
+    """DOLFINx's rectangle or box mesh of ``spec`` on ``comm``."""
     ghost_mode = dolfinx.mesh.GhostMode.shared_facet
     if spec.gdim == 2:
         cell_type = dolfinx.mesh.CellType.triangle if spec.cell_type == "simplex" else dolfinx.mesh.CellType.quadrilateral
@@ -201,16 +213,19 @@ def _shell_model(gmsh, spec: ShellSpec) -> None:
         gmsh.model.mesh.optimize("HighOrder")
 
 
-def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /) -> dolfinx.mesh.Mesh:
-    """Mesh the annulus/spherical shell of ``spec`` with gmsh on rank 0 and distribute it (collective).
+def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray[np.int32] | None = None
+                      ) -> dolfinx.mesh.Mesh:
+    """Mesh the annulus/spherical shell of ``spec`` with gmsh on rank 0 and distribute it (collective;
+    partition as in :func:`create_mesh`).
 
     Needs the ``gmsh`` Python module (Debian: ``python3-gmsh``) on rank 0.
     """
-    import gmsh
     from dolfinx.io import gmshio
 
     started = False
     if comm.rank == 0:
+        import gmsh
+
         # gmsh < 4.9 (Debian 12 ships 4.8) cannot tell whether it is initialised: start our own session.
         is_initialized = getattr(gmsh, "isInitialized", lambda: False)
         started = not is_initialized()
@@ -220,13 +235,13 @@ def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /) -> dolfinx.mesh.Mesh:
         gmsh.model.add(f"{spec.name}_{id(spec)}")
         _shell_model(gmsh, spec)
     try:
-        mesh, _, _ = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=spec.gdim)
+        return create_reproducible_mesh(comm, lambda c: gmshio.model_to_mesh(gmsh.model, c, 0, gdim=spec.gdim)[0],
+                                        owners=owners)
     finally:
         if comm.rank == 0:
             gmsh.model.remove()
             if started:
                 gmsh.finalize()
-    return mesh
 
 
 def cell_values(mesh: dolfinx.mesh.Mesh, integrand: ufl.core.expr.Expr, /) -> npt.NDArray[np.float64]:

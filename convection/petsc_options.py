@@ -7,8 +7,9 @@ solver that set them is garbage collected. :func:`destroy_petsc_objects` frees s
 explicitly, at the same point on every rank.
 
 Each PDE solver lists its linear solvers as :class:`LinearSolver` entries (name, description,
-default options) built from the same two pieces: :data:`MUMPS_LU` (direct) and
-:func:`krylov_options` (iterative: Krylov method, stopping rule, then the preconditioner).
+default options) built from the same pieces: :data:`MUMPS_LU` (direct; on several ranks
+:data:`REPRODUCIBLE_LU`, which gives the same bits in every run) and :func:`krylov_options`
+(iterative: Krylov method, stopping rule, then the preconditioner).
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ from typing import Any, ClassVar, Iterator, Mapping, Sequence
 
 from petsc4py import PETSc
 
-__all__ = ["PetscSolver", 
+__all__ = ["PetscSolver",
     "MUMPS_LU",
+    "REPRODUCIBLE_LU",
     "LinearSolver",
     "destroy_petsc_objects",
     "krylov_options",
@@ -34,6 +36,17 @@ MUMPS_LU: Mapping[str, Any] = MappingProxyType(
     {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
 )
 """Direct solve: one MUMPS LU factorisation, no Krylov iterations (read-only; copy with ``dict``)."""
+
+REPRODUCIBLE_LU: Mapping[str, Any] = MappingProxyType(
+    {"ksp_type": "preonly", "pc_type": "redundant", "redundant_pc_type": "lu",
+     "redundant_pc_factor_mat_solver_type": "mumps"}
+)
+"""Direct solve on several ranks that gives the same bits in every run: every rank factorises the
+whole system with sequential MUMPS (PETSc's ``redundant`` preconditioner gathers the matrix). A
+parallel MUMPS factorisation schedules its work dynamically, so two runs of the same system on the
+same ranks differ in the last bits (measured: from the first step of van Keken 1a on 2 ranks), and
+a resumed run could not continue bit for bit. Options of the inner solver take the ``redundant_``
+prefix (e.g. ``redundant_mat_mumps_icntl_14``). See the README's checkpoint section for its cost."""
 
 
 def krylov_options(ksp_type: str, /, preconditioner: Mapping[str, Any], *, rtol: float, atol: float,
@@ -58,18 +71,23 @@ class LinearSolver:
         name: Lowercase name.
         description: One line for listings.
         options: Default PETSc options without the solver's prefix (read-only; copy with ``dict``).
+        parallel_options: The defaults on more than one rank, when they differ (None: ``options``).
     """
 
     name: str
     description: str
     options: Mapping[str, Any]
+    parallel_options: Mapping[str, Any] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+        if self.parallel_options is not None:
+            object.__setattr__(self, "parallel_options", MappingProxyType(dict(self.parallel_options)))
 
-    def options_with(self, overrides: Mapping[str, Any] | None = None, /) -> dict[str, Any]:
-        """The default options updated by ``overrides`` (a new dict)."""
-        return {**self.options, **(overrides or {})}
+    def options_with(self, overrides: Mapping[str, Any] | None = None, /, *, ranks: int = 1) -> dict[str, Any]:
+        """The default options on ``ranks`` ranks updated by ``overrides`` (a new dict)."""
+        defaults = self.parallel_options if ranks > 1 and self.parallel_options is not None else self.options
+        return {**defaults, **(overrides or {})}
 
 
 def linear_solvers(*solvers: LinearSolver) -> dict[str, LinearSolver]:
@@ -132,7 +150,7 @@ class PetscSolver:
         self._prefix = f"{self.KIND.lower()}{next(PetscSolver._instances)}_"
         self.ksp = PETSc.KSP().create(comm)
         self.ksp.setOptionsPrefix(self._prefix)
-        return self.SOLVERS[solver].options_with(petsc_options)
+        return self.SOLVERS[solver].options_with(petsc_options, ranks=comm.size)
 
     def settings(self) -> dict[str, Any]:
         """The keyword arguments that build this solver again (without mesh and approximation)."""

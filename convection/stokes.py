@@ -64,7 +64,9 @@ from convection.boundary import (
 from convection.nullspace import (
     PressureMean, RigidRotations, constant_pressure_null_space, pressure_pin, rigid_body_modes,
 )
-from convection.petsc_options import MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options
+from convection.petsc_options import (
+    MUMPS_LU, REPRODUCIBLE_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+)
 from convection import jit_cache
 
 jit_cache.install()  # forms and elements compiled once per process (see the module)
@@ -124,7 +126,8 @@ def block_schur_options(velocity: dict[str, Any], /, *, rtol: float = 1e-7) -> d
 
 
 STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
-    LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system", MUMPS_LU),
+    LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: redundant, reproducible)",
+                 MUMPS_LU, REPRODUCIBLE_LU),
     LinearSolver(
         "iterative",
         "FGMRES + block-triangular Schur preconditioner: BoomerAMG (systems) on velocity, SOR on -M_p/eta",

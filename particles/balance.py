@@ -25,6 +25,7 @@ path (``benchmarks/scaling/measure_constants.py serialmesh``); nothing else uses
 
 from __future__ import annotations
 
+import hashlib
 from typing import Any, Callable, NamedTuple
 
 import numpy as np
@@ -40,9 +41,10 @@ from particles.adaptivity import move_to_mesh
 from particles.partition import PARTITIONERS, partition
 from particles.swarm import Swarm
 
-__all__ = ["GHOST_LAYERS", "CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "create_mesh_from_piece",
-           "create_partitioned_mesh", "gather_cell_layout", "mesh_piece", "owner_partitioner", "pull",
-           "rebalance", "redistribute", "redistribution"]
+__all__ = ["GHOST_LAYERS", "CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "cell_owners_by_input",
+           "create_mesh_from_piece", "create_partitioned_mesh", "create_reproducible_mesh", "duplicate_cells",
+           "gather_cell_layout", "mesh_fingerprint", "mesh_piece", "owner_partitioner", "pull", "rebalance",
+           "redistribute", "redistribution"]
 
 
 def _starts(comm: MPI.Comm, n: int) -> npt.NDArray[np.int64]:
@@ -350,6 +352,115 @@ def create_mesh_from_piece(comm: MPI.Comm, piece: MeshPiece, domain: ufl.Mesh, /
         return WeightedMesh(mesh, original)
     starts = _starts(comm, piece.cells.shape[0])
     return WeightedMesh(mesh, pull(comm, original, piece.canonical, starts))
+
+
+def create_reproducible_mesh(comm: MPI.Comm, build: Callable[[MPI.Comm], dolfinx.mesh.Mesh], /, *,
+                             owners: npt.NDArray[np.int32] | None = None, method: str = "rcb") -> dolfinx.mesh.Mesh:
+    """The mesh ``build`` makes, distributed over ``comm`` on a partition that is the same in every
+    run (collective).
+
+    DOLFINx's default graph partitioner (SCOTCH) does not give the same partition twice, not even
+    on one process, so the same config on the same ranks would get another mesh numbering each
+    run, and a checkpoint could not be replayed. Here rank 0 builds the mesh alone
+    (``build(MPI.COMM_SELF)``: a box, a gmsh model on rank 0, ...), chooses the owners of its cells
+    by ``method`` (:data:`particles.partition.PARTITIONERS`, on the cell midpoints) unless they are
+    given, and hands every cell to :func:`create_mesh_from_piece` in the order of ``build``'s
+    input, so ``original_cell_index`` means what it means for a mesh ``build`` distributes itself.
+    On one rank it is ``build(comm)``.
+
+    Args:
+        comm: Communicator of the mesh.
+        build: Makes the mesh on the communicator it is given (called on rank 0 only, with
+            ``MPI.COMM_SELF``, when ``comm`` has several ranks).
+        owners: Owner rank of every cell by its input index, shape=(num_cells,) on rank 0 (other
+            ranks: ignored), e.g. a saved partition to impose again; None: chosen by ``method``.
+        method: Partition method when ``owners`` is None.
+
+    Returns:
+        The distributed mesh (facet ghost layer).
+    """
+    if comm.size == 1:
+        mesh = build(comm)
+        if owners is not None:
+            _check_owners(owners, mesh.topology.index_map(mesh.topology.dim).size_local, 1)
+        return mesh
+    piece, element, failure = None, None, None
+    if comm.rank == 0:
+        try:
+            serial = build(MPI.COMM_SELF)
+            element = serial.ufl_domain().ufl_coordinate_element()
+            tdim = serial.topology.dim
+            num_cells = serial.topology.index_map(tdim).size_local
+            whole = mesh_piece(serial, np.zeros(num_cells, dtype=np.int32))
+            order = np.argsort(np.asarray(serial.topology.original_cell_index, dtype=np.int64), kind="stable")
+            if owners is None:
+                midpoints = dolfinx.mesh.compute_midpoints(serial, tdim, order.astype(np.int32))[:, :serial.geometry.dim]
+                owners = partition(method, midpoints, np.ones(num_cells), np.zeros(num_cells), comm.size,
+                                   particle_weight=0.0)
+            piece = MeshPiece(whole.cells[order], whole.x, _check_owners(owners, num_cells, comm.size))
+        except Exception as err:  # noqa: BLE001 - told to every rank below, raised on every rank
+            failure = f"{type(err).__name__}: {err}"
+    failure, element, shape = comm.bcast((failure, element, None if piece is None else
+                                          (piece.cells.shape[1], piece.x.shape[1])), root=0)
+    if failure is not None:
+        raise RuntimeError(f"creating the mesh on rank 0 failed: {failure}")
+    if comm.rank != 0:
+        piece = MeshPiece(np.zeros((0, shape[0]), dtype=np.int64), np.zeros((0, shape[1])),
+                          np.zeros(0, dtype=np.int32))
+    return create_mesh_from_piece(comm, piece, ufl.Mesh(element)).mesh
+
+
+def _check_owners(owners: npt.ArrayLike, num_cells: int, size: int) -> npt.NDArray[np.int32]:
+    """``owners`` as int32 if it names a rank in [0, size) for each of ``num_cells`` cells."""
+    owners = np.asarray(owners, dtype=np.int32).reshape(-1)
+    if owners.shape[0] != num_cells or owners.min(initial=0) < 0 or owners.max(initial=0) >= size:
+        raise ValueError(f"{owners.shape[0]} owners in [0, {size}) given for {num_cells} cells")
+    return owners
+
+
+def cell_owners_by_input(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32] | None:
+    """The owner rank of every cell by its input index (``original_cell_index``) on rank 0, None
+    elsewhere (collective): the partition :func:`create_reproducible_mesh` can impose again."""
+    comm = mesh.comm
+    num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    mine = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[:num_owned]
+    gathered = comm.gather(mine, root=0)
+    if comm.rank != 0:
+        return None
+    owners = np.full(sum(g.size for g in gathered), -1, dtype=np.int32)
+    for rank, index in enumerate(gathered):
+        owners[index] = rank
+    return owners
+
+
+def mesh_fingerprint(mesh: dolfinx.mesh.Mesh, /) -> bytes:
+    """A digest of this rank's part of ``mesh`` (not collective): node coordinates, geometry dofmap,
+    cell-vertex connectivity, global vertex numbers, input cell indices and the owned/ghost cell
+    counts. Two meshes with the same digest on every rank have the same numbering, so function
+    spaces on them number their dofs alike (the dofmaps are built from these)."""
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim, 0)
+    cells, vertices = mesh.topology.index_map(tdim), mesh.topology.index_map(0)
+    num_vertices = vertices.size_local + vertices.num_ghosts
+    digest = hashlib.sha256()
+    for part in (np.asarray([cells.size_local, cells.num_ghosts, vertices.size_local, num_vertices], dtype=np.int64),
+                 mesh.geometry.x, mesh.geometry.dofmap.array, mesh.topology.connectivity(tdim, 0).array,
+                 np.asarray(vertices.local_to_global(np.arange(num_vertices, dtype=np.int32)), dtype=np.int64),
+                 np.asarray(mesh.topology.original_cell_index, dtype=np.int64)):
+        digest.update(np.ascontiguousarray(part).tobytes())
+    return digest.digest()
+
+
+def duplicate_cells(mesh: dolfinx.mesh.Mesh, /) -> int:
+    """How many of this rank's local cells (owned and ghost) repeat another local cell's vertices
+    (not collective; 0 for a sound mesh)."""
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim, 0)
+    c2v = mesh.topology.connectivity(tdim, 0)
+    width = int(c2v.offsets[1] - c2v.offsets[0]) if c2v.num_nodes else 1
+    vertices = np.asarray(mesh.topology.index_map(0).local_to_global(c2v.array), dtype=np.int64)
+    rows = np.sort(vertices.reshape(-1, width), axis=1)
+    return int(rows.shape[0] - np.unique(rows, axis=0).shape[0])
 
 
 def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /, *,

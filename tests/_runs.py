@@ -1,0 +1,98 @@
+"""Runs of the command line in subprocesses, for tests (``from _runs import ...``): start, kill
+(SIGKILL of the whole process group), resume, and read back what a run wrote."""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import h5py
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+
+
+def command(args: list[str], ranks: int = 1) -> list[str]:
+    """``python -m convection ARGS``, under ``mpirun -n RANKS`` when ranks > 1."""
+    cmd = [sys.executable, "-m", "convection", *args]
+    if ranks > 1:
+        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
+    return cmd
+
+
+def env() -> dict[str, str]:
+    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+
+
+def sets(items: list[str]) -> list[str]:
+    """``--set`` arguments for config overrides ``key=value``."""
+    return [a for item in items for a in ("--set", item)]
+
+
+def run_cli(args: list[str], ranks: int = 1, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run the command line to the end; returns the finished process (text output captured)."""
+    return subprocess.run(command(args, ranks), cwd=ROOT, env=env(), capture_output=True, text=True, timeout=timeout)
+
+
+def rows(run_dir: Path) -> list[dict[str, str]]:
+    """The rows of a run's statistics.csv, as written (strings)."""
+    with open(Path(run_dir) / "statistics.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def assert_same_statistics(a: Path, b: Path, *, ignore: tuple[str, ...] = ("wall_time",)) -> None:
+    """The statistics of two runs equal to the last digit in every column but ``ignore``."""
+    rows_a, rows_b = rows(a), rows(b)
+    assert [r["step"] for r in rows_a] == [r["step"] for r in rows_b]
+    assert list(rows_a[0]) == list(rows_b[0])
+    for x, y in zip(rows_a, rows_b):
+        for key in x:
+            if key not in ignore:
+                assert x[key] == y[key], (key, x["step"], x[key], y[key])
+
+
+def final_particles(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ids, positions and properties of the particles in the newest checkpoint, sorted by id."""
+    from convection.checkpoint import latest_checkpoint
+
+    with h5py.File(latest_checkpoint(run_dir) / "particles.h5", "r") as f:
+        ids = f["ids"][...]
+        order = np.argsort(ids)
+        return ids[order], f["x"][...][order], f["properties"][...][order]
+
+
+def kill_run(config: Path, run_dir: Path, ranks: int, extra: list[str], *, when: Callable[[Path], bool],
+             timeout: float = 300) -> int:
+    """Start ``run CONFIG`` and SIGKILL its whole process group as soon as ``when(run_dir)``;
+    returns the exit code (negative: killed)."""
+    proc = subprocess.Popen(command(["run", str(config), "--output", str(run_dir), *sets(extra)], ranks),
+                            cwd=ROOT, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    deadline = time.monotonic() + timeout
+    while proc.poll() is None and time.monotonic() < deadline:
+        if when(run_dir):
+            os.killpg(proc.pid, signal.SIGKILL)
+            break
+        time.sleep(0.002)
+    proc.wait(timeout=60)
+    return proc.returncode
+
+
+def rows_written(run_dir: Path, n: int) -> bool:
+    """Whether statistics.csv has more than ``n`` lines."""
+    path = run_dir / "statistics.csv"
+    return path.exists() and len(path.read_text().splitlines()) > n
+
+
+def writing_checkpoint(run_dir: Path) -> bool:
+    """Whether a checkpoint is being written (its hidden temporary folder exists)."""
+    folder = run_dir / "checkpoints"
+    return folder.exists() and any(p.name.startswith(".checkpoint_") for p in folder.iterdir())

@@ -23,6 +23,8 @@ circle, not exactly on the curved cells' boundary, so the Nitsche penalty pins t
 small eigenvalue): the operator is regular, so they are not given to PETSc as a null space (MINRES
 stagnates with an inexact one).
 
+The spaces, strong conditions and forms are :class:`convection.stokes_forms.StokesDiscretisation`'s.
+
 Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
     ``"auto"`` (the default): ``"iterative"`` in 3D (``"iterative_gamg"`` for a shell with free
         slip on both surfaces: its rigid rotations, see :func:`resolve_solver`), ``"direct"`` in 2D.
@@ -51,20 +53,17 @@ from typing import Any, NamedTuple
 import dolfinx
 import dolfinx.cpp as _cpp
 import dolfinx.fem.petsc
-import numpy as np
-import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.buoyancy import SemiImplicitBuoyancy
-from convection.boundary import (
-    VelocityBC, boundary_names, free_slip_boundaries, has_rotation_null_space, nitsche_free_slip, velocity_dirichlet_bcs,
-)
+from convection.boundary import VelocityBC, boundary_names, has_rotation_null_space
 from convection.nullspace import (
     PressureMean, RigidRotations, constant_pressure_null_space, pressure_pin, rigid_body_modes,
 )
 from convection.petsc_options import MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options
+from convection.stokes_forms import StokesDiscretisation, StokesForms
 from convection import jit_cache
 
 jit_cache.install()  # forms and elements compiled once per process (see the module)
@@ -245,9 +244,9 @@ class StokesSolver(PetscSolver):
         self._petsc_options = self._create_ksp(
             mesh.comm, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space), petsc_options)
         self.is_iterative = self.solver != "direct"
-        cell = mesh.ufl_cell()
-        self.V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", cell, degree))
-        self.Q = dolfinx.fem.FunctionSpace(mesh, ufl.FiniteElement("Lagrange", cell, degree - 1))
+        self.discretisation = StokesDiscretisation(mesh, approximation, bcs=self.bcs, degree=degree,
+                                                   nitsche_penalty=self.nitsche_penalty)
+        self.V, self.Q = self.discretisation.V, self.discretisation.Q
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 
@@ -255,16 +254,15 @@ class StokesSolver(PetscSolver):
         self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(gdim, self.bcs))
         self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
         self._pressure_mean = PressureMean(self.p) if self.has_pressure_null_space else None
-        self._bcs = velocity_dirichlet_bcs(self.V, self.bcs)
+        self._bcs = list(self.discretisation.dirichlet)
         self._pinned = self.has_pressure_null_space and not self.is_iterative
         if self._pinned:
             self._bcs.append(pressure_pin(self.Q, self.bcs))
 
+        self.forms: StokesForms | None = None
         self._forms_key: tuple[Any, Any] | None = None
-        self._a = self._L = self._a_pc = self._a_lift = None
         self._A: PETSc.Mat | None = None
         self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
-        self._a_si = None  # the semi-implicit term (velocity block form), or None
         self._is_velocity_local: PETSc.IS | None = None
         self._P: PETSc.Mat | None = None
         self._b: PETSc.Vec | None = None
@@ -277,58 +275,33 @@ class StokesSolver(PetscSolver):
         return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta}
 
-    # ------------------------------------------------------------------ setup
-    def _build_forms(self, T: Any, C: Any) -> None:
-        u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
-        eta = self.approximation.viscosity(T, C)
-        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
-        zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
-        # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
-        metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
-        dx = ufl.dx(domain=self.mesh, metadata=metadata)
-        a = [
-            [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
-             -ufl.inner(p, ufl.div(v)) * dx],
-            [-ufl.inner(ufl.div(u), q) * dx, None],
-        ]
-        curved = free_slip_boundaries(self.bcs)
-        if curved:
-            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata)
-            a[0][0] += nitsche.a_uu
-            a[0][1] += nitsche.a_up
-            a[1][0] += nitsche.a_pu
-        if self._pinned:
-            a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
-        self._a = dolfinx.fem.form(a)
-        self._a_lift = self._a
-        if self._semi_implicit is not None:
-            # Assembled on its own into a copy of the fixed operator every solve; the lifting of
-            # the boundary values uses the whole operator.
-            term = self._semi_implicit.form(T, C, u, v, dx)
-            self._a_si = dolfinx.fem.form(term)
-            self._a_lift = dolfinx.fem.form([[a[0][0] + term, a[0][1]], [a[1][0], a[1][1]]])
-        # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
-        zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
-        self._L = dolfinx.fem.form(
-            [ufl.inner(f, v) * dx + ufl.inner(zero_vec, v) * dx, ufl.inner(zero, q) * dx]
-        )
-        if self.is_iterative:
-            # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
-            self._a_pc = dolfinx.fem.form(
-                [[a[0][0], None], [None, -ufl.inner(p, q) / eta * dx]]
-            )
-        self._operator_current = False
+    def prepare(self, T: Any, C: Any = None, /) -> StokesForms:
+        """The forms for ``T`` and ``C`` (arguments as in :meth:`solve`): built again unless these
+        very objects were prepared last; the linear algebra is set up on the first call.
+        Collective. :meth:`solve` calls it; call it first to change the returned forms (e.g.
+        ``stokes.forms = forms._replace(L=...)``, same spaces), which the next solve with the same
+        ``T`` and ``C`` then uses."""
+        key = (T, C)
+        if self._forms_key is None or not _same_objects(self._forms_key, key):
+            self.forms = self.discretisation.forms(T, C, pressure_block=self._pinned,
+                                                   preconditioner=self.is_iterative,
+                                                   semi_implicit=self._semi_implicit)
+            self._forms_key = key
+            self._operator_current = False
+            if self._A is None:
+                self._setup_linear_algebra()
+        return self.forms
 
+    # ------------------------------------------------------------------ setup
     def _setup_linear_algebra(self) -> None:
-        self._A = dolfinx.fem.petsc.create_matrix_block(self._a)
-        if self._semi_implicit is not None:
-            self._A0 = dolfinx.fem.petsc.create_matrix_block(self._a)
-        self._b = dolfinx.fem.petsc.create_vector_block(self._L)
+        forms = self.forms
+        self._A = dolfinx.fem.petsc.create_matrix_block(forms.a)
+        if forms.a_si is not None:
+            self._A0 = dolfinx.fem.petsc.create_matrix_block(forms.a)
+        self._b = dolfinx.fem.petsc.create_vector_block(forms.L)
         self._x = self._b.duplicate()
         if self.is_iterative:
-            self._P = dolfinx.fem.petsc.create_matrix_block(self._a_pc)
+            self._P = dolfinx.fem.petsc.create_matrix_block(forms.a_pc)
         if self.has_pressure_null_space and self.is_iterative:
             n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
             self._null_space = constant_pressure_null_space(self._b, n_u)
@@ -376,19 +349,13 @@ class StokesSolver(PetscSolver):
             Iteration count, true residual norm and timings. An iterative solve starts from the
             current ``u``, ``p`` (the previous solution) and stops at ``|b - K x| <= rtol |b|``.
         """
-        key = (T, C)
-        if self._forms_key is None or not _same_objects(self._forms_key, key):
-            self._build_forms(T, C)
-            self._forms_key = key
-            if self._A is None:
-                self._setup_linear_algebra()
-
+        forms = self.prepare(T, C)
         t0 = time.perf_counter()
         refresh = not self._operator_current or self.approximation.is_variable_viscosity
         fixed = self._A if self._semi_implicit is None else self._A0
         if refresh:
             fixed.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix_block(fixed, self._a, bcs=self._bcs)
+            dolfinx.fem.petsc.assemble_matrix_block(fixed, forms.a, bcs=self._bcs)
             fixed.assemble()
         if self._semi_implicit is not None:
             # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
@@ -396,17 +363,17 @@ class StokesSolver(PetscSolver):
             # viscosity is constant.
             self._semi_implicit.update(dt)
             if not self._A.isAssembled():  # once: A gets A0's nonzero pattern
-                dolfinx.fem.petsc.assemble_matrix_block(self._A, self._a, bcs=self._bcs)
+                dolfinx.fem.petsc.assemble_matrix_block(self._A, forms.a, bcs=self._bcs)
                 self._A.assemble()
             self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            self._add_velocity_block(self._a_si)
+            self._add_velocity_block(forms.a_si)
         if refresh or self._semi_implicit is not None:
             if self._null_space is not None:
                 self._A.setNullSpace(self._null_space)
         if refresh:
             if self._P is not None:
                 self._P.zeroEntries()
-                dolfinx.fem.petsc.assemble_matrix_block(self._P, self._a_pc, bcs=self._bcs)
+                dolfinx.fem.petsc.assemble_matrix_block(self._P, forms.a_pc, bcs=self._bcs)
                 self._P.assemble()
             self._operator_current = True
 
@@ -414,7 +381,7 @@ class StokesSolver(PetscSolver):
             b_local.set(0.0)
         # The pin (last in _bcs) is left out of the right-hand side: its value 0 lifts nothing, and
         # its row keeps the value _consistent_continuity needs.
-        dolfinx.fem.petsc.assemble_vector_block(self._b, self._L, self._a_lift,
+        dolfinx.fem.petsc.assemble_vector_block(self._b, forms.L, forms.a_lift,
                                                 bcs=self._bcs[:-1] if self._pinned else self._bcs)
         if self._null_space is not None:
             self._null_space.remove(self._b)

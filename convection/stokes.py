@@ -14,7 +14,7 @@ shell boundary it is imposed weakly by symmetric Nitsche terms
 side fixes the normal velocity the pressure is only defined up to a constant: the
 constant-pressure null space is attached to the operator (iterative solver) or removed by pinning
 one pressure dof (direct solver, exact once the continuity right-hand side sums to zero, which
-:meth:`StokesSolver._consistent_continuity` ensures), and the pressure is then
+:meth:`~convection.stokes_linear.StokesLinearSystem._consistent_continuity` ensures), and the pressure is then
 normalised to zero mean, ``int p dx = 0``. When both shell boundaries are free slip, rigid
 rotations about the origin (one in 2D, three in 3D) also solve the homogeneous problem; the
 solution's rotational part (its L2 projection onto the rotations) is removed after every solve.
@@ -23,7 +23,11 @@ circle, not exactly on the curved cells' boundary, so the Nitsche penalty pins t
 small eigenvalue): the operator is regular, so they are not given to PETSc as a null space (MINRES
 stagnates with an inexact one).
 
-The spaces, strong conditions and forms are :class:`convection.stokes_forms.StokesDiscretisation`'s.
+The solve has three parts, one module each: the discretisation (spaces, strong conditions and
+forms: :mod:`convection.stokes_forms`), the linear system (matrices, vectors, null spaces and the
+KSP's life cycle: :mod:`convection.stokes_linear`) and the buoyancy predictor
+(:mod:`convection.buoyancy`). :class:`StokesSolver` ties them together: it picks the linear solver
+from the registry below, rebuilds the forms when the fields change and normalises the solution.
 
 Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
     ``"auto"`` (the default): ``"iterative"`` in 3D (``"iterative_gamg"`` for a shell with free
@@ -37,7 +41,7 @@ Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
         mass matrix. Stops at ``|b - K x| <= 1e-7 |b|`` (``ksp_rtol``), starting from the
         previous solution. See :func:`block_schur_options`.
     ``"iterative_gamg"``: the same with PETSc's smoothed-aggregation GAMG on ``A``, given the
-        rigid-body modes (:func:`rigid_body_modes`) as near-null space.
+        rigid-body modes (:func:`convection.nullspace.rigid_body_modes`) as near-null space.
 
 Measured on unit cubes (benchmarks/performance/README.md): BoomerAMG needs fewer iterations than
 GAMG, each cheaper, and sets up 5-10 times faster (which matters when the viscosity, hence ``A``,
@@ -51,19 +55,14 @@ from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import dolfinx
-import dolfinx.cpp as _cpp
-import dolfinx.fem.petsc
-from mpi4py import MPI
-from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.buoyancy import SemiImplicitBuoyancy
 from convection.boundary import VelocityBC, boundary_names, has_rotation_null_space
-from convection.nullspace import (
-    PressureMean, RigidRotations, constant_pressure_null_space, pressure_pin, rigid_body_modes,
-)
+from convection.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
 from convection.petsc_options import MUMPS_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options
 from convection.stokes_forms import StokesDiscretisation, StokesForms
+from convection.stokes_linear import StokesLinearSystem
 from convection import jit_cache
 
 jit_cache.install()  # forms and elements compiled once per process (see the module)
@@ -199,6 +198,13 @@ class StokesResult(NamedTuple):
 class StokesSolver(PetscSolver):
     """Stokes solver on a fixed mesh (see the module docstring for equations and solvers).
 
+    Three components do the work: :class:`~convection.stokes_forms.StokesDiscretisation` (spaces,
+    strong conditions, forms), :class:`~convection.stokes_linear.StokesLinearSystem` (matrices,
+    null spaces, the KSP) and, with ``buoyancy_theta > 0``,
+    :class:`~convection.buoyancy.SemiImplicitBuoyancy` (the predicted buoyancy's operator term).
+    This class chooses the linear solver, rebuilds the forms when the fields change, and
+    normalises the solution (zero-mean pressure, no rigid rotation).
+
     Args:
         mesh: box mesh (2D or 3D).
         approximation: physics parameters and viscosity law.
@@ -218,13 +224,17 @@ class StokesSolver(PetscSolver):
     Attributes:
         u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
         p: pressure, P(degree-1) Function (zero mean when the pressure has a null space).
+        V, Q: the velocity and pressure spaces.
         solver: the registry name in use (``"auto"`` resolved).
         is_iterative: True for the Krylov solvers.
+        discretisation: the spaces and forms.
+        linear_system: the matrices, vectors and KSP (:attr:`ksp`).
+        forms: the forms of the fields of the last :meth:`prepare` (None before).
     """
 
     KIND = "Stokes"
     SOLVERS = STOKES_SOLVERS
-    PETSC_OBJECTS = ("ksp", "_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local")
+    PETSC_OBJECTS = ("ksp", "linear_system")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
                  bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
@@ -250,25 +260,15 @@ class StokesSolver(PetscSolver):
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 
-        gdim = mesh.geometry.dim
-        self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(gdim, self.bcs))
+        self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(mesh.geometry.dim, self.bcs))
         self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
         self._pressure_mean = PressureMean(self.p) if self.has_pressure_null_space else None
-        self._bcs = list(self.discretisation.dirichlet)
-        self._pinned = self.has_pressure_null_space and not self.is_iterative
-        if self._pinned:
-            self._bcs.append(pressure_pin(self.Q, self.bcs))
+        self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
+            self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, bcs=self.bcs,
+            iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space)
 
         self.forms: StokesForms | None = None
         self._forms_key: tuple[Any, Any] | None = None
-        self._A: PETSc.Mat | None = None
-        self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
-        self._is_velocity_local: PETSc.IS | None = None
-        self._P: PETSc.Mat | None = None
-        self._b: PETSc.Vec | None = None
-        self._x: PETSc.Vec | None = None
-        self._null_space: PETSc.NullSpace | None = None
-        self._near_null_space: PETSc.NullSpace | None = None
         self._operator_current = False
 
     def settings(self) -> dict[str, Any]:
@@ -283,57 +283,16 @@ class StokesSolver(PetscSolver):
         ``T`` and ``C`` then uses."""
         key = (T, C)
         if self._forms_key is None or not _same_objects(self._forms_key, key):
-            self.forms = self.discretisation.forms(T, C, pressure_block=self._pinned,
+            self.forms = self.discretisation.forms(T, C, pressure_block=self.linear_system.pinned,
                                                    preconditioner=self.is_iterative,
                                                    semi_implicit=self._semi_implicit)
             self._forms_key = key
             self._operator_current = False
-            if self._A is None:
-                self._setup_linear_algebra()
+            if not self.linear_system.is_set_up:
+                set_owned_options(self, self._prefix, self._petsc_options)
+                self.linear_system.setup(self.forms)
         return self.forms
 
-    # ------------------------------------------------------------------ setup
-    def _setup_linear_algebra(self) -> None:
-        forms = self.forms
-        self._A = dolfinx.fem.petsc.create_matrix_block(forms.a)
-        if forms.a_si is not None:
-            self._A0 = dolfinx.fem.petsc.create_matrix_block(forms.a)
-        self._b = dolfinx.fem.petsc.create_vector_block(forms.L)
-        self._x = self._b.duplicate()
-        if self.is_iterative:
-            self._P = dolfinx.fem.petsc.create_matrix_block(forms.a_pc)
-        if self.has_pressure_null_space and self.is_iterative:
-            n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-            self._null_space = constant_pressure_null_space(self._b, n_u)
-
-        set_owned_options(self, self._prefix, self._petsc_options)
-        if self.is_iterative:
-            self.ksp.setOperators(self._A, self._P)
-            pc = self.ksp.getPC()
-            pc.setType("fieldsplit")
-            is_u, is_p = self._index_sets()
-            # Fieldsplit attaches an IS's "nearnullspace" to the extracted velocity block, and the
-            # IS block size (one node = gdim dofs) becomes that block's block size (AMG nodes).
-            is_u.setBlockSize(self.mesh.geometry.dim)
-            self._near_null_space = rigid_body_modes(self.V)
-            is_u.compose("nearnullspace", self._near_null_space)
-            pc.setFieldSplitIS(("u", is_u), ("p", is_p))
-        else:
-            self.ksp.setOperators(self._A)
-        self.ksp.setFromOptions()
-        if self.is_iterative:
-            self.ksp.setInitialGuessNonzero(True)
-
-    def _index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        start = self._A.getOwnershipRange()[0]
-        comm = self.mesh.comm
-        is_u = PETSc.IS().createStride(n_u, start, 1, comm=comm)
-        is_p = PETSc.IS().createStride(n_p, start + n_u, 1, comm=comm)
-        return is_u, is_p
-
-    # ------------------------------------------------------------------ solve
     def solve(self, T: Any, C: Any = None, /, *, dt: float = 0.0) -> StokesResult:
         """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
 
@@ -351,112 +310,22 @@ class StokesSolver(PetscSolver):
         """
         forms = self.prepare(T, C)
         t0 = time.perf_counter()
-        refresh = not self._operator_current or self.approximation.is_variable_viscosity
-        fixed = self._A if self._semi_implicit is None else self._A0
-        if refresh:
-            fixed.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix_block(fixed, forms.a, bcs=self._bcs)
-            fixed.assemble()
         if self._semi_implicit is not None:
-            # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
-            # preconditioning matrix P (without the term), hence the preconditioner, stays while the
-            # viscosity is constant.
             self._semi_implicit.update(dt)
-            if not self._A.isAssembled():  # once: A gets A0's nonzero pattern
-                dolfinx.fem.petsc.assemble_matrix_block(self._A, forms.a, bcs=self._bcs)
-                self._A.assemble()
-            self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            self._add_velocity_block(forms.a_si)
-        if refresh or self._semi_implicit is not None:
-            if self._null_space is not None:
-                self._A.setNullSpace(self._null_space)
-        if refresh:
-            if self._P is not None:
-                self._P.zeroEntries()
-                dolfinx.fem.petsc.assemble_matrix_block(self._P, forms.a_pc, bcs=self._bcs)
-                self._P.assemble()
-            self._operator_current = True
-
-        with self._b.localForm() as b_local:
-            b_local.set(0.0)
-        # The pin (last in _bcs) is left out of the right-hand side: its value 0 lifts nothing, and
-        # its row keeps the value _consistent_continuity needs.
-        dolfinx.fem.petsc.assemble_vector_block(self._b, forms.L, forms.a_lift,
-                                                bcs=self._bcs[:-1] if self._pinned else self._bcs)
-        if self._null_space is not None:
-            self._null_space.remove(self._b)
-        elif self._pinned:
-            self._consistent_continuity()
+        self.linear_system.assemble_operator(
+            forms, refresh=not self._operator_current or self.approximation.is_variable_viscosity)
+        self._operator_current = True
+        self.linear_system.assemble_rhs(forms)
 
         t1 = time.perf_counter()
-        self._pack_solution(self._x)
-        self.ksp.setUp()  # a no-op unless the operator changed
-        t2 = time.perf_counter()
-        self.ksp.solve(self._b, self._x)
-        reason = self.ksp.getConvergedReason()
-        if reason < 0:
-            raise RuntimeError(f"Stokes solver did not converge (PETSc reason {reason})")
-        self._unpack_solution(self._x)
+        setup_seconds = self.linear_system.solve()
         if self._pressure_mean is not None:
             self._pressure_mean.normalise()
         if self._rotations is not None:
             self._rotations.remove(self.u)
-
-        residual = self._b.duplicate()
-        self._A.mult(self._x, residual)
-        residual.aypx(-1.0, self._b)
-        iterations = self.ksp.getIterationNumber() if self.is_iterative else 1
-        norm = float(residual.norm())
-        residual.destroy()
-        return StokesResult(int(iterations), norm, t1 - t0, time.perf_counter() - t1, t2 - t1)
-
-    def _add_velocity_block(self, form: dolfinx.fem.FormMetaClass) -> None:
-        """Add a velocity-velocity form to A's (0, 0) block, skipping the Dirichlet rows and columns
-        (their unit diagonal is already in A). Collective."""
-        if self._is_velocity_local is None:  # the velocity rows in A's local (block) numbering
-            spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
-            self._is_velocity_local = _cpp.la.petsc.create_index_sets(spaces)[0]
-        rows = self._is_velocity_local
-        block = self._A.getLocalSubMatrix(rows, rows)
-        _cpp.fem.petsc.assemble_matrix(block, form, _cpp.fem.pack_constants(form),
-                                       _cpp.fem.pack_coefficients(form), self._bcs, True)
-        self._A.restoreLocalSubMatrix(rows, rows, block)
-        self._A.assemble()
-
-    def _consistent_continuity(self) -> None:
-        """Make the continuity right-hand side sum to zero, then zero the pinned row (direct solver
-        with a pressure null space).
-
-        The constant pressure is in the null space of the (symmetric) operator, so the system is
-        solvable only if the continuity part of ``b`` sums to zero: the discrete flux of the
-        prescribed velocities, ``int u . n ds``, must vanish. A velocity tangent to a circle or
-        sphere, interpolated on the curved (or straight) cells, has a small flux, and pinning a
-        pressure dof would put the whole defect into that one dof's continuity equation. Removing
-        the mean instead spreads it over the domain, as the iterative solvers' null space does, so
-        both solve the same system. With zero velocity data the continuity part is exactly zero
-        and nothing changes."""
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        g = self._b.array[n_u:n_u + n_p]
-        total = self.mesh.comm.allreduce(float(g.sum()), op=MPI.SUM)
-        if total != 0.0:
-            g -= total / self.Q.dofmap.index_map.size_global
-        pinned = self._bcs[-1].dof_indices()[0]
-        g[pinned[pinned < n_p]] = 0.0
-
-    def _pack_solution(self, x: PETSc.Vec) -> None:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        x.array[:n_u] = self.u.x.array[:n_u]
-        x.array[n_u:] = self.p.x.array[:n_p]
-
-    def _unpack_solution(self, x: PETSc.Vec) -> None:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        self.u.x.array[:n_u] = x.array_r[:n_u]
-        self.p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
-        self.u.x.scatter_forward()
-        self.p.x.scatter_forward()
+        norm = self.linear_system.residual_norm()
+        return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
+                            setup_seconds)
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(

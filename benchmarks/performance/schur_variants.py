@@ -1,7 +1,7 @@
 """Experiment only: Schur-complement variants for the 1e3 viscosity layer (performance README,
 "Iterations in h with the 1e3 layer"). Runs ``stokes3d.py`` with its arguments after patching the
 Stokes solver's preconditioning form; it relies on internals of ``StokesSolver`` and its components
-(:mod:`convection.stokes_forms`) of this commit and is not part of
+(:mod:`convection.stokes_forms`, :mod:`convection.stokes_linear`) of this commit and is not part of
 the package.
 
 - ``SCHUR_SCALE=s``: the Schur block ``-s M_p / eta`` instead of ``-M_p / eta``.
@@ -46,17 +46,18 @@ class WBFBt:
 
     def setUp(self, pc: PETSc.PC) -> None:
         solver = _SOLVERS[-1]
-        is_u, is_p = solver._index_sets()
-        self.A00 = solver._A.createSubMatrix(is_u, is_u)
-        self.B = solver._A.createSubMatrix(is_p, is_u)
-        self.Bt = solver._A.createSubMatrix(is_u, is_p)
+        system = solver.linear_system
+        is_u, is_p = system.index_sets()
+        self.A00 = system.A.createSubMatrix(is_u, is_u)
+        self.B = system.A.createSubMatrix(is_p, is_u)
+        self.Bt = system.A.createSubMatrix(is_u, is_p)
         d = self.A00.getDiagonal()
         if os.environ.get("BFBT_W") == "sqrt_eta":
             T, C = solver._forms_key
             eta = solver.approximation.viscosity(T, C)
             u, v = ufl.TrialFunction(solver.V), ufl.TestFunction(solver.V)
             dx = ufl.dx(domain=solver.mesh, metadata={"quadrature_degree": 6})
-            M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.sqrt(eta) * ufl.inner(u, v) * dx), bcs=solver._bcs)
+            M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.sqrt(eta) * ufl.inner(u, v) * dx), bcs=system.bcs)
             M.assemble()
             d.array[:] = M.getDiagonal().array  # serial: the velocity block keeps V's numbering
             M.destroy()

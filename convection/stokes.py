@@ -14,7 +14,7 @@ shell boundary it is imposed weakly by symmetric Nitsche terms
 side fixes the normal velocity the pressure is only defined up to a constant: the
 constant-pressure null space is attached to the operator (iterative solver) or removed by pinning
 one pressure dof (direct solver, exact once the continuity right-hand side sums to zero, which
-:meth:`StokesSolver._consistent_continuity` ensures), and the pressure is then
+:meth:`~convection.stokes_linear.StokesLinearSystem._consistent_continuity` ensures), and the pressure is then
 normalised to zero mean, ``int p dx = 0``. When both shell boundaries are free slip, rigid
 rotations about the origin (one in 2D, three in 3D) also solve the homogeneous problem; the
 solution's rotational part (its L2 projection onto the rotations) is removed after every solve.
@@ -22,6 +22,12 @@ The rotations are only nearly in the discrete null space (``u . n`` of a rotatio
 circle, not exactly on the curved cells' boundary, so the Nitsche penalty pins them weakly with a
 small eigenvalue): the operator is regular, so they are not given to PETSc as a null space (MINRES
 stagnates with an inexact one).
+
+The solve has three parts, one module each: the discretisation (spaces, strong conditions and
+forms: :mod:`convection.stokes_forms`), the linear system (matrices, vectors, null spaces and the
+KSP's life cycle: :mod:`convection.stokes_linear`) and the buoyancy predictor
+(:mod:`convection.buoyancy`). :class:`StokesSolver` ties them together: it picks the linear solver
+from the registry below, rebuilds the forms when the fields change and normalises the solution.
 
 Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
     ``"auto"`` (the default): ``"iterative"`` in 3D (``"iterative_gamg"`` for a shell with free
@@ -35,7 +41,7 @@ Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
         mass matrix. Stops at ``|b - K x| <= 1e-7 |b|`` (``ksp_rtol``), starting from the
         previous solution. See :func:`block_schur_options`.
     ``"iterative_gamg"``: the same with PETSc's smoothed-aggregation GAMG on ``A``, given the
-        rigid-body modes (:func:`rigid_body_modes`) as near-null space.
+        rigid-body modes (:func:`convection.nullspace.rigid_body_modes`) as near-null space.
 
 Measured on unit cubes (benchmarks/performance/README.md): BoomerAMG needs fewer iterations than
 GAMG, each cheaper, and sets up 5-10 times faster (which matters when the viscosity, hence ``A``,
@@ -49,24 +55,16 @@ from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import dolfinx
-import dolfinx.cpp as _cpp
-import dolfinx.fem.petsc
-import numpy as np
-import ufl
-from mpi4py import MPI
-from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
 from convection.buoyancy import SemiImplicitBuoyancy
-from convection.boundary import (
-    VelocityBC, boundary_names, free_slip_boundaries, has_rotation_null_space, nitsche_free_slip, velocity_dirichlet_bcs,
-)
-from convection.nullspace import (
-    PressureMean, RigidRotations, constant_pressure_null_space, pressure_pin, rigid_body_modes,
-)
+from convection.boundary import VelocityBC, boundary_names, has_rotation_null_space
+from convection.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
 from convection.petsc_options import (
     MUMPS_LU, REPRODUCIBLE_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
+from convection.stokes_forms import StokesDiscretisation, StokesForms
+from convection.stokes_linear import StokesLinearSystem
 from convection import jit_cache
 
 jit_cache.install()  # forms and elements compiled once per process (see the module)
@@ -203,6 +201,13 @@ class StokesResult(NamedTuple):
 class StokesSolver(PetscSolver):
     """Stokes solver on a fixed mesh (see the module docstring for equations and solvers).
 
+    Three components do the work: :class:`~convection.stokes_forms.StokesDiscretisation` (spaces,
+    strong conditions, forms), :class:`~convection.stokes_linear.StokesLinearSystem` (matrices,
+    null spaces, the KSP) and, with ``buoyancy_theta > 0``,
+    :class:`~convection.buoyancy.SemiImplicitBuoyancy` (the predicted buoyancy's operator term).
+    This class chooses the linear solver, rebuilds the forms when the fields change, and
+    normalises the solution (zero-mean pressure, no rigid rotation).
+
     Args:
         mesh: box mesh (2D or 3D).
         approximation: physics parameters and viscosity law.
@@ -222,13 +227,17 @@ class StokesSolver(PetscSolver):
     Attributes:
         u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
         p: pressure, P(degree-1) Function (zero mean when the pressure has a null space).
+        V, Q: the velocity and pressure spaces.
         solver: the registry name in use (``"auto"`` resolved).
         is_iterative: True for the Krylov solvers.
+        discretisation: the spaces and forms.
+        linear_system: the matrices, vectors and KSP (:attr:`ksp`).
+        forms: the forms of the fields of the last :meth:`prepare` (None before).
     """
 
     KIND = "Stokes"
     SOLVERS = STOKES_SOLVERS
-    PETSC_OBJECTS = ("ksp", "_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local")
+    PETSC_OBJECTS = ("ksp", "linear_system")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
                  bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
@@ -248,122 +257,45 @@ class StokesSolver(PetscSolver):
         self._petsc_options = self._create_ksp(
             mesh.comm, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space), petsc_options)
         self.is_iterative = self.solver != "direct"
-        cell = mesh.ufl_cell()
-        self.V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", cell, degree))
-        self.Q = dolfinx.fem.FunctionSpace(mesh, ufl.FiniteElement("Lagrange", cell, degree - 1))
+        self.discretisation = StokesDiscretisation(mesh, approximation, bcs=self.bcs, degree=degree,
+                                                   nitsche_penalty=self.nitsche_penalty)
+        self.V, self.Q = self.discretisation.V, self.discretisation.Q
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 
-        gdim = mesh.geometry.dim
-        self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(gdim, self.bcs))
+        self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(mesh.geometry.dim, self.bcs))
         self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
         self._pressure_mean = PressureMean(self.p) if self.has_pressure_null_space else None
-        self._bcs = velocity_dirichlet_bcs(self.V, self.bcs)
-        self._pinned = self.has_pressure_null_space and not self.is_iterative
-        if self._pinned:
-            self._bcs.append(pressure_pin(self.Q, self.bcs))
+        self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
+            self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, bcs=self.bcs,
+            iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space)
 
+        self.forms: StokesForms | None = None
         self._forms_key: tuple[Any, Any] | None = None
-        self._a = self._L = self._a_pc = self._a_lift = None
-        self._A: PETSc.Mat | None = None
-        self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
-        self._a_si = None  # the semi-implicit term (velocity block form), or None
-        self._is_velocity_local: PETSc.IS | None = None
-        self._P: PETSc.Mat | None = None
-        self._b: PETSc.Vec | None = None
-        self._x: PETSc.Vec | None = None
-        self._null_space: PETSc.NullSpace | None = None
-        self._near_null_space: PETSc.NullSpace | None = None
         self._operator_current = False
 
     def settings(self) -> dict[str, Any]:
         return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta}
 
-    # ------------------------------------------------------------------ setup
-    def _build_forms(self, T: Any, C: Any) -> None:
-        u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
-        eta = self.approximation.viscosity(T, C)
-        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
-        zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
-        # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
-        metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
-        dx = ufl.dx(domain=self.mesh, metadata=metadata)
-        a = [
-            [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
-             -ufl.inner(p, ufl.div(v)) * dx],
-            [-ufl.inner(ufl.div(u), q) * dx, None],
-        ]
-        curved = free_slip_boundaries(self.bcs)
-        if curved:
-            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata)
-            a[0][0] += nitsche.a_uu
-            a[0][1] += nitsche.a_up
-            a[1][0] += nitsche.a_pu
-        if self._pinned:
-            a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
-        self._a = dolfinx.fem.form(a)
-        self._a_lift = self._a
-        if self._semi_implicit is not None:
-            # Assembled on its own into a copy of the fixed operator every solve; the lifting of
-            # the boundary values uses the whole operator.
-            term = self._semi_implicit.form(T, C, u, v, dx)
-            self._a_si = dolfinx.fem.form(term)
-            self._a_lift = dolfinx.fem.form([[a[0][0] + term, a[0][1]], [a[1][0], a[1][1]]])
-        # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
-        zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
-        self._L = dolfinx.fem.form(
-            [ufl.inner(f, v) * dx + ufl.inner(zero_vec, v) * dx, ufl.inner(zero, q) * dx]
-        )
-        if self.is_iterative:
-            # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
-            self._a_pc = dolfinx.fem.form(
-                [[a[0][0], None], [None, -ufl.inner(p, q) / eta * dx]]
-            )
-        self._operator_current = False
+    def prepare(self, T: Any, C: Any = None, /) -> StokesForms:
+        """The forms for ``T`` and ``C`` (arguments as in :meth:`solve`): built again unless these
+        very objects were prepared last; the linear algebra is set up on the first call.
+        Collective. :meth:`solve` calls it; call it first to change the returned forms (e.g.
+        ``stokes.forms = forms._replace(L=...)``, same spaces), which the next solve with the same
+        ``T`` and ``C`` then uses."""
+        key = (T, C)
+        if self._forms_key is None or not _same_objects(self._forms_key, key):
+            self.forms = self.discretisation.forms(T, C, pressure_block=self.linear_system.pinned,
+                                                   preconditioner=self.is_iterative,
+                                                   semi_implicit=self._semi_implicit)
+            self._forms_key = key
+            self._operator_current = False
+            if not self.linear_system.is_set_up:
+                set_owned_options(self, self._prefix, self._petsc_options)
+                self.linear_system.setup(self.forms)
+        return self.forms
 
-    def _setup_linear_algebra(self) -> None:
-        self._A = dolfinx.fem.petsc.create_matrix_block(self._a)
-        if self._semi_implicit is not None:
-            self._A0 = dolfinx.fem.petsc.create_matrix_block(self._a)
-        self._b = dolfinx.fem.petsc.create_vector_block(self._L)
-        self._x = self._b.duplicate()
-        if self.is_iterative:
-            self._P = dolfinx.fem.petsc.create_matrix_block(self._a_pc)
-        if self.has_pressure_null_space and self.is_iterative:
-            n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-            self._null_space = constant_pressure_null_space(self._b, n_u)
-
-        set_owned_options(self, self._prefix, self._petsc_options)
-        if self.is_iterative:
-            self.ksp.setOperators(self._A, self._P)
-            pc = self.ksp.getPC()
-            pc.setType("fieldsplit")
-            is_u, is_p = self._index_sets()
-            # Fieldsplit attaches an IS's "nearnullspace" to the extracted velocity block, and the
-            # IS block size (one node = gdim dofs) becomes that block's block size (AMG nodes).
-            is_u.setBlockSize(self.mesh.geometry.dim)
-            self._near_null_space = rigid_body_modes(self.V)
-            is_u.compose("nearnullspace", self._near_null_space)
-            pc.setFieldSplitIS(("u", is_u), ("p", is_p))
-        else:
-            self.ksp.setOperators(self._A)
-        self.ksp.setFromOptions()
-        if self.is_iterative:
-            self.ksp.setInitialGuessNonzero(True)
-
-    def _index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        start = self._A.getOwnershipRange()[0]
-        comm = self.mesh.comm
-        is_u = PETSc.IS().createStride(n_u, start, 1, comm=comm)
-        is_p = PETSc.IS().createStride(n_p, start + n_u, 1, comm=comm)
-        return is_u, is_p
-
-    # ------------------------------------------------------------------ solve
     def solve(self, T: Any, C: Any = None, /, *, dt: float = 0.0) -> StokesResult:
         """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
 
@@ -379,120 +311,24 @@ class StokesSolver(PetscSolver):
             Iteration count, true residual norm and timings. An iterative solve starts from the
             current ``u``, ``p`` (the previous solution) and stops at ``|b - K x| <= rtol |b|``.
         """
-        key = (T, C)
-        if self._forms_key is None or not _same_objects(self._forms_key, key):
-            self._build_forms(T, C)
-            self._forms_key = key
-            if self._A is None:
-                self._setup_linear_algebra()
-
+        forms = self.prepare(T, C)
         t0 = time.perf_counter()
-        refresh = not self._operator_current or self.approximation.is_variable_viscosity
-        fixed = self._A if self._semi_implicit is None else self._A0
-        if refresh:
-            fixed.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix_block(fixed, self._a, bcs=self._bcs)
-            fixed.assemble()
         if self._semi_implicit is not None:
-            # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
-            # preconditioning matrix P (without the term), hence the preconditioner, stays while the
-            # viscosity is constant.
             self._semi_implicit.update(dt)
-            if not self._A.isAssembled():  # once: A gets A0's nonzero pattern
-                dolfinx.fem.petsc.assemble_matrix_block(self._A, self._a, bcs=self._bcs)
-                self._A.assemble()
-            self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            self._add_velocity_block(self._a_si)
-        if refresh or self._semi_implicit is not None:
-            if self._null_space is not None:
-                self._A.setNullSpace(self._null_space)
-        if refresh:
-            if self._P is not None:
-                self._P.zeroEntries()
-                dolfinx.fem.petsc.assemble_matrix_block(self._P, self._a_pc, bcs=self._bcs)
-                self._P.assemble()
-            self._operator_current = True
-
-        with self._b.localForm() as b_local:
-            b_local.set(0.0)
-        # The pin (last in _bcs) is left out of the right-hand side: its value 0 lifts nothing, and
-        # its row keeps the value _consistent_continuity needs.
-        dolfinx.fem.petsc.assemble_vector_block(self._b, self._L, self._a_lift,
-                                                bcs=self._bcs[:-1] if self._pinned else self._bcs)
-        if self._null_space is not None:
-            self._null_space.remove(self._b)
-        elif self._pinned:
-            self._consistent_continuity()
+        self.linear_system.assemble_operator(
+            forms, refresh=not self._operator_current or self.approximation.is_variable_viscosity)
+        self._operator_current = True
+        self.linear_system.assemble_rhs(forms)
 
         t1 = time.perf_counter()
-        self._pack_solution(self._x)
-        self.ksp.setUp()  # a no-op unless the operator changed
-        t2 = time.perf_counter()
-        self.ksp.solve(self._b, self._x)
-        reason = self.ksp.getConvergedReason()
-        if reason < 0:
-            raise RuntimeError(f"Stokes solver did not converge (PETSc reason {reason})")
-        self._unpack_solution(self._x)
+        setup_seconds = self.linear_system.solve()
         if self._pressure_mean is not None:
             self._pressure_mean.normalise()
         if self._rotations is not None:
             self._rotations.remove(self.u)
-
-        residual = self._b.duplicate()
-        self._A.mult(self._x, residual)
-        residual.aypx(-1.0, self._b)
-        iterations = self.ksp.getIterationNumber() if self.is_iterative else 1
-        norm = float(residual.norm())
-        residual.destroy()
-        return StokesResult(int(iterations), norm, t1 - t0, time.perf_counter() - t1, t2 - t1)
-
-    def _add_velocity_block(self, form: dolfinx.fem.FormMetaClass) -> None:
-        """Add a velocity-velocity form to A's (0, 0) block, skipping the Dirichlet rows and columns
-        (their unit diagonal is already in A). Collective."""
-        if self._is_velocity_local is None:  # the velocity rows in A's local (block) numbering
-            spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
-            self._is_velocity_local = _cpp.la.petsc.create_index_sets(spaces)[0]
-        rows = self._is_velocity_local
-        block = self._A.getLocalSubMatrix(rows, rows)
-        _cpp.fem.petsc.assemble_matrix(block, form, _cpp.fem.pack_constants(form),
-                                       _cpp.fem.pack_coefficients(form), self._bcs, True)
-        self._A.restoreLocalSubMatrix(rows, rows, block)
-        self._A.assemble()
-
-    def _consistent_continuity(self) -> None:
-        """Make the continuity right-hand side sum to zero, then zero the pinned row (direct solver
-        with a pressure null space).
-
-        The constant pressure is in the null space of the (symmetric) operator, so the system is
-        solvable only if the continuity part of ``b`` sums to zero: the discrete flux of the
-        prescribed velocities, ``int u . n ds``, must vanish. A velocity tangent to a circle or
-        sphere, interpolated on the curved (or straight) cells, has a small flux, and pinning a
-        pressure dof would put the whole defect into that one dof's continuity equation. Removing
-        the mean instead spreads it over the domain, as the iterative solvers' null space does, so
-        both solve the same system. With zero velocity data the continuity part is exactly zero
-        and nothing changes."""
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        g = self._b.array[n_u:n_u + n_p]
-        total = self.mesh.comm.allreduce(float(g.sum()), op=MPI.SUM)
-        if total != 0.0:
-            g -= total / self.Q.dofmap.index_map.size_global
-        pinned = self._bcs[-1].dof_indices()[0]
-        g[pinned[pinned < n_p]] = 0.0
-
-    def _pack_solution(self, x: PETSc.Vec) -> None:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        x.array[:n_u] = self.u.x.array[:n_u]
-        x.array[n_u:] = self.p.x.array[:n_p]
-
-    def _unpack_solution(self, x: PETSc.Vec) -> None:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        self.u.x.array[:n_u] = x.array_r[:n_u]
-        self.p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
-        self.u.x.scatter_forward()
-        self.p.x.scatter_forward()
+        norm = self.linear_system.residual_norm()
+        return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
+                            setup_seconds)
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(

@@ -91,7 +91,7 @@ def test_term_is_symmetric_positive_and_only_on_stable_gradients():
     def operator(theta, C, dt):
         solver = _solver(mesh, theta)
         solver.solve(0.0, C, dt=dt)
-        return solver._A.convert("dense").getDenseArray().copy()
+        return solver.linear_system.A.convert("dense").getDenseArray().copy()
 
     below = _layer(mesh, dense_below=True)
     extra = operator(1.0, below, 1e-3) - operator(0.0, below, 1e-3)

@@ -1,7 +1,8 @@
 """Experiment only: Schur-complement variants for the 1e3 viscosity layer (performance README,
 "Iterations in h with the 1e3 layer"). Runs ``stokes3d.py`` with its arguments after patching the
-Stokes solver's preconditioning form; it relies on private ``StokesSolver`` members of this commit
-and is not part of the package.
+Stokes solver's preconditioning form; it relies on internals of ``StokesSolver`` and its components
+(:mod:`convection.stokes_forms`, :mod:`convection.stokes_linear`) of this commit and is not part of
+the package.
 
 - ``SCHUR_SCALE=s``: the Schur block ``-s M_p / eta`` instead of ``-M_p / eta``.
 - ``SCHUR_W=arith|harm|geo|max|min``: the Schur block ``-M_p w`` with ``w = 1 / eta_node``, eta_node
@@ -31,7 +32,7 @@ from petsc4py import PETSc
 import dolfinx.fem
 import dolfinx.fem.petsc
 
-from convection import stokes
+from convection import stokes, stokes_forms
 
 sys.modules.setdefault("schur_variants", sys.modules[__name__])  # for pc_python_type
 _SOLVERS: list = []  # StokesSolver instances; the last is the one being set up
@@ -45,17 +46,18 @@ class WBFBt:
 
     def setUp(self, pc: PETSc.PC) -> None:
         solver = _SOLVERS[-1]
-        is_u, is_p = solver._index_sets()
-        self.A00 = solver._A.createSubMatrix(is_u, is_u)
-        self.B = solver._A.createSubMatrix(is_p, is_u)
-        self.Bt = solver._A.createSubMatrix(is_u, is_p)
+        system = solver.linear_system
+        is_u, is_p = system.index_sets()
+        self.A00 = system.A.createSubMatrix(is_u, is_u)
+        self.B = system.A.createSubMatrix(is_p, is_u)
+        self.Bt = system.A.createSubMatrix(is_u, is_p)
         d = self.A00.getDiagonal()
         if os.environ.get("BFBT_W") == "sqrt_eta":
             T, C = solver._forms_key
             eta = solver.approximation.viscosity(T, C)
             u, v = ufl.TrialFunction(solver.V), ufl.TestFunction(solver.V)
             dx = ufl.dx(domain=solver.mesh, metadata={"quadrature_degree": 6})
-            M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.sqrt(eta) * ufl.inner(u, v) * dx), bcs=solver._bcs)
+            M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.sqrt(eta) * ufl.inner(u, v) * dx), bcs=system.bcs)
             M.assemble()
             d.array[:] = M.getDiagonal().array  # serial: the velocity block keeps V's numbering
             M.destroy()
@@ -127,20 +129,21 @@ def _nodal_weight(solver, eta, mode: str) -> dolfinx.fem.Function:
     return w
 
 
-_setup = stokes.StokesSolver._setup_linear_algebra
-_build_forms = stokes.StokesSolver._build_forms
+_prepare = stokes.StokesSolver.prepare
+_build_forms = stokes_forms.StokesDiscretisation.forms
 
 
-def _record(self) -> None:
-    _SOLVERS.append(self)
-    _setup(self)
+def _record(self, T, C=None, /):
+    if not _SOLVERS or _SOLVERS[-1] is not self:
+        _SOLVERS.append(self)
+    return _prepare(self, T, C)
 
 
-def _forms(self, T, C) -> None:
-    _build_forms(self, T, C)
+def _forms(self, T, C, /, **kwargs):
+    forms = _build_forms(self, T, C, **kwargs)
     scale, mode = os.environ.get("SCHUR_SCALE"), os.environ.get("SCHUR_W")
-    if not self.is_iterative or not (scale or mode):
-        return
+    if forms.a_pc is None or not (scale or mode):
+        return forms
     eta = self.approximation.viscosity(T, C)
     u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
     p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
@@ -151,11 +154,11 @@ def _forms(self, T, C) -> None:
     else:
         self._schur_weight = _nodal_weight(self, eta, mode)
         schur = -ufl.inner(p, q) * self._schur_weight * dx
-    self._a_pc = dolfinx.fem.form([[a00, None], [None, schur]])
+    return forms._replace(a_pc=dolfinx.fem.form([[a00, None], [None, schur]]))
 
 
-stokes.StokesSolver._setup_linear_algebra = _record
-stokes.StokesSolver._build_forms = _forms
+stokes.StokesSolver.prepare = _record
+stokes_forms.StokesDiscretisation.forms = _forms
 
 if __name__ == "__main__":
     sys.argv = ["stokes3d.py"] + sys.argv[1:]

@@ -5,24 +5,31 @@ A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the
 - ``state.h5``: format and version attributes, the resolved config (YAML text), the run state
   (JSON: step, time, previous step, Stokes iterations, the temperature and composition solvers'
   time history scalars, the particle manager's counters, postprocessor and run-loop state, timers),
-  how the mesh was made (:class:`convection.adaptivity.MeshRecipe`: every rank's pieces handed to
-  ``create_mesh`` at the latest repartition, replayed on the same rank count, so the mesh, its
-  partition and its numbering come back bit for bit), the mesh's cells (global vertex indices, the
-  owned vertex coordinates and the base cell, for a restart on another rank count), and every Function with
-  time history (``u``, ``p``, ``T^n``, ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``, advected or static
-  material fractions): owned dof values with the owned dof coordinates;
+  how the mesh was made — the owner rank of every cell of the mesh :func:`convection.mesh.create_mesh`
+  made (``mesh/created_owners``, while the run still stands on it) and
+  :class:`convection.adaptivity.MeshRecipe` (the refinement rounds since, or every rank's pieces
+  handed to ``create_mesh`` at the latest repartition) — every rank's fingerprint of the base and of
+  the current mesh (:func:`particles.balance.mesh_fingerprint`), the mesh's cells (global vertex
+  indices, the owned vertex coordinates and the base cell, for a restart on another rank count), and
+  every Function with time history (``u``, ``p``, ``T^n``, ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``,
+  advected or static material fractions): owned dof values with the owned dof coordinates;
 - ``particles.h5``: the particles with their properties (:func:`particles.checkpoint.save_checkpoint`).
 
 The folder is written under a hidden temporary name and renamed when complete, so a run killed at
 any moment leaves only complete checkpoints under ``checkpoint_*`` names (at worst a stray hidden
 temporary folder, removed by the next checkpoint). Only the newest ``keep`` are kept.
 
-Restoring on the rank count it was written on replays the mesh and copies the dof values: the
-continuation is bit for bit the uninterrupted run (when the run itself is deterministic: parallel
-MUMPS factorisations are not, see the README). On another rank count the mesh is rebuilt from its
-cells and partitioned afresh (each rank reads an equal block of the saved cells and vertices and
-hands them to ``create_mesh``; no rank reads all of them), the fields are matched dof by dof through their coordinates, and the
-particles are located and migrated: the same run to round-off.
+Restoring on the rank count it was written on makes the mesh as the run made it, with the saved
+owners imposed instead of a partitioner run again, checks every rank's fingerprint, and copies the
+dof values: the continuation is bit for bit the uninterrupted run (every part of a run is
+deterministic on a fixed rank count: the mesh partition, see
+:func:`particles.balance.create_reproducible_mesh`, and the direct solver, see
+:data:`convection.petsc_options.REPRODUCIBLE_LU`). If the mesh does not come back exactly (a
+fingerprint differs, or the checkpoint has none), and on another rank count, the mesh is rebuilt
+from its cells and partitioned afresh (each rank reads an equal block of the saved cells and
+vertices and hands them to ``create_mesh``; no rank reads all of them), the fields are matched dof
+by dof through their coordinates, and the particles are located and migrated: the same run to
+round-off (on the same rank count the run says so in one line).
 """
 
 from __future__ import annotations
@@ -60,7 +67,8 @@ __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpoin
            "write_checkpoint"]
 
 FORMAT = "convection-checkpoint"
-VERSION = 2  # 2: the recipe and the mesh's cells as distributed pieces (1: gathered on rank 0)
+VERSION = 3  # 3: created owners and mesh fingerprints; 2: the recipe and the mesh's cells as distributed pieces
+READABLE_VERSIONS = (2, 3)  # 2 is continued by coordinates (no fingerprints to prove an exact replay)
 CONFIG_VERSION = 1
 """Version of the config schema a checkpoint's config was written with; raise it when a change of
 the schema would change the meaning of an old config."""
@@ -269,8 +277,9 @@ def _inspect(path: Path) -> SavedRun | str:
         with h5py.File(state_file, "r") as f:
             if f.attrs.get("format") != FORMAT:
                 return f"not a run checkpoint (format attribute {f.attrs.get('format')!r})"
-            if int(f.attrs.get("version", -1)) != VERSION:
-                return f"checkpoint format version {int(f.attrs.get('version', -1))}, this code reads {VERSION}"
+            if int(f.attrs.get("version", -1)) not in READABLE_VERSIONS:
+                return (f"checkpoint format version {int(f.attrs.get('version', -1))}, this code reads "
+                        f"{' and '.join(map(str, READABLE_VERSIONS))}")
             if int(f.attrs.get("config_version", -1)) != CONFIG_VERSION:
                 return (f"written with config version {int(f.attrs.get('config_version', -1))}, this code reads "
                         f"config version {CONFIG_VERSION}")

@@ -16,6 +16,12 @@ for :func:`rebalance` by default, a vertex (deal.II's ghost layer: a particle th
 partition corner then lands in a ghost cell). Memory per rank stays O(cells per rank); the
 rank-independent (canonical) index of each cell travels along (:func:`create_mesh_from_piece`).
 
+The same tools make a new mesh reproducible (:func:`create_reproducible_mesh`): DOLFINx's graph
+partitioner (SCOTCH) gives another partition in every run, so a mesh is built on rank 0 alone, its
+cells get owners from a partition method (or the owners a checkpoint saved,
+:func:`cell_owners_by_input`) and are handed to ``create_mesh`` through :func:`owner_partitioner`;
+:func:`mesh_fingerprint` proves two meshes have the same numbering.
+
 What still goes through rank 0 is the partition *decision* (:func:`cell_owners`: one midpoint and
 one particle count per cell are gathered there and the partitioner runs serially), O(global cells)
 small data on rank 0. :func:`gather_cell_layout` and :func:`create_partitioned_mesh` (the whole

@@ -21,6 +21,7 @@ from mpi4py import MPI
 
 from convection.checkpoint import latest_checkpoint, list_checkpoints
 from convection.plot import read_statistics
+from convection.run_folder import LOCK_NAME, RunFolderError, RunFolderLock
 from convection.statistics import StatisticsFileError, StatisticsWriter, read_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -103,3 +104,71 @@ def test_damaged_statistics_raise_on_every_rank(tmp_path):
     except StatisticsFileError:
         raised = True
     assert comm.allreduce(int(raised)) == comm.size
+
+
+# ---------------------------------------------------------------------- the lock
+def test_lock_refuses_a_second_holder_and_is_free_after_release(tmp_path):
+    folder = tmp_path / "a" / "run"
+    with RunFolderLock(folder, MPI.COMM_SELF) as lock:
+        assert lock.held and folder.is_dir()
+        assert (folder / LOCK_NAME).read_text() == f"pid {os.getpid()} on {os.uname().nodename}\n"
+        with pytest.raises(RunFolderError, match=re.escape(f"run folder '{folder}' is in use by another run (pid {os.getpid()} ")):
+            RunFolderLock(folder, MPI.COMM_SELF).__enter__()
+    with RunFolderLock(folder, MPI.COMM_SELF):  # released: free again
+        pass
+    (tmp_path / "file").write_text("")
+    with pytest.raises(RunFolderError, match="cannot be created"):
+        RunFolderLock(tmp_path / "file", MPI.COMM_SELF).__enter__()
+
+
+@pytest.mark.mpi
+def test_lock_decision_is_the_same_on_every_rank(tmp_path):
+    comm = MPI.COMM_WORLD
+    folder = Path(comm.bcast(str(tmp_path / "run"), root=0))
+    with RunFolderLock(folder, comm) as lock:
+        assert comm.allreduce(int(lock.held)) == 1  # rank 0 only
+        try:
+            RunFolderLock(folder, comm).__enter__()
+            refused = False
+        except RunFolderError as err:
+            refused = f"'{folder}' is in use" in str(err)
+        assert comm.allreduce(int(refused)) == comm.size
+
+
+def _start(run_dir: Path, ranks: int, extra: list[str]) -> subprocess.Popen:
+    return subprocess.Popen(_command(["run", str(CONFIG), "--output", str(run_dir), *_sets([*SMALL, *extra])], ranks),
+                            cwd=ROOT, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+
+
+def _wait_for(proc: subprocess.Popen, ready, timeout: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not ready():
+        assert proc.poll() is None, "the run ended early"
+        assert time.monotonic() < deadline, "the run did not get going"
+        time.sleep(0.05)
+
+
+def test_a_second_run_or_resume_of_a_busy_folder_is_refused(tmp_path):
+    """While a run goes on, another run and a 2-rank resume of its folder get one line naming the
+    folder and the holder (exit 1) and write nothing; killed with SIGKILL, the run resumes."""
+    run_dir = tmp_path / "run"
+    proc = _start(run_dir, 1, ENDLESS)
+    try:
+        _wait_for(proc, lambda: latest_checkpoint(run_dir) is not None)
+        before = (run_dir / "config.yaml").read_text()
+        line = _error_line(_run(["run", str(CONFIG), "--output", str(run_dir), *_sets([*SMALL, "time.max_steps=2"])]), 1)
+        assert line == f"error: run folder '{run_dir}' is in use by another run (pid {proc.pid} on " \
+                       f"{os.uname().nodename}); wait for it to end or use another folder"
+        line = _error_line(_run(["resume", str(run_dir)], ranks=2), 1)
+        assert f"'{run_dir}' is in use by another run (pid {proc.pid} " in line
+        assert (run_dir / "config.yaml").read_text() == before
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=60)
+    table = read_table(run_dir / "statistics.csv")  # not damaged by the refused ones
+    step = int(latest_checkpoint(run_dir).name.split("_")[1])
+    proc = _run(["resume", str(run_dir), "--set", f"time.max_steps={step + 2}"])
+    assert proc.returncode == 0, proc.stderr
+    steps = read_statistics(run_dir / "statistics.csv")["step"].tolist()
+    assert steps == list(range(step + 3)) and len(table.rows) >= step + 1

@@ -240,9 +240,6 @@ def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         checkpoints = Checkpointer(CheckpointSettings(ccfg["every_steps"], ccfg["every_wall_seconds"], ccfg["keep"],
                                                       ccfg["at_end"]), directory, config,
                                    resumed_at=model.timestep if resume is not None else None)
-        resumed = None
-        if resume is not None:
-            state = resume.state["run"]
-            resumed = Resume(float(state["wall_seconds"]), dict(state["postprocessors"]))
+        resumed = Resume.from_state(resume.state["run"]) if resume is not None else None
         return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start,
                    checkpoints=checkpoints, blowup=BlowUp(**config["blowup"]), resume=resumed)

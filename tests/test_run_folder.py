@@ -172,3 +172,20 @@ def test_a_second_run_or_resume_of_a_busy_folder_is_refused(tmp_path):
     assert proc.returncode == 0, proc.stderr
     steps = read_statistics(run_dir / "statistics.csv")["step"].tolist()
     assert steps == list(range(step + 3)) and len(table.rows) >= step + 1
+
+
+# ---------------------------------------------------------------------- a run killed mid-row
+def test_a_run_killed_mid_row_resumes_with_complete_rows(tmp_path):
+    """A last row cut off inside its step number ('1' of '13,...') would pass for step 1."""
+    run_dir = tmp_path / "run"
+    _new_run(run_dir, "time.max_steps=4", "output.checkpoint.every_steps=2", "output.checkpoint.keep=2")
+    shutil.rmtree(run_dir / "checkpoints" / "checkpoint_000004")  # as if killed before it
+    with open(run_dir / "statistics.csv", "a") as f:
+        f.write("1")
+    assert read_table(run_dir / "statistics.csv").incomplete
+    proc = _run(["resume", str(run_dir), "--set", "time.max_steps=5", "--set", "output.progress=lines"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    assert "statistics.csv: its last line was cut off when the run stopped; dropped" in proc.stdout
+    table = read_table(run_dir / "statistics.csv")
+    assert not table.incomplete and [int(r[0]) for r in table.rows] == [0, 1, 2, 3, 4, 5]
+    assert all(len(r) == len(table.columns) for r in table.rows)

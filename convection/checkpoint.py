@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import time
 import uuid
@@ -65,6 +66,8 @@ CONFIG_VERSION = 1
 the schema would change the meaning of an old config."""
 
 _NAME = "checkpoint_"
+_CHECKPOINT_NAME = re.compile(rf"{_NAME}[0-9]+")
+"""The names the writer gives checkpoint folders (ASCII digits only)."""
 
 
 @dataclass(frozen=True)
@@ -103,10 +106,15 @@ class SavedRun:
 
 # ---------------------------------------------------------------------- listing
 def list_checkpoints(run_dir: str | os.PathLike[str], /) -> list[Path]:
-    """The complete checkpoints of a run folder, oldest first."""
+    """The complete checkpoints of a run folder, oldest first: the folders named as the writer
+    names them (``checkpoint_`` and the step's digits) that hold a ``state.h5``. Anything else in
+    ``checkpoints/`` (a copy such as ``checkpoint_000010.bak``, a temporary folder) is ignored."""
     folder = Path(run_dir) / "checkpoints"
-    found = [p for p in folder.glob(f"{_NAME}[0-9]*") if p.is_dir() and (p / "state.h5").is_file()]
-    return sorted(found, key=lambda p: int(p.name[len(_NAME):]))
+    if not folder.is_dir():
+        return []
+    found = [p for p in folder.iterdir() if _CHECKPOINT_NAME.fullmatch(p.name) and p.is_dir()
+             and (p / "state.h5").is_file()]
+    return sorted(found, key=lambda p: (int(p.name[len(_NAME):]), p.name))
 
 
 def latest_checkpoint(run_dir: str | os.PathLike[str], /) -> Path | None:

@@ -189,3 +189,27 @@ def test_a_run_killed_mid_row_resumes_with_complete_rows(tmp_path):
     table = read_table(run_dir / "statistics.csv")
     assert not table.incomplete and [int(r[0]) for r in table.rows] == [0, 1, 2, 3, 4, 5]
     assert all(len(r) == len(table.columns) for r in table.rows)
+
+
+# ---------------------------------------------------------------------- checkpoint names
+def test_listing_takes_only_the_writers_names(tmp_path):
+    folder = tmp_path / "checkpoints"
+    for name in ("checkpoint_000002", "checkpoint_000010", "checkpoint_000010.bak", "checkpoint_000011 copy",
+                 "checkpoint_x", "checkpoint_000012", ".checkpoint_000013.abcd.tmp"):
+        (folder / name).mkdir(parents=True)
+        (folder / name / "state.h5").write_bytes(b"")
+    (folder / "checkpoint_000012" / "state.h5").unlink()  # incomplete: no state.h5
+    (folder / "checkpoint_000020").write_text("a file")
+    assert [p.name for p in list_checkpoints(tmp_path)] == ["checkpoint_000002", "checkpoint_000010"]
+    assert latest_checkpoint(tmp_path).name == "checkpoint_000010"
+    assert list_checkpoints(tmp_path / "nowhere") == []
+
+
+def test_resume_ignores_a_backup_copy_and_the_writer_keeps_it(tmp_path):
+    run_dir = tmp_path / "run"
+    _new_run(run_dir, "time.max_steps=2", "output.checkpoint.every_steps=1", "output.checkpoint.keep=1")
+    backup = run_dir / "checkpoints" / "checkpoint_000001.bak"
+    shutil.copytree(run_dir / "checkpoints" / "checkpoint_000002", backup)
+    proc = _run(["resume", str(run_dir), "--set", "time.max_steps=4"])
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["checkpoint_000001.bak", "checkpoint_000004"]

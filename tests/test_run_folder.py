@@ -16,10 +16,11 @@ import sys
 import time
 from pathlib import Path
 
+import h5py
 import pytest
 from mpi4py import MPI
 
-from convection.checkpoint import latest_checkpoint, list_checkpoints
+from convection.checkpoint import CheckpointError, latest_checkpoint, list_checkpoints, read_checkpoint
 from convection.plot import read_statistics
 from convection.run_folder import LOCK_NAME, RunFolderError, RunFolderLock
 from convection.statistics import StatisticsFileError, StatisticsWriter, read_table
@@ -213,3 +214,34 @@ def test_resume_ignores_a_backup_copy_and_the_writer_keeps_it(tmp_path):
     proc = _run(["resume", str(run_dir), "--set", "time.max_steps=4"])
     assert proc.returncode == 0, proc.stderr
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["checkpoint_000001.bak", "checkpoint_000004"]
+
+
+# ---------------------------------------------------------------------- a checkpoint's parts
+def test_a_part_from_another_run_or_checkpoint_is_refused(tmp_path):
+    run_dir, other = tmp_path / "run", tmp_path / "other"
+    _new_run(run_dir, "time.max_steps=2", "output.checkpoint.every_steps=1")
+    _new_run(other, "time.max_steps=2", "particles.generator.particles_per_cell=5")
+    newest = run_dir / "checkpoints" / "checkpoint_000002"
+    original = (newest / "particles.h5").read_bytes()
+    shutil.copy(newest / "state.h5", tmp_path / "state.h5")
+    for source, ranks in ((other / "checkpoints" / "checkpoint_000002", (1, 2)),
+                          (run_dir / "checkpoints" / "checkpoint_000001", (1,))):
+        shutil.copy(source / "particles.h5", newest / "particles.h5")
+        for n in ranks:
+            line = _error_line(_run(["resume", str(run_dir)], ranks=n), 1)
+            assert line == f"error: checkpoint {newest}: particles.h5 does not belong to this checkpoint (its token " \
+                           "differs from state.h5's: copied from another run or checkpoint?)"
+    # a checkpoint written before the token: the steps of the parts must agree
+    for path in (newest / "state.h5", newest / "particles.h5"):
+        with h5py.File(path, "a") as f:
+            del f.attrs["token"]
+    with pytest.raises(CheckpointError, match="particles.h5 is of step 1, state.h5 of step 2"):
+        read_checkpoint(newest, MPI.COMM_SELF)
+    (newest / "particles.h5").write_bytes(original)
+    with h5py.File(newest / "particles.h5", "a") as f:
+        del f.attrs["token"]
+    assert read_checkpoint(newest, MPI.COMM_SELF).path == newest
+    (newest / "particles.h5").write_bytes(original)
+    shutil.copy(tmp_path / "state.h5", newest / "state.h5")
+    proc = _run(["resume", str(run_dir), "--set", "time.max_steps=3"])
+    assert proc.returncode == 0, proc.stderr

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 from mpi4py import MPI
 
@@ -137,3 +138,20 @@ def test_statistics_without_the_time_columns_still_resume(tmp_path):
     stats = read_statistics(run_dir / "statistics.csv")
     assert list(stats) == ["step", "time", "dt", "vrms"]
     assert stats["step"].tolist() == [0, 1, 2, 3, 4]
+
+
+def test_a_checkpoint_without_the_references_resumes(tmp_path):
+    """Checkpoints written before the references were kept: they are measured on resuming."""
+    run_dir = tmp_path / "run"
+    extra = [*SMALL, "output.checkpoint.every_steps=2", "time.max_steps=2"]
+    assert _run(["run", str(CONFIG), "--output", str(run_dir), *_sets(extra)]).returncode == 0
+    checkpoint = run_dir / "checkpoints" / "checkpoint_000002"
+    with h5py.File(checkpoint / "state.h5", "a") as f:
+        state = json.loads(f["state"][...].tobytes().decode())
+        kept = state["run"].pop("watched")
+        del state["run"]["steady"], f["state"]
+        f["state"] = np.frombuffer(json.dumps(state).encode(), dtype=np.uint8)
+    proc = _run(["resume", str(run_dir), "--set", "time.max_steps=3"])
+    assert proc.returncode == 0, proc.stderr
+    measured = _run_state(run_dir / "checkpoints" / "checkpoint_000003")["watched"]["first"]
+    assert measured == kept["last"]  # the checkpoint step's values, measured again

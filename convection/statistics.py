@@ -109,7 +109,7 @@ def _agreed(comm: MPI.Comm, action: Callable[[], Any]) -> Any:
         except StatisticsFileError as err:
             error = str(err)
         except OSError as err:
-            error = f"{err.filename or ''}: cannot be written ({err.strerror or err})"
+            error = f"{err.filename or 'a statistics file'}: cannot be read or written ({err.strerror or err})"
     error = comm.bcast(error, root=0)
     if error is not None:
         raise StatisticsFileError(error)

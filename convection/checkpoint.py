@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import time
 import uuid
@@ -74,6 +75,8 @@ CONFIG_VERSION = 1
 the schema would change the meaning of an old config."""
 
 _NAME = "checkpoint_"
+_CHECKPOINT_NAME = re.compile(rf"{_NAME}[0-9]+")
+"""The names the writer gives checkpoint folders (ASCII digits only)."""
 
 
 @dataclass(frozen=True)
@@ -112,10 +115,15 @@ class SavedRun:
 
 # ---------------------------------------------------------------------- listing
 def list_checkpoints(run_dir: str | os.PathLike[str], /) -> list[Path]:
-    """The complete checkpoints of a run folder, oldest first."""
+    """The complete checkpoints of a run folder, oldest first: the folders named as the writer
+    names them (``checkpoint_`` and the step's digits) that hold a ``state.h5``. Anything else in
+    ``checkpoints/`` (a copy such as ``checkpoint_000010.bak``, a temporary folder) is ignored."""
     folder = Path(run_dir) / "checkpoints"
-    found = [p for p in folder.glob(f"{_NAME}[0-9]*") if p.is_dir() and (p / "state.h5").is_file()]
-    return sorted(found, key=lambda p: int(p.name[len(_NAME):]))
+    if not folder.is_dir():
+        return []
+    found = [p for p in folder.iterdir() if _CHECKPOINT_NAME.fullmatch(p.name) and p.is_dir()
+             and (p / "state.h5").is_file()]
+    return sorted(found, key=lambda p: (int(p.name[len(_NAME):]), p.name))
 
 
 def latest_checkpoint(run_dir: str | os.PathLike[str], /) -> Path | None:
@@ -218,7 +226,8 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
     comm = model.comm
     folder = Path(run_dir) / "checkpoints"
     final = folder / f"{_NAME}{model.timestep:06d}"
-    tmp = folder / comm.bcast(f".{final.name}.{uuid.uuid4().hex[:8]}.tmp" if comm.rank == 0 else None, root=0)
+    token = comm.bcast(uuid.uuid4().hex if comm.rank == 0 else None, root=0)  # in every part: they belong together
+    tmp = folder / f".{final.name}.{token[:8]}.tmp"
     if comm.rank == 0:
         for stray in folder.glob(".checkpoint_*.tmp"):
             shutil.rmtree(stray, ignore_errors=True)
@@ -246,9 +255,9 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
         sink.replicated("config", np.frombuffer(yaml.safe_dump(config, sort_keys=False).encode(), dtype=np.uint8))
         sink.replicated("state", np.frombuffer(json.dumps(state).encode(), dtype=np.uint8))
         sink.attrs(format=FORMAT, version=VERSION, config_version=CONFIG_VERSION, num_ranks=comm.size,
-                   step=model.timestep, time=model.time)
+                   step=model.timestep, time=model.time, token=token)
     if model.particles is not None:
-        save_checkpoint(tmp / "particles.h5", model.particles.swarm, step=model.timestep, time=model.time)
+        save_checkpoint(tmp / "particles.h5", model.particles.swarm, step=model.timestep, time=model.time, token=token)
     comm.Barrier()
     if comm.rank == 0:
         if final.exists():
@@ -267,7 +276,11 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
 
 # ---------------------------------------------------------------------- read
 def _inspect(path: Path) -> SavedRun | str:
-    """Check a checkpoint folder alone (rank 0); returns it read back, or what is wrong."""
+    """Check a checkpoint folder alone (rank 0); returns it read back, or what is wrong.
+
+    Its parts must belong together: ``write_checkpoint`` puts one random ``token`` attribute into
+    state.h5 and particles.h5, so a particles.h5 copied in from another run or checkpoint is
+    refused (checkpoints written before the token: the ``step`` attributes must agree)."""
     if not path.is_dir():
         return "missing (no such checkpoint folder)"
     state_file = path / "state.h5"
@@ -286,11 +299,42 @@ def _inspect(path: Path) -> SavedRun | str:
             config = yaml.safe_load(f["config"][...].tobytes().decode())
             state = json.loads(f["state"][...].tobytes().decode())
             num_ranks = int(f.attrs["num_ranks"])
+            identity = _identity(f)
     except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError) as err:
         return f"damaged ({' '.join(str(err).split())})"
-    if state.get("model", {}).get("particles") is not None and not (path / "particles.h5").is_file():
-        return "particles.h5 is missing"
+    if state.get("model", {}).get("particles") is not None:
+        problem = _other_part(path / "particles.h5", identity)
+        if problem is not None:
+            return problem
     return SavedRun(path, config, state, num_ranks)
+
+
+def _identity(f: h5py.File) -> tuple[str | None, int]:
+    """What proves a part belongs to this checkpoint: the token ``write_checkpoint`` put into every
+    part (None in checkpoints written before it did) and the step."""
+    token = f.attrs.get("token")
+    return (None if token is None else str(token)), int(f.attrs.get("step", -1))
+
+
+def _other_part(part: Path, identity: tuple[str | None, int]) -> str | None:
+    """What is wrong with a part of a checkpoint (rank 0): missing, damaged, or written by another
+    checkpoint (its token or step differs from state.h5's); None if it belongs."""
+    if not part.is_file():
+        return f"{part.name} is missing"
+    try:
+        if not h5py.is_hdf5(part):
+            return f"{part.name} is not an HDF5 file"
+        with h5py.File(part, "r") as f:
+            token, step = _identity(f)
+    except (OSError, ValueError, TypeError) as err:
+        return f"{part.name} is damaged ({' '.join(str(err).split())})"
+    expected_token, expected_step = identity
+    if expected_token is not None and token != expected_token:
+        return (f"{part.name} does not belong to this checkpoint (its token differs from state.h5's: copied from "
+                "another run or checkpoint?)")
+    if step != expected_step:
+        return f"{part.name} is of step {step}, state.h5 of step {expected_step} (copied from another checkpoint?)"
+    return None
 
 
 def read_checkpoint(path: str | os.PathLike[str], comm: MPI.Comm, /) -> SavedRun:

@@ -54,6 +54,7 @@ from convection.plates import PlateVelocity
 from convection.postprocess import create_postprocessors
 from convection.rebalance import Balancer
 from convection.run import BlowUp, Resume, RunSettings, RunSummary, run
+from convection.run_folder import RunFolderLock
 from convection.stokes import StokesSolver
 from convection.transport import TransportSolver
 from particles.manager import ParticleManager
@@ -220,32 +221,33 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
 def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
                should_stop: Callable[[], bool] = lambda: False, model: Model | None = None,
                resume: SavedRun | None = None) -> RunSummary:
-    """Build (unless ``model`` is given, built from this config) and run a resolved configuration;
-    writes ``config.yaml`` first (collective). With ``resume`` (a checkpoint of this run) the run
-    continues from it: statistics, fields and particle series go on after its step.
+    """Build (unless ``model`` is given, built from this config) and run a resolved configuration
+    (collective). The run folder is created and locked for the whole run
+    (:class:`convection.run_folder.RunFolderLock`) before anything is written into it, then
+    ``config.yaml`` is written. With ``resume`` (a checkpoint of this run) the run continues from
+    it: statistics, fields and particle series go on after its step.
 
     Raises:
+        RunFolderError: The folder is in use by another run, cannot be created, or a file to
+            continue is damaged (on every rank).
         RunFailure: The run blew up or a solver failed (on every rank).
     """
     start = time.monotonic()
     directory = Path(config["output"]["directory"])
-    if comm.rank == 0:
-        directory.mkdir(parents=True, exist_ok=True)
-        (directory / "config.yaml").write_text(dump_config(config))
-    comm.barrier()
-    if model is None:
-        model = build_model(config, comm=comm, restore=resume)
-    diagnostics = config["diagnostics"]
-    postprocessors = create_postprocessors(model, config["output"]["statistics"], start=start,
-                                           entrainment_material=diagnostics["entrainment_material"],
-                                           entrainment_height=diagnostics["entrainment_height"])
-    ccfg = config["output"]["checkpoint"]
-    checkpoints = Checkpointer(CheckpointSettings(ccfg["every_steps"], ccfg["every_wall_seconds"], ccfg["keep"],
-                                                  ccfg["at_end"]), directory, config,
-                               resumed_at=model.timestep if resume is not None else None)
-    resumed = None
-    if resume is not None:
-        state = resume.state["run"]
-        resumed = Resume(float(state["wall_seconds"]), dict(state["postprocessors"]))
-    return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start,
-               checkpoints=checkpoints, blowup=BlowUp(**config["blowup"]), resume=resumed)
+    with RunFolderLock(directory, comm):
+        if comm.rank == 0:
+            (directory / "config.yaml").write_text(dump_config(config))
+        comm.barrier()
+        if model is None:
+            model = build_model(config, comm=comm, restore=resume)
+        diagnostics = config["diagnostics"]
+        postprocessors = create_postprocessors(model, config["output"]["statistics"], start=start,
+                                               entrainment_material=diagnostics["entrainment_material"],
+                                               entrainment_height=diagnostics["entrainment_height"])
+        ccfg = config["output"]["checkpoint"]
+        checkpoints = Checkpointer(CheckpointSettings(ccfg["every_steps"], ccfg["every_wall_seconds"], ccfg["keep"],
+                                                      ccfg["at_end"]), directory, config,
+                                   resumed_at=model.timestep if resume is not None else None)
+        resumed = Resume.from_state(resume.state["run"]) if resume is not None else None
+        return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start,
+                   checkpoints=checkpoints, blowup=BlowUp(**config["blowup"]), resume=resumed)

@@ -22,13 +22,20 @@ paper's picture of section 4.2): the temperature on the equatorial plane z = 0, 
 sphere, and the particles of the northern hemisphere (within ``--particle-radius``
 of the centre if given) as points coloured by ``--particle-property`` (default ``displacement`` when
 the particles carry it).
+
+A missing or damaged file of the run folder (the folder itself, ``statistics.csv``, a field or
+particle file) stops ``python -m convection.plot`` with one line ``error: ...`` naming it, exit
+code 1 (:class:`convection.xdmf_check.RunFilesError`; an XDMF series and the HDF5 data of the
+times drawn are checked before VTK reads them). A run without field output (statistics only)
+gets its curves, and one line saying what was skipped. A ``statistics.csv`` whose last line was
+cut off (a run killed while writing it) is read without that line.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import os
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -37,60 +44,122 @@ from typing import TYPE_CHECKING, Callable, NamedTuple, Sequence
 
 import numpy as np
 
+from convection.statistics import StatisticsFileError, read_table
+from convection.xdmf_check import RunFilesError, XdmfSeries
+
 if TYPE_CHECKING:
     import pyvista as pv
 
-__all__ = ["read_statistics", "read_last_field", "plot_run", "import_pyvista", "field_times", "snapshot_times",
-           "plot_snapshots"]
+__all__ = ["RunFilesError", "read_statistics", "read_last_field", "plot_run", "import_pyvista", "field_times",
+           "snapshot_times", "plot_snapshots", "field_files", "check_run_folder"]
+
+_FIELD_FILE = re.compile(r"fields_([0-9]+)\.h5")
+"""The per-mesh field files :class:`convection.output.FieldOutput` writes."""
 
 
-def read_statistics(path: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a statistics.csv as float arrays."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows:
+def read_statistics(path: str | Path, *, log: Callable[[str], None] | None = None) -> dict[str, np.ndarray]:
+    """Columns of a statistics.csv as float arrays, shape=(rows,) each ({} without rows); a last
+    line cut off by a kill is left out (and ``log`` told so).
+
+    Raises:
+        FileNotFoundError: No such file.
+        convection.statistics.StatisticsFileError: The file is damaged (one line naming the line).
+    """
+    table = read_table(path)
+    if table.incomplete and log is not None:
+        log(f"{path}: its last line was cut off (the run was stopped while writing it); left out")
+    if not table.rows:
         return {}
-    return {key: np.array([float(r[key]) for r in rows]) for key in rows[0]}
+    values = np.array([[float(v) for v in row] for row in table.rows], dtype=np.float64)
+    return {name: values[:, i] for i, name in enumerate(table.columns)}
+
+
+def field_files(directory: str | Path) -> list[Path]:
+    """The ``fields_NNN.h5`` files of a run folder in the order they were written (by NNN)."""
+    found = [p for p in Path(directory).glob("fields_*.h5") if _FIELD_FILE.fullmatch(p.name)]
+    return sorted(found, key=lambda p: int(_FIELD_FILE.fullmatch(p.name).group(1)))
 
 
 def read_last_field(directory: str | Path, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """(points (n, 3), cells (m, k), values, time) of the latest step of field ``name``."""
+    """(points (n, 3), cells (m, k), values, time) of the latest step of field ``name``.
+
+    Raises:
+        RunFilesError: No field file, or the last one is damaged or lacks the field.
+    """
     import h5py
 
-    files = sorted(Path(directory).glob("fields_*.h5"))
+    files = field_files(directory)
     if not files:
-        raise FileNotFoundError(f"no fields_*.h5 in {directory}")
-    with h5py.File(files[-1], "r") as h5:
-        points = h5["Mesh/mesh/geometry"][...]
-        cells = h5["Mesh/mesh/topology"][...]
-        steps = h5[f"Function/{name}"]
-        key = max(steps.keys(), key=lambda k: float(k.replace("_", ".")))
-        values = steps[key][...]
+        raise RunFilesError(f"no fields_NNN.h5 in {directory}")
+    try:
+        with h5py.File(files[-1], "r") as h5:
+            if f"Function/{name}" not in h5:
+                raise RunFilesError(f"{files[-1]}: no field {name!r} (damaged?)")
+            points = h5["Mesh/mesh/geometry"][...]
+            cells = h5["Mesh/mesh/topology"][...]
+            steps = h5[f"Function/{name}"]
+            key = max(steps.keys(), key=lambda k: float(k.replace("_", ".")))
+            values = steps[key][...]
+    except RunFilesError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as err:
+        raise RunFilesError(f"{files[-1]}: damaged HDF5 file ({' '.join(str(err).split())})") from None
     return points, cells, values, float(key.replace("_", "."))
 
 
-def plot_run(directory: str | Path, png: str | Path | None = None) -> Path:
-    """Draw the run in ``directory`` into a PNG (default ``<directory>/summary.png``)."""
+def check_run_folder(directory: str | Path) -> Path:
+    """``directory`` as a Path if it is a run folder with a ``statistics.csv``.
+
+    Raises:
+        RunFilesError: It is missing, not a folder, empty, or has no statistics.csv.
+    """
+    directory = Path(directory)
+    if not directory.exists():
+        raise RunFilesError(f"run folder '{directory}' not found")
+    if not directory.is_dir():
+        raise RunFilesError(f"'{directory}' is not a run folder (not a folder)")
+    if not (directory / "statistics.csv").is_file():
+        what = "is empty" if not any(directory.iterdir()) else "has no statistics.csv"
+        raise RunFilesError(f"run folder '{directory}' {what}: nothing to draw")
+    return directory
+
+
+def plot_run(directory: str | Path, png: str | Path | None = None, *, log: Callable[[str], None] | None = None) -> Path:
+    """Draw the run in ``directory`` into a PNG (default ``<directory>/summary.png``): the last
+    temperature with the mesh (a note instead if the run wrote no fields), vrms, Nusselt number
+    and cells over time. ``log`` hears about a cut-off last line of statistics.csv.
+
+    Raises:
+        RunFilesError: ``statistics.csv`` or the last field file is missing or damaged.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.tri as mtri
 
-    directory = Path(directory)
+    directory = check_run_folder(directory)
     png = Path(png) if png else directory / "summary.png"
-    stats = read_statistics(directory / "statistics.csv")
-    points, cells, values, t = read_last_field(directory, "temperature")
+    try:
+        stats = read_statistics(directory / "statistics.csv", log=log)
+    except StatisticsFileError as err:
+        raise RunFilesError(str(err)) from None
+    field = read_last_field(directory, "temperature") if field_files(directory) else None
     fig = plt.figure(figsize=(12, 7), constrained_layout=True)
     grid = fig.add_gridspec(2, 3)
     ax = fig.add_subplot(grid[0, :])
-    if cells.shape[1] == 3:
-        tri = mtri.Triangulation(points[:, 0], points[:, 1], cells)
-        image = ax.tripcolor(tri, values.reshape(-1), shading="gouraud", cmap="coolwarm", vmin=0.0, vmax=1.0)
-        ax.triplot(tri, color="k", linewidth=0.1, alpha=0.4)
-        fig.colorbar(image, ax=ax, label="T")
-    ax.set_aspect("equal")
-    ax.set_title(f"temperature and mesh at t = {t:.4g}")
+    if field is None:
+        ax.text(0.5, 0.5, "no field output", ha="center", va="center", transform=ax.transAxes)
+        ax.set_axis_off()
+    else:
+        points, cells, values, t = field
+        if cells.shape[1] == 3:
+            tri = mtri.Triangulation(points[:, 0], points[:, 1], cells)
+            image = ax.tripcolor(tri, values.reshape(-1), shading="gouraud", cmap="coolwarm", vmin=0.0, vmax=1.0)
+            ax.triplot(tri, color="k", linewidth=0.1, alpha=0.4)
+            fig.colorbar(image, ax=ax, label="T")
+        ax.set_aspect("equal")
+        ax.set_title(f"temperature and mesh at t = {t:.4g}")
     for i, (key, label) in enumerate((("vrms", "vrms"), ("nusselt", "Nusselt (top)"), ("cells", "cells"))):
         axi = fig.add_subplot(grid[1, i])
         if key in stats:
@@ -144,9 +213,8 @@ class _Series:
     """
 
     def __init__(self, path: Path) -> None:
+        self.series = XdmfSeries(path)  # checks the XML before VTK's parser sees it
         pv = import_pyvista()
-        if not path.is_file():
-            raise FileNotFoundError(f"no {path.name} in {path.parent}")
         self.path = path
         self.reader = pv.get_reader(str(path))
         self.times = np.sort(np.asarray(self.reader.time_values, dtype=np.float64))
@@ -160,8 +228,12 @@ class _Series:
 
         Arrays whose length matches neither the points nor the cells are dropped (VTK's reader
         reads e.g. an XDMF ``Matrix`` attribute as a single tuple).
+
+        Raises:
+            RunFilesError: An HDF5 file of that time is missing or damaged, or VTK read nothing.
         """
         pv = import_pyvista()
+        self.series.check(t)
         if self.times.size:
             self.reader.set_active_time_value(t)
         with warnings.catch_warnings():
@@ -169,6 +241,8 @@ class _Series:
             data = self.reader.read()
             if isinstance(data, pv.MultiBlock):
                 data = data.combine()
+        if data.n_points == 0:
+            raise RunFilesError(f"{self.path}: nothing could be read at t = {t:.6g} (damaged?)")
         dropped = []
         for arrays, size in ((data.point_data, data.n_points), (data.cell_data, data.n_cells)):
             for name in list(arrays.keys()):
@@ -392,7 +466,8 @@ def plot_snapshots(
         The written PNG files, in time order (composition before temperature).
 
     Raises:
-        FileNotFoundError: ``directory`` has no ``fields.xdmf``.
+        RunFilesError: ``fields.xdmf`` is missing, or it, ``particles.xdmf`` or an HDF5 file of a
+            drawn time is damaged.
         ValueError: ``field`` or ``particle_property`` does not exist.
     """
     say = log if log is not None else (lambda line: None)
@@ -572,20 +647,32 @@ def main(argv: list[str] | None = None) -> int:
                         help="spherical shells: draw only particles within R of the centre (default: all of the "
                              "northern hemisphere)")
     args = parser.parse_args(argv)
-    directory = Path(args.directory)
-    print(plot_run(directory, args.png))
-    if not (directory / "fields.xdmf").is_file():
-        print(f"no fields.xdmf in {directory}: no snapshots")
-        return 0
     try:
-        paths = plot_snapshots(directory, args.times, args.field, args.particle_property,
-                               particle_radius=args.particle_radius)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        _draw(args)
+    except (StatisticsFileError, OSError) as exc:  # RunFilesError, and e.g. a picture that cannot be written
+        return _error(exc, 1)
+    except ValueError as exc:  # an unknown --field or --particle-property
+        return _error(exc, 2)
+    return 0
+
+
+def _draw(args: argparse.Namespace) -> None:
+    """What ``main`` draws: the summary, then the snapshots (or one line saying why none)."""
+    directory = check_run_folder(args.directory)
+    print(plot_run(directory, args.png, log=print))
+    if not (directory / "fields.xdmf").exists() and not field_files(directory):
+        print(f"{directory}: no field output (fields.xdmf, fields_NNN.h5): summary without the temperature, "
+              "no snapshots")
+        return
+    paths = plot_snapshots(directory, args.times, args.field, args.particle_property,
+                           particle_radius=args.particle_radius)
     for path in paths:
         print(path)
-    return 0
+
+
+def _error(exc: BaseException, code: int) -> int:
+    print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@
 - ``cell_ranges`` (num_ranks, 2) int64: the global range of the cells rank r owned;
 - ``rng_state`` (JSON as uint8 bytes) and ``extra/<name>`` for user arrays;
 - root attributes ``format``, ``version``, ``num_ranks``, ``step``, ``time``, ``gdim``, ``tdim``,
-  ``num_global_cells``.
+  ``num_global_cells``, and ``token`` if one is given: a string the caller also writes into the
+  other parts of a checkpoint and compares on reading, to prove the parts belong together.
 
 The file appears atomically (temporary name, then ``os.replace``).
 
@@ -109,6 +110,7 @@ def save_checkpoint(
     time: float,
     rng_state: dict[str, Any] | None = None,
     extra: dict[str, npt.ArrayLike] | None = None,
+    token: str | None = None,
 ) -> Path:
     """Write the swarm and the run state to one HDF5 file (collective, atomic).
 
@@ -120,6 +122,8 @@ def save_checkpoint(
         rng_state: JSON-able state (numpy arrays allowed, e.g. ``Generator.bit_generator.state``);
             must be the same on all ranks.
         extra: Arrays to restore with the checkpoint; rank 0's values are stored.
+        token: Stored as the ``token`` attribute (rank 0's value), e.g. the token of the run
+            checkpoint this file is a part of.
 
     Returns:
         The path of the published file.
@@ -169,6 +173,8 @@ def save_checkpoint(
             sink.replicated(f"extra/{name}", np.asarray(extra[name]) if comm.rank == 0 else None)
         sink.attrs(format=FORMAT, version=VERSION, num_ranks=comm.size, step=int(step), time=float(time),
                    gdim=swarm.gdim, tdim=tdim, num_global_cells=int(cell_map.size_global))
+        if token is not None:
+            sink.attrs(token=str(token))
     return path
 
 

@@ -96,3 +96,13 @@ def writing_checkpoint(run_dir: Path) -> bool:
     """Whether a checkpoint is being written (its hidden temporary folder exists)."""
     folder = run_dir / "checkpoints"
     return folder.exists() and any(p.name.startswith(".checkpoint_") for p in folder.iterdir())
+
+
+def error_line(proc: subprocess.CompletedProcess, code: int, needle: str = "") -> str:
+    """The one ``error...`` line a refused command printed (asserting exit code ``code``, exactly one
+    such line containing ``needle``, no traceback and no MPI abort block)."""
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
+    assert proc.returncode == code, proc.stderr
+    assert len(lines) == 1 and needle in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr and "MPI_ABORT" not in proc.stderr, proc.stderr
+    return lines[0]

@@ -7,16 +7,14 @@ The CLI cases run a small van Keken 1a in a subprocess (on 1 and, where it says 
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
+
+from _runs import error_line as _error_line, run_cli as _run, sets as _sets
 
 from convection.config import load_config
 from convection.factory import build_model
@@ -27,25 +25,6 @@ from convection.run import BlowUp, SteadyState, Watch, Watched
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "vankeken_1a.yaml"
 SMALL = ["mesh.cells=[8,8]", "adaptivity.max_level=1", "output.progress=none"]
-
-
-def _run(args: list[str], ranks: int = 1) -> subprocess.CompletedProcess:
-    cmd = [sys.executable, "-m", "convection", *args]
-    if ranks > 1:
-        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-
-
-def _sets(items: list[str]) -> list[str]:
-    return [a for item in items for a in ("--set", item)]
-
-
-def _error_line(proc: subprocess.CompletedProcess, code: int) -> str:
-    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
-    assert proc.returncode == code, proc.stderr
-    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    return lines[0]
 
 
 def _run_state(checkpoint: Path) -> dict:
@@ -121,7 +100,7 @@ def test_resume_keeps_the_blow_up_references(tmp_path):
     assert last["first"] == first
     # vrms grows by a factor ~1.2 per step here: the first step after the resume must see it
     line = _error_line(_run(["resume", str(run_dir), *_sets(["time.max_steps=8", "blowup.vrms_growth=1.0001"])]), 3)
-    assert line.startswith(f"error: run failed at step 5, t=") and \
+    assert line.startswith("error: run failed at step 5, t=") and \
         f"vrms grew from {last['last']['vrms']:.6g} to " in line, line
     assert _run(["resume", str(run_dir), "--set", "time.max_steps=6"]).returncode == 0
     assert _run_state(checkpoints / "checkpoint_000006")["watched"]["first"] == first

@@ -15,8 +15,8 @@ import h5py
 import numpy as np
 import pytest
 
-from _runs import CONFIGS, assert_same_statistics, final_particles, kill_run, rows, rows_written, run_cli, sets, \
-    writing_checkpoint
+from _runs import CONFIGS, assert_same_statistics, error_line, final_particles, kill_run, rows, rows_written, run_cli, \
+    sets, writing_checkpoint
 
 CONFIG = CONFIGS / "vankeken_1a.yaml"
 SMALL = ["mesh.cells=[8,8]", "adaptivity.max_level=1", "adaptivity.every=4", "particles.generator.particles_per_cell=10",
@@ -70,31 +70,23 @@ def test_resume_on_another_rank_count(tmp_path):
         assert np.array_equal(final_particles(reference)[0], final_particles(run_dir)[0])
 
 
-def _one_line(proc, code, needle):
-    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
-    assert proc.returncode == code, proc.stderr
-    assert len(lines) == 1 and needle in lines[0], proc.stderr
-    assert "Traceback" not in proc.stderr
-    return lines[0]
-
-
 def test_bad_resume_inputs(tmp_path):
     run_dir = tmp_path / "run"
     assert _run(["run", str(CONFIG), "--output", str(run_dir), *sets([*SMALL, "time.max_steps=4"])]).returncode == 0
     checkpoint = run_dir / "checkpoints" / "checkpoint_000004"
-    _one_line(_run(["resume", str(tmp_path / "nowhere")]), 1, "not found")
-    _one_line(_run(["resume", str(run_dir), "--set", "mesh.cells=[4,4]"]), 2, "mesh.cells")
+    error_line(_run(["resume", str(tmp_path / "nowhere")]), 1, "not found")
+    error_line(_run(["resume", str(run_dir), "--set", "mesh.cells=[4,4]"]), 2, "mesh.cells")
     copy = tmp_path / "damaged"
     shutil.copytree(run_dir, copy)
     state = copy / "checkpoints" / "checkpoint_000004" / "state.h5"
     state.write_bytes(state.read_bytes()[:2000])
-    _one_line(_run(["resume", str(copy)], ranks=2), 1, "damaged")
+    error_line(_run(["resume", str(copy)], ranks=2), 1, "damaged")
     with h5py.File(checkpoint / "state.h5", "a") as f:
         f.attrs["config_version"] = 99
-    _one_line(_run(["resume", str(run_dir)]), 1, "config version 99")
+    error_line(_run(["resume", str(run_dir)]), 1, "config version 99")
     empty = tmp_path / "empty"
     empty.mkdir()
-    _one_line(_run(["resume", str(empty)]), 1, "no complete checkpoint")
+    error_line(_run(["resume", str(empty)]), 1, "no complete checkpoint")
 
 
 def test_blow_up_stops_with_one_line_and_keeps_the_checkpoint(tmp_path):
@@ -103,7 +95,7 @@ def test_blow_up_stops_with_one_line_and_keeps_the_checkpoint(tmp_path):
     extra = [*SMALL, "output.checkpoint.every_steps=2", "time.max_steps=40"]
     assert _run(["run", str(CONFIG), "--output", str(run_dir), *sets(extra), "--set", "time.max_steps=4"]).returncode == 0
     proc = _run(["resume", str(run_dir), "--set", "time.cfl=200", "--set", "time.max_steps=40"])
-    line = _one_line(proc, 3, "failed at step")
+    line = error_line(proc, 3, "failed at step")
     assert "particles lost" in line or "vrms" in line
     import json
 

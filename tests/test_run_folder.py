@@ -12,13 +12,14 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import h5py
 import pytest
 from mpi4py import MPI
+
+from _runs import command as _command, env as _env, error_line as _error_line, run_cli as _run, sets as _sets
 
 from convection.checkpoint import CheckpointError, latest_checkpoint, list_checkpoints, read_checkpoint
 from convection.plot import read_statistics
@@ -31,35 +32,9 @@ SMALL = ["mesh.cells=[8,8]", "adaptivity.max_level=1", "output.progress=none"]
 ENDLESS = ["time.end=1e9", "time.dt_max=1", "time.max_steps=1000000", "output.checkpoint.every_steps=3"]
 
 
-def _command(args: list[str], ranks: int = 1) -> list[str]:
-    cmd = [sys.executable, "-m", "convection", *args]
-    if ranks > 1:
-        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
-    return cmd
-
-
-def _env() -> dict[str, str]:
-    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-
-
-def _run(args: list[str], ranks: int = 1) -> subprocess.CompletedProcess:
-    return subprocess.run(_command(args, ranks), cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)
-
-
-def _sets(items: list[str]) -> list[str]:
-    return [a for item in items for a in ("--set", item)]
-
-
 def _new_run(run_dir: Path, *extra: str) -> None:
     proc = _run(["run", str(CONFIG), "--output", str(run_dir), *_sets([*SMALL, *extra])])
     assert proc.returncode == 0, proc.stderr
-
-
-def _error_line(proc: subprocess.CompletedProcess, code: int) -> str:
-    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
-    assert proc.returncode == code, proc.stderr
-    assert len(lines) == 1 and "Traceback" not in proc.stderr and "MPI_ABORT" not in proc.stderr, proc.stderr
-    return lines[0]
 
 
 # ---------------------------------------------------------------------- statistics rows

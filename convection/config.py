@@ -57,6 +57,9 @@ MAX_PARTICLES = 1e8
 """Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
 MAX_STEPS = 1e9
 """Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
+MAX_ENTRIES = 100
+"""Most materials, particle properties, PETSc options or constants (each costs a field, a column, an
+entry of PETSc's options database (512 in all) or an expression check)."""
 MAX_CONFIG_BYTES = 1 << 20
 """Largest config file (1 MiB; configs are a few kB)."""
 VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates")
@@ -235,9 +238,9 @@ SCHEMA: dict[str, Any] = {
         "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical), r, phi, theta"),
         "composition": Field("str", None, nullable=True,
                              help="expression in x, y, z (1 = dense/second material), or null for none"),
-        "constants": Field("mapping", {}, help="named constants usable in the expressions"),
+        "constants": Field("mapping", {}, max_items=MAX_ENTRIES, help="named constants usable in the expressions"),
     },
-    "materials": Field("mapping", {}, items={
+    "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items={
         "initial": Field("str", REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")"),
         "Rb": Field("float", 0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)"),
         "viscosity": Field("float", None, nullable=True, exclusive_minimum=0.0,
@@ -248,7 +251,7 @@ SCHEMA: dict[str, Any] = {
         "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_NAMES"),
                         help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
                         "free slip on both surfaces), direct (MUMPS) in 2D"),
-        "petsc_options": Field("mapping", {}, check=_check_petsc_options,
+        "petsc_options": Field("mapping", {}, check=_check_petsc_options, max_items=MAX_ENTRIES,
                                help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); viewers may "
                                     "only print"),
         "buoyancy_theta": Field("float", 0.0, minimum=0.0, maximum=1.0,
@@ -276,7 +279,7 @@ SCHEMA: dict[str, Any] = {
         "integrator": Field("str", "rk2", choices=_names("particles.advection", "INTEGRATORS")),
         "interpolator": Field("mapping", {"name": "cell_average", "mean": "arithmetic"},
                               help="particle-to-mesh interpolator name and parameters"),
-        "properties": Field("any", [], check=_is_list,
+        "properties": Field("any", [], check=_is_list, max_items=MAX_ENTRIES,
                             help="properties every particle carries: names or {name: ..., parameters}"),
         "population": {
             "min_per_cell": Field("int", 0, minimum=0, help="cells with fewer particles get new ones"),

@@ -119,6 +119,8 @@ class Field:
         help: One-line description.
         items: For kind "mapping": a schema every value of the mapping is validated against
             (keys of the mapping are free names, e.g. material names).
+        max_items: Most entries of a list or mapping value (each may cost a field, a property
+            or an expression check in the run).
     """
 
     kind: str
@@ -132,6 +134,7 @@ class Field:
     check: Callable[[Any], str | None] | None = None
     help: str = ""
     items: Mapping[str, Any] | None = None
+    max_items: int | None = None
 
     def allowed(self) -> list[str] | None:
         """The allowed names (resolving a callable), or None."""
@@ -255,6 +258,8 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
         if spec.nullable:
             return None
         raise ConfigError(f"config key '{key}': must not be null ({spec.help or spec.kind})")
+    if spec.max_items is not None and isinstance(value, (list, tuple, Mapping)) and len(value) > spec.max_items:
+        raise ConfigError(f"config key '{key}': {len(value)} entries, more than {spec.max_items}")
     if spec.kind.startswith("list["):
         item_kind = spec.kind[5:-1]
         if not isinstance(value, (list, tuple)):

@@ -194,6 +194,8 @@ CASES = [
     Case("string formatting", ("initial.temperature='%2000000000s' % 1",),
          needle="only numbers may be literals", two_ranks=True),
     Case("keyword argument", ("initial.temperature=clip(x, a_min=0, a_max=1)",), needle="keyword arguments"),
+    Case("1000 materials", ("materials={" + ", ".join(f"m{i}: {{initial: '0'}}" for i in range(1000)) + "}",),
+         needle="'materials': 1000 entries, more than 100"),
     Case("huge string in a message", ("physics.Ra=" + "a" * 100_000,), needle="expected a number, got str 'aaa"),
     # -- writing outside the run folder --
     Case("petsc viewer to a file", ("stokes.petsc_options={ksp_view: 'ascii:{tmp}/petsc.txt'}",),

@@ -98,14 +98,14 @@ def _check_velocity_bc(value: Any) -> str | None:
             return f"unknown entry {short_repr(extra[0])}; allowed: ['kind', 'value']"
         if kind == "prescribed" and not isinstance(value.get("value"), list):
             return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
-        for component in value.get("value") or ():
+        for i, component in enumerate(value.get("value") or ()):
             if isinstance(component, str):
                 try:
                     Expression(component, gdim=3)
                 except ExpressionError as err:
-                    return str(err)
+                    return f"value[{i}]: {err}"
             elif _finite_number(component) is None:
-                return f"velocity component {short_repr(component)} must be a finite number or an expression"
+                return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
     elif kind == "prescribed":
         return "a prescribed velocity needs the form {kind: prescribed, value: [vx, vy(, vz)]}"
     return None

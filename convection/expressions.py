@@ -105,10 +105,6 @@ def _numeric(tree: ast.Expression) -> dict[str, Any]:
     return values
 
 
-def _quoted(text: str) -> str:
-    return short_repr(text)
-
-
 class Expression:
     """A vectorised scalar function of position compiled from a string.
 
@@ -134,7 +130,7 @@ class Expression:
         try:
             self._code = compile(ast.fix_missing_locations(tree), "<config expression>", "eval")
         except (RecursionError, MemoryError, ValueError) as err:
-            raise ExpressionError(f"cannot compile {_quoted(self.text)}: {type(err).__name__}") from None
+            raise ExpressionError(f"cannot compile {short_repr(self.text)}: {type(err).__name__}") from None
 
     def _numbers(self, constants: Mapping[str, Any]) -> dict[str, float]:
         out = {}
@@ -151,39 +147,41 @@ class Expression:
 
     def _parse(self) -> ast.Expression:
         if len(self.text) > MAX_LENGTH:
-            raise ExpressionError(f"{_quoted(self.text)} is longer than {MAX_LENGTH} characters")
+            raise ExpressionError(f"{short_repr(self.text)} is longer than {MAX_LENGTH} characters")
         try:
             tree = ast.parse(self.text, mode="eval")
         except SyntaxError as err:
-            raise ExpressionError(f"cannot parse {_quoted(self.text)}: {err.msg}") from None
-        except (RecursionError, MemoryError, ValueError) as err:  # too deep for the parser; a NUL byte
-            raise ExpressionError(f"cannot parse {_quoted(self.text)}: {type(err).__name__}") from None
+            raise ExpressionError(f"cannot parse {short_repr(self.text)}: {err.msg}") from None
+        except RecursionError:
+            raise ExpressionError(f"cannot parse {short_repr(self.text)}: nested too deeply") from None
+        except (MemoryError, ValueError) as err:  # too complex for the parser; a NUL byte
+            raise ExpressionError(f"cannot parse {short_repr(self.text)}: {err or type(err).__name__}") from None
         nodes = sum(1 for _ in ast.walk(tree))
         if nodes > MAX_NODES:
-            raise ExpressionError(f"{_quoted(self.text)} has {nodes} terms and operators, more than {MAX_NODES}")
+            raise ExpressionError(f"{short_repr(self.text)} has {nodes} terms and operators, more than {MAX_NODES}")
         if _depth(tree) > MAX_DEPTH:
-            raise ExpressionError(f"{_quoted(self.text)} is nested more than {MAX_DEPTH} levels deep")
+            raise ExpressionError(f"{short_repr(self.text)} is nested more than {MAX_DEPTH} levels deep")
         return tree
 
     def _check_names(self, tree: ast.Expression) -> None:
         for node in ast.walk(tree):
             if not isinstance(node, _ALLOWED_NODES):
-                raise ExpressionError(f"{type(node).__name__} is not allowed in {_quoted(self.text)}")
+                raise ExpressionError(f"{type(node).__name__} is not allowed in {short_repr(self.text)}")
             if isinstance(node, ast.Constant) and (
                     isinstance(node.value, complex) or not isinstance(node.value, (int, float))):
-                raise ExpressionError(f"only numbers may be literals in {_quoted(self.text)}, got "
+                raise ExpressionError(f"only numbers may be literals in {short_repr(self.text)}, got "
                                       f"{short_repr(node.value)}")
             if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS):
                 raise ExpressionError(
-                    f"unknown function in {_quoted(self.text)}; allowed: {sorted(FUNCTIONS)}"
+                    f"unknown function in {short_repr(self.text)}; allowed: {sorted(FUNCTIONS)}"
                 )
             if isinstance(node, ast.Call) and node.keywords:
-                raise ExpressionError(f"keyword arguments are not allowed in {_quoted(self.text)}")
+                raise ExpressionError(f"keyword arguments are not allowed in {short_repr(self.text)}")
             if isinstance(node, ast.Name) and not (
                 node.id in FUNCTIONS or node.id in self.constants or node.id in _COORDINATES
             ):
                 raise ExpressionError(
-                    f"unknown name {short_repr(node.id)} in {_quoted(self.text)}; use x, y, z, r, phi, theta, pi, e,"
+                    f"unknown name {short_repr(node.id)} in {short_repr(self.text)}; use x, y, z, r, phi, theta, pi, e,"
                     f" functions {sorted(FUNCTIONS)} or constants {sorted(set(self.constants) - {'pi', 'e'})}"
                 )
 
@@ -194,13 +192,13 @@ class Expression:
         try:
             values = self(points)
         except _ERRORS as err:
-            raise ExpressionError(f"cannot evaluate {_quoted(self.text)}: {type(err).__name__}: "
+            raise ExpressionError(f"cannot evaluate {short_repr(self.text)}: {type(err).__name__}: "
                                   f"{short_repr(str(err))[1:-1]}") from None
         bad = ~np.isfinite(values)
         if np.any(bad):
             i = int(np.argmax(bad))
             where = ", ".join(f"{c:.6g}" for c in points[: self.gdim, i])
-            raise ExpressionError(f"{_quoted(self.text)} is {values[i]} at ({where}); it must be finite "
+            raise ExpressionError(f"{short_repr(self.text)} is {values[i]} at ({where}); it must be finite "
                                   "everywhere in the domain")
 
     def __call__(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -74,26 +74,29 @@ class ConfigError(ValueError):
         super().__init__(text)
 
 
-def check_document_size(document: Any, /, *, where: str = "config") -> None:
+def check_document_size(document: Any, /) -> None:
     """Refuse a document nested deeper than :data:`MAX_DEPTH` or holding more than :data:`MAX_VALUES`
-    values (each use of a shared YAML alias counted). Iterative, stops at the first excess.
+    values (each use of a shared YAML alias counted, keys too). Iterative, stops at the first excess.
 
     Raises:
-        ConfigError: naming ``where`` and the limit.
+        ConfigError: naming the dotted key where the limit was passed.
     """
-    stack: list[tuple[Any, int]] = [(document, 0)]
+    stack: list[tuple[Any, int, str]] = [(document, 0, "")]
     count = 0
     while stack:
-        value, depth = stack.pop()
+        value, depth, key = stack.pop()
         count += 1
         if count > MAX_VALUES:
-            raise ConfigError(f"{where}: more than {MAX_VALUES} values (a YAML alias counts each time it is used)")
+            raise ConfigError(f"config key '{key}': the config holds more than {MAX_VALUES} values (a YAML alias "
+                              "counts each time it is used)")
         if depth > MAX_DEPTH:
-            raise ConfigError(f"{where}: nested more than {MAX_DEPTH} levels deep")
+            raise ConfigError(f"config key '{key}': nested more than {MAX_DEPTH} levels deep")
         if isinstance(value, Mapping):
-            stack.extend((item, depth + 1) for pair in value.items() for item in pair)
+            for name, item in value.items():
+                sub = f"{key}.{key_text(name)}" if key else key_text(name)
+                stack.extend(((name, depth + 1, sub), (item, depth + 1, sub)))
         elif isinstance(value, (list, tuple)):
-            stack.extend((item, depth + 1) for item in value)
+            stack.extend((item, depth + 1, f"{key}[{i}]") for i, item in enumerate(value))
 
 
 Choices = Union[tuple[str, ...], Callable[[], Iterable[str]]]

@@ -130,7 +130,7 @@ CASES = [
     Case("nested 5000 deep", text=BASE + "name: " + "[" * 5000 + "]" * 5000 + "\n", needle="nested too deeply",
          two_ranks=True),
     Case("nested 100 deep", text=BASE + "stokes: {petsc_options: {a: " + "[" * 100 + "]" * 100 + "}}\n",
-         needle="nested more than 32 levels deep"),
+         needle="'stokes.petsc_options.a[0][0][0]"),
     Case("nested 5000 deep in --set", ("stokes.petsc_options={a: " + "[" * 5000 + "]" * 5000 + "}",),
          needle="--set stokes.petsc_options: nested too deeply"),
     Case("unknown keys of mixed types", text=BASE + "1: one\nfoo: two\n", needle="unknown; allowed keys in top level",
@@ -184,9 +184,9 @@ CASES = [
     Case("dt_max 1e-300", ("time.dt_max=1e-300",), needle="'time.dt_max': time.end / time.dt_max = 2e+300 steps"),
     # -- memory exhaustion from a small config --
     Case("alias bomb in mesh.cells", text=BASE.replace("cells: [4, 4]", "cells: " + _alias_bomb()),
-         needle="more than 100000 values"),
+         needle="the config holds more than 100000 values"),
     Case("alias bomb in petsc_options", text=BASE + "stokes: {petsc_options: {bomb: " + _alias_bomb() + "}}\n",
-         needle="more than 100000 values", two_ranks=True),
+         needle="the config holds more than 100000 values", two_ranks=True),
     Case("boolean power tower", (f"initial.temperature={_TOWER}",), needle="is inf at"),
     Case("comparison power tower", ("initial.temperature=((1<2)+(1<2))**((1<2)+(1<2))**((1<2)+(1<2))**"
                                     "((1<2)+(1<2))**((1<2)+(1<2))**((1<2)+(1<2))*0+1",), code=0),
@@ -371,7 +371,7 @@ def test_messages_are_short_single_lines():
     assert short_repr(10**5000) == "<integer of about 5000 digits>"
     err = ConfigError("a\nb " + "x" * 10_000)
     assert "\n" not in str(err) and len(str(err)) <= 400
-    with pytest.raises(ConfigError, match="more than 100000 values"):
+    with pytest.raises(ConfigError, match=r"config key '\[8\]\[8\].*': the config holds more than 100000 values"):
         check_document_size(bomb)
 
 

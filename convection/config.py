@@ -31,17 +31,15 @@ from __future__ import annotations
 import copy
 import importlib
 import math
-import os
-import re
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import yaml
 
 from convection.expressions import Expression, ExpressionError
+from convection.config_files import check_output_directory, check_petsc_options, read_document, safe_load
 from convection.probes import boundary_probes, domain_probes
-from convection.schema import (MAX_DEPTH, REQUIRED, ConfigError, Field, check_document_size, key_text,
-                               short_repr, validate)
+from convection.schema import REQUIRED, ConfigError, Field, check_document_size, key_text, short_repr, validate
 
 __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
            "parse_overrides"]
@@ -60,8 +58,6 @@ MAX_STEPS = 1e9
 MAX_ENTRIES = 100
 """Most materials, particle properties, PETSc options or constants (each costs a field, a column, an
 entry of PETSc's options database (512 in all) or an expression check)."""
-MAX_CONFIG_BYTES = 1 << 20
-"""Largest config file (1 MiB; configs are a few kB)."""
 VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates")
 TEMPERATURE_KINDS = ("dirichlet", "insulating")
 
@@ -125,54 +121,6 @@ def _check_temperature_bc(value: Any) -> str | None:
             return f"dirichlet value must be a finite number, got {short_repr(value['dirichlet'])}"
         return None
     return f"temperature condition {short_repr(value)} must be 'insulating' or {{dirichlet: <number>}}"
-
-
-_PETSC_WORD = re.compile(r"[A-Za-z0-9_]+")
-_VIEWER_WORDS = frozenset({"view", "monitor", "reason", "draw", "log", "viewer", "lg", "dump", "history"})
-"""Words of PETSc option names whose value is a viewer (``ksp_view``, ``ksp_monitor_true_residual``,
-``ksp_converged_reason``, ``mat_view``, ...)."""
-_PRINTING_VIEWERS = ("", "ascii")
-_STANDARD_STREAMS = ("", "stdout", "stderr")
-
-
-def _check_petsc_options(options: dict[str, Any]) -> str | None:
-    """PETSc options must be plain ``name: scalar`` pairs, and a viewer option may only print
-    (``ascii`` to stdout/stderr, any format): a viewer that names a file (``ascii:/some/path``),
-    writes PETSc's default file (``binary``) or opens a window (``draw``) is refused, since PETSc
-    would create it outside the run folder."""
-    for name, value in options.items():
-        if not isinstance(name, str) or not _PETSC_WORD.fullmatch(name):
-            return f"option name {short_repr(name)} must be letters, digits and _ (without the leading -)"
-        if value is not None and not isinstance(value, (str, int, float)):
-            return f"option {name}: the value must be a number, text, true/false or null, got {short_repr(value)}"
-        if _VIEWER_WORDS.isdisjoint(name.lower().split("_")) or value is None or isinstance(value, bool):
-            continue
-        kind, _, rest = str(value).partition(":")
-        filename = rest.partition(":")[0]
-        if kind.strip().lower() not in _PRINTING_VIEWERS or filename.strip() not in _STANDARD_STREAMS:
-            return (f"option {name}: {short_repr(value)} would make PETSc write a file or open a window outside "
-                    "the run folder; viewers may only print (e.g. ascii, ::ascii_info_detail)")
-    return None
-
-
-def _check_output_directory(text: str) -> str | None:
-    """The run folder must be named, be a folder if it exists, and be creatable otherwise."""
-    if not text.strip():
-        return "must name a folder (an empty name would write into the current folder)"
-    if "\0" in text:
-        return "must not contain a NUL character"
-    try:
-        path = Path(text).absolute()
-        if path.exists() and not path.is_dir():
-            return f"{short_repr(text)} exists and is not a folder"
-        parent = next(p for p in path.parents if p.exists())
-        if not parent.is_dir():
-            return f"{short_repr(text)} lies inside {short_repr(str(parent))}, which is not a folder"
-        if not path.exists() and not os.access(parent, os.W_OK | os.X_OK):
-            return f"cannot create {short_repr(text)}: no write permission in {short_repr(str(parent))}"
-    except OSError as err:
-        return f"{short_repr(text)} cannot be used: {err.strerror or err}"
-    return None
 
 
 def _names(module: str, registry: str) -> Callable[[], list[str]]:
@@ -251,7 +199,7 @@ SCHEMA: dict[str, Any] = {
         "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_NAMES"),
                         help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
                         "free slip on both surfaces), direct (MUMPS) in 2D"),
-        "petsc_options": Field("mapping", {}, check=_check_petsc_options, max_items=MAX_ENTRIES,
+        "petsc_options": Field("mapping", {}, check=check_petsc_options, max_items=MAX_ENTRIES,
                                help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); viewers may "
                                     "only print"),
         "buoyancy_theta": Field("float", 0.0, minimum=0.0, maximum=1.0,
@@ -347,7 +295,7 @@ SCHEMA: dict[str, Any] = {
         "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height (shells: radius) / its initial volume"),
     },
     "output": {
-        "directory": Field("str", REQUIRED, check=_check_output_directory,
+        "directory": Field("str", REQUIRED, check=check_output_directory,
                            help="output folder (statistics.csv, fields, config)"),
         "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
         "statistics": Field("list[str]", None, nullable=True, choices=_names("convection.postprocess", "POSTPROCESSORS"),
@@ -706,57 +654,11 @@ def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:
         if not path:
             raise ConfigError(f"--set {short_repr(item)}: empty key")
         try:
-            value = _safe_load(text, f"--set {key_text(key.strip())}")
+            value = safe_load(text, f"--set {key_text(key.strip())}")
         except yaml.YAMLError:
             value = text
         parsed.append((path, value))
     return parsed
-
-
-def _safe_load(text: str, where: str) -> Any:
-    """``yaml.safe_load(text)``; what else PyYAML raises on hostile input becomes a ConfigError
-    naming ``where``: RecursionError (deep nesting), ValueError (an integer with more digits than
-    Python converts, an impossible date), MemoryError.
-
-    Raises:
-        yaml.YAMLError: the text is not YAML.
-    """
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError:
-        raise
-    except RecursionError:
-        raise ConfigError(f"{where}: nested too deeply (a config has at most {MAX_DEPTH} levels)") from None
-    except MemoryError:
-        raise ConfigError(f"{where}: too large to read") from None
-    except (ValueError, OverflowError) as err:
-        raise ConfigError(f"{where}: a value cannot be read: {str(err).split(';')[0]}") from None
-
-
-def _read_document(p: Path) -> Any:
-    """The parsed YAML of a config file (at most :data:`MAX_CONFIG_BYTES`, UTF-8)."""
-    where = f"config file '{p}'"
-    if not p.is_file():
-        raise ConfigError(f"{where} not found")
-    try:
-        size = p.stat().st_size
-        if size > MAX_CONFIG_BYTES:
-            raise ConfigError(f"{where}: {size / 2**20:.1f} MiB, more than a config may have "
-                              f"({MAX_CONFIG_BYTES // 2**20} MiB)")
-        data = p.read_bytes()[: MAX_CONFIG_BYTES + 1]
-    except OSError as err:
-        raise ConfigError(f"{where}: cannot be read: {err.strerror or err}") from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as err:
-        line = data[: err.start].count(b"\n") + 1
-        raise ConfigError(f"{where}: not UTF-8 text (byte 0x{data[err.start]:02x} at line {line})") from None
-    try:
-        return _safe_load(text, where)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        at = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{where}: invalid YAML{at}") from None
 
 
 def _apply_override(document: dict[str, Any], path: list[str], value: Any) -> None:
@@ -798,7 +700,7 @@ def _load(path: str | Path | None, overrides: Iterable[str], document: dict | No
         if path is None:
             raise ConfigError("no configuration file given")
         p = Path(path)
-        document = _read_document(p)
+        document = read_document(p)
         document = {} if document is None else document
         if not isinstance(document, dict):
             raise ConfigError(f"config file '{p}': expected a mapping at the top level")

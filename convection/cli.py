@@ -18,6 +18,7 @@ everything written and a checkpoint (exit code 128 + signal number).
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import signal
@@ -130,6 +131,12 @@ def _local(function: Any, /, *args: Any, **kwargs: Any) -> Any:
                        "(--debug shows the traceback)", EXIT_RUNTIME_ERROR) from err
 
 
+def _literal(key: str, text: str) -> str:
+    """A ``--set`` override giving ``key`` the string ``text`` as it is (not read as YAML: a folder
+    named ``123``, ``run #1`` or ``''`` stays that text). A JSON string is a YAML string."""
+    return f"{key}={json.dumps(str(text), ensure_ascii=False)}"
+
+
 def _checked_overrides(overrides: list[str]) -> list[str]:
     for item in overrides:
         key = item.split("=", 1)[0].strip()
@@ -149,7 +156,7 @@ def _resume(comm: MPI.Comm, directory: str, overrides: list[str], checkpoint: st
     if path is None:
         raise _Refused(f"run folder '{run_dir}' has no complete checkpoint (checkpoints/checkpoint_*)", EXIT_RUNTIME_ERROR)
     saved = read_checkpoint(path, comm)
-    config = _local(load_config, None, [*_checked_overrides(overrides), f"output.directory={run_dir}"],
+    config = _local(load_config, None, [*_checked_overrides(overrides), _literal("output.directory", str(run_dir))],
                     document=saved.config)
     return config, saved
 
@@ -162,7 +169,7 @@ def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
     else:
         overrides = list(args.overrides)
         if args.output is not None:
-            overrides.append(f"output.directory={args.output}")
+            overrides.append(_literal("output.directory", args.output))
         config = _local(load_config, args.config, overrides)
         if args.command == "check":
             if comm.rank == 0:

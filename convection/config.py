@@ -39,7 +39,7 @@ import yaml
 from convection.expressions import Expression, ExpressionError
 from convection.config_files import check_output_directory, check_petsc_options, read_document, safe_load
 from convection.probes import boundary_probes, domain_probes
-from convection.schema import REQUIRED, ConfigError, Field, check_document_size, key_text, short_repr, validate
+from convection.schema import REQUIRED, ConfigError, Field, check_document_shape, key_text, short_repr, validate
 
 __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
            "parse_overrides"]
@@ -610,8 +610,8 @@ def _check_particles(config: dict[str, Any]) -> None:
         raise ConfigError(f"config key 'particles.generator': {err}") from None
     params = dict(section["interpolator"])
     name = params.pop("name", None)
-    if name not in INTERPOLATORS:
-        raise ConfigError(f"config key 'particles.interpolator.name': {name!r} is not one of {sorted(INTERPOLATORS)}")
+    if not isinstance(name, str) or name not in INTERPOLATORS:
+        raise ConfigError(f"config key 'particles.interpolator.name': {short_repr(name)} is not one of {sorted(INTERPOLATORS)}")
     try:
         INTERPOLATORS[name](**params)
     except (TypeError, ValueError) as err:
@@ -704,11 +704,11 @@ def _load(path: str | Path | None, overrides: Iterable[str], document: dict | No
         document = {} if document is None else document
         if not isinstance(document, dict):
             raise ConfigError(f"config file '{p}': expected a mapping at the top level")
-    check_document_size(document)
+    check_document_shape(document)
     document = copy.deepcopy(document)
     for key_path, value in parse_overrides(overrides):
         _apply_override(document, key_path, value)
-    check_document_size(document)
+    check_document_shape(document)
     config = validate(SCHEMA, document)
     _resolve_boundaries(config, document)
     _check_consistency(config)

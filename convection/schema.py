@@ -11,8 +11,10 @@ Hostile documents are answered with one short line too:
   strings ``"nan"``/``"Infinity"``, a literal too large for a double); an integer key refuses
   values outside the int64 range; free-form values (``any``, ``mapping``) are searched for
   non-finite numbers too;
-- :func:`check_document_size` bounds the nesting depth and the number of values of a document
-  (counting every use of a YAML alias, so an alias bomb is refused before anything expands it);
+- :func:`check_document_shape` bounds the nesting depth and the number of values of a document
+  (counting every use of a YAML alias, so an alias bomb is refused before anything expands it)
+  and requires every mapping key to be text (YAML also reads ``1:``, ``null:`` or ``yes:`` as keys;
+  keys of mixed types cannot even be sorted for a message);
 - values shown in messages go through :func:`short_repr` (a bounded repr), and a
   :class:`ConfigError` keeps its message to one line of at most :data:`MAX_MESSAGE` characters.
 """
@@ -25,7 +27,7 @@ import reprlib
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Union
 
-__all__ = ["MAX_DEPTH", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "check_document_size",
+__all__ = ["MAX_DEPTH", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "check_document_shape",
            "check_finite_values", "key_text", "short_repr", "validate"]
 
 MAX_MESSAGE = 400
@@ -74,12 +76,13 @@ class ConfigError(ValueError):
         super().__init__(text)
 
 
-def check_document_size(document: Any, /) -> None:
-    """Refuse a document nested deeper than :data:`MAX_DEPTH` or holding more than :data:`MAX_VALUES`
-    values (each use of a shared YAML alias counted, keys too). Iterative, stops at the first excess.
+def check_document_shape(document: Any, /) -> None:
+    """Refuse a document nested deeper than :data:`MAX_DEPTH`, holding more than :data:`MAX_VALUES`
+    values (each use of a shared YAML alias counted, keys too) or with a mapping key that is not
+    text. Iterative, stops at the first problem.
 
     Raises:
-        ConfigError: naming the dotted key where the limit was passed.
+        ConfigError: naming the dotted key where the problem is.
     """
     stack: list[tuple[Any, int, str]] = [(document, 0, "")]
     count = 0
@@ -94,6 +97,8 @@ def check_document_size(document: Any, /) -> None:
         if isinstance(value, Mapping):
             for name, item in value.items():
                 sub = f"{key}.{key_text(name)}" if key else key_text(name)
+                if not isinstance(name, str):
+                    raise ConfigError(f"config key '{sub}': keys must be names (text), got {_got(name)}")
                 stack.extend(((name, depth + 1, sub), (item, depth + 1, sub)))
         elif isinstance(value, (list, tuple)):
             stack.extend((item, depth + 1, f"{key}[{i}]") for i, item in enumerate(value))
@@ -239,7 +244,7 @@ def _number_problem(value: Any) -> str | None:
 
 def check_finite_values(value: Any, key: str) -> None:
     """Refuse a non-finite number or an integer beyond int64 anywhere in a free-form value (lists
-    and mappings searched; the depth is bounded by :func:`check_document_size`).
+    and mappings searched; the depth is bounded by :func:`check_document_shape`).
 
     Raises:
         ConfigError: naming the dotted key (``key.sub[2]``) of the first one.

@@ -22,11 +22,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from convection.config import load_config
 from convection.expressions import MAX_LENGTH, Expression, ExpressionError
 from convection.probes import MAX_PROBES, boundary_probes, domain_probes
-from convection.schema import ConfigError, check_document_size, short_repr
+from convection.schema import ConfigError, check_document_shape, short_repr
 
 ROOT = Path(__file__).resolve().parents[1]
 BOX = "configs/blankenbach_1a.yaml"
@@ -133,10 +134,15 @@ CASES = [
          needle="'stokes.petsc_options.a[0][0][0]"),
     Case("nested 5000 deep in --set", ("stokes.petsc_options={a: " + "[" * 5000 + "]" * 5000 + "}",),
          needle="--set stokes.petsc_options: nested too deeply"),
-    Case("unknown keys of mixed types", text=BASE + "1: one\nfoo: two\n", needle="unknown; allowed keys in top level",
+    Case("unknown keys of mixed types", text=BASE + "1: one\nfoo: two\n", needle="config key '1': keys must be names",
          two_ranks=True),
     Case("unknown entry of mixed types", ("boundary.velocity.top={kind: no_slip, 1: a, foo: b}",),
-         needle="'boundary.velocity.top': unknown entry"),
+         needle="'boundary.velocity.top.1': keys must be names (text), got int 1"),
+    Case("plate entries of mixed types", ("boundary.velocity.outer={kind: plates, plates: [{centre: [0], rate: 1, "
+                                          "1: 2, b: 3}]}",), config=SHELL,
+         needle="'boundary.velocity.outer.plates[0].1': keys must be names"),
+    Case("interpolator name a list", ("particles.interpolator={name: [1]}",),
+         needle="'particles.interpolator.name': [1] is not one of"),
     Case("cells 1.0e+308", ("mesh.cells=[1.0e+308, 4]",), needle="'mesh.cells[0]': must be an integer within +-2**63",
          two_ranks=True),
     Case("cells 1e308 text", ("mesh.cells=[1e308, 4]",), needle="'mesh.cells[0]': expected an integer"),
@@ -331,6 +337,18 @@ def test_mpirun_exit_code_and_one_line(tmp_path):
     _assert_answer(case, proc, proc.returncode)
 
 
+def test_output_folder_is_taken_literally(tmp_path):
+    """``--output`` is a folder name, not YAML: ``123`` and ``run #1`` stay text; ``''`` is refused."""
+    for name in ("123", "run #1"):
+        proc = subprocess.run(_command(["check", str(ROOT / BOX), "--output", str(tmp_path / name)]), cwd=ROOT,
+                              env=_env(), capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert yaml.safe_load(proc.stdout)["output"]["directory"] == str(tmp_path / name)
+    proc = subprocess.run(_command(["check", str(ROOT / BOX), "--output", ""]), cwd=ROOT, env=_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: config key 'output.directory': must name a folder")
+
+
 def test_command_line_mistake_is_one_line():
     proc = subprocess.run(_command(["run"]), cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
@@ -372,7 +390,12 @@ def test_messages_are_short_single_lines():
     err = ConfigError("a\nb " + "x" * 10_000)
     assert "\n" not in str(err) and len(str(err)) <= 400
     with pytest.raises(ConfigError, match=r"config key '\[8\]\[8\].*': the config holds more than 100000 values"):
-        check_document_size(bomb)
+        check_document_shape(bomb)
+    from convection.config import SCHEMA
+    from convection.schema import validate
+
+    with pytest.raises(ConfigError, match="unknown; allowed keys in top level"):  # sortable although mixed
+        validate(SCHEMA, {1: "one", "foo": "two"})
 
 
 def test_expressions_cannot_grow_without_bound():

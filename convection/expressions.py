@@ -197,7 +197,7 @@ class Expression:
         bad = ~np.isfinite(values)
         if np.any(bad):
             i = int(np.argmax(bad))
-            where = ", ".join(f"{c:.6g}" for c in points[: self.gdim, i])
+            where = ", ".join(f"{c + 0.0:.6g}" for c in points[: self.gdim, i])  # + 0.0: no "-0"
             raise ExpressionError(f"{short_repr(self.text)} is {values[i]} at ({where}); it must be finite "
                                   "everywhere in the domain")
 

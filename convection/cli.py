@@ -5,17 +5,20 @@
     python -m convection check configs/NAME.yaml [--set ...]
 
 Problems print one line on rank 0 and exit with the same code on every rank, before any
-collective call that could hang: configuration problems (naming the key) with code 2; other
-expected problems (a missing run folder, a damaged checkpoint, ...) with code 1; a run that blew
-up or whose solver failed (naming the step and what failed) with code 3. Anything unexpected
-prints one line too and stops every rank (MPI abort); ``--debug`` (or ``CONVECTION_DEBUG=1``)
-shows the traceback instead. SIGINT/SIGTERM stop the run at the end of the current step with
+collective call that could hang: configuration problems (naming the key) and command-line
+mistakes with code 2; other expected problems (a missing run folder, a damaged checkpoint, ...)
+with code 1; a run that blew up or whose solver failed (naming the step and what failed) with
+code 3. Anything unexpected while the config is read and checked (no communication happens
+there, so every rank meets it alike) prints one line with code 1; anything unexpected later
+prints one line too and stops every rank (MPI abort). ``--debug`` (or ``CONVECTION_DEBUG=1``)
+shows the traceback as well. SIGINT/SIGTERM stop the run at the end of the current step with
 everything written and a checkpoint (exit code 128 + signal number).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import signal
@@ -27,6 +30,7 @@ from typing import Any, Sequence
 from mpi4py import MPI
 
 from convection.config import ConfigError, load_config
+from convection.schema import MAX_MESSAGE
 
 __all__ = ["main"]
 
@@ -42,8 +46,23 @@ SAME_MODEL = ("name", "mesh", "physics", "materials", "boundary", "initial", "st
 """Sections that must equal the checkpoint's for ``run --resume``."""
 
 
+def _one_line(text: str) -> str:
+    """``text`` as one line of at most :data:`convection.schema.MAX_MESSAGE` characters."""
+    line = " ".join(str(text).split())
+    return line if len(line) <= MAX_MESSAGE else line[: MAX_MESSAGE - 3] + "..."
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a command-line mistake as one line on rank 0 and exit code 2 on every rank."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        if MPI.COMM_WORLD.rank == 0:
+            print(f"error: {_one_line(message)} (see {self.prog} --help)", file=sys.stderr, flush=True)
+        sys.exit(EXIT_CONFIG_ERROR)
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m convection", description=__doc__.split("\n")[0])
+    parser = _Parser(prog="python -m convection", description=__doc__.split("\n")[0])
     parser.add_argument("--debug", dest="debug_all", action="store_true", help="show tracebacks of errors")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a configuration")
@@ -99,6 +118,25 @@ class _Refused(Exception):
         self.code = code
 
 
+def _local(function: Any, /, *args: Any, **kwargs: Any) -> Any:
+    """Call ``function`` (reading and checking a config: no communication), turning an unexpected
+    exception into an expected problem (one line, exit code 1): every rank meets it alike, so no
+    MPI abort is needed."""
+    try:
+        return function(*args, **kwargs)
+    except ConfigError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a bug met while checking: reported, not aborted
+        raise _Refused(f"unexpected {type(err).__name__} while checking the config: {err} "
+                       "(--debug shows the traceback)", EXIT_RUNTIME_ERROR) from err
+
+
+def _literal(key: str, text: str) -> str:
+    """A ``--set`` override giving ``key`` the string ``text`` as it is (not read as YAML: a folder
+    named ``123``, ``run #1`` or ``''`` stays that text). A JSON string is a YAML string."""
+    return f"{key}={json.dumps(str(text), ensure_ascii=False)}"
+
+
 def _checked_overrides(overrides: list[str]) -> list[str]:
     for item in overrides:
         key = item.split("=", 1)[0].strip()
@@ -118,15 +156,12 @@ def _resume(comm: MPI.Comm, directory: str, overrides: list[str], checkpoint: st
     if path is None:
         raise _Refused(f"run folder '{run_dir}' has no complete checkpoint (checkpoints/checkpoint_*)", EXIT_RUNTIME_ERROR)
     saved = read_checkpoint(path, comm)
-    config = load_config(None, [*_checked_overrides(overrides), f"output.directory={run_dir}"], document=saved.config)
+    config = _local(load_config, None, [*_checked_overrides(overrides), _literal("output.directory", str(run_dir))],
+                    document=saved.config)
     return config, saved
 
 
 def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
-    from convection.checkpoint import latest_checkpoint, read_checkpoint
-    from convection.factory import run_config
-    from convection.run import RunFailure
-
     stop = _StopFlag()
     saved = None
     if args.command == "resume":
@@ -134,20 +169,25 @@ def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
     else:
         overrides = list(args.overrides)
         if args.output is not None:
-            overrides.append(f"output.directory={args.output}")
-        config = load_config(args.config, overrides)
+            overrides.append(_literal("output.directory", args.output))
+        config = _local(load_config, args.config, overrides)
         if args.command == "check":
             if comm.rank == 0:
                 from convection.config import dump_config
 
                 print(dump_config(config), end="")
             return 0
+        from convection.checkpoint import latest_checkpoint, read_checkpoint
+
         if args.resume and latest_checkpoint(config["output"]["directory"]) is not None:
             saved = read_checkpoint(latest_checkpoint(config["output"]["directory"]), comm)
             changed = [key for key in SAME_MODEL if saved.config.get(key) != config.get(key)]
             if changed:
                 raise ConfigError(f"config key '{changed[0]}': differs from the checkpoint's; only "
                                   f"{_RESUMABLE_TEXT} may change when resuming")
+    from convection.factory import run_config
+    from convection.run import RunFailure
+
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
     try:
@@ -165,31 +205,43 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     debug = args.debug_all or getattr(args, "debug", False) or os.environ.get("CONVECTION_DEBUG", "") not in ("", "0")
     comm = MPI.COMM_WORLD
-    from particles.checkpoint import CheckpointError
-
     try:
         return _run(args, comm)
-    except ConfigError as err:
-        code, message = EXIT_CONFIG_ERROR, str(err)
-    except _Refused as err:
-        code, message = err.code, str(err)
-    except CheckpointError as err:  # raised on every rank alike
-        code, message = EXIT_RUNTIME_ERROR, str(err)
-    except Exception as err:  # noqa: BLE001 - unexpected: one line (or the traceback), then stop every rank
+    except Exception as err:  # noqa: BLE001 - sorted out by _expected_code
+        return _report(err, comm, debug)
+
+
+def _expected_code(err: Exception) -> int | None:
+    """The exit code of an expected problem (raised on every rank alike), or None."""
+    if isinstance(err, ConfigError):
+        return EXIT_CONFIG_ERROR
+    if isinstance(err, _Refused):
+        return err.code
+    checkpoint = sys.modules.get("particles.checkpoint")  # loaded by whatever raised one (it loads slowly)
+    if checkpoint is not None and isinstance(err, checkpoint.CheckpointError):
+        return EXIT_RUNTIME_ERROR
+    return None
+
+
+def _report(err: Exception, comm: MPI.Comm, debug: bool) -> int:
+    """Print ``err`` (one line; with ``debug`` the traceback too) and return the exit code; an
+    unexpected error stops every rank (MPI abort), as the others may wait in a collective call."""
+    code = _expected_code(err)
+    if code is not None:
         if debug:
             traceback.print_exc()
-        else:
-            where = f" (rank {comm.rank})" if comm.size > 1 else ""
-            print(f"error{where}: {type(err).__name__}: {' '.join(str(err).split())} "
-                  "(--debug shows the traceback)", file=sys.stderr, flush=True)
-        if comm.size > 1:
-            comm.Abort(EXIT_RUNTIME_ERROR)
-        return EXIT_RUNTIME_ERROR
+        if comm.rank == 0:
+            print(f"error: {_one_line(str(err))}", file=sys.stderr, flush=True)
+        return code
     if debug:
         traceback.print_exc()
-    if comm.rank == 0:
-        print(f"error: {message}", file=sys.stderr, flush=True)
-    return code
+    else:
+        where = f" (rank {comm.rank})" if comm.size > 1 else ""
+        print(f"error{where}: {_one_line(f'{type(err).__name__}: {err}')} (--debug shows the traceback)",
+              file=sys.stderr, flush=True)
+    if comm.size > 1:
+        comm.Abort(EXIT_RUNTIME_ERROR)
+    return EXIT_RUNTIME_ERROR
 
 
 if __name__ == "__main__":

@@ -30,13 +30,16 @@ from __future__ import annotations
 
 import copy
 import importlib
+import math
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import yaml
 
 from convection.expressions import Expression, ExpressionError
-from convection.schema import REQUIRED, ConfigError, Field, validate
+from convection.config_files import check_output_directory, check_petsc_options, read_document, safe_load
+from convection.probes import boundary_probes, domain_probes
+from convection.schema import REQUIRED, ConfigError, Field, check_document_shape, key_text, short_repr, validate
 
 __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
            "parse_overrides"]
@@ -44,14 +47,37 @@ __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_co
 _SIDES = ("left", "right", "bottom", "top", "front", "back")
 _SHELL_BOUNDARIES = ("inner", "outer")
 _SHELLS = {"annulus": 2, "spherical_shell": 3}
+MAX_DEGREE = 4
+"""Highest polynomial degree of a field (form compilation time grows steeply with the degree)."""
+MAX_INITIAL_ROUNDS = 100
+"""Most rounds of adapting the mesh to the initial condition (each rebuilds the mesh)."""
+MAX_PARTICLES = 1e8
+"""Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
+MAX_STEPS = 1e9
+"""Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
+MAX_ENTRIES = 100
+"""Most materials, particle properties, PETSc options or constants (each costs a field, a column, an
+entry of PETSc's options database (512 in all) or an expression check)."""
 VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates")
 TEMPERATURE_KINDS = ("dirichlet", "insulating")
 
 
+def _finite_number(value: Any) -> float | None:
+    """``value`` as a float if it is a finite number (not a bool, not text), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
 def _check_velocity_bc(value: Any) -> str | None:
     kind = value.get("kind") if isinstance(value, dict) else value
-    if kind not in VELOCITY_KINDS:
-        return f"velocity condition {value!r} is not one of {list(VELOCITY_KINDS)} (or {{kind: prescribed, value: [..]}})"
+    if not isinstance(kind, str) or kind not in VELOCITY_KINDS:
+        return (f"velocity condition {short_repr(value)} is not one of {list(VELOCITY_KINDS)} "
+                "(or {kind: prescribed, value: [..]})")
     if kind == "plates":
         if not isinstance(value, dict):
             return "a plates velocity needs the form {kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
@@ -59,23 +85,23 @@ def _check_velocity_bc(value: Any) -> str | None:
 
         try:
             PlateVelocity.from_config(value, 3)
-        except ValueError as err:
+        except (TypeError, ValueError, OverflowError) as err:  # TypeError: e.g. keys of mixed types
             return str(err)
         return None
     if isinstance(value, dict):
-        extra = set(value) - {"kind", "value"}
+        extra = [name for name in value if name not in ("kind", "value")]
         if extra:
-            return f"unknown entry {sorted(extra)[0]!r}; allowed: ['kind', 'value']"
+            return f"unknown entry {short_repr(extra[0])}; allowed: ['kind', 'value']"
         if kind == "prescribed" and not isinstance(value.get("value"), list):
             return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
-        for component in value.get("value") or ():
+        for i, component in enumerate(value.get("value") or ()):
             if isinstance(component, str):
                 try:
                     Expression(component, gdim=3)
                 except ExpressionError as err:
-                    return str(err)
-            elif not isinstance(component, (int, float)) or isinstance(component, bool):
-                return f"velocity component {component!r} must be a number or an expression"
+                    return f"value[{i}]: {err}"
+            elif _finite_number(component) is None:
+                return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
     elif kind == "prescribed":
         return "a prescribed velocity needs the form {kind: prescribed, value: [vx, vy(, vz)]}"
     return None
@@ -84,13 +110,17 @@ def _check_velocity_bc(value: Any) -> str | None:
 def _check_temperature_bc(value: Any) -> str | None:
     if value == "insulating":
         return None
-    if isinstance(value, dict) and set(value) == {"dirichlet"}:
-        try:
-            float(value["dirichlet"])
-        except (TypeError, ValueError):
-            return f"dirichlet value must be a number, got {value['dirichlet']!r}"
+    if isinstance(value, dict) and list(value) == ["dirichlet"]:
+        number = value["dirichlet"]
+        if isinstance(number, str):
+            try:
+                number = float(number)
+            except ValueError:
+                pass
+        if _finite_number(number) is None:
+            return f"dirichlet value must be a finite number, got {short_repr(value['dirichlet'])}"
         return None
-    return f"temperature condition {value!r} must be 'insulating' or {{dirichlet: <number>}}"
+    return f"temperature condition {short_repr(value)} must be 'insulating' or {{dirichlet: <number>}}"
 
 
 def _names(module: str, registry: str) -> Callable[[], list[str]]:
@@ -101,7 +131,7 @@ def _names(module: str, registry: str) -> Callable[[], list[str]]:
 
 
 def _is_list(value: Any) -> str | None:
-    return None if isinstance(value, list) else f"expected a list, got {value!r}"
+    return None if isinstance(value, list) else f"expected a list, got {short_repr(value)}"
 
 
 def _sides(check, default) -> dict[str, Field]:
@@ -156,36 +186,37 @@ SCHEMA: dict[str, Any] = {
         "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical), r, phi, theta"),
         "composition": Field("str", None, nullable=True,
                              help="expression in x, y, z (1 = dense/second material), or null for none"),
-        "constants": Field("mapping", {}, help="named constants usable in the expressions"),
+        "constants": Field("mapping", {}, max_items=MAX_ENTRIES, help="named constants usable in the expressions"),
     },
-    "materials": Field("mapping", {}, items={
+    "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items={
         "initial": Field("str", REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")"),
         "Rb": Field("float", 0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)"),
         "viscosity": Field("float", None, nullable=True, exclusive_minimum=0.0,
                            help="viscosity of the pure material (null: physics.viscosity.background)"),
     }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "stokes": {
-        "degree": Field("int", 2, minimum=2, help="velocity degree (pressure degree - 1)"),
+        "degree": Field("int", 2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)"),
         "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_NAMES"),
                         help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
                         "free slip on both surfaces), direct (MUMPS) in 2D"),
-        "petsc_options": Field("mapping", {}, help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6)"),
-        "buoyancy_theta": Field("float", 0.0, minimum=0.0,
-                                check=lambda v: None if v <= 1.0 else f"must be <= 1, got {v}",
+        "petsc_options": Field("mapping", {}, check=check_petsc_options, max_items=MAX_ENTRIES,
+                               help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); viewers may "
+                                    "only print"),
+        "buoyancy_theta": Field("float", 0.0, minimum=0.0, maximum=1.0,
                                 help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
                                      "t + theta dt along the flow (semi-implicit, stabilises dense interfaces against "
                                      "the 'drunken sailor' oscillation; 0.5 is a good choice)"),
     },
     "energy": {
         "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),
-        "degree": Field("int", 2, minimum=1),
+        "degree": Field("int", 2, minimum=1, maximum=MAX_DEGREE),
         "stabilisation": Field("str", "supg", choices=_names("convection.transport", "STABILISATIONS")),
     },
     "composition": {
         "source": Field("str", "static", choices=_names("convection.composition", "COMPOSITION_SOURCES"),
                         help="static: fractions fixed at their initial regions; particles: averaged from advected "
                              "particles; field: advected continuous fields (SUPG, no diffusion)"),
-        "degree": Field("int", 0, minimum=0, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); "
+        "degree": Field("int", 0, minimum=0, maximum=MAX_DEGREE, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); "
                                                   "source field needs >= 1"),
     },
     "particles": {
@@ -196,7 +227,7 @@ SCHEMA: dict[str, Any] = {
         "integrator": Field("str", "rk2", choices=_names("particles.advection", "INTEGRATORS")),
         "interpolator": Field("mapping", {"name": "cell_average", "mean": "arithmetic"},
                               help="particle-to-mesh interpolator name and parameters"),
-        "properties": Field("any", [], check=_is_list,
+        "properties": Field("any", [], check=_is_list, max_items=MAX_ENTRIES,
                             help="properties every particle carries: names or {name: ..., parameters}"),
         "population": {
             "min_per_cell": Field("int", 0, minimum=0, help="cells with fewer particles get new ones"),
@@ -232,9 +263,9 @@ SCHEMA: dict[str, Any] = {
         "every": Field("int", 10, minimum=1, help="adapt every N steps"),
         "min_level": Field("int", 0, minimum=0),
         "max_level": Field("int", 2, minimum=0),
-        "refine_fraction": Field("float", 0.3, minimum=0.0, help="fraction of cells (by indicator) to refine"),
-        "coarsen_fraction": Field("float", 0.3, minimum=0.0, help="fraction of cells to coarsen"),
-        "initial_steps": Field("int", None, nullable=True, minimum=0,
+        "refine_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells (by indicator) to refine"),
+        "coarsen_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells to coarsen"),
+        "initial_steps": Field("int", None, nullable=True, minimum=0, maximum=MAX_INITIAL_ROUNDS,
                                help="adapt this many times to the initial condition (default max_level - min_level)"),
         "fields": Field("list[str]", ["temperature"], choices=_names("convection.adaptivity", "INDICATOR_FIELDS")),
     },
@@ -254,7 +285,7 @@ SCHEMA: dict[str, Any] = {
         "max_vrms": Field("float", None, nullable=True, exclusive_minimum=0.0, help="fail when vrms exceeds this"),
         "temperature_margin": Field("float", 1.0, nullable=True, minimum=0.0,
                                     help="fail when T leaves the initial range widened by this many times its width"),
-        "lost_fraction": Field("float", 1.0e-3, nullable=True, minimum=0.0,
+        "lost_fraction": Field("float", 1.0e-3, nullable=True, minimum=0.0, maximum=1.0,
                                help="fail when more than this fraction of the particles is lost"),
     },
     "diagnostics": {
@@ -264,7 +295,8 @@ SCHEMA: dict[str, Any] = {
         "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height (shells: radius) / its initial volume"),
     },
     "output": {
-        "directory": Field("str", REQUIRED, help="output folder (statistics.csv, fields, config)"),
+        "directory": Field("str", REQUIRED, check=check_output_directory,
+                           help="output folder (statistics.csv, fields, config)"),
         "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
         "statistics": Field("list[str]", None, nullable=True, choices=_names("convection.postprocess", "POSTPROCESSORS"),
                             help="postprocessors whose columns statistics.csv holds (null: all that apply)"),
@@ -349,6 +381,9 @@ def _check_consistency(config: dict[str, Any]) -> None:
     upper = mesh["upper"] or [1.0] * gdim
     if any(u <= lo for lo, u in zip(lower, upper)):
         raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
+    if not all(math.isfinite(u - lo) for lo, u in zip(lower, upper)):
+        raise ConfigError(f"config key 'mesh.upper': the box size upper - lower must be a finite number, got {upper} "
+                          f"vs {lower}")
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
     needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
@@ -365,50 +400,62 @@ def _check_boundaries_and_rest(config: dict[str, Any], gdim: int) -> None:
             for side in ("front", "back"):
                 if config["boundary"][section][side] not in (None, "free_slip", "insulating"):
                     raise ConfigError(f"config key 'boundary.{section}.{side}': only exists in 3D")
-    for side, bc in config["boundary"]["velocity"].items():
-        if isinstance(bc, dict) and bc["kind"] == "prescribed" and len(bc["value"]) != gdim:
-            raise ConfigError(f"config key 'boundary.velocity.{side}.value': needs {gdim} components")
     for name, value in config["initial"]["constants"].items():
-        if not isinstance(value, (int, float)) or isinstance(value, bool):
-            raise ConfigError(f"config key 'initial.constants.{name}': expected a number, got {value!r}")
+        if _finite_number(value) is None:
+            raise ConfigError(f"config key 'initial.constants.{key_text(name)}': expected a finite number, "
+                              f"got {short_repr(value)}")
+    _check_size(config)
+    _check_velocity_values(config, gdim)
     for key in ("temperature", "composition"):
         text = config["initial"][key]
         if text is not None:
-            try:
-                Expression(text, constants=expression_constants(config), gdim=gdim).check(_domain_points(config))
-            except ExpressionError as err:
-                raise ConfigError(f"config key 'initial.{key}': {err}") from None
-    _check_size(config)
+            _check_expression(config, f"initial.{key}", text)
     _check_particles(config)
 
 
-def _sample_points(lower: list[float], upper: list[float]) -> Any:
-    """Corners, edge midpoints and centre of the box, shape=(3, n) (where expressions are checked)."""
-    import itertools
+def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: str | None = None,
+                     constants: bool = True) -> Expression:
+    """The expression ``text`` of config key ``key``, evaluated at the probe points of the domain
+    (or of ``boundary``) of a resolved config (see :mod:`convection.probes`).
 
-    import numpy as np
+    Raises:
+        ConfigError: naming ``key``: the text is not an allowed expression, or it fails or is not
+            finite at a probe point.
+    """
+    try:
+        expression = Expression(text, constants=expression_constants(config) if constants else None,
+                                gdim=config_gdim(config))
+        expression.check(domain_probes(config) if boundary is None else boundary_probes(config, boundary))
+    except ExpressionError as err:
+        raise ConfigError(f"config key '{key}': {err}") from None
+    return expression
 
-    axes = [np.array([lo, 0.5 * (lo + hi), hi]) for lo, hi in zip(lower, upper)]
-    points = np.array(list(itertools.product(*axes))).T
-    return np.vstack([points, np.zeros((3 - points.shape[0], points.shape[1]))])
 
-
-def _domain_points(config: dict[str, Any]) -> Any:
-    """Points of the config's domain where expressions are checked, shape=(3, n): the box's corners,
-    edge midpoints and centre, or a shell's inner, middle and outer radius in the axis directions."""
-    import numpy as np
-
-    mesh = config["mesh"]
-    gdim = config_gdim(config)
-    if mesh["geometry"] in _SHELLS:
-        directions = np.vstack([np.eye(gdim), -np.eye(gdim)])
-        inner, outer = mesh["radii"]
-        points = np.concatenate([r * directions for r in (inner, 0.5 * (inner + outer), outer)]).T
-        return np.vstack([points, np.zeros((3 - gdim, points.shape[1]))])
-    return _sample_points(mesh["lower"] or [0.0] * gdim, mesh["upper"] or [1.0] * gdim)
+def _check_velocity_values(config: dict[str, Any], gdim: int) -> None:
+    """Prescribed velocities: gdim components, each expression finite on its boundary."""
+    for side, bc in config["boundary"]["velocity"].items():
+        if not (isinstance(bc, dict) and bc["kind"] == "prescribed"):
+            continue
+        if len(bc["value"]) != gdim:
+            raise ConfigError(f"config key 'boundary.velocity.{side}.value': needs {gdim} components")
+        for i, component in enumerate(bc["value"]):
+            if isinstance(component, str):
+                # boundary.py builds these without the config's constants
+                _check_expression(config, f"boundary.velocity.{side}.value[{i}]", component, boundary=side,
+                                 constants=False)
 
 
 SIMPLICES_PER_BOX = {2: 2, 3: 6}
+
+
+def _product(*factors: float) -> float:
+    """The product of non-negative numbers as a float: inf instead of an overflow (so an estimate
+    from ``cells: [1e18, 4]`` or ``max_level: 10**12`` is a number to compare, not an error)."""
+    logs = [math.log2(f) if f > 0 else -math.inf for f in map(float, factors)]
+    if -math.inf in logs:
+        return 0.0
+    total = sum(logs)
+    return math.inf if total >= 1024 else 2.0**total
 
 
 def _check_size(config: dict[str, Any]) -> None:
@@ -418,30 +465,42 @@ def _check_size(config: dict[str, Any]) -> None:
     if mesh["geometry"] in _SHELLS:
         # Shell volume over the volume of an equilateral cell of edge `resolution`.
         inner, outer = mesh["radii"]
-        h = mesh["resolution"]
-        if gdim == 2:
-            base = int(3.141592653589793 * (outer**2 - inner**2) / (0.4330127 * h**2)) + 1
-        else:
-            base = int(4.18879020 * (outer**3 - inner**3) / (0.11785113 * h**3)) + 1
+        # products, not powers: a float power raises OverflowError where a product gives inf
+        volume, cell = ((math.pi * (outer - inner) * (outer + inner), 0.4330127) if gdim == 2
+                        else (4.18879020 * (outer - inner) * (outer * outer + outer * inner + inner * inner), 0.11785113))
+        base = _product(volume / cell, *[1.0 / mesh["resolution"]] * gdim) + 1.0
     else:
-        base = 1
-        for n in mesh["cells"]:
-            base *= n
-        base *= SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1
+        base = _product(*mesh["cells"], SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1)
     level = adapt["max_level"] if adapt["enabled"] else 0
-    most = base * 2 ** (gdim * level)
+    most = _product(base, *[2.0] * min(gdim * level, 2048))
     if most > mesh["max_cells"]:
         key = "adaptivity.max_level" if level else ("mesh.resolution" if mesh["geometry"] in _SHELLS else "mesh.cells")
-        raise ConfigError(f"config key '{key}': the mesh can reach {most:.3g} cells ({base} base cells, refined "
+        raise ConfigError(f"config key '{key}': the mesh can reach {most:.3g} cells ({base:.3g} base cells, refined "
                           f"{level} times), more than mesh.max_cells = {mesh['max_cells']}; raise mesh.max_cells "
                           "if the machine can take it")
-    try:
-        per_cell = float(config["particles"]["generator"].get("particles_per_cell") or 0.0)
-    except (TypeError, ValueError):
-        return  # reported by the particle checks
-    if particles_enabled(config) and per_cell * most > 1e8:
-        raise ConfigError(f"config key 'particles.generator.particles_per_cell': up to {per_cell * most:.3g} particles "
-                          f"on the finest mesh (more than 1e8, several GB)")
+    if particles_enabled(config):
+        _check_particle_count(config, most)
+    end, dt_max = config["time"]["end"], config["time"]["dt_max"]
+    if dt_max is not None and config["time"]["max_steps"] is None and end / dt_max > MAX_STEPS:
+        raise ConfigError(f"config key 'time.dt_max': time.end / time.dt_max = {end / dt_max:.3g} steps at least "
+                          f"(more than {MAX_STEPS:.0e}); raise dt_max or set time.max_steps")
+
+
+def _check_particle_count(config: dict[str, Any], cells: float) -> None:
+    """Refuse generators and population bounds that ask for more than :data:`MAX_PARTICLES`."""
+    generator = config["particles"]["generator"]
+    asked = []
+    for key in ("particles_per_cell", "num_particles"):
+        try:
+            number = float(generator.get(key) or 0.0)
+        except (TypeError, ValueError, OverflowError):
+            continue  # reported by the particle checks
+        asked.append((f"particles.generator.{key}", _product(number, cells) if key == "particles_per_cell" else number))
+    asked.append(("particles.population.min_per_cell", _product(config["particles"]["population"]["min_per_cell"], cells)))
+    for key, count in asked:
+        if count > MAX_PARTICLES:
+            raise ConfigError(f"config key '{key}': up to {count:.3g} particles on the finest mesh (more than "
+                              f"{MAX_PARTICLES:.0e}, several GB)")
 
 
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
@@ -485,16 +544,11 @@ def _check_materials(config: dict[str, Any]) -> None:
             if given:
                 raise ConfigError(f"config key '{key}': not with the materials section (give each material its "
                                   "initial region, Rb and viscosity there)")
-        gdim = config_gdim(config)
         for name, spec in config["materials"].items():
             if name in RESERVED_FIELD_NAMES:
                 raise ConfigError(f"config key 'materials.{name}': the name is taken by a field; "
                                   f"reserved: {list(RESERVED_FIELD_NAMES)}")
-            try:
-                Expression(spec["initial"], constants=expression_constants(config), gdim=gdim).check(
-                    _domain_points(config))
-            except ExpressionError as err:
-                raise ConfigError(f"config key 'materials.{name}.initial': {err}") from None
+            _check_expression(config, f"materials.{name}.initial", spec["initial"])
     table, _ = material_table(config)
     names = [m["name"] for m in table]
     source = config["composition"]["source"]
@@ -516,13 +570,20 @@ def particles_enabled(config: dict[str, Any]) -> bool:
     return config["composition"]["source"] == "particles" if enabled is None else bool(enabled)
 
 
-def point_function(config: dict[str, Any]) -> Callable[[str], Callable]:
-    """Text -> function of points shape=(m, gdim) (particle properties and densities of a config)."""
+def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[str], Callable]:
+    """Text -> function of points shape=(m, gdim) (particle properties and densities of a config).
+
+    With ``probe``, each expression is first evaluated at the domain's probe points
+    (:mod:`convection.probes`), and one that fails or is not finite there raises ExpressionError
+    (a ValueError, which the particle builders report under the entry's key).
+    """
     gdim = config_gdim(config)
     constants = expression_constants(config)
 
     def make(text: str) -> Callable:
         expression = Expression(text, constants=constants, gdim=gdim)
+        if probe:
+            expression.check(domain_probes(config))
 
         def at(x):
             import numpy as np
@@ -542,15 +603,15 @@ def _check_particles(config: dict[str, Any]) -> None:
     section = config["particles"]
     if section["enabled"] is False and config["composition"]["source"] == "particles":
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
-    make = point_function(config)
+    make = point_function(config, probe=True)
     try:
         build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.generator': {err}") from None
     params = dict(section["interpolator"])
     name = params.pop("name", None)
-    if name not in INTERPOLATORS:
-        raise ConfigError(f"config key 'particles.interpolator.name': {name!r} is not one of {sorted(INTERPOLATORS)}")
+    if not isinstance(name, str) or name not in INTERPOLATORS:
+        raise ConfigError(f"config key 'particles.interpolator.name': {short_repr(name)} is not one of {sorted(INTERPOLATORS)}")
     try:
         INTERPOLATORS[name](**params)
     except (TypeError, ValueError) as err:
@@ -587,13 +648,13 @@ def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:
     parsed = []
     for item in items:
         if "=" not in item:
-            raise ConfigError(f"--set {item!r}: expected key.sub=value")
+            raise ConfigError(f"--set {short_repr(item)}: expected key.sub=value")
         key, text = item.split("=", 1)
         path = [p for p in key.strip().split(".") if p]
         if not path:
-            raise ConfigError(f"--set {item!r}: empty key")
+            raise ConfigError(f"--set {short_repr(item)}: empty key")
         try:
-            value = yaml.safe_load(text)
+            value = safe_load(text, f"--set {key_text(key.strip())}")
         except yaml.YAMLError:
             value = text
         parsed.append((path, value))
@@ -626,23 +687,28 @@ def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, docum
     Raises:
         ConfigError: with a one-line message naming the key.
     """
+    try:
+        return _load(path, overrides, document)
+    except RecursionError:  # the sizes are bounded; this is the last guard
+        raise ConfigError("config: nested too deeply to check") from None
+    except MemoryError:
+        raise ConfigError("config: too large to check") from None
+
+
+def _load(path: str | Path | None, overrides: Iterable[str], document: dict | None) -> dict[str, Any]:
     if document is None:
         if path is None:
             raise ConfigError("no configuration file given")
         p = Path(path)
-        if not p.is_file():
-            raise ConfigError(f"config file '{p}' not found")
-        try:
-            document = yaml.safe_load(p.read_text()) or {}
-        except yaml.YAMLError as err:
-            mark = getattr(err, "problem_mark", None)
-            where = f" at line {mark.line + 1}" if mark is not None else ""
-            raise ConfigError(f"config file '{p}': invalid YAML{where}") from None
+        document = read_document(p)
+        document = {} if document is None else document
         if not isinstance(document, dict):
             raise ConfigError(f"config file '{p}': expected a mapping at the top level")
+    check_document_shape(document)
     document = copy.deepcopy(document)
     for key_path, value in parse_overrides(overrides):
         _apply_override(document, key_path, value)
+    check_document_shape(document)
     config = validate(SCHEMA, document)
     _resolve_boundaries(config, document)
     _check_consistency(config)

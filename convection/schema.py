@@ -4,15 +4,53 @@ A schema is a nested mapping of section names to :class:`Field` (a leaf) or to a
 (a section). :func:`validate` walks a user document against it, fills defaults, coerces numbers
 written as strings (PyYAML reads ``1e4`` as a string) and raises :class:`ConfigError` with one
 line naming the dotted key and what is allowed.
+
+Hostile documents are answered with one short line too:
+
+- every number must be finite: a float key refuses NaN and +-inf (YAML ``.nan``/``.inf``, the
+  strings ``"nan"``/``"Infinity"``, a literal too large for a double); an integer key refuses
+  values outside the int64 range; free-form values (``any``, ``mapping``) are searched for
+  non-finite numbers too;
+- :func:`check_document_shape` bounds the nesting depth and the number of values of a document
+  (counting every use of a YAML alias, so an alias bomb is refused before anything expands it)
+  and requires every mapping key to be text (YAML also reads ``1:``, ``null:`` or ``yes:`` as keys;
+  keys of mixed types cannot even be sorted for a message);
+- values shown in messages go through :func:`short_repr` (a bounded repr), and a
+  :class:`ConfigError` keeps its message to one line of at most :data:`MAX_MESSAGE` characters.
 """
 
 from __future__ import annotations
 
 import copy
+import math
+import reprlib
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Union
 
-__all__ = ["REQUIRED", "ConfigError", "Field", "validate"]
+__all__ = ["MAX_DEPTH", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "check_document_shape",
+           "check_finite_values", "key_text", "short_repr", "validate"]
+
+MAX_MESSAGE = 400
+"""Longest error message (characters); longer ones are cut with ``...``."""
+MAX_DEPTH = 32
+"""Deepest nesting of sections, lists and mappings a config document may have (configs use < 8)."""
+MAX_VALUES = 100_000
+"""Most values (mappings, lists and scalars, each alias use counted) a config document may hold."""
+INT64 = (-(2**63), 2**63 - 1)
+"""Range of an integer key (every integer of a run ends up in int64 arrays or C longs)."""
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxset = 2, 5, 5, 5, 5
+_REPR.maxstring, _REPR.maxlong, _REPR.maxother = 80, 40, 80
+_REPR_CHARACTERS = 120
+
+
+def short_repr(value: Any) -> str:
+    """``repr(value)`` bounded in length and depth (for error messages: never expands a large value)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
+        return f"<integer of about {int(value.bit_length() * 0.30103)} digits>"
+    text = _REPR.repr(value)
+    return text if len(text) <= _REPR_CHARACTERS else text[: _REPR_CHARACTERS - 3] + "..."
 
 
 class _Required:
@@ -25,7 +63,45 @@ REQUIRED: Any = _Required()
 
 
 class ConfigError(ValueError):
-    """A configuration problem, described in one line that names the offending key."""
+    """A configuration problem, described in one line that names the offending key.
+
+    The message is made one line (runs of white space become one space) and cut to
+    :data:`MAX_MESSAGE` characters.
+    """
+
+    def __init__(self, message: str) -> None:
+        text = " ".join(str(message).split())
+        if len(text) > MAX_MESSAGE:
+            text = text[: MAX_MESSAGE - 3] + "..."
+        super().__init__(text)
+
+
+def check_document_shape(document: Any, /) -> None:
+    """Refuse a document nested deeper than :data:`MAX_DEPTH`, holding more than :data:`MAX_VALUES`
+    values (each use of a shared YAML alias counted, keys too) or with a mapping key that is not
+    text. Iterative, stops at the first problem.
+
+    Raises:
+        ConfigError: naming the dotted key where the problem is.
+    """
+    stack: list[tuple[Any, int, str]] = [(document, 0, "")]
+    count = 0
+    while stack:
+        value, depth, key = stack.pop()
+        count += 1
+        if count > MAX_VALUES:
+            raise ConfigError(f"config key '{key}': the config holds more than {MAX_VALUES} values (a YAML alias "
+                              "counts each time it is used)")
+        if depth > MAX_DEPTH:
+            raise ConfigError(f"config key '{key}': nested more than {MAX_DEPTH} levels deep")
+        if isinstance(value, Mapping):
+            for name, item in value.items():
+                sub = f"{key}.{key_text(name)}" if key else key_text(name)
+                if not isinstance(name, str):
+                    raise ConfigError(f"config key '{sub}': keys must be names (text), got {_got(name)}")
+                stack.extend(((name, depth + 1, sub), (item, depth + 1, sub)))
+        elif isinstance(value, (list, tuple)):
+            stack.extend((item, depth + 1, f"{key}[{i}]") for i, item in enumerate(value))
 
 
 Choices = Union[tuple[str, ...], Callable[[], Iterable[str]]]
@@ -45,11 +121,14 @@ class Field:
         nullable: Whether ``null`` is allowed.
         minimum: Lower bound (inclusive) for numbers / each number of a list.
         exclusive_minimum: Lower bound (exclusive) for numbers.
+        maximum: Upper bound (inclusive) for numbers / each number of a list.
         length: Allowed list lengths.
         check: Extra validation ``check(value) -> str | None`` returning a message on error.
         help: One-line description.
         items: For kind "mapping": a schema every value of the mapping is validated against
             (keys of the mapping are free names, e.g. material names).
+        max_items: Most entries of a list or mapping value (each may cost a field, a property
+            or an expression check in the run).
     """
 
     kind: str
@@ -58,10 +137,12 @@ class Field:
     nullable: bool = False
     minimum: float | None = None
     exclusive_minimum: float | None = None
+    maximum: float | None = None
     length: tuple[int, ...] | None = None
     check: Callable[[Any], str | None] | None = None
     help: str = ""
     items: Mapping[str, Any] | None = None
+    max_items: int | None = None
 
     def allowed(self) -> list[str] | None:
         """The allowed names (resolving a callable), or None."""
@@ -70,46 +151,114 @@ class Field:
         return list(self.choices() if callable(self.choices) else self.choices)
 
 
+def key_text(name: Any) -> str:
+    """A mapping key as shown in a dotted key: a string as it is (cut to 80 characters), else its
+    bounded repr (YAML allows keys of any type, e.g. ``1:``)."""
+    if isinstance(name, str):
+        return name if len(name) <= 80 else name[:77] + "..."
+    return short_repr(name)
+
+
 def _type_name(value: Any) -> str:
     return "null" if value is None else type(value).__name__
 
 
+def _got(value: Any) -> str:
+    """``"<type> <bounded repr>"`` of a value, for messages."""
+    return f"{_type_name(value)} {short_repr(value)}"
+
+
+def _finite(number: float, key: str) -> float:
+    """``number`` if finite; NaN passes every ``<``/``<=`` bound, so it is refused here, by kind."""
+    if not math.isfinite(number):
+        raise ConfigError(f"config key '{key}': must be a finite number, got {number}")
+    return number
+
+
+def _to_float(value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ConfigError(f"config key '{key}': expected a number, got {_got(value)}")
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise ConfigError(f"config key '{key}': expected a number, got {_got(value)}") from None
+    try:
+        return _finite(float(value), key)
+    except OverflowError:  # an integer beyond the double range
+        raise ConfigError(f"config key '{key}': must be a finite number, got {short_repr(value)}") from None
+
+
+def _to_int(value: Any, key: str) -> int:
+    number: int | None = None
+    if isinstance(value, int) and not isinstance(value, bool):
+        number = value
+    elif isinstance(value, float) and value.is_integer():
+        number = int(value)
+    elif isinstance(value, str):
+        try:
+            number = int(value)
+        except ValueError:  # not an integer, or more digits than Python converts
+            pass
+    if number is None:
+        raise ConfigError(f"config key '{key}': expected an integer, got {_got(value)}")
+    if not INT64[0] <= number <= INT64[1]:
+        raise ConfigError(f"config key '{key}': must be an integer within +-2**63, got {short_repr(number)}")
+    return number
+
+
 def _coerce_scalar(kind: str, value: Any, key: str) -> Any:
     if kind == "float":
-        if isinstance(value, bool):
-            raise ConfigError(f"config key '{key}': expected a number, got {value!r}")
-        if isinstance(value, (int, float)):
-            return float(value)
-        if isinstance(value, str):
-            try:
-                return float(value)
-            except ValueError:
-                pass
-        raise ConfigError(f"config key '{key}': expected a number, got {_type_name(value)} {value!r}")
+        return _to_float(value, key)
     if kind == "int":
-        if isinstance(value, bool):
-            raise ConfigError(f"config key '{key}': expected an integer, got {value!r}")
-        if isinstance(value, int):
-            return value
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
-        if isinstance(value, str):
-            try:
-                return int(value)
-            except ValueError:
-                pass
-        raise ConfigError(f"config key '{key}': expected an integer, got {_type_name(value)} {value!r}")
+        return _to_int(value, key)
     if kind == "bool":
         if isinstance(value, bool):
             return value
         if isinstance(value, str) and value.lower() in ("true", "false", "yes", "no", "on", "off"):
             return value.lower() in ("true", "yes", "on")
-        raise ConfigError(f"config key '{key}': expected true or false, got {_type_name(value)} {value!r}")
+        raise ConfigError(f"config key '{key}': expected true or false, got {_got(value)}")
     if kind == "str":
         if isinstance(value, str):
             return value
-        raise ConfigError(f"config key '{key}': expected a string, got {_type_name(value)} {value!r}")
+        raise ConfigError(f"config key '{key}': expected a string, got {_got(value)}")
     return value
+
+
+def _number_problem(value: Any) -> str | None:
+    """What is wrong with ``value`` as a number of a run: non-finite (also as text, ``"nan"``,
+    ``"1e999"``) or an integer beyond int64; None if nothing (or not a number)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int) and not INT64[0] <= value <= INT64[1]:
+        return f"must be an integer within +-2**63, got {short_repr(value)}"
+    if isinstance(value, (float, str)):
+        try:
+            number = float(value)
+        except ValueError:
+            return None
+        if not math.isfinite(number):
+            return f"must be a finite number, got {short_repr(value)}"
+    return None
+
+
+def check_finite_values(value: Any, key: str) -> None:
+    """Refuse a non-finite number or an integer beyond int64 anywhere in a free-form value (lists
+    and mappings searched; the depth is bounded by :func:`check_document_shape`).
+
+    Raises:
+        ConfigError: naming the dotted key (``key.sub[2]``) of the first one.
+    """
+    stack: list[tuple[Any, str]] = [(value, key)]
+    while stack:
+        item, where = stack.pop()
+        problem = _number_problem(item)
+        if problem:
+            raise ConfigError(f"config key '{where}': {problem}")
+        if isinstance(item, Mapping):
+            stack.extend((v, f"{where}.{key_text(k)}") for k, v in reversed(list(item.items())))
+        elif isinstance(item, (list, tuple)):
+            stack.extend((v, f"{where}[{i}]") for i, v in reversed(list(enumerate(item))))
 
 
 def _check_leaf(spec: Field, value: Any, key: str) -> Any:
@@ -117,10 +266,12 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
         if spec.nullable:
             return None
         raise ConfigError(f"config key '{key}': must not be null ({spec.help or spec.kind})")
+    if spec.max_items is not None and isinstance(value, (list, tuple, Mapping)) and len(value) > spec.max_items:
+        raise ConfigError(f"config key '{key}': {len(value)} entries, more than {spec.max_items}")
     if spec.kind.startswith("list["):
         item_kind = spec.kind[5:-1]
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"config key '{key}': expected a list of {item_kind}, got {_type_name(value)} {value!r}")
+            raise ConfigError(f"config key '{key}': expected a list of {item_kind}, got {_got(value)}")
         if spec.length is not None and len(value) not in spec.length:
             allowed = " or ".join(str(n) for n in spec.length)
             raise ConfigError(f"config key '{key}': expected {allowed} entries, got {len(value)}")
@@ -130,14 +281,19 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
         value = items
     elif spec.kind == "mapping":
         if not isinstance(value, Mapping):
-            raise ConfigError(f"config key '{key}': expected a mapping, got {_type_name(value)} {value!r}")
+            raise ConfigError(f"config key '{key}': expected a mapping, got {_got(value)}")
         value = dict(value)
         if spec.items is not None:
             for name in value:
                 if not isinstance(name, str) or not name.isidentifier():
-                    raise ConfigError(f"config key '{key}.{name}': names must be identifiers (letters, digits, _)")
+                    raise ConfigError(f"config key '{key}.{key_text(name)}': names must be identifiers "
+                                      "(letters, digits, _)")
             value = {name: validate(spec.items, item, prefix=f"{key}.{name}.") for name, item in value.items()}
-    elif spec.kind != "any":
+        else:
+            check_finite_values(value, key)
+    elif spec.kind == "any":
+        check_finite_values(value, key)
+    else:
         value = _coerce_scalar(spec.kind, value, key)
         _check_bounds(spec, value, key)
     allowed = spec.allowed()
@@ -145,7 +301,7 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
         values = value if isinstance(value, list) else [value]
         for v in values:
             if v not in allowed:
-                raise ConfigError(f"config key '{key}': {v!r} is not one of {allowed}")
+                raise ConfigError(f"config key '{key}': {short_repr(v)} is not one of {allowed}")
     if spec.check is not None:
         message = spec.check(value)
         if message:
@@ -160,6 +316,8 @@ def _check_bounds(spec: Field, value: Any, key: str) -> None:
         raise ConfigError(f"config key '{key}': must be >= {spec.minimum}, got {value}")
     if spec.exclusive_minimum is not None and value <= spec.exclusive_minimum:
         raise ConfigError(f"config key '{key}': must be > {spec.exclusive_minimum}, got {value}")
+    if spec.maximum is not None and value > spec.maximum:
+        raise ConfigError(f"config key '{key}': must be <= {spec.maximum}, got {value}")
 
 
 def validate(schema: Mapping[str, Any], document: Any, prefix: str = "") -> dict[str, Any]:
@@ -173,11 +331,9 @@ def validate(schema: Mapping[str, Any], document: Any, prefix: str = "") -> dict
         document = {}
     if not isinstance(document, Mapping):
         raise ConfigError(f"config section '{where}': expected a mapping, got {_type_name(document)}")
-    unknown = sorted(set(document) - set(schema))
+    unknown = sorted((name for name in document if name not in schema), key=repr)  # keys of any type
     if unknown:
-        raise ConfigError(
-            f"config key '{prefix}{unknown[0]}': unknown; allowed keys in {where}: {sorted(schema)}"
-        )
+        raise ConfigError(f"config key '{prefix}{key_text(unknown[0])}': unknown; allowed keys in {where}: {sorted(schema)}")
     result: dict[str, Any] = {}
     for name, spec in schema.items():
         key = f"{prefix}{name}"

@@ -24,7 +24,7 @@ owners imposed instead of a partitioner run again, checks every rank's fingerpri
 dof values: the continuation is bit for bit the uninterrupted run (every part of a run is
 deterministic on a fixed rank count: the mesh partition, see
 :func:`particles.balance.create_reproducible_mesh`, and the direct solver, see
-:data:`convection.petsc_options.REPRODUCIBLE_LU`). If the mesh does not come back exactly (a
+:func:`convection.petsc_options.reproducible_lu`). If the mesh does not come back exactly (a
 fingerprint differs, or the checkpoint has none), and on another rank count, the mesh is rebuilt
 from its cells and partitioned afresh (each rank reads an equal block of the saved cells and
 vertices and hands them to ``create_mesh``; no rank reads all of them), the fields are matched dof

@@ -8,7 +8,7 @@ explicitly, at the same point on every rank.
 
 Each PDE solver lists its linear solvers as :class:`LinearSolver` entries (name, description,
 default options) built from the same pieces: :data:`MUMPS_LU` (direct; on several ranks
-:data:`REPRODUCIBLE_LU`, which gives the same bits in every run) and :func:`krylov_options`
+:func:`reproducible_lu`, which gives the same bits in every run) and :func:`krylov_options`
 (iterative: Krylov method, stopping rule, then the preconditioner).
 """
 
@@ -18,13 +18,13 @@ import itertools
 import weakref
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, ClassVar, Iterator, Mapping, Sequence
+from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 
 from petsc4py import PETSc
 
 __all__ = ["PetscSolver",
     "MUMPS_LU",
-    "REPRODUCIBLE_LU",
+    "reproducible_lu",
     "LinearSolver",
     "destroy_petsc_objects",
     "krylov_options",
@@ -37,16 +37,23 @@ MUMPS_LU: Mapping[str, Any] = MappingProxyType(
 )
 """Direct solve: one MUMPS LU factorisation, no Krylov iterations (read-only; copy with ``dict``)."""
 
-REPRODUCIBLE_LU: Mapping[str, Any] = MappingProxyType(
-    {"ksp_type": "preonly", "pc_type": "redundant", "redundant_pc_type": "lu",
-     "redundant_pc_factor_mat_solver_type": "mumps"}
-)
-"""Direct solve on several ranks that gives the same bits in every run: every rank factorises the
-whole system with sequential MUMPS (PETSc's ``redundant`` preconditioner gathers the matrix). A
-parallel MUMPS factorisation schedules its work dynamically, so two runs of the same system on the
-same ranks differ in the last bits (measured: from the first step of van Keken 1a on 2 ranks), and
-a resumed run could not continue bit for bit. Options of the inner solver take the ``redundant_``
-prefix (e.g. ``redundant_mat_mumps_icntl_14``). See the README's checkpoint section for its cost."""
+def reproducible_lu(ranks: int, /) -> dict[str, Any]:
+    """Direct solve on ``ranks`` ranks that gives the same bits in every run: PETSc's ``telescope``
+    preconditioner gathers the system on rank 0, which factorises it with sequential MUMPS, and
+    scatters the solution back.
+
+    A parallel MUMPS factorisation schedules its work dynamically, so two runs of the same system on
+    the same ranks differ in the last bits (measured: from the first step of van Keken 1a on 2 ranks,
+    also with METIS or AMF ordering, sequential analysis or ScaLAPACK off), and a resumed run could
+    not continue bit for bit. On van Keken 1a (17 000 unknowns, 2 ranks) this costs about 3 % of the
+    run against parallel MUMPS; ``redundant`` (every rank factorises the whole system) is as fast
+    but needs the factorisation's memory on every rank (benchmarks/scaling/direct_solver_sitting.sh).
+    Options of the inner solver take the ``telescope_`` prefix (e.g. ``telescope_mat_mumps_icntl_14``).
+    """
+    return {"ksp_type": "preonly", "pc_type": "telescope", "pc_telescope_reduction_factor": ranks,
+            "telescope_ksp_type": "preonly", "telescope_pc_type": "lu",
+            "telescope_pc_factor_mat_solver_type": "mumps"}
+
 
 
 def krylov_options(ksp_type: str, /, preconditioner: Mapping[str, Any], *, rtol: float, atol: float,
@@ -71,22 +78,21 @@ class LinearSolver:
         name: Lowercase name.
         description: One line for listings.
         options: Default PETSc options without the solver's prefix (read-only; copy with ``dict``).
-        parallel_options: The defaults on more than one rank, when they differ (None: ``options``).
+        parallel_options: The defaults on a given number of ranks (more than one), when they differ
+            from ``options`` (None: ``options``).
     """
 
     name: str
     description: str
     options: Mapping[str, Any]
-    parallel_options: Mapping[str, Any] | None = None
+    parallel_options: Callable[[int], Mapping[str, Any]] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
-        if self.parallel_options is not None:
-            object.__setattr__(self, "parallel_options", MappingProxyType(dict(self.parallel_options)))
 
     def options_with(self, overrides: Mapping[str, Any] | None = None, /, *, ranks: int = 1) -> dict[str, Any]:
         """The default options on ``ranks`` ranks updated by ``overrides`` (a new dict)."""
-        defaults = self.parallel_options if ranks > 1 and self.parallel_options is not None else self.options
+        defaults = self.parallel_options(ranks) if ranks > 1 and self.parallel_options is not None else self.options
         return {**defaults, **(overrides or {})}
 
 

@@ -61,7 +61,7 @@ from convection.buoyancy import SemiImplicitBuoyancy
 from convection.boundary import VelocityBC, boundary_names, has_rotation_null_space
 from convection.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
 from convection.petsc_options import (
-    MUMPS_LU, REPRODUCIBLE_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+    MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
 from convection.stokes_forms import StokesDiscretisation, StokesForms
 from convection.stokes_linear import StokesLinearSystem
@@ -124,8 +124,8 @@ def block_schur_options(velocity: dict[str, Any], /, *, rtol: float = 1e-7) -> d
 
 
 STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
-    LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: redundant, reproducible)",
-                 MUMPS_LU, REPRODUCIBLE_LU),
+    LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: gathered on rank 0, reproducible)",
+                 MUMPS_LU, reproducible_lu),
     LinearSolver(
         "iterative",
         "FGMRES + block-triangular Schur preconditioner: BoomerAMG (systems) on velocity, SOR on -M_p/eta",

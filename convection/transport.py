@@ -57,7 +57,7 @@ from convection.boundary import (
     temperature_dirichlet_bcs,
 )
 from convection.petsc_options import (
-    MUMPS_LU, REPRODUCIBLE_LU, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+    MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
 
 STABILISATIONS: dict[str, str] = {
@@ -73,7 +73,7 @@ TRANSPORT_SOLVERS: dict[str, LinearSolver] = linear_solvers(
         krylov_options("gmres", {"pc_type": "hypre", "pc_hypre_type": "boomeramg"}, rtol=1e-10, atol=1e-14,
                        max_it=1000),
     ),
-    LinearSolver("direct", "MUMPS LU (on several ranks: redundant, reproducible)", MUMPS_LU, REPRODUCIBLE_LU),
+    LinearSolver("direct", "MUMPS LU (on several ranks: gathered on rank 0, reproducible)", MUMPS_LU, reproducible_lu),
 )
 """Registry of linear solvers for the transport equation (lowercase name -> description and default
 PETSc options)."""

@@ -37,3 +37,22 @@ def test_linear_solvers_share_the_direct_setup_and_merge_overrides():
                      "pc_type": "hypre", "pc_hypre_type": "boomeramg", "ksp_monitor": None}
     assert STOKES_SOLVERS["iterative"].options["ksp_type"] == "fgmres"
     assert "ksp_monitor" not in TRANSPORT_SOLVERS["iterative"].options  # defaults stay unchanged
+
+
+def test_direct_solves_on_several_ranks_gather_on_one_rank():
+    """On several ranks the direct solvers factorise on rank 0 alone (reproducible; a parallel MUMPS
+    factorisation is not); one rank keeps the plain MUMPS LU; user options still win."""
+    from convection.petsc_options import MUMPS_LU, reproducible_lu
+    from convection.stokes import STOKES_SOLVERS
+    from convection.transport import TRANSPORT_SOLVERS
+
+    for registry in (STOKES_SOLVERS, TRANSPORT_SOLVERS):
+        direct = registry["direct"]
+        assert direct.options_with(ranks=1) == dict(MUMPS_LU)
+        for ranks in (2, 3):
+            options = direct.options_with(ranks=ranks)
+            assert options == reproducible_lu(ranks)
+            assert options["pc_type"] == "telescope" and options["pc_telescope_reduction_factor"] == ranks
+            assert options["telescope_pc_factor_mat_solver_type"] == "mumps"
+        assert direct.options_with({"pc_type": "lu"}, ranks=2)["pc_type"] == "lu"
+        assert registry["iterative"].options_with(ranks=2) == dict(registry["iterative"].options)

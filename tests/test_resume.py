@@ -2,7 +2,7 @@
 
 The runs are real CLI runs in subprocesses (``mpirun -n 2`` where it says so): a van Keken 1a
 setup on a small mesh with particles, adaptivity and (on 2 ranks) repartitioning, with the shipped
-solver (MUMPS; reproducible on several ranks, see :data:`convection.petsc_options.REPRODUCIBLE_LU`).
+solver (MUMPS; reproducible on several ranks, see :func:`convection.petsc_options.reproducible_lu`).
 Every shipped config that adapts or balances is killed and resumed in tests/test_resume_configs.py.
 """
 

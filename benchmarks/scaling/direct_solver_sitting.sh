@@ -3,10 +3,11 @@
 # the 1-minute load average before each run; wall time and Stokes solve time (max over ranks).
 #   old      the code before reproducible partitions and solves (git commit OLD, default c0922a9:
 #            SCOTCH partition, parallel MUMPS), in a temporary worktree
-#   new      this code (rcb partition; on 2 ranks the redundant MUMPS factorisation, the default)
+#   new      this code (rcb partition; on 2 ranks PETSc's telescope, the default: the system gathered
+#            on rank 0, one sequential MUMPS factorisation there, the solution scattered back)
 #   mumps    this code on 2 ranks with the parallel MUMPS factorisation (not reproducible)
-#   tele     this code on 2 ranks with PETSc's telescope: the system gathered on rank 0, one
-#            sequential MUMPS factorisation there (reproducible), the other rank waiting
+#   red      this code on 2 ranks with PETSc's redundant: every rank factorises the whole system
+#            with sequential MUMPS (reproducible too)
 # Usage: bash benchmarks/scaling/direct_solver_sitting.sh [ROUNDS]      (from the repository root)
 set -uo pipefail
 ROUNDS=${1:-3}
@@ -23,7 +24,7 @@ print("vrms %.10g cells %d  wall %.2f s  stokes_solve %.2f s" % (s["vrms"], s["c
 declare -A OPTS=(
   [new]="{}"
   [mumps]="{pc_type: lu, pc_factor_mat_solver_type: mumps}"
-  [tele]="{pc_type: telescope, pc_telescope_reduction_factor: 2, telescope_ksp_type: preonly, telescope_pc_type: lu, telescope_pc_factor_mat_solver_type: mumps}"
+  [red]="{pc_type: redundant, redundant_pc_type: lu, redundant_pc_factor_mat_solver_type: mumps}"
 )
 run() {  # run NAME RANKS TREE OPTIONS
   local name=$1 n=$2 tree=$3 opts=$4
@@ -41,6 +42,6 @@ for r in $(seq "$ROUNDS"); do
     run new "$n" "$here" "{}"
   done
   run mumps 2 "$here" "${OPTS[mumps]}"
-  run tele 2 "$here" "${OPTS[tele]}"
+  run red 2 "$here" "${OPTS[red]}"
 done
 git worktree remove --force "$old_tree"

@@ -45,9 +45,10 @@ def reproducible_lu(ranks: int, /) -> dict[str, Any]:
     A parallel MUMPS factorisation schedules its work dynamically, so two runs of the same system on
     the same ranks differ in the last bits (measured: from the first step of van Keken 1a on 2 ranks,
     also with METIS or AMF ordering, sequential analysis or ScaLAPACK off), and a resumed run could
-    not continue bit for bit. On van Keken 1a (17 000 unknowns, 2 ranks) this costs about 3 % of the
-    run against parallel MUMPS; ``redundant`` (every rank factorises the whole system) is as fast
-    but needs the factorisation's memory on every rank (benchmarks/scaling/direct_solver_sitting.sh).
+    not continue bit for bit. On van Keken 1a to t = 300 (17 000 unknowns, 2 ranks, best of three)
+    the run took 6.69 s against 6.30 s with parallel MUMPS (Stokes solve 3.5 s against 3.0 s);
+    ``redundant`` (every rank factorises the whole system) is as fast (6.64 s) but needs the
+    factorisation's memory on every rank (benchmarks/scaling/direct_solver_sitting.sh).
     Options of the inner solver take the ``telescope_`` prefix (e.g. ``telescope_mat_mumps_icntl_14``).
     """
     return {"ksp_type": "preonly", "pc_type": "telescope", "pc_telescope_reduction_factor": ranks,

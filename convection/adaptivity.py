@@ -35,10 +35,10 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
-from convection.balance import PARTITIONERS, MeshPiece, create_mesh_from_piece, mesh_piece, partition
-from particles.balance import duplicate_cells, redistribute
 from convection.transfer import PointEvaluator
-from particles.geometry import Candidates
+from fembase.distribute import MeshPiece, create_mesh_from_piece, duplicate_cells, mesh_piece, redistribute
+from fembase.geometry import Candidates
+from fembase.partition import PARTITIONERS, partition
 
 __all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "MeshRecipe",
            "kelly_indicator", "wanted_levels"]
@@ -284,14 +284,14 @@ class MeshHierarchy:
         """Redistribute the base mesh and ``mesh`` so ranks get equal loads ``cells + W particles``.
 
         Collective. Each base cell carries its descendants in ``mesh`` and their particles; the
-        base cells are partitioned by ``method`` (:data:`convection.balance.PARTITIONERS`) and
+        base cells are partitioned by ``method`` (:data:`fembase.partition.PARTITIONERS`) and
         every cell of ``mesh`` goes with its base cell, so later rebuilds (:meth:`rebuild`) keep
         each region on its rank.
 
         The partition decision runs on rank 0 with the base cells' midpoints, cell and particle
         counts (O(base cells), the coarse mesh) and the owner of every base cell is broadcast. The
         meshes are not gathered: every rank hands its own base cells and its own cells of ``mesh``
-        to ``create_mesh`` (:func:`convection.balance.create_mesh_from_piece`).
+        to ``create_mesh`` (:func:`fembase.distribute.create_mesh_from_piece`).
 
         Args:
             mesh: The current mesh, refined from the current base.
@@ -359,7 +359,7 @@ class MeshHierarchy:
         where three or more ranks meet (seen on 3 ranks: 2-20 duplicates per 8 x 8 mesh, none on 2);
         a facet then has three cells and is no interior facet any more, so jump terms (the
         refinement indicator) miss it and the result depends on the partition. Such a mesh is made
-        again from its owned cells on the same partition (:func:`particles.balance.redistribute`
+        again from its owned cells on the same partition (:func:`fembase.distribute.redistribute`
         with every cell kept on its rank), which builds a clean ghost layer."""
         mesh.topology.create_entities(1)
         if marked is None:

@@ -9,7 +9,7 @@ A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the
   made (``mesh/created_owners``, while the run still stands on it) and
   :class:`convection.adaptivity.MeshRecipe` (the refinement rounds since, or every rank's pieces
   handed to ``create_mesh`` at the latest repartition) — every rank's fingerprint of the base and of
-  the current mesh (:func:`particles.balance.mesh_fingerprint`), the mesh's cells (global vertex
+  the current mesh (:func:`fembase.distribute.mesh_fingerprint`), the mesh's cells (global vertex
   indices, the owned vertex coordinates and the base cell, for a restart on another rank count), and
   every Function with time history (``u``, ``p``, ``T^n``, ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``,
   advected or static material fractions): owned dof values with the owned dof coordinates;
@@ -23,7 +23,7 @@ Restoring on the rank count it was written on makes the mesh as the run made it,
 owners imposed instead of a partitioner run again, checks every rank's fingerprint, and copies the
 dof values: the continuation is bit for bit the uninterrupted run (every part of a run is
 deterministic on a fixed rank count: the mesh partition, see
-:func:`particles.balance.create_reproducible_mesh`, and the direct solver, see
+:func:`fembase.distribute.create_reproducible_mesh`, and the direct solver, see
 :func:`convection.petsc_options.reproducible_lu`). If the mesh does not come back exactly (a
 fingerprint differs, or the checkpoint has none), and on another rank count, the mesh is rebuilt
 from its cells and partitioned afresh (each rank reads an equal block of the saved cells and
@@ -55,12 +55,12 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.adaptivity import MeshHierarchy, MeshRecipe
-from convection.balance import MeshPiece, create_mesh_from_piece, mesh_piece
 from convection.model import Model
-from particles.balance import cell_owners_by_input, mesh_fingerprint
+from fembase.distribute import MeshPiece, create_mesh_from_piece, mesh_piece
+from fembase.distribute import cell_owners_by_input, mesh_fingerprint
+from fembase.files import H5Sink
 from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.manager import ParticleManager
-from particles.output import H5Sink
 from particles.properties import PropertyContext
 
 __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpointer", "SavedRun", "latest_checkpoint",
@@ -174,7 +174,7 @@ def _owned(f: dolfinx.fem.Function) -> tuple[npt.NDArray[np.float64], npt.NDArra
 
 
 def _write_piece(sink: H5Sink, name: str, piece: MeshPiece | None) -> None:
-    """Every rank's piece (:class:`convection.balance.MeshPiece`), concatenated in rank order, with
+    """Every rank's piece (:class:`fembase.distribute.MeshPiece`), concatenated in rank order, with
     the row counts per rank (the cells' global vertex indices stay valid: the vertex blocks are
     concatenated in the same order)."""
     flag = sink.comm.allreduce(int(piece is not None), op=MPI.MAX)
@@ -399,7 +399,7 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArr
     saved owner of every cell imposed (``make_base(owners)``, owners by input index on rank 0), or
     the saved base pieces of the latest repartition, then the saved refinement rounds or pieces
     (:class:`convection.adaptivity.MeshRecipe`). The result must have the saved fingerprint on every
-    rank (:func:`particles.balance.mesh_fingerprint`); otherwise, and on another rank count, the mesh
+    rank (:func:`fembase.distribute.mesh_fingerprint`); otherwise, and on another rank count, the mesh
     is rebuilt from the saved cells and partitioned afresh (each rank reads an equal block of the
     saved cells and vertices; no rank reads all; the base cells go to ranks in equal blocks of
     canonical index and every cell to the rank of its base cell), and the result says why in

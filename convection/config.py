@@ -276,7 +276,7 @@ SCHEMA: dict[str, Any] = {
         "threshold": Field("float", 1.2, minimum=1.0,
                            help="repartition when max/mean over ranks of the load (cells + W particles) exceeds this"),
         "particle_weight": Field("float", 0.01, minimum=0.0, help="W in the cell weight 1 + W n_particles(K)"),
-        "method": Field("str", "rcb", choices=_names("convection.balance", "PARTITIONERS"),
+        "method": Field("str", "rcb", choices=_names("fembase.partition", "PARTITIONERS"),
                         help="rcb: recursive bisection balancing cells and particles; morton: space-filling-curve blocks"),
     },
     "blowup": {

@@ -34,7 +34,7 @@ import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
-from particles.balance import create_reproducible_mesh
+from fembase.distribute import create_reproducible_mesh
 
 __all__ = ["BoxSpec", "MESH_GEOMETRIES", "MeshSpec", "ShellSpec", "cell_diameter", "cell_values", "cell_volumes",
            "create_box_mesh",
@@ -153,7 +153,7 @@ def mesh_spec_from_config(mesh_config: dict) -> MeshSpec:
 def create_mesh(comm: MPI.Comm, spec: MeshSpec, /, *, owners: npt.NDArray[np.int32] | None = None
                 ) -> dolfinx.mesh.Mesh:
     """Create the (coarse, base) mesh described by ``spec`` (collective) on a reproducible
-    partition (:func:`particles.balance.create_reproducible_mesh`: the same mesh, numbering and
+    partition (:func:`fembase.distribute.create_reproducible_mesh`: the same mesh, numbering and
     all, in every run on the same ranks); ``owners``: a partition to impose (owner rank per cell
     by input index, on rank 0), e.g. the one a checkpoint saved."""
     if isinstance(spec, ShellSpec):
@@ -287,7 +287,7 @@ def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> Callable[[
     For particles (:class:`particles.manager.ParticleManager`): a straight Runge-Kutta step along a
     curved free-slip surface ends slightly outside it. The curved cells' boundary is within
     ``margin = 2 s^2 / r_inner`` of the true circle/sphere (``s``: the cells' largest node deviation
-    from the straight-sided cell, :attr:`particles.geometry.CellGeometry.curvature_padding`;
+    from the straight-sided cell, :attr:`fembase.geometry.CellGeometry.curvature_padding`;
     parabola versus circle), so a confined point lies in a cell. Straight-sided cells (vertices on
     the circles/spheres) need no margin at the inner surface (the hole they leave is a polygon or
     polyhedron inscribed in the inner circle/sphere, so ``|x| >= r_inner`` is inside the mesh); at
@@ -298,7 +298,7 @@ def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> Callable[[
         lower = spec.inner_radius * (1.0 + 1e-12)
         upper = _outer_facet_distance(mesh, spec) * (1.0 - 1e-12)
     else:
-        from particles.geometry import CellGeometry
+        from fembase.geometry import CellGeometry
 
         padding = mesh.comm.allreduce(CellGeometry(mesh).curvature_padding, op=MPI.MAX)
         margin = 2.0 * padding**2 / spec.inner_radius + 1e-12 * spec.outer_radius

@@ -44,10 +44,10 @@ from convection.materials import material_index
 from convection.rebalance import Balancer, RankLoads
 from convection.stokes import StokesResult, StokesSolver
 from convection.timestep import cfl_timestep
-from convection.timing import Timers
 from convection.transfer import PointEvaluator, transfer_function
 from convection.transport import TransportSolver
-from particles.geometry import Candidates
+from fembase.geometry import Candidates
+from fembase.timing import Timers
 from particles.manager import ParticleManager
 from particles.properties import PropertyContext
 

@@ -28,7 +28,7 @@ import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
 
-from particles.output import atomic_write_text
+from fembase.files import atomic_write_text
 
 __all__ = ["FieldOutput"]
 

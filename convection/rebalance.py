@@ -2,7 +2,7 @@
 
 The work of a cell is about ``1 + W n_particles(K)``. :class:`Balancer` repartitions the mesh
 (:meth:`convection.adaptivity.MeshHierarchy.repartition`: the base mesh and the current mesh move
-together, with a partition method of :data:`convection.balance.PARTITIONERS`) with strategy
+together, with a partition method of :data:`fembase.partition.PARTITIONERS`) with strategy
 
 - ``every``: every ``every`` steps;
 - ``threshold``: every ``every`` steps, if max/mean over ranks of the load exceeds ``threshold``;
@@ -21,7 +21,7 @@ import numpy as np
 import dolfinx.mesh
 
 from convection.adaptivity import MeshHierarchy
-from convection.balance import PARTITIONERS
+from fembase.partition import PARTITIONERS
 from particles.swarm import Swarm
 
 __all__ = ["BALANCE_STRATEGIES", "Balancer", "RankLoads"]
@@ -77,7 +77,7 @@ class Balancer:
         every: Steps between repartitions (``every``) or checks (``threshold``).
         threshold: Load imbalance (max/mean) that triggers a repartition.
         particle_weight: W in the cell load ``1 + W n_particles``.
-        method: Partition method name in :data:`convection.balance.PARTITIONERS`.
+        method: Partition method name in :data:`fembase.partition.PARTITIONERS`.
     """
 
     def __init__(self, hierarchy: MeshHierarchy, /, *, strategy: str = "every", every: int = 10,

@@ -66,7 +66,7 @@ class RunSettings:
 
 @dataclass(frozen=True)
 class RunSummary:
-    """What a finished (or stopped) run reached; ``timings`` per phase (see :mod:`convection.timing`)."""
+    """What a finished (or stopped) run reached; ``timings`` per phase (see :mod:`fembase.timing`)."""
 
     steps: int
     time: float

@@ -57,15 +57,15 @@ from typing import Any, NamedTuple
 import dolfinx
 
 from convection.approximation import BoussinesqApproximation
-from convection.buoyancy import SemiImplicitBuoyancy
 from convection.boundary import VelocityBC, boundary_names, has_rotation_null_space
+from convection.buoyancy import SemiImplicitBuoyancy
 from convection.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
 from convection.petsc_options import (
     MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
 from convection.stokes_forms import StokesDiscretisation, StokesForms
 from convection.stokes_linear import StokesLinearSystem
-from convection import jit_cache
+from fembase import jit_cache
 
 jit_cache.install()  # forms and elements compiled once per process (see the module)
 

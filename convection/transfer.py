@@ -20,8 +20,8 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from particles.evaluation import Evaluator
-from particles.geometry import Candidates, CellGeometry, Located
+from fembase.evaluation import Evaluator
+from fembase.geometry import Candidates, CellGeometry, Located
 
 __all__ = ["PointEvaluator", "transfer_function"]
 
@@ -29,10 +29,10 @@ __all__ = ["PointEvaluator", "transfer_function"]
 class PointEvaluator:
     """Evaluate Functions on a fixed mesh at arbitrary points (collective for missing points).
 
-    Points are located by :class:`particles.geometry.CellGeometry` (bounding-box candidates tested
+    Points are located by :class:`fembase.geometry.CellGeometry` (bounding-box candidates tested
     by pull-back; among several containing cells the lowest local index) and Lagrange P1/P2
     values come from the particles' compiled evaluation kernel at the reference coordinates
-    found (:class:`particles.evaluation.Evaluator`), so the fields of one element on one target
+    found (:class:`fembase.evaluation.Evaluator`), so the fields of one element on one target
     mesh share one search.
 
     Args:

@@ -18,7 +18,7 @@ import numpy as np
 
 import dolfinx.mesh
 
-from particles.geometry import Candidates
+from fembase.geometry import Candidates
 from particles.migration import migrate
 from particles.swarm import Swarm
 
@@ -47,7 +47,7 @@ def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /, *,
         swarm: Particles on the old mesh (all in owned cells).
         mesh: The new mesh, covering the same domain.
         candidates: Cells of ``mesh`` to search first for each particle (see
-            :meth:`particles.geometry.CellGeometry.locate`); the others are found with the
+            :meth:`fembase.geometry.CellGeometry.locate`); the others are found with the
             bounding-box tree.
 
     Returns:

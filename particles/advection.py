@@ -42,9 +42,9 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
-from particles.evaluation import Evaluator
-from particles.migration import migrate
+from fembase.evaluation import Evaluator
 from particles.kernels import stage_combination
+from particles.migration import migrate
 from particles.registry import Registry
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate

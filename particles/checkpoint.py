@@ -1,7 +1,7 @@
 """Checkpoint and restart of a particle swarm (one parallel HDF5 file).
 
 :func:`save_checkpoint` writes, with every rank writing its slice (MPI-IO, see
-:class:`particles.output.H5Sink`), in the order the particles are stored:
+:class:`fembase.files.H5Sink`), in the order the particles are stored:
 
 - ``ids`` (N,) int64, ``x`` (N, gdim) float64, ``xref`` (N, tdim) float64;
 - ``cells`` (N,) int64: the GLOBAL index of each particle's cell;
@@ -39,8 +39,8 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
+from fembase.files import H5Sink
 from particles.migration import migrate
-from particles.output import H5Sink
 from particles.swarm import Swarm
 
 __all__ = ["FORMAT", "VERSION", "CheckpointError", "Restored", "load_checkpoint", "save_checkpoint"]

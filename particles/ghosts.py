@@ -31,7 +31,7 @@ from mpi4py import MPI
 import dolfinx.la
 import dolfinx.mesh
 
-from particles.geometry import unique_pairs
+from fembase.geometry import unique_pairs
 from particles.swarm import PropertyLayout, Swarm
 
 __all__ = ["GhostExchange", "GhostParticles", "exchange_ghosts", "ghost_exchange_for", "vertex_complete"]

@@ -46,10 +46,10 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.geometry import Candidates
 from particles.adaptivity import move_to_mesh
 from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
-from particles.geometry import Candidates
 from particles.interpolation import CellAverage, Interpolator, get_interpolator
 from particles.migration import migrate
 from particles.output import OutputRecord, ParticleWriter

@@ -32,7 +32,7 @@ from mpi4py import MPI
 import dolfinx.geometry
 import dolfinx.mesh
 
-from particles.generation._cells import OwnedLocation, locate_owned, owned_box, owned_cell_tree
+from fembase.geometry import OwnedLocation, locate_owned, owned_box
 from particles.kernels import pack_by_slot
 from particles.swarm import Swarm
 
@@ -118,7 +118,6 @@ class Migrator:
         self._slot_of_rank[self.neighbours] = np.arange(self.neighbours.shape[0])
         self._ghost_slots = self._slot_of_rank[self.ghost_owners]
         self._ghost_hints = np.ascontiguousarray(self.ghost_globals, dtype=np.int64).view(np.float64)
-        self._owned_tree: dolfinx.geometry.BoundingBoxTree | None = None
 
     def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
         box = owned_box(self.mesh)
@@ -288,13 +287,6 @@ class Migrator:
                 n_in += t.shape[0]
         return n_in
 
-    @property
-    def owned_tree(self) -> dolfinx.geometry.BoundingBoxTree:
-        """Bounding-box tree of this rank's owned cells, built on first use (for the fallback)."""
-        if self._owned_tree is None:
-            self._owned_tree = owned_cell_tree(self.mesh)
-        return self._owned_tree
-
     def _fallback(self, swarm: Swarm, rows: npt.NDArray[np.int64], ncols: int) -> tuple[int, int, int]:
         """Global search for the unlocated particles in ``rows`` (collective). Returns (offered,
         received, lost).
@@ -341,7 +333,7 @@ class Migrator:
         answers: dict[int, npt.NDArray[np.float64]] = {}
         for src in sorted(received):
             t, candidates = received[src]
-            loc = locate_owned(self.mesh, _positions(swarm, t), tree=self.owned_tree, geometry=swarm.geometry)
+            loc = locate_owned(self.mesh, _positions(swarm, t), geometry=swarm.geometry)
             sole = candidates == 1
             found = sole & (loc.cells >= 0)
             kept.append((t[found], loc.xref[found], loc.cells[found]))

@@ -13,14 +13,14 @@ cells with more than max"):
   same result on any number of ranks.
 - **Ids** of new particles are globally unique: ``max global id + 1`` plus an offset from an
   exclusive scan over ranks of the new-particle counts taken in the global order of cell keys
-  (:func:`particles.generation._ordering.key_order_offsets`), which makes them rank-count
+  (:func:`particles.generation.ordering.key_order_offsets`), which makes them rank-count
   independent as well.
 - **Properties** of new particles are set by a hook ``initialise(swarm, rows)`` (``rows``: int64
   rows of the new particles in the swarm after insertion). The hook is called on every rank, also
   with no rows, so it may be collective. The default, :func:`copy_nearest`, copies all property
   columns from the nearest pre-existing particle of the same cell (ties: smallest id); in a cell
   that had no particles, every column takes the empty-cell rule of
-  :mod:`particles.interpolation._fill` applied to the cell averages (outward averaging of
+  :mod:`particles.interpolation.fill` applied to the cell averages (outward averaging of
   neighbouring cells, across ranks).
 """
 
@@ -34,13 +34,13 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from particles.generation._base import first_free_id, insert_in_cells
-from particles.generation._maps import CellMaps
-from particles.generation._ordering import key_order_offsets
-from particles.generation._random import cell_streams, mix, uniforms
-from particles.generation._sampling import uniform_reference_points
+from fembase.streams import cell_streams, mix, uniforms
+from particles.generation.base import first_free_id, insert_in_cells
+from particles.generation.maps import CellMaps
+from particles.generation.ordering import key_order_offsets
+from particles.generation.sampling import uniform_reference_points
 from particles.ghosts import ghost_exchange_for
-from particles.interpolation._fill import fill_cells
+from particles.interpolation.fill import fill_cells
 from particles.swarm import Swarm
 
 __all__ = ["Initialise", "PopulationControl", "PopulationStats", "control_population", "copy_nearest"]
@@ -96,7 +96,7 @@ def copy_nearest(swarm: Swarm, rows: npt.NDArray[np.int64], /) -> None:
     """Default :data:`Initialise` hook: copy properties from the nearest old particle of the cell.
 
     New particles in cells without old particles get, per column, the filled cell average (the
-    empty-cell rule of :mod:`particles.interpolation._fill`). Collective.
+    empty-cell rule of :mod:`particles.interpolation.fill`). Collective.
     """
     rows = np.asarray(rows, dtype=np.int64)
     ncols = swarm.num_property_columns

@@ -30,7 +30,7 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
-from particles.geometry import CellGeometry
+from fembase.geometry import CellGeometry
 from particles.kernels import (
     DEAD, append_packed, count_buckets, gather_particles, rows_outside, scatter_particles, sort_destinations,
 )

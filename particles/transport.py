@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from particles.geometry import CellGeometry
+from fembase.geometry import CellGeometry
 from particles.kernels import DEAD, NEIGHBOUR, SKIPPED, STAYED, UNRESOLVED, relocate_affine_simplex
 from particles.swarm import Swarm
 

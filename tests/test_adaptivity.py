@@ -10,7 +10,7 @@ import dolfinx.mesh
 from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels
 from convection.mesh import BoxSpec, cell_volumes, create_box_mesh
 from convection.transfer import PointEvaluator, transfer_function
-from particles.geometry import CellGeometry
+from fembase.geometry import CellGeometry
 
 
 def _front(x):

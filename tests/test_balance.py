@@ -8,7 +8,8 @@ import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
-from convection.balance import PARTITIONERS, block_owners, morton_order, owner_partitioner, partition, rcb_owners
+from fembase.distribute import owner_partitioner
+from fembase.partition import PARTITIONERS, block_owners, morton_order, partition, rcb_owners
 
 
 def test_block_owners_balance_weights():

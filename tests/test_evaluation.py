@@ -7,8 +7,8 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from particles.evaluation import Evaluator, evaluate, evaluate_gradient, locate
-from particles.geometry import Candidates, CellGeometry
+from fembase.evaluation import Evaluator, evaluate, evaluate_gradient, locate
+from fembase.geometry import Candidates, CellGeometry
 
 
 def _poly(degree, x, shift=0.0):

@@ -8,6 +8,7 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
+from fembase.geometry import locate_owned, push_forward
 from particles import Swarm
 from particles.generation import (
     GENERATORS,
@@ -22,7 +23,6 @@ from particles.generation import (
     generate,
 )
 from particles.generation._allocation import exact_global_sum
-from particles.generation._cells import locate_owned, push_forward
 
 
 def _square(comm, n=8, cell_type=dolfinx.mesh.CellType.triangle):

@@ -9,7 +9,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from convection import jit_cache
+from fembase import jit_cache
 
 
 @pytest.fixture

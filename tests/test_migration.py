@@ -7,8 +7,8 @@ from mpi4py import MPI
 import dolfinx.geometry
 import dolfinx.mesh
 
+from fembase.geometry import cell_nodes, locate_owned, pull_back, push_forward
 from particles import Swarm
-from particles.generation._cells import cell_nodes, locate_owned, pull_back, push_forward
 from particles.migration import Migrator, migrate, migrator_for
 
 

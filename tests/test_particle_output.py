@@ -18,9 +18,10 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.files import H5Sink
 from particles import Swarm
 from particles.generation import generate
-from particles.output import H5Sink, ParticleWriter, write_mesh_fields
+from particles.output import ParticleWriter, write_mesh_fields
 
 N_PARTICLES = 400
 

@@ -4,10 +4,10 @@ import numpy as np
 
 from convection.adaptivity import MeshHierarchy
 from convection.mesh import BoxSpec, create_box_mesh
+from fembase.geometry import CellGeometry
 from particles import Swarm
 from particles.adaptivity import move_to_mesh
 from particles.generation import generate
-from particles.geometry import CellGeometry
 
 from _helpers import gathered
 

@@ -6,12 +6,11 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
-import convection.balance
-import particles.partition
+from fembase.distribute import cell_owners
+from fembase.evaluation import locate
+from fembase.partition import rcb_owners
 from particles import Swarm
-from particles.balance import cell_owners, rebalance
-from particles.evaluation import locate
-from particles.partition import rcb_owners
+from particles.balance import rebalance
 
 
 def _corner_swarm(mesh, n=6000, seed=3):
@@ -46,11 +45,6 @@ def _gathered(swarm):
 def _imbalance(comm, value):
     counts = np.array(comm.allgather(value), dtype=float)
     return counts.max() / counts.mean()
-
-
-def test_partition_code_is_shared_with_convection():
-    assert convection.balance.rcb_owners is particles.partition.rcb_owners
-    assert convection.balance.PARTITIONERS is particles.partition.PARTITIONERS
 
 
 def test_rcb_options_load_only_and_axes():

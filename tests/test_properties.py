@@ -12,9 +12,9 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from _helpers import swarm_at
+from fembase.evaluation import locate
 from particles import Swarm
 from particles.advection import Advector, ParticleODE
-from particles.evaluation import locate
 from particles.generation import RandomUniform, generate
 from particles.properties import (
     PROPERTIES,

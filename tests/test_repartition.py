@@ -10,7 +10,7 @@ import dolfinx.mesh
 import ufl
 
 from convection.adaptivity import MeshHierarchy
-from particles.balance import (
+from fembase.distribute import (
     create_partitioned_mesh, gather_cell_layout, mesh_piece, owner_partitioner, pull, redistribute,
 )
 

@@ -10,7 +10,7 @@ import dolfinx.mesh
 
 from convection.adaptivity import MeshHierarchy
 from convection.mesh import BoxSpec, ShellSpec, cell_volumes, create_mesh
-from particles.balance import cell_owners_by_input, duplicate_cells, mesh_fingerprint
+from fembase.distribute import cell_owners_by_input, duplicate_cells, mesh_fingerprint
 
 pytest.importorskip("gmsh")
 

@@ -14,12 +14,12 @@ pytest.importorskip("gmsh")
 
 from _helpers import gathered, swarm_at  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from fembase.geometry import locate_owned  # noqa: E402
+from fembase.geometry import CellGeometry  # noqa: E402
 from particles import Swarm  # noqa: E402
 from particles.advection import Advector  # noqa: E402
 from particles.generation import generate  # noqa: E402
 from particles.generation.metropolis_hastings import MetropolisHastings  # noqa: E402
-from particles.generation._cells import locate_owned  # noqa: E402
-from particles.geometry import CellGeometry  # noqa: E402
 
 RI, RO = 1.22, 2.22
 
@@ -125,7 +125,7 @@ def test_confinement_on_straight_cells_puts_points_in_cells(world, gdim, resolut
     """Straight-sided shells: confined points lie in the mesh (none in the inscribed hole, none outside
     the outer polygon/polyhedron), points already inside stay where they are, and the outer bound
     is within a sagitta of the circle/sphere."""
-    from particles.evaluation import locate
+    from fembase.evaluation import locate
     from convection.mesh import shell_confinement
 
     spec = ShellSpec(gdim, RI, RO, resolution=resolution, geometry_degree=1)

@@ -6,8 +6,8 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
+from fembase.evaluation import locate
 from particles import Swarm
-from particles.evaluation import locate
 from particles.transport import relocate
 
 

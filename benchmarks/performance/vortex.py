@@ -39,11 +39,11 @@ import dolfinx.fem
 import dolfinx.geometry
 import dolfinx.mesh
 
+from fembase.evaluation import locate
+from fembase.partition import PARTITIONERS
 from particles import Swarm
 from particles.advection import INTEGRATORS, Advector
 from particles.balance import rebalance
-from particles.evaluation import locate
-from particles.partition import PARTITIONERS
 
 DT = 0.002
 CENTRE = np.array([0.5, 0.75])

@@ -272,7 +272,7 @@ def serial_mesh() -> None:
     import ufl
     import dolfinx.mesh
 
-    from particles.balance import create_partitioned_mesh, gather_cell_layout
+    from fembase.distribute import create_partitioned_mesh, gather_cell_layout
 
     comm = MPI.COMM_WORLD
     for dim, n in ((2, 64), (2, 128), (2, 256), (3, 12), (3, 20), (3, 28)):

@@ -23,7 +23,7 @@ from mpi4py import MPI
 import dolfinx.mesh
 import ufl
 
-from particles.balance import create_partitioned_mesh, gather_cell_layout, redistribute
+from fembase.distribute import create_partitioned_mesh, gather_cell_layout, redistribute
 
 
 def _status(key: str) -> int:

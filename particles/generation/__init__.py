@@ -13,15 +13,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from particles.generation._base import Density, GenerationResult, Generator
+from particles.generation.base import Density, GenerationResult, Generator
 from particles.generation.box_lattice import BoxLattice
 from particles.generation.from_file import FromFile
 from particles.generation.metropolis_hastings import MetropolisHastings
 from particles.generation.random_density import RandomDensity, RandomUniform
 from particles.generation.reference_points import ReferencePoints
 from particles.generation.shell import Shell
-from particles.swarm import Swarm
 from particles.registry import Registry
+from particles.swarm import Swarm
 
 __all__ = [
     "GENERATORS",

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from particles.generation._base import GenerationResult, first_free_id
-from particles.generation._cells import locate_owned, owned_box
+from fembase.geometry import locate_owned, owned_box
+from particles.generation.base import GenerationResult, first_free_id
 from particles.swarm import Swarm
 
 __all__ = ["in_box", "insert_listed_points"]

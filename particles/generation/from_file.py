@@ -15,9 +15,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from particles.generation._base import GenerationResult
-from particles.generation._cells import owned_box
+from fembase.geometry import owned_box
 from particles.generation._listed import in_box, insert_listed_points
+from particles.generation.base import GenerationResult
 from particles.swarm import Swarm
 
 __all__ = ["FromFile"]

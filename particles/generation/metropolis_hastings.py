@@ -20,12 +20,12 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.streams import cell_streams, uniforms
 from particles.generation._allocation import allocate_counts
-from particles.generation._base import Density, GenerationResult, evaluate_density, first_free_id, insert_in_cells
-from particles.generation._maps import CellMaps
-from particles.generation._ordering import key_order_offsets
-from particles.generation._random import cell_streams, uniforms
-from particles.generation._sampling import cell_weights, uniform_reference_points
+from particles.generation.base import Density, GenerationResult, evaluate_density, first_free_id, insert_in_cells
+from particles.generation.maps import CellMaps
+from particles.generation.ordering import key_order_offsets
+from particles.generation.sampling import cell_weights, uniform_reference_points
 from particles.swarm import Swarm
 
 __all__ = ["MetropolisHastings"]

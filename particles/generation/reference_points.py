@@ -14,9 +14,9 @@ import basix
 import numpy as np
 import numpy.typing as npt
 
-from particles.generation._base import GenerationResult, first_free_id, insert_in_cells
-from particles.generation._maps import CellMaps
-from particles.generation._ordering import key_order_offsets
+from particles.generation.base import GenerationResult, first_free_id, insert_in_cells
+from particles.generation.maps import CellMaps
+from particles.generation.ordering import key_order_offsets
 from particles.swarm import Swarm
 
 __all__ = ["ReferencePoints"]

@@ -5,7 +5,7 @@ with a collective ``interpolate(swarm, property_name, target, /, *, component=No
 a scalar DOLFINx Function and returns :class:`InterpolationStats`. A property of size 1 is
 interpolated directly; for a multi-column property pass the column as ``component``.
 
-Empty cells never give NaN: see :mod:`particles.interpolation._fill` (outward averaging over
+Empty cells never give NaN: see :mod:`particles.interpolation.fill` (outward averaging over
 vertex-neighbour cells, across ranks through the vertex ghost layer of :mod:`particles.ghosts`,
 which is built from vertex sharing and so works with DOLFINx 0.5's ``GhostMode.shared_facet`` and
 ``none``; 0.5 refuses ``shared_vertex``). All interpolators give the same field on any number of
@@ -24,8 +24,8 @@ from particles.interpolation.distance_weighted import DistanceWeighted
 from particles.interpolation.least_squares import LeastSquares
 from particles.interpolation.nearest import Nearest
 from particles.interpolation.shape_function import ShapeFunction
-from particles.swarm import Swarm
 from particles.registry import Registry
+from particles.swarm import Swarm
 
 __all__ = [
     "INTERPOLATORS",

@@ -14,7 +14,7 @@ import dolfinx.fem
 import dolfinx.la
 
 from particles.ghosts import GhostExchange, ghost_exchange_for
-from particles.interpolation._fill import fill_cells
+from particles.interpolation.fill import fill_cells
 from particles.swarm import Swarm
 
 __all__ = [
@@ -179,7 +179,7 @@ def write_result(swarm: Swarm, space: TargetSpace, target: dolfinx.fem.Function,
     Dof values are ``num / den`` where ``den > 0``. For continuous targets ``num`` and ``den`` hold
     local (owned + ghost dof) partial sums over this rank's cells and are summed over ranks by a
     reverse scatter first. Dofs with ``den == 0`` take the filled cell values (see
-    :func:`particles.interpolation._fill.fill_cells`): in a DG target the value of their cell, in
+    :func:`particles.interpolation.fill.fill_cells`): in a DG target the value of their cell, in
     a continuous one the average over the cells around the dof.
 
     Args:

@@ -7,7 +7,7 @@ ASPECT's "cell average" interpolator. For cell ``K`` with particles ``p = 1..n_K
 - harmonic: ``u_K = n_K / sum_p (1 / v_p)`` (values must be > 0), the usual viscosity average.
 
 Every dof of ``K`` gets ``u_K`` (a DG0 target is the intended use). Empty cells follow the
-empty-cell rule of :mod:`particles.interpolation._fill` (arithmetic mean of neighbours' averages).
+empty-cell rule of :mod:`particles.interpolation.fill` (arithmetic mean of neighbours' averages).
 """
 
 from __future__ import annotations

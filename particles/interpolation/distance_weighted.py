@@ -12,7 +12,7 @@ dominates and ``u_d`` is its value to round-off. The reach is:
 - continuous targets (P1, any Lagrange degree): the particles of every cell containing the dof,
   summed over ranks by a reverse scatter (``use_neighbours`` is not accepted).
 
-Dofs with nothing in reach follow the empty-cell rule of :mod:`particles.interpolation._fill`.
+Dofs with nothing in reach follow the empty-cell rule of :mod:`particles.interpolation.fill`.
 """
 
 from __future__ import annotations

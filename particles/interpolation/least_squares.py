@@ -13,7 +13,7 @@ Fallbacks, in order, for a cell whose own particles do not determine a linear fi
    cells, including other ranks' cells through the ghost layer of :mod:`particles.ghosts`;
 2. the constant average of the cell's own particles, or, if it has none, of the particles of its
    neighbourhood (``use_neighbours=True``);
-3. nothing in reach: the empty-cell rule of :mod:`particles.interpolation._fill`.
+3. nothing in reach: the empty-cell rule of :mod:`particles.interpolation.fill`.
 
 Limiter (``limit=True``): the fitted values are kept within ``[min, max]`` of the particle values
 used in the fit by clipping the value at ``x_K`` into that range and scaling the slope by the

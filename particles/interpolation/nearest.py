@@ -3,7 +3,7 @@
 For a DG0 target the dof point is the cell midpoint; for DG_k the Lagrange points of the cell.
 Ties (equal distances) go to the smallest particle id, so the result does not depend on the
 storage order. Only discontinuous targets (a continuous dof has no single cell). Empty cells follow
-the empty-cell rule of :mod:`particles.interpolation._fill`.
+the empty-cell rule of :mod:`particles.interpolation.fill`.
 """
 
 from __future__ import annotations

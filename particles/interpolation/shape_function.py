@@ -12,7 +12,7 @@ Exactness: constants are reproduced exactly. A linear field ``f`` gives
 ``u_i = f(xbar_i)`` at the phi_i-weighted particle centroid ``xbar_i = sum phi_i x_p / sum phi_i``,
 so ``u_i = f(x_i)`` exactly where that centroid is the dof point (e.g. interior vertices with a
 point-symmetric patch and the same symmetric reference points in every cell), not in general.
-Dofs with zero total weight follow the empty-cell rule of :mod:`particles.interpolation._fill`.
+Dofs with zero total weight follow the empty-cell rule of :mod:`particles.interpolation.fill`.
 """
 
 from __future__ import annotations

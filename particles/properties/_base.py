@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
-from particles.evaluation import Evaluator
+from fembase.evaluation import Evaluator
 from particles.swarm import Swarm
 
 __all__ = [

@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from particles.generation._maps import CellMaps
+from particles.generation.maps import CellMaps
 from particles.swarm import Swarm
 
 __all__ = ["Density", "GenerationResult", "Generator", "evaluate_density", "first_free_id", "insert_in_cells"]

@@ -8,12 +8,12 @@ contracted,
     grad u(x_p) = sum_i u_{dofs(K_p, i)} (d phi_i / dX)(X_p) K(X_p),
 
 with ``K = dX/dx`` the (pseudo-)inverse Jacobian of the cell map. Lagrange P1/P2 on simplices use
-a compiled kernel (:func:`particles.kernels.evaluate_simplex_p12`); everything else the vectorised
+a compiled kernel (:func:`fembase.kernels.evaluate_simplex_p12`); everything else the vectorised
 basix path. DOLFINx permutes the dofmap of Lagrange elements so that no dof transformation is
 needed (``V.element.needs_dof_transformations`` is False); elements that would need one are
 rejected.
 
-:func:`locate` (bounding-box search + pull-back) is re-exported from :mod:`particles.geometry`.
+:func:`locate` (bounding-box search + pull-back) is re-exported from :mod:`fembase.geometry`.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
-from particles.geometry import CellGeometry, Located, locate
-from particles.kernels import evaluate_simplex_p12
+from fembase.geometry import CellGeometry, Located, locate
+from fembase.kernels import evaluate_simplex_p12
 
 __all__ = ["Evaluator", "Located", "evaluate", "evaluate_gradient", "locate"]
 

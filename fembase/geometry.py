@@ -34,9 +34,10 @@ import numpy.typing as npt
 import dolfinx.geometry
 import dolfinx.mesh
 
-from particles import kernels
+from fembase import kernels
 
-__all__ = ["Candidates", "CellGeometry", "Located", "cell_geometry", "locate"]
+__all__ = ["Candidates", "CellGeometry", "Located", "OwnedLocation", "cell_geometry", "cell_nodes", "geometry_dofmap",
+           "is_affine_simplex", "locate", "locate_owned", "owned_box", "pull_back", "push_forward", "unique_pairs"]
 
 _BASIX_CELL = {
     dolfinx.mesh.CellType.interval: basix.CellType.interval,
@@ -451,3 +452,114 @@ def locate(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike, /, *, geometry: CellG
     """
     geom = geometry if geometry is not None else CellGeometry(mesh)
     return geom.locate(points)
+
+
+# ---------------------------------------------------------------------- owned cells
+class OwnedLocation(NamedTuple):
+    """Result of :func:`locate_owned`.
+
+    Attributes:
+        cells: Owned local cell containing each point, -1 if none, shape=(m,), int32.
+        xref: Reference coordinates in that cell (NaN where not found), shape=(m, tdim), float64.
+    """
+
+    cells: npt.NDArray[np.int32]
+    xref: npt.NDArray[np.float64]
+
+
+def is_affine_simplex(mesh: dolfinx.mesh.Mesh) -> bool:
+    """True if the cells are simplices with a degree-1 coordinate map."""
+    return mesh.topology.cell_type in _SIMPLICES and mesh.geometry.cmap.degree == 1
+
+
+def geometry_dofmap(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.int32]:
+    """Geometry node indices of every local cell, shape=(num_local_cells, num_nodes), int32."""
+    dofmap = mesh.geometry.dofmap
+    return dofmap.array.reshape(-1, mesh.geometry.cmap.create_dof_layout().num_dofs)
+
+
+def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:
+    """Bounding box of this rank's owned cells, shape=(2, gdim) (lower > upper if none)."""
+    gdim = mesh.geometry.dim
+    box = np.empty((2, gdim))
+    box[0], box[1] = np.inf, -np.inf
+    num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    if num_owned:
+        x = mesh.geometry.x[np.unique(geometry_dofmap(mesh)[:num_owned]), :gdim]
+        box[0], box[1] = x.min(axis=0), x.max(axis=0)
+        if mesh.geometry.cmap.degree > 1:
+            # A curved cell bulges beyond the box of its nodes (an arc between two boundary
+            # nodes passes outside their coordinate range): pad by the largest bulge.
+            pad = 1.01 * CellGeometry(mesh).curvature_padding
+            box[0] -= pad
+            box[1] += pad
+    return box
+
+
+def cell_nodes(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32]) -> npt.NDArray[np.float64]:
+    """Geometry node coordinates of ``cells`` in DOLFINx order, shape=(m, num_nodes, gdim), float64."""
+    gdim = mesh.geometry.dim
+    dofmap = geometry_dofmap(mesh)
+    return mesh.geometry.x[dofmap[np.asarray(cells, dtype=np.int32)]][:, :, :gdim]
+
+
+def push_forward(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], xref: npt.NDArray[np.float64]
+                 ) -> npt.NDArray[np.float64]:
+    """Physical points of reference points ``xref`` (shape=(m, tdim)) in ``cells``; shape=(m, gdim)."""
+    nodes = cell_nodes(mesh, cells)
+    if is_affine_simplex(mesh):
+        jac = nodes[:, 1:, :] - nodes[:, :1, :]
+        return nodes[:, 0, :] + np.einsum("mi,mig->mg", xref, jac)
+    cmap = mesh.geometry.cmap
+    out = np.empty((xref.shape[0], mesh.geometry.dim))
+    for i in range(xref.shape[0]):
+        out[i] = cmap.push_forward(xref[i : i + 1], nodes[i])[0]
+    return out
+
+
+def pull_back(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64], /, *,
+              geometry: CellGeometry | None = None) -> npt.NDArray[np.float64]:
+    """Reference coordinates of physical points ``x`` (shape=(m, gdim)) in ``cells``; shape=(m, tdim).
+
+    Affine simplices invert the map of each given cell (no data of the other cells needed);
+    other cells go through :meth:`CellGeometry.pull_back` (of ``geometry``, built if omitted)."""
+    tdim = mesh.topology.dim
+    m = x.shape[0]
+    if m == 0:
+        return np.empty((0, tdim))
+    if not is_affine_simplex(mesh):
+        return (geometry if geometry is not None else CellGeometry(mesh)).pull_back(cells, x)
+    nodes = cell_nodes(mesh, cells)
+    jac = np.swapaxes(nodes[:, 1:, :] - nodes[:, :1, :], 1, 2)
+    rhs = x - nodes[:, 0, :]
+    if tdim == mesh.geometry.dim:
+        return np.linalg.solve(jac, rhs[:, :, None])[:, :, 0]
+    return np.stack([np.linalg.lstsq(jac[i], rhs[i], rcond=None)[0] for i in range(m)])
+
+
+def locate_owned(mesh: dolfinx.mesh.Mesh, x: npt.ArrayLike, /, *, geometry: CellGeometry | None = None
+                 ) -> OwnedLocation:
+    """Find, for each point, an owned cell of this rank that contains it (not collective):
+    :meth:`CellGeometry.locate` restricted to the owned cells. A point on a face shared by several
+    owned cells gets the lowest local cell index.
+
+    Args:
+        mesh: The mesh.
+        x: Points, shape=(m, gdim), float64.
+        geometry: The mesh's :class:`CellGeometry`, to reuse (built for this call if omitted).
+
+    Returns:
+        The cells (-1 where no owned cell contains the point) and reference coordinates (NaN there).
+    """
+    gdim, tdim = mesh.geometry.dim, mesh.topology.dim
+    x = np.asarray(x, dtype=np.float64).reshape(-1, gdim)
+    m = x.shape[0]
+    cells = np.full(m, -1, dtype=np.int32)
+    xref = np.full((m, tdim), np.nan)
+    if m == 0 or mesh.topology.index_map(tdim).size_local == 0:
+        return OwnedLocation(cells, xref)
+    found = (geometry if geometry is not None else CellGeometry(mesh)).locate(x, owned_only=True)
+    hit = found.cells >= 0
+    cells[hit] = found.cells[hit]
+    xref[hit] = found.xref[hit]
+    return OwnedLocation(cells, xref)

@@ -15,7 +15,7 @@ import numpy.typing as npt
 
 import dolfinx.mesh
 
-from particles.generation._cells import cell_nodes, is_affine_simplex, pull_back
+from fembase.geometry import cell_nodes, is_affine_simplex, pull_back
 
 __all__ = ["CellMaps"]
 

@@ -6,8 +6,8 @@ import basix
 import numpy as np
 import numpy.typing as npt
 
-from particles.generation._base import Density, evaluate_density
-from particles.generation._maps import CellMaps
+from particles.generation.base import Density, evaluate_density
+from particles.generation.maps import CellMaps
 
 __all__ = ["cell_weights", "uniform_reference_points"]
 

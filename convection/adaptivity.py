@@ -36,7 +36,8 @@ import dolfinx.mesh
 import ufl
 
 from convection.transfer import PointEvaluator
-from fembase.distribute import MeshPiece, create_mesh_from_piece, duplicate_cells, mesh_piece, redistribute
+from fembase.distribute import MeshPiece, create_mesh_from_piece, mesh_piece, refine_on_ranks
+from fembase.dolfinx_compat import SCATTER_ADD, cell_dofmap, function_space, geometry_dofmap, is_discontinuous
 from fembase.geometry import Candidates
 from fembase.partition import PARTITIONERS, partition
 
@@ -77,20 +78,19 @@ def kelly_indicator(fields: Sequence[dolfinx.fem.Function], /) -> npt.NDArray[np
     mesh = fields[0].function_space.mesh
     tdim = mesh.topology.dim
     num_owned = mesh.topology.index_map(tdim).size_local
-    V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    V0 = function_space(mesh, "DG", 0)
     w = ufl.TestFunction(V0)
     h = ufl.CellDiameter(mesh)
     n = ufl.FacetNormal(mesh)
     combined = np.zeros(num_owned)
     for f in fields:
-        family = f.function_space.ufl_element().family()
-        if family in ("Discontinuous Lagrange", "DG", "DQ"):
+        if is_discontinuous(f.function_space):
             integrand = ufl.avg(h) ** (1 - tdim) * ufl.jump(f) ** 2
         else:
             integrand = ufl.avg(h) * ufl.jump(ufl.grad(f), n) ** 2
         vec = dolfinx.fem.assemble_vector(dolfinx.fem.form(integrand * ufl.avg(w) * ufl.dS))
-        vec.scatter_reverse(dolfinx.la.ScatterMode.add)
-        eta = np.sqrt(np.maximum(vec.array[V0.dofmap.list.array.reshape(-1)[:num_owned]], 0.0))
+        vec.scatter_reverse(SCATTER_ADD)
+        eta = np.sqrt(np.maximum(vec.array[cell_dofmap(V0).reshape(-1)[:num_owned]], 0.0))
         scale = mesh.comm.allreduce(float(eta.max(initial=0.0)), op=MPI.MAX)
         if scale > 0.0:
             combined = np.maximum(combined, eta / scale)
@@ -151,7 +151,7 @@ def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int) -> npt.NDArray[np.
     """Volumes (areas in 2D) of the first ``num_cells`` local cells of an affine simplex mesh,
     shape=(num_cells,), from the vertex coordinates (no form to compile for every new mesh)."""
     tdim, gdim = mesh.topology.dim, mesh.geometry.dim
-    dofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[:num_cells]
+    dofs = geometry_dofmap(mesh)[:num_cells]
     x = mesh.geometry.x[dofs][:, :, :gdim]
     edges = x[:, 1:, :] - x[:, :1, :]  # shape=(num_cells, tdim, gdim)
     if tdim == gdim:
@@ -162,12 +162,12 @@ def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int) -> npt.NDArray[np.
 def _gather_midpoints(base: dolfinx.mesh.Mesh, canonical: npt.NDArray[np.int64]) -> npt.NDArray[np.float64] | None:
     """Midpoints of all base cells by canonical index on rank 0 (None elsewhere; collective): the
     input of the partition decision, gdim numbers per base cell."""
-    tdim, gdim = base.topology.dim, base.geometry.dim
+    gdim = base.geometry.dim
     num_owned = canonical.shape[0]
     # The mean of the vertex coordinates taken in a fixed (lexicographic) order of the vertices, so
     # the bits do not depend on the order a mesh lists them in (a replayed base may list them
     # otherwise than the base the uninterrupted run gathered them from).
-    dofs = base.geometry.dofmap.array.reshape(-1, tdim + 1)[:num_owned]
+    dofs = geometry_dofmap(base)[:num_owned]
     corners = base.geometry.x[dofs][:, :, :gdim]
     order = np.lexsort(corners.transpose(2, 0, 1)[::-1], axis=-1)  # per cell, by x then y (then z)
     midpoints = np.take_along_axis(corners, order[:, :, None], axis=1).mean(axis=1)
@@ -184,9 +184,9 @@ def _gather_midpoints(base: dolfinx.mesh.Mesh, canonical: npt.NDArray[np.int64])
 
 def _with_ghost_values(mesh: dolfinx.mesh.Mesh, owned_values: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
     """Per-cell integers of the owned cells extended to the ghost cells (collective)."""
-    V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    V0 = function_space(mesh, "DG", 0)
     f = dolfinx.fem.Function(V0)
-    dofs = V0.dofmap.list.array.reshape(-1)
+    dofs = cell_dofmap(V0).reshape(-1)
     num_owned = owned_values.shape[0]
     f.x.array[dofs[:num_owned]] = owned_values
     f.x.scatter_forward()
@@ -353,24 +353,9 @@ class MeshHierarchy:
 
     def _refine(self, mesh: dolfinx.mesh.Mesh, marked: npt.NDArray[np.int32] | None) -> dolfinx.mesh.Mesh:
         """One refinement round: the marked local cells (None: every cell), each new cell on the
-        rank of its parent (collective).
-
-        DOLFINx 0.5's refinement without redistribution can give a rank the same ghost cell twice
-        where three or more ranks meet (seen on 3 ranks: 2-20 duplicates per 8 x 8 mesh, none on 2);
-        a facet then has three cells and is no interior facet any more, so jump terms (the
-        refinement indicator) miss it and the result depends on the partition. Such a mesh is made
-        again from its owned cells on the same partition (:func:`fembase.distribute.redistribute`
-        with every cell kept on its rank), which builds a clean ghost layer."""
-        mesh.topology.create_entities(1)
-        if marked is None:
-            refined = dolfinx.mesh.refine(mesh, redistribute=False)
-        else:
-            edges = dolfinx.mesh.compute_incident_entities(mesh, marked, self.tdim, 1)
-            refined = dolfinx.mesh.refine(mesh, edges, redistribute=False)
-        if refined.comm.size > 2 and refined.comm.allreduce(duplicate_cells(refined), op=MPI.SUM):
-            num_owned = refined.topology.index_map(self.tdim).size_local
-            refined = redistribute(refined, np.full(num_owned, refined.comm.rank, dtype=np.int32))
-        return refined
+        rank of its parent, with a facet ghost layer (collective;
+        :func:`fembase.distribute.refine_on_ranks`)."""
+        return refine_on_ranks(mesh, marked)
 
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
         """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""

@@ -28,6 +28,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.mesh import cell_diameter
+from fembase.dolfinx_compat import DirichletBC
 
 SIDES_2D: tuple[str, ...] = ("left", "right", "bottom", "top")
 SIDES_3D: tuple[str, ...] = ("left", "right", "bottom", "top", "front", "back")
@@ -290,7 +291,7 @@ def side_tag(side: str, gdim: int) -> int:
 
 def velocity_dirichlet_bcs(
     V: dolfinx.fem.FunctionSpace, bcs: dict[str, VelocityBC]
-) -> list[dolfinx.fem.DirichletBCMetaClass]:
+) -> list[DirichletBC]:
     """DOLFINx Dirichlet conditions on the vector space ``V`` for the given side conditions.
 
     On a box, free slip fixes the normal component (the sub-space along the side's axis) to zero;
@@ -431,7 +432,7 @@ def nitsche_free_slip(mesh: dolfinx.mesh.Mesh, names: Iterable[str], u: Any, p: 
 
 def temperature_dirichlet_bcs(
     V: dolfinx.fem.FunctionSpace, bcs: dict[str, TemperatureBC]
-) -> list[dolfinx.fem.DirichletBCMetaClass]:
+) -> list[DirichletBC]:
     """DOLFINx Dirichlet conditions on the scalar space ``V``; insulating sides get none.
     Collective."""
     gdim = V.mesh.geometry.dim

@@ -44,17 +44,14 @@ import ufl
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation, fractions
+from fembase.dolfinx_compat import function_space, is_discontinuous
 
 
 def _is_discontinuous(expr: Any) -> bool:
     """True when a UFL expression depends on a coefficient of a discontinuous (or "Real") space."""
     if isinstance(expr, (int, float)):
         return False
-    for coefficient in ufl.algorithms.extract_coefficients(expr):
-        family = coefficient.ufl_element().family()
-        if family not in ("Lagrange", "P", "Q"):
-            return True
-    return False
+    return any(is_discontinuous(c.ufl_element()) for c in ufl.algorithms.extract_coefficients(expr))
 
 
 class LumpedProjection:
@@ -69,7 +66,7 @@ class LumpedProjection:
     """
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, expr: Any) -> None:
-        space = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1))
+        space = function_space(mesh, "Lagrange", 1)
         self.function = dolfinx.fem.Function(space, name="projection")
         phi = ufl.TestFunction(space)
         self._rhs = dolfinx.fem.form(ufl.inner(expr, phi) * ufl.dx)

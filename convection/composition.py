@@ -26,6 +26,7 @@ import dolfinx.mesh
 from convection.approximation import BoussinesqApproximation
 from convection.materials import Materials
 from convection.transport import TransportSolver
+from fembase.dolfinx_compat import function_space
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
@@ -55,7 +56,7 @@ class CompositionSource(Protocol):
 
 def composition_space(mesh: dolfinx.mesh.Mesh, degree: int, /) -> dolfinx.fem.FunctionSpace:
     """DG0 for degree 0, else continuous Lagrange of that degree."""
-    return dolfinx.fem.FunctionSpace(mesh, ("DG", 0) if degree == 0 else ("Lagrange", degree))
+    return function_space(mesh, "DG", 0) if degree == 0 else function_space(mesh, "Lagrange", degree)
 
 
 class StaticComposition:

@@ -57,6 +57,7 @@ from convection.run import BlowUp, Resume, RunSettings, RunSummary, run
 from convection.run_folder import RunFolderLock
 from convection.stokes import StokesSolver
 from convection.transport import TransportSolver
+from fembase.dolfinx_compat import function_space, petsc_vector
 from particles.manager import ParticleManager
 from particles.properties import PropertyContext
 
@@ -125,10 +126,10 @@ def _initial_fields(config: dict[str, Any], materials: Materials,
     initial_T = Expression(config["initial"]["temperature"], constants=expression_constants(config), gdim=gdim)
 
     def fields_on(mesh: dolfinx.mesh.Mesh) -> list:
-        V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", config["energy"]["degree"]))
+        V = function_space(mesh, "Lagrange", config["energy"]["degree"])
         T = dolfinx.fem.Function(V)
         T.interpolate(initial_T)
-        dolfinx.fem.petsc.set_bc(T.vector, temperature_dirichlet_bcs(V, temperature_bcs))
+        dolfinx.fem.petsc.set_bc(petsc_vector(T), temperature_dirichlet_bcs(V, temperature_bcs))
         T.x.scatter_forward()
         fields = [T] if "temperature" in acfg["fields"] else []
         if "composition" in acfg["fields"] and len(materials):

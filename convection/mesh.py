@@ -35,6 +35,7 @@ import dolfinx.mesh
 import ufl
 
 from fembase.distribute import create_reproducible_mesh
+from fembase.dolfinx_compat import cell_dofmap, entities_to_geometry, function_space, geometry_dofmap
 
 __all__ = ["BoxSpec", "MESH_GEOMETRIES", "MeshSpec", "ShellSpec", "cell_diameter", "cell_values", "cell_volumes",
            "create_box_mesh",
@@ -246,11 +247,11 @@ def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray
 
 def cell_values(mesh: dolfinx.mesh.Mesh, integrand: ufl.core.expr.Expr, /) -> npt.NDArray[np.float64]:
     """Integral of ``integrand`` over every local cell (owned and ghost), shape=(num_local_cells,)."""
-    V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    V0 = function_space(mesh, "DG", 0)
     w = ufl.TestFunction(V0)
     vec = dolfinx.fem.assemble_vector(dolfinx.fem.form(integrand * w * ufl.dx))
     vec.scatter_forward()
-    return vec.array[V0.dofmap.list.array.reshape(-1)].copy()
+    return vec.array[cell_dofmap(V0).reshape(-1)].copy()
 
 
 def cell_volumes(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.float64]:
@@ -264,19 +265,18 @@ def cell_diameter(mesh: dolfinx.mesh.Mesh, /) -> ufl.core.expr.Expr:
     Not collective (ghost cells are computed directly)."""
     if mesh.geometry.cmap.degree == 1:
         return ufl.CellDiameter(mesh)
-    V0 = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    V0 = function_space(mesh, "DG", 0)
     tdim = mesh.topology.dim
     num_cells = mesh.topology.index_map(tdim).size_local + mesh.topology.index_map(tdim).num_ghosts
     num_vertices = dolfinx.cpp.mesh.cell_num_vertices(mesh.topology.cell_type)
-    dofmap = mesh.geometry.dofmap
-    nodes = dofmap.array.reshape(-1, dofmap.offsets[1] - dofmap.offsets[0])[:num_cells, :num_vertices]
+    nodes = geometry_dofmap(mesh)[:num_cells, :num_vertices]
     x = mesh.geometry.x[nodes]
     h = np.zeros(num_cells)
     for i in range(num_vertices):
         for j in range(i + 1, num_vertices):
             h = np.maximum(h, np.linalg.norm(x[:, i] - x[:, j], axis=1))
     f = dolfinx.fem.Function(V0, name="cell_diameter")
-    f.x.array[V0.dofmap.list.array.reshape(-1)[:num_cells]] = h
+    f.x.array[cell_dofmap(V0).reshape(-1)[:num_cells]] = h
     return f
 
 
@@ -329,8 +329,7 @@ def _outer_facet_distance(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> float:
     facets = dolfinx.mesh.locate_entities_boundary(mesh, tdim - 1, on_outer)
     local = spec.outer_radius
     if facets.size:
-        cpp_mesh = getattr(mesh, "_mesh", mesh)  # DOLFINx 0.5 (Debian) wraps the C++ mesh
-        nodes = dolfinx.cpp.mesh.entities_to_geometry(cpp_mesh, tdim - 1, facets, False)
+        nodes = entities_to_geometry(mesh, tdim - 1, facets)
         x = mesh.geometry.x[nodes][:, :, :gdim]
         if gdim == 2:
             normal = np.stack([x[:, 1, 1] - x[:, 0, 1], x[:, 0, 0] - x[:, 1, 0]], axis=1)

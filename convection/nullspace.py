@@ -24,11 +24,12 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.boundary import VelocityBC, box_bounds, is_shell
+from fembase.dolfinx_compat import DirichletBC
 
 __all__ = ["PressureMean", "RigidRotations", "constant_pressure_null_space", "pressure_pin", "rigid_body_modes"]
 
 
-def pressure_pin(Q: dolfinx.fem.FunctionSpace, bcs: dict[str, VelocityBC], /) -> dolfinx.fem.DirichletBCMetaClass:
+def pressure_pin(Q: dolfinx.fem.FunctionSpace, bcs: dict[str, VelocityBC], /) -> DirichletBC:
     """Zero Dirichlet condition on the pressure dof(s) at the lower box corner (on a shell: on the
     pressure dof numbered 0 globally, whichever point that is). Collective."""
     mesh = Q.mesh

@@ -28,6 +28,7 @@ import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous
 from fembase.files import atomic_write_text
 
 __all__ = ["FieldOutput"]
@@ -84,15 +85,14 @@ class FieldOutput:
     def _output_function(self, name: str, f: dolfinx.fem.Function) -> dolfinx.fem.Function:
         out = self._out.get(name)
         if out is None:
-            element = f.function_space.ufl_element()
             mesh = f.function_space.mesh
-            if element.family() in ("Discontinuous Lagrange", "DG") and element.degree() == 0:
-                space = dolfinx.fem.FunctionSpace(mesh, ("DG", 0)) if not f.ufl_shape else \
-                    dolfinx.fem.VectorFunctionSpace(mesh, ("DG", 0))
+            if is_discontinuous(f.function_space) and element_degree(f.function_space) == 0:
+                space = function_space(mesh, "DG", 0) if not f.ufl_shape else \
+                    function_space(mesh, "DG", 0, shape=(mesh.geometry.dim,))
             elif f.ufl_shape:
-                space = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+                space = function_space(mesh, "Lagrange", 1, shape=(mesh.geometry.dim,))
             else:
-                space = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1))
+                space = function_space(mesh, "Lagrange", 1)
             out = dolfinx.fem.Function(space, name=name)
             self._out[name] = out
         out.interpolate(f)

@@ -37,8 +37,9 @@ import ufl
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
-from convection.buoyancy import SemiImplicitBuoyancy
 from convection.boundary import VelocityBC, free_slip_boundaries, nitsche_free_slip, velocity_dirichlet_bcs
+from convection.buoyancy import SemiImplicitBuoyancy
+from fembase.dolfinx_compat import function_space
 
 __all__ = ["StokesDiscretisation", "StokesForms"]
 
@@ -88,8 +89,8 @@ class StokesDiscretisation:
         self.degree = degree
         self.nitsche_penalty = nitsche_penalty
         cell = mesh.ufl_cell()
-        self.V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", cell, degree))
-        self.Q = dolfinx.fem.FunctionSpace(mesh, ufl.FiniteElement("Lagrange", cell, degree - 1))
+        self.V = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
+        self.Q = function_space(mesh, "Lagrange", degree - 1)
         self.dirichlet = velocity_dirichlet_bcs(self.V, bcs)
 
     def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool,

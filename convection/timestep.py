@@ -9,12 +9,14 @@ import dolfinx.cpp.mesh
 import numpy as np
 from mpi4py import MPI
 
+from fembase.dolfinx_compat import cell_dofmap, element_degree, geometry_dofmap
+
 
 def _cell_min_vertex_distance(mesh: dolfinx.mesh.Mesh, num_cells: int) -> np.ndarray:
     """Shortest distance between two vertices of each of the first ``num_cells`` cells
     (the shortest edge for simplices and boxes), shape=(num_cells,), float64."""
     num_vertices = dolfinx.cpp.mesh.cell_num_entities(mesh.topology.cell_type, 0)
-    x_dofs = mesh.geometry.dofmap.array.reshape(-1, mesh.geometry.dofmap.links(0).size)
+    x_dofs = geometry_dofmap(mesh)
     # Geometry nodes list the cell's vertices first.
     coords = mesh.geometry.x[x_dofs[:num_cells, :num_vertices]]
     h = np.full(num_cells, np.inf)
@@ -45,11 +47,11 @@ def cfl_timestep(u: dolfinx.fem.Function, cfl: float, *, dt_max: float | None = 
     tdim = mesh.topology.dim
     num_cells = mesh.topology.index_map(tdim).size_local
     bs = V.dofmap.index_map_bs
-    cell_dofs = V.dofmap.list.array.reshape(-1, V.dofmap.dof_layout.num_dofs)[:num_cells]
+    cell_dofs = cell_dofmap(V)[:num_cells]
     speed = np.linalg.norm(u.x.array.reshape(-1, bs), axis=1)
     cell_speed = speed[cell_dofs].max(axis=1) if num_cells else np.zeros(0)
     h = _cell_min_vertex_distance(mesh, num_cells)
-    degree = V.ufl_element().degree()
+    degree = element_degree(V)
     moving = cell_speed > 0.0
     local = float(np.min(cfl * h[moving] / (degree * cell_speed[moving]))) if moving.any() else math.inf
     dt = mesh.comm.allreduce(local, op=MPI.MIN)

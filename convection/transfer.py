@@ -20,6 +20,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import cell_dofmap, is_lagrange, value_size
 from fembase.evaluation import Evaluator
 from fembase.geometry import Candidates, CellGeometry, Located
 
@@ -176,19 +177,16 @@ def _node_cells(V: dolfinx.fem.FunctionSpace) -> npt.NDArray[np.int32]:
     one, so an owned cell wherever one holds it (cells are written from the last to the first;
     owned cells are numbered before ghosts)."""
     index_map = V.dofmap.index_map
-    offsets = V.dofmap.list.offsets
-    cell_of_entry = np.repeat(np.arange(offsets.size - 1, dtype=np.int32), np.diff(offsets))[::-1]
+    dofs = cell_dofmap(V)
+    cell_of_entry = np.repeat(np.arange(dofs.shape[0], dtype=np.int32), dofs.shape[1])[::-1]
     cells = np.full(index_map.size_local + index_map.num_ghosts, -1, dtype=np.int32)
-    cells[V.dofmap.list.array[::-1]] = cell_of_entry
+    cells[dofs.reshape(-1)[::-1]] = cell_of_entry
     return cells
 
 
 def _nodal(V: dolfinx.fem.FunctionSpace) -> bool:
     """True for (blocked) Lagrange spaces, whose dofs are the values at the dof coordinates."""
-    element = V.ufl_element()
-    family = element.family()
-    value_size = int(np.prod(element.value_shape())) if element.value_shape() else 1
-    return family in ("Lagrange", "P", "Q", "Discontinuous Lagrange", "DG") and value_size == V.dofmap.index_map_bs
+    return is_lagrange(V) and value_size(V) == V.dofmap.index_map_bs
 
 
 def transfer_function(

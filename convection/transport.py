@@ -48,7 +48,6 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation
-from convection.mesh import cell_diameter
 from convection.boundary import (
     TemperatureBC,
     locate_side_dofs,
@@ -56,9 +55,11 @@ from convection.boundary import (
     side_tag,
     temperature_dirichlet_bcs,
 )
+from convection.mesh import cell_diameter
 from convection.petsc_options import (
     MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
+from fembase.dolfinx_compat import function_space, petsc_vector
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -140,7 +141,7 @@ class TransportSolver(PetscSolver):
         self.diffusivity = float(diffusivity)
         self.heating = heating
 
-        self.V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree))
+        self.V = function_space(mesh, "Lagrange", degree)
         self.T = dolfinx.fem.Function(self.V, name=name)
         self.T_old = dolfinx.fem.Function(self.V, name=f"{name}_old")
         self.T_old2 = dolfinx.fem.Function(self.V, name=f"{name}_old2")
@@ -221,7 +222,7 @@ class TransportSolver(PetscSolver):
         """Set ``T`` (and the history) to ``expression(x)``, x shape=(3, n) -> shape=(n,); the
         Dirichlet values are imposed on the result. Resets the time history."""
         self.T.interpolate(expression)
-        dolfinx.fem.petsc.set_bc(self.T.vector, self._dirichlet)
+        dolfinx.fem.petsc.set_bc(petsc_vector(self.T), self._dirichlet)
         self.T.x.scatter_forward()
         for f in (self.T_old, self.T_old2):
             f.x.array[:] = self.T.x.array
@@ -267,7 +268,7 @@ class TransportSolver(PetscSolver):
         dolfinx.fem.petsc.set_bc(self._b, self._dirichlet)
 
         self._T_new.x.array[:] = self.T.x.array
-        self.ksp.solve(self._b, self._T_new.vector)
+        self.ksp.solve(self._b, petsc_vector(self._T_new))
         reason = self.ksp.getConvergedReason()
         if reason < 0:
             raise RuntimeError(f"Energy solver did not converge (PETSc reason {reason})")
@@ -321,11 +322,11 @@ class TransportSolver(PetscSolver):
         Dirichlet values are re-imposed on the transferred temperatures. Collective."""
         for src, dst in ((old.T, self.T), (old.T_old, self.T_old), (old.T_old2, self.T_old2)):
             transfer(src, dst)
-            dolfinx.fem.petsc.set_bc(dst.vector, self._dirichlet)
+            dolfinx.fem.petsc.set_bc(petsc_vector(dst), self._dirichlet)
             dst.x.scatter_forward()
         if old._u_prev is not None:
             element = old._u_prev.function_space.ufl_element()
-            self._u_prev = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(self.mesh, element))
+            self._u_prev = dolfinx.fem.Function(function_space(self.mesh, element))
             transfer(old._u_prev, self._u_prev)
             self._u_prev.x.scatter_forward()
             self._u_adv = None

@@ -44,6 +44,7 @@ from convection.materials import Material, Materials  # noqa: E402
 from convection.model import Model  # noqa: E402
 from convection.postprocess import Entrainment, Velocity  # noqa: E402
 from convection.stokes import StokesSolver  # noqa: E402
+from fembase.dolfinx_compat import function_space
 from particles.generation import RandomUniform  # noqa: E402
 from particles.manager import ParticleManager  # noqa: E402
 from particles.properties import PropertyContext  # noqa: E402
@@ -80,7 +81,7 @@ def build(cells: int, particles_per_cell: int, max_level: int, comm: MPI.Comm) -
 
     # Start on a mesh already refined along the interface: adapt to the initial fraction.
     def initial_fraction(mesh):
-        space = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+        space = function_space(mesh, "DG", 0)
         C = dolfinx.fem.Function(space)
         C.interpolate(dense.initial)
         return [C]

@@ -37,12 +37,14 @@ import dolfinx.cpp.mesh
 import dolfinx.mesh
 import ufl
 
+from fembase import dolfinx_compat as compat
+from fembase.dolfinx_compat import adjacency_list, cell_partitioner, geometry_dofmap
 from fembase.partition import PARTITIONERS, partition
 
 __all__ = ["GHOST_LAYERS", "CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "cell_owners_by_input",
            "create_mesh_from_piece", "create_partitioned_mesh", "create_reproducible_mesh", "duplicate_cells",
            "gather_cell_layout", "mesh_fingerprint", "mesh_piece", "owner_partitioner", "pull", "redistribute",
-           "redistribution"]
+           "redistribution", "refine_on_ranks"]
 
 
 def _starts(comm: MPI.Comm, n: int) -> npt.NDArray[np.int64]:
@@ -122,7 +124,7 @@ def owner_partitioner(owners: npt.NDArray[np.int32], /, *, vertices: npt.NDArray
         if n and (owners.min() < 0 or owners.max() >= nparts):
             raise ValueError(f"owner partitioner: owners must lie in [0, {nparts})")
         if not ghosting:
-            return dolfinx.cpp.graph.AdjacencyList_int32(owners.copy())
+            return adjacency_list(owners)
         if vertices is not None:
             source, neighbour = _vertex_sharing_owners(comm, vertices, owners)
         else:
@@ -145,9 +147,9 @@ def owner_partitioner(owners: npt.NDArray[np.int32], /, *, vertices: npt.NDArray
         destinations[offsets[:-1]] = owners
         within = np.arange(cell.size) - np.searchsorted(cell, cell)
         destinations[offsets[cell] + 1 + within] = rank
-        return dolfinx.cpp.graph.AdjacencyList_int32(destinations, offsets)
+        return adjacency_list(destinations, offsets)
 
-    return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner)
+    return cell_partitioner(graph_partitioner)
 
 
 def _expand(keys: npt.NDArray[np.int64], table: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.int64],
@@ -231,7 +233,7 @@ def gather_cell_layout(mesh: dolfinx.mesh.Mesh, canonical: npt.NDArray[np.int64]
     comm = mesh.comm
     tdim, gdim = mesh.topology.dim, mesh.geometry.dim
     num_owned = mesh.topology.index_map(tdim).size_local
-    dofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[:num_owned]
+    dofs = geometry_dofmap(mesh)[:num_owned]
     corners = mesh.geometry.x[dofs][:, :, :gdim].reshape(num_owned, -1)
     gathered = comm.gather((np.asarray(canonical[:num_owned], dtype=np.int64), corners), root=0)
     num_cells = int(mesh.topology.index_map(tdim).size_global)
@@ -268,9 +270,7 @@ def create_partitioned_mesh(comm: MPI.Comm, layout: CellLayout, owners: npt.NDAr
         domain: The coordinate element (``ufl.Mesh``) of the mesh.
     """
     owners = np.asarray(owners if comm.rank == 0 else np.zeros(0), dtype=np.int32)
-    mesh = dolfinx.mesh.create_mesh(comm, layout.cells, layout.points, domain,
-                                    ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
-                                    partitioner=owner_partitioner(owners))
+    mesh = compat.create_mesh(comm, layout.cells, layout.points, domain, owner_partitioner(owners))
     return WeightedMesh(mesh, np.asarray(mesh.topology.original_cell_index, dtype=np.int64))
 
 
@@ -306,8 +306,7 @@ def mesh_piece(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], canonical
     tdim, gdim = mesh.topology.dim, mesh.geometry.dim
     num_owned = mesh.topology.index_map(tdim).size_local
     nodes = mesh.geometry.index_map()
-    dofmap = mesh.geometry.dofmap
-    dofs = dofmap.array.reshape(dofmap.num_nodes, -1)[:num_owned]
+    dofs = geometry_dofmap(mesh)[:num_owned]
     cells = np.asarray(nodes.local_to_global(np.ascontiguousarray(dofs, dtype=np.int32).reshape(-1)),
                        dtype=np.int64).reshape(num_owned, -1)
     x = np.array(mesh.geometry.x[: nodes.size_local, :gdim])
@@ -342,9 +341,7 @@ def create_mesh_from_piece(comm: MPI.Comm, piece: MeshPiece, domain: ufl.Mesh, /
     if ghost_layer not in GHOST_LAYERS:
         raise ValueError(f"unknown ghost layer {ghost_layer!r}; valid names: {list(GHOST_LAYERS)}")
     vertices = piece.cells[:, : domain.topological_dimension() + 1] if ghost_layer == "vertex" else None
-    mesh = dolfinx.mesh.create_mesh(comm, piece.cells, piece.x, domain,
-                                    ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
-                                    partitioner=owner_partitioner(piece.owners, vertices=vertices))
+    mesh = compat.create_mesh(comm, piece.cells, piece.x, domain, owner_partitioner(piece.owners, vertices=vertices))
     original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)
     if piece.canonical is None:
         return WeightedMesh(mesh, original)
@@ -386,7 +383,7 @@ def create_reproducible_mesh(comm: MPI.Comm, build: Callable[[MPI.Comm], dolfinx
     if comm.rank == 0:
         try:
             serial = build(MPI.COMM_SELF)
-            element = serial.ufl_domain().ufl_coordinate_element()
+            element = compat.coordinate_element_description(serial)
             tdim = serial.topology.dim
             num_cells = serial.topology.index_map(tdim).size_local
             whole = mesh_piece(serial, np.zeros(num_cells, dtype=np.int32))
@@ -405,7 +402,7 @@ def create_reproducible_mesh(comm: MPI.Comm, build: Callable[[MPI.Comm], dolfinx
     if comm.rank != 0:
         piece = MeshPiece(np.zeros((0, shape[0]), dtype=np.int64), np.zeros((0, shape[1])),
                           np.zeros(0, dtype=np.int32))
-    return create_mesh_from_piece(comm, piece, ufl.Mesh(element)).mesh
+    return create_mesh_from_piece(comm, piece, ufl.Mesh(compat.coordinate_element_from(element))).mesh
 
 
 def _check_owners(owners: npt.ArrayLike, num_cells: int, size: int) -> npt.NDArray[np.int32]:
@@ -442,7 +439,7 @@ def mesh_fingerprint(mesh: dolfinx.mesh.Mesh, /) -> bytes:
     num_vertices = vertices.size_local + vertices.num_ghosts
     digest = hashlib.sha256()
     for part in (np.asarray([cells.size_local, cells.num_ghosts, vertices.size_local, num_vertices], dtype=np.int64),
-                 mesh.geometry.x, mesh.geometry.dofmap.array, mesh.topology.connectivity(tdim, 0).array,
+                 mesh.geometry.x, geometry_dofmap(mesh).reshape(-1), mesh.topology.connectivity(tdim, 0).array,
                  np.asarray(vertices.local_to_global(np.arange(num_vertices, dtype=np.int32)), dtype=np.int64),
                  np.asarray(mesh.topology.original_cell_index, dtype=np.int64)):
         digest.update(np.ascontiguousarray(part).tobytes())
@@ -459,6 +456,30 @@ def duplicate_cells(mesh: dolfinx.mesh.Mesh, /) -> int:
     vertices = np.asarray(mesh.topology.index_map(0).local_to_global(c2v.array), dtype=np.int64)
     rows = np.sort(vertices.reshape(-1, width), axis=1)
     return int(rows.shape[0] - np.unique(rows, axis=0).shape[0])
+
+
+def refine_on_ranks(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32] | None = None, /) -> dolfinx.mesh.Mesh:
+    """``mesh`` refined at the local cells ``cells`` (None: every cell), each new cell on the rank of
+    its parent, with the facet ghost layer (collective).
+
+    DOLFINx 0.9 refines without ghost cells when the partition is kept; DOLFINx 0.5 keeps them but
+    can give a rank the same ghost cell twice where three or more ranks meet (seen on 3 ranks: 2-20
+    duplicates per 8 x 8 mesh, none on 2), and a facet then has three cells and is no interior
+    facet any more (jump terms such as the refinement indicator miss it). In both cases the refined
+    mesh is made again from its owned cells on the same partition (:func:`redistribute` with every
+    cell kept on its rank), which builds a clean ghost layer."""
+    edges = None
+    if cells is not None:
+        mesh.topology.create_entities(1)
+        edges = compat.incident_entities(mesh, cells, mesh.topology.dim, 1)
+    refined = compat.refine_keeping_partition(mesh, edges)
+    comm = refined.comm
+    if comm.size == 1:
+        return refined
+    if compat.REFINE_KEEPS_GHOSTS and not (comm.size > 2 and comm.allreduce(duplicate_cells(refined), op=MPI.SUM)):
+        return refined
+    num_owned = refined.topology.index_map(refined.topology.dim).size_local
+    return redistribute(refined, np.full(num_owned, comm.rank, dtype=np.int32))
 
 
 def redistribute(mesh: dolfinx.mesh.Mesh, owners: npt.NDArray[np.int32], /, *,

@@ -24,6 +24,7 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
+from fembase.dolfinx_compat import cell_dofmap
 from fembase.geometry import CellGeometry, Located, locate
 from fembase.kernels import evaluate_simplex_p12
 
@@ -56,7 +57,7 @@ class Evaluator:
         self.bs: int = V.dofmap.bs
         self.value_size: int = self.bs
         ncells = self.geometry.num_local_cells
-        self.dofs = np.ascontiguousarray(V.dofmap.list.array.reshape(-1, element.dim)[:ncells], dtype=np.int32)
+        self.dofs = np.ascontiguousarray(cell_dofmap(V)[:ncells], dtype=np.int32)
         self.fast: bool = (
             self.geometry.simplex
             and self.geometry.tdim in (2, 3)

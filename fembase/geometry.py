@@ -25,7 +25,7 @@ a convex curved boundary) and accepts points between a straight edge and a conca
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import basix
 import numpy as np
@@ -35,6 +35,7 @@ import dolfinx.geometry
 import dolfinx.mesh
 
 from fembase import kernels
+from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, geometry_dofmap
 
 __all__ = ["Candidates", "CellGeometry", "Located", "OwnedLocation", "cell_geometry", "cell_nodes", "geometry_dofmap",
            "is_affine_simplex", "locate", "locate_owned", "owned_box", "pull_back", "push_forward", "unique_pairs"]
@@ -110,9 +111,7 @@ class CellGeometry:
         self.degree: int = mesh.geometry.cmap.degree
         if self.degree > 2:
             raise NotImplementedError("geometry of degree > 2 is not supported")
-        dofmap = mesh.geometry.dofmap
-        nn = dofmap.offsets[1] - dofmap.offsets[0]
-        self.nodes = np.ascontiguousarray(dofmap.array.reshape(-1, nn)[: self.num_local_cells], dtype=np.int32)
+        self.nodes = np.ascontiguousarray(geometry_dofmap(mesh)[: self.num_local_cells], dtype=np.int32)
         self.coords = np.ascontiguousarray(mesh.geometry.x[:, : self.gdim], dtype=np.float64)
         self.num_vertices: int = basix.geometry(self.basix_cell).shape[0]
         self.coordinate_element = basix.create_element(
@@ -132,7 +131,7 @@ class CellGeometry:
                                       else np.linalg.pinv(self.J))
         self.curvature_padding: float = self._curvature_padding()
         self._build_adjacency()
-        self._tree: dolfinx.geometry.BoundingBoxTree | None = None
+        self._tree: Any | None = None
         self._c2c: tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]] | None = None
         self._facet_nbrs: npt.NDArray[np.int32] | None = None
 
@@ -253,14 +252,14 @@ class CellGeometry:
 
     # ------------------------------------------------------------------ search
     @property
-    def tree(self) -> dolfinx.geometry.BoundingBoxTree:
+    def tree(self) -> Any:
         """Bounding-box tree over all local (owned + ghost) cells, built on first use."""
         if self._tree is None:
             cells = np.arange(self.num_local_cells, dtype=np.int32)
             # Padded by the cells' bulge (curved cells) and by round-off, so that points on the
             # boundary (or a facet) within round-off of a cell are tested by pull-back.
             padding = 1.01 * self.curvature_padding + 1e-12 * float(np.abs(self.coords).max(initial=1.0))
-            self._tree = dolfinx.geometry.BoundingBoxTree(self.mesh, self.tdim, cells, padding=padding)
+            self._tree = bounding_box_tree(self.mesh, self.tdim, cells, padding=padding)
         return self._tree
 
     def locate(self, points: npt.ArrayLike, *, owned_only: bool = False,
@@ -318,7 +317,7 @@ class CellGeometry:
         """The bounding-box tree's candidate cells of each point (one group per point)."""
         p3 = np.zeros((pts.shape[0], 3), dtype=np.float64)
         p3[:, : self.gdim] = pts
-        found = dolfinx.geometry.compute_collisions(self.tree, p3)
+        found = compute_collisions(self.tree, p3)
         return Candidates(np.arange(pts.shape[0], dtype=np.int64), np.asarray(found.offsets, dtype=np.int64),
                           np.asarray(found.array, dtype=np.int32))
 
@@ -397,7 +396,7 @@ class CellGeometry:
             return np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int32), np.zeros((0, self.tdim))
         p3 = np.zeros((m, 3), dtype=np.float64)
         p3[:, : self.gdim] = pts
-        candidates = dolfinx.geometry.compute_collisions(self.tree, p3)
+        candidates = compute_collisions(self.tree, p3)
         offsets = np.asarray(candidates.offsets, dtype=np.int64)
         links = np.asarray(candidates.array, dtype=np.int32)
         if owned_only:
@@ -470,12 +469,6 @@ class OwnedLocation(NamedTuple):
 def is_affine_simplex(mesh: dolfinx.mesh.Mesh) -> bool:
     """True if the cells are simplices with a degree-1 coordinate map."""
     return mesh.topology.cell_type in _SIMPLICES and mesh.geometry.cmap.degree == 1
-
-
-def geometry_dofmap(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.int32]:
-    """Geometry node indices of every local cell, shape=(num_local_cells, num_nodes), int32."""
-    dofmap = mesh.geometry.dofmap
-    return dofmap.array.reshape(-1, mesh.geometry.cmap.create_dof_layout().num_dofs)
 
 
 def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:

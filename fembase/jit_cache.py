@@ -33,18 +33,23 @@ _ORIGINAL = dolfinx.jit.ffcx_jit
 _CACHE: dict[tuple[Any, ...], Any] = {}
 
 
-def _key(ufl_object: Any, options: dict[str, Any]) -> tuple[Any, ...] | None:
+_ELEMENT_TYPES = tuple(t for t in (getattr(ufl, "FiniteElementBase", None), getattr(ufl, "AbstractFiniteElement", None))
+                       if t is not None)
+
+
+def _key(ufl_object: Any, options: str) -> tuple[Any, ...] | None:
     if isinstance(ufl_object, ufl.Form):
-        return ("form", ufl_object.signature(), repr(sorted(options.items())))
-    if isinstance(ufl_object, ufl.FiniteElementBase):
-        return ("element", repr(ufl_object), repr(sorted(options.items())))
+        return ("form", ufl_object.signature(), options)
+    if _ELEMENT_TYPES and isinstance(ufl_object, _ELEMENT_TYPES):
+        return ("element", repr(ufl_object), options)
     return None  # expressions: compiled rarely, passed through
 
 
-def _cached_ffcx_jit(comm: Any, ufl_object: Any, form_compiler_params: dict | None = None,
-                     jit_params: dict | None = None) -> Any:
-    options = {"form_compiler_params": repr(sorted((form_compiler_params or {}).items())),
-               "jit_params": repr(sorted((jit_params or {}).items()))}
+def _cached_ffcx_jit(comm: Any, ufl_object: Any, *args: Any, **kwargs: Any) -> Any:
+    """``dolfinx.jit.ffcx_jit`` with the in-process cache; the compiler options (their names differ
+    between DOLFINx versions) are part of the key, as in FFCx's own cache."""
+    options = repr([repr(sorted(a.items())) if isinstance(a, dict) else repr(a) for a in args]
+                   + sorted((k, repr(sorted(v.items())) if isinstance(v, dict) else repr(v)) for k, v in kwargs.items()))
     key = _key(ufl_object, options)
     if key is not None:
         hit = key in _CACHE
@@ -54,7 +59,7 @@ def _cached_ffcx_jit(comm: Any, ufl_object: Any, form_compiler_params: dict | No
             hit = bool(everywhere[0])
         if hit:
             return _CACHE[key]
-    result = _ORIGINAL(comm, ufl_object, form_compiler_params=form_compiler_params, jit_params=jit_params)
+    result = _ORIGINAL(comm, ufl_object, *args, **kwargs)
     if key is not None:
         _CACHE[key] = result
     return result

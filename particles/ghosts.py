@@ -31,6 +31,7 @@ from mpi4py import MPI
 import dolfinx.la
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import SCATTER_ADD
 from fembase.geometry import unique_pairs
 from particles.swarm import PropertyLayout, Swarm
 
@@ -337,7 +338,7 @@ def vertex_complete(mesh: dolfinx.mesh.Mesh, /) -> bool:
     nv = vmap.size_local + vmap.num_ghosts
     counts = dolfinx.la.vector(vmap)
     counts.array[:] = np.bincount(owned_links, minlength=nv)
-    counts.scatter_reverse(dolfinx.la.ScatterMode.add)
+    counts.scatter_reverse(SCATTER_ADD)
     counts.scatter_forward()
     touched = np.unique(owned_links)
     local = np.bincount(local_links, minlength=nv)

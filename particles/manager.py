@@ -46,6 +46,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import function_space
 from fembase.geometry import Candidates
 from particles.adaptivity import move_to_mesh
 from particles.advection import Advector, get_integrator
@@ -431,7 +432,7 @@ class ParticleManager:
         if self._space is None or self._space.mesh is not self.mesh:
             discontinuous = self.field_degree == 0 or self.interpolator.name in ("cell_average", "least_squares")
             family = "DG" if discontinuous else "Lagrange"
-            self._space = dolfinx.fem.FunctionSpace(self.mesh, (family, self.field_degree))
+            self._space = function_space(self.mesh, family, self.field_degree)
         return dolfinx.fem.Function(self._space, name=label)
 
     def _interpolate(self, tracked: _Tracked) -> None:

@@ -38,6 +38,7 @@ import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous
 from fembase.files import H5Sink, atomic_write_text, exclusive_offset
 from particles.swarm import Swarm
 
@@ -241,18 +242,11 @@ def write_mesh_fields(
     """
     out: list[dolfinx.fem.Function] = []
     for f in fields:
-        element = f.function_space.ufl_element()
-        if element.degree() == 0 or (element.family() in ("P", "Lagrange", "Q") and element.degree() == 1):
+        degree = element_degree(f.function_space)
+        if degree == 0 or (degree == 1 and not is_discontinuous(f.function_space)):
             out.append(f)
             continue
-        shape = f.ufl_shape
-        if len(shape) == 2:
-            p1 = ufl.TensorElement("Lagrange", mesh.ufl_cell(), 1, shape=shape)
-        elif shape:
-            p1 = ufl.VectorElement("Lagrange", mesh.ufl_cell(), 1, dim=shape[0])
-        else:
-            p1 = ufl.FiniteElement("Lagrange", mesh.ufl_cell(), 1)
-        g = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, p1), name=f.name)
+        g = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1, shape=f.ufl_shape or None), name=f.name)
         g.interpolate(f)
         out.append(g)
     with dolfinx.io.XDMFFile(mesh.comm, str(path), "a" if append else "w") as xdmf:

@@ -10,6 +10,7 @@ import dolfinx.mesh
 from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels
 from convection.mesh import BoxSpec, cell_volumes, create_box_mesh
 from convection.transfer import PointEvaluator, transfer_function
+from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from fembase.geometry import CellGeometry
 
 
@@ -27,7 +28,7 @@ def _adapt_cycle(comm, rounds, params):
     mesh = base
     history = []
     for _ in range(rounds):
-        V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2))
+        V = function_space(mesh, "Lagrange", 2)
         T = dolfinx.fem.Function(V)
         T.interpolate(_front)
         wanted = wanted_levels(kelly_indicator([T]), hierarchy.levels(mesh), params, comm)
@@ -73,20 +74,20 @@ def _check_transfer(comm):
     base = create_box_mesh(comm, BoxSpec((6, 6), (0.0, 0.0), (1.0, 1.0)))
     base.topology.create_entities(1)
     edges = dolfinx.mesh.locate_entities(base, 1, lambda x: x[0] < 0.45)
-    fine = dolfinx.mesh.refine(base, edges, redistribute=False)
+    fine = refine_keeping_partition(base, edges)
     other = create_box_mesh(comm, BoxSpec((7, 5), (0.0, 0.0), (1.0, 1.0)))  # unrelated partition
     for target_mesh in (fine, other):
-        src = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(base, ("Lagrange", 2)))
+        src = dolfinx.fem.Function(function_space(base, "Lagrange", 2))
         src.interpolate(_quadratic)
-        dst = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(target_mesh, ("Lagrange", 2)))
+        dst = dolfinx.fem.Function(function_space(target_mesh, "Lagrange", 2))
         transfer_function(src, dst)
         exact = dolfinx.fem.Function(dst.function_space)
         exact.interpolate(_quadratic)
         err = comm.allreduce(float(np.abs(dst.x.array - exact.x.array).max(initial=0.0)), op=MPI.MAX)
         assert err < 1e-12
-        vsrc = dolfinx.fem.Function(dolfinx.fem.VectorFunctionSpace(base, ("Lagrange", 2)))
+        vsrc = dolfinx.fem.Function(function_space(base, "Lagrange", 2, shape=(base.geometry.dim,)))
         vsrc.interpolate(lambda x: np.vstack([_quadratic(x), -x[1] ** 2]))
-        vdst = dolfinx.fem.Function(dolfinx.fem.VectorFunctionSpace(target_mesh, ("Lagrange", 2)))
+        vdst = dolfinx.fem.Function(function_space(target_mesh, "Lagrange", 2, shape=(target_mesh.geometry.dim,)))
         transfer_function(vsrc, vdst)
         vexact = dolfinx.fem.Function(vdst.function_space)
         vexact.interpolate(lambda x: np.vstack([_quadratic(x), -x[1] ** 2]))
@@ -106,9 +107,9 @@ def _check_nested_transfer(comm, monkeypatch):
     new = hierarchy.rebuild(old, np.where(midpoints[:, 1] < 0.4, 2, 0).astype(np.int32))
     evaluator = PointEvaluator(old)
     for element in (("Lagrange", 2), ("DG", 0)):
-        src = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(old, element))
+        src = dolfinx.fem.Function(function_space(old, element))
         src.interpolate(_front)
-        searched = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(new, element))
+        searched = dolfinx.fem.Function(function_space(new, element))
         transfer_function(src, searched, evaluator=PointEvaluator(old))
         nested = dolfinx.fem.Function(searched.function_space)
         with monkeypatch.context() as patch:

@@ -10,6 +10,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from _helpers import swarm_at
+from fembase.dolfinx_compat import function_space
 from particles.advection import INTEGRATORS, Advector, get_integrator
 
 OMEGA = 2.0 * math.pi
@@ -26,7 +27,7 @@ def _ring_swarm(mesh, count=8):
 
 
 def _rotation(mesh, omega=OMEGA, degree=1):
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+    V = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(lambda x: np.stack([-omega * x[1], omega * x[0]]))
     return u
@@ -66,7 +67,7 @@ def test_rigid_rotation_order_and_closed_form(name, steps):
 def test_time_dependent_rotation_linear_interpolation_caps_order():
     """omega(t) = 1.5 pi (1 + t^2) turns by exactly 2 pi over t in [0, 1]."""
     mesh = _square()
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+    V = function_space(mesh, "Lagrange", 1, shape=(mesh.geometry.dim,))
 
     def field(t):
         f = dolfinx.fem.Function(V)

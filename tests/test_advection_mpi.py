@@ -8,6 +8,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.generation import RandomUniform, generate
 
@@ -27,7 +28,7 @@ def _advect(comm):
     from particles.advection import Advector
 
     mesh = dolfinx.mesh.create_unit_square(comm, N_CELLS, N_CELLS)
-    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(_cellular_flow)
     swarm = Swarm(mesh)

@@ -9,6 +9,8 @@ import dolfinx.mesh
 import ufl
 
 from fembase.distribute import owner_partitioner
+from fembase.dolfinx_compat import coordinate_element_from, mesh_domain
+from fembase.dolfinx_compat import create_mesh as compat_create_mesh
 from fembase.partition import PARTITIONERS, block_owners, morton_order, partition, rcb_owners
 
 
@@ -90,9 +92,8 @@ def test_weighted_mesh_partition():
         owners = block_owners(weight(x[cells].mean(axis=1)), comm.size)
     else:
         x, cells, owners = np.zeros((0, 2)), np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int32)
-    domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.triangle, 1))
-    mesh = dolfinx.mesh.create_mesh(comm, cells, x, domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
-                                    partitioner=owner_partitioner(owners))
+    domain = mesh_domain(coordinate_element_from(("triangle", 1, 2)))
+    mesh = compat_create_mesh(comm, cells, x, domain, owner_partitioner(owners))
     num_owned = mesh.topology.index_map(2).size_local
     mid = dolfinx.mesh.compute_midpoints(mesh, 2, np.arange(num_owned, dtype=np.int32))
     sums = np.array(comm.allgather(float(weight(mid[:, :2]).sum())))

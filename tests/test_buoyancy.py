@@ -19,6 +19,7 @@ from convection.config import ConfigError, load_config
 from convection.factory import run_config
 from convection.plot import read_statistics
 from convection.stokes import StokesSolver
+from fembase.dolfinx_compat import function_space
 
 ROOT = Path(__file__).resolve().parents[1]
 FREE_SLIP = {s: VelocityBC("free_slip") for s in SIDES_2D}
@@ -27,7 +28,7 @@ RB = 1.0e4
 
 def _layer(mesh, *, dense_below: bool = True, amplitude: float = 0.05) -> dolfinx.fem.Function:
     """DG0 fraction of a dense layer under (or over) a cosine interface at z = 0.5."""
-    C = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
+    C = dolfinx.fem.Function(function_space(mesh, "DG", 0))
 
     def inside(x):
         interface = 0.5 + amplitude * np.cos(np.pi * x[0])

@@ -16,6 +16,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.advection import Advector
 from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
@@ -36,7 +37,7 @@ def _vortex(x):
 
 def _mesh_and_velocity(comm, n=N_CELLS):
     mesh = dolfinx.mesh.create_unit_square(comm, n, n)
-    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(_vortex)
     return mesh, u

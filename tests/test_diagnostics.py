@@ -14,12 +14,13 @@ from mpi4py import MPI
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import TemperatureBC
 from convection.diagnostics import nusselt, temperature_stats, vrms
-from convection.transport import TransportSolver
 from convection.timestep import cfl_timestep
+from convection.transport import TransportSolver
+from fembase.dolfinx_compat import function_space
 
 
 def _vector_p2(mesh):
-    return dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    return function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
 
 
 def _rectangle(comm=MPI.COMM_WORLD, n=8):
@@ -43,7 +44,7 @@ def test_vrms_3d():
 
 def test_temperature_stats_exact():
     mesh = _rectangle()
-    V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2))
+    V = function_space(mesh, "Lagrange", 2)
     T = dolfinx.fem.Function(V)
     T.interpolate(lambda x: x[0] + 2 * x[1] ** 2)
     stats = temperature_stats(T)

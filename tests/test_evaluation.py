@@ -7,6 +7,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import function_space
 from fembase.evaluation import Evaluator, evaluate, evaluate_gradient, locate
 from fembase.geometry import Candidates, CellGeometry
 
@@ -61,10 +62,10 @@ def test_polynomials_reproduced_exactly(kind, degree):
     geom = CellGeometry(mesh)
     assert np.allclose(geom.push_forward(found.cells, found.xref), points, atol=1e-12)
 
-    V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree))
+    V = function_space(mesh, "Lagrange", degree)
     u = dolfinx.fem.Function(V)
     u.interpolate(lambda x: _poly(degree, x[:gdim])[0])
-    W = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+    W = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
     w = dolfinx.fem.Function(W)
     w.interpolate(lambda x: np.stack([_poly(degree, x[:gdim], shift=s)[0] for s in range(gdim)]))
 
@@ -95,7 +96,7 @@ def test_fast_path_matches_basix_path(kind, degree):
     rng = np.random.default_rng(7)
     mesh = _mesh(kind)
     gdim = mesh.geometry.dim
-    W = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+    W = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
     w = dolfinx.fem.Function(W)
     w.x.array[:] = rng.random(w.x.array.shape)
     ev = Evaluator(W)
@@ -122,8 +123,8 @@ def test_locate_outside_and_function_space_check():
     mesh = _mesh("triangle")
     found = locate(mesh, np.array([[0.5, 0.5], [1.5, 0.2], [-0.1, 0.3]]))
     assert found.cells[0] >= 0 and np.all(found.cells[1:] == -1)
-    other = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1)))
-    ev = Evaluator(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)))
+    other = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1))
+    ev = Evaluator(function_space(mesh, "Lagrange", 2))
     with pytest.raises(ValueError, match="function space"):
         ev.values(other, found.cells[:1], found.xref[:1])
 
@@ -132,7 +133,7 @@ def test_locate_outside_and_function_space_check():
 def test_evaluation_distributed():
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_unit_cube(comm, 4, 4, 4)
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 3))
+    V = function_space(mesh, "Lagrange", 3, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(lambda x: np.stack([_poly(3, x, shift=s)[0] for s in range(3)]))
     points = np.random.default_rng(3).random((400, 3))

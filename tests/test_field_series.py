@@ -19,6 +19,7 @@ import dolfinx.mesh
 
 from convection.output import FieldOutput
 from convection.plot import import_pyvista
+from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from particles import Swarm
 from particles.generation import generate
 from particles.output import ParticleWriter
@@ -33,11 +34,11 @@ def _shared_dir(tmp_path: Path, comm: MPI.Intracomm) -> Path:
 
 def _fields(mesh: dolfinx.mesh.Mesh, t: float) -> dict[str, dolfinx.fem.Function]:
     """P2 temperature (1 + t)(x + 2y), DG0 material [y > 1/2], P2 velocity (y, -x)."""
-    T = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)))
+    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
     T.interpolate(lambda x: (1.0 + t) * (x[0] + 2.0 * x[1]))
-    material = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
+    material = dolfinx.fem.Function(function_space(mesh, "DG", 0))
     material.interpolate(lambda x: (x[1] > 0.5).astype(np.float64))
-    u = dolfinx.fem.Function(dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 2)))
+    u = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,)))
     u.interpolate(lambda x: np.stack([x[1], -x[0]]))
     return {"temperature": T, "material": material, "velocity": u}
 
@@ -80,7 +81,7 @@ def _field_series(tmp_path: Path, comm: MPI.Intracomm) -> None:
     directory = _shared_dir(tmp_path, comm)
     coarse = dolfinx.mesh.create_unit_square(comm, 4, 4)
     coarse.topology.create_entities(1)
-    fine = dolfinx.mesh.refine(coarse)
+    fine = refine_keeping_partition(coarse)
     out = FieldOutput(directory)
     expected: dict[float, tuple[int, int]] = {}
     errors: list[str] = []
@@ -123,7 +124,7 @@ def test_rewritten_time_replaces_its_grid(tmp_path):
     coarse.topology.create_entities(1)
     out = FieldOutput(tmp_path, prefix="state")
     out.write(_fields(coarse, 0.0), 0.0)
-    out.write(_fields(dolfinx.mesh.refine(coarse), 0.0), 0.0)
+    out.write(_fields(refine_keeping_partition(coarse), 0.0), 0.0)
     out.close()
     assert out.series_path == tmp_path / "state.xdmf"
     assert not _read_series(out.series_path, {0.0: (128, 81)})

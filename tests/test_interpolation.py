@@ -7,6 +7,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import cell_dofmap, function_space
 from particles import Swarm
 from particles.generation import generate
 from particles.interpolation import (
@@ -54,7 +55,7 @@ def _owned_dofs_table(u, num_owned_cells):
     V = u.function_space
     mesh = V.mesh
     gdim = mesh.geometry.dim
-    dofs = V.dofmap.list.array.reshape(-1, V.element.basix_element.dim)[:num_owned_cells]
+    dofs = cell_dofmap(V)[:num_owned_cells]
     mid = dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim, np.arange(num_owned_cells, dtype=np.int32))[:, :gdim]
     pts = V.tabulate_dof_coordinates()[:, :gdim]
     k = dofs.shape[1]
@@ -78,13 +79,13 @@ def test_registry_and_errors():
     mesh = _mesh(MPI.COMM_SELF, 2)
     swarm = _swarm(mesh, 40)
     swarm.add_property("vec", 2, 1.0)
-    u = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
+    u = dolfinx.fem.Function(function_space(mesh, "DG", 0))
     with pytest.raises(ValueError, match="component"):
         interpolate_to_mesh(swarm, "vec", u)
     interpolate_to_mesh(swarm, "vec", u, component=1)
     assert np.allclose(u.x.array, 1.0)
     with pytest.raises(ValueError, match="continuous"):
-        interpolate_to_mesh(swarm, "v", dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1))),
+        interpolate_to_mesh(swarm, "v", dolfinx.fem.Function(function_space(mesh, "Lagrange", 1)),
                             method="nearest")
     with pytest.raises(ValueError, match="positive"):
         swarm.property("v")[0] = -1.0
@@ -96,7 +97,7 @@ def test_registry_and_errors():
 def test_constant_reproduced(method, space, params):
     mesh = _mesh(MPI.COMM_SELF)
     swarm = _swarm(mesh, 400, f=lambda x: np.full(x.shape[0], 2.5))
-    u = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, space))
+    u = dolfinx.fem.Function(function_space(mesh, space))
     interpolate_to_mesh(swarm, "v", u, method=method, **params)
     assert np.max(np.abs(u.x.array - 2.5)) < 1e-12
 
@@ -107,7 +108,7 @@ def test_least_squares_reproduces_linear_in_every_cell():
     swarm.remove((swarm.x[:, 0] < 0.5) & (swarm.ids % 3 != 0))
     swarm.remove(np.isin(swarm.cells, [3, 20]))
     assert np.min(np.diff(swarm.offsets)) == 0
-    V = dolfinx.fem.FunctionSpace(mesh, ("DG", 1))
+    V = function_space(mesh, "DG", 1)
     u = dolfinx.fem.Function(V)
     stats = interpolate_to_mesh(swarm, "v", u, method="least_squares")
     x = V.tabulate_dof_coordinates()[:, :2]
@@ -119,7 +120,7 @@ def test_least_squares_reproduces_linear_in_every_cell():
 def test_least_squares_limiter_stays_in_cell_range():
     mesh = _mesh(MPI.COMM_SELF)
     swarm = _swarm(mesh, 1500, f=lambda x: np.sin(6.0 * x[:, 0]) + x[:, 1] ** 2)
-    V = dolfinx.fem.FunctionSpace(mesh, ("DG", 1))
+    V = function_space(mesh, "DG", 1)
     u = dolfinx.fem.Function(V)
     interpolate_to_mesh(swarm, "v", u, method="least_squares", limit=True)
     counts = np.diff(swarm.offsets)
@@ -127,7 +128,7 @@ def test_least_squares_limiter_stays_in_cell_range():
     v = swarm.property("v")[:, 0]
     lo = np.minimum.reduceat(v, swarm.offsets[:-1])
     hi = np.maximum.reduceat(v, swarm.offsets[:-1])
-    dofs = V.dofmap.list.array.reshape(-1, 3)[: swarm.num_owned_cells]
+    dofs = cell_dofmap(V)[: swarm.num_owned_cells]
     vals = u.x.array[dofs]
     assert np.all(vals >= lo[:, None] - 1e-14) and np.all(vals <= hi[:, None] + 1e-14)
     unlimited = dolfinx.fem.Function(V)
@@ -142,7 +143,7 @@ def test_shape_function_linear_at_weighted_centroid_and_symmetric_layout():
     swarm.add_property("py")
     swarm.property("px")[:, 0] = swarm.x[:, 0]
     swarm.property("py")[:, 0] = swarm.x[:, 1]
-    V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1))
+    V = function_space(mesh, "Lagrange", 1)
     u, cx, cy = (dolfinx.fem.Function(V) for _ in range(3))
     for name, f in (("v", u), ("px", cx), ("py", cy)):
         interpolate_to_mesh(swarm, name, f, method="shape_function")
@@ -168,7 +169,7 @@ def test_means_match_hand_computed_values():
     cells = np.repeat(np.arange(2, dtype=np.int32), 3)
     swarm.add(np.arange(6), x, swarm.geometry.pull_back(cells, x), cells,
               np.array([1.0, 2.0, 4.0, 3.0, 3.0, 12.0])[:, None])
-    u = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
+    u = dolfinx.fem.Function(function_space(mesh, "DG", 0))
     expected = {"arithmetic": [7 / 3, 6.0], "geometric": [2.0, 108 ** (1 / 3)], "harmonic": [12 / 7, 3 / (2 / 3 + 1 / 12)]}
     for mean, values in expected.items():
         interpolate_to_mesh(swarm, "v", u, mean=mean)
@@ -180,7 +181,7 @@ def test_empty_cells_give_finite_values(method, space, params):
     mesh = _mesh(MPI.COMM_SELF)
     swarm = _swarm(mesh, 300)
     swarm.remove(swarm.x[:, 0] > 0.4)  # more than half the mesh empty: several fill rounds
-    u = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, space))
+    u = dolfinx.fem.Function(function_space(mesh, space))
     stats = interpolate_to_mesh(swarm, "v", u, method=method, **params)
     assert np.all(np.isfinite(u.x.array))
     assert stats.empty_cells == int(np.count_nonzero(np.diff(swarm.offsets) == 0)) > 0
@@ -200,7 +201,7 @@ def test_fill_rule_is_neighbour_average():
     geo = swarm.geometry
     cells = np.array([0], dtype=np.int32)
     swarm.add([7], geo.centres[cells], geo.pull_back(cells, geo.centres[cells]), cells, [[5.0]])
-    u = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
+    u = dolfinx.fem.Function(function_space(mesh, "DG", 0))
     stats = interpolate_to_mesh(swarm, "v", u)
     assert np.allclose(u.x.array, 5.0) and stats.empty_cells == swarm.num_owned_cells - 1
 
@@ -234,7 +235,7 @@ def test_parallel_equals_serial(ghost_mode):
         swarm.remove((swarm.x[:, 0] - 0.5) ** 2 + (swarm.x[:, 1] - 0.5) ** 2 < 0.06)
         tables, stats = [], []
         for method, space, params in PARALLEL_CASES:
-            u = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, space))
+            u = dolfinx.fem.Function(function_space(mesh, space))
             st = interpolate_to_mesh(swarm, "v", u, method=method, **params)
             stats.append((st.global_empty_cells, st.global_filled_dofs, st.fill_rounds))
             t = _owned_dofs_table(u, swarm.num_owned_cells)

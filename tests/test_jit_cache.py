@@ -10,6 +10,8 @@ import ufl
 from mpi4py import MPI
 
 from fembase import jit_cache
+from fembase.dolfinx_compat import function_space
+from fembase.dolfinx_compat import form as compat_form
 
 
 @pytest.fixture
@@ -17,9 +19,9 @@ def counted(monkeypatch):
     """Count the calls that reach DOLFINx's own (disk-cached) compiler."""
     calls = []
 
-    def original(comm, ufl_object, form_compiler_params=None, jit_params=None):
+    def original(comm, ufl_object, *args, **kwargs):
         calls.append(type(ufl_object).__name__)
-        return real(comm, ufl_object, form_compiler_params=form_compiler_params, jit_params=jit_params)
+        return real(comm, ufl_object, *args, **kwargs)
 
     real = jit_cache._ORIGINAL
     monkeypatch.setattr(jit_cache, "_ORIGINAL", original)
@@ -29,7 +31,7 @@ def counted(monkeypatch):
 
 
 def _mass(mesh: dolfinx.mesh.Mesh, degree: int) -> float:
-    V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree))
+    V = function_space(mesh, "Lagrange", degree)
     f = dolfinx.fem.Function(V)
     f.interpolate(lambda x: 1.0 + x[0] ** 2)
     local = dolfinx.fem.assemble_scalar(dolfinx.fem.form(f * ufl.dx))
@@ -54,7 +56,7 @@ def test_options_are_part_of_the_key(counted):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 2, 2)
     form = dolfinx.fem.Constant(mesh, 1.0) * ufl.dx(domain=mesh)
     dolfinx.fem.form(form)
-    dolfinx.fem.form(form, form_compiler_params={"table_rtol": 1e-9})
+    compat_form(form, form_compiler_options={"table_rtol": 1e-9})
     dolfinx.fem.form(form)
     assert len(counted) == 2
     assert np.isclose(mesh.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(form)), op=MPI.SUM), 1.0)

@@ -7,6 +7,7 @@ from mpi4py import MPI
 import dolfinx.geometry
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import bounding_box_tree, compute_collisions
 from fembase.geometry import cell_nodes, locate_owned, pull_back, push_forward
 from particles import Swarm
 from particles.migration import Migrator, migrate, migrator_for
@@ -19,8 +20,8 @@ def _locate_local(mesh, x):
     n = cmap.size_local + cmap.num_ghosts
     points = np.zeros((x.shape[0], 3))
     points[:, : x.shape[1]] = x
-    tree = dolfinx.geometry.BoundingBoxTree(mesh, tdim, np.arange(n, dtype=np.int32))
-    colliding = dolfinx.geometry.compute_colliding_cells(mesh, dolfinx.geometry.compute_collisions(tree, points), points)
+    tree = bounding_box_tree(mesh, tdim, np.arange(n, dtype=np.int32))
+    colliding = dolfinx.geometry.compute_colliding_cells(mesh, compute_collisions(tree, points), points)
     cells = np.full(x.shape[0], -1, dtype=np.int32)
     for i in range(x.shape[0]):
         links = colliding.links(i)

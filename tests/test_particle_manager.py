@@ -10,6 +10,8 @@ import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
+from fembase.distribute import refine_on_ranks
+from fembase.dolfinx_compat import function_space
 from particles.manager import OutputSchedule, ParticleManager, build_generator, build_properties
 from particles.output import ParticleWriter
 from particles.population import PopulationControl
@@ -34,7 +36,7 @@ def _cell_flow(x):
 
 def _rotation(mesh):
     """The cellular flow in P2."""
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V, name="velocity")
     u.interpolate(_cell_flow)
     return u
@@ -85,7 +87,7 @@ def test_advance_keeps_particles_and_integrates_properties():
 
 def test_integrated_strain_in_shear():
     mesh = _mesh(MPI.COMM_SELF)
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(lambda x: np.stack([0.1 * (x[1] - 0.5), np.zeros_like(x[0])]))  # simple shear, rate 0.1
     manager = _manager(mesh)
@@ -104,10 +106,8 @@ def _bounded_run(comm, tmp: Path | None):
     manager.update(PropertyContext(time=0.0, u_new=u), step=0)
     _steps_from(manager, u, 0, 3)
     # refine the middle band: new small cells hold few particles, the bounds add some
-    mesh.topology.create_entities(1)
     marked = dolfinx.mesh.locate_entities(mesh, 2, lambda x: np.abs(x[1] - 0.5) < 0.2)
-    edges = dolfinx.mesh.compute_incident_entities(mesh, marked, 2, 1)
-    fine = dolfinx.mesh.refine(mesh, edges, redistribute=False)
+    fine = refine_on_ranks(mesh, marked)
     u_fine = _rotation(fine)
     manager.to_mesh(fine, context=PropertyContext(time=0.15, u_new=u_fine), step=3)
     after_refine = manager.particles_per_cell()

@@ -18,6 +18,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import function_space
 from fembase.files import H5Sink
 from particles import Swarm
 from particles.generation import generate
@@ -240,12 +241,12 @@ def test_killed_writer_leaves_only_complete_files(tmp_path):
 
 def test_mesh_fields_dg0_as_cell_data(tmp_path):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
-    dg0 = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)), name="density")
+    dg0 = dolfinx.fem.Function(function_space(mesh, "DG", 0), name="density")
     dg0.x.array[:] = 2.0
-    p2 = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)), name="temperature")
+    p2 = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2), name="temperature")
     p2.interpolate(lambda x: x[0] + x[1])
     tensor = dolfinx.fem.Function(
-        dolfinx.fem.FunctionSpace(mesh, ufl.TensorElement("DG", mesh.ufl_cell(), 1)), name="strain")
+        function_space(mesh, "DG", 1, shape=(mesh.geometry.dim, mesh.geometry.dim)), name="strain")
     write_mesh_fields(tmp_path / "fields.xdmf", mesh, [dg0, p2, tensor], 0.0)
     write_mesh_fields(tmp_path / "fields.xdmf", mesh, [dg0, p2, tensor], 1.0, append=True)
     root = ET.parse(tmp_path / "fields.xdmf").getroot()

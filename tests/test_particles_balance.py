@@ -7,6 +7,7 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase.distribute import cell_owners
+from fembase.dolfinx_compat import SCATTER_ADD, function_space
 from fembase.evaluation import locate
 from fembase.partition import rcb_owners
 from particles import Swarm
@@ -126,14 +127,14 @@ def _touching_cells_missing(mesh) -> int:
     import dolfinx.fem
     import dolfinx.la
 
-    V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1))
+    V = function_space(mesh, "Lagrange", 1)
     tdim = mesh.topology.dim
     num_owned = mesh.topology.index_map(tdim).size_local
     num_local = num_owned + mesh.topology.index_map(tdim).num_ghosts
     dofs = np.array([V.dofmap.cell_dofs(c) for c in range(num_local)])
     total = dolfinx.fem.Function(V)
     np.add.at(total.x.array, dofs[:num_owned].reshape(-1), 1.0)
-    total.x.scatter_reverse(dolfinx.la.ScatterMode.add)
+    total.x.scatter_reverse(SCATTER_ADD)
     total.x.scatter_forward()
     local = np.zeros_like(total.x.array)
     np.add.at(local, dofs.reshape(-1), 1.0)

@@ -12,6 +12,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from _helpers import swarm_at
+from fembase.dolfinx_compat import function_space, geometry_dofmap
 from fembase.evaluation import locate
 from particles import Swarm
 from particles.advection import Advector, ParticleODE
@@ -40,14 +41,14 @@ GAMMA = 0.8
 
 
 def _vector_function(mesh, degree, f):
-    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), degree))
+    V = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(f)
     return u
 
 
 def _scalar_function(mesh, degree, f):
-    V = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree))
+    V = function_space(mesh, "Lagrange", degree)
     u = dolfinx.fem.Function(V)
     u.interpolate(f)
     return u
@@ -324,7 +325,7 @@ def test_initial_composition_from_callable_and_function():
 
 # ----------------------------------------------------------------------------- new particles
 def _centroids(mesh):
-    dofs = mesh.geometry.dofmap.array.reshape(-1, 3)
+    dofs = geometry_dofmap(mesh)
     return mesh.geometry.x[dofs][:, :, :2]
 
 

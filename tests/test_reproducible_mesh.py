@@ -11,6 +11,7 @@ import dolfinx.mesh
 from convection.adaptivity import MeshHierarchy
 from convection.mesh import BoxSpec, ShellSpec, cell_volumes, create_mesh
 from fembase.distribute import cell_owners_by_input, duplicate_cells, mesh_fingerprint
+from fembase.dolfinx_compat import function_space
 
 pytest.importorskip("gmsh")
 
@@ -82,5 +83,5 @@ def test_refinement_leaves_no_duplicate_ghost_cells(world):
         f2c = mesh.topology.connectivity(1, 2)
         counts = np.diff(f2c.offsets)
         assert _same_everywhere(world, counts.max(initial=1) <= 2)
-    V = dolfinx.fem.FunctionSpace(mesh, ("DG", 0))
+    V = function_space(mesh, "DG", 0)
     assert V.dofmap.index_map.size_global == mesh.topology.index_map(2).size_global

@@ -75,7 +75,8 @@ def test_killed_config_resumes_bit_for_bit(tmp_path, name, ranks):
     if mid_write:
         code = kill_run(config, killed, ranks, extra, when=lambda d: rows_written(d, 4) and writing_checkpoint(d))
     else:
-        stop_after = random.Random().randint(4, total - 2)
+        # rows 0..4 written: the checkpoint of step 3 is complete (it is written before step 4)
+        stop_after = random.Random().randint(5, total - 2)
         code = kill_run(config, killed, ranks, extra, when=lambda d: rows_written(d, stop_after))
     assert code != 0, "the run ended before it was killed"
     assert latest_checkpoint(killed) is not None

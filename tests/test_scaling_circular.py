@@ -18,6 +18,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "sca
 
 import circular  # noqa: E402
 
+from fembase.dolfinx_compat import geometry_dofmap
+
 
 def test_annulus_mesh_is_conforming_with_boundary_on_the_circles():
     radial, angular = 3, 20
@@ -38,7 +40,7 @@ def test_annulus_mesh_is_conforming_with_boundary_on_the_circles():
     x = mesh.geometry.x[:, :2]
     # P1 geometry: the geometry dofmap lists each cell's nodes in the order of its vertices.
     node_of_vertex = np.empty(topo.index_map(0).size_local, dtype=np.int64)
-    node_of_vertex[topo.connectivity(2, 0).array] = mesh.geometry.dofmap.array
+    node_of_vertex[topo.connectivity(2, 0).array] = geometry_dofmap(mesh).reshape(-1)
     r_vertex = np.hypot(*x[node_of_vertex].T)
     facet_vertices = topo.connectivity(1, 0).array.reshape(-1, 2)[boundary]
     r = r_vertex[facet_vertices]

@@ -14,6 +14,7 @@ pytest.importorskip("gmsh")
 
 from _helpers import gathered, swarm_at  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from fembase.dolfinx_compat import function_space
 from fembase.geometry import locate_owned  # noqa: E402
 from fembase.geometry import CellGeometry  # noqa: E402
 from particles import Swarm  # noqa: E402
@@ -72,7 +73,7 @@ def test_rigid_rotation_in_curved_annulus(world):
     """One revolution of u = 2 pi (-y, x) with RK2: every particle is kept, stays in the shell, and
     its error is RK2's closed-form amplification error |A^n - 1| r (the field is exact in P2)."""
     mesh = _annulus(world)
-    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(lambda x: np.stack([-2.0 * np.pi * x[1], 2.0 * np.pi * x[0]]))
     radii = np.array([RI + 1e-3, 1.5, 1.9, RO - 2e-3])
@@ -103,7 +104,7 @@ def test_confinement_keeps_particles_crossing_a_curved_boundary(world):
 
     spec = ShellSpec(2, RI, RO, resolution=0.4)
     mesh = create_shell_mesh(world, spec)
-    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(lambda x: np.stack([-2.0 * np.pi * x[1], 2.0 * np.pi * x[0]]))
     phi = 2.0 * np.pi * np.arange(40) / 40

@@ -15,6 +15,7 @@ import dolfinx.mesh
 
 from convection.output import FieldOutput
 from convection.plot import main, plot_snapshots, snapshot_times
+from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from particles import Swarm
 from particles.generation import generate
 from particles.output import ParticleWriter
@@ -28,13 +29,13 @@ def _functions(mesh: dolfinx.mesh.Mesh, temperature: str) -> dict[str, dolfinx.f
     z is the vertical coordinate: y in 2D, z in 3D.
     """
     up = mesh.geometry.dim - 1
-    material = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
+    material = dolfinx.fem.Function(function_space(mesh, "DG", 0))
     material.interpolate(lambda x: (x[up] > 0.5).astype(np.float64))
-    T = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)))
+    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
     T.interpolate(lambda x: x[up] if temperature == "z" else 0.0 * x[up])
-    u = dolfinx.fem.Function(dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 2)))
+    u = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,)))
     u.interpolate(lambda x: np.stack([x[1] - 0.5, 0.5 - x[0], 0 * x[0]][: mesh.geometry.dim]))
-    p = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1)))
+    p = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1))
     p.interpolate(lambda x: x[0])
     return {"temperature": T, "velocity": u, "pressure": p, "material": material}
 
@@ -50,7 +51,7 @@ def _run_directory(path: Path, *, temperature: str = "z", dim: int = 2, particle
     out = FieldOutput(path)
     for t in TIMES:
         if t == TIMES[-1]:
-            mesh = dolfinx.mesh.refine(mesh)
+            mesh = refine_keeping_partition(mesh)
         out.write(_functions(mesh, temperature), t)
     out.close()
     if particles:
@@ -172,7 +173,7 @@ def test_spherical_shell_view_with_particles_coloured_by_displacement(tmp_path):
     from convection.mesh import ShellSpec, create_shell_mesh
 
     mesh = create_shell_mesh(MPI.COMM_SELF, ShellSpec(3, 1.22, 2.22, resolution=0.6, geometry_degree=1))
-    T = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1)), name="temperature")
+    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1), name="temperature")
     T.interpolate(lambda x: 2.22 - np.linalg.norm(x, axis=0))
     out = FieldOutput(tmp_path)
     out.write({"temperature": T}, 0.0)

@@ -18,6 +18,7 @@ from convection.approximation import BoussinesqApproximation
 from convection.boundary import SIDES_2D, SIDES_3D, VelocityBC
 from convection.config import SCHEMA
 from convection.stokes import STOKES_SOLVER_NAMES, StokesSolver, resolve_solver, rigid_body_modes
+from fembase.dolfinx_compat import function_space
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "performance"))
 import stokes3d  # noqa: E402  (the benchmark's problem)
@@ -133,7 +134,7 @@ def test_velocity_block_carries_block_size_and_rigid_body_modes(solver):
 
 def _check_rigid_body_modes(mesh) -> None:
     gdim = mesh.geometry.dim
-    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     A = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * ufl.dx))
     A.assemble()

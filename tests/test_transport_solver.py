@@ -12,6 +12,7 @@ from mpi4py import MPI
 from convection.approximation import BoussinesqApproximation
 from convection.boundary import SIDES_2D, TemperatureBC
 from convection.transport import TransportSolver
+from fembase.dolfinx_compat import function_space
 
 A_ADV = 2.0
 LAMBDA = 2 * np.pi**2 + A_ADV**2 / 4
@@ -26,7 +27,7 @@ def _decaying_mode(t: float):
 
 
 def _velocity(mesh, values):
-    V = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     u.interpolate(values)
     return u
@@ -49,7 +50,7 @@ def _decay_error(n, degree, dts, comm=MPI.COMM_WORLD, stabilisation="supg"):
     u = _velocity(mesh, _uniform_flow)
     orders = [energy.step(u, dt).order for dt in dts]
     assert orders[0] == 1 and set(orders[1:]) <= {2}
-    exact = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree + 2)))
+    exact = dolfinx.fem.Function(function_space(mesh, "Lagrange", degree + 2))
     exact.interpolate(_decaying_mode(float(np.sum(dts))))
     return _l2(comm, (energy.T - exact) ** 2)
 

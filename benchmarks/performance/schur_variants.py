@@ -33,6 +33,7 @@ import dolfinx.fem
 import dolfinx.fem.petsc
 
 from convection import stokes, stokes_forms
+from fembase.dolfinx_compat import cell_dofmap, function_space, interpolation_points
 
 sys.modules.setdefault("schur_variants", sys.modules[__name__])  # for pc_python_type
 _SOLVERS: list = []  # StokesSolver instances; the last is the one being set up
@@ -102,11 +103,11 @@ class WBFBt:
 
 def _nodal_weight(solver, eta, mode: str) -> dolfinx.fem.Function:
     """1 / (the chosen mean of the cell viscosities around each P1 pressure node)."""
-    DG0 = dolfinx.fem.FunctionSpace(solver.mesh, ("DG", 0))
+    DG0 = function_space(solver.mesh, "DG", 0)
     cell_eta = dolfinx.fem.Function(DG0)
-    cell_eta.interpolate(dolfinx.fem.Expression(eta, DG0.element.interpolation_points()))
+    cell_eta.interpolate(dolfinx.fem.Expression(eta, interpolation_points(DG0)))
     ncell = solver.mesh.topology.index_map(3).size_local
-    dofs = solver.Q.dofmap.list.array.reshape(-1, 4)[:ncell].ravel()
+    dofs = cell_dofmap(solver.Q)[:ncell].ravel()
     n = solver.Q.dofmap.index_map.size_local + solver.Q.dofmap.index_map.num_ghosts
     values = np.repeat(cell_eta.x.array[:ncell], 4)
     count = np.bincount(dofs, minlength=n)

@@ -48,6 +48,7 @@ import dolfinx.mesh
 from convection.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.boundary import SIDES_3D, VelocityBC
 from convection.stokes import StokesSolver
+from fembase.dolfinx_compat import function_space
 
 SHIFT_PER_STEP = 0.005
 
@@ -62,7 +63,7 @@ def temperature(viscosity: str, shift: float):
 
 def problem(mesh: dolfinx.mesh.Mesh, viscosity: str):
     """Temperature Function (P2), composition (None or DG0 Function) and the approximation."""
-    T = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)))
+    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
     T.interpolate(temperature(viscosity, 0.0))
     C = None
     if viscosity == "constant":
@@ -70,7 +71,7 @@ def problem(mesh: dolfinx.mesh.Mesh, viscosity: str):
     elif viscosity == "temperature":
         law = ViscosityLaw(temperature_law="frank_kamenetskii", gamma=np.log(1000.0))
     elif viscosity == "layer":
-        C = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("DG", 0)))
+        C = dolfinx.fem.Function(function_space(mesh, "DG", 0))
         C.interpolate(lambda x: (x[2] <= 0.4 + 0.05 * np.cos(np.pi * x[0]) * np.cos(np.pi * x[1])).astype(float))
         law = ViscosityLaw((1.0, 1000.0))
     else:

@@ -39,6 +39,7 @@ import dolfinx.fem
 import dolfinx.geometry
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, function_space
 from fembase.evaluation import locate
 from fembase.partition import PARTITIONERS
 from particles import Swarm
@@ -120,7 +121,7 @@ def run_particles(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, ste
         swarm = rebalance(swarm, particle_weight=args.particle_weight, method=args.balance_method, **options)
         mesh = swarm.mesh
     t_balance = time.perf_counter() - t0
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", args.degree))
+    V = function_space(mesh, "Lagrange", args.degree, shape=(mesh.geometry.dim,))
     u_old, u_new = dolfinx.fem.Function(V), dolfinx.fem.Function(V)
     field = Vortex(0.0)
     interpolate = NodalInterpolation(V)
@@ -161,12 +162,12 @@ def run_particles(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, ste
 
 def run_naive(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, steps: int) -> dict:
     """The plain DOLFINx way: search + Function.eval for every particle every step (Euler)."""
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", args.degree))
+    V = function_space(mesh, "Lagrange", args.degree, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
     field = Vortex(0.0)
     x = np.zeros((n, 3))
     x[:, :2] = annulus_points(n, args.seed)
-    tree = dolfinx.geometry.BoundingBoxTree(mesh, mesh.topology.dim)
+    tree = bounding_box_tree(mesh, mesh.topology.dim)
     t_interp = t_eval = t_search = 0.0
     lost = 0
     loop = 0.0
@@ -176,7 +177,7 @@ def run_naive(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, steps: 
         field.t = step * DT
         u.interpolate(field)
         t1 = time.perf_counter()
-        candidates = dolfinx.geometry.compute_collisions(tree, x)
+        candidates = compute_collisions(tree, x)
         colliding = dolfinx.geometry.compute_colliding_cells(mesh, candidates, x)
         offsets = np.asarray(colliding.offsets)
         found = np.diff(offsets) > 0

@@ -73,7 +73,6 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-import ufl
 from mpi4py import MPI
 
 import dolfinx.fem
@@ -90,6 +89,8 @@ from convection.launch import mpi_environment  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh, shell_confinement  # noqa: E402
 from convection.stokes import STOKES_SOLVER_NAMES, StokesSolver  # noqa: E402
 from convection.timestep import cfl_timestep  # noqa: E402
+from fembase.dolfinx_compat import coordinate_element_from, geometry_dofmap, mesh_domain
+from fembase.dolfinx_compat import create_mesh as compat_create_mesh
 from particles import Swarm  # noqa: E402
 from particles.advection import Advector  # noqa: E402
 from particles.generation import generate  # noqa: E402
@@ -174,8 +175,7 @@ def create_annulus(
         points, cells = layout.points, layout.cells
     else:
         points, cells = np.zeros((0, 2)), np.zeros((0, 3), dtype=np.int64)
-    domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.triangle, 1))
-    return dolfinx.mesh.create_mesh(comm, cells, points, domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
+    return compat_create_mesh(comm, cells, points, mesh_domain(coordinate_element_from(("triangle", 1, 2))))
 
 
 def create_spherical_shell(comm: MPI.Comm, resolution: float, /) -> dolfinx.mesh.Mesh:
@@ -198,7 +198,7 @@ def longest_edge(mesh: dolfinx.mesh.Mesh, /) -> float:
     """Longest cell edge over all ranks (affine cells; collective)."""
     tdim = mesh.topology.dim
     n = mesh.topology.index_map(tdim).size_local
-    nodes = mesh.geometry.dofmap.array.reshape(n + mesh.topology.index_map(tdim).num_ghosts, -1)[:n]
+    nodes = geometry_dofmap(mesh)[:n]
     x = mesh.geometry.x[nodes]
     local = 0.0
     for i in range(tdim + 1):

@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fembase.dolfinx_compat import function_space, geometry_dofmap
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
@@ -138,7 +140,7 @@ def migration_cost() -> None:
     tdim = mesh.topology.dim
     imap = mesh.topology.index_map(tdim)
     num_owned, num_ghost = imap.size_local, imap.num_ghosts
-    dofs = mesh.geometry.dofmap.array.reshape(-1, 3)
+    dofs = geometry_dofmap(mesh)
     coords = mesh.geometry.x[:, :2]
     rng = np.random.default_rng(comm.rank)
     per_cell = 48
@@ -307,7 +309,7 @@ def stokes_cost() -> None:
         else:
             mesh = dolfinx.mesh.create_unit_cube(comm, n, n, n)
             sides = SIDES_3D
-        T = dolfinx.fem.Function(dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2)))
+        T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
         T.interpolate(lambda x: 0.5 + 0.1 * np.sin(np.pi * x[dim - 1]) * np.cos(np.pi * x[0]))
         stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=1e6), bcs={s: VelocityBC("free_slip") for s in sides},
                               solver=solver)
@@ -341,7 +343,7 @@ def advect3d(n: int = 12, per_cell: int = 20, steps: int = 10, integrator: str =
     mesh = dolfinx.mesh.create_unit_cube(comm, n, n, n)
     tdim = 3
     num_owned = mesh.topology.index_map(tdim).size_local
-    dofs = mesh.geometry.dofmap.array.reshape(-1, 4)
+    dofs = geometry_dofmap(mesh)
     coords = mesh.geometry.x
     rng = np.random.default_rng(comm.rank)
     cells = np.repeat(np.arange(num_owned, dtype=np.int32), per_cell)
@@ -354,7 +356,7 @@ def advect3d(n: int = 12, per_cell: int = 20, steps: int = 10, integrator: str =
     offset = comm.exscan(cells.shape[0]) or 0
     swarm = Swarm(mesh)
     swarm.add(offset + np.arange(cells.shape[0]), x, xref, cells)
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     uh = dolfinx.fem.Function(V)
 
     def rotation(xx):

@@ -49,6 +49,7 @@ from convection.approximation import BoussinesqApproximation  # noqa: E402
 from convection.boundary import VelocityBC  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
 from convection.stokes import StokesSolver  # noqa: E402
+from fembase.dolfinx_compat import function_space
 
 KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 R_INNER, R_OUTER, R_DELTA = 1.22, 2.22, 1.72
@@ -172,13 +173,13 @@ def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degr
     x = ufl.SpatialCoordinate(mesh)
     if case.smooth:
         # rho' = (r / R_p)^k * angular; interpolated at degree k + 2 to keep the forcing error small.
-        Vf = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree + 2))
+        Vf = function_space(mesh, "Lagrange", degree + 2)
         T = -_interpolated_density(case, Vf, solutions[0])
     else:
         T = 0.0
     if not case.smooth:
         # Surface force -g Y r_hat on r = r': added to the solver's right-hand side form.
-        Vf = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", degree + 2))
+        Vf = function_space(mesh, "Lagrange", degree + 2)
         angular = _delta_density(case, Vf)
         dS = _interface_measure(mesh)
         v = ufl.TestFunction(stokes.V)
@@ -194,8 +195,8 @@ def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degr
     seconds = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
 
     # Analytical fields in higher-degree spaces.
-    Vh = dolfinx.fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), degree + 2))
-    Qh = dolfinx.fem.FunctionSpace(mesh, ("Lagrange" if case.smooth else "DG", degree + 1))
+    Vh = function_space(mesh, "Lagrange", degree + 2, shape=(mesh.geometry.dim,))
+    Qh = function_space(mesh, "Lagrange" if case.smooth else "DG", degree + 1)
     u_exact, p_exact = dolfinx.fem.Function(Vh), dolfinx.fem.Function(Qh)
     if case.smooth:
         u_exact.interpolate(_pointwise(solutions[0].velocity_cartesian, case.dim))

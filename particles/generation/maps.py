@@ -69,7 +69,7 @@ class CellMaps:
         canonical = _lex_sort_rows(nodes)
         self.keys = canonical.reshape(num_owned, nodes.shape[1] * self.gdim)
         self.affine = is_affine_simplex(mesh)
-        self.basix_cell = basix.cell.string_to_type(mesh.topology.cell_name())
+        self.basix_cell = getattr(basix.CellType, mesh.topology.cell_name())
         self._nodes = canonical if self.affine else nodes
         if not self.affine:
             self._element = basix.create_element(basix.ElementFamily.P, self.basix_cell,

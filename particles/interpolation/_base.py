@@ -13,6 +13,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.la
 
+from fembase.dolfinx_compat import SCATTER_ADD, cell_dofmap
 from particles.ghosts import GhostExchange, ghost_exchange_for
 from particles.interpolation.fill import fill_cells
 from particles.swarm import Swarm
@@ -89,7 +90,7 @@ class TargetSpace:
         self.element = element
         self.continuous = not element.discontinuous
         self.degree = int(element.degree)
-        self.dofs = np.ascontiguousarray(V.dofmap.list.array.reshape(-1, element.dim)[:num_owned_cells], dtype=np.int32)
+        self.dofs = np.ascontiguousarray(cell_dofmap(V)[:num_owned_cells], dtype=np.int32)
         imap = V.dofmap.index_map
         self.num_owned_dofs = int(imap.size_local)
         self.num_local_dofs = int(imap.size_local + imap.num_ghosts)
@@ -202,7 +203,7 @@ def write_result(swarm: Swarm, space: TargetSpace, target: dolfinx.fem.Function,
                                   minlength=space.num_local_dofs)
         table[:, 3] = np.bincount(flat_dofs, minlength=space.num_local_dofs)
         sums.array[:] = table.reshape(-1)
-        sums.scatter_reverse(dolfinx.la.ScatterMode.add)
+        sums.scatter_reverse(SCATTER_ADD)
         t = sums.array.reshape(-1, 4)[: space.num_owned_dofs]
         empty = ~(t[:, 1] > 0)
         values = np.where(empty, t[:, 2] / np.where(t[:, 3] > 0, t[:, 3], 1.0), t[:, 0] / np.where(empty, 1.0, t[:, 1]))

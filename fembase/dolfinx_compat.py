@@ -1,0 +1,287 @@
+"""The one module that knows which DOLFINx it runs on: 0.5 (Debian 12) or 0.9 (Debian 13).
+
+Every DOLFINx call whose spelling differs between the versions goes through a function here, so
+the rest of the code (fembase, particles, convection) is written once. The differences absorbed:
+
+================================= ================================ ===================================
+what                              DOLFINx 0.5                      DOLFINx 0.9
+================================= ================================ ===================================
+geometry dofmap                   ``AdjacencyList`` (``.array``)   ``ndarray`` (num_cells, nodes)
+function-space dofmap             ``dofmap.list`` AdjacencyList    ``dofmap.list`` ndarray
+function spaces                   ``FunctionSpace(mesh, (f, k))``, ``functionspace(mesh, (f, k,
+                                  ``VectorFunctionSpace``          shape))``
+finite elements                   ``ufl.FiniteElement``,           ``basix.ufl.element(f, cell, k,
+                                  ``ufl.VectorElement``            shape=...)``
+element family of a space         ``ufl_element().family()``       ``ufl_element().discontinuous``
+bounding-box tree                 ``geometry.BoundingBoxTree``     ``geometry.bb_tree``
+point collisions                  ``compute_collisions``           ``compute_collisions_points``
+refinement keeping the partition  ``refine(..., redistribute=      ``refine(..., partitioner=None)``
+                                  False)``, with ghost cells       returns a tuple, *no ghost cells*
+``create_mesh``                   ``ghost_mode=`` argument         ghost mode in the partitioner
+custom cell partitioner           ``create_cell_partitioner(fn)``  ``create_cell_partitioner(fn,
+                                                                   ghost_mode)``
+C++ mesh object                   ``mesh._mesh``                   ``mesh._cpp_object``
+``entities_to_geometry``          ``dolfinx.cpp.mesh``, C++ mesh   ``dolfinx.mesh``, Python mesh
+PETSc vector of a Function        ``f.vector``                     ``f.x.petsc_vec``
+reverse scatter mode              ``la.ScatterMode.add``           ``la.InsertMode.add``
+Dirichlet condition class         ``fem.DirichletBCMetaClass``     ``fem.DirichletBC``
+interpolation points              ``element.interpolation_points()`` ``element.interpolation_points``
+form compiler options             ``form_compiler_params``,        ``form_compiler_options``,
+                                  ``jit_params``                   ``jit_options``
+incident entities                 ``compute_incident_entities(     ``compute_incident_entities(
+                                  mesh, ...)``                     mesh.topology, ...)``
+================================= ================================ ===================================
+
+Nothing outside :mod:`fembase` checks a DOLFINx version (tests/test_layers.py).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+import numpy.typing as npt
+
+import dolfinx
+import dolfinx.cpp.graph
+import dolfinx.cpp.mesh
+import dolfinx.fem
+import dolfinx.geometry
+import dolfinx.la
+import dolfinx.mesh
+import ufl
+
+__all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list",
+           "bounding_box_tree", "cell_dofmap", "cell_partitioner", "compute_collisions", "coordinate_element",
+           "coordinate_element_description", "coordinate_element_from", "cpp_mesh", "create_mesh", "element", "element_degree", "entities_to_geometry", "incident_entities", "form", "function_space",
+           "geometry_dofmap", "interpolation_points", "is_discontinuous", "is_lagrange", "mesh_domain", "petsc_vector",
+           "refine_keeping_partition", "value_size"]
+
+DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
+"""(major, minor) of the DOLFINx in use."""
+
+_NEW = DOLFINX_VERSION >= (0, 7)  # numpy dofmaps, basix.ufl elements, functionspace (0.7 and later)
+
+if not (0, 5) <= DOLFINX_VERSION < (0, 10):
+    raise ImportError(f"DOLFINx {dolfinx.__version__} is not supported (0.5 and 0.9 are)")
+
+if _NEW:
+    import basix
+    import basix.ufl
+
+DirichletBC: type = dolfinx.fem.DirichletBC if _NEW else dolfinx.fem.DirichletBCMetaClass
+"""The class of ``dolfinx.fem.dirichletbc``'s results."""
+
+SCATTER_ADD = dolfinx.la.InsertMode.add if _NEW else dolfinx.la.ScatterMode.add
+"""The mode of ``x.scatter_reverse`` that adds ghost contributions to their owners."""
+
+REFINE_KEEPS_GHOSTS: bool = not _NEW
+"""Whether :func:`refine_keeping_partition` gives the refined mesh ghost cells (0.5) or none (0.9;
+:func:`fembase.distribute.refine_on_ranks` makes the facet ghost layer again)."""
+
+
+# ---------------------------------------------------------------------- meshes
+def geometry_dofmap(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
+    """Geometry node indices of every local cell, shape=(num_local_cells, nodes_per_cell), int32."""
+    dofmap = mesh.geometry.dofmap
+    if _NEW:
+        return dofmap
+    return dofmap.array.reshape(dofmap.num_nodes, -1)
+
+
+def cpp_mesh(mesh: dolfinx.mesh.Mesh, /) -> Any:
+    """The C++ mesh behind a Python mesh (what ``dolfinx.cpp`` functions take)."""
+    return mesh._cpp_object if _NEW else getattr(mesh, "_mesh", mesh)
+
+
+def coordinate_element(mesh: dolfinx.mesh.Mesh, /) -> Any:
+    """The UFL coordinate element of ``mesh`` (to make another mesh of the same kind)."""
+    return mesh.ufl_domain().ufl_coordinate_element()
+
+
+def coordinate_element_description(mesh: dolfinx.mesh.Mesh, /) -> tuple[str, int, int]:
+    """(cell name, degree, gdim) of the mesh's Lagrange coordinate element: what another rank
+    needs to make the same element (:func:`coordinate_element_from`; DOLFINx 0.9's elements cannot
+    be pickled)."""
+    return mesh.topology.cell_name(), int(mesh.geometry.cmap.degree), int(mesh.geometry.dim)
+
+
+def coordinate_element_from(description: tuple[str, int, int], /) -> Any:
+    """The vector Lagrange coordinate element of :func:`coordinate_element_description`."""
+    cell, degree, gdim = description
+    return element("Lagrange", cell if _NEW else getattr(ufl, cell), degree, shape=(gdim,))
+
+
+def mesh_domain(coordinate: Any, /) -> ufl.Mesh:
+    """A new UFL domain for a mesh to create from a coordinate element (DOLFINx ties each domain
+    object to one mesh)."""
+    return ufl.Mesh(coordinate)
+
+
+def create_mesh(comm: Any, cells: npt.NDArray[np.int64], x: npt.NDArray[np.float64], domain: ufl.Mesh,
+                partitioner: Any = None, /) -> dolfinx.mesh.Mesh:
+    """``dolfinx.mesh.create_mesh`` with a cell partitioner (:func:`cell_partitioner`; None:
+    DOLFINx's graph partitioner) and the facet ghost layer (collective)."""
+    cells = np.asarray(cells, dtype=np.int64)
+    if partitioner is None:
+        partitioner = dolfinx.mesh.create_cell_partitioner(dolfinx.mesh.GhostMode.shared_facet) if _NEW \
+            else dolfinx.cpp.mesh.create_cell_partitioner()
+    if _NEW:
+        return dolfinx.mesh.create_mesh(comm, cells, np.asarray(x, dtype=np.float64), domain, partitioner)
+    return dolfinx.mesh.create_mesh(comm, cells, x, domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
+                                    partitioner=partitioner)
+
+
+def cell_partitioner(graph_partitioner: Callable[[Any, int, Any, bool], Any], /) -> Any:
+    """A cell partitioner for :func:`create_mesh` from a graph partitioner
+    ``(comm, nparts, graph: AdjacencyList_int64, ghosting) -> AdjacencyList_int32`` (destination
+    ranks per cell: owner first, then ghost ranks), with the facet ghost layer."""
+    if _NEW:
+        return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner, dolfinx.mesh.GhostMode.shared_facet)
+    return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner)
+
+
+def adjacency_list(data: npt.ArrayLike, offsets: npt.ArrayLike | None = None, /) -> Any:
+    """An int32 ``AdjacencyList`` (C++), e.g. a graph partitioner's result."""
+    data = np.ascontiguousarray(data, dtype=np.int32)
+    if offsets is None:
+        return dolfinx.cpp.graph.AdjacencyList_int32(data)
+    return dolfinx.cpp.graph.AdjacencyList_int32(data, np.ascontiguousarray(offsets, dtype=np.int32))
+
+
+def refine_keeping_partition(mesh: dolfinx.mesh.Mesh, edges: npt.NDArray[np.int32] | None = None, /
+                             ) -> dolfinx.mesh.Mesh:
+    """The mesh refined at ``edges`` (None: uniformly), each new cell on the rank of its parent
+    (collective). Ghost cells: see :data:`REFINE_KEEPS_GHOSTS`."""
+    mesh.topology.create_entities(1)
+    if _NEW:
+        return dolfinx.mesh.refine(mesh, edges, partitioner=None)[0]
+    if edges is None:
+        return dolfinx.mesh.refine(mesh, redistribute=False)
+    return dolfinx.mesh.refine(mesh, edges, redistribute=False)
+
+
+def incident_entities(mesh: dolfinx.mesh.Mesh, entities: npt.NDArray[np.int32], d0: int, d1: int, /
+                      ) -> npt.NDArray[np.int32]:
+    """The entities of dimension ``d1`` incident to the given entities of dimension ``d0``."""
+    entities = np.asarray(entities, dtype=np.int32)
+    if _NEW:
+        return dolfinx.mesh.compute_incident_entities(mesh.topology, entities, d0, d1)
+    return dolfinx.mesh.compute_incident_entities(mesh, entities, d0, d1)
+
+
+def entities_to_geometry(mesh: dolfinx.mesh.Mesh, dim: int, entities: npt.NDArray[np.int32], /) -> npt.NDArray[np.int32]:
+    """Geometry nodes of mesh entities of dimension ``dim``, shape=(len(entities), nodes)."""
+    entities = np.asarray(entities, dtype=np.int32)
+    if _NEW:
+        return dolfinx.mesh.entities_to_geometry(mesh, dim, entities, False)
+    return dolfinx.cpp.mesh.entities_to_geometry(cpp_mesh(mesh), dim, entities, False)
+
+
+# ---------------------------------------------------------------------- point search
+def bounding_box_tree(mesh: dolfinx.mesh.Mesh, dim: int, entities: npt.NDArray[np.int32] | None = None, /, *,
+                      padding: float = 0.0) -> Any:
+    """Bounding-box tree of the entities of dimension ``dim`` (default: every local one)."""
+    if entities is None:
+        imap = mesh.topology.index_map(dim)
+        entities = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+    entities = np.asarray(entities, dtype=np.int32)
+    if _NEW:
+        return dolfinx.geometry.bb_tree(mesh, dim, entities, padding=padding)
+    return dolfinx.geometry.BoundingBoxTree(mesh, dim, entities, padding=padding)
+
+
+def compute_collisions(tree: Any, points: npt.NDArray[np.float64], /) -> Any:
+    """Candidate entities of ``tree`` per point (points shape=(m, 3)): an AdjacencyList."""
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    if _NEW:
+        return dolfinx.geometry.compute_collisions_points(tree, points)
+    return dolfinx.geometry.compute_collisions(tree, points)
+
+
+# ---------------------------------------------------------------------- spaces and elements
+def element(family: str, cell: Any, degree: int, /, *, shape: tuple[int, ...] | None = None) -> Any:
+    """A finite element: ``family`` ("Lagrange", "DG", ...) of ``degree`` on ``cell`` (a UFL cell
+    or its name), scalar or with value ``shape`` (a vector: ``(gdim,)``)."""
+    if _NEW:
+        name = cell.cellname() if hasattr(cell, "cellname") else str(cell)
+        return basix.ufl.element(family, name, degree, shape=shape)
+    if shape is None or shape == ():
+        return ufl.FiniteElement(family, cell, degree)
+    if len(shape) == 1:
+        return ufl.VectorElement(family, cell, degree, dim=shape[0])
+    return ufl.TensorElement(family, cell, degree, shape=shape)
+
+
+def function_space(mesh: dolfinx.mesh.Mesh, family: str | Any, degree: int | None = None, /, *,
+                   shape: tuple[int, ...] | None = None) -> dolfinx.fem.FunctionSpace:
+    """A function space on ``mesh``: ``function_space(mesh, "Lagrange", 2, shape=(gdim,))``, or of
+    an element made by :func:`element` (``function_space(mesh, element(...))``)."""
+    if degree is None:
+        e = family
+    else:
+        e = element(family, mesh.ufl_cell(), degree, shape=shape)
+    if _NEW:
+        return dolfinx.fem.functionspace(mesh, e)
+    return dolfinx.fem.FunctionSpace(mesh, e)
+
+
+def cell_dofmap(V: dolfinx.fem.FunctionSpace, /) -> npt.NDArray[np.int32]:
+    """Dofs (blocks) of every local cell, shape=(num_local_cells, dofs_per_cell), int32."""
+    dofs = V.dofmap.list
+    if _NEW:
+        return dofs
+    return dofs.array.reshape(dofs.num_nodes, -1)
+
+
+def _ufl_element(space_or_element: Any) -> Any:
+    return space_or_element.ufl_element() if hasattr(space_or_element, "ufl_element") else space_or_element
+
+
+def is_discontinuous(space_or_element: Any, /) -> bool:
+    """Whether a space's (or a UFL element's) element is discontinuous: DG, or not Lagrange at all
+    (e.g. a "Real" space)."""
+    e = _ufl_element(space_or_element)
+    if _NEW:
+        return bool(e.discontinuous) or not is_lagrange(e)
+    return e.family() not in ("Lagrange", "P", "Q")
+
+
+def is_lagrange(space_or_element: Any, /) -> bool:
+    """Whether the element is (continuous or discontinuous, scalar or blocked) Lagrange, whose dofs
+    are values at the dof coordinates."""
+    e = _ufl_element(space_or_element)
+    if _NEW:
+        return e.element_family == basix.ElementFamily.P
+    return e.family() in ("Lagrange", "P", "Q", "Discontinuous Lagrange", "DG", "DQ")
+
+
+def value_size(space_or_element: Any, /) -> int:
+    """Number of value components of the element (1 for a scalar)."""
+    e = _ufl_element(space_or_element)
+    shape = e.reference_value_shape if _NEW else e.value_shape()
+    return int(np.prod(shape)) if len(shape) else 1
+
+
+def element_degree(space_or_element: Any, /) -> int:
+    """The polynomial degree of the element."""
+    e = _ufl_element(space_or_element)
+    return int(e.degree if _NEW else e.degree())
+
+
+def interpolation_points(V: dolfinx.fem.FunctionSpace, /) -> npt.NDArray[np.float64]:
+    """The reference points at which the space's element interpolates."""
+    points = V.element.interpolation_points
+    return points if _NEW else points()
+
+
+def petsc_vector(f: dolfinx.fem.Function, /) -> Any:
+    """The PETSc vector that shares a Function's values."""
+    return f.x.petsc_vec if _NEW else f.vector
+
+
+def form(forms: Any, /, *, form_compiler_options: dict | None = None, jit_options: dict | None = None) -> Any:
+    """``dolfinx.fem.form`` with form compiler and JIT options under either version's names."""
+    if _NEW:
+        return dolfinx.fem.form(forms, form_compiler_options=form_compiler_options, jit_options=jit_options)
+    return dolfinx.fem.form(forms, form_compiler_params=form_compiler_options, jit_params=jit_options)

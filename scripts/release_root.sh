@@ -46,10 +46,17 @@ remove_root() {
 }
 
 # One maker at a time per release; scripts/in_release_root.sh holds the same lock shared while a
-# command runs, so a --rebuild waits for running commands instead of deleting their root.
+# command runs, so a --rebuild waits for running commands instead of deleting their root. A root
+# that is there already is only looked at (shared lock): commands in it may run side by side.
 exec 9>"$roots/$release.lock"
+flock -s 9
+if [ "$rebuild" = 0 ] && [ -f "$root/$stamp" ]; then
+    echo "$root"
+    exit 0
+fi
+flock -u 9
 if ! flock -n 9; then
-    echo "release_root: waiting for another user of $root to finish" >&2
+    echo "release_root: waiting for the commands running in $root to finish" >&2
     flock 9
 fi
 

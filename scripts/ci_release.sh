@@ -7,7 +7,7 @@
 # Usage: scripts/ci_release.sh [RELEASE] [-- TEST.SH ARGS...]
 #   bash scripts/ci_release.sh trixie              # what .ci/run would call
 #   PIC_CI_KEEP_ROOT=1 bash scripts/ci_release.sh  # keep the root afterwards (its path is printed)
-#   PIC_TEST_TIMEOUT=600 bash scripts/ci_release.sh # seconds per test (default 300)
+#   PIC_TEST_WATCHDOG=600 bash scripts/ci_release.sh # seconds per test (default 300)
 # Costs from nothing on the 2-core machine (see the report in the commit log): debootstrap ~25 s,
 # apt inside ~2.5 min, pip ~30 s, then the test suite.
 set -euo pipefail
@@ -58,12 +58,12 @@ EOF
 echo "== scripts/test.sh inside the $release root ==" >&2
 t0=$SECONDS
 rc=0
-# A bound per test (pytest-timeout, thread method: the stuck rank's stacks are printed, then it
-# exits and mpirun ends that collective run): while the code does not work on this release, a
-# collective test whose ranks part ways (one raises, another waits in a collective) would otherwise
-# sit until test.sh's 30-minute mpirun timeout, twice.
-bash scripts/in_release_root.sh "$release" -- bash scripts/test.sh \
-    --timeout="${PIC_TEST_TIMEOUT:-300}" --timeout-method=thread "$@" || rc=$?
+# A bound per test (scripts/pytest_watchdog.py: the stuck process prints its tracebacks and exits,
+# and mpirun ends that collective run): while the code does not work on this release, a collective
+# test whose ranks part ways (one raises, another waits in a collective) would otherwise sit until
+# test.sh's 30-minute mpirun timeout, twice.
+PIC_TEST_WATCHDOG="${PIC_TEST_WATCHDOG:-300}" \
+    bash scripts/in_release_root.sh "$release" -- bash scripts/test.sh "$@" || rc=$?
 phase "tests"
 echo "[ci-$release] total: $(( SECONDS - t_start )) s, test.sh exit code $rc" >&2
 exit "$rc"

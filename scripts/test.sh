@@ -12,6 +12,12 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_
 # TCP BTL keeps IPv4 only. Harmless with Open MPI 4 (Debian 12).
 export OMPI_MCA_btl_tcp_disable_family=6
 export PYTHONDONTWRITEBYTECODE=1
+# PIC_TEST_WATCHDOG=SECONDS: a test running longer ends its process (scripts/pytest_watchdog.py),
+# so that ranks that parted ways cannot hang a run; scripts/ci_release.sh sets it.
+if [ -n "${PIC_TEST_WATCHDOG:-}" ]; then
+    export PYTHONPATH="$here/scripts${PYTHONPATH:+:$PYTHONPATH}"
+    set -- -p pytest_watchdog "$@"
+fi
 
 status=0
 

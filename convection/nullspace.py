@@ -24,7 +24,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.boundary import VelocityBC, box_bounds, is_shell
-from fembase.dolfinx_compat import DirichletBC
+from fembase.dolfinx_compat import DirichletBC, orthonormalize
 
 __all__ = ["PressureMean", "RigidRotations", "constant_pressure_null_space", "pressure_pin", "rigid_body_modes"]
 
@@ -157,5 +157,5 @@ def rigid_body_modes(V: dolfinx.fem.FunctionSpace) -> PETSc.NullSpace:
             values[3 + k][i::bs], values[3 + k][j::bs] = -x[:, j], x[:, i]
     for v in vectors:
         v.assemble()
-    dolfinx.la.orthonormalize(vectors)
+    orthonormalize(vectors)
     return PETSc.NullSpace().create(vectors=vectors, comm=comm)

@@ -37,6 +37,7 @@ from convection.boundary import VelocityBC
 from convection.nullspace import constant_pressure_null_space, pressure_pin, rigid_body_modes
 from convection.petsc_options import destroy_petsc_objects
 from convection.stokes_forms import StokesForms
+from fembase.dolfinx_compat import assemble_matrix_into
 
 __all__ = ["StokesLinearSystem"]
 
@@ -188,8 +189,7 @@ class StokesLinearSystem:
             self._is_velocity_local = _cpp.la.petsc.create_index_sets(spaces)[0]
         rows = self._is_velocity_local
         block = self._A.getLocalSubMatrix(rows, rows)
-        _cpp.fem.petsc.assemble_matrix(block, form, _cpp.fem.pack_constants(form),
-                                       _cpp.fem.pack_coefficients(form), self._bcs, True)
+        assemble_matrix_into(block, form, self._bcs)
         self._A.restoreLocalSubMatrix(rows, rows, block)
         self._A.assemble()
 

@@ -30,6 +30,9 @@ form compiler options             ``form_compiler_params``,        ``form_compil
                                   ``jit_params``                   ``jit_options``
 incident entities                 ``compute_incident_entities(     ``compute_incident_entities(
                                   mesh, ...)``                     mesh.topology, ...)``
+assembling into a submatrix       ``cpp.fem.petsc.assemble_matrix  the same on ``form._cpp_object``
+                                  (A, form, ...)``                 and the conditions' C++ objects
+orthonormalising PETSc vectors    ``la.orthonormalize(vecs)``      takes ``la.Vector`` only
 ================================= ================================ ===================================
 
 Nothing outside :mod:`fembase` checks a DOLFINx version (tests/test_layers.py).
@@ -51,10 +54,10 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
-__all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list",
+__all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list", "assemble_matrix_into", "atan2",
            "bounding_box_tree", "cell_dofmap", "cell_partitioner", "compute_collisions", "coordinate_element",
-           "coordinate_element_description", "coordinate_element_from", "cpp_mesh", "create_mesh", "element", "element_degree", "entities_to_geometry", "incident_entities", "form", "function_space",
-           "geometry_dofmap", "interpolation_points", "is_discontinuous", "is_lagrange", "mesh_domain", "petsc_vector",
+           "coordinate_element_description", "evaluate_expression", "coordinate_element_from", "cpp_mesh", "create_mesh", "element", "element_degree", "entities_to_geometry", "incident_entities", "form", "function_space",
+           "geometry_dofmap", "interpolation_points", "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
            "refine_keeping_partition", "value_size"]
 
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
@@ -278,6 +281,41 @@ def interpolation_points(V: dolfinx.fem.FunctionSpace, /) -> npt.NDArray[np.floa
 def petsc_vector(f: dolfinx.fem.Function, /) -> Any:
     """The PETSc vector that shares a Function's values."""
     return f.x.petsc_vec if _NEW else f.vector
+
+
+def assemble_matrix_into(A: Any, a: Any, bcs: list[Any], /) -> None:
+    """Add the bilinear form ``a`` into the PETSc matrix ``A`` (e.g. a local submatrix of a block
+    matrix, block-unrolled indices), skipping the rows and columns of ``bcs``; ``A`` is not
+    finalised (collective only through ``A``)."""
+    cpp = dolfinx.cpp.fem
+    if _NEW:
+        f = a._cpp_object
+        cpp.petsc.assemble_matrix(A, f, cpp.pack_constants(f), cpp.pack_coefficients(f),
+                                  [bc._cpp_object for bc in bcs], True)
+    else:
+        cpp.petsc.assemble_matrix(A, a, cpp.pack_constants(a), cpp.pack_coefficients(a), bcs, True)
+
+
+def orthonormalize(vectors: list[Any], /) -> None:
+    """Orthonormalise PETSc vectors in place (modified Gram-Schmidt; collective)."""
+    if not _NEW:
+        dolfinx.la.orthonormalize(vectors)
+        return
+    for i, v in enumerate(vectors):  # DOLFINx 0.9's orthonormalize takes dolfinx.la.Vector only
+        for w in vectors[:i]:
+            v.axpy(-w.dot(v), w)
+        v.scale(1.0 / v.norm())
+
+
+def evaluate_expression(expression: Any, mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], /) -> Any:
+    """Values of a ``dolfinx.fem.Expression`` at its points in ``cells``, shape=(len(cells), ...)."""
+    cells = np.asarray(cells, dtype=np.int32)
+    return expression.eval(mesh, cells) if _NEW else expression.eval(cells)
+
+
+def atan2(y: Any, x: Any, /) -> Any:
+    """UFL's two-argument arctangent (``ufl.atan_2`` in UFL 2022, ``ufl.atan2`` since)."""
+    return ufl.atan2(y, x) if hasattr(ufl, "atan2") else ufl.atan_2(y, x)
 
 
 def form(forms: Any, /, *, form_compiler_options: dict | None = None, jit_options: dict | None = None) -> Any:

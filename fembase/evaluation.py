@@ -68,7 +68,7 @@ class Evaluator:
 
     def _coefficients(self, u: dolfinx.fem.Function) -> npt.NDArray[np.float64]:
         W = u.function_space
-        same = W is self.V or (W.mesh is self.V.mesh and W.element.signature() == self.V.element.signature())
+        same = W is self.V or (W.mesh is self.V.mesh and W.ufl_element() == self.V.ufl_element())
         if not same:
             raise ValueError("Function is not in this evaluator's function space")
         return u.x.array

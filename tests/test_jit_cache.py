@@ -44,7 +44,7 @@ def test_each_form_and_element_is_compiled_once_per_process(counted):
     fine = dolfinx.mesh.create_rectangle(MPI.COMM_WORLD, [[0.0, 0.0], [2.0, 1.0]], [8, 4])
     assert _mass(coarse, 2) == pytest.approx(4.0 / 3.0, rel=1e-13)  # int_0^1 1 + x^2
     first = len(counted)
-    assert first >= 2  # the element and the form
+    assert first >= 1  # the form (and, on DOLFINx 0.5, the element)
     assert _mass(fine, 2) == pytest.approx(2.0 + 8.0 / 3.0, rel=1e-13)  # int_0^2 1 + x^2
     assert len(counted) == first
     _mass(fine, 1)  # another element and form: compiled

@@ -12,6 +12,7 @@ pytest.importorskip("gmsh")
 
 from convection.boundary import SHELL_BOUNDARIES, boundary_measure, locate_boundary_facets, shell_radii  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh, mesh_spec_from_config  # noqa: E402
+from fembase.dolfinx_compat import evaluate_expression  # noqa: E402
 
 
 def _integral(mesh, form):
@@ -23,7 +24,7 @@ def _min_jacobian(mesh):
     points = np.array([[0.25] * tdim, [0.02] * tdim, [0.96] + [0.02] * (tdim - 1), [0.02] * (tdim - 1) + [0.96]])
     expr = dolfinx.fem.Expression(ufl.JacobianDeterminant(mesh), points)
     cells = np.arange(mesh.topology.index_map(tdim).size_local, dtype=np.int32)
-    local = float(expr.eval(cells).min()) if cells.size else np.inf
+    local = float(evaluate_expression(expr, mesh, cells).min()) if cells.size else np.inf
     return mesh.comm.allreduce(local, op=MPI.MIN)
 
 

@@ -49,7 +49,7 @@ from convection.approximation import BoussinesqApproximation  # noqa: E402
 from convection.boundary import VelocityBC  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
 from convection.stokes import StokesSolver  # noqa: E402
-from fembase.dolfinx_compat import function_space
+from fembase.dolfinx_compat import atan2, function_space
 
 KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 R_INNER, R_OUTER, R_DELTA = 1.22, 2.22, 1.72
@@ -107,7 +107,7 @@ def _pointwise(function, components: int):
 def _angular(case: Case, x: ufl.SpatialCoordinate):
     """UFL ``cos(n phi)`` (2D) or the real spherical harmonic ``Y_lm(theta, phi)`` (3D) as assess defines it."""
     if case.dim == 2:
-        return ufl.cos(case.n * ufl.atan_2(x[1], x[0]))
+        return ufl.cos(case.n * atan2(x[1], x[0]))
     return None
 
 

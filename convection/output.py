@@ -28,7 +28,7 @@ import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
 
-from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous
+from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
 from fembase.files import atomic_write_text
 
 __all__ = ["FieldOutput"]
@@ -89,10 +89,9 @@ class FieldOutput:
             if is_discontinuous(f.function_space) and element_degree(f.function_space) == 0:
                 space = function_space(mesh, "DG", 0) if not f.ufl_shape else \
                     function_space(mesh, "DG", 0, shape=(mesh.geometry.dim,))
-            elif f.ufl_shape:
-                space = function_space(mesh, "Lagrange", 1, shape=(mesh.geometry.dim,))
             else:
-                space = function_space(mesh, "Lagrange", 1)
+                space = function_space(mesh, "Lagrange", xdmf_lagrange_degree(mesh),
+                                       shape=(mesh.geometry.dim,) if f.ufl_shape else None)
             out = dolfinx.fem.Function(space, name=name)
             self._out[name] = out
         out.interpolate(f)

@@ -33,6 +33,7 @@ incident entities                 ``compute_incident_entities(     ``compute_inc
 assembling into a submatrix       ``cpp.fem.petsc.assemble_matrix  the same on ``form._cpp_object``
                                   (A, form, ...)``                 and the conditions' C++ objects
 orthonormalising PETSc vectors    ``la.orthonormalize(vecs)``      takes ``la.Vector`` only
+Lagrange fields in XDMF           degree 1 on any mesh             the geometry's degree only
 ================================= ================================ ===================================
 
 Nothing outside :mod:`fembase` checks a DOLFINx version (tests/test_layers.py).
@@ -58,7 +59,7 @@ __all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD
            "bounding_box_tree", "cell_dofmap", "cell_partitioner", "compute_collisions", "coordinate_element",
            "coordinate_element_description", "evaluate_expression", "coordinate_element_from", "cpp_mesh", "create_mesh", "element", "element_degree", "entities_to_geometry", "incident_entities", "form", "function_space",
            "geometry_dofmap", "interpolation_points", "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
-           "refine_keeping_partition", "value_size"]
+           "refine_keeping_partition", "value_size", "xdmf_lagrange_degree"]
 
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
 """(major, minor) of the DOLFINx in use."""
@@ -276,6 +277,13 @@ def interpolation_points(V: dolfinx.fem.FunctionSpace, /) -> npt.NDArray[np.floa
     """The reference points at which the space's element interpolates."""
     points = V.element.interpolation_points
     return points if _NEW else points()
+
+
+def xdmf_lagrange_degree(mesh: dolfinx.mesh.Mesh, /) -> int:
+    """The degree of the continuous Lagrange fields ``XDMFFile.write_function`` accepts on ``mesh``:
+    1 on DOLFINx 0.5 (node values at the vertices), the geometry's degree on 0.9 (which refuses any
+    other, e.g. P1 fields on curved P2 shells)."""
+    return int(mesh.geometry.cmap.degree) if _NEW else 1
 
 
 def petsc_vector(f: dolfinx.fem.Function, /) -> Any:

@@ -38,7 +38,7 @@ import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
 
-from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous
+from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
 from fembase.files import H5Sink, atomic_write_text, exclusive_offset
 from particles.swarm import Swarm
 
@@ -241,12 +241,13 @@ def write_mesh_fields(
             mesh; otherwise the file is (re)created and the mesh written.
     """
     out: list[dolfinx.fem.Function] = []
+    lagrange = xdmf_lagrange_degree(mesh)
     for f in fields:
         degree = element_degree(f.function_space)
-        if degree == 0 or (degree == 1 and not is_discontinuous(f.function_space)):
+        if degree == 0 or (degree == lagrange and not is_discontinuous(f.function_space)):
             out.append(f)
             continue
-        g = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1, shape=f.ufl_shape or None), name=f.name)
+        g = dolfinx.fem.Function(function_space(mesh, "Lagrange", lagrange, shape=f.ufl_shape or None), name=f.name)
         g.interpolate(f)
         out.append(g)
     with dolfinx.io.XDMFFile(mesh.comm, str(path), "a" if append else "w") as xdmf:

@@ -69,9 +69,25 @@ def final_particles(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return ids[order], f["x"][...][order], f["properties"][...][order]
 
 
+def kill_session(leader: int) -> None:
+    """SIGKILL every process of the session ``leader`` leads (a process started with
+    ``start_new_session=True``): mpirun and all its ranks. Open MPI 4 keeps the ranks in mpirun's
+    process group; Open MPI 5 (prterun) gives each rank a group of its own, in the same session."""
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[3]) == leader:  # after "pid (comm)": state ppid pgrp session ...
+            try:
+                os.kill(int(stat.parent.name), signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
 def kill_run(config: Path, run_dir: Path, ranks: int, extra: list[str], *, when: Callable[[Path], bool],
              timeout: float = 300) -> int:
-    """Start ``run CONFIG`` and SIGKILL its whole process group as soon as ``when(run_dir)``;
+    """Start ``run CONFIG`` and SIGKILL it and all its ranks as soon as ``when(run_dir)``;
     returns the exit code (negative: killed)."""
     proc = subprocess.Popen(command(["run", str(config), "--output", str(run_dir), *sets(extra)], ranks),
                             cwd=ROOT, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -79,7 +95,7 @@ def kill_run(config: Path, run_dir: Path, ranks: int, extra: list[str], *, when:
     deadline = time.monotonic() + timeout
     while proc.poll() is None and time.monotonic() < deadline:
         if when(run_dir):
-            os.killpg(proc.pid, signal.SIGKILL)
+            kill_session(proc.pid)
             break
         time.sleep(0.002)
     proc.wait(timeout=60)

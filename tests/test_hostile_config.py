@@ -230,11 +230,11 @@ def _env() -> dict[str, str]:
                 OMPI_MCA_rmaps_base_oversubscribe="1")
 
 
-_RECORD_EXIT = '"$0" "$@"; code=$?; echo $code > "$RANK_EXITS/rank_$OMPI_COMM_WORLD_RANK"; exit $code'
+_RECORD_EXIT = '"$0" "$@"; code=$?; echo $code > "$RANK_EXITS/rank_$OMPI_COMM_WORLD_RANK"; exit 0'
 """Run the command and write its exit code to $RANK_EXITS/rank_N: mpirun reports only the first
-non-zero one, so these show that every rank exits with the same code. (For that mpirun must not
-kill the other ranks when one exits non-zero: OMPI_MCA_orte_abort_on_non_zero_status=0; mpirun
-itself then exits with 0.)"""
+non-zero one, so these show that every rank exits with the same code. (The wrapper itself exits
+with 0, so that mpirun does not kill the other ranks when one exits non-zero — Open MPI 4 and 5
+both do by default; test_mpirun_exit_code_and_one_line checks mpirun's own exit code.)"""
 
 
 def _command(args: list[str], ranks: int = 1) -> list[str]:
@@ -292,7 +292,7 @@ def _answer(case: Case, command: str, tmp_path: Path, ranks: int = 1) -> None:
     """Run ``case`` through the CLI and check the answer; on more than one rank, every rank's exit code."""
     exits = tmp_path / "rank_exits"
     exits.mkdir()
-    env = dict(_env(), RANK_EXITS=str(exits), OMPI_MCA_orte_abort_on_non_zero_status="0")
+    env = dict(_env(), RANK_EXITS=str(exits))
     proc = subprocess.run(_command(_arguments(case, command, tmp_path), ranks), cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=300)
     code = proc.returncode
@@ -402,7 +402,7 @@ def test_expressions_cannot_grow_without_bound():
     for text in (_TOWER, "((not 0)+(not 0))**((not 0)+(not 0))**((not 0)+(not 0))**((not 0)+(not 0))**(not 0)"):
         values = Expression(text)(np.zeros((3, 2)))
         assert values.dtype == np.float64  # NumPy numbers: inf or a small value, never a huge exact integer
-    for text, needle in ((_sum(600), "more than 2000"), ("-" * 3000 + "x", "cannot parse"),
+    for text, needle in ((_sum(600), "more than 2000"), ("-" * 3000 + "x", "cannot parse|more than 2000"),
                          ("'%2000000000s' % 1", "only numbers"), ("1j", "only numbers"), ("x\0", "cannot parse")):
         with pytest.raises(ExpressionError, match=needle):
             Expression(text)

@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import re
 import shutil
-import signal
 import subprocess
 import time
 from pathlib import Path
@@ -19,7 +18,7 @@ import h5py
 import pytest
 from mpi4py import MPI
 
-from _runs import command as _command, env as _env, error_line as _error_line, run_cli as _run, sets as _sets
+from _runs import command as _command, env as _env, error_line as _error_line, kill_session, run_cli as _run, sets as _sets
 
 from convection.checkpoint import CheckpointError, latest_checkpoint, list_checkpoints, read_checkpoint
 from convection.plot import read_statistics
@@ -140,7 +139,7 @@ def test_a_second_run_or_resume_of_a_busy_folder_is_refused(tmp_path):
         assert f"'{run_dir}' is in use by another run (pid {proc.pid} " in line
         assert (run_dir / "config.yaml").read_text() == before
     finally:
-        os.killpg(proc.pid, signal.SIGKILL)
+        kill_session(proc.pid)
         proc.wait(timeout=60)
     table = read_table(run_dir / "statistics.csv")  # not damaged by the refused ones
     step = int(latest_checkpoint(run_dir).name.split("_")[1])

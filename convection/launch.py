@@ -32,8 +32,11 @@ def cli_command(config: str | Path, output: str | Path, /, *, ranks: int = 1,
 
 
 def mpi_environment() -> dict[str, str]:
-    """This process's environment plus the variables that let Open MPI run as root."""
-    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    """This process's environment plus the variables that let Open MPI run as root, and TCP on IPv4
+    only: Open MPI 5 (Debian 13) warns on every rank that it finds no "reachable pairing" between
+    IPv4 and IPv6 interfaces on one machine (open-mpi/ompi issue 14079); harmless with Open MPI 4."""
+    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+                OMPI_MCA_btl_tcp_disable_family="6")
 
 
 def run_config(config: str | Path, output: str | Path, /, *, ranks: int = 1, overrides: Sequence[str] = (),

@@ -29,7 +29,10 @@ def command(args: list[str], ranks: int = 1) -> list[str]:
 
 
 def env() -> dict[str, str]:
-    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    """The environment of a run under mpirun (:func:`convection.launch.mpi_environment`)."""
+    from convection.launch import mpi_environment
+
+    return mpi_environment()
 
 
 def sets(items: list[str]) -> list[str]:

@@ -13,7 +13,6 @@ These tests start ``mpirun`` themselves, so they are plain (not ``mpi``-marked) 
 from __future__ import annotations
 
 import math
-import os
 import shutil
 import subprocess
 import sys
@@ -26,6 +25,7 @@ import yaml
 
 from convection.config import load_config
 from convection.expressions import MAX_LENGTH, Expression, ExpressionError
+from convection.launch import mpi_environment
 from convection.probes import MAX_PROBES, boundary_probes, domain_probes
 from convection.schema import ConfigError, check_document_shape, short_repr
 
@@ -35,7 +35,8 @@ SHELL = "configs/annulus_layer.yaml"
 BASE = "mesh: {cells: [4, 4]}\nphysics: {Ra: 1.0e4}\ntime: {end: 0.01}\noutput: {directory: '{out}'}\n"
 """A minimal config text; ``{out}`` becomes a folder under tmp_path."""
 PARTICLES = "particles.enabled=true"
-ABORT_SIGNS = ("MPI_ABORT", "mpirun has exited", "Traceback", "mpirun noticed")
+ABORT_SIGNS = ("MPI_ABORT", "mpirun has exited", "Traceback", "mpirun noticed", "prterun has exited", "prterun noticed")
+"""Signs of an Open MPI abort block (Open MPI 4 says mpirun, Open MPI 5 prterun) or a traceback."""
 
 
 def _alias_bomb(levels: int = 9) -> str:
@@ -226,8 +227,7 @@ assert len(_BY_ID) == len(CASES), "case ids must be unique"
 
 
 def _env() -> dict[str, str]:
-    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-                OMPI_MCA_rmaps_base_oversubscribe="1")
+    return mpi_environment()
 
 
 _RECORD_EXIT = '"$0" "$@"; code=$?; echo $code > "$RANK_EXITS/rank_$OMPI_COMM_WORLD_RANK"; exit 0'

@@ -10,6 +10,9 @@ Each PDE solver lists its linear solvers as :class:`LinearSolver` entries (name,
 default options) built from the same pieces: :data:`MUMPS_LU` (direct; on several ranks
 :func:`reproducible_lu`, which gives the same bits in every run) and :func:`krylov_options`
 (iterative: Krylov method, stopping rule, then the preconditioner).
+
+Importing this module sets one global option, ``vec_mdot_use_gemv = false`` (unless it is set
+already): :func:`reproducible_vector_kernels`.
 """
 
 from __future__ import annotations
@@ -25,12 +28,39 @@ from petsc4py import PETSc
 __all__ = ["PetscSolver",
     "MUMPS_LU",
     "reproducible_lu",
+    "reproducible_vector_kernels",
     "LinearSolver",
     "destroy_petsc_objects",
     "krylov_options",
     "linear_solvers",
     "set_owned_options",
 ]
+
+def reproducible_vector_kernels() -> None:
+    """Make PETSc's multiple dot products (``VecMDot``, the Gram-Schmidt step of GMRES and FGMRES)
+    give the same bits in every run of the same problem. Not collective; call before the solvers
+    create their vectors (this module calls it when it is imported).
+
+    Since PETSc 3.20 (Debian 13 has 3.22), ``VecMDot`` calls BLAS ``gemv`` by default
+    (``-vec_mdot_use_gemv``). OpenBLAS's ``dgemv`` rounds differently depending on how the
+    vectors happen to be aligned in memory, which changes from run to run: the same transport
+    system, solved twice from the same matrix, right-hand side and initial guess, gave different
+    last bits in about half of the runs (any preconditioner: BoomerAMG, GAMG, ILU; with
+    ``OMP_NUM_THREADS=OPENBLAS_NUM_THREADS=1`` too), so a resumed run could not continue bit for
+    bit. PETSc's own unrolled kernel (the only one in PETSc 3.18, Debian 12) is deterministic:
+    6 of 6 runs identical. An option set by the user (command line, ``PETSC_OPTIONS``) is kept.
+    """
+    options = PETSc.Options()
+    if not options.hasName("vec_mdot_use_gemv"):
+        options["vec_mdot_use_gemv"] = False
+    # Read it back once: that marks it used, so that a process that never makes a Krylov solver
+    # (``convection check``) gets no "options you set that were not used" warning on its stdout from
+    # PetscFinalize (Debian 13's PETSc lists unused options by default; PETSc 3.18 does not know this
+    # option at all).
+    options.getBool("vec_mdot_use_gemv")
+
+
+reproducible_vector_kernels()
 
 MUMPS_LU: Mapping[str, Any] = MappingProxyType(
     {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}

@@ -13,6 +13,7 @@ These tests start ``mpirun`` themselves, so they are plain (not ``mpi``-marked) 
 from __future__ import annotations
 
 import math
+import re
 import shutil
 import subprocess
 import sys
@@ -244,14 +245,21 @@ def _command(args: list[str], ranks: int = 1) -> list[str]:
     return cmd
 
 
+_PMIX_NOTICE = re.compile(r"^\[[^\]]*\] PMIX ERROR: ")
+"""Open MPI 5's launcher (prterun) logs "[host:pid] PMIX ERROR: PMIX_ERR_UNREACH in file
+.../pmix_server.c" when a rank exits while the launcher still talks to it: a launcher line, like its
+dashed notices (open-mpi/ompi issue 7529)."""
+
+
 def _own_lines(stderr: str) -> list[str]:
     """The non-empty lines of stderr without Open MPI's launcher notices (blocks between lines of
-    dashes: "a process returned a non-zero exit code" on more than one rank)."""
+    dashes: "a process returned a non-zero exit code" on more than one rank; Open MPI 5's PMIx
+    lines)."""
     lines, notice = [], False
     for line in stderr.splitlines():
         if line.strip() and set(line.strip()) == {"-"}:
             notice = not notice
-        elif line.strip() and not notice:
+        elif line.strip() and not notice and not _PMIX_NOTICE.match(line):
             lines.append(line)
     return lines
 

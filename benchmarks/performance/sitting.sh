@@ -4,20 +4,14 @@
 # Usage: bash benchmarks/performance/sitting.sh [ROUNDS]      (from the repository root)
 set -uo pipefail
 ROUNDS=${1:-3}
-PY=${PYTHON:-python3}
+PY=${PYTHON:-.venv/bin/python}
 STEP68=${STEP68:-../shared/bench/step68.sh}
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
-V="benchmarks/performance/vortex.py --cells 64 --particles 393216 --steps 50"
-RATE='import json,sys; print("rate=%.0f" % json.loads([l for l in sys.stdin if l.startswith("{")][-1])["particle_updates_per_second"])'
+. "$(dirname "${BASH_SOURCE[0]}")/sitting_common.sh"   # V, RATE, run
 # The machine's own 2-process ceiling: two independent serial runs with half the particles each,
 # started together; their combined rate is twice the slower one's.
 HALF="benchmarks/performance/vortex.py --cells 64 --particles 196608 --steps 50 --integrator euler"
 PAIR='import json,sys; r=[json.loads(l)["particle_updates_per_second"] for l in sys.stdin if l.startswith("{")]; print("rate=%.0f (two independent half runs: %s)" % (2 * min(r), ", ".join("%.0f" % x for x in r)))'
-run() {
-  local label=$1; shift
-  printf '%s load=%s %-34s ' "$(date +%H:%M:%S)" "$(cut -d' ' -f1 /proc/loadavg)" "$label"
-  "$@"
-}
 for r in $(seq "$ROUNDS"); do
   run "deal.II step-68, 1 rank" bash "$STEP68" 6 8 0.1 2 1
   run "ours euler, 1 rank" bash -c "$PY $V --integrator euler | $PY -c '$RATE'"

@@ -23,6 +23,7 @@ on straight-sided meshes it would put the new boundary vertices on the chords, i
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Union
 
 import numpy as np
@@ -214,12 +215,19 @@ def _shell_model(gmsh, spec: ShellSpec) -> None:
         gmsh.model.mesh.optimize("HighOrder")
 
 
-def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray[np.int32] | None = None
-                      ) -> dolfinx.mesh.Mesh:
+def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray[np.int32] | None = None,
+                      msh_file: str | Path | None = None) -> dolfinx.mesh.Mesh:
     """Mesh the annulus/spherical shell of ``spec`` with gmsh on rank 0 and distribute it (collective;
     partition as in :func:`create_mesh`).
 
     Needs the ``gmsh`` Python module (Debian: ``python3-gmsh``) on rank 0.
+
+    Args:
+        msh_file: A gmsh ``.msh`` file of this shell: read if it exists (instead of meshing),
+            written after meshing if not. Different gmsh versions mesh the same shell differently
+            (Debian 12's 4.8 and Debian 13's 4.13 give 673 and 675 cells for the annulus at cell size
+            0.2), so comparing two installations on the same mesh needs the file of one of them
+            (benchmarks/releases). None: mesh, write nothing.
     """
     from dolfinx.io import gmshio
 
@@ -233,8 +241,13 @@ def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray
         if started:
             gmsh.initialize(readConfigFiles=False)
         gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add(f"{spec.name}_{id(spec)}")
-        _shell_model(gmsh, spec)
+        if msh_file is not None and Path(msh_file).exists():
+            gmsh.open(str(msh_file))
+        else:
+            gmsh.model.add(f"{spec.name}_{id(spec)}")
+            _shell_model(gmsh, spec)
+            if msh_file is not None:
+                gmsh.write(str(msh_file))
     try:
         return create_reproducible_mesh(comm, lambda c: gmshio.model_to_mesh(gmsh.model, c, 0, gdim=spec.gdim)[0],
                                         owners=owners)

@@ -20,7 +20,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from fembase.dolfinx_compat import cell_dofmap, is_lagrange, value_size
+from fembase.dolfinx_compat import cell_dofmap, interpolate_on_cells, is_lagrange, value_size
 from fembase.evaluation import Evaluator
 from fembase.geometry import Candidates, CellGeometry, Located
 
@@ -220,5 +220,5 @@ def transfer_function(
     def values(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         return evaluator.evaluate(source, x.T).T
 
-    target.interpolate(values, cells=owned)
+    interpolate_on_cells(target, values, owned)
     target.x.scatter_forward()

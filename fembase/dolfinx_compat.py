@@ -26,6 +26,7 @@ PETSc vector of a Function        ``f.vector``                     ``f.x.petsc_v
 reverse scatter mode              ``la.ScatterMode.add``           ``la.InsertMode.add``
 Dirichlet condition class         ``fem.DirichletBCMetaClass``     ``fem.DirichletBC``
 interpolation points              ``element.interpolation_points()`` ``element.interpolation_points``
+interpolating on some cells       ``f.interpolate(g, cells=...)``  ``f.interpolate(g, cells0=...)``
 form compiler options             ``form_compiler_params``,        ``form_compiler_options``,
                                   ``jit_params``                   ``jit_options``
 incident entities                 ``compute_incident_entities(     ``compute_incident_entities(
@@ -58,7 +59,7 @@ import ufl
 __all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list", "assemble_matrix_into", "atan2",
            "bounding_box_tree", "cell_dofmap", "cell_partitioner", "compute_collisions", "coordinate_element",
            "coordinate_element_description", "evaluate_expression", "coordinate_element_from", "cpp_mesh", "create_mesh", "element", "element_degree", "entities_to_geometry", "incident_entities", "form", "function_space",
-           "geometry_dofmap", "interpolation_points", "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
+           "geometry_dofmap", "interpolate_on_cells", "interpolation_points", "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
            "refine_keeping_partition", "value_size", "xdmf_lagrange_degree"]
 
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
@@ -271,6 +272,16 @@ def element_degree(space_or_element: Any, /) -> int:
     """The polynomial degree of the element."""
     e = _ufl_element(space_or_element)
     return int(e.degree if _NEW else e.degree())
+
+
+def interpolate_on_cells(f: dolfinx.fem.Function, source: Any, cells: npt.NDArray[np.int32], /) -> None:
+    """``f.interpolate(source)`` on the given local cells only (the keyword is ``cells`` on 0.5,
+    ``cells0`` on 0.9). ``source``: a callable ``x`` shape=(3, n) -> shape=(value_size, n), an
+    Expression or a Function on the same mesh. Not collective."""
+    if _NEW:
+        f.interpolate(source, cells0=cells)
+    else:
+        f.interpolate(source, cells=cells)
 
 
 def interpolation_points(V: dolfinx.fem.FunctionSpace, /) -> npt.NDArray[np.float64]:

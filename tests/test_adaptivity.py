@@ -93,6 +93,14 @@ def _check_transfer(comm):
         vexact.interpolate(lambda x: np.vstack([_quadratic(x), -x[1] ** 2]))
         verr = comm.allreduce(float(np.abs(vdst.x.array - vexact.x.array).max(initial=0.0)), op=MPI.MAX)
         assert verr < 1e-12
+        # A target whose dofs are not point values (Nedelec): the interpolation of the source's
+        # values, which are exact for this quadratic field.
+        cdst = dolfinx.fem.Function(function_space(target_mesh, "N1curl", 2))
+        transfer_function(vsrc, cdst)
+        cexact = dolfinx.fem.Function(cdst.function_space)
+        cexact.interpolate(lambda x: np.vstack([_quadratic(x), -x[1] ** 2]))
+        cerr = comm.allreduce(float(np.abs(cdst.x.array - cexact.x.array).max(initial=0.0)), op=MPI.MAX)
+        assert cerr < 1e-11
 
 
 def _check_nested_transfer(comm, monkeypatch):

@@ -49,7 +49,7 @@ from convection.approximation import BoussinesqApproximation  # noqa: E402
 from convection.boundary import VelocityBC  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
 from convection.stokes import StokesSolver  # noqa: E402
-from fembase.dolfinx_compat import atan2, function_space
+from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells
 
 KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 R_INNER, R_OUTER, R_DELTA = 1.22, 2.22, 1.72
@@ -158,12 +158,19 @@ def _interface_measure(mesh: dolfinx.mesh.Mesh):
 
 def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degree: int = 2,
               geometry_degree: int = 2, solver: str = "direct", nitsche_penalty: float | None = None,
-              petsc_options: dict | None = None) -> LevelResult:
-    """Solve one mesh level and measure the errors (collective)."""
+              petsc_options: dict | None = None, mesh_dir: Path | None = None) -> LevelResult:
+    """Solve one mesh level and measure the errors (collective). With ``mesh_dir``, the level's
+    gmsh mesh is read from there if it was written before, else written there."""
     h_target = resolution / 2**level
     spec = ShellSpec(case.dim, R_INNER, R_OUTER, resolution=h_target, geometry_degree=geometry_degree,
                      interfaces=() if case.smooth else (R_DELTA,))
-    mesh = create_shell_mesh(comm, spec)
+    msh = None
+    if mesh_dir is not None:
+        msh = mesh_dir / (f"shell{case.dim}d_{'smooth' if case.smooth else 'delta'}_h{h_target:g}"
+                          f"_g{geometry_degree}.msh")
+        if comm.rank == 0:
+            mesh_dir.mkdir(parents=True, exist_ok=True)
+    mesh = create_shell_mesh(comm, spec, msh_file=msh)
     solutions = case.solutions()
     kind = "free_slip" if case.free_slip else "no_slip"
     bcs = {"inner": VelocityBC(kind), "outer": VelocityBC(kind)}
@@ -208,8 +215,8 @@ def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degr
         below = np.linalg.norm(mid[:, : case.dim], axis=1) < R_DELTA
         for solution, cells in zip(solutions, (np.flatnonzero(below), np.flatnonzero(~below))):
             cells = cells.astype(np.int32)
-            u_exact.interpolate(_pointwise(solution.velocity_cartesian, case.dim), cells=cells)
-            p_exact.interpolate(_pointwise(solution.pressure_cartesian, 1), cells=cells)
+            interpolate_on_cells(u_exact, _pointwise(solution.velocity_cartesian, case.dim), cells)
+            interpolate_on_cells(p_exact, _pointwise(solution.pressure_cartesian, 1), cells)
 
     def integral(expr) -> float:
         return comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr * ufl.dx)), op=MPI.SUM)
@@ -250,13 +257,17 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--nitsche-penalty", type=float, default=None)
     parser.add_argument("--petsc-options", type=json.loads, default=None,
                         help='extra Stokes PETSc options as JSON, e.g. \'{"mat_mumps_icntl_10": -2}\'')
+    parser.add_argument("--mesh-dir", type=Path, default=None,
+                        help="read each level's gmsh mesh from this folder, or write it there the first time "
+                             "(the same meshes for another gmsh version: benchmarks/releases)")
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
     case = Case(args.kind, args.dim, args.n, args.m, args.k)
     resolution = args.resolution if args.resolution is not None else (0.2 if args.dim == 2 else 0.5)
     results = [run_level(case, level, resolution, comm=comm, degree=args.degree,
                          geometry_degree=args.geometry_degree, solver=args.solver,
-                         nitsche_penalty=args.nitsche_penalty, petsc_options=args.petsc_options)
+                         nitsche_penalty=args.nitsche_penalty, petsc_options=args.petsc_options,
+                         mesh_dir=args.mesh_dir)
                for level in args.levels]
     h = [r.h for r in results]
     document = {

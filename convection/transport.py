@@ -59,7 +59,7 @@ from convection.mesh import cell_diameter
 from convection.petsc_options import (
     MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
-from fembase.dolfinx_compat import function_space, petsc_vector
+from fembase.dolfinx_compat import create_vector, function_space, petsc_vector
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -211,7 +211,7 @@ class TransportSolver(PetscSolver):
         self._L = dolfinx.fem.form(ufl.rhs(F) + zero * w * ufl.dx)
         if self._A is None:
             self._A = dolfinx.fem.petsc.create_matrix(self._a)
-            self._b = dolfinx.fem.petsc.create_vector(self._L)
+            self._b = create_vector(self._L)
             self.ksp.setOperators(self._A)
             self.ksp.setFromOptions()
             if self.solver == "iterative":

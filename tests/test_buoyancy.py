@@ -140,6 +140,7 @@ def test_lumped_projection_keeps_constants_and_the_integral():
 
 
 @pytest.mark.mpi
+@needs_hypre
 def test_semi_implicit_solve_is_rank_count_independent():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 12, 12)
     serial_mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 12, 12)

@@ -107,6 +107,7 @@ def test_matches_mumps_to_the_solver_tolerance(solver, viscosity, rtol):
 
 
 @pytest.mark.mpi
+@needs_hypre  # held against the other AMG
 @pytest.mark.parametrize("viscosity", ["temperature", "layer"])
 @pytest.mark.parametrize("solver", [ITERATIVE, "iterative_gamg"])
 def test_matches_mumps_to_the_solver_tolerance_parallel(solver, viscosity):

@@ -45,11 +45,12 @@ HAS_HYPRE: bool = bool(PETSc.Sys.hasExternalPackage("hypre"))
 
 SCALAR_AMG: Mapping[str, Any] = MappingProxyType(
     {"pc_type": "hypre", "pc_hypre_type": "boomeramg"} if HAS_HYPRE else
-    {"pc_type": "gamg", "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor"}
+    {"pc_type": "gamg", "pc_gamg_agg_nsmooths": 0, "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor"}
 )
 """Algebraic multigrid for a scalar problem: hypre's BoomerAMG, or PETSc's own GAMG where PETSc has
-no hypre (read-only). GAMG smooths with SOR instead of its default Chebyshev, whose eigenvalue
-estimates start from random vectors: a resumed run would not continue bit for bit."""
+no hypre (read-only). GAMG aggregates without smoothing the prolongator and smooths with SOR
+instead of Chebyshev: both defaults estimate eigenvalues from random vectors, and a resumed run
+(a fresh preconditioner) would then not continue bit for bit."""
 
 def reproducible_lu(ranks: int, /) -> dict[str, Any]:
     """Direct solve on ``ranks`` ranks that gives the same bits in every run: PETSc's ``telescope``

@@ -44,7 +44,7 @@ import ufl
 from petsc4py import PETSc
 
 from convection.approximation import BoussinesqApproximation, fractions
-from fembase.dolfinx_compat import function_space, is_discontinuous
+from fembase.dolfinx_compat import create_vector, function_space, is_discontinuous
 
 
 def _is_discontinuous(expr: Any) -> bool:
@@ -74,7 +74,7 @@ class LumpedProjection:
         mass.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self._mass = mass.array.copy()
         mass.destroy()
-        self._b = dolfinx.fem.petsc.create_vector(self._rhs)
+        self._b = create_vector(self._rhs)
 
     def update(self) -> None:
         """Project the expression's current values. Collective."""

@@ -7,7 +7,7 @@ Geometries (``mesh.geometry`` in a config, :data:`MESH_GEOMETRIES`):
   (front/back in 3D); gravity along ``-e_z`` (the last axis).
 - ``annulus`` (2D) and ``spherical_shell`` (3D): the region ``r_inner <= |x| <= r_outer`` around
   the origin (:class:`ShellSpec`), meshed by gmsh on rank 0 with a target cell size
-  ``resolution`` and read with DOLFINx's gmsh interface (:mod:`dolfinx.io.gmshio`), which
+  ``resolution`` and read with DOLFINx's gmsh interface (:func:`fembase.dolfinx_compat.gmsh_model_to_mesh`), which
   distributes the cells. With ``geometry_degree: 2`` (the default) the cells are second-order
   (curved) triangles/tetrahedra whose boundary nodes lie on the circles/spheres, so the discrete
   boundary is within ``O(h^3)`` of the true one (a straight-sided mesh is only ``O(h^2)`` close,
@@ -36,7 +36,8 @@ import dolfinx.mesh
 import ufl
 
 from fembase.distribute import create_reproducible_mesh
-from fembase.dolfinx_compat import cell_dofmap, entities_to_geometry, function_space, geometry_dofmap
+from fembase.dolfinx_compat import (cell_dofmap, coordinate_map, entities_to_geometry, function_space, geometry_dofmap,
+                                    gmsh_model_to_mesh)
 
 __all__ = ["BoxSpec", "MESH_GEOMETRIES", "MeshSpec", "ShellSpec", "cell_diameter", "cell_values", "cell_volumes",
            "create_box_mesh",
@@ -229,8 +230,6 @@ def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray
             0.2), so comparing two installations on the same mesh needs the file of one of them
             (benchmarks/releases). None: mesh, write nothing.
     """
-    from dolfinx.io import gmshio
-
     started = False
     if comm.rank == 0:
         import gmsh
@@ -249,7 +248,7 @@ def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray
             if msh_file is not None:
                 gmsh.write(str(msh_file))
     try:
-        return create_reproducible_mesh(comm, lambda c: gmshio.model_to_mesh(gmsh.model, c, 0, gdim=spec.gdim)[0],
+        return create_reproducible_mesh(comm, lambda c: gmsh_model_to_mesh(gmsh.model, c, 0, gdim=spec.gdim),
                                         owners=owners)
     finally:
         if comm.rank == 0:
@@ -276,7 +275,7 @@ def cell_diameter(mesh: dolfinx.mesh.Mesh, /) -> ufl.core.expr.Expr:
     """Cell diameter for forms: ``ufl.CellDiameter`` on straight-sided cells; on curved cells (which
     FFCx 0.5 cannot generate ``CellDiameter`` for) a DG0 Function of the largest vertex distance.
     Not collective (ghost cells are computed directly)."""
-    if mesh.geometry.cmap.degree == 1:
+    if coordinate_map(mesh).degree == 1:
         return ufl.CellDiameter(mesh)
     V0 = function_space(mesh, "DG", 0)
     tdim = mesh.topology.dim
@@ -307,7 +306,7 @@ def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: ShellSpec, /) -> Callable[[
     the outer surface the bound is the smallest distance from the origin to an outer boundary
     facet's line/plane. Collective (the bounds are allreduced).
     """
-    if mesh.geometry.cmap.degree == 1:
+    if coordinate_map(mesh).degree == 1:
         lower = spec.inner_radius * (1.0 + 1e-12)
         upper = _outer_facet_distance(mesh, spec) * (1.0 - 1e-12)
     else:

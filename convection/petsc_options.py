@@ -26,7 +26,9 @@ from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 from petsc4py import PETSc
 
 __all__ = ["PetscSolver",
+    "HAS_HYPRE",
     "MUMPS_LU",
+    "SCALAR_AMG",
     "reproducible_lu",
     "reproducible_vector_kernels",
     "LinearSolver",
@@ -66,6 +68,19 @@ MUMPS_LU: Mapping[str, Any] = MappingProxyType(
     {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
 )
 """Direct solve: one MUMPS LU factorisation, no Krylov iterations (read-only; copy with ``dict``)."""
+
+HAS_HYPRE: bool = bool(PETSc.Sys.hasExternalPackage("hypre"))
+"""Whether this PETSc has hypre (BoomerAMG): Debian's has, the PETSc inside PyPI's DOLFINx wheel
+(dolfinx-solver-real 0.11, PETSc 3.25) has not."""
+
+SCALAR_AMG: Mapping[str, Any] = MappingProxyType(
+    {"pc_type": "hypre", "pc_hypre_type": "boomeramg"} if HAS_HYPRE else
+    {"pc_type": "gamg", "pc_gamg_agg_nsmooths": 0, "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor"}
+)
+"""Algebraic multigrid for a scalar problem: hypre's BoomerAMG, or PETSc's own GAMG where PETSc has
+no hypre (read-only). GAMG aggregates without smoothing the prolongator and smooths with SOR
+instead of Chebyshev: both defaults estimate eigenvalues from random vectors, and a resumed run
+(a fresh preconditioner) would then not continue bit for bit."""
 
 def reproducible_lu(ranks: int, /) -> dict[str, Any]:
     """Direct solve on ``ranks`` ranks that gives the same bits in every run: PETSc's ``telescope``

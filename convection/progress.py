@@ -7,6 +7,8 @@ import sys
 import time
 from typing import TextIO
 
+from convection.launch import launched_rank
+
 __all__ = ["Progress", "is_terminal"]
 
 
@@ -14,12 +16,12 @@ def is_terminal(stream: TextIO) -> bool:
     """Whether ``stream`` ends on a terminal.
 
     Under OpenMPI the ranks' standard output is a pseudo-terminal even when mpirun itself writes
-    into a file or a pipe, so there the answer is taken from mpirun's (the parent's) standard
-    output instead.
+    into a file or a pipe, so under a launcher the answer is taken from the launcher's (the
+    parent's) standard output instead.
     """
     if not stream.isatty():
         return False
-    if "OMPI_COMM_WORLD_SIZE" not in os.environ:
+    if launched_rank() is None:
         return True
     try:
         target = os.readlink(f"/proc/{os.getppid()}/fd/1")

@@ -61,7 +61,7 @@ from convection.boundary import VelocityBC, boundary_names, has_rotation_null_sp
 from convection.buoyancy import SemiImplicitBuoyancy
 from convection.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
 from convection.petsc_options import (
-    MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+    HAS_HYPRE, MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
 from convection.stokes_forms import StokesDiscretisation, StokesForms
 from convection.stokes_linear import StokesLinearSystem
@@ -161,13 +161,19 @@ def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
     warm-started at gmsh size 0.35 (P2 geometry, Ra = 1e4), 661 / 567 at 0.5. GAMG is given the
     rigid-body modes, rotations included, as its near-null space: 54 / 13 at 0.35, 74 / 40 at 0.5,
     and its velocity agrees with MUMPS's to 2e-6 (BoomerAMG's to 4e-5).
+
+    A PETSc without hypre (the one in PyPI's DOLFINx wheel) has no BoomerAMG: there ``"auto"`` is
+    ``"iterative_gamg"`` in 3D, and ``"iterative"`` is refused (ValueError).
     """
     if name == AUTO:
         if gdim == 3:
-            return "iterative_gamg" if rotations else "iterative"
+            return "iterative_gamg" if rotations or not HAS_HYPRE else "iterative"
         return "direct"
     if name not in STOKES_SOLVERS:
         raise ValueError(f"Unknown Stokes solver {name!r}; valid names: {list(STOKES_SOLVER_NAMES)}")
+    if name == "iterative" and not HAS_HYPRE:
+        raise ValueError("Stokes solver 'iterative' uses hypre's BoomerAMG, which this PETSc does not have; "
+                         "use 'iterative_gamg' or 'direct'")
     return name
 
 

@@ -29,7 +29,6 @@ import time
 
 import dolfinx
 import dolfinx.cpp as _cpp
-import dolfinx.fem.petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -37,7 +36,8 @@ from convection.boundary import VelocityBC
 from convection.nullspace import constant_pressure_null_space, pressure_pin, rigid_body_modes
 from convection.petsc_options import destroy_petsc_objects
 from convection.stokes_forms import StokesForms
-from fembase.dolfinx_compat import assemble_matrix_into
+from fembase.dolfinx_compat import (assemble_block_matrix, assemble_block_vector, assemble_matrix_into,
+                                    create_block_matrix, create_block_vector)
 
 __all__ = ["StokesLinearSystem"]
 
@@ -105,13 +105,13 @@ class StokesLinearSystem:
         """Create the matrices and vectors for ``forms``' layout and configure the KSP. Collective.
 
         The matrices serve any later forms on the same spaces (same sparsity)."""
-        self._A = dolfinx.fem.petsc.create_matrix_block(forms.a)
+        self._A = create_block_matrix(forms.a)
         if forms.a_si is not None:
-            self._A0 = dolfinx.fem.petsc.create_matrix_block(forms.a)
-        self._b = dolfinx.fem.petsc.create_vector_block(forms.L)
+            self._A0 = create_block_matrix(forms.a)
+        self._b = create_block_vector(forms.L)
         self._x = self._b.duplicate()
         if self.iterative:
-            self._P = dolfinx.fem.petsc.create_matrix_block(forms.a_pc)
+            self._P = create_block_matrix(forms.a_pc)
         if self.pressure_null_space and self.iterative:
             n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
             self._null_space = constant_pressure_null_space(self._b, n_u)
@@ -150,14 +150,14 @@ class StokesLinearSystem:
         fixed = self._A if forms.a_si is None else self._A0
         if refresh:
             fixed.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix_block(fixed, forms.a, bcs=self._bcs)
+            assemble_block_matrix(fixed, forms.a, bcs=self._bcs)
             fixed.assemble()
         if forms.a_si is not None:
             # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
             # preconditioning matrix P (without the term), hence the preconditioner, stays while the
             # viscosity is constant.
             if not self._A.isAssembled():  # once: A gets A0's nonzero pattern
-                dolfinx.fem.petsc.assemble_matrix_block(self._A, forms.a, bcs=self._bcs)
+                assemble_block_matrix(self._A, forms.a, bcs=self._bcs)
                 self._A.assemble()
             self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             self._add_velocity_block(forms.a_si)
@@ -166,7 +166,7 @@ class StokesLinearSystem:
                 self._A.setNullSpace(self._null_space)
         if refresh and self._P is not None:
             self._P.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix_block(self._P, forms.a_pc, bcs=self._bcs)
+            assemble_block_matrix(self._P, forms.a_pc, bcs=self._bcs)
             self._P.assemble()
 
     def assemble_rhs(self, forms: StokesForms, /) -> None:
@@ -175,7 +175,7 @@ class StokesLinearSystem:
         with self._b.localForm() as b_local:
             b_local.set(0.0)
         # The pin is left out of the right-hand side: its row keeps the value _consistent_continuity needs.
-        dolfinx.fem.petsc.assemble_vector_block(self._b, forms.L, forms.a_lift, bcs=self._lifted)
+        assemble_block_vector(self._b, forms.L, forms.a_lift, bcs=self._lifted)
         if self._null_space is not None:
             self._null_space.remove(self._b)
         elif self.pinned:

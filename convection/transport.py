@@ -57,9 +57,9 @@ from convection.boundary import (
 )
 from convection.mesh import cell_diameter
 from convection.petsc_options import (
-    MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+    HAS_HYPRE, MUMPS_LU, SCALAR_AMG, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
-from fembase.dolfinx_compat import function_space, petsc_vector
+from fembase.dolfinx_compat import create_vector, function_space, petsc_vector
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -70,9 +70,8 @@ STABILISATIONS: dict[str, str] = {
 TRANSPORT_SOLVERS: dict[str, LinearSolver] = linear_solvers(
     LinearSolver(
         "iterative",
-        "GMRES + BoomerAMG",
-        krylov_options("gmres", {"pc_type": "hypre", "pc_hypre_type": "boomeramg"}, rtol=1e-10, atol=1e-14,
-                       max_it=1000),
+        "GMRES + BoomerAMG" if HAS_HYPRE else "GMRES + GAMG (this PETSc has no hypre for BoomerAMG)",
+        krylov_options("gmres", SCALAR_AMG, rtol=1e-10, atol=1e-14, max_it=1000),
     ),
     LinearSolver("direct", "MUMPS LU (on several ranks: gathered on rank 0, reproducible)", MUMPS_LU, reproducible_lu),
 )
@@ -211,7 +210,7 @@ class TransportSolver(PetscSolver):
         self._L = dolfinx.fem.form(ufl.rhs(F) + zero * w * ufl.dx)
         if self._A is None:
             self._A = dolfinx.fem.petsc.create_matrix(self._a)
-            self._b = dolfinx.fem.petsc.create_vector(self._L)
+            self._b = create_vector(self._L)
             self.ksp.setOperators(self._A)
             self.ksp.setFromOptions()
             if self.solver == "iterative":

@@ -340,7 +340,7 @@ def create_mesh_from_piece(comm: MPI.Comm, piece: MeshPiece, domain: ufl.Mesh, /
     """
     if ghost_layer not in GHOST_LAYERS:
         raise ValueError(f"unknown ghost layer {ghost_layer!r}; valid names: {list(GHOST_LAYERS)}")
-    vertices = piece.cells[:, : domain.topological_dimension() + 1] if ghost_layer == "vertex" else None
+    vertices = piece.cells[:, : compat.topological_dimension(domain) + 1] if ghost_layer == "vertex" else None
     mesh = compat.create_mesh(comm, piece.cells, piece.x, domain, owner_partitioner(piece.owners, vertices=vertices))
     original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)
     if piece.canonical is None:

@@ -1,7 +1,9 @@
-"""The one module that knows which DOLFINx it runs on: 0.5 (Debian 12) or 0.9 (Debian 13).
+"""The one module that knows which DOLFINx it runs on: 0.5 (Debian 12), 0.9 (Debian 13), or 0.10
+and 0.11 (PyPI's binary wheel ``dolfinx-solver-real``; scripts/setup.sh with PIC_DOLFINX=pypi).
 
 Every DOLFINx call whose spelling differs between the versions goes through a function here, so
-the rest of the code (fembase, particles, convection) is written once. The differences absorbed:
+the rest of the code (fembase, particles, convection) is written once. The differences absorbed
+between 0.5 and 0.9 (0.10 and 0.11 spell these as 0.9 does, except where the second table says):
 
 ================================= ================================ ===================================
 what                              DOLFINx 0.5                      DOLFINx 0.9
@@ -37,6 +39,46 @@ orthonormalising PETSc vectors    ``la.orthonormalize(vecs)``      takes ``la.Ve
 Lagrange fields in XDMF           degree 1 on any mesh             the geometry's degree only
 ================================= ================================ ===================================
 
+And the differences of 0.10 and 0.11 from 0.9 (the PyPI wheel is 0.11; 0.10 is read from its
+sources, untried):
+
+================================= ================================ ===================================
+what                              DOLFINx 0.9                      DOLFINx 0.10 / 0.11
+================================= ================================ ===================================
+``create_mesh`` arguments         ``(comm, cells, x, domain,       ``(comm, cells, domain, x,
+                                  partitioner)``                   partitioner)``: element before x
+default cell partitioner          ``create_cell_partitioner(mode)`` 0.11: ``(mode,
+                                                                   max_facet_to_cell_links)``
+custom cell partitioner           ``cpp.mesh.create_cell_          0.11: a third argument,
+                                  partitioner(fn, ghost_mode)``    ``max_facet_to_cell_links`` (2)
+coordinate map, geometry dofmap   ``geometry.cmap``,               0.11: ``geometry.cmaps[0]``,
+                                  ``geometry.dofmap``              ``geometry.dofmaps[0]`` (the old
+                                                                   names warn: deprecated)
+bounding-box tree                 ``bb_tree(mesh, dim, entities,   ``entities`` and ``padding``
+                                  padding)``                       keyword-only
+block matrices                    ``create_matrix_block(a)``,      ``create_matrix(a, kind="mpi")``,
+                                  ``assemble_matrix_block(A, a,    ``assemble_matrix(A, a, bcs)`` on
+                                  bcs)``                           the nested list (``_block`` gone)
+block vectors                     ``create_vector_block(L)``       ``create_vector(spaces,
+                                                                   kind="mpi")``: of function spaces
+block right-hand side             ``assemble_vector_block(b, L, a,  ``assemble_vector(b, L)``, then
+                                  bcs)`` lifts and sets values     ``apply_lifting`` and ``set_bc``
+                                                                   with conditions by block
+                                                                   (``bcs_by_block``) and the ghost
+                                                                   update between them
+vector of a linear form           ``create_vector(L)``             ``create_vector(space)``
+gmsh models to meshes             ``io.gmshio.model_to_mesh``:     ``io.gmsh.model_to_mesh``:
+                                  a tuple                          ``MeshData`` (``.mesh``)
+refinement keeping the partition  ``refine(..., partitioner=None)`` the same call (still no ghost
+                                                                   cells; the default keeps the
+                                                                   partition *with* a ghost layer)
+UFL cell name, domain dimension   ``cell.cellname()``,             UFL 2026 (with 0.11): properties,
+                                  ``domain.topological_dimension()`` ``cell.cellname``, ...
+``import dolfinx``                as it is                         the wheel needs ``import
+                                                                   dolfinx_solver`` first (the
+                                                                   venv's .pth file does it)
+================================= ================================ ===================================
+
 Nothing outside :mod:`fembase` checks a DOLFINx version (tests/test_layers.py).
 """
 
@@ -56,19 +98,24 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
-__all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list", "assemble_matrix_into", "atan2",
-           "bounding_box_tree", "cell_dofmap", "cell_partitioner", "compute_collisions", "coordinate_element",
-           "coordinate_element_description", "evaluate_expression", "coordinate_element_from", "cpp_mesh", "create_mesh", "element", "element_degree", "entities_to_geometry", "incident_entities", "form", "function_space",
-           "geometry_dofmap", "interpolate_on_cells", "interpolation_points", "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
-           "refine_keeping_partition", "value_size", "xdmf_lagrange_degree"]
+__all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list", "assemble_block_matrix",
+           "assemble_block_vector", "assemble_matrix_into", "atan2", "bounding_box_tree", "cell_dofmap", "cell_partitioner",
+           "compute_collisions", "coordinate_element", "coordinate_element_description", "coordinate_element_from",
+           "coordinate_map", "cpp_mesh", "create_block_matrix", "create_block_vector", "create_mesh", "create_vector",
+           "element", "element_degree", "entities_to_geometry", "evaluate_expression", "form", "function_space",
+           "geometry_dofmap", "gmsh_model_to_mesh", "incident_entities", "interpolate_on_cells", "interpolation_points", "is_discontinuous",
+           "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector", "refine_keeping_partition",
+           "topological_dimension", "value_size", "xdmf_lagrange_degree"]
 
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
 """(major, minor) of the DOLFINx in use."""
 
 _NEW = DOLFINX_VERSION >= (0, 7)  # numpy dofmaps, basix.ufl elements, functionspace (0.7 and later)
+_V010 = DOLFINX_VERSION >= (0, 10)  # create_mesh's new argument order, unified PETSc assembly, io.gmsh
+_V011 = DOLFINX_VERSION >= (0, 11)  # geometry cmaps/dofmaps lists, max_facet_to_cell_links
 
-if not (0, 5) <= DOLFINX_VERSION < (0, 10):
-    raise ImportError(f"DOLFINx {dolfinx.__version__} is not supported (0.5 and 0.9 are)")
+if not (0, 5) <= DOLFINX_VERSION < (0, 12):
+    raise ImportError(f"DOLFINx {dolfinx.__version__} is not supported (0.5, 0.9, 0.10 and 0.11 are)")
 
 if _NEW:
     import basix
@@ -88,10 +135,17 @@ REFINE_KEEPS_GHOSTS: bool = not _NEW
 # ---------------------------------------------------------------------- meshes
 def geometry_dofmap(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
     """Geometry node indices of every local cell, shape=(num_local_cells, nodes_per_cell), int32."""
+    if _V011:
+        return mesh.geometry.dofmaps[0]
     dofmap = mesh.geometry.dofmap
     if _NEW:
         return dofmap
     return dofmap.array.reshape(dofmap.num_nodes, -1)
+
+
+def coordinate_map(mesh: dolfinx.mesh.Mesh, /) -> Any:
+    """The mesh's coordinate map (``degree``, ``push_forward``, ``pull_back``; one cell type)."""
+    return mesh.geometry.cmaps[0] if _V011 else mesh.geometry.cmap
 
 
 def cpp_mesh(mesh: dolfinx.mesh.Mesh, /) -> Any:
@@ -108,7 +162,7 @@ def coordinate_element_description(mesh: dolfinx.mesh.Mesh, /) -> tuple[str, int
     """(cell name, degree, gdim) of the mesh's Lagrange coordinate element: what another rank
     needs to make the same element (:func:`coordinate_element_from`; DOLFINx 0.9's elements cannot
     be pickled)."""
-    return mesh.topology.cell_name(), int(mesh.geometry.cmap.degree), int(mesh.geometry.dim)
+    return mesh.topology.cell_name(), int(coordinate_map(mesh).degree), int(mesh.geometry.dim)
 
 
 def coordinate_element_from(description: tuple[str, int, int], /) -> Any:
@@ -117,10 +171,24 @@ def coordinate_element_from(description: tuple[str, int, int], /) -> Any:
     return element("Lagrange", cell if _NEW else getattr(ufl, cell), degree, shape=(gdim,))
 
 
+def _ufl_value(attribute: Any) -> Any:
+    """A UFL attribute that is a method before UFL 2026 and a property since (DOLFINx 0.11)."""
+    return attribute() if callable(attribute) else attribute
+
+
+def topological_dimension(domain: ufl.Mesh, /) -> int:
+    """The topological dimension of a UFL domain."""
+    return int(_ufl_value(domain.topological_dimension))
+
+
 def mesh_domain(coordinate: Any, /) -> ufl.Mesh:
     """A new UFL domain for a mesh to create from a coordinate element (DOLFINx ties each domain
     object to one mesh)."""
     return ufl.Mesh(coordinate)
+
+
+_MAX_FACET_CELLS = 2
+"""Cells a facet can have (a manifold mesh without branches; DOLFINx 0.11's partitioners ask)."""
 
 
 def create_mesh(comm: Any, cells: npt.NDArray[np.int64], x: npt.NDArray[np.float64], domain: ufl.Mesh,
@@ -129,8 +197,14 @@ def create_mesh(comm: Any, cells: npt.NDArray[np.int64], x: npt.NDArray[np.float
     DOLFINx's graph partitioner) and the facet ghost layer (collective)."""
     cells = np.asarray(cells, dtype=np.int64)
     if partitioner is None:
-        partitioner = dolfinx.mesh.create_cell_partitioner(dolfinx.mesh.GhostMode.shared_facet) if _NEW \
-            else dolfinx.cpp.mesh.create_cell_partitioner()
+        if _V011:
+            partitioner = dolfinx.mesh.create_cell_partitioner(dolfinx.mesh.GhostMode.shared_facet, _MAX_FACET_CELLS)
+        elif _NEW:
+            partitioner = dolfinx.mesh.create_cell_partitioner(dolfinx.mesh.GhostMode.shared_facet)
+        else:
+            partitioner = dolfinx.cpp.mesh.create_cell_partitioner()
+    if _V010:
+        return dolfinx.mesh.create_mesh(comm, cells, domain, np.asarray(x, dtype=np.float64), partitioner)
     if _NEW:
         return dolfinx.mesh.create_mesh(comm, cells, np.asarray(x, dtype=np.float64), domain, partitioner)
     return dolfinx.mesh.create_mesh(comm, cells, x, domain, ghost_mode=dolfinx.mesh.GhostMode.shared_facet,
@@ -141,6 +215,9 @@ def cell_partitioner(graph_partitioner: Callable[[Any, int, Any, bool], Any], /)
     """A cell partitioner for :func:`create_mesh` from a graph partitioner
     ``(comm, nparts, graph: AdjacencyList_int64, ghosting) -> AdjacencyList_int32`` (destination
     ranks per cell: owner first, then ghost ranks), with the facet ghost layer."""
+    if _V011:
+        return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner, dolfinx.mesh.GhostMode.shared_facet,
+                                                        _MAX_FACET_CELLS)
     if _NEW:
         return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner, dolfinx.mesh.GhostMode.shared_facet)
     return dolfinx.cpp.mesh.create_cell_partitioner(graph_partitioner)
@@ -192,7 +269,7 @@ def bounding_box_tree(mesh: dolfinx.mesh.Mesh, dim: int, entities: npt.NDArray[n
         entities = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
     entities = np.asarray(entities, dtype=np.int32)
     if _NEW:
-        return dolfinx.geometry.bb_tree(mesh, dim, entities, padding=padding)
+        return dolfinx.geometry.bb_tree(mesh, dim, entities=entities, padding=padding)
     return dolfinx.geometry.BoundingBoxTree(mesh, dim, entities, padding=padding)
 
 
@@ -209,7 +286,7 @@ def element(family: str, cell: Any, degree: int, /, *, shape: tuple[int, ...] | 
     """A finite element: ``family`` ("Lagrange", "DG", ...) of ``degree`` on ``cell`` (a UFL cell
     or its name), scalar or with value ``shape`` (a vector: ``(gdim,)``)."""
     if _NEW:
-        name = cell.cellname() if hasattr(cell, "cellname") else str(cell)
+        name = _ufl_value(cell.cellname) if hasattr(cell, "cellname") else str(cell)
         return basix.ufl.element(family, name, degree, shape=shape)
     if shape is None or shape == ():
         return ufl.FiniteElement(family, cell, degree)
@@ -294,7 +371,7 @@ def xdmf_lagrange_degree(mesh: dolfinx.mesh.Mesh, /) -> int:
     """The degree of the continuous Lagrange fields ``XDMFFile.write_function`` accepts on ``mesh``:
     1 on DOLFINx 0.5 (node values at the vertices), the geometry's degree on 0.9 (which refuses any
     other, e.g. P1 fields on curved P2 shells)."""
-    return int(mesh.geometry.cmap.degree) if _NEW else 1
+    return int(coordinate_map(mesh).degree) if _NEW else 1
 
 
 def petsc_vector(f: dolfinx.fem.Function, /) -> Any:
@@ -313,6 +390,74 @@ def assemble_matrix_into(A: Any, a: Any, bcs: list[Any], /) -> None:
                                   [bc._cpp_object for bc in bcs], True)
     else:
         cpp.petsc.assemble_matrix(A, a, cpp.pack_constants(a), cpp.pack_coefficients(a), bcs, True)
+
+
+def create_vector(L: Any, /) -> Any:
+    """A PETSc vector (ghosted) for the linear form ``L``'s space; not zeroed."""
+    import dolfinx.fem.petsc
+
+    if _V010:
+        return dolfinx.fem.petsc.create_vector(L.function_spaces[0])
+    return dolfinx.fem.petsc.create_vector(L)
+
+
+def create_block_matrix(a: list[list[Any]], /) -> Any:
+    """One PETSc matrix (MPI AIJ, not nested) for the nested list of bilinear forms ``a`` (None:
+    an empty block); the rows of each rank: its owned dofs of each block in turn."""
+    import dolfinx.fem.petsc
+
+    if _V010:
+        return dolfinx.fem.petsc.create_matrix(a, kind="mpi")
+    return dolfinx.fem.petsc.create_matrix_block(a)
+
+
+def create_block_vector(L: list[Any], /) -> Any:
+    """One PETSc vector for the list of linear forms ``L``, laid out as :func:`create_block_matrix`'s
+    rows; not zeroed."""
+    import dolfinx.fem.petsc
+
+    if _V010:
+        return dolfinx.fem.petsc.create_vector([form.function_spaces[0] for form in L], kind="mpi")
+    return dolfinx.fem.petsc.create_vector_block(L)
+
+
+def assemble_block_matrix(A: Any, a: list[list[Any]], /, *, bcs: list[Any]) -> None:
+    """Add the nested list of bilinear forms ``a`` into the block matrix ``A`` (from
+    :func:`create_block_matrix`), with unit diagonal entries on the rows and columns of ``bcs``;
+    ``A`` is not finalised (call ``A.assemble()``)."""
+    import dolfinx.fem.petsc
+
+    if _V010:
+        dolfinx.fem.petsc.assemble_matrix(A, a, bcs=bcs)
+    else:
+        dolfinx.fem.petsc.assemble_matrix_block(A, a, bcs=bcs)
+
+
+def assemble_block_vector(b: Any, L: list[Any], a: list[list[Any]], /, *, bcs: list[Any]) -> None:
+    """Add the linear forms ``L`` into the block vector ``b`` (from :func:`create_block_vector`),
+    lift the values of ``bcs`` with the bilinear forms ``a`` (``b - a g``), add the ghost
+    contributions to their owners and set the values of ``bcs`` on their rows (collective)."""
+    import dolfinx.fem.petsc
+    from petsc4py import PETSc
+
+    if not _V010:
+        dolfinx.fem.petsc.assemble_vector_block(b, L, a, bcs=bcs)
+        return
+    dolfinx.fem.petsc.assemble_vector(b, L)
+    dolfinx.fem.petsc.apply_lifting(b, a, bcs=dolfinx.fem.bcs_by_block(dolfinx.fem.extract_function_spaces(a, 1), bcs))
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    dolfinx.fem.petsc.set_bc(b, dolfinx.fem.bcs_by_block(dolfinx.fem.extract_function_spaces(L), bcs))
+
+
+def gmsh_model_to_mesh(model: Any, comm: Any, rank: int, /, *, gdim: int) -> dolfinx.mesh.Mesh:
+    """The mesh of a gmsh model that lives on ``rank`` of ``comm`` (collective; tags dropped)."""
+    if _V010:
+        import dolfinx.io.gmsh
+
+        return dolfinx.io.gmsh.model_to_mesh(model, comm, rank, gdim=gdim).mesh
+    from dolfinx.io import gmshio
+
+    return gmshio.model_to_mesh(model, comm, rank, gdim=gdim)[0]
 
 
 def orthonormalize(vectors: list[Any], /) -> None:

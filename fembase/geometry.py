@@ -35,7 +35,7 @@ import dolfinx.geometry
 import dolfinx.mesh
 
 from fembase import kernels
-from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, geometry_dofmap
+from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, coordinate_map, geometry_dofmap
 
 __all__ = ["Candidates", "CellGeometry", "Located", "OwnedLocation", "cell_geometry", "cell_nodes", "geometry_dofmap",
            "is_affine_simplex", "locate", "locate_owned", "owned_box", "pull_back", "push_forward", "unique_pairs"]
@@ -108,7 +108,7 @@ class CellGeometry:
         cell_map = mesh.topology.index_map(self.tdim)
         self.num_owned_cells: int = cell_map.size_local
         self.num_local_cells: int = cell_map.size_local + cell_map.num_ghosts
-        self.degree: int = mesh.geometry.cmap.degree
+        self.degree: int = coordinate_map(mesh).degree
         if self.degree > 2:
             raise NotImplementedError("geometry of degree > 2 is not supported")
         self.nodes = np.ascontiguousarray(geometry_dofmap(mesh)[: self.num_local_cells], dtype=np.int32)
@@ -468,7 +468,7 @@ class OwnedLocation(NamedTuple):
 
 def is_affine_simplex(mesh: dolfinx.mesh.Mesh) -> bool:
     """True if the cells are simplices with a degree-1 coordinate map."""
-    return mesh.topology.cell_type in _SIMPLICES and mesh.geometry.cmap.degree == 1
+    return mesh.topology.cell_type in _SIMPLICES and coordinate_map(mesh).degree == 1
 
 
 def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:
@@ -480,7 +480,7 @@ def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:
     if num_owned:
         x = mesh.geometry.x[np.unique(geometry_dofmap(mesh)[:num_owned]), :gdim]
         box[0], box[1] = x.min(axis=0), x.max(axis=0)
-        if mesh.geometry.cmap.degree > 1:
+        if coordinate_map(mesh).degree > 1:
             # A curved cell bulges beyond the box of its nodes (an arc between two boundary
             # nodes passes outside their coordinate range): pad by the largest bulge.
             pad = 1.01 * CellGeometry(mesh).curvature_padding
@@ -503,7 +503,7 @@ def push_forward(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], xref: np
     if is_affine_simplex(mesh):
         jac = nodes[:, 1:, :] - nodes[:, :1, :]
         return nodes[:, 0, :] + np.einsum("mi,mig->mg", xref, jac)
-    cmap = mesh.geometry.cmap
+    cmap = coordinate_map(mesh)
     out = np.empty((xref.shape[0], mesh.geometry.dim))
     for i in range(xref.shape[0]):
         out[i] = cmap.push_forward(xref[i : i + 1], nodes[i])[0]

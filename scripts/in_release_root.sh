@@ -7,6 +7,7 @@
 #   bash scripts/in_release_root.sh trixie -- bash scripts/test.sh      # the test suite on Debian 13
 #   bash scripts/in_release_root.sh trixie -- .venv/bin/python -m convection run configs/vankeken_1a.yaml
 #   bash scripts/in_release_root.sh trixie                              # a shell
+#   PIC_DOLFINX=pypi bash scripts/in_release_root.sh trixie -- bash scripts/test.sh  # PyPI's DOLFINx
 # The command's exit code is this script's.
 #
 # Inside the root, the repository's .venv is the root's own venv (another Python, another numpy):
@@ -56,8 +57,14 @@ done
 copy_in /etc/pip.conf
 copy_in /etc/resolv.conf
 
-# --- the root's own venv for this repository ---
+# --- the root's own venv for this repository (and route: PIC_DOLFINX=pypi has its own, so that
+# switching between Debian's DOLFINx and PyPI's does not remake a venv each time) ---
 venv_key="$(printf '%s' "$here" | sed 's|^/||; s|[^A-Za-z0-9._-]|_|g')"
+case "${PIC_DOLFINX:-debian}" in
+    debian) ;;
+    pypi) venv_key="$venv_key+pypi" ;;
+    *) echo "in_release_root: PIC_DOLFINX must be debian or pypi, not '$PIC_DOLFINX'" >&2; exit 2 ;;
+esac
 venv="/var/lib/pic-venvs/$venv_key"
 mkdir -p "$root$venv" "$root$here"
 mkdir -p "$here/.venv"   # the mount point (an empty folder is what setup.sh makes a venv in anyway)

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Set everything up (idempotent) and run the test suite: the collective tests under mpirun with
-# 2 ranks and 3 ranks (--oversubscribe), then the serial tests (exit 5, none collected, fails). Extra arguments go to every pytest call.
+# Set everything up (idempotent) and run the test suite: the collective tests under MPI's launcher
+# with 2 ranks and 3 ranks (Open MPI's mpirun --oversubscribe, or MPICH's mpiexec on the PyPI route:
+# python -m convection.launch N tells which), then the serial tests (exit 5, none collected,
+# fails). Extra arguments go to every pytest call. PIC_DOLFINX=pypi: the PyPI route (setup.sh).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -23,12 +25,16 @@ status=0
 
 logdir="$(mktemp -d)"
 for n in 2 3; do
-    echo "== collective tests under mpirun -n $n =="
+    launcher="$("$py" -m convection.launch "$n")"
+    mapfile -t mpirun <<< "$launcher"
+    echo "== collective tests under ${mpirun[*]} =="
     rc=0
-    # Rank 0 reports; the other ranks log to files that are shown when the run fails.
-    timeout 1800 mpirun -n "$n" --oversubscribe bash -c '
-        if [ "$OMPI_COMM_WORLD_RANK" = 0 ]; then exec "$0" -m pytest -p no:cacheprovider --color=no "${@:2}";
-        else exec "$0" -m pytest -p no:cacheprovider --color=no -q "${@:2}" > "$1/rank$OMPI_COMM_WORLD_RANK.log" 2>&1; fi
+    # Rank 0 reports; the other ranks log to files that are shown when the run fails. The rank is
+    # Open MPI's OMPI_COMM_WORLD_RANK or MPICH's PMI_RANK.
+    timeout 1800 "${mpirun[@]}" bash -c '
+        rank="${OMPI_COMM_WORLD_RANK:-${PMI_RANK:-}}"
+        if [ "$rank" = 0 ]; then exec "$0" -m pytest -p no:cacheprovider --color=no "${@:2}";
+        else exec "$0" -m pytest -p no:cacheprovider --color=no -q "${@:2}" > "$1/rank$rank.log" 2>&1; fi
     ' "$py" "$logdir" -m "mpi and not slow" "$@" || rc=$?
     if [ "$rc" -ne 0 ]; then
         for f in "$logdir"/rank*.log; do echo "---- $f"; tail -n 60 "$f"; done

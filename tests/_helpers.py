@@ -2,12 +2,20 @@
 
 import numpy as np
 import numpy.typing as npt
+import pytest
 from mpi4py import MPI
 
 import dolfinx.mesh
 
+from convection.petsc_options import HAS_HYPRE
 from fembase.evaluation import locate
 from particles import Swarm
+
+needs_hypre = pytest.mark.skipif(not HAS_HYPRE, reason="this PETSc has no hypre (BoomerAMG), as PyPI's DOLFINx wheel")
+"""For tests of the BoomerAMG solvers (the Stokes solver "iterative")."""
+
+ITERATIVE = pytest.param("iterative", marks=needs_hypre)
+"""The Stokes solver "iterative" as a test parameter, skipped without hypre."""
 
 
 def swarm_at(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike) -> Swarm:

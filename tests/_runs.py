@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -16,22 +15,22 @@ from typing import Callable
 import h5py
 import numpy as np
 
+from convection.launch import mpi_environment, mpirun
+
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
 
 
 def command(args: list[str], ranks: int = 1) -> list[str]:
-    """``python -m convection ARGS``, under ``mpirun -n RANKS`` when ranks > 1."""
+    """``python -m convection ARGS``, under MPI's launcher with RANKS ranks when ranks > 1."""
     cmd = [sys.executable, "-m", "convection", *args]
     if ranks > 1:
-        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
+        cmd = [*mpirun(ranks), *cmd]
     return cmd
 
 
 def env() -> dict[str, str]:
     """The environment of a run under mpirun (:func:`convection.launch.mpi_environment`)."""
-    from convection.launch import mpi_environment
-
     return mpi_environment()
 
 

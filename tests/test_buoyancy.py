@@ -20,6 +20,7 @@ from convection.factory import run_config
 from convection.plot import read_statistics
 from convection.stokes import StokesSolver
 from fembase.dolfinx_compat import function_space
+from _helpers import needs_hypre
 
 ROOT = Path(__file__).resolve().parents[1]
 FREE_SLIP = {s: VelocityBC("free_slip") for s in SIDES_2D}
@@ -105,6 +106,7 @@ def test_term_is_symmetric_positive_and_only_on_stable_gradients():
     assert np.abs(unchanged).max() < 1e-12 * np.abs(extra).max()  # round-off of the kernels' sums
 
 
+@needs_hypre
 def test_iterative_keeps_its_preconditioner_and_matches_direct():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 12, 12)
     C = _layer(mesh)
@@ -138,6 +140,7 @@ def test_lumped_projection_keeps_constants_and_the_integral():
 
 
 @pytest.mark.mpi
+@needs_hypre
 def test_semi_implicit_solve_is_rank_count_independent():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 12, 12)
     serial_mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 12, 12)

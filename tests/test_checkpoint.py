@@ -16,6 +16,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from convection.launch import mpirun
 from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.advection import Advector
@@ -259,7 +260,7 @@ def test_damaged_checkpoint_under_mpirun_does_not_hang(tmp_path):
         """
     )
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [shutil.which("mpirun"), "-n", "2", "--oversubscribe", sys.executable, "-c", script]
+    cmd = [*mpirun(2), sys.executable, "-c", script]
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     for rank in (0, 1):

@@ -4,7 +4,6 @@ Each case runs the real CLI under ``mpirun -n 2`` (and once serially) in a subpr
 """
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from convection.config import ConfigError, load_config
+from convection.launch import mpirun
 
 ROOT = Path(__file__).resolve().parents[1]
 GOOD = ROOT / "configs" / "blankenbach_1a.yaml"
@@ -21,7 +21,7 @@ def _run(args, *, ranks=2, timeout=120):
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     cmd = [sys.executable, "-m", "convection", *args]
     if ranks > 1:
-        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", *cmd]
+        cmd = [*mpirun(ranks), *cmd]
     return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import re
-import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ import yaml
 
 from convection.config import load_config
 from convection.expressions import MAX_LENGTH, Expression, ExpressionError
-from convection.launch import mpi_environment
+from convection.launch import RANK_SHELL, mpi_environment, mpirun
 from convection.probes import MAX_PROBES, boundary_probes, domain_probes
 from convection.schema import ConfigError, check_document_shape, short_repr
 
@@ -231,7 +230,7 @@ def _env() -> dict[str, str]:
     return mpi_environment()
 
 
-_RECORD_EXIT = '"$0" "$@"; code=$?; echo $code > "$RANK_EXITS/rank_$OMPI_COMM_WORLD_RANK"; exit 0'
+_RECORD_EXIT = '"$0" "$@"; code=$?; echo $code > "$RANK_EXITS/rank_' + RANK_SHELL + '"; exit 0'
 """Run the command and write its exit code to $RANK_EXITS/rank_N: mpirun reports only the first
 non-zero one, so these show that every rank exits with the same code. (The wrapper itself exits
 with 0, so that mpirun does not kill the other ranks when one exits non-zero — Open MPI 4 and 5
@@ -241,7 +240,7 @@ both do by default; test_mpirun_exit_code_and_one_line checks mpirun's own exit 
 def _command(args: list[str], ranks: int = 1) -> list[str]:
     cmd = [sys.executable, "-m", "convection", *args]
     if ranks > 1:
-        cmd = [shutil.which("mpirun"), "-n", str(ranks), "--oversubscribe", "sh", "-c", _RECORD_EXIT, *cmd]
+        cmd = [*mpirun(ranks), "sh", "-c", _RECORD_EXIT, *cmd]
     return cmd
 
 
@@ -339,7 +338,7 @@ def test_mpirun_exit_code_and_one_line(tmp_path):
     """With mpirun's defaults (the other ranks stopped after the first non-zero exit), mpirun exits
     with the code, and apart from Open MPI's notice about that exit there is one line."""
     case = _BY_ID["end nan"]
-    command = [shutil.which("mpirun"), "-n", "2", "--oversubscribe", sys.executable, "-m", "convection",
+    command = [*mpirun(2), sys.executable, "-m", "convection",
                *_arguments(case, "check", tmp_path)]
     proc = subprocess.run(command, cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=120)
     _assert_answer(case, proc, proc.returncode)

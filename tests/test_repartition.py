@@ -18,15 +18,17 @@ from fembase.dolfinx_compat import geometry_dofmap
 
 
 class _Recorder:
-    """Wraps ``dolfinx.mesh.create_mesh``: the shapes of the cells and nodes each call got here."""
+    """Wraps ``dolfinx.mesh.create_mesh``: the shapes of the cells and nodes each call got here
+    (the nodes are the array among the next two arguments: DOLFINx 0.10 puts the element first)."""
 
     def __init__(self, monkeypatch):
         self.calls = []
         original = dolfinx.mesh.create_mesh
 
-        def create_mesh(comm, cells, x, domain, *args, **kwargs):
-            self.calls.append((np.asarray(cells).shape[0], np.asarray(x).shape[0]))
-            return original(comm, cells, x, domain, *args, **kwargs)
+        def create_mesh(comm, cells, *args, **kwargs):
+            x = next(a for a in args[:2] if isinstance(a, np.ndarray))
+            self.calls.append((np.asarray(cells).shape[0], x.shape[0]))
+            return original(comm, cells, *args, **kwargs)
 
         monkeypatch.setattr(dolfinx.mesh, "create_mesh", create_mesh)
 

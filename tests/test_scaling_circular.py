@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "sca
 import circular  # noqa: E402
 
 from fembase.dolfinx_compat import geometry_dofmap
+from _helpers import needs_hypre
 
 
 def test_annulus_mesh_is_conforming_with_boundary_on_the_circles():
@@ -90,6 +91,7 @@ def test_stokes_solve_reproduces_couette_flow_at_second_order():
 
 
 
+@needs_hypre
 def test_spherical_shell_solve_is_iterative_by_default_and_agrees_with_mumps():
     """In 3D the default ('auto') is FGMRES + block Schur preconditioner; with rotations prescribed on
     both spheres it converges in a few tens of iterations to MUMPS's solution."""

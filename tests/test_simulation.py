@@ -2,7 +2,6 @@
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from mpi4py import MPI
 from convection.config import load_config
 from convection.plot import read_statistics
 from convection.factory import build_model, run_config
+from convection.launch import mpirun
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -83,7 +83,7 @@ def test_parallel_run_matches_serial(tmp_path_factory):
 
 def test_sigterm_stops_cleanly(tmp_path):
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [shutil.which("mpirun"), "-n", "2", "--oversubscribe", sys.executable, "-m", "convection", "run",
+    cmd = [*mpirun(2), sys.executable, "-m", "convection", "run",
            str(ROOT / "configs" / "blankenbach_1a.yaml"), "--set", "mesh.cells=[8,8]", "--set", "time.end=1e3",
            "--set", "time.steady_state_tolerance=null", "--set", "output.progress=none", "--output", str(tmp_path)]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

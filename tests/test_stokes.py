@@ -11,6 +11,8 @@ from mpi4py import MPI
 from convection.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.boundary import SIDES_2D, SIDES_3D, VelocityBC
 from convection.stokes import StokesSolver
+from convection.petsc_options import HAS_HYPRE
+from _helpers import ITERATIVE, needs_hypre
 
 FREE_SLIP = {s: VelocityBC("free_slip") for s in SIDES_2D}
 NO_SLIP = {s: VelocityBC("no_slip") for s in SIDES_2D}
@@ -86,7 +88,7 @@ def _norm(comm, f) -> float:
     return float(np.sqrt(_integral(comm, ufl.inner(f, f) * ufl.dx)))
 
 
-@pytest.mark.parametrize("solver", ["iterative", "iterative_gamg"])
+@pytest.mark.parametrize("solver", [ITERATIVE, "iterative_gamg"])
 @pytest.mark.parametrize("kind", ["no_slip", "free_slip", "variable_viscosity"])
 def test_iterative_matches_direct_to_the_solver_tolerance(kind, solver):
     """The relative residual tolerance rtol bounds the distance to the MUMPS solution: measured
@@ -104,6 +106,7 @@ def test_iterative_matches_direct_to_the_solver_tolerance(kind, solver):
     assert abs(e_p_i - e_p_d) < 1e-4 * e_p_d
 
 
+@needs_hypre
 def test_iterative_convergence_order():
     ns = (8, 16, 32)
     results = [_errors(n, "free_slip", "iterative") for n in ns]
@@ -114,7 +117,7 @@ def test_iterative_convergence_order():
 
 
 @pytest.mark.parametrize("gdim", [2, 3])
-@pytest.mark.parametrize("solver", ["direct", "iterative"])
+@pytest.mark.parametrize("solver", ["direct", ITERATIVE])
 def test_hydrostatic_state_is_exact(gdim, solver):
     """Uniform T in a free-slip box [0,2]x[0,1](x[0,1]): u = 0, p = Ra T (z - mean z)."""
     comm = MPI.COMM_WORLD
@@ -172,7 +175,7 @@ def test_transfer_from_copies_state():
     approx = BoussinesqApproximation(Ra=1.0)
     old = StokesSolver(mesh, approx, bcs=FREE_SLIP)
     old.solve(ufl.SpatialCoordinate(mesh)[0], None)
-    new = StokesSolver(mesh, approx, bcs=FREE_SLIP, solver="iterative")
+    new = StokesSolver(mesh, approx, bcs=FREE_SLIP, solver="iterative" if HAS_HYPRE else "iterative_gamg")
 
     def copy(src, dst):
         dst.interpolate(src)
@@ -183,7 +186,7 @@ def test_transfer_from_copies_state():
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("solver", ["direct", "iterative"])
+@pytest.mark.parametrize("solver", ["direct", ITERATIVE])
 def test_parallel_errors_equal_serial(solver):
     options = {"ksp_rtol": 1e-11} if solver == "iterative" else None
     e_u, e_p, _, _ = _errors(16, "variable_viscosity", solver, comm=MPI.COMM_WORLD, petsc_options=options)
@@ -192,7 +195,7 @@ def test_parallel_errors_equal_serial(solver):
     assert abs(e_p - e_p_s) < 1e-7 * e_p_s
 
 
-@pytest.mark.parametrize("solver", ["iterative", "iterative_gamg"])
+@pytest.mark.parametrize("solver", [ITERATIVE, "iterative_gamg"])
 def test_3d_variable_viscosity_iterative_matches_direct(solver):
     """Frank-Kamenetskii viscosity (contrast 100) with a composition layer in a free-slip cube:
     the iterative solvers give MUMPS's velocity field to within their tolerance."""

@@ -15,6 +15,7 @@ import numpy.typing as npt
 
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import coordinate_map
 from fembase.geometry import cell_nodes, is_affine_simplex, pull_back
 
 __all__ = ["CellMaps"]
@@ -73,7 +74,7 @@ class CellMaps:
         self._nodes = canonical if self.affine else nodes
         if not self.affine:
             self._element = basix.create_element(basix.ElementFamily.P, self.basix_cell,
-                                                 mesh.geometry.cmap.degree, basix.LagrangeVariant.gll_warped)
+                                                 coordinate_map(mesh).degree, basix.LagrangeVariant.gll_warped)
 
     @property
     def reference_volume(self) -> float:

@@ -15,9 +15,11 @@ nondimensional internal heating ``H`` and viscosity ``eta(T, C)`` given by a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Mapping
 
 import ufl
+
+from convection.rheology import FlowState, ViscosityLawBase, laws_field_names
 
 MIXING_RULES: dict[str, str] = {
     "geometric": "eta = eta_0^(1-C) * eta_1^C",
@@ -88,12 +90,19 @@ class ViscosityLaw:
         temperature_law: name in :data:`TEMPERATURE_LAWS` (``"none"`` | ``"frank_kamenetskii"``,
             which multiplies the viscosity by ``exp(-gamma T)``).
         gamma: Frank-Kamenetskii parameter (``ln`` of the thermal viscosity contrast).
+        laws: ``(law_0, law_1, ..., law_n)``: a :mod:`convection.rheology` law per material
+            (background first) in place of ``material_viscosities``; the mixing is the same, of
+            the laws' values. None: ``material_viscosities``.
+        top: where the depth is measured from: ``("box", z_top)`` (depth ``z_top - z``, the last
+            coordinate) or ``("shell", r_outer)`` (depth ``r_outer - |x|``).
     """
 
     material_viscosities: tuple[float, ...] | None = None
     mixing: str = "geometric"
     temperature_law: str = "none"
     gamma: float = 0.0
+    laws: tuple[ViscosityLawBase, ...] | None = None
+    top: tuple[str, float] = ("box", 1.0)
 
     def __post_init__(self) -> None:
         _check_name(self.mixing, MIXING_RULES, "viscosity mixing rule")
@@ -101,10 +110,39 @@ class ViscosityLaw:
         if self.material_viscosities is not None:
             if len(self.material_viscosities) < 2 or min(self.material_viscosities) <= 0.0:
                 raise ValueError("material_viscosities must be at least two positive numbers (eta_0, eta_1, ...)")
+        if self.laws is not None:
+            if self.material_viscosities is not None:
+                raise ValueError("give either material_viscosities or laws, not both")
+            if not self.laws:
+                raise ValueError("laws needs at least the background material's law")
+        if self.top[0] not in ("box", "shell"):
+            raise ValueError(f"top must be ('box', z_top) or ('shell', r_outer), got {self.top}")
+
+    @property
+    def is_nonlinear(self) -> bool:
+        """True when the viscosity depends on the flow (strain rate or pressure)."""
+        return self.laws is not None and any(law.is_nonlinear for law in self.laws)
+
+    @property
+    def field_names(self) -> tuple[str, ...]:
+        """Named mesh fields the laws read (e.g. ``plastic_strain``)."""
+        return laws_field_names(self.laws) if self.laws is not None else ()
+
+    def depth(self, x: Any, /) -> Any:
+        """UFL depth below the top surface at the points ``x`` (``ufl.SpatialCoordinate``)."""
+        kind, level = self.top
+        if kind == "shell":
+            return level - ufl.sqrt(ufl.dot(x, x))
+        return level - x[x.ufl_shape[0] - 1]
 
     @property
     def is_constant(self) -> bool:
-        """True when ``eta`` depends on neither ``T`` nor ``C``."""
+        """True when ``eta`` depends on neither ``T`` nor ``C`` (nor on the flow or a field)."""
+        temperature_free = self.temperature_law == "none" or self.gamma == 0.0
+        if self.laws is not None:
+            # Only plain constants are known to be equal (a clipped constant counts as variable).
+            values = {law.eta0 if law.name == "constant" else None for law in self.laws}
+            return None not in values and len(values) == 1 and temperature_free
         composition_free = (
             self.material_viscosities is None
             or len(set(self.material_viscosities)) == 1
@@ -112,9 +150,16 @@ class ViscosityLaw:
         temperature_free = self.temperature_law == "none" or self.gamma == 0.0
         return composition_free and temperature_free
 
-    def __call__(self, T: Any, C: Any) -> Any:
+    def __call__(self, T: Any, C: Any, /, *, u: Any = None, p: Any = None,
+                 fields: Mapping[str, Any] | None = None, x: Any = None) -> Any:
         """UFL expression of the viscosity for temperature ``T`` and composition ``C``
-        (see :func:`fractions`; one fraction per material after the background)."""
+        (see :func:`fractions`; one fraction per material after the background).
+
+        With :attr:`laws`, also of the velocity ``u`` (its strain rate), the pressure ``p``, the
+        named ``fields`` and the position ``x`` (``ufl.SpatialCoordinate``, for the depth); a law
+        that needs one of them fails without it."""
+        if self.laws is not None:
+            return self._mixed_laws(T, C, u=u, p=p, fields=fields or {}, x=x)
         if self.material_viscosities is None:
             eta = ufl.as_ufl(1.0)
         else:
@@ -133,6 +178,34 @@ class ViscosityLaw:
                     eta = background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
                 else:
                     eta = 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
+        if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
+            eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
+        return eta
+
+
+    def _mixed_laws(self, T: Any, C: Any, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+        if x is None:
+            raise ValueError("viscosity laws need the spatial coordinate x (for the depth)")
+        gdim = x.ufl_shape[0]
+        state = FlowState(T=_as_ufl(T), strain_rate=ufl.sym(ufl.grad(u)) if u is not None else None,
+                          pressure=p, depth=self.depth(x), fields=fields, gdim=gdim)
+        law0, *others = self.laws
+        eta0 = law0(state)
+        if others:
+            cs = fractions(C)
+            if len(cs) != len(others):
+                raise ValueError(f"the viscosity law has {len(others)} material(s), got {len(cs)} fraction(s)")
+            etas = [law(state) for law in others]
+            cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
+            background = 1.0 - _sum(cs)
+            if self.mixing == "geometric":
+                eta = ufl.exp(background * ufl.ln(eta0) + _sum([c * ufl.ln(e) for c, e in zip(cs, etas)]))
+            elif self.mixing == "arithmetic":
+                eta = background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
+            else:
+                eta = 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
+        else:
+            eta = eta0
         if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
             eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
         return eta
@@ -180,9 +253,16 @@ class BoussinesqApproximation:
         """True when the viscosity depends on ``T`` or ``C``."""
         return not self.viscosity_law.is_constant
 
-    def viscosity(self, T: Any, C: Any) -> Any:
-        """UFL expression of ``eta(T, C)`` (``T``, ``C``: Functions, UFL expressions or numbers)."""
-        return self.viscosity_law(T, C)
+    @property
+    def is_nonlinear(self) -> bool:
+        """True when the viscosity depends on the flow: the Stokes problem is nonlinear."""
+        return self.viscosity_law.is_nonlinear
+
+    def viscosity(self, T: Any, C: Any, /, **flow: Any) -> Any:
+        """UFL expression of ``eta(T, C)`` (``T``, ``C``: Functions, UFL expressions or numbers);
+        ``flow``: ``u``, ``p``, ``fields``, ``x`` for :mod:`convection.rheology` laws (see
+        :meth:`ViscosityLaw.__call__`)."""
+        return self.viscosity_law(T, C, **flow)
 
     def up(self, x: Any, /) -> Any:
         """UFL unit vector ``e_up`` against gravity at the points ``x`` (``ufl.SpatialCoordinate``)."""

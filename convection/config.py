@@ -176,6 +176,11 @@ SCHEMA: dict[str, Any] = {
                             help="volume-fraction weighted mixing of the material viscosities"),
             "temperature_law": Field("str", "none", choices=_names("convection.approximation", "TEMPERATURE_LAWS")),
             "gamma": Field("float", 0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii"),
+            "law": Field("any", None, nullable=True,
+                         help="the background material's viscosity law: a number or {name: <law>, ...} "
+                              "(convection.rheology: constant, exponential, arrhenius, depth_table, power_law, "
+                              "composite, von_mises, drucker_prager, viscoplastic, weakened, damaged; any law "
+                              "may add min_viscosity, max_viscosity)"),
         },
     },
     "boundary": {
@@ -191,8 +196,9 @@ SCHEMA: dict[str, Any] = {
     "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items={
         "initial": Field("str", REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")"),
         "Rb": Field("float", 0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)"),
-        "viscosity": Field("float", None, nullable=True, exclusive_minimum=0.0,
-                           help="viscosity of the pure material (null: physics.viscosity.background)"),
+        "viscosity": Field("any", None, nullable=True,
+                           help="viscosity of the pure material: a number or a law as physics.viscosity.law "
+                                "(null: the background's)"),
     }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "stokes": {
         "degree": Field("int", 2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)"),
@@ -202,6 +208,19 @@ SCHEMA: dict[str, Any] = {
         "petsc_options": Field("mapping", {}, check=check_petsc_options, max_items=MAX_ENTRIES,
                                help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); viewers may "
                                     "only print"),
+        "nonlinear": {
+            "method": Field("str", "newton", choices=_names("convection.stokes_nonlinear", "NONLINEAR_METHODS"),
+                            help="for a viscosity that depends on the flow: picard (defect correction) or newton "
+                                 "(SNES, after picard reached switch_tolerance)"),
+            "rtol": Field("float", 1e-6, exclusive_minimum=0.0, maximum=0.5,
+                          help="stop at |F(u, p)| <= rtol |b| (b: forcing and lifted boundary velocities)"),
+            "max_iterations": Field("int", 50, minimum=1, maximum=10_000,
+                                    help="most nonlinear iterations per solve; more is a solver failure (exit 3)"),
+            "switch_tolerance": Field("float", 0.1, exclusive_minimum=0.0, maximum=1.0,
+                                      help="newton: Picard iterations until the relative residual is below this"),
+            "line_search": Field("str", "bt", choices=_names("convection.stokes_nonlinear", "LINE_SEARCHES"),
+                                 help="newton: PETSc SNES line search"),
+        },
         "buoyancy_theta": Field("float", 0.0, minimum=0.0, maximum=1.0,
                                 help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
                                      "t + theta dt along the flow (semi-implicit, stabilises dense interfaces against "
@@ -535,7 +554,70 @@ def material_table(config: dict[str, Any]) -> tuple[list[dict[str, Any]], float]
             etas[0] if etas else viscosity["background"])
 
 
+def viscosity_laws(config: dict[str, Any]) -> tuple[Any, list[Any]] | None:
+    """The rheology laws of a resolved config: ``(background law, [law per material])``, or None
+    when the config uses no law (numbers only: the classic viscosity keys). A material without a
+    viscosity takes the background's law.
+
+    Raises:
+        ConfigError: a law is wrong (one line naming the key).
+    """
+    from convection.rheology import build_law
+
+    visc = config["physics"]["viscosity"]
+    table, background = material_table(config)
+    given = visc["law"] is not None or any(isinstance(m["viscosity"], dict) for m in table)
+    if not given:
+        return None
+    law0 = build_law(visc["law"] if visc["law"] is not None else background, "physics.viscosity.law")
+    keyed = config["materials"] and True
+    laws = []
+    for m in table:
+        key = f"materials.{m['name']}.viscosity" if keyed else "physics.viscosity.material_viscosities"
+        laws.append(law0 if m["viscosity"] is None else build_law(m["viscosity"], key))
+    return law0, laws
+
+
+def _check_rheology(config: dict[str, Any]) -> None:
+    visc = config["physics"]["viscosity"]
+    for name, spec in config["materials"].items():
+        value = spec["viscosity"]
+        if value is not None and not isinstance(value, dict) and (
+                isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0):
+            raise ConfigError(f"config key 'materials.{name}.viscosity': expected a positive number or a law "
+                              f"{{name: ..., ...}}, got {short_repr(value)}")
+    laws = viscosity_laws(config)
+    if laws is None:
+        return
+    if visc["law"] is not None and visc["background"] != 1.0:
+        raise ConfigError("config key 'physics.viscosity.background': not with physics.viscosity.law (the law is the "
+                          "background's)")
+    if visc["temperature_law"] != "none":
+        raise ConfigError("config key 'physics.viscosity.temperature_law': not with viscosity laws (give the "
+                          "temperature dependence in the law, e.g. {name: exponential, gamma_T: ...})")
+    law0, others = laws
+    depends = set(law0.depends_on)
+    for law in others:
+        depends |= law.depends_on
+    nonlinear = bool(depends & {"strain_rate", "pressure"})
+    if nonlinear and config["stokes"]["buoyancy_theta"] != 0.0:
+        raise ConfigError("config key 'stokes.buoyancy_theta': the semi-implicit buoyancy is not available with a "
+                          "viscosity that depends on the flow (strain rate or pressure)")
+    sides = config["boundary"]["velocity"]
+    closed = all(value is not None for value in sides.values())
+    if nonlinear and "pressure" in depends and closed and config["stokes"]["nonlinear"]["method"] == "newton":
+        raise ConfigError("config key 'stokes.nonlinear.method': newton with a pressure-dependent viscosity "
+                          "(drucker_prager) needs a defined pressure level: leave a side traction free (null) or "
+                          "use picard")
+    fields = sorted({d.split(":", 1)[1] for law in (law0, *others) for d in law.depends_on if d.startswith("field:")})
+    if fields:
+        raise ConfigError(f"config key 'physics.viscosity.law': laws that read mesh fields ({fields}) work from the "
+                          "Python API only (StokesSolver.solve(fields=...)); a config cannot map particle properties "
+                          "to fields yet")
+
+
 def _check_materials(config: dict[str, Any]) -> None:
+    _check_rheology(config)
     if config["materials"]:
         legacy = (("initial.composition", config["initial"]["composition"] is not None),
                   ("physics.Rb", config["physics"]["Rb"] != 0.0),

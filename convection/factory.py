@@ -45,6 +45,7 @@ from convection.composition import (
 )
 from convection.config import (
     config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
+    viscosity_laws,
 )
 from convection.expressions import Expression
 from convection.materials import Material, Materials
@@ -56,6 +57,7 @@ from convection.rebalance import Balancer
 from convection.run import BlowUp, Resume, RunSettings, RunSummary, run
 from convection.run_folder import RunFolderLock
 from convection.stokes import StokesSolver
+from convection.stokes_nonlinear import NonlinearSettings
 from convection.transport import TransportSolver
 from fembase.dolfinx_compat import function_space, petsc_vector
 from particles.manager import ParticleManager
@@ -99,14 +101,25 @@ def temperature_bcs_from_config(section: dict, gdim: int) -> dict[str, Temperatu
     return result
 
 
+def depth_origin(config: dict[str, Any]) -> tuple[str, float]:
+    """Where the viscosity laws measure the depth from: ``("box", z_top)`` or ``("shell", r_outer)``."""
+    mesh = config["mesh"]
+    if mesh["geometry"] != "box":
+        return ("shell", float(mesh["radii"][1]))
+    return ("box", float(mesh["upper"][-1]) if mesh["upper"] is not None else 1.0)
+
+
 def materials_from_config(config: dict[str, Any]) -> Materials:
     """The materials of the ``materials`` section (or of the two-material keys)."""
     gdim = config_gdim(config)
     constants = expression_constants(config)
     table, background = material_table(config)
+    laws = viscosity_laws(config)
+    viscosities = [m["viscosity"] for m in table] if laws is None else laws[1]
     materials = tuple(Material(m["name"], Expression(m["initial"], constants=constants, gdim=gdim), Rb=m["Rb"],
-                               viscosity=m["viscosity"]) for m in table)
-    return Materials(materials, background_viscosity=background, mixing=config["physics"]["viscosity"]["mixing"])
+                               viscosity=eta) for m, eta in zip(table, viscosities))
+    return Materials(materials, background_viscosity=background if laws is None else 1.0,
+                     mixing=config["physics"]["viscosity"]["mixing"], background_law=None if laws is None else laws[0])
 
 
 def run_settings(config: dict[str, Any]) -> RunSettings:
@@ -154,7 +167,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     materials = materials_from_config(config)
     visc = physics["viscosity"]
     approximation = materials.approximation(Ra=physics["Ra"], H=physics["H"], temperature_law=visc["temperature_law"],
-                                            gamma=visc["gamma"], gravity=spec.gravity)
+                                            gamma=visc["gamma"], gravity=spec.gravity, top=depth_origin(config))
     velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], gdim)
     temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], gdim)
 
@@ -183,7 +196,8 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
 
     scfg, ecfg = config["stokes"], config["energy"]
     stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, degree=scfg["degree"], solver=scfg["solver"],
-                          petsc_options=scfg["petsc_options"], buoyancy_theta=scfg["buoyancy_theta"])
+                          petsc_options=scfg["petsc_options"], buoyancy_theta=scfg["buoyancy_theta"],
+                          nonlinear=NonlinearSettings.from_config(scfg["nonlinear"]))
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, degree=ecfg["degree"],
                                   stabilisation=ecfg["stabilisation"], velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),

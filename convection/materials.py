@@ -14,7 +14,7 @@ the background, ``i`` where material ``i`` (counted from 1 in the given order) f
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -22,6 +22,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from convection.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.rheology import Constant, ViscosityLawBase
 
 __all__ = ["Material", "Materials", "material_index"]
 
@@ -37,19 +38,20 @@ class Material:
         name: Name (used for its field, its particle property and statistics columns).
         initial: Initial volume fraction as a function of position (DOLFINx interpolation layout).
         Rb: Compositional Rayleigh number: buoyancy ``-Rb C e_z`` (positive: denser).
-        viscosity: Viscosity of the pure material (None: the reference viscosity 1 for every
-            material, i.e. no compositional viscosity contrast).
+        viscosity: Viscosity of the pure material: a number, a :mod:`convection.rheology` law, or
+            None (the background's; without any law or number: the reference viscosity 1 for
+            every material, i.e. no compositional viscosity contrast).
     """
 
     name: str
     initial: InitialRegion
     Rb: float = 0.0
-    viscosity: float | None = None
+    viscosity: float | ViscosityLawBase | None = None
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
             raise ValueError(f"material name {self.name!r} must be a name (letters, digits, _)")
-        if self.viscosity is not None and not self.viscosity > 0.0:
+        if isinstance(self.viscosity, (int, float)) and not self.viscosity > 0.0:
             raise ValueError(f"material {self.name!r}: viscosity must be > 0, got {self.viscosity}")
 
 
@@ -61,11 +63,14 @@ class Materials:
         materials: The named materials, in order (material ``i`` has index ``i + 1``).
         background_viscosity: Viscosity of the background material.
         mixing: ``"arithmetic"``, ``"geometric"`` or ``"harmonic"`` (volume-fraction weighted).
+        background_law: The background's :mod:`convection.rheology` law (replaces
+            ``background_viscosity``), or None.
     """
 
     materials: tuple[Material, ...] = ()
     background_viscosity: float = 1.0
     mixing: str = "geometric"
+    background_law: ViscosityLawBase | None = None
 
     def __post_init__(self) -> None:
         names = self.names
@@ -81,8 +86,25 @@ class Materials:
     def __len__(self) -> int:
         return len(self.materials)
 
-    def viscosity_law(self, *, temperature_law: str = "none", gamma: float = 0.0) -> ViscosityLaw:
-        """The viscosity law of these materials (with an optional temperature dependence)."""
+    @property
+    def has_laws(self) -> bool:
+        """True when a material (or the background) has a rheology law rather than a number."""
+        return self.background_law is not None or any(isinstance(m.viscosity, ViscosityLawBase)
+                                                      for m in self.materials)
+
+    def viscosity_law(self, *, temperature_law: str = "none", gamma: float = 0.0,
+                      top: tuple[str, float] = ("box", 1.0)) -> ViscosityLaw:
+        """The viscosity law of these materials (with an optional temperature dependence); ``top``:
+        where the laws' depth is measured from (:class:`convection.approximation.ViscosityLaw`)."""
+        if self.has_laws:
+            law0 = self.background_law if self.background_law is not None else Constant(self.background_viscosity)
+
+            def law(value: Any) -> ViscosityLawBase:
+                if value is None:
+                    return law0
+                return value if isinstance(value, ViscosityLawBase) else Constant(float(value))
+            return ViscosityLaw(mixing=self.mixing, temperature_law=temperature_law, gamma=gamma,
+                                laws=(law0, *(law(m.viscosity) for m in self.materials)), top=top)
         etas = [m.viscosity for m in self.materials]
         contrasts = None
         if any(e is not None for e in etas):
@@ -91,11 +113,13 @@ class Materials:
                             gamma=gamma)
 
     def approximation(self, *, Ra: float, H: float = 0.0, temperature_law: str = "none",
-                      gamma: float = 0.0, gravity: str = "vertical") -> BoussinesqApproximation:
+                      gamma: float = 0.0, gravity: str = "vertical",
+                      top: tuple[str, float] = ("box", 1.0)) -> BoussinesqApproximation:
         """The Boussinesq approximation with these materials' buoyancy and viscosity."""
         rb = tuple(m.Rb for m in self.materials)
         return BoussinesqApproximation(Ra=Ra, Rb=rb if rb else 0.0, H=H, gravity=gravity,
-                                       viscosity=self.viscosity_law(temperature_law=temperature_law, gamma=gamma))
+                                       viscosity=self.viscosity_law(temperature_law=temperature_law, gamma=gamma,
+                                                                    top=top))
 
 
 def material_index(fractions: Sequence[dolfinx.fem.Function], /, *, name: str = "material") -> dolfinx.fem.Function:

@@ -20,7 +20,16 @@ name            columns
 ``entrainment`` entrainment: volume of a material above a height / its initial volume
                 (one column per material, ``entrainment_<name>``, for ``all``)
 ``wall_time``   wall_time (seconds since the run started)
+``nonlinear``   nonlinear_iterations, nonlinear_residual (relative) of the last Stokes solve
+``rheology``    eta_min, eta_max: the viscosity's extremes at the velocity nodes of every cell
+``energy``      W = <T u . e_up>, Phi_over_Ra = <2 eta eps(u):eps(u)> / Ra (volume averages) and
+                delta = |W - Phi/Ra| / max(W, Phi/Ra): the energy balance of steady convection
+``surface``     vrms_surface = sqrt(int_top |u|^2 ds / |top|), vmax_surface (largest nodal |u| on
+                the top; shells: the outer surface)
 =============== =======================================================================
+
+The last four apply by default to a model whose viscosity depends on the flow (the others may
+ask for them in ``output.statistics``).
 
 A postprocessor is built by ``create(model, options)`` (None when it does not apply, e.g.
 ``nusselt`` without a temperature equation) and called with the model after every step; all
@@ -38,7 +47,8 @@ from mpi4py import MPI
 
 import dolfinx.fem
 
-from convection.boundary import is_shell
+from convection.boundary import boundary_measure, is_shell, locate_side_dofs
+from fembase.dolfinx_compat import evaluate_expression, interpolation_points
 from convection.diagnostics import nusselt
 from convection.model import Model
 from convection.rebalance import RankLoads
@@ -83,6 +93,11 @@ class _Column:
 
     @classmethod
     def applies(cls, model: Model) -> bool:
+        return True
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        """Whether a run without ``output.statistics`` gets these columns."""
         return True
 
     @classmethod
@@ -282,9 +297,128 @@ class WallTime:
         return {"wall_time": time.monotonic() - self.start}
 
 
+class _Rheology(_Column):
+    """Columns for models whose viscosity depends on the flow (by default there only)."""
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return model.stokes.is_nonlinear
+
+
+class NonlinearStatistics(_Rheology):
+    name: ClassVar[str] = "nonlinear"
+    description: ClassVar[str] = "iterations and final relative residual of the last nonlinear Stokes solve"
+    columns = ("nonlinear_iterations", "nonlinear_residual")
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        result = model.flow_result.nonlinear if model.flow_result is not None else None
+        if result is None:
+            return {"nonlinear_iterations": 0, "nonlinear_residual": 0.0}
+        return {"nonlinear_iterations": result.iterations, "nonlinear_residual": result.residual}
+
+
+def _viscosity(model: Model) -> Any:
+    """The model's viscosity as UFL, at its current fields and flow."""
+    stokes = model.stokes
+    T = model.T if model.T is not None else 0.0
+    return stokes.discretisation.viscosity(T, model.fractions or None, {"u": stokes.u, "p": stokes.p, "fields": {}})
+
+
+class ViscosityRange(_Rheology):
+    name: ClassVar[str] = "rheology"
+    description: ClassVar[str] = "smallest and largest viscosity at the velocity nodes of every cell"
+    columns = ("eta_min", "eta_max")
+
+    def __init__(self) -> None:
+        self._version: int | None = None
+        self._expression: Any = None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        if self._version != model.mesh_version or self._expression is None:
+            points = interpolation_points(model.stokes.V)
+            self._expression = dolfinx.fem.Expression(_viscosity(model), points)
+            self._version = model.mesh_version
+        mesh = model.mesh
+        owned = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
+        values = np.asarray(evaluate_expression(self._expression, mesh, owned))
+        lo = float(values.min()) if values.size else np.inf
+        hi = float(values.max()) if values.size else -np.inf
+        return {"eta_min": mesh.comm.allreduce(lo, op=MPI.MIN), "eta_max": mesh.comm.allreduce(hi, op=MPI.MAX)}
+
+
+class EnergyBalance(_Rheology):
+    name: ClassVar[str] = "energy"
+    description: ClassVar[str] = "work against gravity W, dissipation Phi/Ra and their balance delta (volume averages)"
+    columns = ("W", "Phi_over_Ra", "delta")
+
+    def __init__(self) -> None:
+        self._forms = _Forms()
+
+    @classmethod
+    def applies(cls, model: Model) -> bool:
+        return model.T is not None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        stokes = model.stokes
+
+        def build() -> dict[str, Any]:
+            u = stokes.u
+            x = ufl.SpatialCoordinate(model.mesh)
+            up = stokes.approximation.up(x)
+            eps = ufl.sym(ufl.grad(u))
+            dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 3 * stokes.degree})
+            return {"W": dolfinx.fem.form(model.T * ufl.dot(u, up) * dx),
+                    "Phi": dolfinx.fem.form(2.0 * _viscosity(model) * ufl.inner(eps, eps) * dx),
+                    "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
+        forms = self._forms.get(model, build)
+        volume = _integral(model, forms["volume"])
+        W = _integral(model, forms["W"]) / volume
+        ra = stokes.approximation.Ra
+        phi = _integral(model, forms["Phi"]) / volume / ra if ra else float("nan")
+        scale = max(abs(W), abs(phi))
+        return {"W": W, "Phi_over_Ra": phi, "delta": abs(W - phi) / scale if scale > 0 else 0.0}
+
+
+class SurfaceVelocity(_Rheology):
+    name: ClassVar[str] = "surface"
+    description: ClassVar[str] = "rms and largest nodal speed on the top (shells: outer) surface"
+    columns = ("vrms_surface", "vmax_surface")
+
+    def __init__(self) -> None:
+        self._forms = _Forms()
+        self._dofs: Any = None
+        self._version: int | None = None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        stokes = model.stokes
+        top = "outer" if is_shell(stokes.bcs) else "top"
+
+        def build() -> dict[str, Any]:
+            ds = boundary_measure(model.mesh, top)
+            u = stokes.u
+            return {"u2": dolfinx.fem.form(ufl.inner(u, u) * ds),
+                    "area": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * ds)}
+        forms = self._forms.get(model, build)
+        if self._version != model.mesh_version or self._dofs is None:
+            V0, to_parent = stokes.V.sub(0).collapse()
+            gdim = model.mesh.geometry.dim
+            # the nodes (blocked dofs of V) on the surface: parent indices are unrolled, node * gdim + 0
+            self._dofs = np.asarray(to_parent)[np.asarray(locate_side_dofs(V0, top))] // gdim
+            self._version = model.mesh_version
+        gdim = model.mesh.geometry.dim
+        n_owned = stokes.V.dofmap.index_map.size_local
+        nodes = np.asarray(self._dofs)
+        nodes = nodes[nodes < n_owned]
+        values = stokes.u.x.array.reshape(-1, gdim)[nodes]
+        local = float(np.sqrt((values ** 2).sum(axis=1)).max()) if len(nodes) else 0.0
+        rms = np.sqrt(_integral(model, forms["u2"]) / _integral(model, forms["area"]))
+        return {"vrms_surface": float(rms), "vmax_surface": model.mesh.comm.allreduce(local, op=MPI.MAX)}
+
+
 POSTPROCESSORS: dict[str, type] = {
     cls.name: cls for cls in (TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics,
-                              ParticleStatistics, LoadStatistics, Entrainment, WallTime)
+                              ParticleStatistics, LoadStatistics, Entrainment, WallTime, NonlinearStatistics,
+                              ViscosityRange, EnergyBalance, SurfaceVelocity)
 }
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
@@ -309,6 +443,8 @@ def create_postprocessors(model: Model, names: list[str] | None = None, /, **opt
     out = []
     for name, cls in POSTPROCESSORS.items():
         if names is not None and name not in names:
+            continue
+        if names is None and hasattr(cls, "by_default") and not cls.by_default(model):
             continue
         pp = cls.create(model, options)
         if pp is None and names is not None:

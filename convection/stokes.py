@@ -65,6 +65,7 @@ from convection.petsc_options import (
 )
 from convection.stokes_forms import StokesDiscretisation, StokesForms
 from convection.stokes_linear import StokesLinearSystem
+from convection.stokes_nonlinear import NonlinearResult, NonlinearSettings, NonlinearStokes
 from fembase import jit_cache
 
 jit_cache.install()  # forms and elements compiled once per process (see the module)
@@ -195,6 +196,8 @@ class StokesResult(NamedTuple):
         setup_seconds: The part of ``solve_seconds`` spent setting up the preconditioner (AMG
             hierarchy, LU factorisation): after every operator change, i.e. every solve with a
             variable viscosity, once otherwise.
+        nonlinear: The nonlinear iteration's outcome (a viscosity that depends on the flow), or
+            None (a linear solve).
     """
 
     iterations: int
@@ -202,6 +205,7 @@ class StokesResult(NamedTuple):
     assembly_seconds: float = 0.0
     solve_seconds: float = 0.0
     setup_seconds: float = 0.0
+    nonlinear: NonlinearResult | None = None
 
 
 class StokesSolver(PetscSolver):
@@ -229,6 +233,8 @@ class StokesSolver(PetscSolver):
         buoyancy_theta: 0 (the default): the buoyancy of the current fields; ``0 < theta <= 1``:
             the buoyancy predicted at ``t + theta dt`` along the flow
             (:class:`convection.buoyancy.SemiImplicitBuoyancy`; ``dt`` is given to :meth:`solve`).
+        nonlinear: Picard or Newton settings (:mod:`convection.stokes_nonlinear`), used when the
+            viscosity depends on the flow (default: :class:`NonlinearSettings`'s defaults).
 
     Attributes:
         u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
@@ -243,12 +249,12 @@ class StokesSolver(PetscSolver):
 
     KIND = "Stokes"
     SOLVERS = STOKES_SOLVERS
-    PETSC_OBJECTS = ("ksp", "linear_system")
+    PETSC_OBJECTS = ("_nonlinear", "ksp", "linear_system")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
                  bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
                  petsc_options: dict | None = None, nitsche_penalty: float | None = None,
-                 buoyancy_theta: float = 0.0) -> None:
+                 buoyancy_theta: float = 0.0, nonlinear: NonlinearSettings | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.mesh = mesh
@@ -258,6 +264,11 @@ class StokesSolver(PetscSolver):
         self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
         self.has_rotation_null_space = has_rotation_null_space(self.bcs)
         self.buoyancy_theta = float(buoyancy_theta)
+        self.nonlinear_settings = nonlinear if nonlinear is not None else NonlinearSettings()
+        self.is_nonlinear = approximation.is_nonlinear
+        if self.is_nonlinear and self.buoyancy_theta != 0.0:
+            raise ValueError("a semi-implicit buoyancy (buoyancy_theta > 0) is not available with a viscosity that "
+                             "depends on the flow")
         self._semi_implicit = (SemiImplicitBuoyancy(mesh, approximation, self.buoyancy_theta)
                                if self.buoyancy_theta != 0.0 else None)
         self._petsc_options = self._create_ksp(
@@ -279,22 +290,25 @@ class StokesSolver(PetscSolver):
         self.forms: StokesForms | None = None
         self._forms_key: tuple[Any, Any] | None = None
         self._operator_current = False
+        self._nonlinear = NonlinearStokes(self, self.nonlinear_settings) if self.is_nonlinear else None
 
     def settings(self) -> dict[str, Any]:
         return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
-                "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta}
+                "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
+                "nonlinear": self.nonlinear_settings}
 
-    def prepare(self, T: Any, C: Any = None, /) -> StokesForms:
+    def prepare(self, T: Any, C: Any = None, /, *, fields: dict[str, Any] | None = None) -> StokesForms:
         """The forms for ``T`` and ``C`` (arguments as in :meth:`solve`): built again unless these
         very objects were prepared last; the linear algebra is set up on the first call.
         Collective. :meth:`solve` calls it; call it first to change the returned forms (e.g.
         ``stokes.forms = forms._replace(L=...)``, same spaces), which the next solve with the same
         ``T`` and ``C`` then uses."""
-        key = (T, C)
+        key = (T, C, tuple(sorted((fields or {}).items(), key=lambda item: item[0])))
         if self._forms_key is None or not _same_objects(self._forms_key, key):
+            flow = {"u": self.u, "p": self.p, "fields": fields or {}}
             self.forms = self.discretisation.forms(T, C, pressure_block=self.linear_system.pinned,
                                                    preconditioner=self.is_iterative,
-                                                   semi_implicit=self._semi_implicit)
+                                                   semi_implicit=self._semi_implicit, flow=flow)
             self._forms_key = key
             self._operator_current = False
             if not self.linear_system.is_set_up:
@@ -302,7 +316,8 @@ class StokesSolver(PetscSolver):
                 self.linear_system.setup(self.forms)
         return self.forms
 
-    def solve(self, T: Any, C: Any = None, /, *, dt: float = 0.0) -> StokesResult:
+    def solve(self, T: Any, C: Any = None, /, *, dt: float = 0.0,
+              fields: dict[str, Any] | None = None) -> StokesResult:
         """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
 
         Args:
@@ -312,13 +327,21 @@ class StokesSolver(PetscSolver):
                 :func:`convection.approximation.fractions`).
             dt: the coming step, for a semi-implicit buoyancy (``buoyancy_theta > 0``); ignored
                 otherwise.
+            fields: named mesh fields the viscosity laws read (e.g. ``{"plastic_strain": f}``).
 
         Returns:
             Iteration count, true residual norm and timings. An iterative solve starts from the
             current ``u``, ``p`` (the previous solution) and stops at ``|b - K x| <= rtol |b|``.
         """
-        forms = self.prepare(T, C)
+        forms = self.prepare(T, C, fields=fields)
         t0 = time.perf_counter()
+        if self._nonlinear is not None:
+            result = self._nonlinear.solve(forms, self._forms_key, T, C, fields)
+            if self._rotations is not None:
+                self._rotations.remove(self.u)
+            self._operator_current = False
+            seconds = time.perf_counter() - t0
+            return StokesResult(result.linear_iterations, result.residual, 0.0, seconds, 0.0, result)
         if self._semi_implicit is not None:
             self._semi_implicit.update(dt)
         self.linear_system.assemble_operator(

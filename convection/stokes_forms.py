@@ -44,6 +44,7 @@ from fembase.dolfinx_compat import function_space
 __all__ = ["StokesDiscretisation", "StokesForms"]
 
 
+
 class StokesForms(NamedTuple):
     """Compiled forms of one Stokes problem (fields ``T``, ``C`` fixed as coefficients).
 
@@ -93,8 +94,47 @@ class StokesDiscretisation:
         self.Q = function_space(mesh, "Lagrange", degree - 1)
         self.dirichlet = velocity_dirichlet_bcs(self.V, bcs)
 
+    def viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
+        """The viscosity (UFL) for ``T``, ``C`` and, for :mod:`convection.rheology` laws, the flow:
+        ``flow = {"u": ..., "p": ..., "fields": {...}}`` (the current iterate's Functions)."""
+        return self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **(flow or {}))
+
+    def _dx(self) -> Any:
+        # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
+        metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
+        return ufl.dx(domain=self.mesh, metadata=metadata), metadata
+
+    def nonlinear_forms(self, T: Any, C: Any, u: dolfinx.fem.Function, p: dolfinx.fem.Function, /, *,
+                        fields: dict[str, Any] | None, pressure_block: bool) -> tuple[Any, Any]:
+        """The residual ``F(u, p)`` (a block linear form in ``(v, q)``) and its Jacobian (UFL's
+        derivative with respect to ``u`` and ``p``, a 2 x 2 block form) for Newton's method, with
+        the viscosity evaluated at the Functions ``u``, ``p`` (the iterate). Collective (compiles).
+
+        ``F = a(eta(u, p); (u, p), (v, q)) - L(v, q)``: the Picard operator of :meth:`forms`
+        applied to the iterate, so both methods solve the same equations."""
+        v, q = ufl.TestFunction(self.V), ufl.TestFunction(self.Q)
+        du, dp = ufl.TrialFunction(self.V), ufl.TrialFunction(self.Q)
+        eta = self.viscosity(T, C, {"u": u, "p": p, "fields": fields or {}})
+        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
+        dx, metadata = self._dx()
+        F_u = (2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
+               - ufl.inner(p, ufl.div(v)) * dx - ufl.inner(f, v) * dx)
+        F_p = -ufl.inner(ufl.div(u), q) * dx
+        curved = free_slip_boundaries(self.bcs)
+        if curved:
+            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+                                        metadata=metadata)
+            F_u = F_u + nitsche.a_uu + nitsche.a_up
+            F_p = F_p + nitsche.a_pu
+        J = [[ufl.derivative(F_u, u, du), ufl.derivative(F_u, p, dp)],
+             [ufl.derivative(F_p, u, du), None]]
+        if pressure_block:
+            zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
+            J[1][1] = zero * ufl.inner(dp, q) * dx
+        return dolfinx.fem.form([F_u, F_p]), dolfinx.fem.form(J)
+
     def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool,
-              semi_implicit: SemiImplicitBuoyancy | None = None) -> StokesForms:
+              semi_implicit: SemiImplicitBuoyancy | None = None, flow: dict[str, Any] | None = None) -> StokesForms:
         """The forms for temperature ``T`` and composition ``C`` (see
         :meth:`convection.stokes.StokesSolver.solve`); a semi-implicit buoyancy's term replaces its
         earlier one. Collective (compiles forms).
@@ -103,15 +143,15 @@ class StokesDiscretisation:
             pressure_block: add a zero pressure-pressure block (for a pinned pressure dof).
             preconditioner: also build the preconditioning matrix's form ``a_pc``.
             semi_implicit: the buoyancy predictor whose operator term to build, or None.
+            flow: the iterate ``{"u", "p", "fields"}`` the viscosity laws read (Picard: the
+                operator of the viscosity at the iterate), or None.
         """
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
-        eta = self.approximation.viscosity(T, C)
+        eta = self.viscosity(T, C, flow)
         f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
         zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
-        # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
-        metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
-        dx = ufl.dx(domain=self.mesh, metadata=metadata)
+        dx, metadata = self._dx()
         a = [
             [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
              -ufl.inner(p, ufl.div(v)) * dx],

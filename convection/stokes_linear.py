@@ -193,7 +193,58 @@ class StokesLinearSystem:
         self._A.restoreLocalSubMatrix(rows, rows, block)
         self._A.assemble()
 
-    def _consistent_continuity(self) -> None:
+    # ------------------------------------------------------------------ nonlinear solves
+    @property
+    def x(self) -> PETSc.Vec:
+        """The solution vector ``(u, p)`` (block layout); :meth:`pack` fills it from ``u``, ``p``."""
+        return self._x
+
+    @property
+    def b(self) -> PETSc.Vec:
+        """The right-hand side of the last :meth:`assemble_rhs`."""
+        return self._b
+
+    @property
+    def P(self) -> PETSc.Mat | None:
+        """The preconditioning matrix (iterative solvers), None otherwise."""
+        return self._P
+
+    def pack(self) -> None:
+        """Copy ``u``, ``p`` into :attr:`x`."""
+        self._pack_solution(self._x)
+
+    def unpack(self, x: PETSc.Vec, /) -> None:
+        """Copy the block vector ``x`` into ``u``, ``p`` (ghosts updated). Collective."""
+        self._unpack_solution(x)
+
+    def assemble_residual(self, F: PETSc.Vec, F_forms: list, J_forms: list, homogeneous: list, /) -> None:
+        """The nonlinear residual ``F(u, p)`` of the current ``u``, ``p`` into ``F``: the residual
+        forms, zero on the rows of the strong conditions (``homogeneous``: the same conditions with
+        value 0; ``u`` satisfies them), orthogonal to the constant pressure, or, with a pinned pressure, with the
+        continuity rows made consistent as the right-hand side is. Collective."""
+        with F.localForm() as f_local:
+            f_local.set(0.0)
+        assemble_block_vector(F, F_forms, J_forms, bcs=homogeneous)
+        if self._null_space is not None:
+            self._null_space.remove(F)
+        elif self.pinned:
+            self._consistent_continuity(F)
+
+    def assemble_jacobian(self, J_forms: list, a_pc: list | None, /) -> None:
+        """Newton's Jacobian into the operator matrix (unit diagonal on the strong conditions'
+        rows and columns) and, for an iterative solver, the Picard preconditioning matrix ``a_pc``
+        at the current iterate into ``P``. Collective."""
+        self._A.zeroEntries()
+        assemble_block_matrix(self._A, J_forms, bcs=self._bcs)
+        self._A.assemble()
+        if self._null_space is not None:
+            self._A.setNullSpace(self._null_space)
+        if self._P is not None and a_pc is not None:
+            self._P.zeroEntries()
+            assemble_block_matrix(self._P, a_pc, bcs=self._bcs)
+            self._P.assemble()
+
+    def _consistent_continuity(self, vec: PETSc.Vec | None = None) -> None:
         """Make the continuity right-hand side sum to zero, then zero the pinned row (direct solver
         with a pressure null space).
 
@@ -207,7 +258,7 @@ class StokesLinearSystem:
         and nothing changes."""
         n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
         n_p = self.Q.dofmap.index_map.size_local
-        g = self._b.array[n_u:n_u + n_p]
+        g = (self._b if vec is None else vec).array[n_u:n_u + n_p]
         total = self.V.mesh.comm.allreduce(float(g.sum()), op=MPI.SUM)
         if total != 0.0:
             g -= total / self.Q.dofmap.index_map.size_global

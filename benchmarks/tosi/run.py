@@ -1,0 +1,254 @@
+"""Tosi et al. (2015) viscoplastic convection benchmark: cases 1-4 and 5a from configs/tosi.yaml.
+
+Usage::
+
+    python benchmarks/tosi/run.py --case N [--cells 48] [--ranks 1] [--method newton] [--out DIR]
+    python benchmarks/tosi/run.py --methods [--cells 24] [--steps 40]    # Picard vs Newton per step
+    python benchmarks/tosi/run.py --table                                 # results.md, results.png
+
+``--case N`` runs case N with the CLI to steady state (case 5a: over ``--periods`` periods of its
+oscillation after a spin-up) and prints one JSON line last: the steady-state (5a: last-cycle
+mean) values of ``T_mean``, ``nusselt_top``, ``nusselt_bottom``, ``vrms``, ``vrms_surface``,
+``vmax_surface``, ``eta_min``, ``eta_max``, ``W``, ``Phi_over_Ra``, ``delta``, the mesh, steps,
+wall time and nonlinear iterations; for 5a also ``period`` and ``<name>_min`` / ``<name>_max``
+over the last cycle. The JSON goes to ``results/case<N>.json`` too; ``--table`` writes
+``results.md`` (against the published ranges in ``reference.csv``) and ``results.png`` from the
+saved JSON files.
+
+The cases (Tosi et al. 2015, table 1): eta = 2 / (1/eta_lin + 1/eta_plast) with eta_lin =
+exp(-gamma_T T + gamma_z (1 - z)), gamma_T = ln(1e5), eta_plast = 1e-3 + sigma_y / |eps|::
+
+    case 1: Delta eta_z = 1,  no yielding (eta = 2 eta_lin)     case 2: Delta eta_z = 1,  sigma_y = 1
+    case 3: Delta eta_z = 10, no yielding                       case 4: Delta eta_z = 10, sigma_y = 1
+    case 5a: Delta eta_z = 10, sigma_y = 4 (time-periodic)
+
+``--methods`` runs the first ``--steps`` steps of case 2 with Picard and with Newton (relative
+residual 1e-8 each step) and writes ``methods.md`` and ``methods.png`` (iterations per step).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT))
+
+from convection.launch import run_config  # noqa: E402
+from convection.plot import read_statistics  # noqa: E402
+
+GAMMA_T = math.log(1e5)
+CASES = {  # case -> (Delta eta_z, sigma_y or None)
+    "1": (1.0, None), "2": (1.0, 1.0), "3": (10.0, None), "4": (10.0, 1.0), "5a": (10.0, 4.0),
+}
+QUANTITIES = ("T_mean", "nusselt_top", "nusselt_bottom", "vrms", "vrms_surface", "vmax_surface", "eta_min",
+              "eta_max", "W", "Phi_over_Ra", "delta")
+COLUMNS = {"nusselt_top": "nusselt"}  # statistics.csv column of a quantity, where the names differ
+STATISTICS = "[time,velocity,nusselt,temperature,mesh,stokes,nonlinear,rheology,energy,surface,wall_time]"
+
+
+def law_overrides(case: str) -> list[str]:
+    """``--set`` overrides of configs/tosi.yaml (case 2) for ``case``."""
+    contrast_z, sigma = CASES[case]
+    viscous = f"{{name: exponential, gamma_T: {GAMMA_T!r}, gamma_z: {math.log(contrast_z)!r}}}"
+    if sigma is None:  # no yielding: eta_plast -> infinity, eta = 2 eta_lin
+        law = f"{{name: exponential, eta0: 2.0, gamma_T: {GAMMA_T!r}, gamma_z: {math.log(contrast_z)!r}}}"
+        return [f"physics.viscosity.law={law}"]
+    plastic = f"{{name: von_mises, yield_stress: {sigma!r}, eta_star: 1.0e-3, strain_rate_measure: norm}}"
+    return [f"physics.viscosity.law={{name: viscoplastic, combination: tosi, viscous: {viscous}, plastic: {plastic}}}"]
+
+
+def reference() -> dict[str, dict[str, tuple[float, float]]]:
+    """Published ranges by case and quantity (reference.csv)."""
+    out: dict[str, dict[str, tuple[float, float]]] = {}
+    with open(HERE / "reference.csv", newline="") as f:
+        for row in csv.DictReader(line for line in f if not line.startswith("#")):
+            out.setdefault(row["case"], {})[row["quantity"]] = (float(row["low"]), float(row["high"]))
+    return out
+
+
+def run_case(case: str, out: Path, *, cells: int, ranks: int, method: str, end: float, cfl: float,
+             extra: list[str]) -> dict:
+    """Run one case with the CLI; returns its statistics (columns -> lists) and the wall time."""
+    overrides = [*law_overrides(case), f"mesh.cells=[{cells},{cells}]", f"stokes.nonlinear.method={method}",
+                 f"time.end={end}", f"time.cfl={cfl}", f"output.statistics={STATISTICS}", f"name=tosi_case{case}",
+                 "output.progress=lines", "output.progress_every=200", *extra]
+    start = time.perf_counter()
+    run_config(ROOT / "configs" / "tosi.yaml", out, ranks=ranks, overrides=overrides, cwd=ROOT)
+    return {"statistics": read_statistics(out / "statistics.csv"), "wall": time.perf_counter() - start}
+
+
+def _value(stats: dict, name: str, index: int) -> float:
+    return float(stats[COLUMNS.get(name, name)][index])
+
+
+def oscillation(series: list[float], times: list[float]) -> tuple[float, int, int] | None:
+    """Period of the last full cycles of a periodic series (mean spacing of the last maxima) and the
+    index range of the last cycle, or None when fewer than three maxima were seen."""
+    peaks = [i for i in range(1, len(series) - 1) if series[i - 1] < series[i] >= series[i + 1]]
+    if len(peaks) < 3:
+        return None
+    last = peaks[-4:] if len(peaks) >= 4 else peaks
+    period = (times[last[-1]] - times[last[0]]) / (len(last) - 1)
+    return period, peaks[-2], peaks[-1]
+
+
+def summarise(case: str, result: dict, cells: int, ranks: int, method: str) -> dict:
+    stats = result["statistics"]
+    n = len(stats["step"])
+    summary = {"case": case, "cells": f"{cells}x{cells}", "ranks": ranks, "method": method,
+               "steps": int(stats["step"][-1]), "time": float(stats["time"][-1]), "wall_seconds": result["wall"],
+               "nonlinear_iterations": int(sum(stats["nonlinear_iterations"])),
+               "nonlinear_per_step": float(sum(stats["nonlinear_iterations"][1:]) / max(n - 1, 1))}
+    if case == "5a":
+        cycle = oscillation(stats["vrms"], stats["time"])
+        if cycle is None:
+            summary["period"] = None
+            summary.update({q: _value(stats, q, -1) for q in QUANTITIES})
+            return summary
+        period, a, b = cycle
+        summary["period"] = period
+        for q in QUANTITIES:
+            values = [_value(stats, q, i) for i in range(a, b + 1)]
+            summary[q] = sum(values) / len(values)
+            summary[f"{q}_min"], summary[f"{q}_max"] = min(values), max(values)
+        return summary
+    summary.update({q: _value(stats, q, -1) for q in QUANTITIES})
+    return summary
+
+
+def table(results_dir: Path) -> str:
+    ref = reference()
+    lines = ["| case | mesh | quantity | this code | published range | inside |", "|---|---|---|---|---|---|"]
+    for case in CASES:
+        path = results_dir / f"case{case}.json"
+        if not path.exists():
+            continue
+        r = json.loads(path.read_text())
+        for q in QUANTITIES:
+            low_high = ref.get(case, {}).get(q)
+            value = r[q]
+            text = f"{value:.6g}"
+            if case == "5a" and f"{q}_min" in r:
+                text += f" ({r[f'{q}_min']:.5g} to {r[f'{q}_max']:.5g})"
+            inside = "" if low_high is None else ("yes" if low_high[0] <= value <= low_high[1] else "**no**")
+            published = "" if low_high is None else f"{low_high[0]:g} to {low_high[1]:g}"
+            lines.append(f"| {case} | {r['cells']} P2-P1/P2 | {q} | {text} | {published} | {inside} |")
+        extra = f"steps {r['steps']}, t = {r['time']:.4g}, {r['wall_seconds']:.0f} s on {r['ranks']} rank(s), " \
+                f"{r['nonlinear_per_step']:.2f} nonlinear iterations per step ({r['method']})"
+        if case == "5a":
+            extra += f", period {r['period']:.5g}" if r.get("period") else ", no period detected"
+        lines.append(f"| {case} | | run | {extra} | | |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(results_dir: Path, out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for case in CASES:
+        stats_file = results_dir / f"case{case}" / "statistics.csv"
+        if not stats_file.exists():
+            continue
+        stats = read_statistics(stats_file)
+        axes[0].plot(stats["time"], stats["vrms"], label=f"case {case}")
+        axes[1].plot(stats["time"], stats["nusselt"], label=f"case {case}")
+    axes[0].set_ylabel("u_rms")
+    axes[1].set_ylabel("Nu (top)")
+    for ax in axes:
+        ax.set_xlabel("time")
+        ax.legend()
+    fig.suptitle("Tosi et al. (2015) cases: this code")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
+def methods(out: Path, *, cells: int, steps: int, ranks: int) -> None:
+    """Picard against Newton, iterations per step to the relative residual 1e-8 (case 2)."""
+    counts = {}
+    for method in ("picard", "newton"):
+        result = run_case("2", out / f"methods_{method}", cells=cells, ranks=ranks, method=method, end=4.0, cfl=16.0,
+                          extra=[f"time.max_steps={steps}", "stokes.nonlinear.rtol=1e-8",
+                                 "stokes.nonlinear.max_iterations=500"])
+        counts[method] = [int(c) for c in result["statistics"]["nonlinear_iterations"]]
+        counts[method + "_wall"] = result["wall"]
+    lines = [f"Tosi case 2, {cells}x{cells} P2-P1/P2, first {steps} steps from the initial condition, relative "
+             "residual 1e-8 every step (MUMPS).", "",
+             "| method | iterations, total | per step (mean) | max | wall [s] |", "|---|---|---|---|---|"]
+    for method in ("picard", "newton"):
+        c = counts[method]
+        lines.append(f"| {method} | {sum(c)} | {sum(c) / len(c):.2f} | {max(c)} | {counts[method + '_wall']:.0f} |")
+    (HERE / "methods.md").write_text("\n".join(lines) + "\n")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method in ("picard", "newton"):
+        ax.plot(range(len(counts[method])), counts[method], "o-", ms=3, label=method)
+    ax.set_xlabel("time step")
+    ax.set_ylabel("nonlinear iterations to |F|/|b| <= 1e-8")
+    ax.set_yscale("log")
+    ax.legend()
+    ax.set_title(f"Tosi case 2, {cells}x{cells}")
+    fig.tight_layout()
+    fig.savefig(HERE / "methods.png", dpi=110)
+    print(json.dumps({m: sum(counts[m]) for m in ("picard", "newton")}))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--case", choices=list(CASES))
+    parser.add_argument("--cells", type=int, default=48)
+    parser.add_argument("--ranks", type=int, default=1)
+    parser.add_argument("--method", default="newton", choices=["newton", "picard"])
+    parser.add_argument("--end", type=float, default=None, help="end time (default: 4; 5a: 6)")
+    parser.add_argument("--cfl", type=float, default=16.0)
+    parser.add_argument("--set", action="append", default=[], help="extra config override key=value")
+    parser.add_argument("--methods", action="store_true", help="Picard vs Newton iterations per step (case 2)")
+    parser.add_argument("--steps", type=int, default=40)
+    parser.add_argument("--table", action="store_true", help="write results.md and results.png")
+    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "tosi"), help="run folders")
+    parser.add_argument("--results", default=str(HERE / "results"), help="where case<N>.json files go")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    results_dir = Path(args.results)
+    if args.methods:
+        methods(out, cells=args.cells, steps=args.steps, ranks=args.ranks)
+        return 0
+    if args.table:
+        (HERE / "results.md").write_text(table(results_dir))
+        plot(results_dir, HERE / "results.png")
+        print((HERE / "results.md").read_text())
+        return 0
+    if args.case is None:
+        parser.error("give --case N, --methods or --table")
+    end = args.end if args.end is not None else (6.0 if args.case == "5a" else 4.0)
+    extra = list(args.set)
+    if args.case == "5a":
+        extra.append("time.steady_state_tolerance=null")  # periodic: run to the end time
+    result = run_case(args.case, out / f"case{args.case}", cells=args.cells, ranks=args.ranks, method=args.method,
+                      end=end, cfl=args.cfl, extra=extra)
+    summary = summarise(args.case, result, args.cells, args.ranks, args.method)
+    results_dir.mkdir(exist_ok=True)
+    (results_dir / f"case{args.case}.json").write_text(json.dumps(summary, indent=1) + "\n")
+    case_dir = results_dir / f"case{args.case}"
+    case_dir.mkdir(exist_ok=True)
+    (case_dir / "statistics.csv").write_text((out / f"case{args.case}" / "statistics.csv").read_text())
+    print(json.dumps(summary))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

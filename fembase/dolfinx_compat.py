@@ -27,7 +27,7 @@ C++ mesh object                   ``mesh._mesh``                   ``mesh._cpp_o
 PETSc vector of a Function        ``f.vector``                     ``f.x.petsc_vec``
 reverse scatter mode              ``la.ScatterMode.add``           ``la.InsertMode.add``
 Dirichlet condition class         ``fem.DirichletBCMetaClass``     ``fem.DirichletBC``
-interpolation points              ``element.interpolation_points()`` ``element.interpolation_points``
+interpolation points              ``element.interpolation_points()`` ``element.interpolation_points()`` on 0.9, a property from 0.10
 interpolating on some cells       ``f.interpolate(g, cells=...)``  ``f.interpolate(g, cells0=...)``
 form compiler options             ``form_compiler_params``,        ``form_compiler_options``,
                                   ``jit_params``                   ``jit_options``
@@ -362,9 +362,10 @@ def interpolate_on_cells(f: dolfinx.fem.Function, source: Any, cells: npt.NDArra
 
 
 def interpolation_points(V: dolfinx.fem.FunctionSpace, /) -> npt.NDArray[np.float64]:
-    """The reference points at which the space's element interpolates."""
+    """The reference points at which the space's element interpolates (a method on DOLFINx 0.5
+    and 0.9, a property from 0.10)."""
     points = V.element.interpolation_points
-    return points if _NEW else points()
+    return points() if callable(points) else points
 
 
 def xdmf_lagrange_degree(mesh: dolfinx.mesh.Mesh, /) -> int:

@@ -214,4 +214,6 @@ def test_a_constant_law_is_the_linear_solve(world):
         assert result.nonlinear is None
         out.append(stokes.u.x.array.copy())
         stokes.destroy()
-    assert np.array_equal(out[0], out[1])
+    # The same linear solve; the law's form is compiled separately, so MUMPS on 3 ranks may differ
+    # in the last digits (5e-14 of 34 seen on DOLFINx 0.5).
+    np.testing.assert_allclose(out[1], out[0], rtol=0, atol=1e-12 * np.abs(out[0]).max())

@@ -19,7 +19,7 @@ from typing import Any, Mapping
 
 import ufl
 
-from convection.rheology import FlowState, ViscosityLawBase, laws_field_names
+from convection.rheology import FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
 
 MIXING_RULES: dict[str, str] = {
     "geometric": "eta = eta_0^(1-C) * eta_1^C",
@@ -183,12 +183,36 @@ class ViscosityLaw:
         return eta
 
 
-    def _mixed_laws(self, T: Any, C: Any, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+    @property
+    def yields(self) -> bool:
+        """True when some material has a visco-plastic law (it can yield)."""
+        return self.laws is not None and any(yield_law(law) is not None for law in self.laws)
+
+    def plastic_strain_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+        """UFL ``eps_II sum_l C_l [eta_yield,l < eta_viscous,l]``: the strain rate where the
+        visco-plastic laws yield (their yield viscosity below the viscous one), weighted by the
+        volume fractions ``C_l`` (background ``C_0 = 1 - sum_i C_i``); what ``plastic_strain``
+        particles integrate."""
+        state = self._state(T, u, p, fields, x)
+        cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in fractions(C)]
+        weights = [1.0 - _sum(cs) if cs else ufl.as_ufl(1.0), *cs]
+        if len(weights) != len(self.laws):
+            raise ValueError(f"the viscosity law has {len(self.laws) - 1} material(s), got {len(cs)} fraction(s)")
+        rate: Any = ufl.as_ufl(0.0)
+        for weight, law in zip(weights, self.laws):
+            vp = yield_law(law)
+            if vp is not None:
+                rate = rate + weight * ufl.conditional(ufl.lt(vp.plastic(state), vp.viscous(state)), 1.0, 0.0)
+        return rate * strain_rate_measure(state, "second_invariant", 0.0)
+
+    def _state(self, T: Any, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> FlowState:
         if x is None:
             raise ValueError("viscosity laws need the spatial coordinate x (for the depth)")
-        gdim = x.ufl_shape[0]
-        state = FlowState(T=_as_ufl(T), strain_rate=ufl.sym(ufl.grad(u)) if u is not None else None,
-                          pressure=p, depth=self.depth(x), fields=fields, gdim=gdim)
+        return FlowState(T=_as_ufl(T), strain_rate=ufl.sym(ufl.grad(u)) if u is not None else None,
+                         pressure=p, depth=self.depth(x), fields=fields, gdim=x.ufl_shape[0])
+
+    def _mixed_laws(self, T: Any, C: Any, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+        state = self._state(T, u, p, fields, x)
         law0, *others = self.laws
         eta0 = law0(state)
         if others:

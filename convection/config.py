@@ -611,9 +611,27 @@ def _check_rheology(config: dict[str, Any]) -> None:
                           "use picard")
     fields = sorted({d.split(":", 1)[1] for law in (law0, *others) for d in law.depends_on if d.startswith("field:")})
     if fields:
-        raise ConfigError(f"config key 'physics.viscosity.law': laws that read mesh fields ({fields}) work from the "
-                          "Python API only (StokesSolver.solve(fields=...)); a config cannot map particle properties "
-                          "to fields yet")
+        if not particles_enabled(config):
+            raise ConfigError(f"config key 'particles.enabled': the viscosity laws read the field {fields[0]!r}, "
+                              "a particle property averaged onto the mesh; set particles.enabled: true and carry "
+                              f"{fields[0]!r} in particles.properties")
+        carried = _property_names(config)
+        missing = [name for name in fields if name not in carried]
+        if missing:
+            raise ConfigError(f"config key 'particles.properties': the viscosity laws read the field {missing[0]!r}, "
+                              "which comes from a particle property of that name (e.g. plastic_strain); carry it "
+                              f"(particles carry {carried})")
+
+
+def _property_names(config: dict[str, Any]) -> list[str]:
+    """Names of the particle properties of a resolved config (as given: names or {name: ...})."""
+    names = []
+    for item in config["particles"]["properties"]:
+        if isinstance(item, str):
+            names.append(item)
+        elif isinstance(item, dict) and isinstance(item.get("name"), str):
+            names.append(item["name"])
+    return names
 
 
 def _check_materials(config: dict[str, Any]) -> None:

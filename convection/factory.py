@@ -226,6 +226,11 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
                                            stabilisation=ecfg["stabilisation"])
         else:
             composition = StaticComposition(mesh, materials, degree=ccfg["degree"])
+    if particles is not None:
+        # Particle properties the viscosity laws read (e.g. plastic_strain), averaged onto the mesh
+        # with the particles' interpolator after every step.
+        for name in approximation.viscosity_law.field_names:
+            particles.track(name)
     model = Model(stokes, temperature=temperature, solve_temperature=ecfg["enabled"], composition=composition,
                   particles=particles, adaptivity=adaptivity, balancer=balancer)
     if restore is not None:

@@ -41,6 +41,7 @@ import dolfinx.mesh
 from convection.adaptivity import Adaptivity
 from convection.composition import CompositionSource
 from convection.materials import material_index
+from convection.plasticity import PlasticStrainRate
 from convection.rebalance import Balancer, RankLoads
 from convection.stokes import StokesResult, StokesSolver
 from convection.timestep import cfl_timestep
@@ -104,6 +105,12 @@ class Model:
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
         self._point_evaluator: PointEvaluator | None = None
+        rates = particles.properties.rate_fields if particles is not None else ()
+        unknown = [name for name in rates if name != "plastic_strain_rate"]
+        if unknown:
+            raise ValueError(f"no mesh field {unknown[0]!r} for the particles to integrate; the model provides "
+                             "plastic_strain_rate")
+        self._plastic_rate = PlasticStrainRate() if rates else None
 
     # ------------------------------------------------------------------ state
     @property
@@ -141,6 +148,22 @@ class Model:
             out["material"] = material_index(self.fractions)
         return out
 
+    def rheology_fields(self) -> dict[str, dolfinx.fem.Function]:
+        """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
+        mesh (the particles' tracked fields, e.g. ``plastic_strain``)."""
+        names = self.stokes.approximation.viscosity_law.field_names
+        if not names:
+            return {}
+        if self.particles is None:
+            raise ValueError(f"the viscosity laws read the fields {list(names)}, which come from particles")
+        return {name: self.particles.field(name) for name in names}
+
+    def particle_fields(self) -> dict[str, dolfinx.fem.Function]:
+        """The mesh fields the particles integrate (``plastic_strain_rate``), as of the last flow solve."""
+        if self._plastic_rate is None or self._plastic_rate.function is None:
+            return {}
+        return {self._plastic_rate.name: self._plastic_rate.function}
+
     def property_context(self) -> PropertyContext:
         """The current fields and time, for particle properties."""
         return PropertyContext(time=self.time, dt=self.dt_previous, u_new=self.stokes.u, temperature=self.T,
@@ -150,8 +173,12 @@ class Model:
     def solve_flow(self) -> StokesResult:
         """Solve Stokes for the current temperature and fractions."""
         # dt: the step just taken predicts the coming one (for a semi-implicit buoyancy).
+        fields = self.rheology_fields()
         result = self.stokes.solve(self.T if self.T is not None else 0.0, self.fractions or None,
-                                   dt=self.dt_previous)
+                                   dt=self.dt_previous, fields=fields or None)
+        if self._plastic_rate is not None:
+            with self.timers("plastic_strain_rate"):
+                self._plastic_rate.update(self, fields)
         self.timers.add("stokes_assembly", result.assembly_seconds)
         self.timers.add("stokes_solve", result.solve_seconds)
         self.flow_result = result
@@ -182,7 +209,7 @@ class Model:
             with self.timers("composition"):
                 self.composition.advance(u_end, dt)
         if self.particles is not None:
-            self.particles.advance(u, u_end, dt, step=self.timestep)
+            self.particles.advance(u, u_end, dt, step=self.timestep, fields=self.particle_fields())
         self.time += dt
         self.timestep += 1
         self.dt_previous = dt

@@ -321,7 +321,7 @@ def _viscosity(model: Model) -> Any:
     """The model's viscosity as UFL, at its current fields and flow."""
     stokes = model.stokes
     T = model.T if model.T is not None else 0.0
-    return stokes.discretisation.viscosity(T, model.fractions or None, {"u": stokes.u, "p": stokes.p, "fields": {}})
+    return stokes.discretisation.viscosity(T, model.fractions or None, {"u": stokes.u, "p": stokes.p, "fields": model.rheology_fields()})
 
 
 class ViscosityRange(_Rheology):

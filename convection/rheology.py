@@ -58,7 +58,7 @@ import ufl
 from convection.schema import ConfigError, short_repr
 
 __all__ = ["FlowState", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase", "build_law",
-           "describe_laws", "strain_rate_measure", "weakening_factor"]
+           "describe_laws", "laws_field_names", "strain_rate_measure", "weakening_factor", "yield_law"]
 
 STRAIN_RATE_MEASURES: dict[str, str] = {
     "second_invariant": "eps_II = sqrt(eps:eps / 2); yield viscosity sigma_y / (2 eps_II) (ASPECT)",
@@ -623,6 +623,13 @@ def build_law(spec: Any, key: str) -> ViscosityLawBase:
             raise ConfigError(f"config key '{key}.max_viscosity': must exceed min_viscosity, got {hi} <= {lo}")
         law = Bounded(law=law, min_viscosity=lo, max_viscosity=hi)
     return law
+
+
+def yield_law(law: ViscosityLawBase) -> "ViscoPlastic | None":
+    """The visco-plastic law ``law`` is (or clips), or None."""
+    while isinstance(law, Bounded):
+        law = law.law
+    return law if isinstance(law, ViscoPlastic) else None
 
 
 def laws_field_names(laws: Sequence[ViscosityLawBase]) -> tuple[str, ...]:

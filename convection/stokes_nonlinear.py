@@ -189,8 +189,10 @@ class NonlinearStokes:
         picard = 0
         linear = 0
         newton = settings.method == "newton"
-        # Picard until converged, or (Newton) until the switch tolerance, at least once from rest.
-        while history[-1] > settings.rtol and picard < settings.max_iterations:
+        # Picard until converged, or (Newton) until the switch tolerance; at least once, as the
+        # residual is measured with homogeneous boundary values and cannot see an iterate that
+        # misses prescribed velocities (a sheared box at rest has residual 0).
+        while picard == 0 or (history[-1] > settings.rtol and picard < settings.max_iterations):
             if newton and history[-1] <= settings.switch_tolerance and picard > 0:
                 break
             if picard > 0:

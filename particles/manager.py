@@ -447,16 +447,20 @@ class ParticleManager:
 
     # ------------------------------------------------------------------ time stepping
     def advance(self, u_old: dolfinx.fem.Function, u_new: dolfinx.fem.Function, dt: float, /, *,
-                step: int = 0) -> AdvanceReport:
-        """Advect over one step (positions and ODE properties), apply the population bounds and
-        re-interpolate the tracked fields (collective).
+                step: int = 0, fields: Mapping[str, dolfinx.fem.Function] | None = None) -> AdvanceReport:
+        """Advance the accumulating properties (``plastic_strain``: ``v += dt f(x_p)``, the fields
+        at the step's start), advect over one step (positions and ODE properties), apply the
+        population bounds and re-interpolate the tracked fields (collective).
 
         Args:
             u_old: Velocity at the start of the step.
             u_new: Velocity at the end of the step (linear in time in between).
             dt: Step length.
             step: Number of the step being taken (keys the population's random draws).
+            fields: The mesh fields the accumulating properties integrate (by name).
         """
+        if self.properties.rate_fields:
+            self.properties.accumulate(fields or {}, dt)
         stats = self._advector.step(u_old, u_new, dt)
         self.timings["particle_advection"] += stats.evaluation_seconds
         self.timings["particle_sort"] += stats.relocation_seconds

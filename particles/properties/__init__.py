@@ -18,7 +18,9 @@ gradient, integrated strain, damage) are advanced by the Advector together with 
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence, Union
+from typing import Mapping, Sequence, Union
+
+import dolfinx.fem
 
 import numpy as np
 import numpy.typing as npt
@@ -30,6 +32,7 @@ from particles.properties._base import (
     EvaluatorCache,
     ParticleProperty,
     PropertyContext,
+    evaluate_at,
 )
 from particles.properties._interpolate import interpolate_from_neighbours
 from particles.properties.damage import Damage
@@ -39,6 +42,7 @@ from particles.properties.function import FunctionProperty
 from particles.properties.initial_composition import InitialComposition
 from particles.properties.initial_position import InitialPosition
 from particles.properties.integrated_strain import IntegratedStrain
+from particles.properties.plastic_strain import PlasticStrain
 from particles.properties.pressure import Pressure
 from particles.properties.rank import Rank
 from particles.properties.strain_rate import StrainRate
@@ -60,6 +64,7 @@ __all__ = [
     "InitialPosition",
     "IntegratedStrain",
     "ParticleProperty",
+    "PlasticStrain",
     "Pressure",
     "PropertyContext",
     "PropertyManager",
@@ -77,7 +82,7 @@ PROPERTIES: Registry[type[ParticleProperty]] = Registry(
     "property",
     (
         InitialPosition, InitialComposition, FunctionProperty, Velocity, Temperature, Pressure, StrainRate,
-        IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank, Displacement,
+        IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank, Displacement, PlasticStrain,
     ),
 )
 """Property classes by their lowercase config name."""
@@ -237,6 +242,32 @@ class PropertyManager:
             policy = prop.update_policy
             if policy == "every_step" or (policy == "output_only" and at_output):
                 prop.refresh(self.swarm, ctx)
+
+    @property
+    def rate_fields(self) -> tuple[str, ...]:
+        """The mesh fields the accumulating properties integrate (names, each once)."""
+        return tuple(dict.fromkeys(p.rate_field for p in self.properties if p.accumulating))
+
+    def accumulate(self, fields: Mapping[str, dolfinx.fem.Function], dt: float, /) -> None:
+        """Advance the accumulating properties by one step: ``v += dt f(x_p)`` with ``f`` the
+        property's rate field (from ``fields``) at the particles' current positions (call before
+        the particles move: explicit Euler). Not collective.
+
+        Raises:
+            ValueError: a rate field is missing from ``fields``.
+        """
+        rows = np.arange(self.swarm.num_particles, dtype=np.int64)
+        for prop in self.properties:
+            if not prop.accumulating:
+                continue
+            if prop.rate_field not in fields:
+                raise ValueError(f"particle property {prop.column!r} integrates the mesh field {prop.rate_field!r}, "
+                                 f"which was not given (have {sorted(fields)})")
+            if rows.shape[0] == 0 or dt == 0.0:
+                continue
+            rate = evaluate_at(self.swarm, rows, fields[prop.rate_field], self._context)
+            lay = self.swarm.layout(prop.column)
+            self.swarm.properties[:, lay.start:lay.start + lay.size] += dt * rate.reshape(rows.shape[0], lay.size)
 
     def odes(self) -> list[ParticleODE]:
         """The integrated properties as Advector ODEs (``Advector(swarm, odes=manager.odes())``)."""

@@ -12,7 +12,7 @@ Runge-Kutta scheme as the positions, through :meth:`ParticleProperty.rhs`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import ClassVar, Mapping
 
 import numpy as np
 import numpy.typing as npt
@@ -68,6 +68,7 @@ class PropertyContext:
         u_new: Velocity at ``time`` (vector Function), if known.
         temperature: Temperature at ``time`` (scalar Function), if known.
         pressure: Pressure at ``time`` (scalar Function), if known.
+        fields: Other named mesh fields (e.g. a plastic strain rate for ``plastic_strain``).
         evaluators: Evaluator cache (the property manager passes its own, so evaluators are built
             once per function space).
     """
@@ -78,6 +79,7 @@ class PropertyContext:
     u_new: dolfinx.fem.Function | None = None
     temperature: dolfinx.fem.Function | None = None
     pressure: dolfinx.fem.Function | None = None
+    fields: Mapping[str, dolfinx.fem.Function] = field(default_factory=dict, compare=False)
     evaluators: EvaluatorCache = field(default_factory=EvaluatorCache, compare=False, repr=False)
 
     @property
@@ -138,6 +140,10 @@ class ParticleProperty:
             :data:`NEW_PARTICLE_POLICIES`.
         integrated: True if the property obeys an ODE advanced by the Advector (then its update
             policy is fixed to ``"every_step"`` and :meth:`rhs` is defined).
+        accumulating: True if the property is the time integral of a mesh field sampled at the
+            particle (``dv/dt = f(x_p)``, :attr:`rate_field`), advanced once per step by
+            :meth:`particles.properties.PropertyManager.accumulate` (explicit Euler, the field of
+            the step's start).
 
     Attributes:
         update: Override of ``default_update`` (None keeps the default).
@@ -149,6 +155,7 @@ class ParticleProperty:
     default_update: ClassVar[str] = "never"
     default_new_particles: ClassVar[str] = "reinitialise"
     integrated: ClassVar[bool] = False
+    accumulating: ClassVar[bool] = False
 
     update: str | None = None
     new_particles: str | None = None

@@ -1,0 +1,46 @@
+"""``plastic_strain``: accumulated plastic strain, ``de/dt = eps_II`` where (and while) the material yields."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from particles.properties._base import ParticleProperty, PropertyContext, write_rows
+from particles.swarm import Swarm
+
+__all__ = ["PlasticStrain"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlasticStrain(ParticleProperty):
+    """Accumulated plastic strain ``e``: the time integral of a mesh field ``rate_field`` sampled
+    at the particle, ``de/dt = f(x_p)``. The model supplies ``f = eps_II`` where the material
+    yields and 0 elsewhere (ASPECT's convention; ``integrated_strain`` is the total-strain
+    variant). Advanced once per step before the particles move, with the field of the step's start
+    (explicit Euler): a particle in a steady yielding shear of rate ``eps_II`` has ``e = e0 + eps_II t``.
+
+    Attributes:
+        initial: Value at creation (new particles later take the mean of their neighbours).
+        rate_field: Name of the mesh field integrated.
+    """
+
+    name: ClassVar[str] = "plastic_strain"
+    description: ClassVar[str] = "accumulated plastic strain, de/dt = eps_II where the material yields"
+    default_new_particles: ClassVar[str] = "interpolate"
+    accumulating: ClassVar[bool] = True
+
+    initial: float = 0.0
+    rate_field: str = "plastic_strain_rate"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not np.isfinite(self.initial) or self.initial < 0:
+            raise ValueError(f"plastic_strain: initial must be a finite number >= 0, got {self.initial}")
+        if not isinstance(self.rate_field, str) or not self.rate_field.isidentifier():
+            raise ValueError(f"plastic_strain: rate_field must be a field name, got {self.rate_field!r}")
+
+    def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
+        write_rows(swarm, self.column, rows, self.initial)

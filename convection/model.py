@@ -41,7 +41,7 @@ import dolfinx.mesh
 from convection.adaptivity import Adaptivity
 from convection.composition import CompositionSource
 from convection.materials import material_index
-from convection.plasticity import PlasticStrainRate
+from convection.plasticity import PlasticStrainRate, ViscosityField
 from convection.rebalance import Balancer, RankLoads
 from convection.stokes import StokesResult, StokesSolver
 from convection.timestep import cfl_timestep
@@ -111,6 +111,7 @@ class Model:
             raise ValueError(f"no mesh field {unknown[0]!r} for the particles to integrate; the model provides "
                              "plastic_strain_rate")
         self._plastic_rate = PlasticStrainRate() if rates else None
+        self._viscosity_field: ViscosityField | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -146,6 +147,15 @@ class Model:
             out[f.name] = f
         if len(self.fractions) >= 2:
             out["material"] = material_index(self.fractions)
+        if self.stokes.approximation.is_nonlinear or self.stokes.approximation.viscosity_law.laws is not None:
+            # The viscosity of the flow (cell midpoints), the particle fields it reads (e.g. plastic
+            # strain) and the plastic strain rate.
+            rheology = self.rheology_fields()
+            if self._viscosity_field is None:
+                self._viscosity_field = ViscosityField()
+            out["viscosity"] = self._viscosity_field.update(self, rheology)
+            out.update(rheology)
+            out.update(self.particle_fields())
         return out
 
     def rheology_fields(self) -> dict[str, dolfinx.fem.Function]:
@@ -159,10 +169,14 @@ class Model:
         return {name: self.particles.field(name) for name in names}
 
     def particle_fields(self) -> dict[str, dolfinx.fem.Function]:
-        """The mesh fields the particles integrate (``plastic_strain_rate``), as of the last flow solve."""
-        if self._plastic_rate is None or self._plastic_rate.function is None:
+        """The mesh fields the particles integrate (``plastic_strain_rate``), as of the last flow
+        solve (computed here after a restart, which restores the flow without solving it;
+        collective then)."""
+        if self._plastic_rate is None:
             return {}
-        return {self._plastic_rate.name: self._plastic_rate.function}
+        if self._plastic_rate.function is None and self.flow_result is not None:
+            self._plastic_rate.update(self, self.rheology_fields())
+        return {} if self._plastic_rate.function is None else {self._plastic_rate.name: self._plastic_rate.function}
 
     def property_context(self) -> PropertyContext:
         """The current fields and time, for particle properties."""

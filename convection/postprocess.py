@@ -52,6 +52,7 @@ from fembase.dolfinx_compat import evaluate_expression, interpolation_points
 from convection.diagnostics import nusselt
 from convection.model import Model
 from convection.rebalance import RankLoads
+from convection.plasticity import flow_viscosity
 
 __all__ = ["POSTPROCESSORS", "Postprocessor", "create_postprocessors", "describe_postprocessors"]
 
@@ -317,13 +318,6 @@ class NonlinearStatistics(_Rheology):
         return {"nonlinear_iterations": result.iterations, "nonlinear_residual": result.residual}
 
 
-def _viscosity(model: Model) -> Any:
-    """The model's viscosity as UFL, at its current fields and flow."""
-    stokes = model.stokes
-    T = model.T if model.T is not None else 0.0
-    return stokes.discretisation.viscosity(T, model.fractions or None, {"u": stokes.u, "p": stokes.p, "fields": model.rheology_fields()})
-
-
 class ViscosityRange(_Rheology):
     name: ClassVar[str] = "rheology"
     description: ClassVar[str] = "smallest and largest viscosity at the velocity nodes of every cell"
@@ -336,7 +330,7 @@ class ViscosityRange(_Rheology):
     def __call__(self, model: Model, /) -> dict[str, float]:
         if self._version != model.mesh_version or self._expression is None:
             points = interpolation_points(model.stokes.V)
-            self._expression = dolfinx.fem.Expression(_viscosity(model), points)
+            self._expression = dolfinx.fem.Expression(flow_viscosity(model), points)
             self._version = model.mesh_version
         mesh = model.mesh
         owned = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
@@ -368,7 +362,7 @@ class EnergyBalance(_Rheology):
             eps = ufl.sym(ufl.grad(u))
             dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 3 * stokes.degree})
             return {"W": dolfinx.fem.form(model.T * ufl.dot(u, up) * dx),
-                    "Phi": dolfinx.fem.form(2.0 * _viscosity(model) * ufl.inner(eps, eps) * dx),
+                    "Phi": dolfinx.fem.form(2.0 * flow_viscosity(model) * ufl.inner(eps, eps) * dx),
                     "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
         forms = self._forms.get(model, build)
         volume = _integral(model, forms["volume"])

@@ -185,8 +185,8 @@ def _parse_value(kind: str, value: Any, key: str, checks: Mapping[str, Any]) -> 
         if any(b <= a for a, b in zip(depths, depths[1:])):
             raise ConfigError(f"config key '{key}': the depths must increase, got {depths}")
         return tuple(rows)
-    if kind == "weakening":
-        return Weakening.from_config(value, key)
+    if kind == "weakening":  # null: no weakening (the default)
+        return None if value is None else Weakening.from_config(value, key)
     raise AssertionError(kind)
 
 

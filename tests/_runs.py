@@ -71,6 +71,20 @@ def final_particles(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return ids[order], f["x"][...][order], f["properties"][...][order]
 
 
+def final_property(run_dir: Path, name: str) -> np.ndarray:
+    """The values of the particle property ``name`` in the newest checkpoint, sorted by id
+    (shape=(n,) for a scalar, (n, size) otherwise)."""
+    from convection.checkpoint import latest_checkpoint
+
+    with h5py.File(latest_checkpoint(run_dir) / "particles.h5", "r") as f:
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["layout/names"][...]]
+        k = names.index(name)
+        start, size = int(f["layout/starts"][k]), int(f["layout/sizes"][k])
+        order = np.argsort(f["ids"][...])
+        values = f["properties"][...][order, start:start + size]
+    return values[:, 0] if size == 1 else values
+
+
 def kill_session(leader: int) -> None:
     """SIGKILL every process of the session ``leader`` leads (a process started with
     ``start_new_session=True``): mpirun and all its ranks. Open MPI 4 keeps the ranks in mpirun's

@@ -119,3 +119,21 @@ def test_plastic_strain_is_written_with_the_particles(sheared):
     with h5py.File(sheared[2] / "particles_000008.h5", "r") as f:
         e = f["properties/plastic_strain"][...]
     assert e.shape[0] > 500 and np.allclose(e, 0.2, rtol=1e-12, atol=0)
+
+
+def test_damage_on_particles_lowers_the_viscosity(config, tmp_path):
+    """``damaged`` law over the ``damage`` property (alpha = 1, no healing): in the same shear,
+    d = eps_II t = t / 2 on every particle and eta = 10 (1 - d)."""
+    law = "{name: damaged, law: {name: constant, eta0: 10.0}}"
+    proc = run_cli(["run", str(config), "--output", str(tmp_path),
+                    *sets([f"physics.viscosity.law={law}", "particles.properties=[{name: damage, alpha: 1.0}]",
+                           "output.statistics=[time,velocity,rheology]"])])
+    assert proc.returncode == 0, proc.stderr
+    table = rows(tmp_path)
+    assert len(table) == 9
+    for row in table:
+        eta = 10.0 * (1.0 - 0.5 * float(row["time"]))
+        assert float(row["eta_min"]) == pytest.approx(eta, rel=1e-10)
+        assert float(row["eta_max"]) == pytest.approx(eta, rel=1e-10)
+    _, _, props = final_particles(tmp_path)
+    assert np.allclose(props[:, 0], 0.2, rtol=1e-12, atol=0)

@@ -151,7 +151,7 @@ def methods(out: Path, results: Path, *, cells: str, steps: int, ranks: int) -> 
     for method in ("picard", "newton"):
         walls[method] = run(out / f"methods_{method}", cells=cells, ranks=ranks,
                             extra=[f"time.max_steps={steps}", f"stokes.nonlinear.method={method}",
-                                   "stokes.nonlinear.rtol=1e-8", "stokes.nonlinear.max_iterations=500",
+                                   "stokes.nonlinear.rtol=1e-8", "stokes.nonlinear.max_iterations=5000",
                                    "output.fields_every=0"])
         counts[method] = [int(c) for c in read_statistics(out / f"methods_{method}" / "statistics.csv")["nonlinear_iterations"]]
     lines = [f"configs/localisation.yaml, {cells} cells, first {steps} steps, relative residual 1e-8 every step "

@@ -37,6 +37,7 @@ import argparse
 import csv
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -192,6 +193,8 @@ def methods(out: Path, *, cells: int, steps: int, ranks: int) -> None:
     for method in ("picard", "newton"):
         c = counts[method]
         lines.append(f"| {method} | {sum(c)} | {sum(c) / len(c):.2f} | {max(c)} | {counts[method + '_wall']:.0f} |")
+    lines += ["", f"Load average at the end: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; the wall times are what "
+              "these runs took, not a timing measurement."]
     (HERE / "methods.md").write_text("\n".join(lines) + "\n")
     import matplotlib
 

@@ -9,7 +9,7 @@ chords, inside the circle. A :class:`ShellManifold` keeps the topology straight 
 - a point map ``Phi`` takes that polygonal annulus onto the true one (a *radial* transfinite rule):
   along the ray of angle ``theta`` it maps the segment between the inner and outer polygons,
   radii ``rho_in(theta)`` and ``rho_out(theta)``, linearly onto ``[r_inner, r_outer]``, so a point
-  on a boundary chord lands on its circle exactly and a base vertex stays where it is;
+  on a boundary chord lands on its circle exactly and a boundary vertex of the base stays where it is;
 - :meth:`ShellManifold.curve` places every geometry node of a second-order (P2) mesh at ``Phi``
   of the straight node (the vertices and the edge midpoints of the straight cells) and
   :meth:`ShellManifold.straighten` undoes it (``Phi`` has the explicit inverse

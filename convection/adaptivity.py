@@ -231,8 +231,7 @@ class MeshHierarchy:
         if manifold is not None:
             if coordinate_map(base).degree != 1:
                 raise ValueError("a hierarchy with a manifold needs a straight-sided (P1) base mesh")
-            if not manifold.fitted:
-                manifold.fit(base)
+            manifold.fit(base)
         self.manifold = manifold
         self.base = base
         self.tdim = base.topology.dim
@@ -375,6 +374,8 @@ class MeshHierarchy:
         base_piece = mesh_piece(self.base, owners[canonical], canonical)
         created = create_mesh_from_piece(comm, base_piece, self.new_domain())
         self.base, self.base_canonical = created.mesh, created.canonical
+        if self.manifold is not None:
+            self.manifold.fit(self.base)
         # The refined mesh is redistributed as it is, not rebuilt from the new base: DOLFINx 0.5's
         # refinement of a repartitioned base with marks computed on another partition gave
         # inconsistent facet ownership (interior facets lost between ranks) in our tests.
@@ -394,6 +395,8 @@ class MeshHierarchy:
         if recipe.base is not None and base:
             created = create_mesh_from_piece(self.base.comm, recipe.base, self.new_domain())
             self.base, self.base_canonical = created.mesh, created.canonical
+            if self.manifold is not None:
+                self.manifold.fit(self.base)
         self.recipe = recipe
         if recipe.mesh is not None:
             return create_mesh_from_piece(self.base.comm, recipe.mesh, self.mesh_domain()).mesh

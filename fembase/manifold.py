@@ -4,24 +4,27 @@ DOLFINx refines straight-sided (P1) simplex meshes only (0.5's Plaza refinement 
 second-order geometry), and refining straight-sided cells puts the new boundary vertices on the
 chords, inside the circle. A :class:`ShellManifold` keeps the topology straight and *curves* it:
 
-- the straight mesh covers a polygonal annulus whose boundary vertices (those of the coarse base
-  mesh) lie on the circles ``r = r_inner`` and ``r = r_outer``;
-- a point map ``Phi`` takes that polygonal annulus onto the true one (a *radial* transfinite rule):
-  along the ray of angle ``theta`` it maps the segment between the inner and outer polygons,
-  radii ``rho_in(theta)`` and ``rho_out(theta)``, linearly onto ``[r_inner, r_outer]``, so a point
-  on a boundary chord lands on its circle exactly and a boundary vertex of the base stays where it is;
+- the straight base mesh covers a polygonal annulus whose boundary vertices lie on the circles
+  ``r = r_inner`` and ``r = r_outer``;
+- a point map ``Phi`` takes a point ``x`` of the straight base cell ``K`` holding it through ``K``'s
+  curved (second-order) map: ``Phi(x) = x + sum_e 4 lambda_a lambda_b d_e`` over the boundary
+  edges ``e = (a, b)`` of ``K`` (``lambda``: barycentric coordinates of ``x`` in ``K``; ``d_e``: from
+  the chord's midpoint to the circle), the blend of the parent cell's curved map (Gordon-Hall with
+  quadratic edge bubbles). A point on a boundary edge is then put on its circle radially;
 - :meth:`ShellManifold.curve` places every geometry node of a second-order (P2) mesh at ``Phi``
   of the straight node (the vertices and the edge midpoints of the straight cells) and
-  :meth:`ShellManifold.straighten` undoes it (``Phi`` has the explicit inverse
-  :meth:`ShellManifold.straight_points`).
+  :meth:`ShellManifold.straighten` undoes it (:meth:`ShellManifold.straight_points`, a fixed-point
+  iteration, exact up to the radial step: ``O(h_base^4)``).
 
-``Phi`` depends on a point's coordinates and the base mesh's boundary polygon only, never on a
-cell or a rank, so the curved mesh is the same on any number of ranks (bit for bit, given the same
-straight mesh). Its derivative differs from the identity by ``O(h_base / r_inner)``, so cells of
-any refinement level keep a positive Jacobian.
+``Phi`` is smooth inside each base cell, and refined cells never straddle two base cells, so every
+refined cell's map is smooth and its Jacobian differs from the straight one by ``O(h_base / r)``.
+On the base cells' interior edges and vertices ``Phi`` is the identity (barycentric coordinates
+below 1e-13 count as 0), so it depends on a point's coordinates and the base mesh only, never on
+the rank: the curved mesh is the same on any number of ranks (measured: to one unit in the last
+place, tests/test_shell_refinement.py).
 
-Only the annulus (``gdim = 2``) is implemented: the spherical shell's polyhedral boundary needs a
-search for the boundary triangle below a point (future work).
+Only the annulus (``gdim = 2``) is implemented (the tetrahedra of a spherical shell need face
+bubbles as well: future work).
 """
 
 from __future__ import annotations
@@ -45,8 +48,8 @@ EDGES: dict[int, tuple[tuple[int, int], ...]] = {
 """The local vertices of each edge of a triangle / tetrahedron in the reference (basix) order, the
 order of the edge nodes of a second-order Lagrange cell."""
 
-_SNAP = 1e-12
-"""Relative radial position (0 inner, 1 outer) within which a mapped point is put on its circle."""
+_ZERO = 1e-13
+"""Barycentric coordinates below this count as 0 (points on a base cell's edge or vertex)."""
 
 
 class ShellManifold:
@@ -65,70 +68,120 @@ class ShellManifold:
         if not 0.0 < r_inner < r_outer:
             raise ValueError(f"need 0 < r_inner < r_outer, got {r_inner}, {r_outer}")
         self.r_inner, self.r_outer, self.gdim = float(r_inner), float(r_outer), gdim
-        self._polygons: tuple[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]], ...] | None = None
+        self._geometry = None
+        self._bubbles: npt.NDArray[np.float64] | None = None
+        self._radius: npt.NDArray[np.float64] | None = None
 
     @property
     def fitted(self) -> bool:
-        """Whether :meth:`fit` has given the manifold its boundary polygons."""
-        return self._polygons is not None
+        """Whether :meth:`fit` has given the manifold its base mesh."""
+        return self._geometry is not None
 
     def fit(self, base: dolfinx.mesh.Mesh, /) -> None:
-        """Take the boundary polygons from the straight base mesh (collective): its boundary vertices,
-        gathered on every rank, split by radius and sorted by angle."""
+        """Take the straight base mesh the points lie in (not collective; again after the base is
+        repartitioned): per local base cell and edge, the bubble ``d_e`` of a boundary edge (0 for
+        interior edges) and the radius of its circle."""
+        from fembase.geometry import CellGeometry
+
         if coordinate_map(base).degree != 1:
             raise ValueError("the manifold is fitted to a straight-sided (P1) base mesh")
-        tdim = base.topology.dim
+        tdim, gdim = base.topology.dim, self.gdim
+        base.topology.create_entities(1)
         base.topology.create_connectivity(tdim - 1, tdim)
-        vertices = dolfinx.mesh.locate_entities_boundary(base, 0, lambda x: np.full(x.shape[1], True))
-        nodes = compat.entities_to_geometry(base, 0, vertices).reshape(-1)
-        local = np.ascontiguousarray(base.geometry.x[nodes, : self.gdim])
-        points = np.unique(np.concatenate(base.comm.allgather(local)), axis=0)
-        r = np.linalg.norm(points, axis=1)
-        inner = np.abs(r - self.r_inner) < np.abs(r - self.r_outer)
-        polygons = []
-        for chosen, radius in ((inner, self.r_inner), (~inner, self.r_outer)):
-            p = points[chosen]
-            if p.shape[0] < 3 or np.max(np.abs(np.linalg.norm(p, axis=1) - radius)) > 1e-8 * radius:
-                raise ValueError(f"the base mesh's boundary vertices do not lie on the circle r = {radius}")
-            angle = np.arctan2(p[:, 1], p[:, 0])
-            order = np.argsort(angle, kind="stable")
-            polygons.append((angle[order], p[order]))
-        self._polygons = tuple(polygons)
+        base.topology.create_connectivity(tdim, 1)
+        geometry = CellGeometry(base)
+        n = geometry.num_local_cells
+        boundary = np.zeros(base.topology.index_map(1).size_local + base.topology.index_map(1).num_ghosts, dtype=bool)
+        boundary[dolfinx.mesh.locate_entities_boundary(base, 1, lambda x: np.full(x.shape[1], True))] = True
+        c2e = np.asarray(base.topology.connectivity(tdim, 1).array, dtype=np.int32).reshape(-1, len(EDGES[tdim]))[:n]
+        # Each cell's vertices in a canonical order (by coordinates), so the barycentric coordinates
+        # of a point do not depend on the order a mesh lists them in (ranks may list them otherwise).
+        x = geometry.coords[geometry.nodes[:, : tdim + 1]]  # shape=(n, 3, gdim)
+        order = np.lexsort(x.transpose(2, 0, 1)[::-1], axis=-1)
+        x = np.take_along_axis(x, order[:, :, None], axis=1)
+        c2e_sorted = np.empty_like(c2e)
+        for j, (a, b) in enumerate(EDGES[tdim]):  # edge j of the sorted cell: opposite sorted vertex j
+            c2e_sorted[:, j] = c2e[np.arange(n), order[:, j]]
+        c2e = c2e_sorted
+        self._origin = np.ascontiguousarray(x[:, 0])
+        self._inverse = np.linalg.inv(np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))) if n else np.zeros((0, gdim, gdim))
+        bubbles = np.zeros((n, len(EDGES[tdim]), gdim))
+        radius = np.zeros((n, len(EDGES[tdim])))
+        for j, (a, b) in enumerate(EDGES[tdim]):
+            m = 0.5 * (x[:, a] + x[:, b])
+            r = np.linalg.norm(m, axis=1)
+            ra, rb = np.linalg.norm(x[:, a], axis=1), np.linalg.norm(x[:, b], axis=1)
+            for target in (self.r_inner, self.r_outer):
+                on = (boundary[c2e[:, j]] & (np.abs(ra - target) < 1e-8 * target)
+                      & (np.abs(rb - target) < 1e-8 * target))
+                bubbles[on, j] = m[on] * (target / r[on] - 1.0)[:, None]
+                radius[on, j] = target
+        self._geometry, self._bubbles, self._radius = geometry, bubbles, radius
 
-    def _radii(self, theta: npt.NDArray[np.float64], direction: npt.NDArray[np.float64]
-               ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Radii of the inner and outer polygons along the rays of angle ``theta`` (unit
-        ``direction``, shape=(n, 2))."""
-        if self._polygons is None:
+    def _displacement(self, x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """``Phi(x) - x`` before the radial step, and the radius of the circle each point lies on
+        (0: none), for points of the base, x shape=(n, gdim)."""
+        if self._geometry is None:
             raise RuntimeError("ShellManifold.fit(base) first")
-        radii = []
-        for angle, p in self._polygons:
-            k = (np.searchsorted(angle, theta, side="right") - 1) % angle.size
-            a, b = p[k], p[(k + 1) % angle.size]
-            normal = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=1)
-            radii.append(np.sum(normal * a, axis=1) / np.sum(normal * direction, axis=1))
-        return radii[0], radii[1]
+        found = self._geometry.locate(x)
+        if np.any(found.cells < 0):
+            raise ValueError(f"{int(np.sum(found.cells < 0))} points lie outside this rank's base cells")
+        xref = np.einsum("mtg,mg->mt", self._inverse[found.cells], x - self._origin[found.cells])
+        lam = np.concatenate([1.0 - xref.sum(axis=1, keepdims=True), xref], axis=1)
+        lam[np.abs(lam) < _ZERO] = 0.0
+        displacement = np.zeros_like(x)
+        on_circle = np.zeros(x.shape[0])
+        for j, (a, b) in enumerate(EDGES[2]):
+            displacement += (4.0 * lam[:, a] * lam[:, b])[:, None] * self._bubbles[found.cells, j]
+            radius = self._radius[found.cells, j]
+            on = (radius > 0.0) & (lam[:, j] == 0.0)  # edge j is opposite vertex j
+            on_circle[on] = radius[on]
+        return displacement, on_circle
 
     def curved_points(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
-        """``Phi(x)``: points of the polygonal annulus mapped onto the annulus, x shape=(n, gdim)."""
-        x = np.asarray(x, dtype=np.float64)[:, : self.gdim]
-        r = np.linalg.norm(x, axis=1)
-        theta = np.arctan2(x[:, 1], x[:, 0])
-        direction = np.stack([np.cos(theta), np.sin(theta)], axis=1)
-        rho_in, rho_out = self._radii(theta, direction)
-        s = (r - rho_in) / (rho_out - rho_in)
-        s = np.where(np.abs(s) < _SNAP, 0.0, np.where(np.abs(s - 1.0) < _SNAP, 1.0, s))
-        return direction * (self.r_inner + s * (self.r_outer - self.r_inner))[:, None]
+        """``Phi(x)``: points of this rank's base cells mapped onto the annulus, x shape=(n, gdim)."""
+        x = np.ascontiguousarray(np.asarray(x, dtype=np.float64)[:, : self.gdim])
+        displacement, on_circle = self._displacement(x)
+        y = x + displacement
+        on = on_circle > 0.0
+        y[on] *= (on_circle[on] / np.linalg.norm(y[on], axis=1))[:, None]
+        return y
 
     def straight_points(self, y: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
-        """``Phi^-1(y)``: points of the annulus mapped back to the polygonal one, y shape=(n, gdim)."""
-        y = np.asarray(y, dtype=np.float64)[:, : self.gdim]
-        r = np.linalg.norm(y, axis=1)
-        theta = np.arctan2(y[:, 1], y[:, 0])
-        direction = np.stack([np.cos(theta), np.sin(theta)], axis=1)
-        rho_in, rho_out = self._radii(theta, direction)
-        s = (r - self.r_inner) / (self.r_outer - self.r_inner)
-        return direction * (rho_in + s * (rho_out - rho_in))[:, None]
+        """``Phi^-1(y)`` by fixed-point iteration ``x = y - (Phi(x) - x)`` (a contraction: ``Phi``
+        is the identity up to ``O(h_base / r)`` in its derivative), y shape=(n, gdim); the radial
+        step is not undone (``O(h_base^4)``)."""
+        y = np.ascontiguousarray(np.asarray(y, dtype=np.float64)[:, : self.gdim])
+        x = y.copy()
+        for _ in range(60):
+            r = np.linalg.norm(x, axis=1)
+            inside = np.clip(r, self.r_inner * (1 + 1e-15), self.r_outer)  # keep the iterate in the base
+            x_in = x * (inside / np.where(r > 0, r, 1.0))[:, None]
+            new = y - self._displacement_clamped(x_in)
+            if np.abs(new - x).max(initial=0.0) <= 1e-15 * self.r_outer:
+                return new
+            x = new
+        return x
+
+    def _displacement_clamped(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """``Phi(x) - x`` before the radial step for points that may lie just outside the base (the
+        nearest base point along the ray is taken: outside points are moved in by halving steps)."""
+        found = self._geometry.locate(x)
+        missing = found.cells < 0
+        if np.any(missing):
+            x = x.copy()
+            # A point between the chord and the circle: slide it towards the annulus' mid radius.
+            mid = 0.5 * (self.r_inner + self.r_outer)
+            for _ in range(60):
+                r = np.linalg.norm(x[missing], axis=1)
+                x[missing] *= ((r + 0.05 * (mid - r)) / r)[:, None]
+                still = self._geometry.locate(x[missing]).cells < 0
+                if not np.any(still):
+                    break
+                rows = np.flatnonzero(missing)
+                missing = np.zeros_like(missing)
+                missing[rows[still]] = True
+        return self._displacement(x)[0]
 
     def curve(self, straight: dolfinx.mesh.Mesh, /, *, degree: int = 2) -> dolfinx.mesh.Mesh:
         """The curved mesh of a straight-sided (P1) simplex mesh: the same cells on the same ranks,

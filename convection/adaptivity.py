@@ -10,6 +10,13 @@ meshes: a point inside a base cell lies only in cells descending from it, so par
 of transferred fields and the refinement rounds' midpoints are looked for among those cells first
 (:meth:`MeshHierarchy.candidates`).
 
+Curved shells (``manifold=``, :class:`fembase.manifold.ShellManifold`): the base mesh and every
+mesh the refinement rounds make are straight-sided (P1; DOLFINx refines those only); the meshes the
+hierarchy hands out are curved (P2) by the manifold, which puts every geometry node where the
+straight node maps to (boundary nodes on the circles). Levels, base cells and the refinement
+rounds' midpoints are computed from the straight positions of a curved mesh's vertices
+(:meth:`fembase.manifold.ShellManifold.straight_points`), so the nesting is exact.
+
 The level of a simplex is measured from its volume: ``level = floor(log2(V_base / V) / tdim)``, so a
 cell split uniformly once is level 1 and a cell only bisected for conformity stays at its level.
 
@@ -35,10 +42,13 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
+from convection.mesh import cell_diameter
 from convection.transfer import PointEvaluator
 from fembase.distribute import MeshPiece, create_mesh_from_piece, mesh_piece, refine_on_ranks
-from fembase.dolfinx_compat import SCATTER_ADD, cell_dofmap, function_space, geometry_dofmap, is_discontinuous
+from fembase.dolfinx_compat import (SCATTER_ADD, cell_dofmap, coordinate_element_from, coordinate_map, function_space,
+                                    geometry_dofmap, is_discontinuous, mesh_domain)
 from fembase.geometry import Candidates
+from fembase.manifold import ShellManifold
 from fembase.partition import PARTITIONERS, partition
 
 __all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "MeshRecipe",
@@ -80,7 +90,7 @@ def kelly_indicator(fields: Sequence[dolfinx.fem.Function], /) -> npt.NDArray[np
     num_owned = mesh.topology.index_map(tdim).size_local
     V0 = function_space(mesh, "DG", 0)
     w = ufl.TestFunction(V0)
-    h = ufl.CellDiameter(mesh)
+    h = cell_diameter(mesh)
     n = ufl.FacetNormal(mesh)
     combined = np.zeros(num_owned)
     for f in fields:
@@ -147,12 +157,25 @@ class MeshRecipe:
     mesh: MeshPiece | None = None
 
 
-def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int) -> npt.NDArray[np.float64]:
-    """Volumes (areas in 2D) of the first ``num_cells`` local cells of an affine simplex mesh,
-    shape=(num_cells,), from the vertex coordinates (no form to compile for every new mesh)."""
+def _vertex_coordinates(mesh: dolfinx.mesh.Mesh, num_cells: int, manifold: ShellManifold | None = None
+                        ) -> npt.NDArray[np.float64]:
+    """Vertex coordinates of the first ``num_cells`` local cells, shape=(num_cells, tdim + 1, gdim);
+    of a curved mesh (geometry degree > 1) with a ``manifold``: the straight positions."""
     tdim, gdim = mesh.topology.dim, mesh.geometry.dim
-    dofs = geometry_dofmap(mesh)[:num_cells]
+    dofs = geometry_dofmap(mesh)[:num_cells, : tdim + 1]
     x = mesh.geometry.x[dofs][:, :, :gdim]
+    if manifold is not None and coordinate_map(mesh).degree > 1:
+        x = manifold.straight_points(x.reshape(-1, gdim)).reshape(x.shape)
+    return x
+
+
+def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int, manifold: ShellManifold | None = None
+                     ) -> npt.NDArray[np.float64]:
+    """Volumes (areas in 2D) of the first ``num_cells`` local cells of an affine simplex mesh (or of
+    a curved mesh's straight cells, see :func:`_vertex_coordinates`), shape=(num_cells,), from the
+    vertex coordinates (no form to compile for every new mesh)."""
+    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+    x = _vertex_coordinates(mesh, num_cells, manifold)
     edges = x[:, 1:, :] - x[:, :1, :]  # shape=(num_cells, tdim, gdim)
     if tdim == gdim:
         return np.abs(np.linalg.det(edges)) / math.factorial(tdim)
@@ -197,12 +220,19 @@ class MeshHierarchy:
     """The coarse base mesh and the level of each cell of meshes refined from it.
 
     Args:
-        base: The coarse, uniformly sized base mesh (simplices).
+        base: The coarse, uniformly sized base mesh (simplices; straight-sided with a manifold).
+        manifold: Curves the meshes handed out (see the module docstring); None: they are
+            refined as they are.
     """
 
-    def __init__(self, base: dolfinx.mesh.Mesh, /) -> None:
+    def __init__(self, base: dolfinx.mesh.Mesh, /, *, manifold: ShellManifold | None = None) -> None:
         if base.topology.cell_type not in (dolfinx.mesh.CellType.triangle, dolfinx.mesh.CellType.tetrahedron):
             raise ValueError("adaptive refinement needs a simplex mesh (mesh.cell_type: simplex)")
+        if manifold is not None:
+            if coordinate_map(base).degree != 1:
+                raise ValueError("a hierarchy with a manifold needs a straight-sided (P1) base mesh")
+            manifold.fit(base)
+        self.manifold = manifold
         self.base = base
         self.tdim = base.topology.dim
         num_owned = base.topology.index_map(self.tdim).size_local
@@ -241,12 +271,32 @@ class MeshHierarchy:
             if base is self.base and known is mesh:
                 return local
         num_owned = mesh.topology.index_map(self.tdim).size_local
-        midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, np.arange(num_owned, dtype=np.int32))
+        midpoints = self._straight_midpoints(mesh, np.arange(num_owned, dtype=np.int32))
         if self._base_locator is None or self._base_locator.mesh is not self.base:
             self._base_locator = PointEvaluator(self.base)
         local = self._base_locator.locate(midpoints)
         self._base_of = [*self._base_of[-3:], (self.base, mesh, local)]
         return local
+
+    def _straight_midpoints(self, mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], /) -> npt.NDArray[np.float64]:
+        """Midpoints (shape=(len(cells), 3)) of local cells, of the straight cells for a curved mesh."""
+        if self.manifold is None or coordinate_map(mesh).degree == 1:
+            return dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
+        x = _vertex_coordinates(mesh, int(cells.max(initial=-1)) + 1, self.manifold)[cells]
+        out = np.zeros((cells.size, 3))
+        out[:, : x.shape[2]] = x.mean(axis=1)
+        return out
+
+    def curve(self, mesh: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.Mesh:
+        """The mesh to hand out for a straight mesh of the hierarchy: curved by the manifold, or
+        ``mesh`` itself without one (collective)."""
+        return mesh if self.manifold is None else self.manifold.curve(mesh)
+
+    def mesh_domain(self) -> ufl.Mesh:
+        """A new UFL domain for a mesh to hand out (curved with a manifold; see :meth:`new_domain`)."""
+        if self.manifold is None:
+            return self.new_domain()
+        return mesh_domain(coordinate_element_from((self.base.topology.cell_name(), 2, self.base.geometry.dim)))
 
     def candidates(self, search: dolfinx.mesh.Mesh, where: dolfinx.mesh.Mesh,
                    cells: npt.NDArray[np.int32], /) -> Candidates | None:
@@ -324,13 +374,15 @@ class MeshHierarchy:
         base_piece = mesh_piece(self.base, owners[canonical], canonical)
         created = create_mesh_from_piece(comm, base_piece, self.new_domain())
         self.base, self.base_canonical = created.mesh, created.canonical
+        if self.manifold is not None:
+            self.manifold.fit(self.base)
         # The refined mesh is redistributed as it is, not rebuilt from the new base: DOLFINx 0.5's
         # refinement of a repartitioned base with marks computed on another partition gave
         # inconsistent facet ownership (interior facets lost between ranks) in our tests.
         piece = mesh_piece(mesh, owners[base_of])
         self.recipe = MeshRecipe(base_piece, [], piece)
         # Not ``comm``: the old base mesh is gone, and with it its communicator.
-        return create_mesh_from_piece(mesh.comm, piece, self.new_domain()).mesh
+        return create_mesh_from_piece(mesh.comm, piece, self.mesh_domain()).mesh
 
     def new_domain(self) -> ufl.Mesh:
         """A new UFL domain for a mesh to create (DOLFINx ties each domain object to one mesh)."""
@@ -343,13 +395,15 @@ class MeshHierarchy:
         if recipe.base is not None and base:
             created = create_mesh_from_piece(self.base.comm, recipe.base, self.new_domain())
             self.base, self.base_canonical = created.mesh, created.canonical
+            if self.manifold is not None:
+                self.manifold.fit(self.base)
         self.recipe = recipe
         if recipe.mesh is not None:
-            return create_mesh_from_piece(self.base.comm, recipe.mesh, self.new_domain()).mesh
+            return create_mesh_from_piece(self.base.comm, recipe.mesh, self.mesh_domain()).mesh
         mesh = self.base
         for marked in recipe.rounds:
             mesh = self._refine(mesh, marked)
-        return mesh
+        return self.curve(mesh)
 
     def _refine(self, mesh: dolfinx.mesh.Mesh, marked: npt.NDArray[np.int32] | None) -> dolfinx.mesh.Mesh:
         """One refinement round: the marked local cells (None: every cell), each new cell on the
@@ -360,7 +414,7 @@ class MeshHierarchy:
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
         """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""
         num_owned = mesh.topology.index_map(self.tdim).size_local
-        ratio = self.base_volume / _simplex_volumes(mesh, num_owned)
+        ratio = self.base_volume / _simplex_volumes(mesh, num_owned, self.manifold)
         return np.floor(np.log2(ratio) / self.tdim + 1e-6).astype(np.int32)
 
     def uniform(self, level: int, /) -> dolfinx.mesh.Mesh:
@@ -369,7 +423,7 @@ class MeshHierarchy:
         for _ in range(level):
             mesh = self._refine(mesh, None)
         self.recipe = MeshRecipe(self.recipe.base, [None] * level)
-        return mesh
+        return self.curve(mesh)
 
     def rebuild(self, old: dolfinx.mesh.Mesh, wanted: npt.NDArray[np.int32], /, *,
                 locator: PointEvaluator | None = None) -> dolfinx.mesh.Mesh:
@@ -392,6 +446,8 @@ class MeshHierarchy:
             num_owned = mesh.topology.index_map(self.tdim).size_local
             cells = np.arange(num_owned, dtype=np.int32)
             midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
+            if self.manifold is not None:  # the old mesh is curved: where the straight midpoints go
+                midpoints[:, : mesh.geometry.dim] = self.manifold.curved_points(midpoints)
             # The largest wanted level among all old cells touching the midpoint: a midpoint on a
             # facet of the old mesh must not take whichever neighbour the local numbering lists
             # first, or the result would depend on the partition. After a repartition of the base
@@ -406,7 +462,7 @@ class MeshHierarchy:
             rounds.append(marked)
             mesh = self._refine(mesh, marked)
         self.recipe = MeshRecipe(self.recipe.base, rounds)
-        return mesh
+        return self.curve(mesh)
 
 
 class Adaptivity:

@@ -55,6 +55,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.adaptivity import MeshHierarchy, MeshRecipe
+from fembase.manifold import ShellManifold
 from convection.model import Model
 from fembase.distribute import MeshPiece, create_mesh_from_piece, mesh_piece
 from fembase.distribute import cell_owners_by_input, mesh_fingerprint
@@ -392,7 +393,7 @@ class RestoredMesh:
 
 
 def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np.int32] | None], dolfinx.mesh.Mesh],
-                 /, *, hierarchical: bool) -> RestoredMesh:
+                 /, *, hierarchical: bool, manifold: ShellManifold | None = None) -> RestoredMesh:
     """The checkpoint's mesh (collective).
 
     On the rank count it was written on the mesh is made as the run made it: the base mesh with the
@@ -411,16 +412,17 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArr
         make_base: Makes the config's base mesh, on the given partition (None: its own choice).
         hierarchical: Whether the run has a :class:`convection.adaptivity.MeshHierarchy`
             (adaptivity or balancing).
+        manifold: The hierarchy's manifold (curved shells; ``make_base`` then makes the straight base).
     """
     note = None
     if saved.num_ranks == comm.size:
-        restored = _replay(saved, comm, make_base, hierarchical)
+        restored = _replay(saved, comm, make_base, hierarchical, manifold)
         if isinstance(restored, RestoredMesh):
             return restored
         note = (f"checkpoint {saved.path}: {restored}, so the continuation is the same run to round-off, "
                 f"not bit for bit (fields matched by coordinates, particles located again)")
     base = make_base(None)
-    hierarchy = MeshHierarchy(base) if hierarchical else None
+    hierarchy = MeshHierarchy(base, manifold=manifold) if hierarchical else None
     if hierarchy is None:
         return RestoredMesh(base, None, False, note)  # the base mesh, made the same way on any rank count
     with h5py.File(saved.path / "state.h5", "r") as f:
@@ -436,12 +438,12 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArr
     # The saved cells, each sent to the rank that owns its base cell, so the mesh and its base
     # stay together (load balancing needs that).
     owners = _base_owners(hierarchy)[base_cells]
-    mesh = create_mesh_from_piece(comm, MeshPiece(cells, x, owners), hierarchy.new_domain()).mesh
+    mesh = create_mesh_from_piece(comm, MeshPiece(cells, x, owners), hierarchy.mesh_domain()).mesh
     return RestoredMesh(mesh, hierarchy, False, note)
 
 
 def _replay(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np.int32] | None], dolfinx.mesh.Mesh],
-            hierarchical: bool) -> RestoredMesh | str:
+            hierarchical: bool, manifold: ShellManifold | None = None) -> RestoredMesh | str:
     """The saved mesh made again on the same ranks, checked against the saved fingerprints; or why
     not (collective; the same answer on every rank)."""
     with h5py.File(saved.path / "state.h5", "r") as f:
@@ -458,7 +460,7 @@ def _replay(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np
             rounds.append(None if kind == "uniform" else _slice(f, f"recipe/round_{i}", counts, comm.rank).astype(np.int32))
     # A checkpoint after a repartition rebuilds its base from the saved pieces, not from the config.
     base = make_base(owners if pieces["base"] is None else None)
-    hierarchy = MeshHierarchy(base) if hierarchical else None
+    hierarchy = MeshHierarchy(base, manifold=manifold) if hierarchical else None
     if hierarchy is not None and pieces["base"] is not None:
         hierarchy.replay(MeshRecipe(pieces["base"], []))  # the base only
     created = base if hierarchy is None else hierarchy.base

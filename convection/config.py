@@ -379,11 +379,14 @@ def _check_mesh(config: dict[str, Any]) -> None:
         raise ConfigError(f"config key 'mesh.cell_type': mesh.geometry {mesh['geometry']} has simplex cells only")
     for key, enabled in (("adaptivity.enabled", config["adaptivity"]["enabled"]),
                          ("balance.strategy", config["balance"]["strategy"] != "none")):
-        if enabled:
-            raise ConfigError(
-                f"config key '{key}': not available on mesh.geometry {mesh['geometry']}: DOLFINx 0.5 cannot refine "
-                "curved (second-order) cells, and refining straight-sided ones would put new boundary vertices "
-                "off the circle/sphere")
+        if not enabled:
+            continue
+        if mesh["geometry"] == "spherical_shell":
+            raise ConfigError(f"config key '{key}': not available on mesh.geometry spherical_shell yet: refined "
+                              "shell cells are curved by a manifold implemented for the annulus only")
+        if mesh["geometry_degree"] != 2:
+            raise ConfigError(f"config key '{key}': on mesh.geometry annulus needs mesh.geometry_degree 2 (the "
+                              "refined cells are curved onto the circles)")
 
 
 def _check_consistency(config: dict[str, Any]) -> None:

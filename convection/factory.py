@@ -47,9 +47,10 @@ from convection.config import (
     config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
     viscosity_laws,
 )
+from convection.domain import domain_from_config
 from convection.expressions import Expression
 from convection.materials import Material, Materials
-from convection.mesh import ShellSpec, create_mesh, mesh_spec_from_config, shell_confinement
+from convection.mesh import create_mesh
 from convection.model import Model
 from convection.plates import PlateVelocity
 from convection.postprocess import create_postprocessors
@@ -161,7 +162,8 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     checkpoint of a run of this config) the mesh, fields, particles and time stepping state are
     the checkpoint's instead.
     """
-    spec = mesh_spec_from_config(config["mesh"])
+    domain = domain_from_config(config)
+    spec = domain.spec
     gdim = spec.gdim
     physics = config["physics"]
     materials = materials_from_config(config)
@@ -173,16 +175,21 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
 
     acfg, bcfg = config["adaptivity"], config["balance"]
     hierarchical = acfg["enabled"] or bcfg["strategy"] != "none"
+    # A curved shell's hierarchy refines the straight-sided base and curves what it hands out.
+    manifold = domain.manifold() if hierarchical else None
+    base_spec = dataclasses.replace(spec, geometry_degree=1) if manifold is not None else spec
     exact = True
     if restore is not None:
-        restored = restore_mesh(restore, comm, lambda owners: create_mesh(comm, spec, owners=owners),
-                                hierarchical=hierarchical)
+        restored = restore_mesh(restore, comm, lambda owners: create_mesh(comm, base_spec, owners=owners),
+                                hierarchical=hierarchical, manifold=manifold)
         mesh, hierarchy, exact = restored.mesh, restored.hierarchy, restored.exact
         if restored.note is not None and comm.rank == 0:
             print(f"note: {restored.note}", file=sys.stderr, flush=True)
     else:
-        mesh = create_mesh(comm, spec)
-        hierarchy = MeshHierarchy(mesh) if hierarchical else None
+        mesh = create_mesh(comm, base_spec)
+        hierarchy = MeshHierarchy(mesh, manifold=manifold) if hierarchical else None
+        if manifold is not None:
+            mesh = hierarchy.uniform(0)
     adaptivity = None
     if acfg["enabled"]:
         adaptivity = Adaptivity(hierarchy, AdaptivityParameters.from_config(acfg), fields=acfg["fields"])
@@ -212,7 +219,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
             config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
             make_function=point_function(config), field_degree=ccfg["degree"], context=context,
             generate_particles=restore is None,
-            confine=shell_confinement(mesh, spec) if isinstance(spec, ShellSpec) else None)
+            confine=domain.confinement(mesh))
         if restore is not None:
             saved = restore.state["model"]
             restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],

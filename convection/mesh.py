@@ -15,9 +15,12 @@ Geometries (``mesh.geometry`` in a config, :data:`MESH_GEOMETRIES`):
   gravity along ``-x/|x|``. Optional ``interfaces`` (radii strictly between the two) are meshed
   conformingly, e.g. for forcing concentrated on a surface ``r = r'``.
 
-Adaptive refinement is not available on shells: DOLFINx 0.5's (Plaza) refinement fails on meshes
-with second-order geometry ("Data size mismatch between local and global adjacency lists"), and
-on straight-sided meshes it would put the new boundary vertices on the chords, inside the circle.
+DOLFINx 0.5's (Plaza) refinement fails on meshes with second-order geometry ("Data size mismatch
+between local and global adjacency lists"), and on straight-sided meshes it puts the new boundary
+vertices on the chords, inside the circle. Adaptive (and load-balanced) annulus runs therefore
+refine the straight-sided gmsh mesh and curve every mesh they use by the annulus manifold
+(:mod:`fembase.manifold`, :class:`convection.adaptivity.MeshHierarchy` with ``manifold=``; the
+domain object of :mod:`convection.domain` provides it). Spherical shells are not refined yet.
 """
 
 from __future__ import annotations

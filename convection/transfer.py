@@ -6,6 +6,12 @@ this rank's part of the old mesh first (a bounding-box tree and pull-back); mesh
 distributed base mesh without redistribution (see :mod:`convection.adaptivity`) find every point
 locally. Points not found locally are resolved collectively: they are shared with all ranks, each
 rank evaluates the ones it holds, and the values are combined.
+
+Points in no cell of the source mesh at all but within :data:`NEAR_REACH` (in reference
+coordinates, about that fraction of a cell size) of one take the value of the nearest cell's
+polynomial there (extrapolation): a curved boundary approximated by second-order cells lies a
+little differently on a coarse and on a refined mesh (:mod:`fembase.manifold`), so some boundary
+nodes of the new mesh lie just outside the old one.
 """
 
 from __future__ import annotations
@@ -20,11 +26,16 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from fembase.dolfinx_compat import cell_dofmap, interpolate_on_cells, is_lagrange, value_size
+from fembase.dolfinx_compat import (bounding_box_tree, cell_dofmap, compute_collisions, interpolate_on_cells,
+                                    is_lagrange, value_size)
 from fembase.evaluation import Evaluator
 from fembase.geometry import Candidates, CellGeometry, Located
 
-__all__ = ["PointEvaluator", "transfer_function"]
+__all__ = ["NEAR_REACH", "PointEvaluator", "transfer_function"]
+
+NEAR_REACH = 0.05
+"""How far outside every cell (reference coordinates) a point may lie and still be evaluated, by
+the nearest cell's polynomial."""
 
 
 class PointEvaluator:
@@ -130,6 +141,53 @@ class PointEvaluator:
         result[uncertain] = total[start: start + uncertain.size]
         return result
 
+    def _near(self, function: dolfinx.fem.Function, points: npt.NDArray[np.float64], value_size: int
+              ) -> npt.NDArray[np.float64]:
+        """Values at points (the same on every rank, shape=(m, 3)) that lie in no cell: from the owned
+        cell, over all ranks, whose reference cell the point's pull-back misses least, if by at most
+        :data:`NEAR_REACH` (collective; raises on every rank otherwise)."""
+        comm = self.mesh.comm
+        g = self.geometry
+        m = points.shape[0]
+        miss = np.full(m, np.inf)
+        cell = np.full(m, -1, dtype=np.int32)
+        xref = np.zeros((m, g.tdim))
+        if g.num_owned_cells:
+            vertices = g.coords[g.nodes[: g.num_owned_cells, : g.num_vertices]]
+            size = float((vertices.max(axis=1) - vertices.min(axis=1)).max())
+            tree = bounding_box_tree(self.mesh, g.tdim, np.arange(g.num_owned_cells, dtype=np.int32),
+                                     padding=2.0 * NEAR_REACH * size + 1.01 * g.curvature_padding)
+            hits = compute_collisions(tree, points)
+            offsets = np.asarray(hits.offsets, dtype=np.int64)
+            links = np.asarray(hits.array, dtype=np.int32)
+            rows = np.repeat(np.arange(m), np.diff(offsets))
+            if links.size:
+                X = g.pull_back(links, points[rows, : g.gdim])
+                if g.simplex:
+                    by = np.maximum(np.maximum(-X, 0.0).max(axis=1), X.sum(axis=1) - 1.0)
+                else:
+                    by = np.maximum(-X, X - 1.0).max(axis=1)
+                by = np.maximum(by, 0.0)
+                order = np.lexsort((links, by, rows))  # per point: least miss, then lowest cell
+                first = order[np.r_[True, rows[order][1:] != rows[order][:-1]]]
+                miss[rows[first]], cell[rows[first]], xref[rows[first]] = by[first], links[first], X[first]
+        best = np.empty_like(miss)
+        comm.Allreduce(miss, best, op=MPI.MIN)
+        if np.any(best > NEAR_REACH):
+            lost = int(np.count_nonzero(best > NEAR_REACH))
+            raise RuntimeError(f"{lost} points lie outside the source mesh; cannot transfer the field")
+        mine = np.where(miss == best, comm.rank, comm.size).astype(np.int32)
+        chooser = np.empty_like(mine)
+        comm.Allreduce(mine, chooser, op=MPI.MIN)
+        values = np.zeros((m, value_size))
+        chosen = np.flatnonzero(chooser == comm.rank)
+        if chosen.size:
+            found = Located(cell, xref)
+            values[chosen] = self._values(function, found, chosen, value_size)
+        total = np.empty_like(values)
+        comm.Allreduce(values, total, op=MPI.SUM)
+        return total
+
     def evaluate(self, function: dolfinx.fem.Function, points: npt.NDArray[np.float64], /, *,
                  candidates: Callable[[], Candidates | None] | None = None) -> npt.NDArray[np.float64]:
         """Values of ``function`` at ``points`` (shape=(n, 3)); returns shape=(n, value_size).
@@ -164,9 +222,9 @@ class PointEvaluator:
         gvalues[owner != comm.rank] = 0.0
         total = np.empty_like(gvalues)
         comm.Allreduce(gvalues, total, op=MPI.SUM)
-        if np.any(owner == comm.size):
-            lost = int(np.count_nonzero(owner == comm.size))
-            raise RuntimeError(f"{lost} points lie outside the source mesh; cannot transfer the field")
+        outside = np.flatnonzero(owner == comm.size)
+        if outside.size:
+            total[outside] = self._near(function, gathered[outside], value_size)
         start = sum(p.shape[0] for p in all_points[: comm.rank])
         values[missing] = total[start: start + missing.size]
         return values

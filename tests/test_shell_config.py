@@ -45,14 +45,20 @@ def test_shell_defaults_and_names():
     ({"mesh": {"cells": [4, 4]}}, "mesh.cells"),
     ({"mesh": {"resolution": None}}, "mesh.resolution"),
     ({"mesh": {"radii": [2.0, 1.0]}}, "mesh.radii"),
-    ({"adaptivity": {"enabled": True}}, "adaptivity.enabled"),
-    ({"balance": {"strategy": "every"}}, "balance.strategy"),
+    ({"mesh": {"geometry": "spherical_shell"}, "adaptivity": {"enabled": True}}, "adaptivity.enabled"),
+    ({"mesh": {"geometry": "spherical_shell"}, "balance": {"strategy": "every"}}, "balance.strategy"),
+    ({"mesh": {"geometry_degree": 1}, "adaptivity": {"enabled": True}}, "adaptivity.enabled"),
     ({"boundary": {"velocity": {"outer": {"kind": "prescribed", "value": ["-y"]}}}}, "boundary.velocity.outer.value"),
     ({"boundary": {"velocity": {"outer": {"kind": "prescribed", "value": ["-q", "x"]}}}}, "boundary.velocity.outer"),
 ])
 def test_shell_config_errors(sections, key):
     with pytest.raises(ConfigError, match=f"'{key}'"):
         load_config(None, document=_document(**sections))
+
+
+def test_annulus_adaptivity_and_balance_allowed():
+    config = load_config(None, document=_document(adaptivity={"enabled": True}, balance={"strategy": "every"}))
+    assert config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "every"
 
 
 def test_shell_names_refused_on_a_box():

@@ -25,6 +25,14 @@ Usage (ranks via mpirun; prints one JSON document on rank 0)::
     python benchmarks/shell/analytical.py --kind smooth_free_slip --dim 2 --n 2 --k 3 --levels 0 1 2 3
     mpirun -n 2 python benchmarks/shell/analytical.py --kind smooth_zero_slip --dim 2 --levels 0 1 2
     python benchmarks/shell/analytical.py --kind smooth_free_slip --dim 3 --n 2 --m 1 --levels 0 1 --resolution 0.5
+    python benchmarks/shell/analytical.py --kind smooth_free_slip --adaptive 3 --resolution 0.4
+
+``--adaptive ROUNDS`` (annulus, smooth cases): the meshes of a
+:class:`convection.adaptivity.MeshHierarchy` with the annulus manifold (:mod:`fembase.manifold`):
+the straight gmsh mesh of cell size ``resolution`` curved, solved, then ``ROUNDS`` times refined
+where the Kelly indicator of the velocity is largest (30 % of the cells up one level) and solved
+again; ``levels`` lists the rounds. ``--hierarchy`` instead refines that base uniformly
+``--levels`` times (the adaptive code path's meshes, uniformly refined).
 """
 
 from __future__ import annotations
@@ -45,11 +53,13 @@ import dolfinx.mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels  # noqa: E402
 from convection.approximation import BoussinesqApproximation  # noqa: E402
 from convection.boundary import VelocityBC  # noqa: E402
 from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
 from convection.stokes import StokesSolver  # noqa: E402
-from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells
+from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells  # noqa: E402
+from fembase.manifold import ShellManifold  # noqa: E402
 
 KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 R_INNER, R_OUTER, R_DELTA = 1.22, 2.22, 1.72
@@ -171,6 +181,15 @@ def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degr
         if comm.rank == 0:
             mesh_dir.mkdir(parents=True, exist_ok=True)
     mesh = create_shell_mesh(comm, spec, msh_file=msh)
+    return solve_on(case, mesh, level, h_target, comm=comm, degree=degree, solver=solver,
+                    nitsche_penalty=nitsche_penalty, petsc_options=petsc_options)[0]
+
+
+def solve_on(case: Case, mesh: dolfinx.mesh.Mesh, level: int, h_target: float, *, comm: MPI.Comm, degree: int = 2,
+             solver: str = "direct", nitsche_penalty: float | None = None, petsc_options: dict | None = None,
+             indicator: bool = False) -> tuple[LevelResult, np.ndarray | None]:
+    """Solve on ``mesh`` and measure the errors (collective); with ``indicator``, also the Kelly
+    indicator of the velocity per owned cell (:func:`convection.adaptivity.kelly_indicator`)."""
     solutions = case.solutions()
     kind = "free_slip" if case.free_slip else "no_slip"
     bcs = {"inner": VelocityBC(kind), "outer": VelocityBC(kind)}
@@ -229,9 +248,32 @@ def run_level(case: Case, level: int, resolution: float, *, comm: MPI.Comm, degr
     cells = mesh.topology.index_map(mesh.topology.dim).size_global
     dofs = (stokes.V.dofmap.index_map.size_global * stokes.V.dofmap.index_map_bs
             + stokes.Q.dofmap.index_map.size_global)
+    eta = kelly_indicator([stokes.u]) if indicator else None
     stokes.destroy()
     return LevelResult(level, h_target, int(cells), float((volume / cells) ** (1.0 / case.dim)), int(dofs),
-                       float(u_err), float(p_err), float(divergence), float(seconds))
+                       float(u_err), float(p_err), float(divergence), float(seconds)), eta
+
+
+def run_hierarchy(case: Case, rounds: int, resolution: float, *, comm: MPI.Comm, adaptive: bool,
+                  refine_fraction: float = 0.3, **options) -> list[LevelResult]:
+    """The meshes of a hierarchy with the annulus manifold (collective): ``adaptive``, round i
+    refined from round i - 1 by the Kelly indicator of its velocity; otherwise level i uniformly
+    refined i times. Returns one result per round / level 0..rounds."""
+    if case.dim != 2 or not case.smooth:
+        raise SystemExit("error: --adaptive and --hierarchy take the annulus (--dim 2) and the smooth cases")
+    base = create_shell_mesh(comm, ShellSpec(2, R_INNER, R_OUTER, resolution=resolution, geometry_degree=1))
+    hierarchy = MeshHierarchy(base, manifold=ShellManifold(R_INNER, R_OUTER, 2))
+    params = AdaptivityParameters(every=1, min_level=0, max_level=rounds, refine_fraction=refine_fraction,
+                                  coarsen_fraction=0.0)
+    results, mesh = [], hierarchy.uniform(0)
+    for i in range(rounds + 1):
+        if not adaptive:
+            mesh = hierarchy.uniform(i)
+        result, eta = solve_on(case, mesh, i, resolution / 2**i, comm=comm, indicator=adaptive, **options)
+        results.append(result)
+        if adaptive and i < rounds:
+            mesh = hierarchy.rebuild(mesh, wanted_levels(eta, hierarchy.levels(mesh), params, comm))
+    return results
 
 
 def fitted_order(h: list[float], errors: list[float]) -> float | None:
@@ -260,19 +302,29 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--mesh-dir", type=Path, default=None,
                         help="read each level's gmsh mesh from this folder, or write it there the first time "
                              "(the same meshes for another gmsh version: benchmarks/releases)")
+    parser.add_argument("--adaptive", type=int, default=None, metavar="ROUNDS",
+                        help="refine ROUNDS times by the Kelly indicator of the velocity (annulus, smooth cases)")
+    parser.add_argument("--hierarchy", action="store_true",
+                        help="refine the adaptive path's base uniformly to the largest of --levels")
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
     case = Case(args.kind, args.dim, args.n, args.m, args.k)
     resolution = args.resolution if args.resolution is not None else (0.2 if args.dim == 2 else 0.5)
-    results = [run_level(case, level, resolution, comm=comm, degree=args.degree,
-                         geometry_degree=args.geometry_degree, solver=args.solver,
-                         nitsche_penalty=args.nitsche_penalty, petsc_options=args.petsc_options,
-                         mesh_dir=args.mesh_dir)
-               for level in args.levels]
+    options = dict(degree=args.degree, solver=args.solver, nitsche_penalty=args.nitsche_penalty,
+                   petsc_options=args.petsc_options)
+    if args.adaptive is not None or args.hierarchy:
+        rounds = args.adaptive if args.adaptive is not None else max(args.levels)
+        results = run_hierarchy(case, rounds, resolution, comm=comm, adaptive=args.adaptive is not None, **options)
+    else:
+        results = [run_level(case, level, resolution, comm=comm, geometry_degree=args.geometry_degree,
+                             mesh_dir=args.mesh_dir, **options)
+                   for level in args.levels]
     h = [r.h for r in results]
     document = {
         "case": asdict(case), "ranks": comm.size, "degree": args.degree, "geometry_degree": args.geometry_degree,
-        "solver": args.solver, "levels": [asdict(r) for r in results],
+        "solver": args.solver, "refinement": ("adaptive" if args.adaptive is not None else
+                                              "hierarchy" if args.hierarchy else "gmsh"),
+        "levels": [asdict(r) for r in results],
         "orders": {"velocity": fitted_order(h, [r.velocity_error for r in results]),
                    "pressure": fitted_order(h, [r.pressure_error for r in results])},
     }

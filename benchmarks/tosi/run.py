@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/tosi/run.py --case N [--cells 48] [--ranks 1] [--method newton] [--out DIR]
     python benchmarks/tosi/run.py --methods [--cells 24] [--steps 40]    # Picard vs Newton per step
+    python benchmarks/tosi/run.py --cost [--cells 32]                     # case 2 on 1 and 2 ranks
     python benchmarks/tosi/run.py --table                                 # results.md, results.png
 
 ``--case N`` runs case N with the CLI to steady state (case 5a: over ``--periods`` periods of its
@@ -11,9 +12,9 @@ oscillation after a spin-up) and prints one JSON line last: the steady-state (5a
 mean) values of ``T_mean``, ``nusselt_top``, ``nusselt_bottom``, ``vrms``, ``vrms_surface``,
 ``vmax_surface``, ``eta_min``, ``eta_max``, ``W``, ``Phi_over_Ra``, ``delta``, the mesh, steps,
 wall time and nonlinear iterations; for 5a also ``period`` and ``<name>_min`` / ``<name>_max``
-over the last cycle. The JSON goes to ``results/case<N>.json`` too; ``--table`` writes
-``results.md`` (against the published ranges in ``reference.csv``) and ``results.png`` from the
-saved JSON files.
+over the last cycle. The JSON goes to ``data/<cells>x<cells>/case<N>.json`` too, with the run's
+``statistics.csv`` beside it; ``--table`` writes ``results.md`` (every case at every resolution
+in ``data/``, against the published ranges in ``reference.csv``) and ``results.png`` from them.
 
 The cases (Tosi et al. 2015, table 1): eta = 2 / (1/eta_lin + 1/eta_plast) with eta_lin =
 exp(-gamma_T T + gamma_z (1 - z)), gamma_T = ln(1e5), eta_plast = 1e-3 + sigma_y / |eps|::
@@ -29,6 +30,13 @@ at 32x32 to steady state: ``eta_lin`` gives u_rms 249.61, Nu 3.4215, <T> 0.77578
 
 ``--methods`` runs the first ``--steps`` steps of case 2 with Picard and with Newton (relative
 residual 1e-8 each step) and writes ``methods.md`` and ``methods.png`` (iterations per step).
+
+``--cost`` runs case 2 to steady state on 1 and then on 2 ranks, one after the other on the same
+machine, and writes ``cost_<cells>x<cells>.md``: wall time to steady state, steps, nonlinear iterations, the time
+and share of the nonlinear Stokes solve (every Newton iteration: assembly of the Jacobian and
+residual, MUMPS factorisation and solve) and the machine's load before and after. With
+``--repeat K`` it also times the first ``--steps`` steps K times on each rank count (best of K);
+``--no-steady`` skips the runs to steady state (a larger mesh, where only the timing is wanted).
 """
 
 from __future__ import annotations
@@ -81,13 +89,16 @@ def reference() -> dict[str, dict[str, tuple[float, float]]]:
 
 def run_case(case: str, out: Path, *, cells: int, ranks: int, method: str, end: float, cfl: float,
              extra: list[str]) -> dict:
-    """Run one case with the CLI; returns its statistics (columns -> lists) and the wall time."""
+    """Run one case with the CLI; returns its statistics (columns -> lists), the wall time and the
+    run's time per phase (summary.json)."""
     overrides = [*law_overrides(case), f"mesh.cells=[{cells},{cells}]", f"stokes.nonlinear.method={method}",
                  f"time.end={end}", f"time.cfl={cfl}", f"output.statistics={STATISTICS}", f"name=tosi_case{case}",
                  "output.progress=lines", "output.progress_every=200", *extra]
     start = time.perf_counter()
     run_config(ROOT / "configs" / "tosi.yaml", out, ranks=ranks, overrides=overrides, cwd=ROOT)
-    return {"statistics": read_statistics(out / "statistics.csv"), "wall": time.perf_counter() - start}
+    wall = time.perf_counter() - start
+    timings = json.loads((out / "summary.json").read_text())["timings"] if (out / "summary.json").exists() else {}
+    return {"statistics": read_statistics(out / "statistics.csv"), "wall": wall, "timings": timings}
 
 
 def _value(stats: dict, name: str, index: int) -> float:
@@ -129,32 +140,41 @@ def summarise(case: str, result: dict, cells: int, ranks: int, method: str) -> d
     return summary
 
 
-def table(results_dir: Path) -> str:
+def resolutions(data: Path) -> list[Path]:
+    """The ``<n>x<n>`` folders of ``data``, coarsest first."""
+    folders = [d for d in data.glob("*x*") if d.is_dir() and d.name.split("x")[0].isdigit()]
+    return sorted(folders, key=lambda d: int(d.name.split("x")[0]))
+
+
+def table(data: Path) -> str:
+    """Every case at every resolution found in ``data`` against the published ranges (markdown)."""
     ref = reference()
     lines = ["| case | mesh | quantity | this code | published range | inside |", "|---|---|---|---|---|---|"]
     for case in CASES:
-        path = results_dir / f"case{case}.json"
-        if not path.exists():
-            continue
-        r = json.loads(path.read_text())
-        for q in QUANTITIES:
-            low_high = ref.get(case, {}).get(q)
-            value = r[q]
-            text = f"{value:.6g}"
-            if case == "5a" and f"{q}_min" in r:
-                text += f" ({r[f'{q}_min']:.5g} to {r[f'{q}_max']:.5g})"
-            inside = "" if low_high is None else ("yes" if low_high[0] <= value <= low_high[1] else "**no**")
-            published = "" if low_high is None else f"{low_high[0]:g} to {low_high[1]:g}"
-            lines.append(f"| {case} | {r['cells']} P2-P1/P2 | {q} | {text} | {published} | {inside} |")
-        extra = f"steps {r['steps']}, t = {r['time']:.4g}, {r['wall_seconds']:.0f} s on {r['ranks']} rank(s), " \
-                f"{r['nonlinear_per_step']:.2f} nonlinear iterations per step ({r['method']})"
-        if case == "5a":
-            extra += f", period {r['period']:.5g}" if r.get("period") else ", no period detected"
-        lines.append(f"| {case} | | run | {extra} | | |")
+        for folder in resolutions(data):
+            path = folder / f"case{case}.json"
+            if not path.exists():
+                continue
+            r = json.loads(path.read_text())
+            for q in QUANTITIES:
+                low_high = ref.get(case, {}).get(q)
+                value = r[q]
+                text = f"{value:.6g}"
+                if case == "5a" and f"{q}_min" in r:
+                    text += f" ({r[f'{q}_min']:.5g} to {r[f'{q}_max']:.5g})"
+                inside = "" if low_high is None else ("yes" if low_high[0] <= value <= low_high[1] else "**no**")
+                published = "" if low_high is None else f"{low_high[0]:g} to {low_high[1]:g}"
+                lines.append(f"| {case} | {r['cells']} P2-P1/P2 | {q} | {text} | {published} | {inside} |")
+            extra = f"steps {r['steps']}, t = {r['time']:.4g}, {r['wall_seconds']:.0f} s on {r['ranks']} rank(s), " \
+                    f"{r['nonlinear_per_step']:.2f} nonlinear iterations per step ({r['method']})"
+            if case == "5a":
+                extra += f", period {r['period']:.5g}" if r.get("period") else ", no period detected"
+            lines.append(f"| {case} | {r['cells']} | run | {extra} | | |")
     return "\n".join(lines) + "\n"
 
 
-def plot(results_dir: Path, out: Path) -> None:
+def plot(data: Path, out: Path) -> None:
+    """u_rms and Nu_top against time of every case (finest resolution in ``data``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -162,12 +182,14 @@ def plot(results_dir: Path, out: Path) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for case in CASES:
-        stats_file = results_dir / f"case{case}" / "statistics.csv"
-        if not stats_file.exists():
+        found = [f / f"case{case}" / "statistics.csv" for f in resolutions(data)]
+        found = [f for f in found if f.exists()]
+        if not found:
             continue
-        stats = read_statistics(stats_file)
-        axes[0].plot(stats["time"], stats["vrms"], label=f"case {case}")
-        axes[1].plot(stats["time"], stats["nusselt"], label=f"case {case}")
+        stats = read_statistics(found[-1])
+        label = f"case {case} ({found[-1].parent.parent.name})"
+        axes[0].plot(stats["time"], stats["vrms"], label=label)
+        axes[1].plot(stats["time"], stats["nusselt"], label=label)
     axes[0].set_ylabel("u_rms")
     axes[1].set_ylabel("Nu (top)")
     for ax in axes:
@@ -176,6 +198,53 @@ def plot(results_dir: Path, out: Path) -> None:
     fig.suptitle("Tosi et al. (2015) cases: this code")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
+
+
+def _load() -> str:
+    return f"{os.getloadavg()[0]:.2f}"
+
+
+def cost(out: Path, *, cells: int, repeat: int, steps: int, steady: bool = True) -> None:
+    """Case 2 to steady state on 1 and 2 ranks one after the other (unless not ``steady``), then
+    (``repeat`` > 0) the first ``steps`` steps ``repeat`` times each; writes cost_<cells>x<cells>.md."""
+    rows, loads = [], [_load()]
+    for ranks in (1, 2) if steady else ():
+        r = run_case("2", out / f"cost_{ranks}", cells=cells, ranks=ranks, method="newton", end=4.0, cfl=4.0, extra=[])
+        stats = r["statistics"]
+        solve = r["timings"].get("stokes_solve", {}).get("max_seconds", float("nan"))
+        rows.append({"ranks": ranks, "steps": int(stats["step"][-1]), "wall": r["wall"],
+                     "iterations": int(sum(stats["nonlinear_iterations"])), "solve": solve,
+                     "vrms": float(stats["vrms"][-1]), "nusselt": float(stats["nusselt"][-1])})
+        loads.append(_load())
+    short = {}
+    for ranks in (1, 2) if repeat else ():
+        walls = []
+        for _ in range(repeat):
+            r = run_case("2", out / f"cost_short_{ranks}", cells=cells, ranks=ranks, method="newton", end=4.0,
+                         cfl=4.0, extra=[f"time.max_steps={steps}"])
+            walls.append(r["wall"])
+        short[ranks] = walls
+        loads.append(_load())
+    lines = [f"Tosi case 2, {cells}x{cells} P2-P1/P2, Newton to 1e-8 (MUMPS), cfl 4, from the initial condition"
+             + (" to the steady state (relative change < 1e-6 over 40 steps)" if steady else "")
+             + f"; 1 and 2 ranks run one after the other on this {os.cpu_count()}-core machine, nothing else "
+             f"running. Load average (1 min) before, between and after: {', '.join(loads)}.", ""]
+    if rows:
+        lines += ["| ranks | steps | wall to steady state [s] | speed-up | nonlinear iterations | Stokes solve [s] "
+                  "| share of the wall | s per iteration | u_rms | Nu_top |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        lines.append(f"| {row['ranks']} | {row['steps']} | {row['wall']:.0f} | {rows[0]['wall'] / row['wall']:.2f} | "
+                     f"{row['iterations']} | {row['solve']:.0f} | {100 * row['solve'] / row['wall']:.1f} % | "
+                     f"{row['solve'] / max(row['iterations'], 1):.4f} | {row['vrms']:.5g} | {row['nusselt']:.6g} |")
+    if short:
+        best = {k: min(v) for k, v in short.items()}
+        lines += ["", f"First {steps} steps, best of {repeat}: 1 rank {best[1]:.1f} s "
+                  f"({', '.join(f'{w:.1f}' for w in short[1])}), 2 ranks {best[2]:.1f} s "
+                  f"({', '.join(f'{w:.1f}' for w in short[2])}); ratio {best[1] / best[2]:.2f}."]
+    lines += ["", "The Stokes solve is the whole nonlinear iteration (Jacobian and residual assembly, factorisation, "
+              "solve, viscosity update); the rest is the temperature step, postprocessing and output."]
+    (HERE / f"cost_{cells}x{cells}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def methods(out: Path, *, cells: int, steps: int, ranks: int) -> None:
@@ -224,24 +293,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cfl", type=float, default=16.0)
     parser.add_argument("--set", action="append", default=[], help="extra config override key=value")
     parser.add_argument("--methods", action="store_true", help="Picard vs Newton iterations per step (case 2)")
+    parser.add_argument("--cost", action="store_true", help="case 2 to steady state on 1 and 2 ranks (cost.md)")
+    parser.add_argument("--repeat", type=int, default=0, help="--cost: time the first --steps steps this often")
+    parser.add_argument("--no-steady", action="store_true", help="--cost: only the --repeat timings")
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--table", action="store_true", help="write results.md and results.png")
     parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "tosi"), help="run folders")
-    parser.add_argument("--results", default=str(HERE / "results"), help="where case<N>.json files go")
+    parser.add_argument("--results", default=None,
+                        help="where case<N>.json goes (default: data/<cells>x<cells>; --table: data)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results_dir = Path(args.results)
     if args.methods:
         methods(out, cells=args.cells, steps=args.steps, ranks=args.ranks)
         return 0
+    if args.cost:
+        cost(out, cells=args.cells, repeat=args.repeat, steps=args.steps, steady=not args.no_steady)
+        return 0
     if args.table:
-        (HERE / "results.md").write_text(table(results_dir))
-        plot(results_dir, HERE / "results.png")
+        data = Path(args.results) if args.results else HERE / "data"
+        (HERE / "results.md").write_text(table(data))
+        plot(data, HERE / "results.png")
         print((HERE / "results.md").read_text())
         return 0
     if args.case is None:
-        parser.error("give --case N, --methods or --table")
+        parser.error("give --case N, --methods, --cost or --table")
     end = args.end if args.end is not None else (6.0 if args.case == "5a" else 4.0)
     extra = list(args.set)
     if args.case == "5a":
@@ -249,7 +325,8 @@ def main(argv: list[str] | None = None) -> int:
     result = run_case(args.case, out / f"case{args.case}", cells=args.cells, ranks=args.ranks, method=args.method,
                       end=end, cfl=args.cfl, extra=extra)
     summary = summarise(args.case, result, args.cells, args.ranks, args.method)
-    results_dir.mkdir(exist_ok=True)
+    results_dir = Path(args.results) if args.results else HERE / "data" / f"{args.cells}x{args.cells}"
+    results_dir.mkdir(parents=True, exist_ok=True)
     (results_dir / f"case{args.case}.json").write_text(json.dumps(summary, indent=1) + "\n")
     case_dir = results_dir / f"case{args.case}"
     case_dir.mkdir(exist_ok=True)

@@ -13,12 +13,15 @@ of transferred fields and the refinement rounds' midpoints are looked for among 
 Curved shells (``manifold=``, :class:`fembase.manifold.ShellManifold`): the base mesh and every
 mesh the refinement rounds make are straight-sided (P1; DOLFINx refines those only); the meshes the
 hierarchy hands out are curved (P2) by the manifold, which puts every geometry node where the
-straight node maps to (boundary nodes on the circles). Levels, base cells and the refinement
-rounds' midpoints are computed from the straight positions of a curved mesh's vertices
-(:meth:`fembase.manifold.ShellManifold.straight_points`), so the nesting is exact.
+straight node maps to (boundary nodes on the circles or spheres). Levels, base cells and the
+refinement rounds' midpoints are computed on the straight mesh a curved mesh was made from (the
+hierarchy keeps the last three, :meth:`MeshHierarchy.straight_of`), or, for a curved mesh made
+elsewhere (a repartition, a checkpoint), from the straight positions of its vertices
+(:meth:`fembase.manifold.ShellManifold.straight_points`), so the nesting is exact either way.
 
-The level of a simplex is measured from its volume: ``level = floor(log2(V_base / V) / tdim)``, so a
-cell split uniformly once is level 1 and a cell only bisected for conformity stays at its level.
+The level of a simplex is measured from its volume: ``level = floor(log2(V_base / V) / tdim)`` with
+``V_base`` the volume of the base cell it descends from, so a cell split uniformly once is level 1
+and a cell only bisected for conformity stays at its level.
 
 Indicator (Kelly-type): for a continuous field f, ``eta_K^2 = sum over interior facets F of K of
 h_F * integral_F [df/dn]^2``; for a discontinuous field (e.g. DG0 composition), ``[f]^2`` replaces
@@ -163,10 +166,11 @@ def _vertex_coordinates(mesh: dolfinx.mesh.Mesh, num_cells: int, manifold: Shell
     of a curved mesh (geometry degree > 1) with a ``manifold``: the straight positions."""
     tdim, gdim = mesh.topology.dim, mesh.geometry.dim
     dofs = geometry_dofmap(mesh)[:num_cells, : tdim + 1]
-    x = mesh.geometry.x[dofs][:, :, :gdim]
     if manifold is not None and coordinate_map(mesh).degree > 1:
-        x = manifold.straight_points(x.reshape(-1, gdim)).reshape(x.shape)
-    return x
+        nodes, inverse = np.unique(dofs, return_inverse=True)  # each vertex once (~20 cells share one in 3D)
+        straight = manifold.straight_points(mesh.geometry.x[nodes, :gdim])
+        return straight[inverse.reshape(dofs.shape)]
+    return mesh.geometry.x[dofs][:, :, :gdim]
 
 
 def _simplex_volumes(mesh: dolfinx.mesh.Mesh, num_cells: int, manifold: ShellManifold | None = None
@@ -248,6 +252,12 @@ class MeshHierarchy:
         # adaptation asks about the old mesh, each refinement round's mesh and the new one.
         self._base_of: list[tuple[dolfinx.mesh.Mesh, dolfinx.mesh.Mesh, npt.NDArray[np.int32]]] = []
         self._base_locator: PointEvaluator | None = None
+        # (curved mesh handed out, the straight mesh it was curved from, straight owned cell of each
+        # curved owned cell) for the last meshes curved: the straight cells answer the hierarchy's
+        # questions (levels, base cells, which old cell holds a midpoint) with affine maps, without
+        # inverting the manifold.
+        self._straight: list[tuple[dolfinx.mesh.Mesh, dolfinx.mesh.Mesh, npt.NDArray[np.int32]]] = []
+        self._volumes_of: tuple[dolfinx.mesh.Mesh, npt.NDArray[np.float64]] | None = None
 
     @property
     def num_base_cells(self) -> int:
@@ -278,10 +288,20 @@ class MeshHierarchy:
         self._base_of = [*self._base_of[-3:], (self.base, mesh, local)]
         return local
 
+    def _base_volumes(self) -> npt.NDArray[np.float64]:
+        """Volume of every local (owned and ghost) base cell, shape=(num_local_base_cells,)."""
+        if self._volumes_of is None or self._volumes_of[0] is not self.base:
+            imap = self.base.topology.index_map(self.tdim)
+            self._volumes_of = (self.base, _simplex_volumes(self.base, imap.size_local + imap.num_ghosts))
+        return self._volumes_of[1]
+
     def _straight_midpoints(self, mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32], /) -> npt.NDArray[np.float64]:
         """Midpoints (shape=(len(cells), 3)) of local cells, of the straight cells for a curved mesh."""
         if self.manifold is None or coordinate_map(mesh).degree == 1:
             return dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
+        straight = self.straight_of(mesh)
+        if straight is not None and np.all(cells < straight[1].size):
+            return dolfinx.mesh.compute_midpoints(straight[0], self.tdim, straight[1][cells])
         x = _vertex_coordinates(mesh, int(cells.max(initial=-1)) + 1, self.manifold)[cells]
         out = np.zeros((cells.size, 3))
         out[:, : x.shape[2]] = x.mean(axis=1)
@@ -290,7 +310,26 @@ class MeshHierarchy:
     def curve(self, mesh: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.Mesh:
         """The mesh to hand out for a straight mesh of the hierarchy: curved by the manifold, or
         ``mesh`` itself without one (collective)."""
-        return mesh if self.manifold is None else self.manifold.curve(mesh)
+        if self.manifold is None:
+            return mesh
+        curved = self.manifold.curve(mesh)
+        # curve() keeps every cell on its rank, in the straight mesh's owned order as the input
+        # order: the curved cell's original index minus the rank's offset is the straight cell.
+        num_owned = curved.topology.index_map(self.tdim).size_local
+        offset = curved.comm.exscan(num_owned) or 0
+        perm = (np.asarray(curved.topology.original_cell_index, dtype=np.int64)[:num_owned] - offset).astype(np.int32)
+        if num_owned and (perm.min() < 0 or perm.max() >= num_owned):
+            raise RuntimeError("the curved mesh's cells are not the straight mesh's cells of the same rank")
+        self._straight = [*self._straight[-2:], (curved, mesh, perm)]
+        return curved
+
+    def straight_of(self, mesh: dolfinx.mesh.Mesh, /) -> tuple[dolfinx.mesh.Mesh, npt.NDArray[np.int32]] | None:
+        """The straight mesh a curved mesh of this hierarchy was made from and the straight owned
+        cell of each owned cell (shape=(num_owned,)), if it is one of the last three curved here."""
+        for curved, straight, perm in self._straight:
+            if curved is mesh:
+                return straight, perm
+        return None
 
     def mesh_domain(self) -> ufl.Mesh:
         """A new UFL domain for a mesh to hand out (curved with a manifold; see :meth:`new_domain`)."""
@@ -414,7 +453,16 @@ class MeshHierarchy:
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
         """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""
         num_owned = mesh.topology.index_map(self.tdim).size_local
-        ratio = self.base_volume / _simplex_volumes(mesh, num_owned, self.manifold)
+        straight = self.straight_of(mesh) if self.manifold is not None else None
+        if straight is not None:
+            return self.levels(straight[0])[straight[1]]
+        # Against the volume of each cell's own base cell: the base cells of an unstructured
+        # (gmsh) mesh differ in volume by more than a factor 2^tdim in 3D.
+        reference = np.full(num_owned, self.base_volume)
+        parent = self._local_base_cells(mesh)
+        known = parent >= 0
+        reference[known] = self._base_volumes()[parent[known]]
+        ratio = reference / _simplex_volumes(mesh, num_owned, self.manifold)
         return np.floor(np.log2(ratio) / self.tdim + 1e-6).astype(np.int32)
 
     def uniform(self, level: int, /) -> dolfinx.mesh.Mesh:
@@ -436,6 +484,12 @@ class MeshHierarchy:
 
         Collective.
         """
+        straight = self.straight_of(old) if self.manifold is not None else None
+        if straight is not None:  # search the straight cells: affine maps, straight midpoints
+            old, perm = straight
+            straight_wanted = np.empty_like(wanted)
+            straight_wanted[perm] = wanted
+            wanted, locator = straight_wanted, None
         if locator is None or locator.mesh is not old:
             locator = PointEvaluator(old)
         wanted_local = _with_ghost_values(old, wanted)
@@ -446,7 +500,7 @@ class MeshHierarchy:
             num_owned = mesh.topology.index_map(self.tdim).size_local
             cells = np.arange(num_owned, dtype=np.int32)
             midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
-            if self.manifold is not None:  # the old mesh is curved: where the straight midpoints go
+            if self.manifold is not None and straight is None:  # the old mesh is curved: where the straight midpoints go
                 midpoints[:, : mesh.geometry.dim] = self.manifold.curved_points(midpoints)
             # The largest wanted level among all old cells touching the midpoint: a midpoint on a
             # facet of the old mesh must not take whichever neighbour the local numbering lists

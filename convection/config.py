@@ -381,12 +381,10 @@ def _check_mesh(config: dict[str, Any]) -> None:
                          ("balance.strategy", config["balance"]["strategy"] != "none")):
         if not enabled:
             continue
-        if mesh["geometry"] == "spherical_shell":
-            raise ConfigError(f"config key '{key}': not available on mesh.geometry spherical_shell yet: refined "
-                              "shell cells are curved by a manifold implemented for the annulus only")
         if mesh["geometry_degree"] != 2:
-            raise ConfigError(f"config key '{key}': on mesh.geometry annulus needs mesh.geometry_degree 2 (the "
-                              "refined cells are curved onto the circles)")
+            surfaces = "circles" if mesh["geometry"] == "annulus" else "spheres"
+            raise ConfigError(f"config key '{key}': on mesh.geometry {mesh['geometry']} needs mesh.geometry_degree 2 "
+                              f"(the refined cells are curved onto the {surfaces})")
 
 
 def _check_consistency(config: dict[str, Any]) -> None:

@@ -5,7 +5,7 @@ A domain knows its boundary names and which are the top and the bottom, the grav
 the constants it adds to expressions, the mesh spec (:mod:`convection.mesh`), how particles are
 kept inside (:meth:`ShellDomain.confinement`), an estimate of its base cell count, and the
 *manifold* that places the geometry nodes of refined cells (:class:`fembase.manifold.ShellManifold`
-on the annulus; none on a box, whose refined cells are straight).
+on the annulus and the spherical shell; none on a box, whose refined cells are straight).
 
 =================== ================================== ======================================
 query               :class:`BoxDomain`                 :class:`ShellDomain`
@@ -14,7 +14,7 @@ query               :class:`BoxDomain`                 :class:`ShellDomain`
                     front, back in 3D)
 ``top / bottom``    top / bottom                       outer / inner
 ``gravity``         ``"vertical"`` (``-e_z``)          ``"radial"`` (``-x/|x|``)
-``manifold()``      None                               ShellManifold (annulus); 3D: None
+``manifold()``      None                               ShellManifold (annulus, spherical shell)
 =================== ================================== ======================================
 """
 
@@ -124,11 +124,8 @@ class ShellDomain:
         cell = math.sqrt(3.0) / 4.0 * h * h if self.gdim == 2 else h**3 / (6.0 * math.sqrt(2.0))
         return self.spec.volume / cell
 
-    def manifold(self) -> ShellManifold | None:
-        """Where refined cells' geometry nodes go: a new (unfitted) :class:`ShellManifold` on the
-        annulus; None on the spherical shell (not implemented)."""
-        if self.gdim != 2:
-            return None
+    def manifold(self) -> ShellManifold:
+        """Where refined cells' geometry nodes go: a new (unfitted) :class:`ShellManifold`."""
         return ShellManifold(self.spec.inner_radius, self.spec.outer_radius, self.gdim)
 
     def confinement(self, mesh: dolfinx.mesh.Mesh, /) -> Callable[[npt.NDArray[np.float64]], None]:

@@ -1,4 +1,4 @@
-"""Where the geometry nodes of refined curved cells go: the manifold of an annulus.
+"""Where the geometry nodes of refined curved cells go: the manifold of an annulus or spherical shell.
 
 DOLFINx refines straight-sided (P1) simplex meshes only (0.5's Plaza refinement fails on
 second-order geometry), and refining straight-sided cells puts the new boundary vertices on the
@@ -23,8 +23,24 @@ below 1e-13 count as 0), so it depends on a point's coordinates and the base mes
 the rank: the curved mesh is the same on any number of ranks (measured: to one unit in the last
 place, tests/test_shell_refinement.py).
 
-Only the annulus (``gdim = 2``) is implemented (the tetrahedra of a spherical shell need face
-bubbles as well: future work).
+The spherical shell (``gdim = 3``) blends by projection instead (Lenoir's / Scott's curved
+simplices): for each boundary entity ``E`` of ``K`` on a sphere of radius ``R`` (a boundary face,
+else each boundary edge), with ``s = sum_{v in E} lambda_v`` and ``x_E = sum_{v in E} lambda_v v / s``
+(the point of ``E`` seen from the opposite vertices),
+
+    Phi(x) = x + sum_E s^2 (R x_E / |x_E| - x_E).
+
+On ``E`` itself ``s = 1`` and ``x_E = x``, so boundary points land on the sphere exactly (no radial
+step); restricted to a face of ``K`` the sum depends only on that face's barycentric coordinates
+and on whether its edges lie on the boundary (the face formula restricted to a face through one of
+its edges is that edge's formula), so two cells sharing a face map it alike. A quadratic face
+bubble would leave the face interior ``O(h^3)`` inside the sphere; the projection does not. The
+weight ``s^2`` (not ``s``) makes ``Phi`` differentiable at the vertex opposite a curved face.
+A base cell with all four vertices on one sphere is refused (:meth:`ShellManifold.fit`).
+
+Interior circles/spheres the mesh conforms to (``interfaces``, e.g. the surface a delta-function
+force acts on in benchmarks/shell/analytical.py) are curved the same way: their edges (2D) and
+faces (3D) are treated as boundary ones, from both sides.
 """
 
 from __future__ import annotations
@@ -39,7 +55,7 @@ from fembase import dolfinx_compat as compat
 from fembase.distribute import MeshPiece, create_mesh_from_piece
 from fembase.dolfinx_compat import coordinate_element_from, coordinate_map, geometry_dofmap
 
-__all__ = ["EDGES", "ShellManifold", "boundary_radius_error"]
+__all__ = ["EDGES", "ShellManifold", "boundary_entities", "boundary_radius_error"]
 
 EDGES: dict[int, tuple[tuple[int, int], ...]] = {
     2: ((1, 2), (0, 2), (0, 1)),
@@ -51,26 +67,39 @@ order of the edge nodes of a second-order Lagrange cell."""
 _ZERO = 1e-13
 """Barycentric coordinates below this count as 0 (points on a base cell's edge or vertex)."""
 
+_SLOTS = 3
+"""Curved entities a tetrahedron can have (a face on one sphere and none on the other, or up to
+three boundary edges on one sphere without their face, or an edge on each sphere)."""
+
 
 class ShellManifold:
-    """The annulus ``r_inner <= |x| <= r_outer`` as the image of a polygonal annulus (see the module
-    docstring).
+    """The annulus or spherical shell ``r_inner <= |x| <= r_outer`` as the image of a polygonal /
+    polyhedral one (see the module docstring).
 
     Args:
         r_inner: Inner radius.
         r_outer: Outer radius.
-        gdim: 2 (annulus); 3 raises NotImplementedError.
+        gdim: 2 (annulus) or 3 (spherical shell).
+        interfaces: Radii of interior circles/spheres the mesh conforms to
+            (:attr:`convection.mesh.ShellSpec.interfaces`): their edges (and faces) are curved onto
+            them as the boundary's are. An interior edge/face counts as on an interface when all
+            its vertices lie on it (as the facets of the forcing are found,
+            benchmarks/shell/analytical.py).
     """
 
-    def __init__(self, r_inner: float, r_outer: float, gdim: int, /) -> None:
-        if gdim != 2:
-            raise NotImplementedError("curving refined cells is implemented for the annulus (gdim 2) only")
+    def __init__(self, r_inner: float, r_outer: float, gdim: int, /, *, interfaces: tuple[float, ...] = ()) -> None:
+        if gdim not in (2, 3):
+            raise ValueError(f"a shell manifold is 2D (annulus) or 3D (spherical shell), got gdim={gdim}")
         if not 0.0 < r_inner < r_outer:
             raise ValueError(f"need 0 < r_inner < r_outer, got {r_inner}, {r_outer}")
+        if any(not r_inner < r < r_outer for r in interfaces):
+            raise ValueError(f"interface radii must lie strictly between {r_inner} and {r_outer}, got {interfaces}")
         self.r_inner, self.r_outer, self.gdim = float(r_inner), float(r_outer), gdim
+        self.interfaces = tuple(float(r) for r in interfaces)
         self._geometry = None
         self._bubbles: npt.NDArray[np.float64] | None = None
         self._radius: npt.NDArray[np.float64] | None = None
+        self._masks: npt.NDArray[np.float64] | None = None  # 3D: (cells, _SLOTS, 4) vertices of each entity
 
     @property
     def fitted(self) -> bool:
@@ -91,32 +120,87 @@ class ShellManifold:
         base.topology.create_connectivity(tdim, 1)
         geometry = CellGeometry(base)
         n = geometry.num_local_cells
-        boundary = np.zeros(base.topology.index_map(1).size_local + base.topology.index_map(1).num_ghosts, dtype=bool)
-        boundary[dolfinx.mesh.locate_entities_boundary(base, 1, lambda x: np.full(x.shape[1], True))] = True
+        boundary = boundary_entities(base, 1)
         c2e = np.asarray(base.topology.connectivity(tdim, 1).array, dtype=np.int32).reshape(-1, len(EDGES[tdim]))[:n]
         # Each cell's vertices in a canonical order (by coordinates), so the barycentric coordinates
         # of a point do not depend on the order a mesh lists them in (ranks may list them otherwise).
-        x = geometry.coords[geometry.nodes[:, : tdim + 1]]  # shape=(n, 3, gdim)
+        x = geometry.coords[geometry.nodes[:, : tdim + 1]]  # shape=(n, tdim + 1, gdim)
         order = np.lexsort(x.transpose(2, 0, 1)[::-1], axis=-1)
         x = np.take_along_axis(x, order[:, :, None], axis=1)
-        c2e_sorted = np.empty_like(c2e)
-        for j, (a, b) in enumerate(EDGES[tdim]):  # edge j of the sorted cell: opposite sorted vertex j
-            c2e_sorted[:, j] = c2e[np.arange(n), order[:, j]]
-        c2e = c2e_sorted
+        c2e = self._sorted_edges(c2e, order, tdim)
         self._origin = np.ascontiguousarray(x[:, 0])
+        self._vertices = np.ascontiguousarray(x)
+        self._order = order  # sorted vertex j of cell c is the mesh's local vertex order[c, j]
         self._inverse = np.linalg.inv(np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))) if n else np.zeros((0, gdim, gdim))
+        radii = np.linalg.norm(x, axis=2)  # shape=(n, tdim + 1)
+        targets = (self.r_inner, self.r_outer, *self.interfaces)
+        on_sphere = {t: np.abs(radii - t) < 1e-8 * t for t in targets}
+        interface = {t: t in self.interfaces for t in targets}  # interior surfaces: any edge/face on them
+        if tdim == 3:
+            self._geometry = geometry
+            self._fit_faces(base, n, c2e, order, boundary, on_sphere, interface)
+            return
         bubbles = np.zeros((n, len(EDGES[tdim]), gdim))
         radius = np.zeros((n, len(EDGES[tdim])))
         for j, (a, b) in enumerate(EDGES[tdim]):
             m = 0.5 * (x[:, a] + x[:, b])
             r = np.linalg.norm(m, axis=1)
-            ra, rb = np.linalg.norm(x[:, a], axis=1), np.linalg.norm(x[:, b], axis=1)
-            for target in (self.r_inner, self.r_outer):
-                on = (boundary[c2e[:, j]] & (np.abs(ra - target) < 1e-8 * target)
-                      & (np.abs(rb - target) < 1e-8 * target))
+            for target in targets:
+                on = (interface[target] | boundary[c2e[:, j]]) & on_sphere[target][:, a] & on_sphere[target][:, b]
                 bubbles[on, j] = m[on] * (target / r[on] - 1.0)[:, None]
                 radius[on, j] = target
         self._geometry, self._bubbles, self._radius = geometry, bubbles, radius
+
+    @staticmethod
+    def _sorted_edges(c2e: npt.NDArray[np.int32], order: npt.NDArray[np.int64], tdim: int) -> npt.NDArray[np.int32]:
+        """The cell-edge connectivity for the cells' vertices taken in ``order`` (edge j of the
+        sorted cell joins sorted vertices EDGES[tdim][j])."""
+        index = np.full((tdim + 1, tdim + 1), -1, dtype=np.int64)
+        for j, (a, b) in enumerate(EDGES[tdim]):
+            index[a, b] = index[b, a] = j
+        rows = np.arange(c2e.shape[0])
+        out = np.empty_like(c2e)
+        for j, (a, b) in enumerate(EDGES[tdim]):
+            out[:, j] = c2e[rows, index[order[:, a], order[:, b]]]
+        return out
+
+    def _fit_faces(self, base: dolfinx.mesh.Mesh, n: int, c2e: npt.NDArray[np.int32], order: npt.NDArray[np.int64],
+                   boundary_edge: npt.NDArray[np.bool_], on_sphere: dict[float, npt.NDArray[np.bool_]],
+                   interface: dict[float, bool]) -> None:
+        """3D: per cell the curved entities (a boundary or interface face on a sphere, else its
+        boundary or interface edges on that sphere) as vertex masks (sorted order) and radii."""
+        base.topology.create_connectivity(3, 2)
+        c2f = np.asarray(base.topology.connectivity(3, 2).array, dtype=np.int32).reshape(-1, 4)[:n]
+        c2f = np.take_along_axis(c2f, order, axis=1)  # face j is opposite vertex j, also after sorting
+        boundary_face = boundary_entities(base, 2)
+        masks = np.zeros((n, _SLOTS, 4))
+        radius = np.zeros((n, _SLOTS))
+        used = np.zeros(n, dtype=np.int64)
+
+        def add(cells: npt.NDArray[np.int64], vertices: tuple[int, ...], target: float) -> None:
+            slot = used[cells]
+            if np.any(slot >= _SLOTS):
+                raise ValueError("a base cell touches the shell's boundary in too many entities to be curved")
+            masks[cells, slot] = 0.0
+            for v in vertices:
+                masks[cells, slot, v] = 1.0
+            radius[cells, slot] = target
+            used[cells] += 1
+
+        for target, on in on_sphere.items():
+            if np.any(on.all(axis=1)):
+                raise ValueError(f"{int(on.all(axis=1).sum())} base cell(s) have all four vertices on the sphere "
+                                 f"r = {target:g}: the manifold cannot curve them (remesh the base)")
+            face_on = np.zeros(n, dtype=bool)
+            for j in range(4):  # face j: the vertices other than j
+                others = [v for v in range(4) if v != j]
+                cells = np.flatnonzero((interface[target] | boundary_face[c2f[:, j]]) & on[:, others].all(axis=1))
+                face_on[cells] = True
+                add(cells, tuple(others), target)
+            for j, (a, b) in enumerate(EDGES[3]):
+                cells = np.flatnonzero(~face_on & (interface[target] | boundary_edge[c2e[:, j]]) & on[:, a] & on[:, b])
+                add(cells, (a, b), target)
+        self._masks, self._radius = masks, radius
 
     def _displacement(self, x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """``Phi(x) - x`` before the radial step, and the radius of the circle each point lies on
@@ -126,14 +210,40 @@ class ShellManifold:
         found = self._geometry.locate(x)
         if np.any(found.cells < 0):
             raise ValueError(f"{int(np.sum(found.cells < 0))} points lie outside this rank's base cells")
-        xref = np.einsum("mtg,mg->mt", self._inverse[found.cells], x - self._origin[found.cells])
-        lam = np.concatenate([1.0 - xref.sum(axis=1, keepdims=True), xref], axis=1)
+        return self._displacement_in(found.cells, x)
+
+    def _barycentric(self, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Barycentric coordinates (sorted vertex order) of points x in the straight base cells
+        ``cells`` (also of points outside them), shape=(n, tdim + 1)."""
+        xref = np.einsum("mtg,mg->mt", self._inverse[cells], x - self._origin[cells])
+        return np.concatenate([1.0 - xref.sum(axis=1, keepdims=True), xref], axis=1)
+
+    def _displacement_in(self, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64]
+                         ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """:meth:`_displacement` through the map of the given base cells (shape=(n,)); the formula
+        extends smoothly beyond a cell, which the inverse uses."""
+        lam = self._barycentric(cells, x)
         lam[np.abs(lam) < _ZERO] = 0.0
         displacement = np.zeros_like(x)
         on_circle = np.zeros(x.shape[0])
+        if self.gdim == 3:
+            vertices = self._vertices[cells]  # shape=(m, 4, 3), sorted order
+            for k in range(_SLOTS):
+                radius = self._radius[cells, k]
+                on = radius > 0.0
+                if not np.any(on):
+                    continue
+                weights = lam[on] * self._masks[cells[on], k]  # shape=(m_on, 4)
+                s = weights.sum(axis=1)
+                inside = s > 0.0
+                rows = np.flatnonzero(on)[inside]
+                xe = np.einsum("mv,mvg->mg", weights[inside], vertices[rows]) / s[inside, None]
+                projected = xe * (radius[rows] / np.linalg.norm(xe, axis=1))[:, None]
+                displacement[rows] += (s[inside] ** 2)[:, None] * (projected - xe)
+            return displacement, on_circle
         for j, (a, b) in enumerate(EDGES[2]):
-            displacement += (4.0 * lam[:, a] * lam[:, b])[:, None] * self._bubbles[found.cells, j]
-            radius = self._radius[found.cells, j]
+            displacement += (4.0 * lam[:, a] * lam[:, b])[:, None] * self._bubbles[cells, j]
+            radius = self._radius[cells, j]
             on = (radius > 0.0) & (lam[:, j] == 0.0)  # edge j is opposite vertex j
             on_circle[on] = radius[on]
         return displacement, on_circle
@@ -148,40 +258,69 @@ class ShellManifold:
         return y
 
     def straight_points(self, y: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
-        """``Phi^-1(y)`` by fixed-point iteration ``x = y - (Phi(x) - x)`` (a contraction: ``Phi``
-        is the identity up to ``O(h_base / r)`` in its derivative), y shape=(n, gdim); the radial
-        step is not undone (``O(h_base^4)``)."""
+        """``Phi^-1(y)``, y shape=(n, gdim) (not collective).
+
+        Each point starts in the base cell holding it (a point between a flat boundary face and
+        its sphere: the cell found moving it towards the mid radius), iterates ``x = y - d_K(x)``
+        through that cell's map ``d_K`` (extended beyond the cell: a contraction, ``d_K`` has
+        derivative ``O(h_base / r)``) until its step is at round-off, and moves to the cell across
+        the facet where the result left its cell (up to 4 times). In 2D the radial step is not
+        undone (``O(h_base^4)``)."""
+        if self._geometry is None:
+            raise RuntimeError("ShellManifold.fit(base) first")
         y = np.ascontiguousarray(np.asarray(y, dtype=np.float64)[:, : self.gdim])
+        cells = self._start_cells(y)
+        neighbours = self._geometry.facet_neighbours
         x = y.copy()
-        for _ in range(60):
-            r = np.linalg.norm(x, axis=1)
-            inside = np.clip(r, self.r_inner * (1 + 1e-15), self.r_outer)  # keep the iterate in the base
-            x_in = x * (inside / np.where(r > 0, r, 1.0))[:, None]
-            new = y - self._displacement_clamped(x_in)
-            if np.abs(new - x).max(initial=0.0) <= 1e-15 * self.r_outer:
-                return new
-            x = new
+        todo = np.arange(y.shape[0])
+        for _ in range(5):
+            if todo.size == 0:
+                break
+            x[todo] = self._fixed_point(cells[todo], y[todo], x[todo])
+            lam = self._barycentric(cells[todo], x[todo])
+            worst = np.argmin(lam, axis=1)
+            outside = lam[np.arange(todo.size), worst] < -1e-10
+            rows, j = todo[outside], worst[outside]
+            nxt = neighbours[cells[rows], self._order[cells[rows], j]]  # across the facet opposite vertex j
+            moves = nxt >= 0
+            cells[rows[moves]] = nxt[moves]
+            todo = rows[moves]
         return x
 
-    def _displacement_clamped(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """``Phi(x) - x`` before the radial step for points that may lie just outside the base (the
-        nearest base point along the ray is taken: outside points are moved in by halving steps)."""
-        found = self._geometry.locate(x)
-        missing = found.cells < 0
-        if np.any(missing):
-            x = x.copy()
-            # A point between the chord and the circle: slide it towards the annulus' mid radius.
+    def _fixed_point(self, cells: npt.NDArray[np.int32], y: npt.NDArray[np.float64], x: npt.NDArray[np.float64]
+                     ) -> npt.NDArray[np.float64]:
+        """Solve ``x + d_K(x) = y`` in fixed cells by iteration; each point until its own step is at round-off."""
+        x = x.copy()
+        active = np.arange(y.shape[0])
+        for _ in range(60):
+            if active.size == 0:
+                break
+            new = y[active] - self._displacement_in(cells[active], x[active])[0]
+            moving = np.abs(new - x[active]).max(axis=1) > 1e-15 * self.r_outer
+            x[active] = new
+            active = active[moving]
+        return x
+
+    def _start_cells(self, y: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
+        """A local base cell near each point (the one holding it, else the first met moving the
+        point towards the annulus' / shell's mid radius), shape=(n,)."""
+        cells = self._geometry.locate(y).cells.copy()
+        missing = np.flatnonzero(cells < 0)
+        if missing.size:
+            x = y[missing].copy()
             mid = 0.5 * (self.r_inner + self.r_outer)
             for _ in range(60):
-                r = np.linalg.norm(x[missing], axis=1)
-                x[missing] *= ((r + 0.05 * (mid - r)) / r)[:, None]
-                still = self._geometry.locate(x[missing]).cells < 0
-                if not np.any(still):
+                r = np.linalg.norm(x, axis=1)
+                x *= ((r + 0.05 * (mid - r)) / r)[:, None]
+                found = self._geometry.locate(x).cells
+                hit = found >= 0
+                cells[missing[hit]] = found[hit]
+                missing, x = missing[~hit], x[~hit]
+                if missing.size == 0:
                     break
-                rows = np.flatnonzero(missing)
-                missing = np.zeros_like(missing)
-                missing[rows[still]] = True
-        return self._displacement(x)[0]
+        if missing.size:
+            raise ValueError(f"{missing.size} points are not near this rank's base cells")
+        return cells
 
     def curve(self, straight: dolfinx.mesh.Mesh, /, *, degree: int = 2) -> dolfinx.mesh.Mesh:
         """The curved mesh of a straight-sided (P1) simplex mesh: the same cells on the same ranks,
@@ -284,6 +423,42 @@ class ShellManifold:
         piece = MeshPiece(glob, x, np.full(num_owned, comm.rank, dtype=np.int32))
         domain = compat.mesh_domain(coordinate_element_from((curved.topology.cell_name(), 1, gdim)))
         return create_mesh_from_piece(comm, piece, domain).mesh
+
+
+def boundary_entities(mesh: dolfinx.mesh.Mesh, dim: int, /) -> npt.NDArray[np.bool_]:
+    """Whether each local (owned and ghost) entity of dimension ``dim`` (edges, or faces in 3D)
+    lies on the domain's boundary, shape=(num_local_entities,) (collective).
+
+    ``locate_entities_boundary`` sees the boundary facets a rank owns: a ghost cell's boundary face
+    owned by another rank, and its edges, are missed. Each rank marks what it found in a Lagrange
+    function of degree ``dim + 1`` (one degree of freedom inside each entity of dimension ``dim``),
+    the marks are summed onto the owners and sent back to every rank holding the entity.
+    """
+    tdim = mesh.topology.dim
+    mesh.topology.create_entities(dim)
+    mesh.topology.create_connectivity(tdim, dim)
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    imap = mesh.topology.index_map(dim)
+    num_entities = imap.size_local + imap.num_ghosts
+    V = compat.function_space(mesh, "Lagrange", dim + 1)
+    cells = compat.cell_dofmap(V)
+    per_cell = len(EDGES[tdim]) if dim == 1 else tdim + 1
+    c2e = np.asarray(mesh.topology.connectivity(tdim, dim).array, dtype=np.int64).reshape(-1, per_cell)
+    # Local dof layout of P(dim+1): the vertices' dofs, then dim (edges: 1 each; P3 on a tetrahedron
+    # has 2 per edge, then 1 per face), entities in the reference order of c2e.
+    first = tdim + 1 if dim == 1 else (tdim + 1) + 2 * len(EDGES[tdim])
+    entity_dof = np.full(num_entities, -1, dtype=np.int64)
+    local = cells[:, first:first + per_cell]
+    entity_dof[c2e[: cells.shape[0]].reshape(-1)] = local.reshape(-1)
+    if not np.array_equal(entity_dof[c2e[: cells.shape[0]]], local):
+        raise RuntimeError(f"the P{dim + 1} dofs are not one per entity of dimension {dim} in the reference order")
+    marker = dolfinx.fem.Function(V)
+    marker.x.array[:] = 0.0
+    found = dolfinx.mesh.locate_entities_boundary(mesh, dim, lambda x: np.full(x.shape[1], True))
+    marker.x.array[entity_dof[found]] = 1.0
+    marker.x.scatter_reverse(compat.SCATTER_ADD)
+    marker.x.scatter_forward()
+    return marker.x.array[entity_dof] > 0.5
 
 
 def boundary_radius_error(mesh: dolfinx.mesh.Mesh, r_inner: float, r_outer: float, /) -> float:

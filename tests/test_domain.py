@@ -44,8 +44,5 @@ def test_shell_domain(geometry, gdim):
     cell = math.sqrt(3.0) / 4.0 * 0.25**2 if gdim == 2 else 0.25**3 / (6.0 * math.sqrt(2.0))
     assert domain.estimated_cells() == pytest.approx(volume / cell, rel=1e-12)
     manifold = domain.manifold()
-    if gdim == 2:
-        assert isinstance(manifold, ShellManifold) and (manifold.r_inner, manifold.r_outer) == (1.0, 2.0)
-        assert not manifold.fitted
-    else:
-        assert manifold is None  # the spherical shell's manifold is not implemented
+    assert isinstance(manifold, ShellManifold) and (manifold.r_inner, manifold.r_outer) == (1.0, 2.0)
+    assert manifold.gdim == gdim and not manifold.fitted

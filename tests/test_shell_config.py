@@ -45,8 +45,10 @@ def test_shell_defaults_and_names():
     ({"mesh": {"cells": [4, 4]}}, "mesh.cells"),
     ({"mesh": {"resolution": None}}, "mesh.resolution"),
     ({"mesh": {"radii": [2.0, 1.0]}}, "mesh.radii"),
-    ({"mesh": {"geometry": "spherical_shell"}, "adaptivity": {"enabled": True}}, "adaptivity.enabled"),
-    ({"mesh": {"geometry": "spherical_shell"}, "balance": {"strategy": "every"}}, "balance.strategy"),
+    ({"mesh": {"geometry": "spherical_shell", "geometry_degree": 1}, "adaptivity": {"enabled": True}},
+     "adaptivity.enabled"),
+    ({"mesh": {"geometry": "spherical_shell", "geometry_degree": 1}, "balance": {"strategy": "every"}},
+     "balance.strategy"),
     ({"mesh": {"geometry_degree": 1}, "adaptivity": {"enabled": True}}, "adaptivity.enabled"),
     ({"boundary": {"velocity": {"outer": {"kind": "prescribed", "value": ["-y"]}}}}, "boundary.velocity.outer.value"),
     ({"boundary": {"velocity": {"outer": {"kind": "prescribed", "value": ["-q", "x"]}}}}, "boundary.velocity.outer"),
@@ -56,8 +58,10 @@ def test_shell_config_errors(sections, key):
         load_config(None, document=_document(**sections))
 
 
-def test_annulus_adaptivity_and_balance_allowed():
-    config = load_config(None, document=_document(adaptivity={"enabled": True}, balance={"strategy": "every"}))
+@pytest.mark.parametrize("geometry", ["annulus", "spherical_shell"])
+def test_shell_adaptivity_and_balance_allowed(geometry):
+    config = load_config(None, document=_document(mesh={"geometry": geometry, "resolution": 0.5}, adaptivity={"enabled": True},
+                                                  balance={"strategy": "every"}))
     assert config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "every"
 
 

@@ -67,8 +67,8 @@ def test_manifold_maps_base_and_boundary():
     y = manifold.curved_points(inside)
     assert np.abs(y - inside).max() > 1e-4  # cells at the boundary bend
     assert np.abs(manifold.straight_points(y) - inside).max() < 1e-13  # the inverse, inside the base
-    with pytest.raises(NotImplementedError):
-        ShellManifold(RI, RO, 3)
+    with pytest.raises(ValueError, match="2D .* or 3D"):
+        ShellManifold(RI, RO, 4)
 
 
 def test_refined_annulus_rounds(world):

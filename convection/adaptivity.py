@@ -315,13 +315,35 @@ class MeshHierarchy:
         curved = self.manifold.curve(mesh)
         # curve() keeps every cell on its rank, in the straight mesh's owned order as the input
         # order: the curved cell's original index minus the rank's offset is the straight cell.
-        num_owned = curved.topology.index_map(self.tdim).size_local
-        offset = curved.comm.exscan(num_owned) or 0
-        perm = (np.asarray(curved.topology.original_cell_index, dtype=np.int64)[:num_owned] - offset).astype(np.int32)
-        if num_owned and (perm.min() < 0 or perm.max() >= num_owned):
-            raise RuntimeError("the curved mesh's cells are not the straight mesh's cells of the same rank")
-        self._straight = [*self._straight[-2:], (curved, mesh, perm)]
+        self._remember(curved, mesh, self._made_from(curved))
         return curved
+
+    def _made_from(self, made: dolfinx.mesh.Mesh) -> npt.NDArray[np.int32]:
+        """For a mesh made from another one's owned cells, rank by rank in their order (curve(),
+        straighten()): the source's owned cell of each owned cell, shape=(num_owned,) (collective)."""
+        num_owned = made.topology.index_map(self.tdim).size_local
+        offset = made.comm.exscan(num_owned) or 0
+        perm = (np.asarray(made.topology.original_cell_index, dtype=np.int64)[:num_owned] - offset).astype(np.int32)
+        if num_owned and (perm.min() < 0 or perm.max() >= num_owned):
+            raise RuntimeError("the new mesh's cells are not the old mesh's cells of the same rank")
+        return perm
+
+    def _remember(self, curved: dolfinx.mesh.Mesh, straight: dolfinx.mesh.Mesh, perm: npt.NDArray[np.int32]) -> None:
+        self._straight = [*self._straight[-2:], (curved, straight, perm)]
+
+    def straight_view(self, mesh: dolfinx.mesh.Mesh, /) -> tuple[dolfinx.mesh.Mesh, npt.NDArray[np.int32]]:
+        """:meth:`straight_of`, made (collective, :meth:`ShellManifold.straighten`) for a curved
+        mesh the hierarchy did not curve itself (a repartitioned mesh, a restored checkpoint)."""
+        known = self.straight_of(mesh)
+        if known is not None:
+            return known
+        straight = self.manifold.straighten(mesh)
+        # straighten() lists the straight cells in the curved mesh's owned order: invert the map.
+        made = self._made_from(straight)  # curved owned cell of each straight owned cell
+        perm = np.empty_like(made)
+        perm[made] = np.arange(made.size, dtype=np.int32)
+        self._remember(mesh, straight, perm)
+        return straight, perm
 
     def straight_of(self, mesh: dolfinx.mesh.Mesh, /) -> tuple[dolfinx.mesh.Mesh, npt.NDArray[np.int32]] | None:
         """The straight mesh a curved mesh of this hierarchy was made from and the straight owned
@@ -484,8 +506,11 @@ class MeshHierarchy:
 
         Collective.
         """
-        straight = self.straight_of(old) if self.manifold is not None else None
-        if straight is not None:  # search the straight cells: affine maps, straight midpoints
+        # A curved mesh is searched through its straight cells (affine maps, straight midpoints):
+        # a straight midpoint mapped by the manifold need not lie in the P2 cell that interpolates
+        # the map, and near a facet it would take a neighbour's level.
+        straight = self.straight_view(old) if self.manifold is not None and coordinate_map(old).degree > 1 else None
+        if straight is not None:
             old, perm = straight
             straight_wanted = np.empty_like(wanted)
             straight_wanted[perm] = wanted
@@ -500,8 +525,6 @@ class MeshHierarchy:
             num_owned = mesh.topology.index_map(self.tdim).size_local
             cells = np.arange(num_owned, dtype=np.int32)
             midpoints = dolfinx.mesh.compute_midpoints(mesh, self.tdim, cells)
-            if self.manifold is not None and straight is None:  # the old mesh is curved: where the straight midpoints go
-                midpoints[:, : mesh.geometry.dim] = self.manifold.curved_points(midpoints)
             # The largest wanted level among all old cells touching the midpoint: a midpoint on a
             # facet of the old mesh must not take whichever neighbour the local numbering lists
             # first, or the result would depend on the partition. After a repartition of the base

@@ -260,8 +260,7 @@ class ShellManifold:
     def straight_points(self, y: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
         """``Phi^-1(y)``, y shape=(n, gdim) (not collective).
 
-        Each point starts in the base cell holding it (a point between a flat boundary face and
-        its sphere: the cell found moving it towards the mid radius), iterates ``x = y - d_K(x)``
+        Each point starts in the base cell holding it (else the nearest, :meth:`_start_cells`), iterates ``x = y - d_K(x)``
         through that cell's map ``d_K`` (extended beyond the cell: a contraction, ``d_K`` has
         derivative ``O(h_base / r)``) until its step is at round-off, and moves to the cell across
         the facet where the result left its cell (up to 4 times). In 2D the radial step is not
@@ -302,24 +301,18 @@ class ShellManifold:
         return x
 
     def _start_cells(self, y: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
-        """A local base cell near each point (the one holding it, else the first met moving the
-        point towards the annulus' / shell's mid radius), shape=(n,)."""
+        """A local base cell near each point: the one holding it, else the one with the nearest
+        centre (a point between a flat boundary face and its sphere, or moved by ``Phi`` across a
+        base facet into a cell this rank does not hold), shape=(n,)."""
         cells = self._geometry.locate(y).cells.copy()
         missing = np.flatnonzero(cells < 0)
-        if missing.size:
-            x = y[missing].copy()
-            mid = 0.5 * (self.r_inner + self.r_outer)
-            for _ in range(60):
-                r = np.linalg.norm(x, axis=1)
-                x *= ((r + 0.05 * (mid - r)) / r)[:, None]
-                found = self._geometry.locate(x).cells
-                hit = found >= 0
-                cells[missing[hit]] = found[hit]
-                missing, x = missing[~hit], x[~hit]
-                if missing.size == 0:
-                    break
-        if missing.size:
-            raise ValueError(f"{missing.size} points are not near this rank's base cells")
+        centres = self._geometry.centres
+        if missing.size and centres.shape[0] == 0:
+            raise ValueError(f"{missing.size} points, and no base cell on this rank")
+        for chunk in np.array_split(missing, max(1, missing.size // 256)):
+            if chunk.size:
+                distance = np.linalg.norm(y[chunk, None, :] - centres[None, :, :], axis=2)
+                cells[chunk] = np.argmin(distance, axis=1)
         return cells
 
     def curve(self, straight: dolfinx.mesh.Mesh, /, *, degree: int = 2) -> dolfinx.mesh.Mesh:

@@ -27,12 +27,12 @@ Usage (ranks via mpirun; prints one JSON document on rank 0)::
     python benchmarks/shell/analytical.py --kind smooth_free_slip --dim 3 --n 2 --m 1 --levels 0 1 --resolution 0.5
     python benchmarks/shell/analytical.py --kind smooth_free_slip --adaptive 3 --resolution 0.4
 
-``--adaptive ROUNDS`` (annulus, smooth cases): the meshes of a
-:class:`convection.adaptivity.MeshHierarchy` with the annulus manifold (:mod:`fembase.manifold`):
-the straight gmsh mesh of cell size ``resolution`` curved, solved, then ``ROUNDS`` times refined
-where the Kelly indicator of the velocity is largest (30 % of the cells up one level) and solved
-again; ``levels`` lists the rounds. ``--hierarchy`` instead refines that base uniformly
-``--levels`` times (the adaptive code path's meshes, uniformly refined).
+``--adaptive ROUNDS``: the meshes of a :class:`convection.adaptivity.MeshHierarchy` with the shell
+manifold (:mod:`fembase.manifold`; for the delta cases it also keeps the surface ``r'`` the force
+acts on): the straight gmsh mesh of cell size ``resolution`` curved, solved, then ``ROUNDS`` times
+refined where the Kelly indicator of the velocity is largest (``--refine-fraction`` of the cells up
+one level) and solved again; ``levels`` lists the rounds. ``--hierarchy`` instead refines that
+base uniformly ``--levels`` times (the adaptive code path's meshes, uniformly refined).
 """
 
 from __future__ import annotations
@@ -256,13 +256,14 @@ def solve_on(case: Case, mesh: dolfinx.mesh.Mesh, level: int, h_target: float, *
 
 def run_hierarchy(case: Case, rounds: int, resolution: float, *, comm: MPI.Comm, adaptive: bool,
                   refine_fraction: float = 0.3, **options) -> list[LevelResult]:
-    """The meshes of a hierarchy with the annulus manifold (collective): ``adaptive``, round i
+    """The meshes of a hierarchy with the shell manifold (collective; the delta cases' manifold keeps
+    the forcing's surface r' as well): ``adaptive``, round i
     refined from round i - 1 by the Kelly indicator of its velocity; otherwise level i uniformly
     refined i times. Returns one result per round / level 0..rounds."""
-    if case.dim != 2 or not case.smooth:
-        raise SystemExit("error: --adaptive and --hierarchy take the annulus (--dim 2) and the smooth cases")
-    base = create_shell_mesh(comm, ShellSpec(2, R_INNER, R_OUTER, resolution=resolution, geometry_degree=1))
-    hierarchy = MeshHierarchy(base, manifold=ShellManifold(R_INNER, R_OUTER, 2))
+    interfaces = () if case.smooth else (R_DELTA,)
+    base = create_shell_mesh(comm, ShellSpec(case.dim, R_INNER, R_OUTER, resolution=resolution, geometry_degree=1,
+                                             interfaces=interfaces))
+    hierarchy = MeshHierarchy(base, manifold=ShellManifold(R_INNER, R_OUTER, case.dim, interfaces=interfaces))
     params = AdaptivityParameters(every=1, min_level=0, max_level=rounds, refine_fraction=refine_fraction,
                                   coarsen_fraction=0.0)
     results, mesh = [], hierarchy.uniform(0)
@@ -303,7 +304,9 @@ def main(argv: list[str] | None = None) -> dict:
                         help="read each level's gmsh mesh from this folder, or write it there the first time "
                              "(the same meshes for another gmsh version: benchmarks/releases)")
     parser.add_argument("--adaptive", type=int, default=None, metavar="ROUNDS",
-                        help="refine ROUNDS times by the Kelly indicator of the velocity (annulus, smooth cases)")
+                        help="refine ROUNDS times by the Kelly indicator of the velocity")
+    parser.add_argument("--refine-fraction", type=float, default=0.3,
+                        help="--adaptive: fraction of the cells (largest indicator) refined each round")
     parser.add_argument("--hierarchy", action="store_true",
                         help="refine the adaptive path's base uniformly to the largest of --levels")
     args = parser.parse_args(argv)
@@ -314,7 +317,8 @@ def main(argv: list[str] | None = None) -> dict:
                    petsc_options=args.petsc_options)
     if args.adaptive is not None or args.hierarchy:
         rounds = args.adaptive if args.adaptive is not None else max(args.levels)
-        results = run_hierarchy(case, rounds, resolution, comm=comm, adaptive=args.adaptive is not None, **options)
+        results = run_hierarchy(case, rounds, resolution, comm=comm, adaptive=args.adaptive is not None,
+                                refine_fraction=args.refine_fraction, **options)
     else:
         results = [run_level(case, level, resolution, comm=comm, geometry_degree=args.geometry_degree,
                              mesh_dir=args.mesh_dir, **options)

@@ -20,6 +20,7 @@ The Nusselt numbers are the heat flow through a surface over the conductive heat
 Usage::
 
     python benchmarks/shell/davies.py --cases 2.1 1.1 --resolutions 0.1 0.07 0.05
+    python benchmarks/shell/davies.py --cases 2.1 --resolutions 0.14 --adaptive 1   # adaptive mesh
     python benchmarks/shell/davies.py --table          # the table from measured/davies.json only
 
 Writes ``measured/davies.json`` (merged with earlier runs: one record per case and resolution) and
@@ -60,18 +61,34 @@ CASES: dict[str, dict] = {
 COLUMNS = ("T_mean", "nusselt", "nusselt_bottom", "vrms")
 
 
-def run_case(case: str, resolution: float, *, output: Path, ranks: int, extra: list[str]) -> dict:
-    """Run one case at one mesh size to steady state; the final statistics row and the run's facts."""
-    out = output / f"case_{case}_h{resolution:g}"
-    overrides = [f"mesh.resolution={resolution}", *CASES[case]["overrides"], *extra]
+def adaptive_overrides(levels: int) -> list[str]:
+    """Config overrides of an adaptive run: the base mesh refined up to ``levels`` times where the
+    temperature's Kelly indicator is largest (40 % of the cells up, 20 % down, every 10 steps, 3
+    rounds on the initial condition), so the mesh follows the boundary layers and plumes."""
+    return ["adaptivity.enabled=true", "adaptivity.min_level=0", f"adaptivity.max_level={levels}",
+            "adaptivity.every=10", "adaptivity.refine_fraction=0.4", "adaptivity.coarsen_fraction=0.2",
+            "adaptivity.fields=[temperature]"]
+
+
+def _key(record: dict) -> tuple:
+    return record["case"], record["resolution"], record.get("adaptive_levels", 0)
+
+
+def run_case(case: str, resolution: float, *, output: Path, ranks: int, extra: list[str], adaptive: int = 0) -> dict:
+    """Run one case at one mesh size to steady state; the final statistics row and the run's facts.
+    ``adaptive`` > 0: that many adaptive levels above the base mesh of this size."""
+    label = f"case_{case}_h{resolution:g}" + (f"_adaptive{adaptive}" if adaptive else "")
+    out = output / label
+    overrides = [f"mesh.resolution={resolution}", *CASES[case]["overrides"],
+                 *(adaptive_overrides(adaptive) if adaptive else []), *extra]
     start = time.time()
-    start_cli_run(CONFIG, out, ranks=ranks, overrides=overrides, log=output / f"case_{case}_h{resolution:g}.log").wait()
+    start_cli_run(CONFIG, out, ranks=ranks, overrides=overrides, log=output / f"{label}.log").wait()
     stats = read_statistics(out / "statistics.csv")
     final = {k: float(stats[k][-1]) for k in COLUMNS}
     window = max(1, len(stats["time"]) // 10)
     drift = {k: float(abs(stats[k][-1] - stats[k][-window]) / max(abs(stats[k][-1]), 1e-300)) for k in COLUMNS}
-    return {"case": case, "resolution": resolution, "ranks": ranks, "cells": int(stats["cells"][-1]),
-            "steps": int(stats["step"][-1]),
+    return {"case": case, "resolution": resolution, "adaptive_levels": adaptive, "ranks": ranks,
+            "cells": int(stats["cells"][-1]), "cells_max": int(max(stats["cells"])), "steps": int(stats["step"][-1]),
             "time": float(stats["time"][-1]), "final": final, "drift_last_tenth": drift,
             "wall_seconds": time.time() - start, "overrides": overrides}
 
@@ -89,10 +106,12 @@ def table(records: list[dict]) -> str:
         ref = CASES[case]["reference"]
         rows.append(f"| {case} {CASES[case]['name']} | reference (ASPECT) | | | | {ref['T_mean']} | {ref['nusselt']} "
                     f"| {ref['nusselt_bottom']} | {ref['vrms']} | |")
-        for r in sorted((r for r in records if r["case"] == case), key=lambda r: -r["resolution"]):
+        for r in sorted((r for r in records if r["case"] == case),
+                        key=lambda r: (r.get("adaptive_levels", 0), -r["resolution"])):
             f = r["final"]
             worst = max(COLUMNS, key=lambda k: abs(f[k] / ref[k] - 1.0))
-            rows.append(f"| {case} | {r['resolution']:g} | {r.get('cells', '')} | {r['steps']} | {r['time']:.3g} "
+            size = f"{r['resolution']:g}" + (f", adaptive +{r['adaptive_levels']}" if r.get("adaptive_levels") else "")
+            rows.append(f"| {case} | {size} | {r.get('cells', '')} | {r['steps']} | {r['time']:.3g} "
                         f"| {f['T_mean']:.4f} "
                         f"| {f['nusselt']:.4f} | {f['nusselt_bottom']:.4f} | {f['vrms']:.3f} "
                         f"| {100 * (f[worst] / ref[worst] - 1.0):+.2f} % ({worst}) |")
@@ -106,15 +125,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ranks", type=int, default=1)
     parser.add_argument("--output", type=Path, default=Path("output/shell_davies"))
     parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument("--adaptive", type=int, default=0, metavar="LEVELS",
+                        help="adapt the mesh by the temperature, up to LEVELS refinements of the base")
     parser.add_argument("--table", action="store_true", help="only print the table of measured/davies.json")
     args = parser.parse_args(argv)
     records = load_measured()
     if not args.table:
         for case in args.cases:
             for resolution in args.resolutions:
-                record = run_case(case, resolution, output=args.output, ranks=args.ranks, extra=args.overrides)
+                record = run_case(case, resolution, output=args.output, ranks=args.ranks, extra=args.overrides,
+                                  adaptive=args.adaptive)
                 print(json.dumps(record), flush=True)
-                records = [r for r in records if (r["case"], r["resolution"]) != (case, resolution)] + [record]
+                records = [r for r in records if _key(r) != _key(record)] + [record]
                 MEASURED.write_text(json.dumps(records, indent=1) + "\n")
     print(f"Reference: {SOURCE}.\n")
     print(table(records))

@@ -1,0 +1,135 @@
+"""The seed's global model (section 4.2): ``configs/shell_adaptive.yaml`` — an adaptive, load-balanced
+3D spherical shell with plates and particles at the core-mantle boundary — with and without the
+weighted repartition, and its pictures.
+
+Usage::
+
+    python benchmarks/shell/shell_adaptive.py [--ranks 2] [--steps 40]      # the comparison
+    python benchmarks/shell/shell_adaptive.py --picture RUN_DIR              # the seed's figure 5
+
+The comparison runs the config on ``--ranks`` ranks three times for ``--steps`` steps:
+
+- ``weighted``: as shipped, repartitioned every 5 steps by the cell weights ``1 + W n_particles(K)``
+  (``W = balance.particle_weight = 0.05``);
+- ``cells``: repartitioned as often by the cell count alone (``W = 0``);
+- ``static``: never repartitioned (``balance.strategy: none``): the base mesh's partition, refined
+  where the temperature asks;
+
+and writes ``imbalance.png`` and ``imbalance.md`` (particle and cell imbalance, max/mean over the
+ranks, per step; mean and worst over the run; wall time) and prints one JSON line. The particles
+sit in a layer around the core, a few percent of the volume, so balancing cells leaves them on
+whichever rank owns the core.
+
+``--picture`` draws a finished run (``python -m convection.plot``): ``shell_*.png``, the particles
+within r < 1.45 coloured by displacement over the temperature on the equatorial plane (the seed's
+figure 5, left), and ``snapshots/``, the vertical section y = 0 of the temperature with the
+particles near it coloured by the magnitude of ``initial_position`` — their initial radius (right).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parents[1]))
+sys.path.insert(0, str(HERE.parent))
+
+from common import ROOT, start_cli_run  # noqa: E402
+from convection.plot import read_statistics  # noqa: E402
+
+CONFIG = ROOT / "configs" / "shell_adaptive.yaml"
+VARIANTS = {
+    "weighted": [],
+    "cells": ["balance.particle_weight=0.0"],
+    "static": ["balance.strategy=none"],
+}
+STATISTICS = "[time,velocity,nusselt,mesh,particles,load,wall_time]"
+
+
+def compare(out: Path, *, ranks: int, steps: int, extra: list[str]) -> dict:
+    """Run every variant and write imbalance.md / imbalance.png next to this script."""
+    results = {}
+    for name, overrides in VARIANTS.items():
+        folder = out / name
+        if folder.exists():
+            shutil.rmtree(folder)
+        run = start_cli_run(CONFIG, folder, ranks=ranks, nice=0, log=out / f"{name}.log",
+                            overrides=[f"time.max_steps={steps}", "time.end=1e9", f"output.statistics={STATISTICS}",
+                                       "particles.output.every_steps=1000000", *overrides, *extra])
+        run.wait()
+        stats = read_statistics(folder / "statistics.csv")
+        results[name] = {key: np.asarray(stats[key], dtype=float) for key in
+                         ("step", "cells", "n_particles", "particle_imbalance", "cell_imbalance", "wall_time")}
+    summary = {name: {"particle_imbalance_mean": float(r["particle_imbalance"][1:].mean()),
+                      "particle_imbalance_max": float(r["particle_imbalance"][1:].max()),
+                      "cell_imbalance_mean": float(r["cell_imbalance"][1:].mean()),
+                      "cells_final": int(r["cells"][-1]), "particles_final": int(r["n_particles"][-1]),
+                      "wall_seconds": float(r["wall_time"][-1])} for name, r in results.items()}
+    lines = [f"configs/shell_adaptive.yaml on {ranks} ranks, {steps} steps (adapted every 5, repartitioned every 5 "
+             "unless static). Imbalance = max/mean over the ranks, per step, averaged over steps 1..end.", "",
+             "| partition | particle imbalance, mean | worst | cell imbalance, mean | cells at the end | particles "
+             "| wall [s] |", "|---|---|---|---|---|---|---|"]
+    for name, s in summary.items():
+        lines.append(f"| {name} | {s['particle_imbalance_mean']:.3f} | {s['particle_imbalance_max']:.3f} | "
+                     f"{s['cell_imbalance_mean']:.3f} | {s['cells_final']} | {s['particles_final']} | "
+                     f"{s['wall_seconds']:.0f} |")
+    (HERE / "imbalance.md").write_text("\n".join(lines) + "\n")
+    _plot(results, HERE / "imbalance.png", ranks)
+    return summary
+
+
+def _plot(results: dict, png: Path, ranks: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for name, r in results.items():
+        axes[0].plot(r["step"][1:], r["particle_imbalance"][1:], "o-", ms=3, label=name)
+        axes[1].plot(r["step"][1:], r["cell_imbalance"][1:], "o-", ms=3, label=name)
+    axes[0].set_ylabel("particle imbalance (max/mean)")
+    axes[1].set_ylabel("cell imbalance (max/mean)")
+    for ax in axes:
+        ax.axhline(1.0, color="grey", lw=0.8)
+        ax.set_xlabel("time step")
+        ax.legend()
+    fig.suptitle(f"shell_adaptive.yaml on {ranks} ranks: repartition weighted by particles, by cells, or never")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+
+
+def picture(run_dir: Path) -> None:
+    """The seed's figure 5 from a finished run (python -m convection.plot, twice)."""
+    base = [sys.executable, "-m", "convection.plot", str(run_dir)]
+    subprocess.run([*base, "--particle-property", "displacement", "--particle-radius", "1.45"], cwd=ROOT, check=True)
+    subprocess.run([*base, "--particle-property", "initial_position"], cwd=ROOT, check=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--ranks", type=int, default=2)
+    parser.add_argument("--steps", type=int, default=40)
+    parser.add_argument("--out", type=Path, default=ROOT / "output" / "benchmarks" / "shell_adaptive")
+    parser.add_argument("--set", action="append", default=[], help="extra config override key=value")
+    parser.add_argument("--picture", type=Path, default=None, metavar="RUN_DIR", help="draw a finished run")
+    args = parser.parse_args(argv)
+    if args.picture is not None:
+        picture(args.picture)
+        return 0
+    args.out.mkdir(parents=True, exist_ok=True)
+    summary = compare(args.out, ranks=args.ranks, steps=args.steps, extra=args.set)
+    print((HERE / "imbalance.md").read_text())
+    print(json.dumps(summary))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

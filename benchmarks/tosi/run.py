@@ -165,8 +165,9 @@ def table(data: Path) -> str:
                 inside = "" if low_high is None else ("yes" if low_high[0] <= value <= low_high[1] else "**no**")
                 published = "" if low_high is None else f"{low_high[0]:g} to {low_high[1]:g}"
                 lines.append(f"| {case} | {r['cells']} P2-P1/P2 | {q} | {text} | {published} | {inside} |")
-            extra = f"steps {r['steps']}, t = {r['time']:.4g}, {r['wall_seconds']:.0f} s on {r['ranks']} rank(s), " \
-                    f"{r['nonlinear_per_step']:.2f} nonlinear iterations per step ({r['method']})"
+            solve = (f"{r['nonlinear_per_step']:.2f} nonlinear iterations per step ({r['method']})"
+                     if r['nonlinear_per_step'] > 0 else "linear Stokes (no yielding: one solve per step)")
+            extra = f"steps {r['steps']}, t = {r['time']:.4g}, {r['wall_seconds']:.0f} s on {r['ranks']} rank(s), {solve}"
             if case == "5a":
                 extra += f", period {r['period']:.5g}" if r.get("period") else ", no period detected"
             lines.append(f"| {case} | {r['cells']} | run | {extra} | | |")

@@ -212,6 +212,10 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
 
     ccfg = config["composition"]
     particles = None
+    # The confinement margin follows the curvature of the coarsest cells a hierarchy hands out (its
+    # base, curved): it covers every mesh of the run, and a resumed run gets the same margin as the
+    # run it continues (the mesh it starts from is refined differently from the first one).
+    confinement_mesh = manifold.curve(hierarchy.base) if manifold is not None and particles_enabled(config) else mesh
     if particles_enabled(config):
         extra = particle_properties(materials, gdim) if ccfg["source"] == "particles" else []
         context = PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p)
@@ -219,7 +223,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
             config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
             make_function=point_function(config), field_degree=ccfg["degree"], context=context,
             generate_particles=restore is None,
-            confine=domain.confinement(mesh))
+            confine=domain.confinement(confinement_mesh))
         if restore is not None:
             saved = restore.state["model"]
             restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],

@@ -11,14 +11,18 @@ The comparison runs the config on ``--ranks`` ranks three times for ``--steps`` 
 
 - ``weighted``: as shipped, repartitioned every 5 steps by the cell weights ``1 + W n_particles(K)``
   (``W = balance.particle_weight = 0.05``);
-- ``cells``: repartitioned as often by the cell count alone (``W = 0``);
+- ``cells``: repartitioned as often by the cell count alone (``W = 0``), by the same recursive
+  coordinate bisection;
+- ``cells_morton``: by the cell count alone in blocks of a Morton (Z-order) curve;
 - ``static``: never repartitioned (``balance.strategy: none``): the base mesh's partition, refined
   where the temperature asks;
 
 and writes ``imbalance.png`` and ``imbalance.md`` (particle and cell imbalance, max/mean over the
 ranks, per step; mean and worst over the run; wall time) and prints one JSON line. The particles
-sit in a layer around the core, a few percent of the volume, so balancing cells leaves them on
-whichever rank owns the core.
+sit in a layer around the core, a few percent of the volume, so balancing cells alone leaves them
+on whichever ranks own the core's cells. (On 2 ranks a bisection of the cells cuts through the
+centre and halves the layer, which is symmetric to start with: ``cells`` balances the particles
+too, by the symmetry, and only the Morton blocks show what the weights buy.)
 
 ``--picture`` draws a finished run (``python -m convection.plot``): ``shell_*.png``, the particles
 within r < 1.45 coloured by displacement over the temperature on the equatorial plane (the seed's
@@ -48,6 +52,7 @@ CONFIG = ROOT / "configs" / "shell_adaptive.yaml"
 VARIANTS = {
     "weighted": [],
     "cells": ["balance.particle_weight=0.0"],
+    "cells_morton": ["balance.particle_weight=0.0", "balance.method=morton"],
     "static": ["balance.strategy=none"],
 }
 STATISTICS = "[time,velocity,nusselt,mesh,particles,load,wall_time]"
@@ -101,7 +106,7 @@ def _plot(results: dict, png: Path, ranks: int) -> None:
         ax.axhline(1.0, color="grey", lw=0.8)
         ax.set_xlabel("time step")
         ax.legend()
-    fig.suptitle(f"shell_adaptive.yaml on {ranks} ranks: repartition weighted by particles, by cells, or never")
+    fig.suptitle(f"shell_adaptive.yaml on {ranks} ranks: repartition weighted by particles, by cells (bisection, Morton), or never")
     fig.tight_layout()
     fig.savefig(png, dpi=110)
 

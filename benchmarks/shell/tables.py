@@ -20,8 +20,10 @@ def table(document: dict, reference: dict | None = None) -> str:
     forcing = f", k = {case['k']}" if case["kind"].startswith("smooth") else ""
     solver = document.get("solver", "direct")
     solver = "" if solver == "direct" else f", Stokes solver {document.get('solver_resolved', solver)}"
+    refinement = {"adaptive": ", adaptive (Kelly indicator of the velocity; a level is a round)",
+                  "hierarchy": ", the hierarchy's uniform refinement"}.get(document.get("refinement", "gmsh"), "")
     lines = [f"**{case['kind']}, {case['dim']}D, {harmonic}{forcing}, {document['ranks']} rank(s), "
-             f"geometry degree {document['geometry_degree']}{solver}**", ""]
+             f"geometry degree {document['geometry_degree']}{solver}{refinement}**", ""]
     header = "| level | cells | h | dofs | velocity error | pressure error | solve [s] |"
     rule = "|---:|---:|---:|---:|---:|---:|---:|"
     if reference is not None:
@@ -38,7 +40,8 @@ def table(document: dict, reference: dict | None = None) -> str:
         lines.append(line)
     orders = document["orders"]
     if orders["velocity"] is not None:
-        lines += ["", f"Fitted orders: velocity {orders['velocity']:.2f}, pressure {orders['pressure']:.2f}."]
+        lines += ["", f"Fitted orders: velocity {orders['velocity']:.2f}, pressure {orders['pressure']:.2f}"
+                  + (" (against h = (|Omega| / cells)^(1/dim))." if refinement else ".")]
     return "\n".join(lines)
 
 

@@ -1,8 +1,9 @@
-"""Command line: run, resume and check configurations.
+"""Command line: run, resume and check configurations; print the config reference.
 
     python -m convection run configs/NAME.yaml [--set key.sub=value ...] [--output DIR] [--resume]
     python -m convection resume RUN_DIR [--set time.end=...] [--checkpoint PATH]
     python -m convection check configs/NAME.yaml [--set ...]
+    python -m convection schema [--format markdown|yaml]     # the config reference
 
 Problems print one line on rank 0 and exit with the same code on every rank, before any
 collective call that could hang: configuration problems (naming the key) and command-line
@@ -83,6 +84,10 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument("config")
     check.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     check.add_argument("--output", default=None)
+    schema = sub.add_parser("schema", help="print the config reference: every key, default, allowed value and "
+                                           "plugin parameter")
+    schema.add_argument("--format", choices=("markdown", "yaml"), default="markdown",
+                        help="markdown: the reference (docs/config-reference.md); yaml: every key at its default")
     return parser
 
 
@@ -164,6 +169,12 @@ def _resume(comm: MPI.Comm, directory: str, overrides: list[str], checkpoint: st
 def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
     stop = _StopFlag()
     saved = None
+    if args.command == "schema":
+        if comm.rank == 0:
+            from convection.reference import render_markdown, render_yaml
+
+            print(render_markdown() if args.format == "markdown" else render_yaml(), end="")
+        return 0
     if args.command == "resume":
         config, saved = _resume(comm, args.directory, list(args.overrides), args.checkpoint)
     else:

@@ -123,23 +123,39 @@ def _check_temperature_bc(value: Any) -> str | None:
     return f"temperature condition {short_repr(value)} must be 'insulating' or {{dirichlet: <number>}}"
 
 
-def _names(module: str, registry: str) -> Callable[[], list[str]]:
-    """The names of a registry, read when a config is checked (so the registry is the one list)."""
-    def names() -> list[str]:
-        return list(getattr(importlib.import_module(module), registry))
-    return names
+class RegistryNames:
+    """The names of a registry, read when a config is checked (so the registry is the one list).
+
+    Called, it returns the names; :meth:`registry` gives the registry itself (for the generated
+    config reference: its entries' descriptions).
+    """
+
+    def __init__(self, module: str, name: str) -> None:
+        self.module = module
+        self.name = name
+
+    def registry(self) -> Any:
+        return getattr(importlib.import_module(self.module), self.name)
+
+    def __call__(self) -> list[str]:
+        return list(self.registry())
+
+
+_names = RegistryNames
 
 
 def _is_list(value: Any) -> str | None:
     return None if isinstance(value, list) else f"expected a list, got {short_repr(value)}"
 
 
-def _sides(check, default) -> dict[str, Field]:
-    sides = {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v))
-             for side in _SIDES}
+def _sides(check, default, forms: str) -> dict[str, Field]:
+    sides = {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v),
+                         help=f"box side {where}: {forms}")
+             for side, where in zip(_SIDES, ("x = lower", "x = upper", "lowest y (2D) or z (3D)", "highest y (2D) or z (3D)",
+                                             "y = lower (3D)", "y = upper (3D)"))}
     for name in _SHELL_BOUNDARIES:
         sides[name] = Field("any", default=None, nullable=True, check=lambda v: None if v is None else check(v),
-                            help=f"annulus/spherical shell {name} surface (default: {default})")
+                            help=f"annulus/spherical shell {name} surface (default: {default}): {forms}")
     return sides
 
 
@@ -153,7 +169,8 @@ SCHEMA: dict[str, Any] = {
         "lower": Field("list[float]", None, nullable=True, length=(2, 3), help="lower box corner (default 0)"),
         "upper": Field("list[float]", None, nullable=True, length=(2, 3), help="upper box corner (default 1)"),
         "cell_type": Field("str", "simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes"),
-        "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left")),
+        "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left"),
+                          help="how a 2D simplex box mesh splits its squares into triangles (DOLFINx's diagonal)"),
         "radii": Field("list[float]", [1.22, 2.22], length=(2,), exclusive_minimum=0.0,
                        help="[inner, outer] radius of an annulus/spherical shell around the origin"),
         "resolution": Field("float", None, nullable=True, exclusive_minimum=0.0,
@@ -174,7 +191,8 @@ SCHEMA: dict[str, Any] = {
                                 help="viscosity of the background material (with the materials section)"),
             "mixing": Field("str", "geometric", choices=_names("convection.approximation", "MIXING_RULES"),
                             help="volume-fraction weighted mixing of the material viscosities"),
-            "temperature_law": Field("str", "none", choices=_names("convection.approximation", "TEMPERATURE_LAWS")),
+            "temperature_law": Field("str", "none", choices=_names("convection.approximation", "TEMPERATURE_LAWS"),
+                                     help="temperature dependence of the material viscosities (older than law)"),
             "gamma": Field("float", 0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii"),
             "law": Field("any", None, nullable=True,
                          help="the background material's viscosity law: a number or {name: <law>, ...} "
@@ -184,8 +202,11 @@ SCHEMA: dict[str, Any] = {
         },
     },
     "boundary": {
-        "velocity": _sides(_check_velocity_bc, "free_slip"),
-        "temperature": _sides(_check_temperature_bc, "insulating"),
+        "velocity": _sides(_check_velocity_bc, "free_slip",
+                           "free_slip, no_slip, {kind: prescribed, value: [vx, vy(, vz)]} (numbers or expressions) "
+                           "or, on a spherical shell's outer surface, {kind: plates, width, plates: [{centre, pole, "
+                           "rate}, ...]}"),
+        "temperature": _sides(_check_temperature_bc, "insulating", "insulating or {dirichlet: <number>}"),
     },
     "initial": {
         "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical), r, phi, theta"),
@@ -202,7 +223,7 @@ SCHEMA: dict[str, Any] = {
     }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "stokes": {
         "degree": Field("int", 2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)"),
-        "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_NAMES"),
+        "solver": Field("str", "auto", choices=_names("convection.stokes", "STOKES_SOLVER_CHOICES"),
                         help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
                         "free slip on both surfaces), direct (MUMPS) in 2D"),
         "petsc_options": Field("mapping", {}, check=check_petsc_options, max_items=MAX_ENTRIES,
@@ -228,8 +249,9 @@ SCHEMA: dict[str, Any] = {
     },
     "energy": {
         "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),
-        "degree": Field("int", 2, minimum=1, maximum=MAX_DEGREE),
-        "stabilisation": Field("str", "supg", choices=_names("convection.transport", "STABILISATIONS")),
+        "degree": Field("int", 2, minimum=1, maximum=MAX_DEGREE, help="temperature degree (Lagrange)"),
+        "stabilisation": Field("str", "supg", choices=_names("convection.transport", "STABILISATIONS"),
+                               help="stabilisation of the advection-diffusion equation of the temperature"),
     },
     "composition": {
         "source": Field("str", "static", choices=_names("convection.composition", "COMPOSITION_SOURCES"),
@@ -243,7 +265,8 @@ SCHEMA: dict[str, Any] = {
                          help="carry particles (null: when composition.source is particles; true: also as tracers)"),
         "generator": Field("mapping", {"name": "random_uniform", "particles_per_cell": 20, "seed": 1},
                            help="generator name and parameters; particles_per_cell may replace num_particles"),
-        "integrator": Field("str", "rk2", choices=_names("particles.advection", "INTEGRATORS")),
+        "integrator": Field("str", "rk2", choices=_names("particles.advection", "INTEGRATORS"),
+                            help="time integrator of the particle positions (and integrated properties)"),
         "interpolator": Field("mapping", {"name": "cell_average", "mean": "arithmetic"},
                               help="particle-to-mesh interpolator name and parameters"),
         "properties": Field("any", [], check=_is_list, max_items=MAX_ENTRIES,
@@ -264,29 +287,31 @@ SCHEMA: dict[str, Any] = {
     },
     "time": {
         "end": Field("float", REQUIRED, exclusive_minimum=0.0, help="end time (nondimensional)"),
-        "cfl": Field("float", 1.0, exclusive_minimum=0.0),
-        "dt_max": Field("float", None, nullable=True, exclusive_minimum=0.0),
+        "cfl": Field("float", 1.0, exclusive_minimum=0.0,
+                     help="time step = cfl * min over cells of (cell size / (velocity degree * |u|))"),
+        "dt_max": Field("float", None, nullable=True, exclusive_minimum=0.0, help="longest time step (null: no limit)"),
         "dt_initial": Field("float", None, nullable=True, exclusive_minimum=0.0,
                             help="first step when the initial velocity is zero"),
         "max_increase": Field("float", None, nullable=True, exclusive_minimum=1.0,
                               help="a step is at most this many times the previous one (null: no limit); keeps the "
                                    "velocity extrapolation u* = (1 + w) u^n - w u^(n-1), w = dt/dt_previous, tame "
                                    "after a fast initial transient"),
-        "max_steps": Field("int", None, nullable=True, minimum=0),
+        "max_steps": Field("int", None, nullable=True, minimum=0, help="stop after this many steps (null: at time.end)"),
         "steady_state_tolerance": Field("float", None, nullable=True, exclusive_minimum=0.0,
                                         help="stop when Nu and vrms change by less than this (relative) per unit step window"),
         "steady_state_window": Field("int", 20, minimum=1, help="steps over which the steady-state change is measured"),
     },
     "adaptivity": {
-        "enabled": Field("bool", False),
+        "enabled": Field("bool", False, help="refine and coarsen the mesh by an error indicator during the run"),
         "every": Field("int", 10, minimum=1, help="adapt every N steps"),
-        "min_level": Field("int", 0, minimum=0),
-        "max_level": Field("int", 2, minimum=0),
+        "min_level": Field("int", 0, minimum=0, help="coarsest refinement level of a cell (0: the base mesh)"),
+        "max_level": Field("int", 2, minimum=0, help="finest refinement level of a cell (each level halves the cell size)"),
         "refine_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells (by indicator) to refine"),
         "coarsen_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells to coarsen"),
         "initial_steps": Field("int", None, nullable=True, minimum=0, maximum=MAX_INITIAL_ROUNDS,
                                help="adapt this many times to the initial condition (default max_level - min_level)"),
-        "fields": Field("list[str]", ["temperature"], choices=_names("convection.adaptivity", "INDICATOR_FIELDS")),
+        "fields": Field("list[str]", ["temperature"], choices=_names("convection.adaptivity", "INDICATOR_FIELDS"),
+                        help="fields whose Kelly error indicators (each normalised, summed) choose the cells"),
     },
     "balance": {
         "strategy": Field("str", "none", choices=_names("convection.rebalance", "BALANCE_STRATEGIES"),
@@ -326,7 +351,8 @@ SCHEMA: dict[str, Any] = {
             "keep": Field("int", 2, minimum=1, help="how many of the newest checkpoints are kept"),
             "at_end": Field("bool", True, help="also write one at the end and when stopped by a signal"),
         },
-        "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none")),
+        "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none"),
+                          help="progress display: a bar on a terminal, lines in a log (auto: by stdout), or none"),
         "progress_every": Field("int", 10, minimum=1, help="steps between progress lines"),
     },
 }

@@ -146,6 +146,12 @@ AUTO = "auto"
 STOKES_SOLVER_NAMES: tuple[str, ...] = (AUTO, *STOKES_SOLVERS)
 """Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
 
+STOKES_SOLVER_CHOICES: dict[str, str] = {
+    AUTO: "iterative in 3D (iterative_gamg for a shell with free slip on both surfaces), direct in 2D",
+    **{name: solver.description for name, solver in STOKES_SOLVERS.items()},
+}
+"""One line on each of :data:`STOKES_SOLVER_NAMES` (the config reference lists them)."""
+
 
 def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
     """The registry name behind ``name``: ``"auto"`` is ``"iterative"`` in 3D (``"iterative_gamg"``

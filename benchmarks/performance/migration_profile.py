@@ -1,4 +1,4 @@
-"""Where a migration's time goes on 2+ ranks (performance README, "Issue 12 table, final sittings").
+"""Where a migration's time goes on 2+ ranks (log/NOTES.md, "Issue 12 table, final sittings").
 
 Runs ``vortex.py`` with its arguments, with a barrier before every migration of the timed loop (so
 waiting for a slower rank is counted apart) and the parts of ``Migrator.migrate`` timed; prints

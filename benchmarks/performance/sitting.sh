@@ -2,6 +2,7 @@
 # One side-by-side sitting against deal.II's step-68 (issue 12's table): every run ROUNDS times,
 # interleaved, with the 1-minute load average printed before each run.
 # Usage: bash benchmarks/performance/sitting.sh [ROUNDS]      (from the repository root)
+# Log: benchmarks/performance/log/sitting_<date>.txt (tee it there).
 set -uo pipefail
 ROUNDS=${1:-3}
 PY=${PYTHON:-.venv/bin/python}

@@ -31,7 +31,7 @@ class Constants:
     reloc_ns: float = 85.0
     sort_ns: float = 27.0
     step_fixed_s: float = 1.0e-3       # per-step Python overhead of Advector.step besides migration
-                                       # (performance README: ~3 ms/step fixed incl. ~2 ms interpolation)
+                                       # (performance/log/NOTES.md: ~3 ms/step fixed incl. ~2 ms interpolation)
     # --- migration (per call; RK2 migrates once per stage = 2 calls per step)
     mig_fixed_s: float = 0.6e-3        # CPU, 0 particles sent (measure_constants.py migration)
     mig_per_particle_s: float = 2.2e-6  # CPU per particle received, 3D run incl. neighbour offers

@@ -9,6 +9,7 @@
 #   red      this code on 2 ranks with PETSc's redundant: every rank factorises the whole system
 #            with sequential MUMPS (reproducible too)
 # Usage: bash benchmarks/scaling/direct_solver_sitting.sh [ROUNDS]      (from the repository root)
+# Log: benchmarks/scaling/log/direct_solver_sitting_<date>.txt (tee it there).
 set -uo pipefail
 ROUNDS=${1:-3}
 PY=${PYTHON:-.venv/bin/python}

@@ -3,6 +3,7 @@
 # count ROUNDS times, interleaved, with the 1-minute load average before each run; prints the wall
 # time and the phases of mesh adaptation (field transfer + adaptation + particles' mesh change).
 # Usage: bash benchmarks/scaling/vk1a_sitting.sh [ROUNDS]      (from the repository root)
+# Log: benchmarks/scaling/log/vk1a_sitting_<date>.txt (tee it there).
 set -uo pipefail
 ROUNDS=${1:-3}
 PY=${PYTHON:-python3}

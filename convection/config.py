@@ -732,9 +732,14 @@ def _check_particles(config: dict[str, Any]) -> None:
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
     make = point_function(config, probe=True)
     try:
-        build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
+        generator = build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.generator': {err}") from None
+    curved = config["mesh"]["geometry"] in _SHELLS and config["mesh"]["geometry_degree"] >= 2
+    if curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
+        raise ConfigError(f"config key 'particles.generator.name': {generator.name} needs straight-sided cells; the "
+                          f"{config['mesh']['geometry']} has curved ones (mesh.geometry_degree 2): use "
+                          "metropolis_hastings (with a density, e.g. \"r < r_inner + 0.15\", or none for uniform)")
     params = dict(section["interpolator"])
     name = params.pop("name", None)
     if not isinstance(name, str) or name not in INTERPOLATORS:

@@ -443,6 +443,7 @@ def plot_snapshots(
     particle_property: str | None = None,
     *,
     particle_radius: float | None = None,
+    out_dir: str | Path | None = None,
     log: Callable[[str], None] | None = print,
 ) -> list[Path]:
     """Draw composition (with particles) and temperature pictures into ``directory/snapshots``.
@@ -460,6 +461,7 @@ def plot_snapshots(
             default black particles (spherical shells: ``displacement`` if the particles carry it).
         particle_radius: Spherical shells: draw only the particles within this distance of the
             centre (default all of the northern hemisphere).
+        out_dir: Folder of the pictures (default ``directory/snapshots``).
         log: Receives one line per skipped picture (default ``print``; None: silent).
 
     Returns:
@@ -474,8 +476,8 @@ def plot_snapshots(
     directory = Path(directory)
     fields = _Series(directory / "fields.xdmf")
     particles = _Series(directory / "particles.xdmf") if (directory / "particles.xdmf").is_file() else None
-    out_dir = directory / "snapshots"
-    out_dir.mkdir(exist_ok=True)
+    out_dir = directory / "snapshots" if out_dir is None else Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     for t in snapshot_times(fields.times, times):
         index = int(np.argmin(np.abs(fields.times - t))) if fields.times.size else 0
@@ -500,7 +502,12 @@ def plot_snapshots(
             value = float(_values(data, "temperature")[0])
             say(f"t = {_time_label(t)}: temperature is constant ({value:.6g}); no temperature picture")
         else:
-            written.append(_temperature_picture(section, view, plane, t, out_dir / f"temperature_{stem}.png"))
+            # with a particle property asked for, the particles near the section show it on top
+            # (for a shell: the seed paper's figure 5, right, with initial_position)
+            shown = particles if particle_property is not None else None
+            written.append(_temperature_picture(section, view, plane, t, out_dir / f"temperature_{stem}.png",
+                                                particles=shown, particle_property=particle_property,
+                                                cell_size=cell_size))
     return written
 
 
@@ -514,13 +521,7 @@ def _composition_picture(data: pv.DataSet, view: _View, plane: float | None, nam
     cloud = None
     title = f"{name} at t = {_time_label(t)}{_plane_label(plane)}"
     if particles is not None:
-        tp = particles.nearest(t)
-        cloud, dropped = particles.read(tp)
-        if particle_property is not None and particle_property not in cloud.point_data.keys():
-            known = [n for n in cloud.point_data.keys()]
-            unread = f" (VTK could not read: {', '.join(dropped)})" if dropped else ""
-            raise ValueError(f"no particle property '{particle_property}' in {particles.path.name}; "
-                             f"properties: {', '.join(known)}{unread}")
+        cloud, tp = _read_particles(particles, t, particle_property)
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
             title += f"; particles at t = {_time_label(tp)}"
     colour_particles = cloud is not None and particle_property is not None
@@ -547,14 +548,51 @@ def _composition_picture(data: pv.DataSet, view: _View, plane: float | None, nam
     return picture.save(title, path)
 
 
-def _temperature_picture(data: pv.DataSet, view: _View, plane: float | None, t: float, path: Path) -> Path:
-    picture = _Picture(data, view, bars=1)
+def _read_particles(particles: _Series, t: float, particle_property: str | None) -> tuple[pv.DataSet, float]:
+    """The particles written nearest to ``t`` and their time; ``particle_property`` must exist.
+
+    Raises:
+        ValueError: No such particle property (the message lists those there are).
+    """
+    tp = particles.nearest(t)
+    cloud, dropped = particles.read(tp)
+    if particle_property is not None and particle_property not in cloud.point_data.keys():
+        known = [n for n in cloud.point_data.keys()]
+        unread = f" (VTK could not read: {', '.join(dropped)})" if dropped else ""
+        raise ValueError(f"no particle property '{particle_property}' in {particles.path.name}; "
+                         f"properties: {', '.join(known)}{unread}")
+    return cloud, tp
+
+
+def _temperature_picture(data: pv.DataSet, view: _View, plane: float | None, t: float, path: Path, *,
+                         particles: _Series | None = None, particle_property: str | None = None,
+                         cell_size: float = 0.0) -> Path:
+    """The temperature with the mesh; with ``particles`` and ``particle_property`` also the particles
+    near the picture plane coloured by that property (viridis, beside the temperature's coolwarm)."""
+    picture = _Picture(data, view, bars=2 if particles is not None and particle_property is not None else 1)
     # mesh edges only where cells are large enough in the picture not to hide the colours
     edges = bool(picture.domain_pixels[0] * picture.domain_pixels[1] / max(data.n_cells, 1) >= _MIN_EDGE_CELL_PIXELS)
     picture.plotter.add_mesh(data, scalars="temperature", cmap="coolwarm", clim=_clim(_values(data, "temperature")),
                              lighting=False, show_edges=edges, edge_color="black", edge_opacity=0.2, line_width=0.5,
                              scalar_bar_args=picture.bar("temperature", 0))
-    return picture.save(f"temperature at t = {_time_label(t)}{_plane_label(plane)}", path)
+    title = f"temperature at t = {_time_label(t)}{_plane_label(plane)}"
+    if particles is not None and particle_property is not None and particles.times.size:
+        cloud, tp = _read_particles(particles, t, particle_property)
+        shown = _particles_near(cloud, picture, plane, cell_size)
+        if shown.n_points:
+            values = _values(shown, particle_property)
+            shown.point_data["_colour"] = values
+            label = particle_property if np.asarray(shown.point_data[particle_property]).ndim == 1 \
+                else f"{particle_property} magnitude"
+            area = picture.domain_pixels[0] * picture.domain_pixels[1]
+            size = float(np.clip(0.3 * np.sqrt(area / shown.n_points), 2.0, 5.0))
+            picture.plotter.add_points(shown, scalars="_colour", cmap="viridis", clim=_clim(values), point_size=size,
+                                       lighting=False, scalar_bar_args=picture.bar(f"particles: {label}", 1))
+        where = f" within {cell_size:.2g}" if plane is not None else ""
+        title += f"; {shown.n_points} particles{where}"
+        if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
+            title += f" at t = {_time_label(tp)}"
+    return picture.save(title, path)
 
 def _shell_radii(data: pv.DataSet) -> tuple[float, float] | None:
     """(inner, outer) radius if ``data`` is a 3D shell around the origin (its points keep away from
@@ -646,6 +684,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--particle-radius", type=float, default=None, metavar="R",
                         help="spherical shells: draw only particles within R of the centre (default: all of the "
                              "northern hemisphere)")
+    parser.add_argument("--snapshots", default=None, metavar="DIR",
+                        help="folder of the snapshot pictures (default RUN_DIR/snapshots)")
     args = parser.parse_args(argv)
     try:
         _draw(args)
@@ -665,7 +705,7 @@ def _draw(args: argparse.Namespace) -> None:
               "no snapshots")
         return
     paths = plot_snapshots(directory, args.times, args.field, args.particle_property,
-                           particle_radius=args.particle_radius)
+                           particle_radius=args.particle_radius, out_dir=args.snapshots)
     for path in paths:
         print(path)
 

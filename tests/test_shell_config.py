@@ -52,6 +52,10 @@ def test_shell_defaults_and_names():
     ({"mesh": {"geometry_degree": 1}, "adaptivity": {"enabled": True}}, "adaptivity.enabled"),
     ({"boundary": {"velocity": {"outer": {"kind": "prescribed", "value": ["-y"]}}}}, "boundary.velocity.outer.value"),
     ({"boundary": {"velocity": {"outer": {"kind": "prescribed", "value": ["-q", "x"]}}}}, "boundary.velocity.outer"),
+    ({"particles": {"enabled": True}}, "particles.generator.name"),  # the default random_uniform: curved cells
+    ({"particles": {"enabled": True, "generator": {"name": "random_density", "num_particles": 10,
+                                                   "density": "r < 1.5"}}},
+     "particles.generator.name"),
 ])
 def test_shell_config_errors(sections, key):
     with pytest.raises(ConfigError, match=f"'{key}'"):
@@ -63,6 +67,15 @@ def test_shell_adaptivity_and_balance_allowed(geometry):
     config = load_config(None, document=_document(mesh={"geometry": geometry, "resolution": 0.5}, adaptivity={"enabled": True},
                                                   balance={"strategy": "every"}))
     assert config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "every"
+
+
+def test_shell_generators_for_curved_cells():
+    """metropolis_hastings samples curved cells; random_uniform does on straight-sided shells."""
+    curved = load_config(None, document=_document(particles={"generator": {"name": "metropolis_hastings",
+                                                                             "num_particles": 10}}))
+    assert curved["particles"]["generator"]["name"] == "metropolis_hastings"
+    straight = load_config(None, document=_document(mesh={"geometry_degree": 1}, particles={"enabled": True}))
+    assert straight["particles"]["generator"]["name"] == "random_uniform"
 
 
 def test_shell_names_refused_on_a_box():

@@ -140,6 +140,28 @@ def test_particle_colours_and_chosen_times(tmp_path):
     assert ((b > 0.65) & (r < 0.45)).sum() > 50  # blue particles
 
 
+def test_temperature_with_particles_coloured_by_a_property(tmp_path):
+    """With a particle property the temperature picture shows the particles on top in viridis (the
+    seed's figure 5, right: a section coloured by initial radius); the pictures go to out_dir."""
+    directory = _run_directory(tmp_path)
+    out = tmp_path / "pictures"
+    paths = plot_snapshots(directory, times=[2.0], particle_property="material", out_dir=out, log=None)
+    assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
+    assert all(p.parent == out for p in paths) and not (directory / "snapshots").exists()
+    image = imread(paths[1])[..., :3]
+    h, w = image.shape[:2]
+    body = image[int(0.1 * h): int(0.85 * h)]
+    left, right = body[:, : w // 2], body[:, w // 2:]
+    # material = x + 2 at t = 2: dark purple particles on the left, yellow ones on the right;
+    # neither colour is in coolwarm (the temperature) or white
+    purple = lambda a: ((a[..., 0] < 0.35) & (a[..., 1] < 0.15) & (a[..., 2] > 0.25) & (a[..., 2] < 0.45)).sum()
+    yellow = lambda a: ((a[..., 0] > 0.75) & (a[..., 1] > 0.75) & (a[..., 2] < 0.35)).sum()
+    assert purple(left) > 50 and yellow(right) > 50
+    assert purple(right) < purple(left) / 5 and yellow(left) < yellow(right) / 5
+    plain = plot_snapshots(directory, times=[2.0], log=None)[1]
+    assert yellow(imread(plain)[..., :3]) == 0  # without a property: the temperature alone
+
+
 def test_unknown_names_list_the_known_ones(tmp_path):
     directory = _run_directory(tmp_path)
     with pytest.raises(ValueError, match="fields: .*material"):

@@ -4,30 +4,36 @@ weighted repartition, and its pictures.
 
 Usage::
 
-    python benchmarks/shell/shell_adaptive.py [--ranks 2] [--steps 40]      # the comparison
+    python benchmarks/shell/shell_adaptive.py [--ranks 2] [--steps 40] [--reuse]   # the comparison
     python benchmarks/shell/shell_adaptive.py --picture RUN_DIR              # the seed's figure 5
 
-The comparison runs the config on ``--ranks`` ranks three times for ``--steps`` steps:
+The comparison runs the config on ``--ranks`` ranks for ``--steps`` steps in five ways:
 
-- ``weighted``: as shipped, repartitioned every 5 steps by the cell weights ``1 + W n_particles(K)``
-  (``W = balance.particle_weight = 0.05``);
-- ``cells``: repartitioned as often by the cell count alone (``W = 0``), by the same recursive
-  coordinate bisection;
-- ``cells_morton``: by the cell count alone in blocks of a Morton (Z-order) curve;
+- ``rcb``: as shipped, repartitioned every 5 steps by recursive coordinate bisection, each cut
+  placed so that cells, particles and the load ``1 + W n_particles(K)`` (``W =
+  balance.particle_weight = 0.05``) all split evenly (the particles are balanced by construction,
+  whatever ``W``: with ``W = 0`` the runs are identical);
+- ``morton_weighted``: repartitioned as often into blocks of equal load ``1 + W n_particles(K)``
+  along a Morton (Z-order) curve, ``W = 0.05``;
+- ``morton_cells``: the same blocks by the cell count alone (``W = 0``): the repartition without
+  the particle weights;
+- ``morton_w1``: the Morton blocks with ``W = 1`` (a particle costs as much as a cell): what the
+  weights do when the particles are a large part of the load;
 - ``static``: never repartitioned (``balance.strategy: none``): the base mesh's partition, refined
   where the temperature asks;
 
 and writes ``imbalance.png`` and ``imbalance.md`` (particle and cell imbalance, max/mean over the
 ranks, per step; mean and worst over the run; wall time) and prints one JSON line. The particles
 sit in a layer around the core, a few percent of the volume, so balancing cells alone leaves them
-on whichever ranks own the core's cells. (On 2 ranks a bisection of the cells cuts through the
-centre and halves the layer, which is symmetric to start with: ``cells`` balances the particles
-too, by the symmetry, and only the Morton blocks show what the weights buy.)
+on whichever ranks own the core's cells. The particle counts per rank are deterministic; the wall
+times depend on the machine's load (stated in the benchmark README when measured).
 
-``--picture`` draws a finished run (``python -m convection.plot``): ``shell_*.png``, the particles
-within r < 1.45 coloured by displacement over the temperature on the equatorial plane (the seed's
-figure 5, left), and ``snapshots/``, the vertical section y = 0 of the temperature with the
-particles near it coloured by the magnitude of ``initial_position`` — their initial radius (right).
+``--picture`` draws a finished run (``python -m convection.plot``): in
+``RUN_DIR/snapshots/displacement/``, ``shell_*.png``, the particles within r < 1.45 coloured by
+displacement over the temperature on the equatorial plane (the seed's figure 5, left); in
+``RUN_DIR/snapshots/initial_radius/``, ``temperature_*.png``, the vertical section y = 0 of the
+temperature with the particles near it coloured by the magnitude of ``initial_position`` — their
+initial radius (right).
 """
 
 from __future__ import annotations
@@ -50,25 +56,36 @@ from convection.plot import read_statistics  # noqa: E402
 
 CONFIG = ROOT / "configs" / "shell_adaptive.yaml"
 VARIANTS = {
-    "weighted": [],
-    "cells": ["balance.particle_weight=0.0"],
-    "cells_morton": ["balance.particle_weight=0.0", "balance.method=morton"],
+    "rcb": [],
+    "morton_weighted": ["balance.method=morton"],
+    "morton_cells": ["balance.method=morton", "balance.particle_weight=0.0"],
+    "morton_w1": ["balance.method=morton", "balance.particle_weight=1.0"],
     "static": ["balance.strategy=none"],
 }
 STATISTICS = "[time,velocity,nusselt,mesh,particles,load,wall_time]"
 
 
-def compare(out: Path, *, ranks: int, steps: int, extra: list[str]) -> dict:
-    """Run every variant and write imbalance.md / imbalance.png next to this script."""
+def _finished(folder: Path, steps: int) -> bool:
+    """Whether ``folder`` holds a finished run of ``steps`` steps (its statistics end at that step)."""
+    try:
+        return int(read_statistics(folder / "statistics.csv")["step"][-1]) == steps
+    except Exception:  # noqa: BLE001 - missing or damaged: not finished
+        return False
+
+
+def compare(out: Path, *, ranks: int, steps: int, extra: list[str], reuse: bool = False) -> dict:
+    """Run every variant (with ``reuse``: only those without a finished run in ``out``) and write
+    imbalance.md / imbalance.png next to this script."""
     results = {}
     for name, overrides in VARIANTS.items():
         folder = out / name
-        if folder.exists():
-            shutil.rmtree(folder)
-        run = start_cli_run(CONFIG, folder, ranks=ranks, nice=0, log=out / f"{name}.log",
-                            overrides=[f"time.max_steps={steps}", "time.end=1e9", f"output.statistics={STATISTICS}",
-                                       "particles.output.every_steps=1000000", *overrides, *extra])
-        run.wait()
+        if not (reuse and _finished(folder, steps)):
+            if folder.exists():
+                shutil.rmtree(folder)
+            run = start_cli_run(CONFIG, folder, ranks=ranks, nice=0, log=out / f"{name}.log",
+                                overrides=[f"time.max_steps={steps}", "time.end=1e9", f"output.statistics={STATISTICS}",
+                                           "particles.output.every_steps=1000000", *overrides, *extra])
+            run.wait()
         stats = read_statistics(folder / "statistics.csv")
         results[name] = {key: np.asarray(stats[key], dtype=float) for key in
                          ("step", "cells", "n_particles", "particle_imbalance", "cell_imbalance", "wall_time")}
@@ -106,16 +123,22 @@ def _plot(results: dict, png: Path, ranks: int) -> None:
         ax.axhline(1.0, color="grey", lw=0.8)
         ax.set_xlabel("time step")
         ax.legend()
-    fig.suptitle(f"shell_adaptive.yaml on {ranks} ranks: repartition weighted by particles, by cells (bisection, Morton), or never")
+    fig.suptitle(f"shell_adaptive.yaml on {ranks} ranks: repartitioned by bisection (cells and particles), "
+                 "Morton blocks (weighted / cells only), or never", fontsize=10)
     fig.tight_layout()
     fig.savefig(png, dpi=110)
 
 
 def picture(run_dir: Path) -> None:
-    """The seed's figure 5 from a finished run (python -m convection.plot, twice)."""
+    """The seed's figure 5 from a finished run (python -m convection.plot, twice): into
+    ``RUN_DIR/snapshots/displacement/`` the particles within r < 1.45 coloured by displacement
+    (``shell_*.png``), into ``RUN_DIR/snapshots/initial_radius/`` the vertical section y = 0 of the
+    temperature with the particles near it coloured by their initial radius (``temperature_*.png``)."""
     base = [sys.executable, "-m", "convection.plot", str(run_dir)]
-    subprocess.run([*base, "--particle-property", "displacement", "--particle-radius", "1.45"], cwd=ROOT, check=True)
-    subprocess.run([*base, "--particle-property", "initial_position"], cwd=ROOT, check=True)
+    subprocess.run([*base, "--particle-property", "displacement", "--particle-radius", "1.45",
+                    "--snapshots", str(run_dir / "snapshots" / "displacement")], cwd=ROOT, check=True)
+    subprocess.run([*base, "--particle-property", "initial_position",
+                    "--snapshots", str(run_dir / "snapshots" / "initial_radius")], cwd=ROOT, check=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -124,13 +147,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--out", type=Path, default=ROOT / "output" / "benchmarks" / "shell_adaptive")
     parser.add_argument("--set", action="append", default=[], help="extra config override key=value")
+    parser.add_argument("--reuse", action="store_true",
+                        help="keep the variants that already have a finished run in --out (run only the others)")
     parser.add_argument("--picture", type=Path, default=None, metavar="RUN_DIR", help="draw a finished run")
     args = parser.parse_args(argv)
     if args.picture is not None:
         picture(args.picture)
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
-    summary = compare(args.out, ranks=args.ranks, steps=args.steps, extra=args.set)
+    summary = compare(args.out, ranks=args.ranks, steps=args.steps, extra=args.set, reuse=args.reuse)
     print((HERE / "imbalance.md").read_text())
     print(json.dumps(summary))
     return 0

@@ -42,6 +42,8 @@ class Generator(Protocol):
 
     name: ClassVar[str]
     description: ClassVar[str]
+    affine_cells_only: ClassVar[bool]
+    """True for a generator that needs straight-sided (affine) simplex cells (optional; default False)."""
 
     def generate(self, swarm: Swarm, /) -> GenerationResult: ...
 

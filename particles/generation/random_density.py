@@ -43,6 +43,7 @@ class RandomDensity:
 
     name: ClassVar[str] = "random_density"
     description: ClassVar[str] = "random positions with probability proportional to a density function"
+    affine_cells_only: ClassVar[bool] = True
 
     num_particles: int
     seed: int = 0
@@ -80,6 +81,7 @@ class RandomUniform:
 
     name: ClassVar[str] = "random_uniform"
     description: ClassVar[str] = "uniformly distributed random positions"
+    affine_cells_only: ClassVar[bool] = True
 
     num_particles: int
     seed: int = 0

@@ -25,6 +25,7 @@ from convection.postprocess import (
 )
 from convection.progress import Progress
 from convection.run_folder import RunFolderError
+from particles.checkpoint import CheckpointError
 from convection.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
 __all__ = ["BlowUp", "Resume", "RunFailure", "RunSettings", "RunSummary", "SteadyState", "Watch", "Watched", "run"]
@@ -337,6 +338,12 @@ class _Outputs:
         self.fields.close()
 
 
+def _close(out: _Outputs, model: Model) -> None:
+    """Close the run's files and free the solvers, on every rank together (collective)."""
+    out.close()
+    model.destroy()  # now, together, not in the garbage collector
+
+
 def _with_time_columns(postprocessors: Sequence[Postprocessor]) -> list[Postprocessor]:
     """The postprocessors with the step, time and dt columns first (resume and pictures need them)."""
     if any(isinstance(pp, TimeColumns) for pp in postprocessors):
@@ -438,10 +445,14 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
                     model.particles.update(model.property_context(), step=model.timestep, final=True)
             if checkpoints is not None and checkpoints.settings.at_end:
                 checkpoints.write(model, _state(postprocessors, start, first, now, steady), only_if_new=True)
-    finally:
-        out.close()
-        # The solvers are done; free them now, on every rank together, not in the garbage collector.
-        model.destroy()
+    except BaseException as err:
+        # Closing the files and freeing the solvers are collective: only when every rank is here.
+        # An error met on one rank alone (a bug, a failed write) may leave the others inside a
+        # collective call, where cleaning up would wait forever; the command line stops them all.
+        if model.comm.size == 1 or isinstance(err, CheckpointError):  # CheckpointErrors: raised on every rank
+            _close(out, model)
+        raise
+    _close(out, model)
     if failure is not None:
         reason = f"failed at step {model.timestep}, t={model.time:.6g}: {failure}"
     wall = time.monotonic() - start

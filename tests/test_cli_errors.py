@@ -96,3 +96,38 @@ def test_load_config_defaults_and_overrides():
         load_config(GOOD, ["mesh.lower=[0, 0]", "mesh.upper=[1, 0]"])
     with pytest.raises(ConfigError, match="boundary.velocity.top.value"):
         load_config(GOOD, ["boundary.velocity.top={kind: prescribed, value: [1, 0, 0]}"])
+
+
+FAIL_ON_RANK_1 = """
+import sys
+from mpi4py import MPI
+import convection.output
+output_function = convection.output.FieldOutput._output_function
+calls = []
+
+
+def failing(self, name, f):
+    calls.append(name)
+    if len(calls) > 4 and MPI.COMM_WORLD.rank == 1:  # rank 1 alone, with the field file open
+        raise RuntimeError("injected failure on rank 1")
+    return output_function(self, name, f)
+
+
+convection.output.FieldOutput._output_function = failing
+from convection.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_error_on_one_rank_stops_every_rank(tmp_path):
+    """An unexpected error on one rank while the other is in a collective call (here: rank 1 fails
+    between two fields of an output, rank 0 writes the next field): the run stops at once with one line naming the
+    rank and exit code 1, instead of the other rank waiting forever (the run's cleanup, itself
+    collective, is skipped then)."""
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    cmd = [*mpirun(2), sys.executable, "-c", FAIL_ON_RANK_1, "run", str(GOOD), "--output", str(tmp_path / "run"),
+           "--set", "mesh.cells=[8,8]", "--set", "time.max_steps=3", "--set", "output.fields_every=1",
+           "--set", "output.progress=none"]
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0
+    assert "error (rank 1): RuntimeError: injected failure on rank 1" in proc.stderr

@@ -134,6 +134,7 @@ def picture(run_dir: Path) -> None:
     ``RUN_DIR/snapshots/displacement/`` the particles within r < 1.45 coloured by displacement
     (``shell_*.png``), into ``RUN_DIR/snapshots/initial_radius/`` the vertical section y = 0 of the
     temperature with the particles near it coloured by their initial radius (``temperature_*.png``)."""
+    run_dir = run_dir.resolve()  # the drawing runs in the project folder
     base = [sys.executable, "-m", "convection.plot", str(run_dir)]
     subprocess.run([*base, "--particle-property", "displacement", "--particle-radius", "1.45",
                     "--snapshots", str(run_dir / "snapshots" / "displacement")], cwd=ROOT, check=True)

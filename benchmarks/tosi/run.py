@@ -7,8 +7,8 @@ Usage::
     python benchmarks/tosi/run.py --cost [--cells 32]                     # case 2 on 1 and 2 ranks
     python benchmarks/tosi/run.py --table                                 # results.md, results.png
 
-``--case N`` runs case N with the CLI to steady state (case 5a: over ``--periods`` periods of its
-oscillation after a spin-up) and prints one JSON line last: the steady-state (5a: last-cycle
+``--case N`` runs case N with the CLI to steady state (case 5a: to ``--end``, default 6, and the
+last full period of its oscillation is measured) and prints one JSON line last: the steady-state (5a: last-cycle
 mean) values of ``T_mean``, ``nusselt_top``, ``nusselt_bottom``, ``vrms``, ``vrms_surface``,
 ``vmax_surface``, ``eta_min``, ``eta_max``, ``W``, ``Phi_over_Ra``, ``delta``, the mesh, steps,
 wall time and nonlinear iterations; for 5a also ``period`` and ``<name>_min`` / ``<name>_max``

@@ -536,16 +536,20 @@ def _composition_picture(data: pv.DataSet, view: _View, plane: float | None, nam
             area = picture.domain_pixels[0] * picture.domain_pixels[1]
             size = float(np.clip(0.3 * np.sqrt(area / shown.n_points), 1.0, 4.0))
             if colour_particles:
-                values = _values(shown, particle_property)
-                shown.point_data["_colour"] = values
-                label = particle_property if np.asarray(shown.point_data[particle_property]).ndim == 1 \
-                    else f"{particle_property} magnitude"
-                picture.plotter.add_points(shown, scalars="_colour", cmap="coolwarm", clim=_clim(values),
-                                           point_size=size, lighting=False,
-                                           scalar_bar_args=picture.bar(f"particles: {label}", 1))
+                _add_coloured_points(picture, shown, particle_property, cmap="coolwarm", size=size)
             else:
                 picture.plotter.add_points(shown, color="black", point_size=size, lighting=False)
     return picture.save(title, path)
+
+
+def _add_coloured_points(picture: _Picture, shown: pv.PolyData, name: str, *, cmap: str, size: float) -> None:
+    """The particles ``shown`` coloured by their property ``name`` (vectors: magnitude), with the
+    second scalar bar below the picture."""
+    values = _values(shown, name)
+    shown.point_data["_colour"] = values
+    label = name if np.asarray(shown.point_data[name]).ndim == 1 else f"{name} magnitude"
+    picture.plotter.add_points(shown, scalars="_colour", cmap=cmap, clim=_clim(values), point_size=size,
+                               lighting=False, scalar_bar_args=picture.bar(f"particles: {label}", 1))
 
 
 def _read_particles(particles: _Series, t: float, particle_property: str | None) -> tuple[pv.DataSet, float]:
@@ -580,14 +584,9 @@ def _temperature_picture(data: pv.DataSet, view: _View, plane: float | None, t: 
         cloud, tp = _read_particles(particles, t, particle_property)
         shown = _particles_near(cloud, picture, plane, cell_size)
         if shown.n_points:
-            values = _values(shown, particle_property)
-            shown.point_data["_colour"] = values
-            label = particle_property if np.asarray(shown.point_data[particle_property]).ndim == 1 \
-                else f"{particle_property} magnitude"
             area = picture.domain_pixels[0] * picture.domain_pixels[1]
             size = float(np.clip(0.3 * np.sqrt(area / shown.n_points), 2.0, 5.0))
-            picture.plotter.add_points(shown, scalars="_colour", cmap="viridis", clim=_clim(values), point_size=size,
-                                       lighting=False, scalar_bar_args=picture.bar(f"particles: {label}", 1))
+            _add_coloured_points(picture, shown, particle_property, cmap="viridis", size=size)
         where = f" within {cell_size:.2g}" if plane is not None else ""
         title += f"; {shown.n_points} particles{where}"
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):

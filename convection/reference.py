@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-import json
 import re
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Mapping
+
+import yaml
 
 from convection.config import SCHEMA, RegistryNames
 from convection.schema import REQUIRED, Field
@@ -97,20 +98,12 @@ def schema_keys(schema: Mapping[str, Any] = SCHEMA, prefix: str = "") -> Iterato
 
 
 def _value(value: Any) -> str:
-    """A default as YAML flow text (``null``, ``[32, 32]``, ``{name: cell_average, ...}``)."""
-    if isinstance(value, str):
-        return json.dumps(value) if value == "" or not re.fullmatch(r"[\w./ +-]+", value) else value
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, Mapping):
-        return "{" + ", ".join(f"{k}: {_value(v)}" for k, v in value.items()) + "}"
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_value(v) for v in value) + "]"
-    if isinstance(value, float) and "e" in repr(value) and "." not in repr(value):
-        return repr(value).replace("e", ".0e")  # PyYAML (YAML 1.1) reads 1e-06 as text, 1.0e-06 as a number
-    return repr(value)
+    """A default as YAML flow text (``null``, ``[32, 32]``, ``{name: cell_average, ...}``), as PyYAML
+    reads it back (``1.0e-06``, not ``1e-06``, which it reads as text)."""
+    if isinstance(value, tuple):
+        value = list(value)
+    text = yaml.safe_dump(value, default_flow_style=True, sort_keys=False, width=10**6)
+    return text.removesuffix("\n").removesuffix("\n...")
 
 
 def _describe(entry: Any) -> str:

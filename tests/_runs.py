@@ -14,6 +14,7 @@ from typing import Callable
 
 import h5py
 import numpy as np
+import yaml
 
 from convection.launch import mpi_environment, mpirun
 
@@ -38,8 +39,6 @@ def shrink(config: Path, *, divisor: int, coarsen: float, max_particles: int, ma
     """Overrides that make a shipped config smaller and keep its features: a box gets its cells
     per direction divided by ``divisor`` (at least 4), a shell a cell size ``coarsen`` times
     larger; particle counts are capped at ``max_particles`` or ``max_per_cell`` per cell."""
-    import yaml
-
     raw = yaml.safe_load(Path(config).read_text())
     mesh = raw["mesh"]
     if "cells" in mesh:

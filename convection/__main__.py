@@ -1,7 +1,7 @@
-"""``python -m convection``: see :mod:`convection.cli`."""
+"""``python -m convection``: see :mod:`convection.app.cli`."""
 
 import sys
 
-from convection.cli import main
+from convection.app.cli import main
 
 sys.exit(main())

@@ -19,7 +19,7 @@
 # [jupytext](https://jupytext.readthedocs.io) "percent" script: run it as it is
 # (`python demos/first_model.py`), or open it as a notebook
 # (`jupytext --to notebook demos/first_model.py`, then `jupyter lab demos/first_model.ipynb`).
-# `tests/test_notebook.py` executes it as a notebook at a tiny size (`PIC_DEMO_SIZE=tiny`).
+# `tests/docs/test_notebook.py` executes it as a notebook at a tiny size (`PIC_DEMO_SIZE=tiny`).
 #
 # The problem: Blankenbach et al.'s (1989) case 1a — a unit square heated from below, cooled from
 # above, insulating sides, free slip everywhere, Ra = 1e4, constant viscosity. From a small
@@ -34,9 +34,9 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 
-from convection.config import load_config
-from convection.factory import build_model, run_config
-from convection.plot import import_pyvista, read_statistics
+from convection.config.loader import load_config
+from convection.app.factory import build_model, run_config
+from convection.io.pictures import import_pyvista, read_statistics
 
 # The form compiler logs every build at INFO level on the root logger; show warnings only.
 logging.getLogger().addFilter(lambda record: record.levelno >= logging.WARNING)
@@ -161,7 +161,7 @@ plotter.show(screenshot=f"{OUT}/first_model.png")
 # [the Rayleigh–Taylor demo](rayleigh_taylor.md)).
 
 # %%
-from convection.postprocess import Velocity  # noqa: E402
+from convection.postprocess.postprocessors import Velocity  # noqa: E402
 
 model = build_model(config)
 vrms = Velocity()

@@ -37,13 +37,13 @@ import dolfinx.mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from convection.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy  # noqa: E402
-from convection.boundary import VelocityBC  # noqa: E402
-from convection.composition import ParticleComposition, particle_properties  # noqa: E402
-from convection.materials import Material, Materials  # noqa: E402
-from convection.model import Model  # noqa: E402
-from convection.postprocess import Entrainment, Velocity  # noqa: E402
-from convection.stokes import StokesSolver  # noqa: E402
+from convection.adapt.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy  # noqa: E402
+from convection.geometry.boundary import VelocityBC  # noqa: E402
+from convection.model.composition import ParticleComposition, particle_properties  # noqa: E402
+from convection.physics.materials import Material, Materials  # noqa: E402
+from convection.model.model import Model  # noqa: E402
+from convection.postprocess.postprocessors import Entrainment, Velocity  # noqa: E402
+from convection.solvers.stokes.solver import StokesSolver  # noqa: E402
 from fembase.dolfinx_compat import function_space
 from particles.generation import RandomUniform  # noqa: E402
 from particles.manager import ParticleManager  # noqa: E402

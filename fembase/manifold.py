@@ -21,7 +21,7 @@ refined cell's map is smooth and its Jacobian differs from the straight one by `
 On the base cells' interior edges and vertices ``Phi`` is the identity (barycentric coordinates
 below 1e-13 count as 0), so it depends on a point's coordinates and the base mesh only, never on
 the rank: the curved mesh is the same on any number of ranks (measured: to one unit in the last
-place, tests/test_shell_refinement.py).
+place, tests/convection/geometry/test_shell_refinement.py).
 
 The spherical shell (``gdim = 3``) blends by projection instead (Lenoir's / Scott's curved
 simplices): for each boundary entity ``E`` of ``K`` on a sphere of radius ``R`` (a boundary face,
@@ -81,7 +81,7 @@ class ShellManifold:
         r_outer: Outer radius.
         gdim: 2 (annulus) or 3 (spherical shell).
         interfaces: Radii of interior circles/spheres the mesh conforms to
-            (:attr:`convection.mesh.ShellSpec.interfaces`): their edges (and faces) are curved onto
+            (:attr:`convection.geometry.mesh.ShellSpec.interfaces`): their edges (and faces) are curved onto
             them as the boundary's are. An interior edge/face counts as on an interface when all
             its vertices lie on it (as the facets of the forcing are found,
             benchmarks/shell/analytical.py).

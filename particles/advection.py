@@ -18,7 +18,7 @@ evaluates the velocity from time-interpolated coefficients, once (the field is l
 
 An optional ``confine(x)`` moves stage positions that left the domain back inside before they are
 relocated (e.g. onto a curved boundary that a straight Runge-Kutta step crossed; the domain owner
-supplies it, see :func:`convection.mesh.shell_confinement`); without it such particles are lost.
+supplies it, see :func:`convection.geometry.mesh.shell_confinement`); without it such particles are lost.
 
 Quantities integrated alongside the positions (deformation gradient, accumulated strain, damage)
 are given as :class:`ParticleODE` objects: property ``y`` obeys ``dy/dt = rhs(swarm, c, y, L)``

@@ -11,7 +11,7 @@
 # machine: `PIC_DOLFINX=pypi bash scripts/in_release_root.sh trixie -- bash scripts/setup.sh`).
 # apt brings only the C compiler and Python headers (the forms' JIT) and the libraries the gmsh
 # and VTK wheels load. Runs on more than one rank use the venv's MPICH launcher (.venv/bin/mpiexec;
-# convection/launch.py). The venv remembers its route (.venv/pic-route) and is made again when the
+# convection/app/launch.py). The venv remembers its route (.venv/pic-route) and is made again when the
 # route changes.
 # Usage: [PIC_DOLFINX=debian|pypi] scripts/setup.sh   (prints the venv python path on its last line)
 set -euo pipefail
@@ -45,7 +45,7 @@ esac
 # (0.56.4 with numpy 1.24.2 on 12, 0.61.2 with numpy 2.2.4 on 13); on 12 it comes anyway through
 # python3-basix's dependencies, on 13 it must be asked for.
 # Off-screen pictures (pyvista/VTK) need Mesa's EGL and software rasteriser; VTK loads them at run
-# time. gmsh meshes the annulus/spherical-shell geometries (convection/mesh.py).
+# time. gmsh meshes the annulus/spherical-shell geometries (convection/geometry/mesh.py).
 apt_packages=(python3-dolfinx python3-h5py-mpi python3-numba python3-venv python3-pip python3-yaml
               python3-scipy python3-gmsh libegl1 libegl-mesa0 libgl1-mesa-dri)
 if [ "$route" = pypi ]; then

@@ -7,7 +7,7 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
-from convection.petsc_options import HAS_HYPRE
+from convection.solvers.petsc_options import HAS_HYPRE
 from fembase.evaluation import locate
 from particles import Swarm
 

@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 import yaml
 
-from convection.launch import mpi_environment, mpirun
+from convection.app.launch import mpi_environment, mpirun
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -31,7 +31,7 @@ def command(args: list[str], ranks: int = 1) -> list[str]:
 
 
 def env() -> dict[str, str]:
-    """The environment of a run under mpirun (:func:`convection.launch.mpi_environment`)."""
+    """The environment of a run under mpirun (:func:`convection.app.launch.mpi_environment`)."""
     return mpi_environment()
 
 
@@ -82,7 +82,7 @@ def assert_same_statistics(a: Path, b: Path, *, ignore: tuple[str, ...] = ("wall
 
 def final_particles(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ids, positions and properties of the particles in the newest checkpoint, sorted by id."""
-    from convection.checkpoint import latest_checkpoint
+    from convection.io.checkpoint import latest_checkpoint
 
     with h5py.File(latest_checkpoint(run_dir) / "particles.h5", "r") as f:
         ids = f["ids"][...]
@@ -93,7 +93,7 @@ def final_particles(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def final_property(run_dir: Path, name: str) -> np.ndarray:
     """The values of the particle property ``name`` in the newest checkpoint, sorted by id
     (shape=(n,) for a scalar, (n, size) otherwise)."""
-    from convection.checkpoint import latest_checkpoint
+    from convection.io.checkpoint import latest_checkpoint
 
     with h5py.File(latest_checkpoint(run_dir) / "particles.h5", "r") as f:
         names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["layout/names"][...]]

@@ -1,7 +1,7 @@
 """Experiment only: Schur-complement variants for the 1e3 viscosity layer (log/NOTES.md,
 "Iterations in h with the 1e3 layer"). Runs ``stokes3d.py`` with its arguments after patching the
 Stokes solver's preconditioning form; it relies on internals of ``StokesSolver`` and its components
-(:mod:`convection.stokes_forms`, :mod:`convection.stokes_linear`) of this commit and is not part of
+(:mod:`convection.solvers.stokes.forms`, :mod:`convection.solvers.stokes.linear`) of this commit and is not part of
 the package.
 
 - ``SCHUR_SCALE=s``: the Schur block ``-s M_p / eta`` instead of ``-M_p / eta``.

@@ -45,9 +45,9 @@ from petsc4py import PETSc
 import dolfinx.fem
 import dolfinx.mesh
 
-from convection.approximation import BoussinesqApproximation, ViscosityLaw
-from convection.boundary import SIDES_3D, VelocityBC
-from convection.stokes import StokesSolver
+from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.geometry.boundary import SIDES_3D, VelocityBC
+from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space
 
 SHIFT_PER_STEP = 0.005

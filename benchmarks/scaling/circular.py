@@ -7,7 +7,7 @@ The domain is the shell ``R_IN <= |x| <= R_OUT`` (radius ratio 0.55, the Earth's
   two triangles, mapped to polar coordinates; the last angular column reuses the first column's
   vertices, so the mesh is conforming across the seam. Its boundary is the polygon through
   ``angular`` vertices on each circle.
-- 3D: a spherical shell meshed by gmsh (:func:`convection.mesh.create_shell_mesh`) with target cell
+- 3D: a spherical shell meshed by gmsh (:func:`convection.geometry.mesh.create_shell_mesh`) with target cell
   size ``resolution`` and straight-sided (affine) tetrahedra, whose boundary vertices lie on the
   spheres.
 
@@ -15,7 +15,7 @@ Affine cells keep the particle kernels compiled (curved cells take the vectorise
 about 10x slower per relocation) and allow ``random_uniform`` generation.
 
 **The flow is solved, not prescribed.** Every time step solves the Stokes equations
-(:class:`convection.stokes.StokesSolver`, Taylor-Hood P2-P1, no buoyancy) with the velocity
+(:class:`convection.solvers.stokes.solver.StokesSolver`, Taylor-Hood P2-P1, no buoyancy) with the velocity
 prescribed on both surfaces as rotations about the z axis: ``omega_inner (-y, x)`` on the inner and
 ``omega_outer (-y, x)`` on the outer surface (strong conditions; defaults -1 and 1, counter-rotating).
 Its exact solution is circular Couette flow, ``u = f(r) (-y, x)`` (3D: ``(-y, x, 0)``) with
@@ -32,7 +32,7 @@ MUMPS in 2D and FGMRES with the block Schur preconditioner (BoomerAMG on the vel
 step is one right-hand side assembly and back-substitution).
 
 ``particles_per_cell * cells`` particles are placed with ``random_uniform`` and advected with RK2
-in the solved velocity at a fixed CFL number (``convection.timestep.cfl_timestep``: shortest edge
+in the solved velocity at a fixed CFL number (``convection.solvers.timestep.cfl_timestep``: shortest edge
 over velocity degree, as ASPECT). The straight-sided boundary lies inside the circle/sphere
 between its vertices while the prescribed velocity is tangent to the circle/sphere, so particles
 next to a surface can step across a boundary facet; stage positions are moved back radially by
@@ -83,12 +83,12 @@ ROOT = HERE.parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from convection.approximation import BoussinesqApproximation, ViscosityLaw  # noqa: E402
-from convection.boundary import VelocityBC  # noqa: E402
-from convection.launch import mpi_environment  # noqa: E402
-from convection.mesh import ShellSpec, create_shell_mesh, shell_confinement  # noqa: E402
-from convection.stokes import STOKES_SOLVER_NAMES, StokesSolver  # noqa: E402
-from convection.timestep import cfl_timestep  # noqa: E402
+from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw  # noqa: E402
+from convection.geometry.boundary import VelocityBC  # noqa: E402
+from convection.app.launch import mpi_environment  # noqa: E402
+from convection.geometry.mesh import ShellSpec, create_shell_mesh, shell_confinement  # noqa: E402
+from convection.solvers.stokes.solver import STOKES_SOLVER_NAMES, StokesSolver  # noqa: E402
+from convection.solvers.timestep import cfl_timestep  # noqa: E402
 from fembase.dolfinx_compat import coordinate_element_from, geometry_dofmap, mesh_domain
 from fembase.dolfinx_compat import create_mesh as compat_create_mesh
 from particles import Swarm  # noqa: E402
@@ -256,7 +256,7 @@ class StokesFlow:
     Args:
         mesh: The shell mesh.
         flow: Boundary rotations (and the exact solution).
-        solver: a name in :data:`convection.stokes.STOKES_SOLVER_NAMES` (``"auto"``: MUMPS in 2D,
+        solver: a name in :data:`convection.solvers.stokes.solver.STOKES_SOLVER_NAMES` (``"auto"``: MUMPS in 2D,
             FGMRES + block Schur preconditioner in 3D).
         variable_viscosity: Treat the (unit) viscosity as variable: reassemble and set the solver up
             at every step (see the module docstring).

@@ -296,9 +296,9 @@ def stokes_cost() -> None:
     import dolfinx.fem
     import dolfinx.mesh
 
-    from convection.approximation import BoussinesqApproximation
-    from convection.boundary import SIDES_2D, SIDES_3D, VelocityBC
-    from convection.stokes import StokesSolver
+    from convection.physics.approximation import BoussinesqApproximation
+    from convection.geometry.boundary import SIDES_2D, SIDES_3D, VelocityBC
+    from convection.solvers.stokes.solver import StokesSolver
 
     comm = MPI.COMM_WORLD
     cases = [(2, 32, "direct"), (2, 64, "direct"), (2, 96, "direct"), (3, 6, "iterative"), (3, 10, "iterative")]

@@ -27,7 +27,7 @@ Usage (ranks via mpirun; prints one JSON document on rank 0)::
     python benchmarks/shell/analytical.py --kind smooth_free_slip --dim 3 --n 2 --m 1 --levels 0 1 --resolution 0.5
     python benchmarks/shell/analytical.py --kind smooth_free_slip --adaptive 3 --resolution 0.4
 
-``--adaptive ROUNDS``: the meshes of a :class:`convection.adaptivity.MeshHierarchy` with the shell
+``--adaptive ROUNDS``: the meshes of a :class:`convection.adapt.adaptivity.MeshHierarchy` with the shell
 manifold (:mod:`fembase.manifold`; for the delta cases it also keeps the surface ``r'`` the force
 acts on): the straight gmsh mesh of cell size ``resolution`` curved, solved, then ``ROUNDS`` times
 refined where the Kelly indicator of the velocity is largest (``--refine-fraction`` of the cells up
@@ -53,11 +53,11 @@ import dolfinx.mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from convection.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels  # noqa: E402
-from convection.approximation import BoussinesqApproximation  # noqa: E402
-from convection.boundary import VelocityBC  # noqa: E402
-from convection.mesh import ShellSpec, create_shell_mesh  # noqa: E402
-from convection.stokes import StokesSolver  # noqa: E402
+from convection.adapt.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels  # noqa: E402
+from convection.physics.approximation import BoussinesqApproximation  # noqa: E402
+from convection.geometry.boundary import VelocityBC  # noqa: E402
+from convection.geometry.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from convection.solvers.stokes.solver import StokesSolver  # noqa: E402
 from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells  # noqa: E402
 from fembase.manifold import ShellManifold  # noqa: E402
 
@@ -189,7 +189,7 @@ def solve_on(case: Case, mesh: dolfinx.mesh.Mesh, level: int, h_target: float, *
              solver: str = "direct", nitsche_penalty: float | None = None, petsc_options: dict | None = None,
              indicator: bool = False) -> tuple[LevelResult, np.ndarray | None]:
     """Solve on ``mesh`` and measure the errors (collective); with ``indicator``, also the Kelly
-    indicator of the velocity per owned cell (:func:`convection.adaptivity.kelly_indicator`)."""
+    indicator of the velocity per owned cell (:func:`convection.adapt.adaptivity.kelly_indicator`)."""
     solutions = case.solutions()
     kind = "free_slip" if case.free_slip else "no_slip"
     bcs = {"inner": VelocityBC(kind), "outer": VelocityBC(kind)}

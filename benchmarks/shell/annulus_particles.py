@@ -30,7 +30,7 @@ sys.path.insert(0, str(HERE.parents[1]))
 sys.path.insert(0, str(HERE.parent))
 
 from common import start_cli_run  # noqa: E402
-from convection.plot import read_statistics  # noqa: E402
+from convection.io.pictures import read_statistics  # noqa: E402
 
 RANK_DEPENDENT = ("wall_time", "cell_imbalance", "particle_imbalance")
 CONFIG = HERE.parents[1] / "configs" / "annulus_layer.yaml"

@@ -52,7 +52,7 @@ sys.path.insert(0, str(HERE.parents[1]))
 sys.path.insert(0, str(HERE.parent))
 
 from common import ROOT, start_cli_run  # noqa: E402
-from convection.plot import read_statistics  # noqa: E402
+from convection.io.pictures import read_statistics  # noqa: E402
 
 CONFIG = ROOT / "configs" / "shell_adaptive.yaml"
 VARIANTS = {
@@ -135,7 +135,7 @@ def picture(run_dir: Path) -> None:
     (``shell_*.png``), into ``RUN_DIR/snapshots/initial_radius/`` the vertical section y = 0 of the
     temperature with the particles near it coloured by their initial radius (``temperature_*.png``)."""
     run_dir = run_dir.resolve()  # the drawing runs in the project folder
-    base = [sys.executable, "-m", "convection.plot", str(run_dir)]
+    base = [sys.executable, "-m", "convection.io.pictures", str(run_dir)]
     subprocess.run([*base, "--particle-property", "displacement", "--particle-radius", "1.45",
                     "--snapshots", str(run_dir / "snapshots" / "displacement")], cwd=ROOT, check=True)
     subprocess.run([*base, "--particle-property", "initial_position",

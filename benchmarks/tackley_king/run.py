@@ -10,7 +10,7 @@ Runs ``configs/thick_layer_<case>.yaml`` with the CLI: in 2D a series of uniform
 and P there too). A config with an explicit buoyancy (2D: ``stokes.buoyancy_theta: 0``) gets
 ``time.dt_max = DT_FACTOR / (Rb h)`` (h = 1/N) for every run: a larger step makes the dense
 interface oscillate from step to step ("drunken sailor"; at 10^3 the CFL step alone blows up).
-The 3D config predicts the buoyancy (``buoyancy_theta: 1``, :mod:`convection.buoyancy`) and takes
+The 3D config predicts the buoyancy (``buoyancy_theta: 1``, :mod:`convection.physics.buoyancy`) and takes
 the CFL step. ``--time-limit`` stops a run cleanly after that many seconds (its statistics keep
 every finished step).
 
@@ -37,7 +37,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 
 from benchmarks.common import ROOT, read_reference, sample, start_cli_run  # noqa: E402
-from convection.plot import read_statistics  # noqa: E402
+from convection.io.pictures import read_statistics  # noqa: E402
 
 RB = 1.0e6
 DT_FACTOR = 0.25
@@ -80,7 +80,7 @@ def overrides(case: str, member: Member, end: float) -> list[str]:
 
 def semi_implicit(case: str) -> bool:
     """Whether ``configs/thick_layer_<case>.yaml`` predicts the buoyancy (``stokes.buoyancy_theta > 0``)."""
-    from convection.config import load_config
+    from convection.config.loader import load_config
 
     return load_config(ROOT / "configs" / f"thick_layer_{case}.yaml")["stokes"]["buoyancy_theta"] > 0.0
 

@@ -54,8 +54,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parents[1]))
 
-from convection.config import load_config  # noqa: E402
-from convection.plot import read_statistics  # noqa: E402
+from convection.config.loader import load_config  # noqa: E402
+from convection.io.pictures import read_statistics  # noqa: E402
 from run import CONFIGS, ROOT, fitted_peak, peak, reference, run_case  # noqa: E402
 
 CASES = ("1a", "1b", "1c")

@@ -1,0 +1,115 @@
+"""The load-balancing component of a model: when to repartition and the loads per rank.
+
+The work of a cell is about ``1 + W n_particles(K)``. :class:`Balancer` repartitions the mesh
+(:meth:`convection.adapt.adaptivity.MeshHierarchy.repartition`: the base mesh and the current mesh move
+together, with a partition method of :data:`fembase.partition.PARTITIONERS`) with strategy
+
+- ``every``: every ``every`` steps;
+- ``threshold``: every ``every`` steps, if max/mean over ranks of the load exceeds ``threshold``;
+- ``none``: never.
+
+Nothing is repartitioned on one rank. Fields and particles move with the mesh (the model carries
+them); results do not change, only where they are computed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import dolfinx.mesh
+
+from convection.adapt.adaptivity import MeshHierarchy
+from fembase.partition import PARTITIONERS
+from particles.swarm import Swarm
+
+__all__ = ["BALANCE_STRATEGIES", "Balancer", "RankLoads"]
+
+BALANCE_STRATEGIES: dict[str, str] = {
+    "none": "never repartition",
+    "every": "repartition every N steps",
+    "threshold": "repartition when max/mean of the load over ranks exceeds a threshold (checked every N steps)",
+}
+"""Registry of balancing strategies (name -> one-line description)."""
+
+
+@dataclass(frozen=True)
+class RankLoads:
+    """Per-rank counts, each shape=(num_ranks,): owned cells, particles, load = cells + W particles."""
+
+    cells: np.ndarray
+    particles: np.ndarray
+    load: np.ndarray
+
+    @staticmethod
+    def _ratio(values: np.ndarray) -> float:
+        mean = float(np.mean(values))
+        return float(np.max(values)) / mean if mean > 0 else 1.0
+
+    @property
+    def cell_imbalance(self) -> float:
+        return self._ratio(self.cells)
+
+    @property
+    def particle_imbalance(self) -> float:
+        return self._ratio(self.particles)
+
+    @property
+    def load_imbalance(self) -> float:
+        return self._ratio(self.load)
+
+    @classmethod
+    def measure(cls, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /, *, particle_weight: float) -> RankLoads:
+        """The loads of ``mesh`` and the particles of ``swarm`` (collective)."""
+        owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        particles = swarm.num_particles if swarm is not None else 0
+        gathered = mesh.comm.allgather((owned, particles, owned + particle_weight * particles))
+        return cls(*(np.array(column) for column in zip(*gathered)))
+
+
+class Balancer:
+    """When and how to repartition (see the module docstring).
+
+    Args:
+        hierarchy: The base mesh and its refinements (shared with adaptivity).
+        strategy: Name in :data:`BALANCE_STRATEGIES`.
+        every: Steps between repartitions (``every``) or checks (``threshold``).
+        threshold: Load imbalance (max/mean) that triggers a repartition.
+        particle_weight: W in the cell load ``1 + W n_particles``.
+        method: Partition method name in :data:`fembase.partition.PARTITIONERS`.
+    """
+
+    def __init__(self, hierarchy: MeshHierarchy, /, *, strategy: str = "every", every: int = 10,
+                 threshold: float = 1.2, particle_weight: float = 0.01, method: str = "rcb") -> None:
+        if strategy not in BALANCE_STRATEGIES:
+            raise ValueError(f"unknown balancing strategy {strategy!r}; valid: {sorted(BALANCE_STRATEGIES)}")
+        if method not in PARTITIONERS:
+            raise ValueError(f"unknown partition method {method!r}; valid: {sorted(PARTITIONERS)}")
+        if every < 1:
+            raise ValueError(f"every must be >= 1, got {every}")
+        self.hierarchy = hierarchy
+        self.strategy = strategy
+        self.every = every
+        self.threshold = threshold
+        self.particle_weight = particle_weight
+        self.method = method
+
+    def loads(self, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> RankLoads:
+        """Cells, particles and load per rank (collective)."""
+        return RankLoads.measure(mesh, swarm, particle_weight=self.particle_weight)
+
+    def due(self, timestep: int, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
+        """Whether to repartition after step ``timestep`` (collective for ``threshold``)."""
+        if self.strategy == "none" or mesh.comm.size == 1 or timestep % self.every != 0:
+            return False
+        if self.strategy == "every":
+            return True
+        return self.loads(mesh, swarm).load_imbalance > self.threshold
+
+    def new_mesh(self, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> dolfinx.mesh.Mesh:
+        """The same cells on a partition with equal loads (collective)."""
+        num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        counts = swarm.particles_per_cell().astype(np.float64) if swarm is not None else np.zeros(num_owned)
+        return self.hierarchy.repartition(mesh, counts, particle_weight=self.particle_weight, method=self.method)
+

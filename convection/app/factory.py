@@ -1,0 +1,284 @@
+"""From a resolved configuration to a model and a run: one builder per YAML section.
+
+=================== ===========================================================================
+section             component
+=================== ===========================================================================
+``mesh``            base mesh (:func:`convection.geometry.mesh.create_mesh`: box, annulus, spherical shell)
+``physics``,        :class:`convection.physics.materials.Materials` and the Boussinesq approximation
+``materials``
+``boundary``        velocity and temperature conditions per side
+``stokes``          :class:`convection.solvers.stokes.solver.StokesSolver`
+``energy``          :class:`convection.solvers.transport.TransportSolver` for the temperature
+``composition``     a :data:`convection.model.composition.COMPOSITION_SOURCES` entry
+``particles``       :meth:`particles.manager.ParticleManager.from_config`
+``adaptivity``      :class:`convection.adapt.adaptivity.Adaptivity` (and the initial adapted mesh)
+``balance``         :class:`convection.adapt.rebalance.Balancer`
+``time``,           :class:`convection.app.loop.RunSettings`
+``output``
+``diagnostics``,    postprocessors (:func:`convection.postprocess.postprocessors.create_postprocessors`)
+``output``
+=================== ===========================================================================
+
+:func:`run_config` is what ``python -m convection run`` does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
+from mpi4py import MPI
+
+from convection.adapt.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy
+from convection.geometry.boundary import SHELL_BOUNDARIES, TemperatureBC, VelocityBC, side_names, temperature_dirichlet_bcs
+from convection.io.checkpoint import (
+    Checkpointer, CheckpointSettings, SavedRun, restore_mesh, restore_particles, restore_state,
+)
+from convection.model.composition import (
+    FieldComposition, ParticleComposition, StaticComposition, composition_space, particle_properties,
+)
+from convection.config.loader import (
+    config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
+    viscosity_laws,
+)
+from convection.geometry.domain import domain_from_config
+from convection.expressions import Expression
+from convection.physics.materials import Material, Materials
+from convection.geometry.mesh import create_mesh
+from convection.model.model import Model
+from convection.geometry.plates import PlateVelocity
+from convection.postprocess.postprocessors import create_postprocessors
+from convection.adapt.rebalance import Balancer
+from convection.app.loop import BlowUp, Resume, RunSettings, RunSummary, run
+from convection.app.run_folder import RunFolderLock
+from convection.solvers.stokes.solver import StokesSolver
+from convection.solvers.stokes.nonlinear import NonlinearSettings
+from convection.solvers.transport import TransportSolver
+from fembase.dolfinx_compat import function_space, petsc_vector
+from particles.manager import ParticleManager
+from particles.properties import PropertyContext
+
+__all__ = ["build_model", "materials_from_config", "run_config", "run_settings", "temperature_bcs_from_config",
+           "velocity_bcs_from_config"]
+
+
+def _names(section: dict, gdim: int) -> tuple[str, ...]:
+    """The boundary names of a resolved ``boundary.*`` section: the shell's, or the box sides."""
+    return SHELL_BOUNDARIES if any(n in section for n in SHELL_BOUNDARIES) else side_names(gdim)
+
+
+def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
+    """Velocity conditions per side of the ``boundary.velocity`` section (null sides: traction free)."""
+    result = {}
+    for side in _names(section, gdim):
+        value = section[side]
+        if value is None:
+            continue
+        if isinstance(value, dict) and value["kind"] == "plates":
+            result[side] = VelocityBC("prescribed", PlateVelocity.from_config(value, gdim))
+        elif isinstance(value, dict):
+            components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
+            result[side] = VelocityBC(value["kind"], components or None)
+        else:
+            result[side] = VelocityBC(value)
+    return result
+
+
+def temperature_bcs_from_config(section: dict, gdim: int) -> dict[str, TemperatureBC]:
+    """Temperature conditions per side of the ``boundary.temperature`` section."""
+    result = {}
+    for side in _names(section, gdim):
+        value = section[side]
+        if value is None or value == "insulating":
+            result[side] = TemperatureBC("insulating")
+        else:
+            result[side] = TemperatureBC("dirichlet", float(value["dirichlet"]))
+    return result
+
+
+def depth_origin(config: dict[str, Any]) -> tuple[str, float]:
+    """Where the viscosity laws measure the depth from: ``("box", z_top)`` or ``("shell", r_outer)``."""
+    mesh = config["mesh"]
+    if mesh["geometry"] != "box":
+        return ("shell", float(mesh["radii"][1]))
+    return ("box", float(mesh["upper"][-1]) if mesh["upper"] is not None else 1.0)
+
+
+def materials_from_config(config: dict[str, Any]) -> Materials:
+    """The materials of the ``materials`` section (or of the two-material keys)."""
+    gdim = config_gdim(config)
+    constants = expression_constants(config)
+    table, background = material_table(config)
+    laws = viscosity_laws(config)
+    viscosities = [m["viscosity"] for m in table] if laws is None else laws[1]
+    materials = tuple(Material(m["name"], Expression(m["initial"], constants=constants, gdim=gdim), Rb=m["Rb"],
+                               viscosity=eta) for m, eta in zip(table, viscosities))
+    return Materials(materials, background_viscosity=background if laws is None else 1.0,
+                     mixing=config["physics"]["viscosity"]["mixing"], background_law=None if laws is None else laws[0])
+
+
+def run_settings(config: dict[str, Any]) -> RunSettings:
+    """The ``time`` and ``output`` sections."""
+    t, out = config["time"], config["output"]
+    return RunSettings(end=t["end"], directory=Path(out["directory"]), cfl=t["cfl"], dt_max=t["dt_max"],
+                       dt_initial=t["dt_initial"], max_increase=t["max_increase"], max_steps=t["max_steps"], steady_tolerance=t["steady_state_tolerance"],
+                       steady_window=t["steady_state_window"], fields_every=out["fields_every"],
+                       progress=out["progress"], progress_every=out["progress_every"])
+
+
+def _initial_fields(config: dict[str, Any], materials: Materials,
+                    temperature_bcs: dict[str, TemperatureBC]) -> Callable[[dolfinx.mesh.Mesh], list]:
+    """The fields that drive the initial adaptation, set from the initial condition on a mesh."""
+    acfg = config["adaptivity"]
+    gdim = config_gdim(config)
+    initial_T = Expression(config["initial"]["temperature"], constants=expression_constants(config), gdim=gdim)
+
+    def fields_on(mesh: dolfinx.mesh.Mesh) -> list:
+        V = function_space(mesh, "Lagrange", config["energy"]["degree"])
+        T = dolfinx.fem.Function(V)
+        T.interpolate(initial_T)
+        dolfinx.fem.petsc.set_bc(petsc_vector(T), temperature_dirichlet_bcs(V, temperature_bcs))
+        T.x.scatter_forward()
+        fields = [T] if "temperature" in acfg["fields"] else []
+        if "composition" in acfg["fields"] and len(materials):
+            degree = config["composition"]["degree"]
+            fields += list(StaticComposition(mesh, materials, degree=degree).fields)
+        return fields or [T]
+    return fields_on
+
+
+def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+                restore: SavedRun | None = None) -> Model:
+    """The model of a resolved configuration (collective).
+
+    The mesh is adapted to the initial condition first (``adaptivity.initial_steps`` rounds); the
+    composition source and the particles are then created on that mesh. With ``restore`` (a
+    checkpoint of a run of this config) the mesh, fields, particles and time stepping state are
+    the checkpoint's instead.
+    """
+    domain = domain_from_config(config)
+    spec = domain.spec
+    gdim = spec.gdim
+    physics = config["physics"]
+    materials = materials_from_config(config)
+    visc = physics["viscosity"]
+    approximation = materials.approximation(Ra=physics["Ra"], H=physics["H"], temperature_law=visc["temperature_law"],
+                                            gamma=visc["gamma"], gravity=spec.gravity, top=depth_origin(config))
+    velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], gdim)
+    temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], gdim)
+
+    acfg, bcfg = config["adaptivity"], config["balance"]
+    hierarchical = acfg["enabled"] or bcfg["strategy"] != "none"
+    # A curved shell's hierarchy refines the straight-sided base and curves what it hands out.
+    manifold = domain.manifold() if hierarchical else None
+    base_spec = dataclasses.replace(spec, geometry_degree=1) if manifold is not None else spec
+    exact = True
+    if restore is not None:
+        restored = restore_mesh(restore, comm, lambda owners: create_mesh(comm, base_spec, owners=owners),
+                                hierarchical=hierarchical, manifold=manifold)
+        mesh, hierarchy, exact = restored.mesh, restored.hierarchy, restored.exact
+        if restored.note is not None and comm.rank == 0:
+            print(f"note: {restored.note}", file=sys.stderr, flush=True)
+    else:
+        mesh = create_mesh(comm, base_spec)
+        hierarchy = MeshHierarchy(mesh, manifold=manifold) if hierarchical else None
+        if manifold is not None:
+            mesh = hierarchy.uniform(0)
+    adaptivity = None
+    if acfg["enabled"]:
+        adaptivity = Adaptivity(hierarchy, AdaptivityParameters.from_config(acfg), fields=acfg["fields"])
+        if restore is None:
+            mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs),
+                                           rounds=acfg["initial_steps"])
+    balancer = None
+    if bcfg["strategy"] != "none":
+        balancer = Balancer(hierarchy, strategy=bcfg["strategy"], every=bcfg["every"], threshold=bcfg["threshold"],
+                            particle_weight=bcfg["particle_weight"], method=bcfg["method"])
+
+    scfg, ecfg = config["stokes"], config["energy"]
+    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, degree=scfg["degree"], solver=scfg["solver"],
+                          petsc_options=scfg["petsc_options"], buoyancy_theta=scfg["buoyancy_theta"],
+                          nonlinear=NonlinearSettings.from_config(scfg["nonlinear"]))
+    temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, degree=ecfg["degree"],
+                                  stabilisation=ecfg["stabilisation"], velocity_extrapolation=False)
+    temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
+                                       gdim=gdim))
+
+    ccfg = config["composition"]
+    particles = None
+    # The confinement margin follows the curvature of the coarsest cells a hierarchy hands out (its
+    # base, curved): it covers every mesh of the run, and a resumed run gets the same margin as the
+    # run it continues (the mesh it starts from is refined differently from the first one).
+    confinement_mesh = manifold.curve(hierarchy.base) if manifold is not None and particles_enabled(config) else mesh
+    if particles_enabled(config):
+        extra = particle_properties(materials, gdim) if ccfg["source"] == "particles" else []
+        context = PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p)
+        particles = ParticleManager.from_config(
+            config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
+            make_function=point_function(config), field_degree=ccfg["degree"], context=context,
+            generate_particles=restore is None,
+            confine=domain.confinement(confinement_mesh))
+        if restore is not None:
+            saved = restore.state["model"]
+            restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],
+                                                                       dt=saved["dt_previous"]))
+    composition = None
+    if len(materials):
+        if ccfg["source"] == "particles":
+            composition = ParticleComposition(particles, materials)
+        elif ccfg["source"] == "field":
+            composition = FieldComposition(mesh, approximation, materials, degree=ccfg["degree"],
+                                           stabilisation=ecfg["stabilisation"])
+        else:
+            composition = StaticComposition(mesh, materials, degree=ccfg["degree"])
+    if particles is not None:
+        # Particle properties the viscosity laws read (e.g. plastic_strain), averaged onto the mesh
+        # with the particles' interpolator after every step.
+        for name in approximation.viscosity_law.field_names:
+            particles.track(name)
+    model = Model(stokes, temperature=temperature, solve_temperature=ecfg["enabled"], composition=composition,
+                  particles=particles, adaptivity=adaptivity, balancer=balancer)
+    if restore is not None:
+        restore_state(model, restore, exact=exact)
+    return model
+
+
+def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+               should_stop: Callable[[], bool] = lambda: False, model: Model | None = None,
+               resume: SavedRun | None = None) -> RunSummary:
+    """Build (unless ``model`` is given, built from this config) and run a resolved configuration
+    (collective). The run folder is created and locked for the whole run
+    (:class:`convection.app.run_folder.RunFolderLock`) before anything is written into it, then
+    ``config.yaml`` is written. With ``resume`` (a checkpoint of this run) the run continues from
+    it: statistics, fields and particle series go on after its step.
+
+    Raises:
+        RunFolderError: The folder is in use by another run, cannot be created, or a file to
+            continue is damaged (on every rank).
+        RunFailure: The run blew up or a solver failed (on every rank).
+    """
+    start = time.monotonic()
+    directory = Path(config["output"]["directory"])
+    with RunFolderLock(directory, comm):
+        if comm.rank == 0:
+            (directory / "config.yaml").write_text(dump_config(config))
+        comm.barrier()
+        if model is None:
+            model = build_model(config, comm=comm, restore=resume)
+        diagnostics = config["diagnostics"]
+        postprocessors = create_postprocessors(model, config["output"]["statistics"], start=start,
+                                               entrainment_material=diagnostics["entrainment_material"],
+                                               entrainment_height=diagnostics["entrainment_height"])
+        ccfg = config["output"]["checkpoint"]
+        checkpoints = Checkpointer(CheckpointSettings(ccfg["every_steps"], ccfg["every_wall_seconds"], ccfg["keep"],
+                                                      ccfg["at_end"]), directory, config,
+                                   resumed_at=model.timestep if resume is not None else None)
+        resumed = Resume.from_state(resume.state["run"]) if resume is not None else None
+        return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start,
+                   checkpoints=checkpoints, blowup=BlowUp(**config["blowup"]), resume=resumed)

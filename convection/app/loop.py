@@ -1,0 +1,481 @@
+"""The run loop: time steps of a :class:`~convection.model.model.Model` with statistics, output and stops.
+
+Per step: statistics row (from the postprocessors), progress, field output when due; then the stop
+conditions (end time, ``max_steps``, steady state, a stop request); then the CFL step length and
+:meth:`Model.step`. At the end the fields (and the particles, if they are written) are written
+once more, the time per phase is printed and ``summary.json`` written.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, NamedTuple, Sequence
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from convection.model.model import Model, StepReport
+from convection.io.fields import FieldOutput
+from convection.postprocess.postprocessors import (
+    Nusselt, ParticleStatistics, Postprocessor, TemperatureStatistics, TimeColumns, Velocity,
+)
+from convection.app.progress import Progress
+from convection.app.run_folder import RunFolderError
+from particles.checkpoint import CheckpointError
+from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
+
+__all__ = ["BlowUp", "Resume", "RunFailure", "RunSettings", "RunSummary", "SteadyState", "Watch", "Watched", "run"]
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How long and how a run goes (the ``time`` and ``output`` sections).
+
+    Attributes:
+        end: End time.
+        cfl: Courant number of the step.
+        dt_max: Largest step, or None.
+        dt_initial: Step used while the velocity is zero, or None.
+        max_increase: A step is at most this factor times the previous one, or None.
+        max_steps: Stop after this many steps, or None.
+        steady_tolerance: Stop when vrms and Nu change by less than this (relative) over
+            ``steady_window`` steps, or None.
+        steady_window: Steps of the steady-state test.
+        directory: Output folder.
+        fields_every: Field output every this many steps (0: only at the end).
+        progress: ``auto``, ``bar``, ``lines`` or ``none``.
+        progress_every: Steps between progress lines.
+    """
+
+    end: float
+    directory: Path
+    cfl: float = 1.0
+    dt_max: float | None = None
+    dt_initial: float | None = None
+    max_increase: float | None = None
+    max_steps: int | None = None
+    steady_tolerance: float | None = None
+    steady_window: int = 20
+    fields_every: int = 10
+    progress: str = "auto"
+    progress_every: int = 10
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a finished (or stopped) run reached; ``timings`` per phase (see :mod:`fembase.timing`)."""
+
+    steps: int
+    time: float
+    vrms: float
+    nusselt: float
+    cells: int
+    wall_time: float
+    reason: str
+    timings: dict[str, dict[str, float]]
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+class SteadyState:
+    """Stop when every watched quantity changed by less than ``tolerance`` (relative) over ``window`` steps.
+
+    Quantities that are None (not in this model, e.g. ``nusselt`` without a temperature equation)
+    are left out; the test needs at least one.
+    """
+
+    def __init__(self, tolerance: float | None, window: int, columns: Sequence[str] = ("vrms", "nusselt")) -> None:
+        self.tolerance = tolerance
+        self.window = window
+        self.columns = tuple(columns)
+        self._history: list[tuple[int, list[float]]] = []
+
+    def __call__(self, values: Mapping[str, float | None], step: int | None = None) -> bool:
+        """Add the values of a step (a value for the step already added last replaces it)."""
+        if step is not None and self._history and self._history[-1][0] == step:
+            self._history.pop()
+        entry = [np.nan if values.get(c) is None else float(values[c]) for c in self.columns]
+        self._history.append((-1 if step is None else step, entry))
+        if self.tolerance is None or len(self._history) <= self.window:
+            return False
+        recent = np.array([e for _, e in self._history[-self.window - 1:]])
+        present = ~np.all(np.isnan(recent), axis=0)
+        if not present.any():
+            return False
+        recent = recent[:, present]
+        scale = np.maximum(np.abs(recent[-1]), 1e-300)
+        change = np.max(np.abs(recent - recent[-1]), axis=0) / scale
+        return bool(np.all(change < self.tolerance))
+
+    def state(self) -> list[list[Any]]:
+        """The last ``window + 1`` entries (what a checkpoint keeps; JSON-able)."""
+        return [[step, [None if np.isnan(v) else v for v in entry]] for step, entry in self._history[-self.window - 1:]]
+
+    def restore(self, state: list[list[Any]]) -> None:
+        self._history = [(int(step), [np.nan if v is None else float(v) for v in entry]) for step, entry in state]
+
+
+def _timestep(model: Model, settings: RunSettings) -> float:
+    dt = model.cfl_dt(settings.cfl, dt_max=settings.dt_max)
+    if not np.isfinite(dt) or dt <= 0.0:
+        dt = settings.dt_initial or settings.dt_max or 0.0
+        if dt <= 0.0:
+            raise RuntimeError("the velocity is zero and neither time.dt_initial nor time.dt_max is set")
+    if settings.max_increase is not None and model.dt_previous > 0.0:
+        dt = min(dt, settings.max_increase * model.dt_previous)
+    return min(dt, settings.end - model.time)
+
+
+def _report(report: StepReport, step: int, balance_log: BalanceLog, progress: Progress) -> None:
+    """Log what happened to the mesh in a step."""
+    if report.adapted is not None:
+        before, after = report.adapted
+        progress.message(f"adapted mesh at step {step}: {before} -> {after} cells")
+    if report.rebalanced is not None:
+        before, after = report.rebalanced
+        balance_log.write(step, before, after)
+        progress.message(
+            f"rebalanced at step {step}: cells per rank {before.cells.tolist()} -> {after.cells.tolist()}, "
+            f"particles per rank {before.particles.tolist()} -> {after.particles.tolist()} "
+            f"(imbalance cells {before.cell_imbalance:.3f} -> {after.cell_imbalance:.3f}, "
+            f"particles {before.particle_imbalance:.3f} -> {after.particle_imbalance:.3f})"
+        )
+
+
+SOLVER_ERRORS = (RuntimeError, FloatingPointError, PETSc.Error)
+"""What a failing solve raises (on every rank: convergence is decided globally)."""
+
+
+class RunFailure(RuntimeError):
+    """The run cannot go on (blow-up, solver failure, lost particles); one line naming the step."""
+
+
+class Watched(NamedTuple):
+    """What the blow-up and steady-state tests look at after a step (None: not in this model).
+
+    Attributes:
+        vrms: Root-mean-square velocity.
+        T_min: Smallest nodal temperature.
+        T_max: Largest nodal temperature.
+        T_mean: Volume-mean temperature.
+        n_particles: Global particle count.
+        n_lost: Particles lost so far (cumulative).
+        nusselt: Nusselt number at the top (only when measured, see :class:`Watch`).
+    """
+
+    vrms: float
+    T_min: float | None = None
+    T_max: float | None = None
+    T_mean: float | None = None
+    n_particles: int | None = None
+    n_lost: int | None = None
+    nusselt: float | None = None
+
+    @classmethod
+    def of(cls, values: Mapping[str, Any]) -> Watched:
+        """The watched quantities among ``values`` (JSON-able: plain floats and ints)."""
+        def plain(name: str, kind: type) -> Any:
+            value = values.get(name)
+            return None if value is None else kind(value)
+        return cls(float(values["vrms"]), plain("T_min", float), plain("T_max", float), plain("T_mean", float),
+                   plain("n_particles", int), plain("n_lost", int), plain("nusselt", float))
+
+
+class Watch:
+    """Measures :class:`Watched` after every step whatever columns ``statistics.csv`` has (collective).
+
+    The values of the postprocessors the run has anyway (velocity, temperature, particles, Nusselt)
+    are taken from their part of the row, at no extra cost; the others are computed here with the
+    same postprocessors' code. The Nusselt number is measured only with ``nusselt=True`` (the
+    steady-state test).
+
+    Args:
+        model: The model.
+        postprocessors: The run's postprocessors (the row's producers).
+        nusselt: Also measure the Nusselt number when the run's postprocessors do not.
+    """
+
+    def __init__(self, model: Model, postprocessors: Sequence[Postprocessor], /, *, nusselt: bool = False) -> None:
+        reused = [cls for cls in (Velocity, TemperatureStatistics, Nusselt, ParticleStatistics)
+                  if any(isinstance(pp, cls) for pp in postprocessors)]
+        self._reused = [c for cls in reused for c in cls.columns]
+        wanted = (Velocity, TemperatureStatistics, *((Nusselt,) if nusselt else ()))
+        self._own = [cls() for cls in wanted if cls not in reused and cls.applies(model)]
+        self._count = model.particles is not None and ParticleStatistics not in reused
+        self._nusselt = nusselt
+
+    def __call__(self, model: Model, row: Mapping[str, Any], /) -> Watched:
+        """The watched quantities of ``model`` now; ``row`` is this step's row of the run's postprocessors."""
+        values = {c: row[c] for c in self._reused}
+        for pp in self._own:
+            values.update(pp(model))
+        if self._count:
+            values.update(n_particles=model.particles.num_particles, n_lost=model.particles.lost)
+        return Watched.of(values)
+
+    def measure(self, model: Model, /) -> Watched:
+        """The watched quantities computed afresh, without a row (e.g. right after a restore)."""
+        return Watch(model, [], nusselt=self._nusselt)(model, {})
+
+
+@dataclass(frozen=True)
+class BlowUp:
+    """When a run counts as failed (the ``blowup`` section).
+
+    The tests read :class:`Watched` quantities, measured whatever statistics columns the run writes.
+
+    Attributes:
+        vrms_growth: vrms growing by more than this factor in one step.
+        max_vrms: vrms above this (None: no bound).
+        temperature_margin: T leaving [T_min0 - m dT0, T_max0 + m dT0] (initial range dT0, at least 1).
+        lost_fraction: More than this fraction of the initial particle count lost.
+    """
+
+    vrms_growth: float | None = 1.0e3
+    max_vrms: float | None = None
+    temperature_margin: float | None = 1.0
+    lost_fraction: float | None = 1.0e-3
+
+    def check(self, now: Watched, first: Watched, previous: Watched | None) -> str | None:
+        """What failed at this step (None: nothing); ``first`` is the run's first step (step 0, kept
+        across resumes), ``previous`` the step before (None at the first)."""
+        for key in ("vrms", "T_min", "T_max", "T_mean"):
+            value = getattr(now, key)
+            if value is not None and not np.isfinite(value):
+                return f"{key} is {value}"
+        vrms = now.vrms
+        if self.max_vrms is not None and vrms > self.max_vrms:
+            return f"vrms {vrms:.6g} exceeds blowup.max_vrms = {self.max_vrms:g}"
+        if previous is not None and self.vrms_growth is not None and previous.vrms > 0 \
+                and vrms > self.vrms_growth * previous.vrms:
+            return f"vrms grew from {previous.vrms:.6g} to {vrms:.6g} in one step (more than blowup.vrms_growth)"
+        if self.temperature_margin is not None and None not in (now.T_min, now.T_max, first.T_min, first.T_max):
+            span = max(first.T_max - first.T_min, 1.0) * self.temperature_margin
+            if now.T_min < first.T_min - span or now.T_max > first.T_max + span:
+                return f"temperature left [{first.T_min - span:.6g}, {first.T_max + span:.6g}]: " \
+                       f"min {now.T_min:.6g}, max {now.T_max:.6g}"
+        if self.lost_fraction is not None and now.n_lost is not None \
+                and now.n_lost > self.lost_fraction * max(first.n_particles or 0, 1):
+            return f"{now.n_lost} particles lost (more than blowup.lost_fraction = {self.lost_fraction:g})"
+        return None
+
+
+@dataclass
+class Resume:
+    """What a resumed run continues from (see :mod:`convection.io.checkpoint`).
+
+    Attributes:
+        wall_seconds: Wall time of the run up to the checkpoint.
+        postprocessors: Saved postprocessor states by name.
+        first: The watched quantities of the run's first step (the blow-up reference), or None
+            (a checkpoint written before they were kept: measured again on resuming).
+        last: Those of the checkpoint's step (the blow-up test's previous step), or None.
+        steady: The steady-state test's recent history (:meth:`SteadyState.state`), or None.
+    """
+
+    wall_seconds: float
+    postprocessors: dict[str, Any]
+    first: Watched | None = None
+    last: Watched | None = None
+    steady: list[list[Any]] | None = None
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, Any], /) -> Resume:
+        """From the run loop's part of a checkpoint (what :func:`run` saved)."""
+        watched = state.get("watched") or {}
+        first, last = watched.get("first"), watched.get("last")
+        return cls(float(state["wall_seconds"]), dict(state["postprocessors"]),
+                   Watched.of(first) if first else None, Watched.of(last) if last else None, state.get("steady"))
+
+
+class _Outputs:
+    """The files a run writes as it goes: statistics, balance log, fields, progress (collective).
+
+    Raises:
+        RunFolderError: On every rank: a file to continue (resume) is missing or damaged, or a
+            file cannot be written.
+    """
+
+    def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool) -> None:
+        directory = Path(settings.directory)
+        after = model.timestep if resume else None
+        try:
+            self.statistics = StatisticsWriter(directory / "statistics.csv", columns, comm=model.comm,
+                                               resume_after_step=after)
+            self.balance = BalanceLog(directory / "balance.csv", comm=model.comm, resume_after_step=after)
+        except StatisticsFileError as err:
+            raise RunFolderError(str(err)) from None
+        self.fields = FieldOutput(directory, resume_after=model.time if resume else None)
+        self.progress = Progress(settings.end, mode=settings.progress, every=settings.progress_every,
+                                 enabled=model.comm.rank == 0)
+        if self.statistics.dropped_incomplete:
+            self.progress.message("statistics.csv: its last line was cut off when the run stopped; dropped")
+        self.fields_every = settings.fields_every
+        self.written = model.timestep if resume and settings.fields_every and model.timestep % settings.fields_every == 0 \
+            else -1
+
+    def row(self, model: Model, row: dict[str, Any], now: Watched) -> None:
+        self.statistics.write(row)
+        extra = f"Nu={now.nusselt:.5g}" if now.nusselt is not None else ""
+        self.progress.update(model.timestep, model.time, model.dt_previous, now.vrms, extra=extra)
+        if self.fields_every and model.timestep % self.fields_every == 0:
+            self.write_fields(model)
+
+    def write_fields(self, model: Model) -> None:
+        with model.timers("output"):
+            self.fields.write(model.fields(), model.time)
+        self.written = model.timestep
+
+    def close(self) -> None:
+        self.statistics.close()
+        self.balance.close()
+        self.progress.close()
+        self.fields.close()
+
+
+def _close(out: _Outputs, model: Model) -> None:
+    """Close the run's files and free the solvers, on every rank together (collective)."""
+    out.close()
+    model.destroy()  # now, together, not in the garbage collector
+
+
+def _with_time_columns(postprocessors: Sequence[Postprocessor]) -> list[Postprocessor]:
+    """The postprocessors with the step, time and dt columns first (resume and pictures need them)."""
+    if any(isinstance(pp, TimeColumns) for pp in postprocessors):
+        return list(postprocessors)
+    return [TimeColumns(), *postprocessors]
+
+
+def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postprocessor], /, *,
+        should_stop: Callable[[], bool] = lambda: False, start: float | None = None,
+        checkpoints: Any = None, blowup: BlowUp = BlowUp(), resume: Resume | None = None) -> RunSummary:
+    """Run ``model`` to ``settings.end`` (or max_steps, steady state, or a stop request). Collective.
+
+    The blow-up and steady-state tests watch the model itself (:class:`Watch`), whatever
+    statistics columns the postprocessors write; the columns step, time and dt are always written.
+
+    Args:
+        model: The model (started here if it was not).
+        settings: Time and output settings.
+        postprocessors: The statistics columns (:func:`convection.postprocess.postprocessors.create_postprocessors`).
+        should_stop: Polled every step on every rank (e.g. a signal flag); the run stops when it
+            is True on any rank, with everything written.
+        start: ``time.monotonic()`` at the start of the run (default: now).
+        checkpoints: A :class:`convection.io.checkpoint.Checkpointer`, or None.
+        blowup: When the run counts as failed.
+        resume: Continue a run restored from a checkpoint: its statistics, field and particle
+            series are continued after the checkpoint's step, the blow-up and steady-state tests
+            with the checkpoint's references.
+
+    Raises:
+        RunFailure: The run blew up or a solver failed (summary.json says so; on every rank).
+        RunFolderError: A file to continue is missing or damaged (on every rank, before any step).
+    """
+    rank0 = model.comm.rank == 0
+    start = time.monotonic() if start is None else start
+    directory = Path(settings.directory)
+    postprocessors = _with_time_columns(postprocessors)
+    columns = [c for pp in postprocessors for c in pp.columns]
+    out = _Outputs(model, settings, columns, resume is not None)
+    steady = SteadyState(settings.steady_tolerance, settings.steady_window)
+    watch = Watch(model, postprocessors, nusselt=settings.steady_tolerance is not None)
+    reason, failure = "end time", None
+    row: dict[str, Any] = {}
+    first: Watched | None = None
+    now: Watched | None = None
+    report = True
+    if resume is not None:
+        start -= resume.wall_seconds
+        for pp in postprocessors:
+            if hasattr(pp, "restore") and pp.name in resume.postprocessors:
+                pp.restore(resume.postprocessors[pp.name])
+            if pp.name == "wall_time":
+                pp.start = start
+        # A checkpoint written before the references were kept: they are measured now.
+        now = resume.last or watch.measure(model)
+        first = resume.first or now
+        steady.restore(resume.steady or [])
+        report = False
+    try:
+        if model.flow_result is None:
+            try:
+                _report(model.start(), model.timestep, out.balance, out.progress)
+            except SOLVER_ERRORS as err:
+                failure = " ".join(str(err).split())
+        while failure is None:
+            if report:
+                previous = now
+                with model.timers("postprocess"):
+                    row = {k: v for pp in postprocessors for k, v in pp(model).items()}
+                    now = watch(model, row)
+                first = first or now
+                out.row(model, row, now)
+                failure = blowup.check(now, first, previous)
+                if failure:
+                    break
+                if checkpoints is not None and checkpoints.due(model):
+                    checkpoints.write(model, _state(postprocessors, start, first, now, steady))
+            report = True
+            if model.time >= settings.end * (1.0 - 1e-12):
+                break
+            if settings.max_steps is not None and model.timestep >= settings.max_steps:
+                reason = "max steps"
+                break
+            if steady(now._asdict(), model.timestep):
+                reason = "steady state"
+                break
+            if model.comm.allreduce(bool(should_stop()), op=MPI.LOR):
+                reason = "stopped by signal"
+                break
+            try:
+                _report(model.step(_timestep(model, settings)), model.timestep, out.balance, out.progress)
+            except SOLVER_ERRORS as err:
+                failure = " ".join(str(err).split())
+                break
+        if failure is None:
+            if out.written != model.timestep:
+                out.write_fields(model)
+            with model.timers("output"):
+                if model.particles is not None and model.particles.writer is not None:
+                    model.particles.update(model.property_context(), step=model.timestep, final=True)
+            if checkpoints is not None and checkpoints.settings.at_end:
+                checkpoints.write(model, _state(postprocessors, start, first, now, steady), only_if_new=True)
+    except BaseException as err:
+        # Closing the files and freeing the solvers are collective: only when every rank is here.
+        # An error met on one rank alone (a bug, a failed write) may leave the others inside a
+        # collective call, where cleaning up would wait forever; the command line stops them all.
+        if model.comm.size == 1 or isinstance(err, CheckpointError):  # CheckpointErrors: raised on every rank
+            _close(out, model)
+        raise
+    _close(out, model)
+    if failure is not None:
+        reason = f"failed at step {model.timestep}, t={model.time:.6g}: {failure}"
+    wall = time.monotonic() - start
+    timings = model.timers.summary(model.comm, extra=model.particles.timings if model.particles else None, total=wall)
+    vrms = now.vrms if now is not None else np.nan
+    nusselt = now.nusselt if now is not None and now.nusselt is not None else np.nan
+    summary = RunSummary(model.timestep, model.time, float(vrms), float(nusselt), model.num_cells, wall, reason,
+                         timings)
+    if rank0:
+        (directory / "summary.json").write_text(json.dumps(summary.as_dict(), indent=2) + "\n")
+        out.progress.message(f"finished ({reason}): step {summary.steps}, t={summary.time:.6g}, "
+                             f"vrms={summary.vrms:.6g}, Nu={summary.nusselt:.6g}, {summary.cells} cells, "
+                             f"{summary.wall_time:.1f} s")
+        out.progress.message("time per phase (max over ranks):\n" + model.timers.table(timings))
+    if failure is not None:
+        raise RunFailure(reason)
+    return summary
+
+
+def _state(postprocessors: Sequence[Postprocessor], start: float, first: Watched | None, last: Watched | None,
+           steady: SteadyState) -> dict[str, Any]:
+    """The run loop's part of a checkpoint (JSON-able): what :meth:`Resume.from_state` reads."""
+    return {"wall_seconds": time.monotonic() - start,
+            "postprocessors": {pp.name: pp.state() for pp in postprocessors if hasattr(pp, "state")},
+            "watched": {"first": first._asdict() if first else None, "last": last._asdict() if last else None},
+            "steady": steady.state()}

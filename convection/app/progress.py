@@ -1,0 +1,90 @@
+"""Progress display on rank 0: a bar on a terminal, plain lines otherwise."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from typing import TextIO
+
+from convection.app.launch import launched_rank
+
+__all__ = ["Progress", "is_terminal"]
+
+
+def is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` ends on a terminal.
+
+    Under OpenMPI the ranks' standard output is a pseudo-terminal even when mpirun itself writes
+    into a file or a pipe, so under a launcher the answer is taken from the launcher's (the
+    parent's) standard output instead.
+    """
+    if not stream.isatty():
+        return False
+    if launched_rank() is None:
+        return True
+    try:
+        target = os.readlink(f"/proc/{os.getppid()}/fd/1")
+    except OSError:
+        return False
+    return target.startswith(("/dev/pts/", "/dev/tty"))
+
+
+class Progress:
+    """Shows step, time, dt, vrms and an ETA from the simulated-time rate.
+
+    Args:
+        end_time: Simulated end time (the bar's total).
+        mode: "auto" (bar on a terminal, lines otherwise), "bar", "lines" or "none".
+        every: Steps between plain lines.
+        enabled: False on ranks other than 0.
+        stream: Where to write (default stderr for the bar, stdout for lines).
+    """
+
+    def __init__(self, end_time: float, /, *, mode: str = "auto", every: int = 10, enabled: bool = True,
+                 stream: TextIO | None = None) -> None:
+        self.end_time = end_time
+        self.every = max(1, every)
+        self._start = time.monotonic()
+        self._bar = None
+        self._stream = stream
+        if not enabled or mode == "none":
+            self.mode = "none"
+            return
+        out = stream or sys.stdout
+        if mode == "auto":
+            mode = "bar" if is_terminal(out) else "lines"
+        self.mode = mode
+        if mode == "bar":
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=end_time, unit="t", file=stream or sys.stderr, dynamic_ncols=True,
+                             bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}] {postfix}")
+
+    def eta(self, t: float) -> float:
+        """Seconds left, extrapolated from the simulated-time rate so far (inf before any progress)."""
+        elapsed = time.monotonic() - self._start
+        if t <= 0.0:
+            return float("inf")
+        return elapsed * max(self.end_time - t, 0.0) / t
+
+    def update(self, step: int, t: float, dt: float, vrms: float, *, extra: str = "", force: bool = False) -> None:
+        if self.mode == "bar" and self._bar is not None:
+            self._bar.set_postfix_str(f"step={step} dt={dt:.3g} vrms={vrms:.5g} {extra}".strip(), refresh=False)
+            self._bar.update(min(t, self.end_time) - self._bar.n)
+        elif self.mode == "lines" and (force or step % self.every == 0):
+            eta = self.eta(t)
+            eta_text = "?" if eta == float("inf") else f"{eta:.0f}s"
+            line = f"step {step:6d}  t={t:.6g}  dt={dt:.4g}  vrms={vrms:.6g}  ETA {eta_text}"
+            print(f"{line}  {extra}".rstrip(), file=self._stream or sys.stdout, flush=True)
+
+    def message(self, text: str) -> None:
+        if self.mode == "bar" and self._bar is not None:
+            self._bar.write(text)
+        elif self.mode in ("lines", "bar"):
+            print(text, file=self._stream or sys.stdout, flush=True)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None

@@ -1,0 +1,852 @@
+"""Run configuration: the YAML schema of a convection run, loading and ``--set`` overrides.
+
+Every config has at least ``mesh.cells`` (or a shell ``mesh.geometry`` with ``mesh.resolution``),
+``time.end`` and ``output.directory``. Sections:
+
+- ``mesh``: the domain (``geometry``: box with cells per direction; annulus or spherical shell
+  with radii, cell size and geometry degree);
+- ``physics``: Ra, Rb, H and the viscosity law;
+- ``boundary``: velocity and temperature conditions per side (box: left/right, bottom/top,
+  front/back; annulus and spherical shell: inner/outer);
+- ``initial``: initial temperature and composition (closed-form expressions, see
+  :mod:`convection.expressions`);
+- ``materials``: any number of named materials, each with an initial region, a compositional
+  Rayleigh number and a viscosity (instead of ``initial.composition``);
+- ``composition``: where the material fractions come from (static, field, particles);
+- ``particles``: generator, integrator, interpolator, properties, population bounds, output;
+- ``stokes``, ``energy``: discretisation and solver choices;
+- ``time``: end time, CFL number, step limits, steady-state stop;
+- ``adaptivity``: refine/coarsen between levels every N steps;
+- ``balance``: repartition across ranks with cell weights 1 + W n_particles (none/every/threshold);
+- ``diagnostics``: entrainment;
+- ``output``: folder, field output interval, statistics columns, progress display.
+
+Names that choose an implementation (solvers, mixing rules, composition sources, partitioners,
+postprocessors, particle generators, properties, ...) are checked against the implementation's
+registry, and the error lists the registry's names.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+import math
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+import yaml
+
+from convection.expressions import Expression, ExpressionError
+from convection.config.files import check_output_directory, check_petsc_options, read_document, safe_load
+from convection.geometry.probes import boundary_probes, domain_probes
+from convection.schema import REQUIRED, ConfigError, Field, check_document_shape, key_text, short_repr, validate
+
+__all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
+           "parse_overrides"]
+
+_SIDES = ("left", "right", "bottom", "top", "front", "back")
+_SHELL_BOUNDARIES = ("inner", "outer")
+_SHELLS = {"annulus": 2, "spherical_shell": 3}
+MAX_DEGREE = 4
+"""Highest polynomial degree of a field (form compilation time grows steeply with the degree)."""
+MAX_INITIAL_ROUNDS = 100
+"""Most rounds of adapting the mesh to the initial condition (each rebuilds the mesh)."""
+MAX_PARTICLES = 1e8
+"""Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
+MAX_STEPS = 1e9
+"""Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
+MAX_ENTRIES = 100
+"""Most materials, particle properties, PETSc options or constants (each costs a field, a column, an
+entry of PETSc's options database (512 in all) or an expression check)."""
+VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates")
+TEMPERATURE_KINDS = ("dirichlet", "insulating")
+
+
+def _finite_number(value: Any) -> float | None:
+    """``value`` as a float if it is a finite number (not a bool, not text), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
+def _check_velocity_bc(value: Any) -> str | None:
+    kind = value.get("kind") if isinstance(value, dict) else value
+    if not isinstance(kind, str) or kind not in VELOCITY_KINDS:
+        return (f"velocity condition {short_repr(value)} is not one of {list(VELOCITY_KINDS)} "
+                "(or {kind: prescribed, value: [..]})")
+    if kind == "plates":
+        if not isinstance(value, dict):
+            return "a plates velocity needs the form {kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
+        from convection.geometry.plates import PlateVelocity
+
+        try:
+            PlateVelocity.from_config(value, 3)
+        except (TypeError, ValueError, OverflowError) as err:  # TypeError: e.g. keys of mixed types
+            return str(err)
+        return None
+    if isinstance(value, dict):
+        extra = [name for name in value if name not in ("kind", "value")]
+        if extra:
+            return f"unknown entry {short_repr(extra[0])}; allowed: ['kind', 'value']"
+        if kind == "prescribed" and not isinstance(value.get("value"), list):
+            return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
+        for i, component in enumerate(value.get("value") or ()):
+            if isinstance(component, str):
+                try:
+                    Expression(component, gdim=3)
+                except ExpressionError as err:
+                    return f"value[{i}]: {err}"
+            elif _finite_number(component) is None:
+                return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
+    elif kind == "prescribed":
+        return "a prescribed velocity needs the form {kind: prescribed, value: [vx, vy(, vz)]}"
+    return None
+
+
+def _check_temperature_bc(value: Any) -> str | None:
+    if value == "insulating":
+        return None
+    if isinstance(value, dict) and list(value) == ["dirichlet"]:
+        number = value["dirichlet"]
+        if isinstance(number, str):
+            try:
+                number = float(number)
+            except ValueError:
+                pass
+        if _finite_number(number) is None:
+            return f"dirichlet value must be a finite number, got {short_repr(value['dirichlet'])}"
+        return None
+    return f"temperature condition {short_repr(value)} must be 'insulating' or {{dirichlet: <number>}}"
+
+
+class RegistryNames:
+    """The names of a registry, read when a config is checked (so the registry is the one list).
+
+    Called, it returns the names; :meth:`registry` gives the registry itself (for the generated
+    config reference: its entries' descriptions).
+    """
+
+    def __init__(self, module: str, name: str) -> None:
+        self.module = module
+        self.name = name
+
+    def registry(self) -> Any:
+        return getattr(importlib.import_module(self.module), self.name)
+
+    def __call__(self) -> list[str]:
+        return list(self.registry())
+
+
+_names = RegistryNames
+
+
+def _is_list(value: Any) -> str | None:
+    return None if isinstance(value, list) else f"expected a list, got {short_repr(value)}"
+
+
+def _sides(check, default, forms: str) -> dict[str, Field]:
+    sides = {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v),
+                         help=f"box side {where}: {forms}")
+             for side, where in zip(_SIDES, ("x = lower", "x = upper", "lowest y (2D) or z (3D)", "highest y (2D) or z (3D)",
+                                             "y = lower (3D)", "y = upper (3D)"))}
+    for name in _SHELL_BOUNDARIES:
+        sides[name] = Field("any", default=None, nullable=True, check=lambda v: None if v is None else check(v),
+                            help=f"annulus/spherical shell {name} surface (default: {default}): {forms}")
+    return sides
+
+
+SCHEMA: dict[str, Any] = {
+    "name": Field("str", default="run", help="a label for the run"),
+    "mesh": {
+        "geometry": Field("str", "box", choices=_names("convection.geometry.mesh", "MESH_GEOMETRIES"),
+                          help="box (cells, lower, upper), annulus or spherical_shell (radii, resolution)"),
+        "cells": Field("list[int]", None, nullable=True, length=(2, 3), minimum=1,
+                       help="cells per direction, e.g. [32, 32]"),
+        "lower": Field("list[float]", None, nullable=True, length=(2, 3), help="lower box corner (default 0)"),
+        "upper": Field("list[float]", None, nullable=True, length=(2, 3), help="upper box corner (default 1)"),
+        "cell_type": Field("str", "simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes"),
+        "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left"),
+                          help="how a 2D simplex box mesh splits its squares into triangles (DOLFINx's diagonal)"),
+        "radii": Field("list[float]", [1.22, 2.22], length=(2,), exclusive_minimum=0.0,
+                       help="[inner, outer] radius of an annulus/spherical shell around the origin"),
+        "resolution": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                            help="target cell size of an annulus/spherical shell (gmsh)"),
+        "geometry_degree": Field("int", 2, choices=None, minimum=1,
+                                 help="1: straight-sided cells; 2: curved cells on the circles/spheres (shells)"),
+        "max_cells": Field("int", 2_000_000, minimum=1,
+                           help="refuse configs whose mesh can grow beyond this many cells (base x refinement)"),
+    },
+    "physics": {
+        "Ra": Field("float", REQUIRED, minimum=0.0, help="thermal Rayleigh number"),
+        "Rb": Field("float", 0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_up)"),
+        "H": Field("float", 0.0, help="internal heating"),
+        "viscosity": {
+            "material_viscosities": Field("list[float]", None, nullable=True, length=(2,), exclusive_minimum=0.0,
+                                          help="[eta of C=0 material, eta of C=1 material] (with initial.composition)"),
+            "background": Field("float", 1.0, exclusive_minimum=0.0,
+                                help="viscosity of the background material (with the materials section)"),
+            "mixing": Field("str", "geometric", choices=_names("convection.physics.approximation", "MIXING_RULES"),
+                            help="volume-fraction weighted mixing of the material viscosities"),
+            "temperature_law": Field("str", "none", choices=_names("convection.physics.approximation", "TEMPERATURE_LAWS"),
+                                     help="temperature dependence of the material viscosities (older than law)"),
+            "gamma": Field("float", 0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii"),
+            "law": Field("any", None, nullable=True,
+                         help="the background material's viscosity law: a number or {name: <law>, ...} "
+                              "(convection.physics.rheology: constant, exponential, arrhenius, depth_table, power_law, "
+                              "composite, von_mises, drucker_prager, viscoplastic, weakened, damaged; any law "
+                              "may add min_viscosity, max_viscosity)"),
+        },
+    },
+    "boundary": {
+        "velocity": _sides(_check_velocity_bc, "free_slip",
+                           "free_slip, no_slip, {kind: prescribed, value: [vx, vy(, vz)]} (numbers or expressions) "
+                           "or, on a spherical shell's outer surface, {kind: plates, width, plates: [{centre, pole, "
+                           "rate}, ...]}"),
+        "temperature": _sides(_check_temperature_bc, "insulating", "insulating or {dirichlet: <number>}"),
+    },
+    "initial": {
+        "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical), r, phi, theta"),
+        "composition": Field("str", None, nullable=True,
+                             help="expression in x, y, z (1 = dense/second material), or null for none"),
+        "constants": Field("mapping", {}, max_items=MAX_ENTRIES, help="named constants usable in the expressions"),
+    },
+    "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items={
+        "initial": Field("str", REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")"),
+        "Rb": Field("float", 0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)"),
+        "viscosity": Field("any", None, nullable=True,
+                           help="viscosity of the pure material: a number or a law as physics.viscosity.law "
+                                "(null: the background's)"),
+    }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
+    "stokes": {
+        "degree": Field("int", 2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)"),
+        "solver": Field("str", "auto", choices=_names("convection.solvers.stokes.solver", "STOKES_SOLVER_CHOICES"),
+                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
+                        "free slip on both surfaces), direct (MUMPS) in 2D"),
+        "petsc_options": Field("mapping", {}, check=check_petsc_options, max_items=MAX_ENTRIES,
+                               help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); viewers may "
+                                    "only print"),
+        "nonlinear": {
+            "method": Field("str", "newton", choices=_names("convection.solvers.stokes.nonlinear", "NONLINEAR_METHODS"),
+                            help="for a viscosity that depends on the flow: picard (defect correction) or newton "
+                                 "(SNES, after picard reached switch_tolerance)"),
+            "rtol": Field("float", 1e-6, exclusive_minimum=0.0, maximum=0.5,
+                          help="stop at |F(u, p)| <= rtol |b| (b: forcing and lifted boundary velocities)"),
+            "max_iterations": Field("int", 50, minimum=1, maximum=10_000,
+                                    help="most nonlinear iterations per solve; more is a solver failure (exit 3)"),
+            "switch_tolerance": Field("float", 0.1, exclusive_minimum=0.0, maximum=1.0,
+                                      help="newton: Picard iterations until the relative residual is below this"),
+            "line_search": Field("str", "bt", choices=_names("convection.solvers.stokes.nonlinear", "LINE_SEARCHES"),
+                                 help="newton: PETSc SNES line search"),
+        },
+        "buoyancy_theta": Field("float", 0.0, minimum=0.0, maximum=1.0,
+                                help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
+                                     "t + theta dt along the flow (semi-implicit, stabilises dense interfaces against "
+                                     "the 'drunken sailor' oscillation; 0.5 is a good choice)"),
+    },
+    "energy": {
+        "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),
+        "degree": Field("int", 2, minimum=1, maximum=MAX_DEGREE, help="temperature degree (Lagrange)"),
+        "stabilisation": Field("str", "supg", choices=_names("convection.solvers.transport", "STABILISATIONS"),
+                               help="stabilisation of the advection-diffusion equation of the temperature"),
+    },
+    "composition": {
+        "source": Field("str", "static", choices=_names("convection.model.composition", "COMPOSITION_SOURCES"),
+                        help="static: fractions fixed at their initial regions; particles: averaged from advected "
+                             "particles; field: advected continuous fields (SUPG, no diffusion)"),
+        "degree": Field("int", 0, minimum=0, maximum=MAX_DEGREE, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); "
+                                                  "source field needs >= 1"),
+    },
+    "particles": {
+        "enabled": Field("bool", None, nullable=True,
+                         help="carry particles (null: when composition.source is particles; true: also as tracers)"),
+        "generator": Field("mapping", {"name": "random_uniform", "particles_per_cell": 20, "seed": 1},
+                           help="generator name and parameters; particles_per_cell may replace num_particles"),
+        "integrator": Field("str", "rk2", choices=_names("particles.advection", "INTEGRATORS"),
+                            help="time integrator of the particle positions (and integrated properties)"),
+        "interpolator": Field("mapping", {"name": "cell_average", "mean": "arithmetic"},
+                              help="particle-to-mesh interpolator name and parameters"),
+        "properties": Field("any", [], check=_is_list, max_items=MAX_ENTRIES,
+                            help="properties every particle carries: names or {name: ..., parameters}"),
+        "population": {
+            "min_per_cell": Field("int", 0, minimum=0, help="cells with fewer particles get new ones"),
+            "max_per_cell": Field("int", None, nullable=True, minimum=1,
+                                  help="cells with more particles lose some (null: never)"),
+            "seed": Field("int", 0, help="random seed of the population control"),
+        },
+        "output": {
+            "every_steps": Field("int", None, nullable=True, minimum=1, help="write particles every N steps"),
+            "every_time": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                                help="write particles at the first step after every multiple of this time"),
+            "properties": Field("list[str]", None, nullable=True, help="properties written (null: all)"),
+            "every_nth": Field("int", 1, minimum=1, help="write only particles with id % every_nth == 0"),
+        },
+    },
+    "time": {
+        "end": Field("float", REQUIRED, exclusive_minimum=0.0, help="end time (nondimensional)"),
+        "cfl": Field("float", 1.0, exclusive_minimum=0.0,
+                     help="time step = cfl * min over cells of (cell size / (velocity degree * |u|))"),
+        "dt_max": Field("float", None, nullable=True, exclusive_minimum=0.0, help="longest time step (null: no limit)"),
+        "dt_initial": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                            help="first step when the initial velocity is zero"),
+        "max_increase": Field("float", None, nullable=True, exclusive_minimum=1.0,
+                              help="a step is at most this many times the previous one (null: no limit); keeps the "
+                                   "velocity extrapolation u* = (1 + w) u^n - w u^(n-1), w = dt/dt_previous, tame "
+                                   "after a fast initial transient"),
+        "max_steps": Field("int", None, nullable=True, minimum=0, help="stop after this many steps (null: at time.end)"),
+        "steady_state_tolerance": Field("float", None, nullable=True, exclusive_minimum=0.0,
+                                        help="stop when Nu and vrms change by less than this (relative) per unit step window"),
+        "steady_state_window": Field("int", 20, minimum=1, help="steps over which the steady-state change is measured"),
+    },
+    "adaptivity": {
+        "enabled": Field("bool", False, help="refine and coarsen the mesh by an error indicator during the run"),
+        "every": Field("int", 10, minimum=1, help="adapt every N steps"),
+        "min_level": Field("int", 0, minimum=0, help="coarsest refinement level of a cell (0: the base mesh)"),
+        "max_level": Field("int", 2, minimum=0, help="finest refinement level of a cell (each level halves the cell size)"),
+        "refine_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells (by indicator) to refine"),
+        "coarsen_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells to coarsen"),
+        "initial_steps": Field("int", None, nullable=True, minimum=0, maximum=MAX_INITIAL_ROUNDS,
+                               help="adapt this many times to the initial condition (default max_level - min_level)"),
+        "fields": Field("list[str]", ["temperature"], choices=_names("convection.adapt.adaptivity", "INDICATOR_FIELDS"),
+                        help="fields whose Kelly error indicators (each normalised, summed) choose the cells"),
+    },
+    "balance": {
+        "strategy": Field("str", "none", choices=_names("convection.adapt.rebalance", "BALANCE_STRATEGIES"),
+                          help="repartition the mesh: never, every N steps, or when the load imbalance exceeds a threshold"),
+        "every": Field("int", 10, minimum=1, help="steps between repartitions (every) or checks (threshold)"),
+        "threshold": Field("float", 1.2, minimum=1.0,
+                           help="repartition when max/mean over ranks of the load (cells + W particles) exceeds this"),
+        "particle_weight": Field("float", 0.01, minimum=0.0, help="W in the cell weight 1 + W n_particles(K)"),
+        "method": Field("str", "rcb", choices=_names("fembase.partition", "PARTITIONERS"),
+                        help="rcb: recursive bisection balancing cells and particles; morton: space-filling-curve blocks"),
+    },
+    "blowup": {
+        "vrms_growth": Field("float", 1.0e3, nullable=True, exclusive_minimum=1.0,
+                             help="fail when vrms grows by more than this factor in one step"),
+        "max_vrms": Field("float", None, nullable=True, exclusive_minimum=0.0, help="fail when vrms exceeds this"),
+        "temperature_margin": Field("float", 1.0, nullable=True, minimum=0.0,
+                                    help="fail when T leaves the initial range widened by this many times its width"),
+        "lost_fraction": Field("float", 1.0e-3, nullable=True, minimum=0.0, maximum=1.0,
+                               help="fail when more than this fraction of the particles is lost"),
+    },
+    "diagnostics": {
+        "entrainment_material": Field("str", None, nullable=True,
+                                      help="material whose entrainment is reported: a material name, all, or with "
+                                           "one material dense (C) or light (1 - C)"),
+        "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height (shells: radius) / its initial volume"),
+    },
+    "output": {
+        "directory": Field("str", REQUIRED, check=check_output_directory,
+                           help="output folder (statistics.csv, fields, config)"),
+        "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
+        "statistics": Field("list[str]", None, nullable=True, choices=_names("convection.postprocess.postprocessors", "POSTPROCESSORS"),
+                            help="postprocessors whose columns statistics.csv holds (null: all that apply)"),
+        "checkpoint": {
+            "every_steps": Field("int", None, nullable=True, minimum=1, help="write a checkpoint every N steps"),
+            "every_wall_seconds": Field("float", 3600.0, nullable=True, exclusive_minimum=0.0,
+                                        help="write a checkpoint when this much wall time passed since the last"),
+            "keep": Field("int", 2, minimum=1, help="how many of the newest checkpoints are kept"),
+            "at_end": Field("bool", True, help="also write one at the end and when stopped by a signal"),
+        },
+        "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none"),
+                          help="progress display: a bar on a terminal, lines in a log (auto: by stdout), or none"),
+        "progress_every": Field("int", 10, minimum=1, help="steps between progress lines"),
+    },
+}
+
+
+def config_gdim(config: dict[str, Any]) -> int:
+    """Geometric dimension of a resolved config's domain (box: from ``mesh.cells``)."""
+    geometry = config["mesh"].get("geometry", "box")
+    return _SHELLS[geometry] if geometry in _SHELLS else len(config["mesh"]["cells"])
+
+
+def _resolve_boundaries(config: dict[str, Any], document: dict[str, Any]) -> None:
+    """Keep only the boundary names of the config's geometry (box sides, or the shell's inner/outer
+    with defaults free_slip / insulating); names of the other geometry given by the user are errors."""
+    shell = config["mesh"]["geometry"] in _SHELLS
+    given = (document.get("boundary") or {}) if isinstance(document.get("boundary"), dict) else {}
+    for section, default in (("velocity", "free_slip"), ("temperature", "insulating")):
+        user = given.get(section) or {}
+        wrong = [n for n in (_SIDES if shell else _SHELL_BOUNDARIES) if isinstance(user, dict) and n in user]
+        if wrong:
+            what = "a box side" if shell else "an annulus/spherical-shell boundary"
+            raise ConfigError(f"config key 'boundary.{section}.{wrong[0]}': {what}; mesh.geometry "
+                              f"{config['mesh']['geometry']} has {list(_SHELL_BOUNDARIES if shell else _SIDES)}")
+        values = config["boundary"][section]
+        if shell:
+            config["boundary"][section] = {n: default if values[n] is None and n not in user else values[n]
+                                           for n in _SHELL_BOUNDARIES}
+        else:
+            config["boundary"][section] = {n: values[n] for n in _SIDES}
+
+
+def _check_mesh(config: dict[str, Any]) -> None:
+    mesh = config["mesh"]
+    if mesh["geometry"] == "box":
+        if mesh["cells"] is None:
+            raise ConfigError("config key 'mesh.cells': required value missing (cells per direction, e.g. [32, 32])")
+        return
+    for key in ("cells", "lower", "upper"):
+        if mesh[key] is not None:
+            raise ConfigError(f"config key 'mesh.{key}': only for mesh.geometry box (a shell has radii and resolution)")
+    if mesh["resolution"] is None:
+        raise ConfigError(f"config key 'mesh.resolution': required for mesh.geometry {mesh['geometry']} "
+                          "(target cell size)")
+    inner, outer = mesh["radii"]
+    if not inner < outer:
+        raise ConfigError(f"config key 'mesh.radii': the inner radius must be below the outer one, got {mesh['radii']}")
+    if mesh["geometry_degree"] not in (1, 2):
+        raise ConfigError(f"config key 'mesh.geometry_degree': must be 1 or 2, got {mesh['geometry_degree']}")
+    if mesh["cell_type"] != "simplex":
+        raise ConfigError(f"config key 'mesh.cell_type': mesh.geometry {mesh['geometry']} has simplex cells only")
+    for key, enabled in (("adaptivity.enabled", config["adaptivity"]["enabled"]),
+                         ("balance.strategy", config["balance"]["strategy"] != "none")):
+        if not enabled:
+            continue
+        if mesh["geometry_degree"] != 2:
+            surfaces = "circles" if mesh["geometry"] == "annulus" else "spheres"
+            raise ConfigError(f"config key '{key}': on mesh.geometry {mesh['geometry']} needs mesh.geometry_degree 2 "
+                              f"(the refined cells are curved onto the {surfaces})")
+
+
+def _check_consistency(config: dict[str, Any]) -> None:
+    _check_mesh(config)
+    mesh, adapt = config["mesh"], config["adaptivity"]
+    gdim = config_gdim(config)
+    if mesh["geometry"] in _SHELLS:
+        _check_boundaries_and_rest(config, gdim)
+        return
+    for key in ("lower", "upper"):
+        if mesh[key] is not None and len(mesh[key]) != gdim:
+            raise ConfigError(f"config key 'mesh.{key}': needs {gdim} entries like mesh.cells")
+    lower = mesh["lower"] or [0.0] * gdim
+    upper = mesh["upper"] or [1.0] * gdim
+    if any(u <= lo for lo, u in zip(lower, upper)):
+        raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
+    if not all(math.isfinite(u - lo) for lo, u in zip(lower, upper)):
+        raise ConfigError(f"config key 'mesh.upper': the box size upper - lower must be a finite number, got {upper} "
+                          f"vs {lower}")
+    if adapt["min_level"] > adapt["max_level"]:
+        raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
+    needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
+    if needs_simplices and mesh["cell_type"] != "simplex":
+        what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"
+        raise ConfigError(f"config key '{what}': needs mesh.cell_type: simplex (triangles/tetrahedra)")
+    _check_boundaries_and_rest(config, gdim)
+
+
+def _check_boundaries_and_rest(config: dict[str, Any], gdim: int) -> None:
+    _check_materials(config)
+    if gdim == 2 and config["mesh"]["geometry"] == "box":
+        for section in ("velocity", "temperature"):
+            for side in ("front", "back"):
+                if config["boundary"][section][side] not in (None, "free_slip", "insulating"):
+                    raise ConfigError(f"config key 'boundary.{section}.{side}': only exists in 3D")
+    for name, value in config["initial"]["constants"].items():
+        if _finite_number(value) is None:
+            raise ConfigError(f"config key 'initial.constants.{key_text(name)}': expected a finite number, "
+                              f"got {short_repr(value)}")
+    _check_size(config)
+    _check_velocity_values(config, gdim)
+    for key in ("temperature", "composition"):
+        text = config["initial"][key]
+        if text is not None:
+            _check_expression(config, f"initial.{key}", text)
+    _check_particles(config)
+
+
+def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: str | None = None,
+                     constants: bool = True) -> Expression:
+    """The expression ``text`` of config key ``key``, evaluated at the probe points of the domain
+    (or of ``boundary``) of a resolved config (see :mod:`convection.geometry.probes`).
+
+    Raises:
+        ConfigError: naming ``key``: the text is not an allowed expression, or it fails or is not
+            finite at a probe point.
+    """
+    try:
+        expression = Expression(text, constants=expression_constants(config) if constants else None,
+                                gdim=config_gdim(config))
+        expression.check(domain_probes(config) if boundary is None else boundary_probes(config, boundary))
+    except ExpressionError as err:
+        raise ConfigError(f"config key '{key}': {err}") from None
+    return expression
+
+
+def _check_velocity_values(config: dict[str, Any], gdim: int) -> None:
+    """Prescribed velocities: gdim components, each expression finite on its boundary."""
+    for side, bc in config["boundary"]["velocity"].items():
+        if not (isinstance(bc, dict) and bc["kind"] == "prescribed"):
+            continue
+        if len(bc["value"]) != gdim:
+            raise ConfigError(f"config key 'boundary.velocity.{side}.value': needs {gdim} components")
+        for i, component in enumerate(bc["value"]):
+            if isinstance(component, str):
+                # boundary.py builds these without the config's constants
+                _check_expression(config, f"boundary.velocity.{side}.value[{i}]", component, boundary=side,
+                                 constants=False)
+
+
+SIMPLICES_PER_BOX = {2: 2, 3: 6}
+
+
+def _product(*factors: float) -> float:
+    """The product of non-negative numbers as a float: inf instead of an overflow (so an estimate
+    from ``cells: [1e18, 4]`` or ``max_level: 10**12`` is a number to compare, not an error)."""
+    logs = [math.log2(f) if f > 0 else -math.inf for f in map(float, factors)]
+    if -math.inf in logs:
+        return 0.0
+    total = sum(logs)
+    return math.inf if total >= 1024 else 2.0**total
+
+
+def _check_size(config: dict[str, Any]) -> None:
+    """Refuse meshes (and particle counts) that would exhaust the machine, naming the estimate."""
+    mesh, adapt = config["mesh"], config["adaptivity"]
+    gdim = config_gdim(config)
+    if mesh["geometry"] in _SHELLS:
+        # Shell volume over the volume of an equilateral cell of edge `resolution`.
+        inner, outer = mesh["radii"]
+        # products, not powers: a float power raises OverflowError where a product gives inf
+        volume, cell = ((math.pi * (outer - inner) * (outer + inner), 0.4330127) if gdim == 2
+                        else (4.18879020 * (outer - inner) * (outer * outer + outer * inner + inner * inner), 0.11785113))
+        base = _product(volume / cell, *[1.0 / mesh["resolution"]] * gdim) + 1.0
+    else:
+        base = _product(*mesh["cells"], SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1)
+    level = adapt["max_level"] if adapt["enabled"] else 0
+    most = _product(base, *[2.0] * min(gdim * level, 2048))
+    if most > mesh["max_cells"]:
+        key = "adaptivity.max_level" if level else ("mesh.resolution" if mesh["geometry"] in _SHELLS else "mesh.cells")
+        raise ConfigError(f"config key '{key}': the mesh can reach {most:.3g} cells ({base:.3g} base cells, refined "
+                          f"{level} times), more than mesh.max_cells = {mesh['max_cells']}; raise mesh.max_cells "
+                          "if the machine can take it")
+    if particles_enabled(config):
+        _check_particle_count(config, most)
+    end, dt_max = config["time"]["end"], config["time"]["dt_max"]
+    if dt_max is not None and config["time"]["max_steps"] is None and end / dt_max > MAX_STEPS:
+        raise ConfigError(f"config key 'time.dt_max': time.end / time.dt_max = {end / dt_max:.3g} steps at least "
+                          f"(more than {MAX_STEPS:.0e}); raise dt_max or set time.max_steps")
+
+
+def _check_particle_count(config: dict[str, Any], cells: float) -> None:
+    """Refuse generators and population bounds that ask for more than :data:`MAX_PARTICLES`."""
+    generator = config["particles"]["generator"]
+    asked = []
+    for key in ("particles_per_cell", "num_particles"):
+        try:
+            number = float(generator.get(key) or 0.0)
+        except (TypeError, ValueError, OverflowError):
+            continue  # reported by the particle checks
+        asked.append((f"particles.generator.{key}", _product(number, cells) if key == "particles_per_cell" else number))
+    asked.append(("particles.population.min_per_cell", _product(config["particles"]["population"]["min_per_cell"], cells)))
+    for key, count in asked:
+        if count > MAX_PARTICLES:
+            raise ConfigError(f"config key '{key}': up to {count:.3g} particles on the finest mesh (more than "
+                              f"{MAX_PARTICLES:.0e}, several GB)")
+
+
+def expression_constants(config: dict[str, Any]) -> dict[str, float]:
+    """Constants available in initial-condition expressions: Ra, Rb, H and initial.constants."""
+    physics = config["physics"]
+    shell = {}
+    if config["mesh"].get("geometry", "box") in _SHELLS:
+        shell = dict(zip(("r_inner", "r_outer"), config["mesh"]["radii"]))
+    return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **shell, **config["initial"]["constants"]}
+
+
+RESERVED_FIELD_NAMES = ("temperature", "velocity", "pressure", "material")
+
+
+def material_table(config: dict[str, Any]) -> tuple[list[dict[str, Any]], float]:
+    """The materials of a resolved config and the background viscosity.
+
+    Each material is ``{name, initial, Rb, viscosity}`` (``initial`` an expression text). The
+    classic two-material keys (``initial.composition``, ``physics.Rb``,
+    ``physics.viscosity.material_viscosities``) give one material named ``composition``.
+    """
+    physics = config["physics"]
+    viscosity = physics["viscosity"]
+    if config["materials"]:
+        table = [{"name": name, **spec} for name, spec in config["materials"].items()]
+        return table, viscosity["background"]
+    text = config["initial"]["composition"]
+    if text is None:
+        return [], viscosity["background"]
+    etas = viscosity["material_viscosities"]
+    return ([{"name": "composition", "initial": text, "Rb": physics["Rb"], "viscosity": etas[1] if etas else None}],
+            etas[0] if etas else viscosity["background"])
+
+
+def viscosity_laws(config: dict[str, Any]) -> tuple[Any, list[Any]] | None:
+    """The rheology laws of a resolved config: ``(background law, [law per material])``, or None
+    when the config uses no law (numbers only: the classic viscosity keys). A material without a
+    viscosity takes the background's law.
+
+    Raises:
+        ConfigError: a law is wrong (one line naming the key).
+    """
+    from convection.physics.rheology import build_law
+
+    visc = config["physics"]["viscosity"]
+    table, background = material_table(config)
+    given = visc["law"] is not None or any(isinstance(m["viscosity"], dict) for m in table)
+    if not given:
+        return None
+    law0 = build_law(visc["law"] if visc["law"] is not None else background, "physics.viscosity.law")
+    keyed = config["materials"] and True
+    laws = []
+    for m in table:
+        key = f"materials.{m['name']}.viscosity" if keyed else "physics.viscosity.material_viscosities"
+        laws.append(law0 if m["viscosity"] is None else build_law(m["viscosity"], key))
+    return law0, laws
+
+
+def _check_rheology(config: dict[str, Any]) -> None:
+    visc = config["physics"]["viscosity"]
+    for name, spec in config["materials"].items():
+        value = spec["viscosity"]
+        if value is not None and not isinstance(value, dict) and (
+                isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0):
+            raise ConfigError(f"config key 'materials.{name}.viscosity': expected a positive number or a law "
+                              f"{{name: ..., ...}}, got {short_repr(value)}")
+    laws = viscosity_laws(config)
+    if laws is None:
+        return
+    if visc["law"] is not None and visc["background"] != 1.0:
+        raise ConfigError("config key 'physics.viscosity.background': not with physics.viscosity.law (the law is the "
+                          "background's)")
+    if visc["temperature_law"] != "none":
+        raise ConfigError("config key 'physics.viscosity.temperature_law': not with viscosity laws (give the "
+                          "temperature dependence in the law, e.g. {name: exponential, gamma_T: ...})")
+    law0, others = laws
+    depends = set(law0.depends_on)
+    for law in others:
+        depends |= law.depends_on
+    nonlinear = bool(depends & {"strain_rate", "pressure"})
+    if nonlinear and config["stokes"]["buoyancy_theta"] != 0.0:
+        raise ConfigError("config key 'stokes.buoyancy_theta': the semi-implicit buoyancy is not available with a "
+                          "viscosity that depends on the flow (strain rate or pressure)")
+    sides = config["boundary"]["velocity"]
+    closed = all(value is not None for value in sides.values())
+    if nonlinear and "pressure" in depends and closed and config["stokes"]["nonlinear"]["method"] == "newton":
+        raise ConfigError("config key 'stokes.nonlinear.method': newton with a pressure-dependent viscosity "
+                          "(drucker_prager) needs a defined pressure level: leave a side traction free (null) or "
+                          "use picard")
+    fields = sorted({d.split(":", 1)[1] for law in (law0, *others) for d in law.depends_on if d.startswith("field:")})
+    if fields:
+        if not particles_enabled(config):
+            raise ConfigError(f"config key 'particles.enabled': the viscosity laws read the field {fields[0]!r}, "
+                              "a particle property averaged onto the mesh; set particles.enabled: true and carry "
+                              f"{fields[0]!r} in particles.properties")
+        carried = _property_names(config)
+        missing = [name for name in fields if name not in carried]
+        if missing:
+            raise ConfigError(f"config key 'particles.properties': the viscosity laws read the field {missing[0]!r}, "
+                              "which comes from a particle property of that name (e.g. plastic_strain); carry it "
+                              f"(particles carry {carried})")
+
+
+def _property_names(config: dict[str, Any]) -> list[str]:
+    """Names of the particle properties of a resolved config (as given: names or {name: ...})."""
+    names = []
+    for item in config["particles"]["properties"]:
+        if isinstance(item, str):
+            names.append(item)
+        elif isinstance(item, dict) and isinstance(item.get("name"), str):
+            names.append(item["name"])
+    return names
+
+
+def _check_materials(config: dict[str, Any]) -> None:
+    _check_rheology(config)
+    if config["materials"]:
+        legacy = (("initial.composition", config["initial"]["composition"] is not None),
+                  ("physics.Rb", config["physics"]["Rb"] != 0.0),
+                  ("physics.viscosity.material_viscosities", config["physics"]["viscosity"]["material_viscosities"] is not None))
+        for key, given in legacy:
+            if given:
+                raise ConfigError(f"config key '{key}': not with the materials section (give each material its "
+                                  "initial region, Rb and viscosity there)")
+        for name, spec in config["materials"].items():
+            if name in RESERVED_FIELD_NAMES:
+                raise ConfigError(f"config key 'materials.{name}': the name is taken by a field; "
+                                  f"reserved: {list(RESERVED_FIELD_NAMES)}")
+            _check_expression(config, f"materials.{name}.initial", spec["initial"])
+    table, _ = material_table(config)
+    names = [m["name"] for m in table]
+    source = config["composition"]["source"]
+    if source != "static" and not table:
+        raise ConfigError(f"config key 'composition.source': {source} needs materials (the materials section or "
+                          "initial.composition)")
+    if source == "field" and config["composition"]["degree"] < 1:
+        raise ConfigError("config key 'composition.degree': an advected composition field needs degree >= 1")
+    material = config["diagnostics"]["entrainment_material"]
+    if material is not None:
+        valid = ["all", *names] + (["dense", "light"] if len(names) == 1 else [])
+        if material not in valid:
+            raise ConfigError(f"config key 'diagnostics.entrainment_material': {material!r} is not one of {valid}")
+
+
+def particles_enabled(config: dict[str, Any]) -> bool:
+    """Whether a run of ``config`` carries particles."""
+    enabled = config["particles"]["enabled"]
+    return config["composition"]["source"] == "particles" if enabled is None else bool(enabled)
+
+
+def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[str], Callable]:
+    """Text -> function of points shape=(m, gdim) (particle properties and densities of a config).
+
+    With ``probe``, each expression is first evaluated at the domain's probe points
+    (:mod:`convection.geometry.probes`), and one that fails or is not finite there raises ExpressionError
+    (a ValueError, which the particle builders report under the entry's key).
+    """
+    gdim = config_gdim(config)
+    constants = expression_constants(config)
+
+    def make(text: str) -> Callable:
+        expression = Expression(text, constants=constants, gdim=gdim)
+        if probe:
+            expression.check(domain_probes(config))
+
+        def at(x):
+            import numpy as np
+
+            points = np.zeros((3, x.shape[0]))
+            points[:gdim] = np.asarray(x).T
+            return expression(points)
+        return at
+    return make
+
+
+def _check_particles(config: dict[str, Any]) -> None:
+    from particles.manager import build_generator, build_properties
+    from particles.interpolation import INTERPOLATORS
+    from particles.population import PopulationControl
+
+    section = config["particles"]
+    if section["enabled"] is False and config["composition"]["source"] == "particles":
+        raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
+    make = point_function(config, probe=True)
+    try:
+        generator = build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"config key 'particles.generator': {err}") from None
+    curved = config["mesh"]["geometry"] in _SHELLS and config["mesh"]["geometry_degree"] >= 2
+    if curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
+        raise ConfigError(f"config key 'particles.generator.name': {generator.name} needs straight-sided cells; the "
+                          f"{config['mesh']['geometry']} has curved ones (mesh.geometry_degree 2): use "
+                          "metropolis_hastings (with a density, e.g. \"r < r_inner + 0.15\", or none for uniform)")
+    params = dict(section["interpolator"])
+    name = params.pop("name", None)
+    if not isinstance(name, str) or name not in INTERPOLATORS:
+        raise ConfigError(f"config key 'particles.interpolator.name': {short_repr(name)} is not one of {sorted(INTERPOLATORS)}")
+    try:
+        INTERPOLATORS[name](**params)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"config key 'particles.interpolator': {err}") from None
+    columns = [m["name"] for m in material_table(config)[0]] if config["composition"]["source"] == "particles" else []
+    built = []
+    for i, spec in enumerate(section["properties"]):
+        try:
+            built.append(build_properties([spec], make_function=make)[0])
+        except (TypeError, ValueError) as err:
+            raise ConfigError(f"config key 'particles.properties[{i}]': {str(err).removeprefix('item 0: ')}") from None
+        columns.append(built[-1].column)
+    for i, prop in enumerate(built):
+        missing = [c for c in prop.requires() if c not in columns]
+        if missing:
+            raise ConfigError(f"config key 'particles.properties[{i}]': {prop.column!r} needs the particle property "
+                              f"{missing[0]!r}; add it to particles.properties")
+    repeated = sorted({c for c in columns if columns.count(c) > 1})
+    if repeated:
+        raise ConfigError(f"config key 'particles.properties': more than one property (or material) named {repeated[0]!r}"
+                          "; give properties distinct labels")
+    pop = section["population"]
+    try:
+        PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"])
+    except ValueError as err:
+        raise ConfigError(f"config key 'particles.population': {err}") from None
+    for name in section["output"]["properties"] or ():
+        if name not in columns:
+            raise ConfigError(f"config key 'particles.output.properties': {name!r} is not carried; carried: {columns}")
+
+
+def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:
+    """Parse ``--set key.sub=value`` strings into (path, value) with YAML-typed values."""
+    parsed = []
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"--set {short_repr(item)}: expected key.sub=value")
+        key, text = item.split("=", 1)
+        path = [p for p in key.strip().split(".") if p]
+        if not path:
+            raise ConfigError(f"--set {short_repr(item)}: empty key")
+        try:
+            value = safe_load(text, f"--set {key_text(key.strip())}")
+        except yaml.YAMLError:
+            value = text
+        parsed.append((path, value))
+    return parsed
+
+
+def _apply_override(document: dict[str, Any], path: list[str], value: Any) -> None:
+    node = document
+    for i, part in enumerate(path[:-1]):
+        child = node.get(part)
+        if child is None:
+            child = node[part] = {}
+        if not isinstance(child, dict):
+            raise ConfigError(f"--set {'.'.join(path)}: '{'.'.join(path[:i + 1])}' is not a section")
+        node = child
+    node[path[-1]] = value
+
+
+def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, document: dict | None = None) -> dict[str, Any]:
+    """Read, override and validate a run configuration.
+
+    Args:
+        path: YAML file (or None when ``document`` is given).
+        overrides: ``key.sub=value`` strings applied on top of the file.
+        document: An already parsed document to use instead of the file.
+
+    Returns:
+        The fully resolved configuration (every key present, defaults filled in).
+
+    Raises:
+        ConfigError: with a one-line message naming the key.
+    """
+    try:
+        return _load(path, overrides, document)
+    except RecursionError:  # the sizes are bounded; this is the last guard
+        raise ConfigError("config: nested too deeply to check") from None
+    except MemoryError:
+        raise ConfigError("config: too large to check") from None
+
+
+def _load(path: str | Path | None, overrides: Iterable[str], document: dict | None) -> dict[str, Any]:
+    if document is None:
+        if path is None:
+            raise ConfigError("no configuration file given")
+        p = Path(path)
+        document = read_document(p)
+        document = {} if document is None else document
+        if not isinstance(document, dict):
+            raise ConfigError(f"config file '{p}': expected a mapping at the top level")
+    check_document_shape(document)
+    document = copy.deepcopy(document)
+    for key_path, value in parse_overrides(overrides):
+        _apply_override(document, key_path, value)
+    check_document_shape(document)
+    config = validate(SCHEMA, document)
+    _resolve_boundaries(config, document)
+    _check_consistency(config)
+    return config
+
+
+def dump_config(config: dict[str, Any]) -> str:
+    """The resolved config as YAML text (written to the output folder as config.yaml)."""
+    return yaml.safe_dump(config, sort_keys=False, default_flow_style=None)

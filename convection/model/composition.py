@@ -1,0 +1,198 @@
+"""Composition sources: where the material fields that buoyancy and viscosity need come from.
+
+One source per model, chosen by name from :data:`COMPOSITION_SOURCES`:
+
+- ``static``: each material's fraction interpolated from its initial region, then kept fixed
+  (carried to every new mesh by interpolation);
+- ``field``: each fraction is a continuous P(k) field advected with the flow by the SUPG/BDF2
+  transport solver with zero diffusivity and no heating (:class:`convection.solvers.transport.TransportSolver`);
+- ``particles``: each fraction is a particle property (set from the initial region at creation)
+  averaged per cell by the particle manager's interpolator (:class:`particles.manager.ParticleManager`).
+
+A source has ``fields`` (one Function per material, on the current mesh), ``advance(u, dt)`` for
+one time step with the advecting velocity ``u`` (already extrapolated to the step's end), and
+``to_mesh(mesh, transfer)`` for a change of mesh. All methods are collective.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, ClassVar, Protocol
+
+import numpy as np
+
+import dolfinx.fem
+import dolfinx.mesh
+
+from convection.physics.approximation import BoussinesqApproximation
+from convection.physics.materials import Materials
+from convection.solvers.transport import TransportSolver
+from fembase.dolfinx_compat import function_space
+from particles.manager import ParticleManager
+from particles.properties import InitialComposition
+
+__all__ = ["COMPOSITION_SOURCES", "CompositionSource", "FieldComposition", "ParticleComposition",
+           "StaticComposition", "Transfer", "composition_space", "particle_properties"]
+
+Transfer = Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]
+"""``transfer(source_on_old_mesh, target_on_new_mesh)`` fills the target (collective)."""
+
+
+class CompositionSource(Protocol):
+    """Gives the material fields; see the module docstring."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    materials: Materials
+
+    @property
+    def fields(self) -> tuple[dolfinx.fem.Function, ...]: ...
+
+    def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None: ...
+
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None: ...
+
+    def destroy(self) -> None: ...
+
+
+def composition_space(mesh: dolfinx.mesh.Mesh, degree: int, /) -> dolfinx.fem.FunctionSpace:
+    """DG0 for degree 0, else continuous Lagrange of that degree."""
+    return function_space(mesh, "DG", 0) if degree == 0 else function_space(mesh, "Lagrange", degree)
+
+
+class StaticComposition:
+    """Fractions interpolated from the initial regions and kept fixed.
+
+    Args:
+        mesh: The mesh.
+        materials: The materials.
+        degree: 0 (DG0) or a Lagrange degree.
+    """
+
+    name: ClassVar[str] = "static"
+    description: ClassVar[str] = "fractions set from the initial regions and kept fixed"
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, materials: Materials, /, *, degree: int = 0) -> None:
+        self.materials = materials
+        self.degree = degree
+        self._fields = self._new_fields(mesh)
+        for f, material in zip(self._fields, materials.materials):
+            f.interpolate(material.initial)
+            f.x.scatter_forward()
+
+    def _new_fields(self, mesh: dolfinx.mesh.Mesh) -> tuple[dolfinx.fem.Function, ...]:
+        space = composition_space(mesh, self.degree)
+        return tuple(dolfinx.fem.Function(space, name=name) for name in self.materials.names)
+
+    @property
+    def fields(self) -> tuple[dolfinx.fem.Function, ...]:
+        return self._fields
+
+    def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None:
+        """Nothing moves."""
+
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None:
+        new = self._new_fields(mesh)
+        for old, f in zip(self._fields, new):
+            transfer(old, f)
+        self._fields = new
+
+    def destroy(self) -> None:
+        """Nothing to free."""
+
+
+class FieldComposition:
+    """Fractions advected as continuous fields (one transport solver per material, no diffusion).
+
+    Args:
+        mesh: The mesh.
+        approximation: The physics (the transport solver needs it; no heating is applied).
+        materials: The materials.
+        degree: Lagrange degree (>= 1).
+        stabilisation: ``"supg"`` or ``"none"``.
+    """
+
+    name: ClassVar[str] = "field"
+    description: ClassVar[str] = "fractions advected as continuous fields (SUPG + BDF2, no diffusion)"
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, materials: Materials, /, *,
+                 degree: int = 2, stabilisation: str = "supg") -> None:
+        if degree < 1:
+            raise ValueError("an advected composition field needs degree >= 1")
+        self.materials = materials
+        self.solvers = [
+            TransportSolver(mesh, approximation, bcs={}, degree=degree, stabilisation=stabilisation, diffusivity=0.0,
+                            heating=False, name=m.name, velocity_extrapolation=False)
+            for m in materials.materials
+        ]
+        for solver, material in zip(self.solvers, materials.materials):
+            solver.set_initial(material.initial)
+
+    @property
+    def fields(self) -> tuple[dolfinx.fem.Function, ...]:
+        return tuple(s.T for s in self.solvers)
+
+    def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None:
+        for solver in self.solvers:
+            solver.step(u, dt)
+
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None:
+        old = self.solvers
+        self.solvers = [s.on_mesh(mesh) for s in old]
+        for new, previous in zip(self.solvers, old):
+            new.transfer_from(previous, transfer)
+            previous.destroy()
+
+    def destroy(self) -> None:
+        for solver in self.solvers:
+            solver.destroy()
+
+
+def particle_properties(materials: Materials, gdim: int, /) -> list[InitialComposition]:
+    """One ``initial_composition`` particle property per material (labelled with its name)."""
+
+    def region(material_initial):
+        def at(x: np.ndarray) -> np.ndarray:
+            points = np.zeros((3, x.shape[0]))
+            points[:gdim] = x.T
+            return material_initial(points)
+        return at
+
+    return [InitialComposition(source=region(m.initial), label=m.name) for m in materials.materials]
+
+
+class ParticleComposition:
+    """Fractions averaged per cell from particle properties (one per material).
+
+    The particle manager must carry :func:`particle_properties` of the materials; the model
+    advances and moves the manager, so this source only names its fields.
+
+    Args:
+        manager: The particle manager.
+        materials: The materials.
+    """
+
+    name: ClassVar[str] = "particles"
+    description: ClassVar[str] = "fractions averaged per cell from the particles' material properties"
+
+    def __init__(self, manager: ParticleManager, materials: Materials, /) -> None:
+        self.materials = materials
+        self.manager = manager
+        for name in materials.names:
+            manager.track(name)
+
+    @property
+    def fields(self) -> tuple[dolfinx.fem.Function, ...]:
+        return tuple(self.manager.field(name) for name in self.materials.names)
+
+    def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None:
+        """The model advances the particles (and with them these fields)."""
+
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None:
+        """The model moves the particles (and with them these fields)."""
+
+    def destroy(self) -> None:
+        """Nothing to free."""
+
+
+COMPOSITION_SOURCES: dict[str, type] = {cls.name: cls for cls in (StaticComposition, FieldComposition, ParticleComposition)}
+"""Composition sources by their config name (``composition.source``)."""

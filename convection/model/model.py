@@ -1,0 +1,353 @@
+"""A convection model made of components, advanced one time step at a time.
+
+The model holds the mesh's solvers and the components that act on them, each with one job:
+
+- ``stokes`` (:class:`convection.solvers.stokes.solver.StokesSolver`): velocity and pressure for the current
+  temperature and material fractions; its approximation holds the physics;
+- ``temperature`` (:class:`convection.solvers.transport.TransportSolver`, or None for a fixed ``T = 0``);
+- ``composition`` (a :data:`convection.model.composition.COMPOSITION_SOURCES` entry, or None): the
+  material fractions;
+- ``particles`` (:class:`particles.manager.ParticleManager`, or None);
+- ``adaptivity`` (:class:`convection.adapt.adaptivity.Adaptivity`) and ``balancer``
+  (:class:`convection.adapt.rebalance.Balancer`), each with its own schedule.
+
+One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
+
+1. the velocity at the step's end is extrapolated, ``u* = (1 + w) u^n - w u^{n-1}``
+   (``w = dt / dt_previous``; ``u* = u^n`` on the first step) — the model is the one owner of the
+   previous velocity;
+2. the temperature is advanced with ``u*`` (SUPG, BDF2), then the advected material fields;
+3. the particles move in the velocity linear in time from ``u^n`` to ``u*`` (with their ODE
+   properties), then the population bounds apply and the material fields are re-averaged;
+4. ``t += dt``; the mesh is adapted and/or repartitioned if due (every field, the velocity history
+   and the particles follow);
+5. Stokes is solved for ``u^{n+1}, p^{n+1}``; the particles' properties are refreshed from the new
+   solution and written when due.
+
+A run (:func:`convection.app.loop.run`) is a loop around :meth:`Model.step`; a user can write the same
+loop in Python (see ``demos/``).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+import dolfinx.fem
+import dolfinx.mesh
+
+from convection.adapt.adaptivity import Adaptivity
+from convection.model.composition import CompositionSource
+from convection.physics.materials import material_index
+from convection.model.rheology_fields import PlasticStrainRate, ViscosityField
+from convection.adapt.rebalance import Balancer, RankLoads
+from convection.solvers.stokes.solver import StokesResult, StokesSolver
+from convection.solvers.timestep import cfl_timestep
+from convection.adapt.transfer import PointEvaluator, transfer_function
+from convection.solvers.transport import TransportSolver
+from fembase.geometry import Candidates
+from fembase.timing import Timers
+from particles.manager import ParticleManager
+from particles.properties import PropertyContext
+
+__all__ = ["Model", "StepReport"]
+
+
+class StepReport(NamedTuple):
+    """What happened to the mesh in one step (None: nothing).
+
+    Attributes:
+        adapted: Global cell counts (before, after) if the mesh was adapted.
+        rebalanced: Loads per rank (before, after) if the mesh was repartitioned.
+    """
+
+    adapted: tuple[int, int] | None = None
+    rebalanced: tuple[RankLoads, RankLoads] | None = None
+
+
+class Model:
+    """Boussinesq convection with optional materials, particles, adaptivity and balancing.
+
+    All methods are collective.
+
+    Args:
+        stokes: The flow solver on the model's mesh.
+        temperature: The temperature solver (``velocity_extrapolation=False``: the model passes the
+            extrapolated velocity), or None for ``T = 0``.
+        solve_temperature: False keeps the temperature at its initial value.
+        composition: The material fractions, or None.
+        particles: The particles, or None.
+        adaptivity: Mesh adaptivity, or None.
+        balancer: Load balancing, or None.
+    """
+
+    def __init__(self, stokes: StokesSolver, /, *, temperature: TransportSolver | None = None,
+                 solve_temperature: bool = True, composition: CompositionSource | None = None,
+                 particles: ParticleManager | None = None, adaptivity: Adaptivity | None = None,
+                 balancer: Balancer | None = None) -> None:
+        if temperature is not None and temperature.velocity_extrapolation:
+            raise ValueError("the model extrapolates the velocity itself: build the temperature solver with "
+                             "velocity_extrapolation=False")
+        self.stokes = stokes
+        self.temperature = temperature
+        self.solve_temperature = solve_temperature and temperature is not None
+        self.composition = composition
+        self.particles = particles
+        self.adaptivity = adaptivity
+        self.balancer = balancer
+        self.timers = Timers()
+        self.time = 0.0
+        self.timestep = 0
+        self.dt_previous = 0.0
+        self.u_previous: dolfinx.fem.Function | None = None
+        self.flow_result: StokesResult | None = None
+        self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
+        self._point_evaluator: PointEvaluator | None = None
+        rates = particles.properties.rate_fields if particles is not None else ()
+        unknown = [name for name in rates if name != "plastic_strain_rate"]
+        if unknown:
+            raise ValueError(f"no mesh field {unknown[0]!r} for the particles to integrate; the model provides "
+                             "plastic_strain_rate")
+        self._plastic_rate = PlasticStrainRate() if rates else None
+        self._viscosity_field: ViscosityField | None = None
+
+    # ------------------------------------------------------------------ state
+    @property
+    def mesh(self) -> dolfinx.mesh.Mesh:
+        return self.stokes.mesh
+
+    @property
+    def comm(self):
+        """The current mesh's communicator (ask again after a mesh change: the old one is freed with its mesh)."""
+        return self.stokes.mesh.comm
+
+    @property
+    def num_cells(self) -> int:
+        return int(self.mesh.topology.index_map(self.mesh.topology.dim).size_global)
+
+    @property
+    def T(self) -> dolfinx.fem.Function | None:
+        """The temperature Function (None without a temperature solver)."""
+        return self.temperature.T if self.temperature is not None else None
+
+    @property
+    def fractions(self) -> tuple[dolfinx.fem.Function, ...]:
+        """The material fractions, one Function per material (empty without composition)."""
+        return self.composition.fields if self.composition is not None else ()
+
+    def fields(self) -> dict[str, dolfinx.fem.Function]:
+        """Every field by name, for output: temperature, velocity, pressure, the material fractions
+        and, with two or more materials, ``material`` (:func:`convection.physics.materials.material_index`)."""
+        out = {"velocity": self.stokes.u, "pressure": self.stokes.p}
+        if self.temperature is not None:
+            out = {"temperature": self.temperature.T, **out}
+        for f in self.fractions:
+            out[f.name] = f
+        if len(self.fractions) >= 2:
+            out["material"] = material_index(self.fractions)
+        if self.stokes.approximation.is_nonlinear or self.stokes.approximation.viscosity_law.laws is not None:
+            # The viscosity of the flow (cell midpoints), the particle fields it reads (e.g. plastic
+            # strain) and the plastic strain rate.
+            rheology = self.rheology_fields()
+            if self._viscosity_field is None:
+                self._viscosity_field = ViscosityField()
+            out["viscosity"] = self._viscosity_field.update(self, rheology)
+            out.update(rheology)
+            out.update(self.particle_fields())
+        return out
+
+    def rheology_fields(self) -> dict[str, dolfinx.fem.Function]:
+        """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
+        mesh (the particles' tracked fields, e.g. ``plastic_strain``)."""
+        names = self.stokes.approximation.viscosity_law.field_names
+        if not names:
+            return {}
+        if self.particles is None:
+            raise ValueError(f"the viscosity laws read the fields {list(names)}, which come from particles")
+        return {name: self.particles.field(name) for name in names}
+
+    def particle_fields(self) -> dict[str, dolfinx.fem.Function]:
+        """The mesh fields the particles integrate (``plastic_strain_rate``), as of the last flow
+        solve (computed here after a restart, which restores the flow without solving it;
+        collective then)."""
+        if self._plastic_rate is None:
+            return {}
+        if self._plastic_rate.function is None and self.flow_result is not None:
+            self._plastic_rate.update(self, self.rheology_fields())
+        return {} if self._plastic_rate.function is None else {self._plastic_rate.name: self._plastic_rate.function}
+
+    def property_context(self) -> PropertyContext:
+        """The current fields and time, for particle properties."""
+        return PropertyContext(time=self.time, dt=self.dt_previous, u_new=self.stokes.u, temperature=self.T,
+                               pressure=self.stokes.p)
+
+    # ------------------------------------------------------------------ time stepping
+    def solve_flow(self) -> StokesResult:
+        """Solve Stokes for the current temperature and fractions."""
+        # dt: the step just taken predicts the coming one (for a semi-implicit buoyancy).
+        fields = self.rheology_fields()
+        result = self.stokes.solve(self.T if self.T is not None else 0.0, self.fractions or None,
+                                   dt=self.dt_previous, fields=fields or None)
+        if self._plastic_rate is not None:
+            with self.timers("plastic_strain_rate"):
+                self._plastic_rate.update(self, fields)
+        self.timers.add("stokes_assembly", result.assembly_seconds)
+        self.timers.add("stokes_solve", result.solve_seconds)
+        self.flow_result = result
+        return result
+
+    def start(self) -> StepReport:
+        """Repartition if due at step 0, solve the initial flow, sample it into the particles."""
+        report = StepReport(rebalanced=self._rebalance_if_due())
+        self.solve_flow()
+        if self.particles is not None:
+            self.particles.update(self.property_context(), step=self.timestep)
+        return report
+
+    def cfl_dt(self, cfl: float, /, *, dt_max: float | None = None) -> float:
+        """The largest step with Courant number ``cfl`` for the current velocity (inf if at rest)."""
+        return cfl_timestep(self.stokes.u, cfl, dt_max=dt_max)
+
+    def step(self, dt: float, /) -> StepReport:
+        """Advance the model by ``dt`` (see the module docstring); starts the model if needed."""
+        if self.flow_result is None:
+            self.start()
+        u = self.stokes.u
+        u_end = self._velocity_at_step_end(dt)
+        if self.solve_temperature:
+            with self.timers("temperature"):
+                self.temperature.step(u_end, dt)
+        if self.composition is not None:
+            with self.timers("composition"):
+                self.composition.advance(u_end, dt)
+        if self.particles is not None:
+            self.particles.advance(u, u_end, dt, step=self.timestep, fields=self.particle_fields())
+        self.time += dt
+        self.timestep += 1
+        self.dt_previous = dt
+        adapted = None
+        if self.adaptivity is not None and self.adaptivity.due(self.timestep):
+            adapted = self.adapt()
+        report = StepReport(adapted, self._rebalance_if_due())
+        self.solve_flow()
+        if self.particles is not None:
+            self.particles.update(self.property_context(), step=self.timestep)
+        return report
+
+    def _velocity_at_step_end(self, dt: float) -> dolfinx.fem.Function:
+        """u* (module docstring); then remembers u^n as the previous velocity."""
+        u = self.stokes.u
+        if self.u_previous is None or self.dt_previous <= 0.0:
+            u_end = u
+        else:
+            w = dt / self.dt_previous
+            u_end = dolfinx.fem.Function(u.function_space)
+            u_end.x.array[:] = (1.0 + w) * u.x.array - w * self.u_previous.x.array
+        if self.u_previous is None or self.u_previous.function_space is not u.function_space:
+            self.u_previous = dolfinx.fem.Function(u.function_space)
+        self.u_previous.x.array[:] = u.x.array
+        return u_end
+
+    # ------------------------------------------------------------------ mesh changes
+    def adapt(self) -> tuple[int, int]:
+        """Adapt the mesh once (needs ``adaptivity``) and carry everything to it. Returns the global
+        cell counts before and after."""
+        assert self.adaptivity is not None
+        before = self.num_cells
+        with self.timers("adaptation"):
+            fields = []
+            if "temperature" in self.adaptivity.fields and self.T is not None:
+                fields.append(self.T)
+            if "composition" in self.adaptivity.fields:
+                fields.extend(self.fractions)
+            mesh = self.adaptivity.new_mesh(self.mesh, fields or [self._indicator_fallback()], locator=self._locator())
+            # Both meshes are refined from one base: each particle is looked for first among the
+            # new cells of its old cell's base cell, not with a bounding-box search of the new mesh.
+            swarm = self._swarm()
+            candidates = None if swarm is None else \
+                self.adaptivity.hierarchy.candidates(mesh, self.mesh, swarm.cells)
+        self._move_to(mesh, candidates=candidates, nested=True)
+        return before, self.num_cells
+
+    def _locator(self) -> PointEvaluator:
+        """Point location and evaluation on the current mesh (built once per mesh; shares the
+        particles' cell geometry when they live on it)."""
+        if self._point_evaluator is None or self._point_evaluator.mesh is not self.mesh:
+            swarm = self._swarm()
+            geometry = swarm.geometry if swarm is not None and swarm.mesh is self.mesh else None
+            self._point_evaluator = PointEvaluator(self.mesh, geometry=geometry)
+        return self._point_evaluator
+
+    def _indicator_fallback(self) -> dolfinx.fem.Function:
+        return self.T if self.T is not None else self.stokes.u
+
+    def _swarm(self):
+        return self.particles.swarm if self.particles is not None else None
+
+    def _rebalance_if_due(self) -> tuple[RankLoads, RankLoads] | None:
+        if self.balancer is None or not self.balancer.due(self.timestep, self.mesh, self._swarm()):
+            return None
+        return self.rebalance()
+
+    def rebalance(self) -> tuple[RankLoads, RankLoads]:
+        """Repartition now (needs ``balancer``); returns the loads per rank before and after."""
+        assert self.balancer is not None
+        with self.timers("balancing"):
+            before = self.balancer.loads(self.mesh, self._swarm())
+            mesh = self.balancer.new_mesh(self.mesh, self._swarm())
+        self._move_to(mesh)
+        return before, self.balancer.loads(self.mesh, self._swarm())
+
+    def _move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Candidates | None = None,
+                 nested: bool = False) -> None:
+        """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles
+        (``candidates``: where to look for each particle first, see ``ParticleManager.to_mesh``;
+        ``nested``: both meshes are refined from the adaptivity's base mesh, so the fields' nodes are
+        looked for among the old cells of their base cell first)."""
+        nodes_in = None
+        if nested and self.adaptivity is not None:
+            hierarchy, old_mesh = self.adaptivity.hierarchy, self.mesh
+
+            def nodes_in(cells: npt.NDArray[np.int32]) -> Candidates | None:
+                return hierarchy.candidates(old_mesh, mesh, cells)
+
+        with self.timers("field_transfer"):
+            old = self._transfer_fields(mesh, nodes_in)
+        if self.particles is not None:  # the manager times its own move
+            self.particles.to_mesh(mesh, context=self.property_context(), step=self.timestep, candidates=candidates)
+        for solver in old:
+            if solver is not None:
+                solver.destroy()
+        self._point_evaluator = None  # it holds the old mesh
+        self.mesh_version += 1
+
+    def _transfer_fields(self, mesh: dolfinx.mesh.Mesh,
+                         candidates: Callable[[npt.NDArray[np.int32]], Candidates | None] | None = None) -> list:
+        """New solvers on ``mesh`` with the fields carried over; returns the old solvers
+        (``candidates``: see :func:`convection.adapt.transfer.transfer_function`)."""
+        evaluator = self._locator()
+
+        def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
+            transfer_function(src, dst, evaluator=evaluator, candidates=candidates)
+
+        old = [self.stokes, self.temperature]
+        self.stokes = self.stokes.on_mesh(mesh)
+        self.stokes.transfer_from(old[0], transfer)
+        if self.temperature is not None:
+            self.temperature = self.temperature.on_mesh(mesh)
+            self.temperature.transfer_from(old[1], transfer)
+        if self.u_previous is not None:
+            u_previous = dolfinx.fem.Function(self.stokes.u.function_space)
+            transfer(self.u_previous, u_previous)
+            self.u_previous = u_previous
+        if self.composition is not None:
+            self.composition.to_mesh(mesh, transfer)
+        return old
+
+    def destroy(self) -> None:
+        """Free the solvers' PETSc objects now, on every rank together."""
+        for solver in (self.stokes, self.temperature, self.composition):
+            if solver is not None:
+                solver.destroy()

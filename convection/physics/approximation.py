@@ -1,0 +1,325 @@
+"""Nondimensional Boussinesq approximation: material parameters and constitutive laws.
+
+Equations (``e_up`` the "up" direction, against gravity: ``e_z``, the last coordinate axis, for
+``gravity="vertical"``; ``x / |x|``, away from the origin, for ``gravity="radial"`` in shells)::
+
+    -div(2 eta(T, C) eps(u)) + grad p = (Ra T - sum_i Rb_i C_i) e_up,      div u = 0,
+    dT/dt + u . grad T = lap T + H,
+
+with ``eps(u) = (grad u + grad u^T) / 2``, thermal Rayleigh number ``Ra``, compositional (buoyancy)
+Rayleigh numbers ``Rb_i`` of the materials with volume fractions ``C_i`` (one material: ``Rb C``),
+nondimensional internal heating ``H`` and viscosity ``eta(T, C)`` given by a
+:class:`ViscosityLaw`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import ufl
+
+from convection.physics.rheology import FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
+
+MIXING_RULES: dict[str, str] = {
+    "geometric": "eta = eta_0^(1-C) * eta_1^C",
+    "arithmetic": "eta = (1-C) eta_0 + C eta_1",
+    "harmonic": "1/eta = (1-C)/eta_0 + C/eta_1",
+}
+"""Registry of composition mixing rules (lowercase name -> one-line description)."""
+
+GRAVITY_DIRECTIONS: dict[str, str] = {
+    "vertical": "gravity along -e_z (the last axis): boxes",
+    "radial": "gravity towards the origin, g = -x/|x|: annulus and spherical shell",
+}
+"""Registry of gravity directions (lowercase name -> one-line description)."""
+
+TEMPERATURE_LAWS: dict[str, str] = {
+    "none": "no temperature dependence",
+    "frank_kamenetskii": "eta *= exp(-gamma T)",
+}
+"""Registry of temperature dependences (lowercase name -> one-line description)."""
+
+
+def _check_name(name: str, registry: dict[str, str], what: str) -> None:
+    if name not in registry:
+        raise ValueError(f"Unknown {what} {name!r}; valid names: {sorted(registry)}")
+
+
+def _as_ufl(value: Any) -> Any:
+    """Return ``value`` as something UFL algebra accepts (``None`` -> 0)."""
+    if value is None:
+        return ufl.as_ufl(0.0)
+    if isinstance(value, (int, float)):
+        return ufl.as_ufl(float(value))
+    return value
+
+
+def fractions(C: Any) -> tuple[Any, ...]:
+    """The material fractions ``(C_1, ..., C_n)`` of a composition argument.
+
+    ``C`` is ``None`` (no material: ``()``), one field/expression/number (one material, the
+    two-material case ``C`` / ``1 - C``) or a sequence of them (one per material).
+    """
+    if C is None:
+        return ()
+    if isinstance(C, (list, tuple)):
+        return tuple(C)
+    return (C,)
+
+
+@dataclass(frozen=True)
+class ViscosityLaw:
+    """Viscosity law ``eta(T, C_1, ..., C_n)``.
+
+    The domain holds a background material and ``n`` materials with volume fractions ``C_i``
+    (clipped to ``[0, 1]``; the background has ``C_0 = 1 - sum_i C_i``). Their viscosities are
+    mixed, weighted by volume fraction, by ``mixing``::
+
+        arithmetic:  eta = C_0 eta_0 + sum_i C_i eta_i
+        geometric:   eta = eta_0 exp(sum_i C_i ln(eta_i / eta_0))
+        harmonic:    1 / eta = C_0 / eta_0 + sum_i C_i / eta_i
+
+    With one material this is the classic two-material rule in ``C`` and ``1 - C``.
+
+    Attributes:
+        material_viscosities: ``(eta_0, eta_1, ..., eta_n)``: the background's viscosity, then one
+            per material, in the order of the fractions passed to :meth:`__call__`. ``None``
+            means reference viscosity 1 regardless of ``C``.
+        mixing: name in :data:`MIXING_RULES` (``"geometric"`` | ``"arithmetic"`` | ``"harmonic"``).
+        temperature_law: name in :data:`TEMPERATURE_LAWS` (``"none"`` | ``"frank_kamenetskii"``,
+            which multiplies the viscosity by ``exp(-gamma T)``).
+        gamma: Frank-Kamenetskii parameter (``ln`` of the thermal viscosity contrast).
+        laws: ``(law_0, law_1, ..., law_n)``: a :mod:`convection.physics.rheology` law per material
+            (background first) in place of ``material_viscosities``; the mixing is the same, of
+            the laws' values. None: ``material_viscosities``.
+        top: where the depth is measured from: ``("box", z_top)`` (depth ``z_top - z``, the last
+            coordinate) or ``("shell", r_outer)`` (depth ``r_outer - |x|``).
+    """
+
+    material_viscosities: tuple[float, ...] | None = None
+    mixing: str = "geometric"
+    temperature_law: str = "none"
+    gamma: float = 0.0
+    laws: tuple[ViscosityLawBase, ...] | None = None
+    top: tuple[str, float] = ("box", 1.0)
+
+    def __post_init__(self) -> None:
+        _check_name(self.mixing, MIXING_RULES, "viscosity mixing rule")
+        _check_name(self.temperature_law, TEMPERATURE_LAWS, "viscosity temperature law")
+        if self.material_viscosities is not None:
+            if len(self.material_viscosities) < 2 or min(self.material_viscosities) <= 0.0:
+                raise ValueError("material_viscosities must be at least two positive numbers (eta_0, eta_1, ...)")
+        if self.laws is not None:
+            if self.material_viscosities is not None:
+                raise ValueError("give either material_viscosities or laws, not both")
+            if not self.laws:
+                raise ValueError("laws needs at least the background material's law")
+        if self.top[0] not in ("box", "shell"):
+            raise ValueError(f"top must be ('box', z_top) or ('shell', r_outer), got {self.top}")
+
+    @property
+    def is_nonlinear(self) -> bool:
+        """True when the viscosity depends on the flow (strain rate or pressure)."""
+        return self.laws is not None and any(law.is_nonlinear for law in self.laws)
+
+    @property
+    def field_names(self) -> tuple[str, ...]:
+        """Named mesh fields the laws read (e.g. ``plastic_strain``)."""
+        return laws_field_names(self.laws) if self.laws is not None else ()
+
+    def depth(self, x: Any, /) -> Any:
+        """UFL depth below the top surface at the points ``x`` (``ufl.SpatialCoordinate``)."""
+        kind, level = self.top
+        if kind == "shell":
+            return level - ufl.sqrt(ufl.dot(x, x))
+        return level - x[x.ufl_shape[0] - 1]
+
+    @property
+    def is_constant(self) -> bool:
+        """True when ``eta`` depends on neither ``T`` nor ``C`` (nor on the flow or a field)."""
+        temperature_free = self.temperature_law == "none" or self.gamma == 0.0
+        if self.laws is not None:
+            # Only plain constants are known to be equal (a clipped constant counts as variable).
+            values = {law.eta0 if law.name == "constant" else None for law in self.laws}
+            return None not in values and len(values) == 1 and temperature_free
+        composition_free = (
+            self.material_viscosities is None
+            or len(set(self.material_viscosities)) == 1
+        )
+        temperature_free = self.temperature_law == "none" or self.gamma == 0.0
+        return composition_free and temperature_free
+
+    def __call__(self, T: Any, C: Any, /, *, u: Any = None, p: Any = None,
+                 fields: Mapping[str, Any] | None = None, x: Any = None) -> Any:
+        """UFL expression of the viscosity for temperature ``T`` and composition ``C``
+        (see :func:`fractions`; one fraction per material after the background).
+
+        With :attr:`laws`, also of the velocity ``u`` (its strain rate), the pressure ``p``, the
+        named ``fields`` and the position ``x`` (``ufl.SpatialCoordinate``, for the depth); a law
+        that needs one of them fails without it."""
+        if self.laws is not None:
+            return self._mixed_laws(T, C, u=u, p=p, fields=fields or {}, x=x)
+        if self.material_viscosities is None:
+            eta = ufl.as_ufl(1.0)
+        else:
+            eta0, *etas = (float(v) for v in self.material_viscosities)
+            if all(e == eta0 for e in etas):
+                eta = ufl.as_ufl(eta0)
+            else:
+                cs = fractions(C)
+                if len(cs) != len(etas):
+                    raise ValueError(f"the viscosity law has {len(etas)} material(s), got {len(cs)} fraction(s)")
+                cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
+                background = 1.0 - _sum(cs)
+                if self.mixing == "geometric":
+                    eta = eta0 * ufl.exp(_sum([c * ufl.ln(e / eta0) for c, e in zip(cs, etas)]))
+                elif self.mixing == "arithmetic":
+                    eta = background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
+                else:
+                    eta = 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
+        if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
+            eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
+        return eta
+
+
+    @property
+    def yields(self) -> bool:
+        """True when some material has a visco-plastic law (it can yield)."""
+        return self.laws is not None and any(yield_law(law) is not None for law in self.laws)
+
+    def plastic_strain_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+        """UFL ``eps_II sum_l C_l [eta_yield,l < eta_viscous,l]``: the strain rate where the
+        visco-plastic laws yield (their yield viscosity below the viscous one), weighted by the
+        volume fractions ``C_l`` (background ``C_0 = 1 - sum_i C_i``); what ``plastic_strain``
+        particles integrate."""
+        state = self._state(T, u, p, fields, x)
+        cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in fractions(C)]
+        weights = [1.0 - _sum(cs) if cs else ufl.as_ufl(1.0), *cs]
+        if len(weights) != len(self.laws):
+            raise ValueError(f"the viscosity law has {len(self.laws) - 1} material(s), got {len(cs)} fraction(s)")
+        rate: Any = ufl.as_ufl(0.0)
+        for weight, law in zip(weights, self.laws):
+            vp = yield_law(law)
+            if vp is not None:
+                rate = rate + weight * ufl.conditional(ufl.lt(vp.plastic(state), vp.viscous(state)), 1.0, 0.0)
+        return rate * strain_rate_measure(state, "second_invariant", 0.0)
+
+    def _state(self, T: Any, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> FlowState:
+        if x is None:
+            raise ValueError("viscosity laws need the spatial coordinate x (for the depth)")
+        return FlowState(T=_as_ufl(T), strain_rate=ufl.sym(ufl.grad(u)) if u is not None else None,
+                         pressure=p, depth=self.depth(x), fields=fields, gdim=x.ufl_shape[0])
+
+    def _mixed_laws(self, T: Any, C: Any, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+        state = self._state(T, u, p, fields, x)
+        law0, *others = self.laws
+        eta0 = law0(state)
+        if others:
+            cs = fractions(C)
+            if len(cs) != len(others):
+                raise ValueError(f"the viscosity law has {len(others)} material(s), got {len(cs)} fraction(s)")
+            etas = [law(state) for law in others]
+            cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
+            background = 1.0 - _sum(cs)
+            if self.mixing == "geometric":
+                eta = ufl.exp(background * ufl.ln(eta0) + _sum([c * ufl.ln(e) for c, e in zip(cs, etas)]))
+            elif self.mixing == "arithmetic":
+                eta = background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
+            else:
+                eta = 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
+        else:
+            eta = eta0
+        if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
+            eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
+        return eta
+
+
+def _sum(terms: list[Any]) -> Any:
+    """``terms[0] + terms[1] + ...`` (left to right, so one term is returned as it is)."""
+    total = terms[0]
+    for term in terms[1:]:
+        total = total + term
+    return total
+
+
+class BoussinesqApproximation:
+    """Boussinesq approximation parameters (see the module docstring for the equations).
+
+    Args:
+        Ra: thermal Rayleigh number.
+        Rb: compositional Rayleigh number (buoyancy ``-Rb C e_z``), or one per material
+            (buoyancy ``-sum_i Rb_i C_i e_z``) in the order of the fractions (:func:`fractions`).
+        H: nondimensional internal heating rate.
+        viscosity: viscosity law ``eta(T, C)``.
+        gravity: name in :data:`GRAVITY_DIRECTIONS` (``"vertical"`` | ``"radial"``).
+    """
+
+    def __init__(
+        self,
+        /,
+        *,
+        Ra: float,
+        Rb: float | tuple[float, ...] = 0.0,
+        H: float = 0.0,
+        viscosity: ViscosityLaw = ViscosityLaw(),
+        gravity: str = "vertical",
+    ) -> None:
+        _check_name(gravity, GRAVITY_DIRECTIONS, "gravity direction")
+        self.gravity = gravity
+        self.Ra = float(Ra)
+        self.Rb: float | tuple[float, ...] = tuple(float(r) for r in Rb) if isinstance(Rb, (list, tuple)) else float(Rb)
+        self.H = float(H)
+        self.viscosity_law = viscosity
+
+    @property
+    def is_variable_viscosity(self) -> bool:
+        """True when the viscosity depends on ``T`` or ``C``."""
+        return not self.viscosity_law.is_constant
+
+    @property
+    def is_nonlinear(self) -> bool:
+        """True when the viscosity depends on the flow: the Stokes problem is nonlinear."""
+        return self.viscosity_law.is_nonlinear
+
+    def viscosity(self, T: Any, C: Any, /, **flow: Any) -> Any:
+        """UFL expression of ``eta(T, C)`` (``T``, ``C``: Functions, UFL expressions or numbers);
+        ``flow``: ``u``, ``p``, ``fields``, ``x`` for :mod:`convection.physics.rheology` laws (see
+        :meth:`ViscosityLaw.__call__`)."""
+        return self.viscosity_law(T, C, **flow)
+
+    def up(self, x: Any, /) -> Any:
+        """UFL unit vector ``e_up`` against gravity at the points ``x`` (``ufl.SpatialCoordinate``)."""
+        gdim = x.ufl_shape[0]
+        if self.gravity == "radial":
+            return x / ufl.sqrt(ufl.dot(x, x))
+        return ufl.as_vector([0.0] * (gdim - 1) + [1.0])
+
+    def density(self, T: Any, C: Any) -> Any:
+        """UFL scalar ``Ra T - sum_i Rb_i C_i``, the buoyancy's magnitude along ``e_up`` (``C = None`` -> 0)."""
+        magnitude = self.Ra * _as_ufl(T)
+        cs = fractions(C)
+        rbs = self.Rb if isinstance(self.Rb, tuple) else (self.Rb,) * len(cs)
+        if cs and len(rbs) != len(cs):
+            raise ValueError(f"{len(rbs)} compositional Rayleigh number(s) for {len(cs)} material fraction(s)")
+        for rb, c in zip(rbs, cs):
+            if rb != 0.0:
+                magnitude = magnitude - rb * _as_ufl(c)
+        return magnitude
+
+    def buoyancy(self, T: Any, C: Any, gdim: int, /, *, x: Any = None) -> Any:
+        """UFL vector expression ``(Ra T - sum_i Rb_i C_i) e_up`` of length ``gdim`` (``C = None`` -> 0).
+
+        ``x`` (``ufl.SpatialCoordinate`` of the mesh) is needed for radial gravity."""
+        magnitude = self.density(T, C)
+        if self.gravity == "radial":
+            if x is None:
+                raise ValueError("radial gravity needs the spatial coordinate x")
+            return magnitude * self.up(x)
+        return ufl.as_vector([0.0] * (gdim - 1) + [magnitude])
+
+    def __repr__(self) -> str:
+        return (
+            f"BoussinesqApproximation(Ra={self.Ra}, Rb={self.Rb}, H={self.H}, "
+            f"viscosity={self.viscosity_law}" + (f", gravity={self.gravity!r})" if self.gravity != "vertical" else ")")
+        )

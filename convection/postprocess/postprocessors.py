@@ -1,0 +1,448 @@
+"""Postprocessors: the statistics of a run, each declaring its own columns.
+
+Every postprocessor is registered under a name in :data:`POSTPROCESSORS`; ``output.statistics``
+lists the ones a run uses (default: every one that applies to the model). ``statistics.csv`` has
+the union of their columns, in registry order:
+
+=============== =======================================================================
+name            columns
+=============== =======================================================================
+``time``        step, time, dt
+``velocity``    vrms = sqrt(int |u|^2 dx / |Omega|)
+``nusselt``     nusselt (top), nusselt_bottom: consistent boundary-flux Nusselt numbers (shells:
+                outer and inner surface)
+``temperature`` T_mean (volume average), T_min, T_max (nodal)
+``mesh``        cells (global)
+``stokes``      stokes_iterations
+``particles``   n_particles, n_lost (cumulative), n_added, n_removed (population control),
+                ppc_min, ppc_mean, ppc_max (particles per cell)
+``load``        cell_imbalance, particle_imbalance (max/mean over ranks)
+``entrainment`` entrainment: volume of a material above a height / its initial volume
+                (one column per material, ``entrainment_<name>``, for ``all``)
+``wall_time``   wall_time (seconds since the run started)
+``nonlinear``   nonlinear_iterations, nonlinear_residual (relative) of the last Stokes solve
+``rheology``    eta_min, eta_max: the viscosity's extremes at the velocity nodes of every cell
+``energy``      W = <T u . e_up>, Phi_over_Ra = <2 eta eps(u):eps(u)> / Ra (volume averages) and
+                delta = |W - Phi/Ra| / max(W, Phi/Ra): the energy balance of steady convection
+``surface``     vrms_surface = sqrt(int_top |u|^2 ds / |top|), vmax_surface (largest nodal |u| on
+                the top; shells: the outer surface)
+=============== =======================================================================
+
+The last four apply by default to a model whose viscosity depends on the flow (the others may
+ask for them in ``output.statistics``).
+
+A postprocessor is built by ``create(model, options)`` (None when it does not apply, e.g.
+``nusselt`` without a temperature equation) and called with the model after every step; all
+calls are collective.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, ClassVar, Mapping, Protocol
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+import dolfinx.fem
+
+from convection.geometry.boundary import boundary_measure, is_shell, locate_side_dofs
+from fembase.dolfinx_compat import evaluate_expression, interpolation_points
+from convection.postprocess.diagnostics import nusselt
+from convection.model.model import Model
+from convection.adapt.rebalance import RankLoads
+from convection.model.rheology_fields import flow_viscosity
+
+__all__ = ["POSTPROCESSORS", "Postprocessor", "create_postprocessors", "describe_postprocessors"]
+
+
+class Postprocessor(Protocol):
+    """Computes some statistics columns of a model (collective)."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    columns: tuple[str, ...]
+
+    def __call__(self, model: Model, /) -> dict[str, float]: ...
+
+
+def _integral(model: Model, form: Any) -> float:
+    return float(model.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM))
+
+
+class _Forms:
+    """Compiled forms of one postprocessor, rebuilt when the model's mesh changes."""
+
+    def __init__(self) -> None:
+        self._version: int | None = None
+        self._forms: dict[str, Any] = {}
+
+    def get(self, model: Model, build: Any) -> dict[str, Any]:
+        if self._version != model.mesh_version or not self._forms:
+            self._forms = build()
+            self._version = model.mesh_version
+        return self._forms
+
+
+class _Column:
+    """Default construction: no options; applies to every model unless :meth:`applies` says otherwise."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    columns: tuple[str, ...]
+
+    @classmethod
+    def applies(cls, model: Model) -> bool:
+        return True
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        """Whether a run without ``output.statistics`` gets these columns."""
+        return True
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> Any:
+        return cls() if cls.applies(model) else None
+
+
+class TimeColumns(_Column):
+    name: ClassVar[str] = "time"
+    description: ClassVar[str] = "step number, time and the last step length"
+    columns = ("step", "time", "dt")
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        return {"step": model.timestep, "time": model.time, "dt": model.dt_previous}
+
+
+class Velocity(_Column):
+    name: ClassVar[str] = "velocity"
+    description: ClassVar[str] = "root-mean-square velocity"
+    columns = ("vrms",)
+
+    def __init__(self) -> None:
+        self._forms = _Forms()
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        u = model.stokes.u
+        forms = self._forms.get(model, lambda: {
+            "u2": dolfinx.fem.form(ufl.inner(u, u) * ufl.dx),
+            "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * ufl.dx(domain=model.mesh)),
+        })
+        return {"vrms": float(np.sqrt(_integral(model, forms["u2"]) / _integral(model, forms["volume"])))}
+
+
+class Nusselt(_Column):
+    name: ClassVar[str] = "nusselt"
+    description: ClassVar[str] = ("Nusselt numbers at the top and bottom (shells: outer and inner surface) from the "
+                                  "consistent boundary flux")
+    columns = ("nusselt", "nusselt_bottom")
+
+    @classmethod
+    def applies(cls, model: Model) -> bool:
+        return model.solve_temperature
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        assert model.temperature is not None
+        top, bottom = ("outer", "inner") if is_shell(model.temperature.bcs) else ("top", "bottom")
+        return {"nusselt": nusselt(model.temperature, model.stokes.u, top),
+                "nusselt_bottom": nusselt(model.temperature, model.stokes.u, bottom)}
+
+
+class TemperatureStatistics(_Column):
+    name: ClassVar[str] = "temperature"
+    description: ClassVar[str] = "volume-mean, minimum and maximum temperature"
+    columns = ("T_mean", "T_min", "T_max")
+
+    def __init__(self) -> None:
+        self._forms = _Forms()
+
+    @classmethod
+    def applies(cls, model: Model) -> bool:
+        return model.T is not None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        T = model.T
+        forms = self._forms.get(model, lambda: {
+            "T": dolfinx.fem.form(T * ufl.dx),
+            "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * ufl.dx(domain=model.mesh)),
+        })
+        comm = model.mesh.comm
+        owned = T.x.array[: T.function_space.dofmap.index_map.size_local]
+        lo = comm.allreduce(float(owned.min()) if owned.size else np.inf, op=MPI.MIN)
+        hi = comm.allreduce(float(owned.max()) if owned.size else -np.inf, op=MPI.MAX)
+        return {"T_mean": _integral(model, forms["T"]) / _integral(model, forms["volume"]), "T_min": lo, "T_max": hi}
+
+
+class MeshStatistics(_Column):
+    name: ClassVar[str] = "mesh"
+    description: ClassVar[str] = "global number of cells"
+    columns = ("cells",)
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        return {"cells": model.num_cells}
+
+
+class StokesStatistics(_Column):
+    name: ClassVar[str] = "stokes"
+    description: ClassVar[str] = "iterations of the last Stokes solve"
+    columns = ("stokes_iterations",)
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        return {"stokes_iterations": model.flow_result.iterations if model.flow_result else 0}
+
+
+class ParticleStatistics(_Column):
+    name: ClassVar[str] = "particles"
+    description: ClassVar[str] = "particle count, lost/added/removed particles, particles per cell min/mean/max"
+    columns = ("n_particles", "n_lost", "n_added", "n_removed", "ppc_min", "ppc_mean", "ppc_max")
+
+    @classmethod
+    def applies(cls, model: Model) -> bool:
+        return model.particles is not None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        manager = model.particles
+        assert manager is not None
+        lo, mean, hi = manager.particles_per_cell()
+        return {"n_particles": manager.num_particles, "n_lost": manager.lost, "n_added": manager.added,
+                "n_removed": manager.removed, "ppc_min": lo, "ppc_mean": mean, "ppc_max": hi}
+
+
+class LoadStatistics(_Column):
+    name: ClassVar[str] = "load"
+    description: ClassVar[str] = "imbalance (max/mean over ranks) of owned cells and particles"
+    columns = ("cell_imbalance", "particle_imbalance")
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        swarm = model.particles.swarm if model.particles is not None else None
+        loads = RankLoads.measure(model.mesh, swarm, particle_weight=0.0)
+        return {"cell_imbalance": loads.cell_imbalance, "particle_imbalance": loads.particle_imbalance}
+
+
+class Entrainment:
+    """Volume of a material above ``height`` (in shells: outside the radius ``height``) divided by its
+    volume at the first call.
+
+    ``material``: a material name; ``all`` (one column per material); or, with exactly one
+    material, ``dense`` (its fraction C) or ``light`` (the background, 1 - C).
+    """
+
+    name: ClassVar[str] = "entrainment"
+    description: ClassVar[str] = "fraction of a material's initial volume above a height"
+
+    def __init__(self, amounts: dict[str, tuple[int, bool]], height: float) -> None:
+        self.amounts = amounts  # column -> (material index, background instead)
+        self.height = height
+        self.columns = tuple(amounts)
+        self._forms = _Forms()
+        self._initial: dict[str, float] | None = None
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> Entrainment | None:
+        material = options.get("entrainment_material")
+        names = [f.name for f in model.fractions]
+        if material is None or not names:
+            return None
+        if material == "all":
+            amounts = {f"entrainment_{n}": (i, False) for i, n in enumerate(names)}
+        elif material in ("dense", "light"):
+            if len(names) != 1:
+                raise ValueError(f"entrainment material {material!r} needs exactly one material; name one of {names}")
+            amounts = {"entrainment": (0, material == "light")}
+        elif material in names:
+            amounts = {"entrainment": (names.index(material), False)}
+        else:
+            raise ValueError(f"unknown entrainment material {material!r}; valid: {['all', 'dense', 'light', *names]}")
+        return cls(amounts, float(options.get("entrainment_height", 0.2)))
+
+    def _build(self, model: Model) -> dict[str, Any]:
+        x = ufl.SpatialCoordinate(model.mesh)
+        # The height is the radius in shells (radial gravity), else the last coordinate.
+        z = ufl.sqrt(ufl.dot(x, x)) if model.stokes.approximation.gravity == "radial" else x[model.mesh.geometry.dim - 1]
+        forms = {}
+        for column, (i, light) in self.amounts.items():
+            C = model.fractions[i]
+            amount = 1.0 - C if light else C
+            forms[column] = (dolfinx.fem.form(ufl.conditional(ufl.gt(z, self.height), amount, 0.0) * ufl.dx),
+                             dolfinx.fem.form(amount * ufl.dx))
+        return forms
+
+    def state(self) -> dict[str, float] | None:
+        """The initial volumes (what a checkpoint keeps)."""
+        return self._initial
+
+    def restore(self, state: dict[str, float] | None) -> None:
+        self._initial = state
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        forms = self._forms.get(model, lambda: self._build(model))
+        if self._initial is None:
+            self._initial = {column: _integral(model, total) for column, (_, total) in forms.items()}
+        return {column: _integral(model, above) / self._initial[column] for column, (above, _) in forms.items()}
+
+
+class WallTime:
+    name: ClassVar[str] = "wall_time"
+    description: ClassVar[str] = "wall seconds since the run started"
+    columns = ("wall_time",)
+
+    def __init__(self, start: float) -> None:
+        self.start = start
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> WallTime:
+        return cls(float(options.get("start", time.monotonic())))
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        return {"wall_time": time.monotonic() - self.start}
+
+
+class _Rheology(_Column):
+    """Columns for models whose viscosity depends on the flow (by default there only)."""
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return model.stokes.is_nonlinear
+
+
+class NonlinearStatistics(_Rheology):
+    name: ClassVar[str] = "nonlinear"
+    description: ClassVar[str] = "iterations and final relative residual of the last nonlinear Stokes solve"
+    columns = ("nonlinear_iterations", "nonlinear_residual")
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        result = model.flow_result.nonlinear if model.flow_result is not None else None
+        if result is None:
+            return {"nonlinear_iterations": 0, "nonlinear_residual": 0.0}
+        return {"nonlinear_iterations": result.iterations, "nonlinear_residual": result.residual}
+
+
+class ViscosityRange(_Rheology):
+    name: ClassVar[str] = "rheology"
+    description: ClassVar[str] = "smallest and largest viscosity at the velocity nodes of every cell"
+    columns = ("eta_min", "eta_max")
+
+    def __init__(self) -> None:
+        self._version: int | None = None
+        self._expression: Any = None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        if self._version != model.mesh_version or self._expression is None:
+            points = interpolation_points(model.stokes.V)
+            self._expression = dolfinx.fem.Expression(flow_viscosity(model), points)
+            self._version = model.mesh_version
+        mesh = model.mesh
+        owned = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
+        values = np.asarray(evaluate_expression(self._expression, mesh, owned))
+        lo = float(values.min()) if values.size else np.inf
+        hi = float(values.max()) if values.size else -np.inf
+        return {"eta_min": mesh.comm.allreduce(lo, op=MPI.MIN), "eta_max": mesh.comm.allreduce(hi, op=MPI.MAX)}
+
+
+class EnergyBalance(_Rheology):
+    name: ClassVar[str] = "energy"
+    description: ClassVar[str] = "work against gravity W, dissipation Phi/Ra and their balance delta (volume averages)"
+    columns = ("W", "Phi_over_Ra", "delta")
+
+    def __init__(self) -> None:
+        self._forms = _Forms()
+
+    @classmethod
+    def applies(cls, model: Model) -> bool:
+        return model.T is not None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        stokes = model.stokes
+
+        def build() -> dict[str, Any]:
+            u = stokes.u
+            x = ufl.SpatialCoordinate(model.mesh)
+            up = stokes.approximation.up(x)
+            eps = ufl.sym(ufl.grad(u))
+            dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 3 * stokes.degree})
+            return {"W": dolfinx.fem.form(model.T * ufl.dot(u, up) * dx),
+                    "Phi": dolfinx.fem.form(2.0 * flow_viscosity(model) * ufl.inner(eps, eps) * dx),
+                    "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
+        forms = self._forms.get(model, build)
+        volume = _integral(model, forms["volume"])
+        W = _integral(model, forms["W"]) / volume
+        ra = stokes.approximation.Ra
+        phi = _integral(model, forms["Phi"]) / volume / ra if ra else float("nan")
+        scale = max(abs(W), abs(phi))
+        return {"W": W, "Phi_over_Ra": phi, "delta": abs(W - phi) / scale if scale > 0 else 0.0}
+
+
+class SurfaceVelocity(_Rheology):
+    name: ClassVar[str] = "surface"
+    description: ClassVar[str] = "rms and largest nodal speed on the top (shells: outer) surface"
+    columns = ("vrms_surface", "vmax_surface")
+
+    def __init__(self) -> None:
+        self._forms = _Forms()
+        self._dofs: Any = None
+        self._version: int | None = None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        stokes = model.stokes
+        top = "outer" if is_shell(stokes.bcs) else "top"
+
+        def build() -> dict[str, Any]:
+            ds = boundary_measure(model.mesh, top)
+            u = stokes.u
+            return {"u2": dolfinx.fem.form(ufl.inner(u, u) * ds),
+                    "area": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * ds)}
+        forms = self._forms.get(model, build)
+        if self._version != model.mesh_version or self._dofs is None:
+            V0, to_parent = stokes.V.sub(0).collapse()
+            gdim = model.mesh.geometry.dim
+            # the nodes (blocked dofs of V) on the surface: parent indices are unrolled, node * gdim + 0
+            self._dofs = np.asarray(to_parent)[np.asarray(locate_side_dofs(V0, top))] // gdim
+            self._version = model.mesh_version
+        gdim = model.mesh.geometry.dim
+        n_owned = stokes.V.dofmap.index_map.size_local
+        nodes = np.asarray(self._dofs)
+        nodes = nodes[nodes < n_owned]
+        values = stokes.u.x.array.reshape(-1, gdim)[nodes]
+        local = float(np.sqrt((values ** 2).sum(axis=1)).max()) if len(nodes) else 0.0
+        rms = np.sqrt(_integral(model, forms["u2"]) / _integral(model, forms["area"]))
+        return {"vrms_surface": float(rms), "vmax_surface": model.mesh.comm.allreduce(local, op=MPI.MAX)}
+
+
+POSTPROCESSORS: dict[str, type] = {
+    cls.name: cls for cls in (TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics,
+                              ParticleStatistics, LoadStatistics, Entrainment, WallTime, NonlinearStatistics,
+                              ViscosityRange, EnergyBalance, SurfaceVelocity)
+}
+"""Postprocessor classes by their config name (``output.statistics``), in column order."""
+
+
+def describe_postprocessors() -> dict[str, str]:
+    """One-line description of every postprocessor, by name."""
+    return {name: cls.description for name, cls in POSTPROCESSORS.items()}
+
+
+def create_postprocessors(model: Model, names: list[str] | None = None, /, **options: Any) -> list[Postprocessor]:
+    """The postprocessors ``names`` (default: all that apply to ``model``), in registry order.
+
+    A name asked for explicitly that does not apply to the model is an error.
+
+    Raises:
+        ValueError: Unknown name (listing the valid ones) or one that does not apply.
+    """
+    if names is not None:
+        unknown = [n for n in names if n not in POSTPROCESSORS]
+        if unknown:
+            raise ValueError(f"unknown postprocessor {unknown[0]!r}; valid: {list(POSTPROCESSORS)}")
+    out = []
+    for name, cls in POSTPROCESSORS.items():
+        if names is not None and name not in names:
+            continue
+        if names is None and hasattr(cls, "by_default") and not cls.by_default(model):
+            continue
+        pp = cls.create(model, options)
+        if pp is None and names is not None:
+            raise ValueError(f"postprocessor {name!r} does not apply to this model")
+        if pp is not None:
+            out.append(pp)
+    return out

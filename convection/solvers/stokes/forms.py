@@ -1,0 +1,189 @@
+"""Taylor-Hood discretisation of the Boussinesq Stokes problem: spaces, strong conditions, forms.
+
+Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in Q``)::
+
+    (2 eta eps(u), eps(v)) - (p, div v) = ((Ra T - Rb C) e_z, v)
+                            -(q, div u) = 0
+
+on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1), ``eta = eta(T, C)`` and the
+body force from :class:`~convection.physics.approximation.BoussinesqApproximation`. With a variable
+viscosity the cell integrals use a quadrature of degree ``3 k`` (UFL's estimate for ``exp`` or
+quotients would be far higher). Strong conditions (:func:`convection.geometry.boundary.velocity_dirichlet_bcs`)
+fix the velocity on the box sides and the no-slip or prescribed shell boundaries; free slip on a
+curved shell boundary adds the symmetric Nitsche terms of
+:func:`convection.geometry.boundary.nitsche_free_slip` (penalty ``nitsche_penalty eta / h``) to the three
+blocks.
+
+Besides the operator ``K = [[A, B^T], [B, 0]]`` and the right-hand side, :meth:`StokesDiscretisation.forms`
+builds what a linear solver asks for:
+
+- a zero pressure-pressure block (``pressure_block=True``), to hold the diagonal of a pinned
+  pressure dof;
+- the preconditioning matrix ``[[A, 0], [0, -M_p / eta]]`` (``preconditioner=True``): the
+  viscosity-scaled pressure mass matrix approximates the Schur complement ``S = -B A^-1 B^T``
+  (PETSc's sign);
+- with a semi-implicit buoyancy (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`), its
+  velocity-velocity term on its own (added to ``A`` every solve) and the whole operator
+  ``K + term`` that lifts the boundary values into the right-hand side.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import dolfinx
+import numpy as np
+import ufl
+from petsc4py import PETSc
+
+from convection.physics.approximation import BoussinesqApproximation
+from convection.geometry.boundary import VelocityBC, free_slip_boundaries, nitsche_free_slip, velocity_dirichlet_bcs
+from convection.physics.buoyancy import SemiImplicitBuoyancy
+from fembase.dolfinx_compat import function_space
+
+__all__ = ["StokesDiscretisation", "StokesForms"]
+
+
+
+class StokesForms(NamedTuple):
+    """Compiled forms of one Stokes problem (fields ``T``, ``C`` fixed as coefficients).
+
+    Attributes:
+        a: the operator ``K``, a 2 x 2 block form (velocity, pressure).
+        L: the right-hand side, a block form (momentum, continuity).
+        a_lift: the operator that lifts the boundary values into ``L``: ``a``, or ``K + term`` with
+            a semi-implicit buoyancy.
+        a_pc: the preconditioning matrix ``[[A, 0], [0, -M_p / eta]]``, or None.
+        a_si: the semi-implicit buoyancy term (a velocity-velocity form), or None.
+    """
+
+    a: Any
+    L: Any
+    a_lift: Any
+    a_pc: Any = None
+    a_si: Any = None
+
+
+class StokesDiscretisation:
+    """Taylor-Hood spaces, the strong velocity conditions and the forms (see the module docstring).
+
+    Args:
+        mesh: the mesh (box or shell, 2D or 3D).
+        approximation: physics parameters, viscosity law and body force.
+        bcs: velocity condition per side name (:mod:`convection.geometry.boundary`).
+        degree: velocity degree ``k >= 2``; the pressure has degree ``k - 1``.
+        nitsche_penalty: penalty factor of the weak free-slip condition on curved boundaries.
+
+    Attributes:
+        V: the vector P(degree) velocity space.
+        Q: the P(degree - 1) pressure space.
+        dirichlet: the strong velocity conditions (DirichletBC list, on ``V`` or its sub-spaces).
+    """
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
+                 bcs: dict[str, VelocityBC], degree: int, nitsche_penalty: float) -> None:
+        if degree < 2:
+            raise ValueError("Taylor-Hood needs velocity degree >= 2")
+        self.mesh = mesh
+        self.approximation = approximation
+        self.bcs = bcs
+        self.degree = degree
+        self.nitsche_penalty = nitsche_penalty
+        cell = mesh.ufl_cell()
+        self.V = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
+        self.Q = function_space(mesh, "Lagrange", degree - 1)
+        self.dirichlet = velocity_dirichlet_bcs(self.V, bcs)
+
+    def viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
+        """The viscosity (UFL) for ``T``, ``C`` and, for :mod:`convection.physics.rheology` laws, the flow:
+        ``flow = {"u": ..., "p": ..., "fields": {...}}`` (the current iterate's Functions)."""
+        return self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **(flow or {}))
+
+    def _dx(self) -> Any:
+        # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
+        metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
+        return ufl.dx(domain=self.mesh, metadata=metadata), metadata
+
+    def nonlinear_forms(self, T: Any, C: Any, u: dolfinx.fem.Function, p: dolfinx.fem.Function, /, *,
+                        fields: dict[str, Any] | None, pressure_block: bool) -> tuple[Any, Any]:
+        """The residual ``F(u, p)`` (a block linear form in ``(v, q)``) and its Jacobian (UFL's
+        derivative with respect to ``u`` and ``p``, a 2 x 2 block form) for Newton's method, with
+        the viscosity evaluated at the Functions ``u``, ``p`` (the iterate). Collective (compiles).
+
+        ``F = a(eta(u, p); (u, p), (v, q)) - L(v, q)``: the Picard operator of :meth:`forms`
+        applied to the iterate, so both methods solve the same equations."""
+        v, q = ufl.TestFunction(self.V), ufl.TestFunction(self.Q)
+        du, dp = ufl.TrialFunction(self.V), ufl.TrialFunction(self.Q)
+        eta = self.viscosity(T, C, {"u": u, "p": p, "fields": fields or {}})
+        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
+        dx, metadata = self._dx()
+        F_u = (2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
+               - ufl.inner(p, ufl.div(v)) * dx - ufl.inner(f, v) * dx)
+        F_p = -ufl.inner(ufl.div(u), q) * dx
+        curved = free_slip_boundaries(self.bcs)
+        if curved:
+            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+                                        metadata=metadata)
+            F_u = F_u + nitsche.a_uu + nitsche.a_up
+            F_p = F_p + nitsche.a_pu
+        J = [[ufl.derivative(F_u, u, du), ufl.derivative(F_u, p, dp)],
+             [ufl.derivative(F_p, u, du), None]]
+        if pressure_block:
+            zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
+            J[1][1] = zero * ufl.inner(dp, q) * dx
+        return dolfinx.fem.form([F_u, F_p]), dolfinx.fem.form(J)
+
+    def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool,
+              semi_implicit: SemiImplicitBuoyancy | None = None, flow: dict[str, Any] | None = None) -> StokesForms:
+        """The forms for temperature ``T`` and composition ``C`` (see
+        :meth:`convection.solvers.stokes.solver.StokesSolver.solve`); a semi-implicit buoyancy's term replaces its
+        earlier one. Collective (compiles forms).
+
+        Args:
+            pressure_block: add a zero pressure-pressure block (for a pinned pressure dof).
+            preconditioner: also build the preconditioning matrix's form ``a_pc``.
+            semi_implicit: the buoyancy predictor whose operator term to build, or None.
+            flow: the iterate ``{"u", "p", "fields"}`` the viscosity laws read (Picard: the
+                operator of the viscosity at the iterate), or None.
+        """
+        u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
+        p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
+        eta = self.viscosity(T, C, flow)
+        f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
+        zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
+        dx, metadata = self._dx()
+        a = [
+            [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
+             -ufl.inner(p, ufl.div(v)) * dx],
+            [-ufl.inner(ufl.div(u), q) * dx, None],
+        ]
+        curved = free_slip_boundaries(self.bcs)
+        if curved:
+            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+                                        metadata=metadata)
+            a[0][0] += nitsche.a_uu
+            a[0][1] += nitsche.a_up
+            a[1][0] += nitsche.a_pu
+        if pressure_block:
+            a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
+        a_form = dolfinx.fem.form(a)
+        a_lift = a_form
+        a_si = None
+        if semi_implicit is not None:
+            # Assembled on its own into a copy of the fixed operator every solve; the lifting of
+            # the boundary values uses the whole operator.
+            term = semi_implicit.form(T, C, u, v, dx)
+            a_si = dolfinx.fem.form(term)
+            a_lift = dolfinx.fem.form([[a[0][0] + term, a[0][1]], [a[1][0], a[1][1]]])
+        # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
+        zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
+        L = dolfinx.fem.form(
+            [ufl.inner(f, v) * dx + ufl.inner(zero_vec, v) * dx, ufl.inner(zero, q) * dx]
+        )
+        a_pc = None
+        if preconditioner:
+            # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
+            a_pc = dolfinx.fem.form(
+                [[a[0][0], None], [None, -ufl.inner(p, q) / eta * dx]]
+            )
+        return StokesForms(a_form, L, a_lift, a_pc, a_si)

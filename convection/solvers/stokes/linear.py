@@ -1,0 +1,314 @@
+"""The linear Stokes system ``K x = b`` in PETSc: matrices, vectors, null spaces and the KSP's life cycle.
+
+``x = (u, p)`` has PETSc's block layout: on each rank its owned velocity dofs (block size gdim),
+then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
+:class:`convection.solvers.stokes.forms.StokesForms` and solves; it does not know the physics.
+
+- **Operator**: ``K`` with the strong conditions (unit diagonal on their rows and columns). It is
+  re-assembled only when the caller says it changed (new forms, or a variable viscosity); the
+  preconditioner (AMG hierarchy, LU factorisation) is then set up again, otherwise reused. With a
+  semi-implicit buoyancy the operator is ``K = K_0 + term``: ``K_0`` is kept, copied into ``K``
+  every solve and the term (which changes with the fields and ``dt``) added to the velocity
+  block, skipping the Dirichlet rows and columns.
+- **Preconditioner** (iterative solvers): the matrix ``P = [[A, 0], [0, -M_p / eta]]`` (assembled
+  with ``K_0``, without the semi-implicit term), PETSc fieldsplit on the velocity and pressure
+  index sets; the velocity set carries the block size gdim (AMG nodes) and the rigid-body modes as
+  near-null space (:func:`convection.solvers.stokes.nullspace.rigid_body_modes`).
+- **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
+  ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
+  dof (:func:`convection.solvers.stokes.nullspace.pressure_pin`, a zero pressure block holds its diagonal) and
+  makes the continuity right-hand side sum to zero (:meth:`StokesLinearSystem._consistent_continuity`),
+  so both solve the same system.
+- **Warm start**: ``x`` starts from the current ``u``, ``p`` (a Krylov solver's nonzero initial
+  guess; a direct solver ignores it), and the solution is written back to them.
+"""
+
+from __future__ import annotations
+
+import time
+
+import dolfinx
+import dolfinx.cpp as _cpp
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from convection.geometry.boundary import VelocityBC
+from convection.solvers.stokes.nullspace import constant_pressure_null_space, pressure_pin, rigid_body_modes
+from convection.solvers.petsc_options import destroy_petsc_objects
+from convection.solvers.stokes.forms import StokesForms
+from fembase.dolfinx_compat import (assemble_block_matrix, assemble_block_vector, assemble_matrix_into,
+                                    create_block_matrix, create_block_vector)
+
+__all__ = ["StokesLinearSystem"]
+
+
+class StokesLinearSystem:
+    """Block matrices and vectors of the Stokes system and the KSP that solves it (module docstring).
+
+    Args:
+        u: velocity Function: the initial guess, overwritten by the solution.
+        p: pressure Function: the same.
+        ksp: the KSP to drive, its options already under its prefix before :meth:`setup`.
+        dirichlet: the strong velocity conditions.
+        bcs: velocity condition per side name (where to pin the pressure).
+        iterative: True for a Krylov solver with the fieldsplit preconditioner, False for a
+            direct solver.
+        pressure_null_space: whether the constant pressure solves the homogeneous problem.
+
+    Attributes:
+        pinned: True when a pressure dof is pinned (direct solver with a pressure null space); the
+            forms then need a pressure-pressure block.
+    """
+
+    PETSC_OBJECTS = ("_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local")
+
+    def __init__(self, u: dolfinx.fem.Function, p: dolfinx.fem.Function, ksp: PETSc.KSP, /, *,
+                 dirichlet: list, bcs: dict[str, VelocityBC], iterative: bool, pressure_null_space: bool) -> None:
+        self.u, self.p, self.ksp = u, p, ksp
+        self.V, self.Q = u.function_space, p.function_space
+        self.iterative = iterative
+        self.pressure_null_space = pressure_null_space
+        self.pinned = pressure_null_space and not iterative
+        self._lifted = list(dirichlet)  # the pin's value 0 lifts nothing: not in the right-hand side
+        self._bcs = self._lifted + ([pressure_pin(self.Q, bcs)] if self.pinned else [])
+        self._A: PETSc.Mat | None = None
+        self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
+        self._is_velocity_local: PETSc.IS | None = None
+        self._P: PETSc.Mat | None = None
+        self._b: PETSc.Vec | None = None
+        self._x: PETSc.Vec | None = None
+        self._null_space: PETSc.NullSpace | None = None
+        self._near_null_space: PETSc.NullSpace | None = None
+
+    @property
+    def is_set_up(self) -> bool:
+        """Whether :meth:`setup` has run."""
+        return self._A is not None
+
+    @property
+    def A(self) -> PETSc.Mat | None:
+        """The assembled operator ``K`` (with the semi-implicit term), None before :meth:`setup`."""
+        return self._A
+
+    @property
+    def bcs(self) -> list:
+        """All strong conditions: the velocity's, then the pressure pin if :attr:`pinned`."""
+        return self._bcs
+
+    @property
+    def iterations(self) -> int:
+        """Krylov iterations of the last solve (1 for the direct solver)."""
+        return self.ksp.getIterationNumber() if self.iterative else 1
+
+    # ------------------------------------------------------------------ setup
+    def setup(self, forms: StokesForms, /) -> None:
+        """Create the matrices and vectors for ``forms``' layout and configure the KSP. Collective.
+
+        The matrices serve any later forms on the same spaces (same sparsity)."""
+        self._A = create_block_matrix(forms.a)
+        if forms.a_si is not None:
+            self._A0 = create_block_matrix(forms.a)
+        self._b = create_block_vector(forms.L)
+        self._x = self._b.duplicate()
+        if self.iterative:
+            self._P = create_block_matrix(forms.a_pc)
+        if self.pressure_null_space and self.iterative:
+            n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+            self._null_space = constant_pressure_null_space(self._b, n_u)
+
+        if self.iterative:
+            self.ksp.setOperators(self._A, self._P)
+            pc = self.ksp.getPC()
+            pc.setType("fieldsplit")
+            is_u, is_p = self.index_sets()
+            # Fieldsplit attaches an IS's "nearnullspace" to the extracted velocity block, and the
+            # IS block size (one node = gdim dofs) becomes that block's block size (AMG nodes).
+            is_u.setBlockSize(self.V.mesh.geometry.dim)
+            self._near_null_space = rigid_body_modes(self.V)
+            is_u.compose("nearnullspace", self._near_null_space)
+            pc.setFieldSplitIS(("u", is_u), ("p", is_p))
+        else:
+            self.ksp.setOperators(self._A)
+        self.ksp.setFromOptions()
+        if self.iterative:
+            self.ksp.setInitialGuessNonzero(True)
+
+    def index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
+        """The velocity and pressure rows of ``K`` (global numbering, owned rows). Collective."""
+        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        n_p = self.Q.dofmap.index_map.size_local
+        start = self._A.getOwnershipRange()[0]
+        comm = self.V.mesh.comm
+        is_u = PETSc.IS().createStride(n_u, start, 1, comm=comm)
+        is_p = PETSc.IS().createStride(n_p, start + n_u, 1, comm=comm)
+        return is_u, is_p
+
+    # ------------------------------------------------------------------ assembly
+    def assemble_operator(self, forms: StokesForms, /, *, refresh: bool) -> None:
+        """Assemble ``K`` (and ``P``): the fixed part only when ``refresh`` (the forms or their
+        viscosity changed), the semi-implicit term always. Collective."""
+        fixed = self._A if forms.a_si is None else self._A0
+        if refresh:
+            fixed.zeroEntries()
+            assemble_block_matrix(fixed, forms.a, bcs=self._bcs)
+            fixed.assemble()
+        if forms.a_si is not None:
+            # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
+            # preconditioning matrix P (without the term), hence the preconditioner, stays while the
+            # viscosity is constant.
+            if not self._A.isAssembled():  # once: A gets A0's nonzero pattern
+                assemble_block_matrix(self._A, forms.a, bcs=self._bcs)
+                self._A.assemble()
+            self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            self._add_velocity_block(forms.a_si)
+        if refresh or forms.a_si is not None:
+            if self._null_space is not None:
+                self._A.setNullSpace(self._null_space)
+        if refresh and self._P is not None:
+            self._P.zeroEntries()
+            assemble_block_matrix(self._P, forms.a_pc, bcs=self._bcs)
+            self._P.assemble()
+
+    def assemble_rhs(self, forms: StokesForms, /) -> None:
+        """Assemble ``b`` (boundary values lifted with ``forms.a_lift``), consistent with the
+        constant-pressure null space. Collective."""
+        with self._b.localForm() as b_local:
+            b_local.set(0.0)
+        # The pin is left out of the right-hand side: its row keeps the value _consistent_continuity needs.
+        assemble_block_vector(self._b, forms.L, forms.a_lift, bcs=self._lifted)
+        if self._null_space is not None:
+            self._null_space.remove(self._b)
+        elif self.pinned:
+            self._consistent_continuity()
+
+    def _add_velocity_block(self, form: dolfinx.fem.FormMetaClass) -> None:
+        """Add a velocity-velocity form to A's (0, 0) block, skipping the Dirichlet rows and columns
+        (their unit diagonal is already in A). Collective."""
+        if self._is_velocity_local is None:  # the velocity rows in A's local (block) numbering
+            spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
+            self._is_velocity_local = _cpp.la.petsc.create_index_sets(spaces)[0]
+        rows = self._is_velocity_local
+        block = self._A.getLocalSubMatrix(rows, rows)
+        assemble_matrix_into(block, form, self._bcs)
+        self._A.restoreLocalSubMatrix(rows, rows, block)
+        self._A.assemble()
+
+    # ------------------------------------------------------------------ nonlinear solves
+    @property
+    def x(self) -> PETSc.Vec:
+        """The solution vector ``(u, p)`` (block layout); :meth:`pack` fills it from ``u``, ``p``."""
+        return self._x
+
+    @property
+    def b(self) -> PETSc.Vec:
+        """The right-hand side of the last :meth:`assemble_rhs`."""
+        return self._b
+
+    @property
+    def P(self) -> PETSc.Mat | None:
+        """The preconditioning matrix (iterative solvers), None otherwise."""
+        return self._P
+
+    def pack(self) -> None:
+        """Copy ``u``, ``p`` into :attr:`x`."""
+        self._pack_solution(self._x)
+
+    def unpack(self, x: PETSc.Vec, /) -> None:
+        """Copy the block vector ``x`` into ``u``, ``p`` (ghosts updated). Collective."""
+        self._unpack_solution(x)
+
+    def assemble_residual(self, F: PETSc.Vec, F_forms: list, J_forms: list, homogeneous: list, /) -> None:
+        """The nonlinear residual ``F(u, p)`` of the current ``u``, ``p`` into ``F``: the residual
+        forms, zero on the rows of the strong conditions (``homogeneous``: the same conditions with
+        value 0; ``u`` satisfies them), orthogonal to the constant pressure, or, with a pinned pressure, with the
+        continuity rows made consistent as the right-hand side is. Collective."""
+        with F.localForm() as f_local:
+            f_local.set(0.0)
+        assemble_block_vector(F, F_forms, J_forms, bcs=homogeneous)
+        if self._null_space is not None:
+            self._null_space.remove(F)
+        elif self.pinned:
+            self._consistent_continuity(F)
+
+    def assemble_jacobian(self, J_forms: list, a_pc: list | None, /) -> None:
+        """Newton's Jacobian into the operator matrix (unit diagonal on the strong conditions'
+        rows and columns) and, for an iterative solver, the Picard preconditioning matrix ``a_pc``
+        at the current iterate into ``P``. Collective."""
+        self._A.zeroEntries()
+        assemble_block_matrix(self._A, J_forms, bcs=self._bcs)
+        self._A.assemble()
+        if self._null_space is not None:
+            self._A.setNullSpace(self._null_space)
+        if self._P is not None and a_pc is not None:
+            self._P.zeroEntries()
+            assemble_block_matrix(self._P, a_pc, bcs=self._bcs)
+            self._P.assemble()
+
+    def _consistent_continuity(self, vec: PETSc.Vec | None = None) -> None:
+        """Make the continuity right-hand side sum to zero, then zero the pinned row (direct solver
+        with a pressure null space).
+
+        The constant pressure is in the null space of the (symmetric) operator, so the system is
+        solvable only if the continuity part of ``b`` sums to zero: the discrete flux of the
+        prescribed velocities, ``int u . n ds``, must vanish. A velocity tangent to a circle or
+        sphere, interpolated on the curved (or straight) cells, has a small flux, and pinning a
+        pressure dof would put the whole defect into that one dof's continuity equation. Removing
+        the mean instead spreads it over the domain, as the iterative solvers' null space does, so
+        both solve the same system. With zero velocity data the continuity part is exactly zero
+        and nothing changes."""
+        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        n_p = self.Q.dofmap.index_map.size_local
+        g = (self._b if vec is None else vec).array[n_u:n_u + n_p]
+        total = self.V.mesh.comm.allreduce(float(g.sum()), op=MPI.SUM)
+        if total != 0.0:
+            g -= total / self.Q.dofmap.index_map.size_global
+        pinned = self._bcs[-1].dof_indices()[0]
+        g[pinned[pinned < n_p]] = 0.0
+
+    # ------------------------------------------------------------------ solve
+    def solve(self) -> float:
+        """Solve ``K x = b`` from ``x = (u, p)`` and write ``x`` back to ``u``, ``p``. Collective.
+
+        Returns:
+            The seconds spent setting up the preconditioner (nothing unless the operator changed).
+
+        Raises:
+            RuntimeError: the KSP diverged.
+        """
+        t1 = time.perf_counter()
+        self._pack_solution(self._x)
+        self.ksp.setUp()  # a no-op unless the operator changed
+        setup_seconds = time.perf_counter() - t1
+        self.ksp.solve(self._b, self._x)
+        reason = self.ksp.getConvergedReason()
+        if reason < 0:
+            raise RuntimeError(f"Stokes solver did not converge (PETSc reason {reason})")
+        self._unpack_solution(self._x)
+        return setup_seconds
+
+    def residual_norm(self) -> float:
+        """Euclidean norm of the true residual ``b - K x`` of the last solve. Collective."""
+        residual = self._b.duplicate()
+        self._A.mult(self._x, residual)
+        residual.aypx(-1.0, self._b)
+        norm = float(residual.norm())
+        residual.destroy()
+        return norm
+
+    def _pack_solution(self, x: PETSc.Vec) -> None:
+        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        n_p = self.Q.dofmap.index_map.size_local
+        x.array[:n_u] = self.u.x.array[:n_u]
+        x.array[n_u:] = self.p.x.array[:n_p]
+
+    def _unpack_solution(self, x: PETSc.Vec) -> None:
+        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        n_p = self.Q.dofmap.index_map.size_local
+        self.u.x.array[:n_u] = x.array_r[:n_u]
+        self.p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
+        self.u.x.scatter_forward()
+        self.p.x.scatter_forward()
+
+    def destroy(self) -> None:
+        """Free the matrices, vectors and null spaces now (collective; not the KSP, which the caller owns)."""
+        destroy_petsc_objects(self, self.PETSC_OBJECTS)

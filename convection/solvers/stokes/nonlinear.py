@@ -1,0 +1,286 @@
+"""Nonlinear Stokes solves: Picard (defect correction) and Newton (PETSc SNES with a line search).
+
+With a viscosity that depends on the flow (:mod:`convection.physics.rheology`: power-law creep, yielding)
+the Stokes problem ``F(x) = 0``, ``x = (u, p)``, is nonlinear::
+
+    F(x) = a(eta(x); x, (v, q)) - L(v, q)
+         = (2 eta(x) eps(u), eps(v)) - (p, div v) - (f, v) - (q, div u)  (+ Nitsche terms on shells)
+
+- **Picard**: ``x_{k+1}`` solves the linear problem with the viscosity frozen at ``x_k``,
+  ``A(x_k) x_{k+1} = b``: the linear solver of :mod:`convection.solvers.stokes.solver` once per iteration;
+  converges linearly.
+- **Newton**: ``J(x_k) dx = -F(x_k)``, ``x_{k+1} = x_k + lambda dx``, with ``J`` UFL's derivative of
+  ``F`` (the viscosity's derivative included) and the step length ``lambda`` from PETSc's line
+  search (``bt``: backtracking on ``|F|``). Newton starts after Picard has brought the residual below
+  ``switch_tolerance`` (from rest, Newton's first steps are far outside its basin); converges
+  quadratically near the solution. An iterative linear solver is preconditioned with the Picard
+  operator's blocks (symmetric positive definite), as ASPECT does.
+
+Both stop when the **relative residual** ``|F(x_k)| / |b|`` is at most ``rtol``, with ``b`` the
+right-hand side of the first linearised system of the solve (forcing and lifted boundary
+velocities); ``F`` vanishes on the rows of strong conditions (``x`` satisfies them after the first
+Picard step) and is orthogonal to the constant pressure when the pressure has a null space. Not
+reaching ``rtol`` in ``max_iterations`` raises :class:`NonlinearSolveError` (a solver failure: the
+run ends as a blow-up, exit code 3, with one line).
+
+Limitation (refused at construction): Newton with a pressure-dependent law (Drucker-Prager) when
+the pressure is only defined up to a constant (every side fixes the normal velocity) — the
+viscosity would then depend on the arbitrary pressure level; use Picard, or leave a side traction
+free.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+from petsc4py import PETSc
+
+from convection.geometry.boundary import VelocityBC, velocity_dirichlet_bcs
+from convection.solvers.stokes.nullspace import pressure_pin
+
+if TYPE_CHECKING:
+    from convection.solvers.stokes.solver import StokesSolver
+
+__all__ = ["LINE_SEARCHES", "NONLINEAR_METHODS", "NonlinearResult", "NonlinearSettings", "NonlinearSolveError",
+           "NonlinearStokes"]
+
+NONLINEAR_METHODS: dict[str, str] = {
+    "picard": "defect correction: the linear problem with the viscosity of the previous iterate",
+    "newton": "Newton's method (PETSc SNES, exact Jacobian from UFL) after Picard reached switch_tolerance",
+}
+"""Registry of nonlinear Stokes methods (name -> one-line description)."""
+
+LINE_SEARCHES: dict[str, str] = {
+    "bt": "backtracking (cubic) on the residual norm",
+    "basic": "full Newton steps",
+    "l2": "secant search on the residual norm",
+    "cp": "critical point (for problems with an energy)",
+}
+"""Registry of SNES line searches for Newton (name -> one-line description)."""
+
+
+class NonlinearSolveError(RuntimeError):
+    """The nonlinear iteration did not reach its tolerance (a solver failure)."""
+
+
+@dataclass(frozen=True)
+class NonlinearSettings:
+    """The ``stokes.nonlinear`` config section.
+
+    Attributes:
+        method: a name in :data:`NONLINEAR_METHODS`.
+        rtol: relative residual ``|F| / |b|`` to reach.
+        max_iterations: most nonlinear iterations (Picard and Newton together) per solve.
+        switch_tolerance: Newton takes over once Picard's relative residual is below this.
+        line_search: a name in :data:`LINE_SEARCHES` (Newton).
+    """
+
+    method: str = "newton"
+    rtol: float = 1e-6
+    max_iterations: int = 50
+    switch_tolerance: float = 1e-2
+    line_search: str = "bt"
+
+    def __post_init__(self) -> None:
+        if self.method not in NONLINEAR_METHODS:
+            raise ValueError(f"unknown nonlinear method {self.method!r}; valid: {sorted(NONLINEAR_METHODS)}")
+        if self.line_search not in LINE_SEARCHES:
+            raise ValueError(f"unknown line search {self.line_search!r}; valid: {sorted(LINE_SEARCHES)}")
+        if not (0.0 < self.rtol < 1.0 and 0.0 < self.switch_tolerance <= 1.0 and self.max_iterations >= 1):
+            raise ValueError(f"invalid nonlinear settings {self}")
+
+    @classmethod
+    def from_config(cls, section: dict[str, Any]) -> "NonlinearSettings":
+        return cls(section["method"], section["rtol"], section["max_iterations"], section["switch_tolerance"],
+                   section["line_search"])
+
+
+class NonlinearResult(NamedTuple):
+    """Outcome of one nonlinear solve.
+
+    Attributes:
+        iterations: nonlinear iterations (Picard + Newton).
+        picard_iterations: of which Picard.
+        residual: the final relative residual ``|F| / |b|``.
+        history: the relative residual before each iteration and at the end, shape (iterations + 1,).
+        linear_iterations: Krylov iterations summed over the linear solves (1 per direct solve).
+    """
+
+    iterations: int
+    picard_iterations: int
+    residual: float
+    history: tuple[float, ...]
+    linear_iterations: int
+
+
+def homogeneous(bcs: dict[str, VelocityBC]) -> dict[str, VelocityBC]:
+    """The same conditions with zero values (prescribed -> no slip: the same dofs)."""
+    return {side: VelocityBC("no_slip") if bc.kind == "prescribed" else bc for side, bc in bcs.items()}
+
+
+class NonlinearStokes:
+    """Picard and Newton iterations on a :class:`~convection.solvers.stokes.solver.StokesSolver` (module docstring).
+
+    Args:
+        solver: the Stokes solver whose linear system, forms and ``u``, ``p`` are used.
+        settings: method and tolerances.
+    """
+
+    def __init__(self, solver: "StokesSolver", settings: NonlinearSettings, /) -> None:
+        self.solver = solver
+        self.settings = settings
+        law = solver.approximation.viscosity_law
+        depends = set()
+        for item in law.laws or ():
+            depends |= item.depends_on
+        if settings.method == "newton" and "pressure" in depends and solver.has_pressure_null_space:
+            raise ValueError("Newton's method with a pressure-dependent viscosity needs a defined pressure level: "
+                             "leave a side traction free, or use stokes.nonlinear.method: picard")
+        system = solver.linear_system
+        self._homogeneous = velocity_dirichlet_bcs(solver.V, homogeneous(solver.bcs))
+        if system.pinned:
+            self._homogeneous.append(pressure_pin(solver.Q, solver.bcs))
+        self._F: PETSc.Vec | None = None
+        self._snes: PETSc.SNES | None = None
+        self._newton_forms: tuple[Any, Any] | None = None
+        self._newton_key: Any = None
+
+    # ------------------------------------------------------------------ pieces
+    def _forms(self, key: Any, T: Any, C: Any, fields: Any) -> tuple[Any, Any]:
+        if self._newton_forms is None or self._newton_key is not key:
+            s = self.solver
+            self._newton_forms = s.discretisation.nonlinear_forms(
+                T, C, s.u, s.p, fields=fields, pressure_block=s.linear_system.pinned)
+            self._newton_key = key
+        return self._newton_forms
+
+    def _residual_norm(self, F_forms: Any, J_forms: Any) -> float:
+        system = self.solver.linear_system
+        if self._F is None:
+            self._F = system.b.duplicate()
+        system.assemble_residual(self._F, F_forms, J_forms, self._homogeneous)
+        return float(self._F.norm())
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, forms: Any, key: Any, T: Any, C: Any, fields: Any) -> NonlinearResult:
+        """Iterate from the current ``u``, ``p`` to the relative residual ``rtol``. Collective.
+
+        Args:
+            forms: the Picard forms (viscosity at the iterate ``u``, ``p``).
+            key: identifies the fields the forms were built for (the Newton forms are rebuilt
+                when it changes).
+            T, C, fields: as in :meth:`convection.solvers.stokes.solver.StokesSolver.solve`.
+
+        Raises:
+            NonlinearSolveError: ``rtol`` not reached within ``max_iterations``.
+        """
+        settings = self.settings
+        s = self.solver
+        system = s.linear_system
+        F_forms, J_forms = self._forms(key, T, C, fields)
+        system.assemble_operator(forms, refresh=True)  # the lifting of b uses the operator at the iterate
+        system.assemble_rhs(forms)
+        reference = float(system.b.norm())
+        if reference == 0.0 or not math.isfinite(reference):
+            reference = 1.0
+        history = [self._residual_norm(F_forms, J_forms) / reference]
+        picard = 0
+        linear = 0
+        newton = settings.method == "newton"
+        # Picard until converged, or (Newton) until the switch tolerance; at least once, as the
+        # residual is measured with homogeneous boundary values and cannot see an iterate that
+        # misses prescribed velocities (a sheared box at rest has residual 0).
+        while picard == 0 or (history[-1] > settings.rtol and picard < settings.max_iterations):
+            if newton and history[-1] <= settings.switch_tolerance and picard > 0:
+                break
+            if picard > 0:
+                system.assemble_operator(forms, refresh=True)
+                system.assemble_rhs(forms)
+            system.solve()
+            if s._pressure_mean is not None:
+                s._pressure_mean.normalise()
+            linear += int(system.iterations)
+            picard += 1
+            history.append(self._residual_norm(F_forms, J_forms) / reference)
+            if not math.isfinite(history[-1]):
+                break
+        iterations = picard
+        if newton and history[-1] > settings.rtol and math.isfinite(history[-1]) and picard < settings.max_iterations:
+            its, lin, residuals = self._newton(forms, F_forms, J_forms, reference,
+                                               settings.max_iterations - picard)
+            iterations += its
+            linear += lin
+            history.extend(residuals)
+        if s._pressure_mean is not None:
+            s._pressure_mean.normalise()
+        if not history[-1] <= settings.rtol:
+            raise NonlinearSolveError(
+                f"nonlinear Stokes solve ({settings.method}) did not reach the relative residual "
+                f"{settings.rtol:g} in {iterations} iterations (reached {history[-1]:.3g}); try more "
+                "stokes.nonlinear.max_iterations, picard, or viscosity bounds")
+        return NonlinearResult(iterations, picard, history[-1], tuple(history), linear)
+
+    def _newton(self, forms: Any, F_forms: Any, J_forms: Any, reference: float,
+                max_iterations: int) -> tuple[int, int, list[float]]:
+        """SNES Newton from the current iterate; returns (iterations, linear iterations, relative
+        residuals after each iteration)."""
+        s = self.solver
+        system = s.linear_system
+        residuals: list[float] = []
+
+        def function(snes: PETSc.SNES, x: PETSc.Vec, F: PETSc.Vec) -> None:
+            system.unpack(x)
+            system.assemble_residual(F, F_forms, J_forms, self._homogeneous)
+
+        def jacobian(snes: PETSc.SNES, x: PETSc.Vec, J: PETSc.Mat, P: PETSc.Mat) -> None:
+            system.unpack(x)
+            system.assemble_jacobian(J_forms, forms.a_pc)
+
+        def monitor(snes: PETSc.SNES, its: int, norm: float) -> None:
+            if its > 0:
+                residuals.append(float(norm) / reference)
+
+        if self._snes is None:
+            snes = PETSc.SNES().create(s.mesh.comm)
+            snes.setKSP(s.ksp)
+            # petsc4py 3.18 has no line-search object: the type goes through the options database,
+            # read once here and removed again.
+            prefix = f"{s.ksp.getOptionsPrefix()}nonlinear_"
+            snes.setOptionsPrefix(prefix)
+            options = PETSc.Options()
+            options[f"{prefix}snes_type"] = "newtonls"
+            options[f"{prefix}snes_linesearch_type"] = self.settings.line_search
+            snes.setFromOptions()
+            for key in ("snes_type", "snes_linesearch_type"):
+                options.delValue(f"{prefix}{key}")
+            self._snes = snes
+        snes = self._snes
+        if self._F is None:
+            self._F = system.b.duplicate()
+        snes.setFunction(function, self._F)
+        P = system.P if system.P is not None else system.A
+        snes.setJacobian(jacobian, system.A, P)
+        snes.setTolerances(rtol=0.0, atol=self.settings.rtol * reference, stol=0.0, max_it=max_iterations)
+        snes.cancelMonitor()
+        snes.setMonitor(monitor)
+        snes.setConvergenceHistory(reset=True)
+        guess = s.ksp.getInitialGuessNonzero()
+        s.ksp.setInitialGuessNonzero(False)  # a Newton increment starts from zero
+        system.pack()
+        x = system.x
+        try:
+            snes.solve(None, x)
+        finally:
+            s.ksp.setInitialGuessNonzero(guess)
+        system.unpack(x)
+        return int(snes.getIterationNumber()), int(snes.getLinearSolveIterations()), residuals
+
+    def destroy(self) -> None:
+        """Free the SNES and the residual vector (collective)."""
+        for name in ("_snes", "_F"):
+            obj = getattr(self, name)
+            if obj is not None:
+                obj.destroy()
+                setattr(self, name, None)

@@ -1,0 +1,161 @@
+"""Null spaces of the Stokes operator and how the solver deals with them.
+
+- The **constant pressure** solves the homogeneous problem when every boundary fixes the normal
+  velocity: :func:`pressure_pin` removes it for a direct solver (one pressure dof set to zero,
+  exact because the system is consistent), :func:`constant_pressure_null_space` hands it to a
+  Krylov solver, and :class:`PressureMean` normalises the pressure to ``int p dx = 0`` after
+  every solve.
+- **Rigid rotations** about the origin solve the homogeneous problem when both shell boundaries
+  are free slip; they are only nearly in the discrete null space (the Nitsche penalty pins them
+  weakly), so they are not given to PETSc: :class:`RigidRotations` removes the solution's L2
+  projection onto them after every solve.
+- The **rigid-body modes** (:func:`rigid_body_modes`) are the near-null space of the velocity
+  block that smoothed-aggregation AMG needs.
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import dolfinx.fem
+import dolfinx.la
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from convection.geometry.boundary import VelocityBC, box_bounds, is_shell
+from fembase.dolfinx_compat import DirichletBC, orthonormalize
+
+__all__ = ["PressureMean", "RigidRotations", "constant_pressure_null_space", "pressure_pin", "rigid_body_modes"]
+
+
+def pressure_pin(Q: dolfinx.fem.FunctionSpace, bcs: dict[str, VelocityBC], /) -> DirichletBC:
+    """Zero Dirichlet condition on the pressure dof(s) at the lower box corner (on a shell: on the
+    pressure dof numbered 0 globally, whichever point that is). Collective."""
+    mesh = Q.mesh
+    if is_shell(bcs):
+        owns_first = mesh.comm.rank == 0 and Q.dofmap.index_map.size_local > 0
+        dofs = np.arange(1 if owns_first else 0, dtype=np.int32)
+        return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Q)
+    bounds = box_bounds(mesh)
+    lower = bounds.lower
+    tol = 1e-10 * float(np.max(bounds.upper - lower))
+    gdim = mesh.geometry.dim
+
+    def corner(x: np.ndarray) -> np.ndarray:
+        return np.all(np.abs(x[:gdim] - lower[:, None]) <= tol, axis=0)
+
+    dofs = dolfinx.fem.locate_dofs_geometrical(Q, corner)
+    return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Q)
+
+
+def constant_pressure_null_space(template: PETSc.Vec, num_owned_velocity: int, /) -> PETSc.NullSpace:
+    """The normalised constant-pressure vector of a block (velocity, pressure) system as a PETSc
+    null space; ``template`` has the system's layout, its first ``num_owned_velocity`` owned
+    entries are velocity. Collective."""
+    vector = template.duplicate()
+    vector.set(0.0)
+    vector.array[num_owned_velocity:] = 1.0
+    vector.normalize()
+    return PETSc.NullSpace().create(vectors=[vector], comm=template.getComm())
+
+
+class PressureMean:
+    """Shift a pressure Function to zero mean, ``int p dx = 0``.
+
+    Args:
+        p: The pressure Function.
+    """
+
+    def __init__(self, p: dolfinx.fem.Function, /) -> None:
+        self.p = p
+        mesh = p.function_space.mesh
+        one = dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0))
+        self.volume = mesh.comm.allreduce(
+            dolfinx.fem.assemble_scalar(dolfinx.fem.form(one * ufl.dx(domain=mesh))), op=MPI.SUM)
+        self._integral = dolfinx.fem.form(p * ufl.dx)
+
+    def normalise(self) -> None:
+        """Subtract the mean. Collective."""
+        comm = self.p.function_space.mesh.comm
+        mean = comm.allreduce(dolfinx.fem.assemble_scalar(self._integral), op=MPI.SUM) / self.volume
+        self.p.x.array[:] -= mean
+
+
+class RigidRotations:
+    """The rigid rotations about the origin in a vector space ``V`` (exact: they are linear):
+    ``(-y, x)`` in 2D; ``e_i x x`` for i = x, y, z in 3D.
+
+    Args:
+        V: The velocity space.
+    """
+
+    def __init__(self, V: dolfinx.fem.FunctionSpace, /) -> None:
+        self.V = V
+        self._rotations: list[dolfinx.fem.Function] = []
+        self._moment_forms: dict[int, list] = {}
+        self._gram: np.ndarray | None = None
+
+    @property
+    def rotations(self) -> list[dolfinx.fem.Function]:
+        """One Function per rotation (built on first use)."""
+        if not self._rotations:
+            if self.V.mesh.geometry.dim == 2:
+                fields = [lambda x: np.stack([-x[1], x[0]])]
+            else:
+                zero = lambda x: np.zeros(x.shape[1])  # noqa: E731
+                fields = [lambda x: np.stack([zero(x), -x[2], x[1]]), lambda x: np.stack([x[2], zero(x), -x[0]]),
+                          lambda x: np.stack([-x[1], x[0], zero(x)])]
+            for field in fields:
+                rotation = dolfinx.fem.Function(self.V)
+                rotation.interpolate(field)
+                self._rotations.append(rotation)
+        return self._rotations
+
+    def remove(self, u: dolfinx.fem.Function, /) -> None:
+        """Subtract the L2 projection of ``u`` (in ``V``) onto the rotations. Collective."""
+        rotations = self.rotations
+        comm = self.V.mesh.comm
+        if self._gram is None:
+            local = np.array([[dolfinx.fem.assemble_scalar(dolfinx.fem.form(ufl.inner(a, b) * ufl.dx))
+                               for b in rotations] for a in rotations])
+            self._gram = np.empty_like(local)
+            comm.Allreduce(local, self._gram, op=MPI.SUM)
+        forms = self._moment_forms.get(id(u))
+        if forms is None:
+            forms = self._moment_forms[id(u)] = [dolfinx.fem.form(ufl.inner(u, a) * ufl.dx) for a in rotations]
+        local = np.array([dolfinx.fem.assemble_scalar(f) for f in forms])
+        moments = np.empty_like(local)
+        comm.Allreduce(local, moments, op=MPI.SUM)
+        for coefficient, rotation in zip(np.linalg.solve(self._gram, moments), rotations):
+            u.x.array[:] -= coefficient * rotation.x.array
+
+
+def rigid_body_modes(V: dolfinx.fem.FunctionSpace) -> PETSc.NullSpace:
+    """The rigid-body modes of the vector space ``V`` as an orthonormal PETSc near-null space.
+
+    Three modes in 2D (two translations, one rotation), six in 3D (three of each), built from the
+    coordinates of ``V``'s owned nodes. The vectors have ``V``'s owned layout (block size gdim),
+    the layout of the velocity block of the Stokes operator. Collective.
+    """
+    gdim = V.mesh.geometry.dim
+    index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    n_nodes = index_map.size_local
+    x = V.tabulate_dof_coordinates()[:n_nodes, :gdim]
+    comm = V.mesh.comm
+    centre = comm.allreduce(x.sum(axis=0), op=MPI.SUM) / index_map.size_global
+    x = x - centre  # rotations about the centre are better conditioned (the same centre on all ranks)
+    vectors = [PETSc.Vec().createMPI((n_nodes * bs, PETSc.DECIDE), bsize=bs, comm=comm)
+               for _ in range(3 if gdim == 2 else 6)]
+    values = [v.getArray() for v in vectors]
+    for axis in range(gdim):
+        values[axis][axis::bs] = 1.0
+    if gdim == 2:
+        values[2][0::bs], values[2][1::bs] = -x[:, 1], x[:, 0]
+    else:
+        for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):  # rotation in the (i, j) plane
+            values[3 + k][i::bs], values[3 + k][j::bs] = -x[:, j], x[:, i]
+    for v in vectors:
+        v.assemble()
+    orthonormalize(vectors)
+    return PETSc.NullSpace().create(vectors=vectors, comm=comm)

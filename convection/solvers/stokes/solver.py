@@ -1,0 +1,384 @@
+"""Taylor-Hood Stokes solver for the Boussinesq momentum and mass equations.
+
+Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in Q``)::
+
+    (2 eta eps(u), eps(v)) - (p, div v) = ((Ra T - Rb C) e_z, v)
+                            -(q, div u) = 0
+
+on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1). With a variable viscosity the
+cell integrals use a quadrature of degree ``3 k``. Boundary conditions are
+:class:`~convection.geometry.boundary.VelocityBC` per box side or shell boundary (``inner``/``outer``); on
+a box side free slip is a zero Dirichlet condition on the normal velocity component, on a curved
+shell boundary it is imposed weakly by symmetric Nitsche terms
+(:func:`convection.geometry.boundary.nitsche_free_slip`, penalty ``nitsche_penalty eta / h``). When every
+side fixes the normal velocity the pressure is only defined up to a constant: the
+constant-pressure null space is attached to the operator (iterative solver) or removed by pinning
+one pressure dof (direct solver, exact once the continuity right-hand side sums to zero, which
+:meth:`~convection.solvers.stokes.linear.StokesLinearSystem._consistent_continuity` ensures), and the pressure is then
+normalised to zero mean, ``int p dx = 0``. When both shell boundaries are free slip, rigid
+rotations about the origin (one in 2D, three in 3D) also solve the homogeneous problem; the
+solution's rotational part (its L2 projection onto the rotations) is removed after every solve.
+The rotations are only nearly in the discrete null space (``u . n`` of a rotation vanishes on the
+circle, not exactly on the curved cells' boundary, so the Nitsche penalty pins them weakly with a
+small eigenvalue): the operator is regular, so they are not given to PETSc as a null space (MINRES
+stagnates with an inexact one).
+
+The solve has three parts, one module each: the discretisation (spaces, strong conditions and
+forms: :mod:`convection.solvers.stokes.forms`), the linear system (matrices, vectors, null spaces and the
+KSP's life cycle: :mod:`convection.solvers.stokes.linear`) and the buoyancy predictor
+(:mod:`convection.physics.buoyancy`). :class:`StokesSolver` ties them together: it picks the linear solver
+from the registry below, rebuilds the forms when the fields change and normalises the solution.
+
+Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
+    ``"auto"`` (the default): ``"iterative"`` in 3D (``"iterative_gamg"`` for a shell with free
+        slip on both surfaces: its rigid rotations, see :func:`resolve_solver`), ``"direct"`` in 2D.
+    ``"direct"``: MUMPS LU of the monolithic (block) system; the factorisation is reused while the
+        viscosity is constant.
+    ``"iterative"``: FGMRES, right-preconditioned by the upper block-triangular Schur
+        preconditioner ``[[A, B^T], [0, -M_p/eta]]^-1`` (PETSc fieldsplit): one BoomerAMG V-cycle
+        on the velocity block ``A`` (systems AMG: the velocity components are the AMG's
+        "functions", no pre-smoothing), one symmetric SOR sweep on the viscosity-scaled pressure
+        mass matrix. Stops at ``|b - K x| <= 1e-7 |b|`` (``ksp_rtol``), starting from the
+        previous solution. See :func:`block_schur_options`.
+    ``"iterative_gamg"``: the same with PETSc's smoothed-aggregation GAMG on ``A``, given the
+        rigid-body modes (:func:`convection.solvers.stokes.nullspace.rigid_body_modes`) as near-null space.
+
+Measured on unit cubes (benchmarks/performance/README.md): BoomerAMG needs fewer iterations than
+GAMG, each cheaper, and sets up 5-10 times faster (which matters when the viscosity, hence ``A``,
+changes every step).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import dolfinx
+
+from convection.physics.approximation import BoussinesqApproximation
+from convection.geometry.boundary import VelocityBC, boundary_names, has_rotation_null_space
+from convection.physics.buoyancy import SemiImplicitBuoyancy
+from convection.solvers.stokes.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
+from convection.solvers.petsc_options import (
+    HAS_HYPRE, MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+)
+from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
+from convection.solvers.stokes.linear import StokesLinearSystem
+from convection.solvers.stokes.nonlinear import NonlinearResult, NonlinearSettings, NonlinearStokes
+from fembase import jit_cache
+
+jit_cache.install()  # forms and elements compiled once per process (see the module)
+
+_BOOMERAMG_SYSTEMS: dict[str, Any] = {
+    # Systems AMG ("unknown" approach: PETSc passes the block size gdim as hypre's number of
+    # functions, so only like components couple), HMIS coarsening with ext+i interpolation, one level
+    # of aggressive coarsening and 2 interpolation entries per row: operator complexity ~1.1.
+    "pc_type": "hypre",
+    "pc_hypre_type": "boomeramg",
+    "pc_hypre_boomeramg_coarsen_type": "HMIS",
+    "pc_hypre_boomeramg_interp_type": "ext+i",
+    "pc_hypre_boomeramg_strong_threshold": 0.5,
+    "pc_hypre_boomeramg_agg_nl": 1,
+    "pc_hypre_boomeramg_P_max": 2,
+    # No pre-smoothing: half the cost of a V-cycle for a few more outer iterations (FGMRES does not
+    # need a symmetric preconditioner).
+    "pc_hypre_boomeramg_grid_sweeps_down": 0,
+}
+
+_GAMG_RIGID_BODY: dict[str, Any] = {
+    "pc_type": "gamg",  # smoothed aggregation; uses the rigid-body near-null space
+    "pc_gamg_reuse_interpolation": True,  # re-setup after a viscosity change: Galerkin products only
+}
+
+
+def block_schur_options(velocity: dict[str, Any], /, *, rtol: float = 1e-7) -> dict[str, Any]:
+    """FGMRES with the upper block-triangular preconditioner ``[[A, B^T], [0, S]]^-1``.
+
+    ``A^-1`` is one application of the ``velocity`` preconditioner (``pc_*`` options, given
+    without the ``fieldsplit_u_`` prefix); the Schur complement ``S = -B A^-1 B^T`` is replaced by
+    ``-M_p / eta`` (the viscosity-scaled pressure mass matrix, the ``(1, 1)`` block of the
+    preconditioning matrix), inverted by one symmetric SOR sweep. FGMRES is right preconditioned,
+    so ``rtol`` bounds the true residual: ``|b - K x| <= rtol |b|`` (PETSc measures against
+    ``|b|`` also when the initial guess is nonzero). The default 1e-7 (as ASPECT's) leaves the
+    velocity within about 1e-6 (relative L2) of the exact discrete solution; with the previous
+    step's solution as the initial guess a time step needs about two thirds of the iterations of
+    a solve from zero.
+    """
+    return krylov_options(
+        "fgmres",
+        {
+            "ksp_gmres_restart": 100,  # vectors are allocated as needed
+            "pc_type": "fieldsplit",
+            "pc_fieldsplit_type": "schur",
+            "pc_fieldsplit_schur_fact_type": "upper",
+            "pc_fieldsplit_schur_precondition": "a11",
+            "fieldsplit_u_ksp_type": "preonly",
+            **{f"fieldsplit_u_{key}": value for key, value in velocity.items()},
+            "fieldsplit_p_ksp_type": "preonly",
+            "fieldsplit_p_pc_type": "sor",
+        },
+        rtol=rtol,
+        atol=1e-14,
+        max_it=1000,
+    )
+
+
+STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
+    LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: gathered on rank 0, reproducible)",
+                 MUMPS_LU, reproducible_lu),
+    LinearSolver(
+        "iterative",
+        "FGMRES + block-triangular Schur preconditioner: BoomerAMG (systems) on velocity, SOR on -M_p/eta",
+        block_schur_options(_BOOMERAMG_SYSTEMS),
+    ),
+    LinearSolver(
+        "iterative_gamg",
+        "FGMRES + block-triangular Schur preconditioner: GAMG with rigid-body modes on velocity, SOR on -M_p/eta",
+        block_schur_options(_GAMG_RIGID_BODY),
+    ),
+)
+"""Registry of Stokes solver kinds (lowercase name -> description and default PETSc options)."""
+
+AUTO = "auto"
+"""Solver name resolved by the mesh: ``"iterative"`` in 3D, ``"direct"`` in 2D (see :func:`resolve_solver`)."""
+
+STOKES_SOLVER_NAMES: tuple[str, ...] = (AUTO, *STOKES_SOLVERS)
+"""Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
+
+STOKES_SOLVER_CHOICES: dict[str, str] = {
+    AUTO: "iterative in 3D (iterative_gamg for a shell with free slip on both surfaces), direct in 2D",
+    **{name: solver.description for name, solver in STOKES_SOLVERS.items()},
+}
+"""One line on each of :data:`STOKES_SOLVER_NAMES` (the config reference lists them)."""
+
+
+def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
+    """The registry name behind ``name``: ``"auto"`` is ``"iterative"`` in 3D (``"iterative_gamg"``
+    when ``rotations``, i.e. both shell surfaces are free slip) and ``"direct"`` in 2D, any other
+    name is itself.
+
+    In 2D MUMPS is exact and cheap: with a constant viscosity it reuses its factorisation (0.03 s
+    per solve at 64 x 64 P2-P1, against ~0.5 s for a cold iterative solve), and 2D runs keep the
+    results they had before the iterative solver became the 3D default.
+
+    A spherical shell with free slip on both surfaces has the three rigid rotations as near-null
+    modes of the velocity block (the Nitsche penalty pins them only weakly, see the module
+    docstring). BoomerAMG does not see them and FGMRES stalls: 510 iterations from zero and 765
+    warm-started at gmsh size 0.35 (P2 geometry, Ra = 1e4), 661 / 567 at 0.5. GAMG is given the
+    rigid-body modes, rotations included, as its near-null space: 54 / 13 at 0.35, 74 / 40 at 0.5,
+    and its velocity agrees with MUMPS's to 2e-6 (BoomerAMG's to 4e-5).
+
+    A PETSc without hypre (the one in PyPI's DOLFINx wheel) has no BoomerAMG: there ``"auto"`` is
+    ``"iterative_gamg"`` in 3D, and ``"iterative"`` is refused (ValueError).
+    """
+    if name == AUTO:
+        if gdim == 3:
+            return "iterative_gamg" if rotations or not HAS_HYPRE else "iterative"
+        return "direct"
+    if name not in STOKES_SOLVERS:
+        raise ValueError(f"Unknown Stokes solver {name!r}; valid names: {list(STOKES_SOLVER_NAMES)}")
+    if name == "iterative" and not HAS_HYPRE:
+        raise ValueError("Stokes solver 'iterative' uses hypre's BoomerAMG, which this PETSc does not have; "
+                         "use 'iterative_gamg' or 'direct'")
+    return name
+
+
+def _same_objects(a: Any, b: Any) -> bool:
+    """True when ``a`` and ``b`` are the same objects, element by element for tuples and lists."""
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
+        return len(a) == len(b) and all(_same_objects(x, y) for x, y in zip(a, b))
+    return a is b
+
+
+class StokesResult(NamedTuple):
+    """Outcome of :meth:`StokesSolver.solve`.
+
+    Attributes:
+        iterations: Krylov iterations (1 for the direct solver).
+        residual_norm: Euclidean norm of the true residual ``b - K x`` of the assembled system.
+        assembly_seconds: Time spent assembling the operator and the right-hand side.
+        solve_seconds: Time spent in the linear solver (with the residual check).
+        setup_seconds: The part of ``solve_seconds`` spent setting up the preconditioner (AMG
+            hierarchy, LU factorisation): after every operator change, i.e. every solve with a
+            variable viscosity, once otherwise.
+        nonlinear: The nonlinear iteration's outcome (a viscosity that depends on the flow), or
+            None (a linear solve).
+    """
+
+    iterations: int
+    residual_norm: float
+    assembly_seconds: float = 0.0
+    solve_seconds: float = 0.0
+    setup_seconds: float = 0.0
+    nonlinear: NonlinearResult | None = None
+
+
+class StokesSolver(PetscSolver):
+    """Stokes solver on a fixed mesh (see the module docstring for equations and solvers).
+
+    Three components do the work: :class:`~convection.solvers.stokes.forms.StokesDiscretisation` (spaces,
+    strong conditions, forms), :class:`~convection.solvers.stokes.linear.StokesLinearSystem` (matrices,
+    null spaces, the KSP) and, with ``buoyancy_theta > 0``,
+    :class:`~convection.physics.buoyancy.SemiImplicitBuoyancy` (the predicted buoyancy's operator term).
+    This class chooses the linear solver, rebuilds the forms when the fields change, and
+    normalises the solution (zero-mean pressure, no rigid rotation).
+
+    Args:
+        mesh: box mesh (2D or 3D).
+        approximation: physics parameters and viscosity law.
+        bcs: velocity condition per side name (see :mod:`convection.geometry.boundary`); sides not listed
+            are traction free.
+        degree: velocity degree ``k >= 2``; the pressure has degree ``k - 1``.
+        solver: a name in :data:`STOKES_SOLVER_NAMES`: ``"auto"`` (iterative in 3D, GAMG's for a
+            shell free slip on both surfaces; direct in 2D), ``"direct"``, ``"iterative"`` or ``"iterative_gamg"``.
+        petsc_options: extra PETSc options overriding the defaults (without prefix), e.g.
+            ``{"ksp_rtol": 1e-6}``.
+        nitsche_penalty: penalty factor of the weak free-slip condition on curved boundaries
+            (default ``10 (degree + 1)^2``).
+        buoyancy_theta: 0 (the default): the buoyancy of the current fields; ``0 < theta <= 1``:
+            the buoyancy predicted at ``t + theta dt`` along the flow
+            (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`; ``dt`` is given to :meth:`solve`).
+        nonlinear: Picard or Newton settings (:mod:`convection.solvers.stokes.nonlinear`), used when the
+            viscosity depends on the flow (default: :class:`NonlinearSettings`'s defaults).
+
+    Attributes:
+        u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
+        p: pressure, P(degree-1) Function (zero mean when the pressure has a null space).
+        V, Q: the velocity and pressure spaces.
+        solver: the registry name in use (``"auto"`` resolved).
+        is_iterative: True for the Krylov solvers.
+        discretisation: the spaces and forms.
+        linear_system: the matrices, vectors and KSP (:attr:`ksp`).
+        forms: the forms of the fields of the last :meth:`prepare` (None before).
+    """
+
+    KIND = "Stokes"
+    SOLVERS = STOKES_SOLVERS
+    PETSC_OBJECTS = ("_nonlinear", "ksp", "linear_system")
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
+                 bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
+                 petsc_options: dict | None = None, nitsche_penalty: float | None = None,
+                 buoyancy_theta: float = 0.0, nonlinear: NonlinearSettings | None = None) -> None:
+        if degree < 2:
+            raise ValueError("Taylor-Hood needs velocity degree >= 2")
+        self.mesh = mesh
+        self.approximation = approximation
+        self.bcs = dict(bcs)
+        self.degree = degree
+        self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
+        self.has_rotation_null_space = has_rotation_null_space(self.bcs)
+        self.buoyancy_theta = float(buoyancy_theta)
+        self.nonlinear_settings = nonlinear if nonlinear is not None else NonlinearSettings()
+        self.is_nonlinear = approximation.is_nonlinear
+        if self.is_nonlinear and self.buoyancy_theta != 0.0:
+            raise ValueError("a semi-implicit buoyancy (buoyancy_theta > 0) is not available with a viscosity that "
+                             "depends on the flow")
+        self._semi_implicit = (SemiImplicitBuoyancy(mesh, approximation, self.buoyancy_theta)
+                               if self.buoyancy_theta != 0.0 else None)
+        self._petsc_options = self._create_ksp(
+            mesh.comm, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space), petsc_options)
+        self.is_iterative = self.solver != "direct"
+        self.discretisation = StokesDiscretisation(mesh, approximation, bcs=self.bcs, degree=degree,
+                                                   nitsche_penalty=self.nitsche_penalty)
+        self.V, self.Q = self.discretisation.V, self.discretisation.Q
+        self.u = dolfinx.fem.Function(self.V, name="velocity")
+        self.p = dolfinx.fem.Function(self.Q, name="pressure")
+
+        self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(mesh.geometry.dim, self.bcs))
+        self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
+        self._pressure_mean = PressureMean(self.p) if self.has_pressure_null_space else None
+        self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
+            self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, bcs=self.bcs,
+            iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space)
+
+        self.forms: StokesForms | None = None
+        self._forms_key: tuple[Any, Any] | None = None
+        self._operator_current = False
+        self._nonlinear = NonlinearStokes(self, self.nonlinear_settings) if self.is_nonlinear else None
+
+    def settings(self) -> dict[str, Any]:
+        return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
+                "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
+                "nonlinear": self.nonlinear_settings}
+
+    def prepare(self, T: Any, C: Any = None, /, *, fields: dict[str, Any] | None = None) -> StokesForms:
+        """The forms for ``T`` and ``C`` (arguments as in :meth:`solve`): built again unless these
+        very objects were prepared last; the linear algebra is set up on the first call.
+        Collective. :meth:`solve` calls it; call it first to change the returned forms (e.g.
+        ``stokes.forms = forms._replace(L=...)``, same spaces), which the next solve with the same
+        ``T`` and ``C`` then uses."""
+        key = (T, C, tuple(sorted((fields or {}).items(), key=lambda item: item[0])))
+        if self._forms_key is None or not _same_objects(self._forms_key, key):
+            flow = {"u": self.u, "p": self.p, "fields": fields or {}}
+            self.forms = self.discretisation.forms(T, C, pressure_block=self.linear_system.pinned,
+                                                   preconditioner=self.is_iterative,
+                                                   semi_implicit=self._semi_implicit, flow=flow)
+            self._forms_key = key
+            self._operator_current = False
+            if not self.linear_system.is_set_up:
+                set_owned_options(self, self._prefix, self._petsc_options)
+                self.linear_system.setup(self.forms)
+        return self.forms
+
+    def solve(self, T: Any, C: Any = None, /, *, dt: float = 0.0,
+              fields: dict[str, Any] | None = None) -> StokesResult:
+        """Solve for ``(u, p)`` given temperature ``T`` and composition ``C``. Collective.
+
+        Args:
+            T: temperature (Function, UFL expression or number).
+            C: composition: ``None``, one material fraction (Function of any degree, UFL
+                expression or number) or a tuple of them, one per material (see
+                :func:`convection.physics.approximation.fractions`).
+            dt: the coming step, for a semi-implicit buoyancy (``buoyancy_theta > 0``); ignored
+                otherwise.
+            fields: named mesh fields the viscosity laws read (e.g. ``{"plastic_strain": f}``).
+
+        Returns:
+            Iteration count, true residual norm and timings. An iterative solve starts from the
+            current ``u``, ``p`` (the previous solution) and stops at ``|b - K x| <= rtol |b|``.
+        """
+        forms = self.prepare(T, C, fields=fields)
+        t0 = time.perf_counter()
+        if self._nonlinear is not None:
+            result = self._nonlinear.solve(forms, self._forms_key, T, C, fields)
+            if self._rotations is not None:
+                self._rotations.remove(self.u)
+            self._operator_current = False
+            seconds = time.perf_counter() - t0
+            return StokesResult(result.linear_iterations, result.residual, 0.0, seconds, 0.0, result)
+        if self._semi_implicit is not None:
+            self._semi_implicit.update(dt)
+        self.linear_system.assemble_operator(
+            forms, refresh=not self._operator_current or self.approximation.is_variable_viscosity)
+        self._operator_current = True
+        self.linear_system.assemble_rhs(forms)
+
+        t1 = time.perf_counter()
+        setup_seconds = self.linear_system.solve()
+        if self._pressure_mean is not None:
+            self._pressure_mean.normalise()
+        if self._rotations is not None:
+            self._rotations.remove(self.u)
+        norm = self.linear_system.residual_norm()
+        return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
+                            setup_seconds)
+
+    # ------------------------------------------------------------------ adaptivity
+    def transfer_from(
+        self,
+        old: "StokesSolver",
+        transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
+    ) -> None:
+        """Copy ``u`` and ``p`` (used as the initial guess) from a solver on the previous mesh.
+
+        Args:
+            old: solver on the old mesh.
+            transfer: ``transfer(src_on_old_mesh, dst_on_new_mesh)`` fills ``dst``; supplied by
+                the caller (e.g. interpolation between non-matching meshes). Collective.
+        """
+        transfer(old.u, self.u)
+        transfer(old.p, self.p)
+        self.u.x.scatter_forward()
+        self.p.x.scatter_forward()

@@ -1,0 +1,133 @@
+"""Bad configuration inputs give one line naming the key, exit code 2, no traceback, no hang.
+
+Each case runs the real CLI under ``mpirun -n 2`` (and once serially) in a subprocess.
+"""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from convection.config.loader import ConfigError, load_config
+from convection.app.launch import mpirun
+
+ROOT = Path(__file__).resolve().parents[3]
+GOOD = ROOT / "configs" / "blankenbach_1a.yaml"
+
+
+def _run(args, *, ranks=2, timeout=120):
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    cmd = [sys.executable, "-m", "convection", *args]
+    if ranks > 1:
+        cmd = [*mpirun(ranks), *cmd]
+    return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+CASES = {
+    "unknown key": (["run", str(GOOD), "--set", "mesh.colls=[4,4]"], "mesh.colls"),
+    "wrong type": (["run", str(GOOD), "--set", "physics.Ra=hot"], "physics.Ra"),
+    "missing file": (["run", "configs/does_not_exist.yaml"], "not found"),
+    "negative end time": (["run", str(GOOD), "--set", "time.end=-1"], "time.end"),
+    "bad choice": (["run", str(GOOD), "--set", "stokes.solver=magic"], "stokes.solver"),
+    "bad expression": (["run", str(GOOD), "--set", "initial.temperature=1-q"], "initial.temperature"),
+    "negative particles per cell": (["run", str(GOOD), "--set", "particles.generator.particles_per_cell=-5"],
+                                    "particles.generator"),
+    "missing particle file": (["run", str(GOOD), "--set", "particles.generator={name: from_file, path: nowhere.txt}"],
+                              "'nowhere.txt' not found"),
+    "unknown particle property": (["run", str(GOOD), "--set", "particles.properties=[velocity, strain]"],
+                                  "particles.properties[1]"),
+    "property without the one it reads": (["run", str(GOOD), "--set", "particles.enabled=true",
+                                           "--set", "particles.properties=[velocity, displacement]"],
+                                          "particles.properties[1]': 'displacement' needs the particle property "
+                                          "'initial_position'"),
+    "unknown material key": (["run", str(GOOD), "--set", "materials={lid: {initial: 'z > 0.8', density: 1}}"],
+                             "materials.lid.density"),
+    "runaway integer power": (["run", str(GOOD), "--set", "initial.temperature=9**9**9"], "initial.temperature"),
+    "runaway refinement": (["run", str(GOOD), "--set", "adaptivity.enabled=true", "--set", "adaptivity.max_level=50"],
+                           "adaptivity.max_level"),
+    "too many particles": (["run", str(GOOD), "--set", "particles.enabled=true",
+                            "--set", "particles.generator.particles_per_cell=1e7"], "particles_per_cell"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_bad_input_under_mpirun(name):
+    args, needle = CASES[name]
+    proc = _run(args, ranks=2)
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, proc.stderr  # printed once (rank 0), one line
+    assert needle in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_missing_required_value(tmp_path):
+    path = _write(tmp_path, "mesh: {cells: [4, 4]}\nphysics: {Ra: 1e4}\noutput: {directory: out}\n")
+    proc = _run(["run", path], ranks=1)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "error: config key 'time.end': required value missing (end time (nondimensional))"
+
+
+def test_invalid_yaml(tmp_path):
+    proc = _run(["run", _write(tmp_path, "mesh: [cells: 4\n")], ranks=1)
+    assert proc.returncode == 2 and "invalid YAML" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_check_prints_resolved_config():
+    proc = _run(["check", str(GOOD), "--set", "time.end=0.5", "--output", "elsewhere"], ranks=1)
+    assert proc.returncode == 0, proc.stderr
+    assert "end: 0.5" in proc.stdout and "directory: elsewhere" in proc.stdout
+
+
+def test_load_config_defaults_and_overrides():
+    config = load_config(GOOD, ["mesh.cells=[8, 4]", "physics.Rb=1e3"])
+    assert config["mesh"]["cells"] == [8, 4]
+    assert config["physics"]["Rb"] == 1000.0  # "1e3" (a string for PyYAML) coerced to float
+    assert config["adaptivity"]["enabled"] is False
+    with pytest.raises(ConfigError, match="mesh.upper"):
+        load_config(GOOD, ["mesh.lower=[0, 0]", "mesh.upper=[1, 0]"])
+    with pytest.raises(ConfigError, match="boundary.velocity.top.value"):
+        load_config(GOOD, ["boundary.velocity.top={kind: prescribed, value: [1, 0, 0]}"])
+
+
+FAIL_ON_RANK_1 = """
+import sys
+from mpi4py import MPI
+import convection.io.fields
+output_function = convection.io.fields.FieldOutput._output_function
+calls = []
+
+
+def failing(self, name, f):
+    calls.append(name)
+    if len(calls) > 4 and MPI.COMM_WORLD.rank == 1:  # rank 1 alone, with the field file open
+        raise RuntimeError("injected failure on rank 1")
+    return output_function(self, name, f)
+
+
+convection.io.fields.FieldOutput._output_function = failing
+from convection.app.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_error_on_one_rank_stops_every_rank(tmp_path):
+    """An unexpected error on one rank while the other is in a collective call (here: rank 1 fails
+    between two fields of an output, rank 0 writes the next field): the run stops at once with one line naming the
+    rank and exit code 1, instead of the other rank waiting forever (the run's cleanup, itself
+    collective, is skipped then)."""
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    cmd = [*mpirun(2), sys.executable, "-c", FAIL_ON_RANK_1, "run", str(GOOD), "--output", str(tmp_path / "run"),
+           "--set", "mesh.cells=[8,8]", "--set", "time.max_steps=3", "--set", "output.fields_every=1",
+           "--set", "output.progress=none"]
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0
+    assert "error (rank 1): RuntimeError: injected failure on rank 1" in proc.stderr

@@ -1,0 +1,79 @@
+"""gmsh annulus and spherical-shell meshes: curved cells with boundary nodes on the circles/spheres,
+no inverted cells, areas/volumes to the accuracy of second-order geometry, radius-based boundaries."""
+
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+import dolfinx.fem
+
+pytest.importorskip("gmsh")
+
+from convection.geometry.boundary import SHELL_BOUNDARIES, boundary_measure, locate_boundary_facets, shell_radii  # noqa: E402
+from convection.geometry.mesh import ShellSpec, create_shell_mesh, mesh_spec_from_config  # noqa: E402
+from fembase.dolfinx_compat import coordinate_map, evaluate_expression  # noqa: E402
+
+
+def _integral(mesh, form):
+    return mesh.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(form)), op=MPI.SUM)
+
+
+def _min_jacobian(mesh):
+    tdim = mesh.topology.dim
+    points = np.array([[0.25] * tdim, [0.02] * tdim, [0.96] + [0.02] * (tdim - 1), [0.02] * (tdim - 1) + [0.96]])
+    expr = dolfinx.fem.Expression(ufl.JacobianDeterminant(mesh), points)
+    cells = np.arange(mesh.topology.index_map(tdim).size_local, dtype=np.int32)
+    local = float(evaluate_expression(expr, mesh, cells).min()) if cells.size else np.inf
+    return mesh.comm.allreduce(local, op=MPI.MIN)
+
+
+@pytest.mark.parametrize("gdim, resolution, tolerance", [(2, 0.3, 1e-4), (3, 0.5, 1e-3)])
+def test_curved_shell_mesh(world, gdim, resolution, tolerance):
+    spec = ShellSpec(gdim, 1.22, 2.22, resolution=resolution)
+    mesh = create_shell_mesh(world, spec)
+    assert coordinate_map(mesh).degree == 2
+    assert _min_jacobian(mesh) > 0.0  # the coarse 3D mesh needs gmsh's high-order untangling
+    assert shell_radii(mesh) == pytest.approx((1.22, 2.22), abs=1e-12)
+    volume = _integral(mesh, dolfinx.fem.Constant(mesh, 1.0) * ufl.dx)
+    assert abs(volume - spec.volume) < tolerance * spec.volume
+    for name, radius in zip(SHELL_BOUNDARIES, (1.22, 2.22)):
+        area = _integral(mesh, dolfinx.fem.Constant(mesh, 1.0) * boundary_measure(mesh, name))
+        exact = 2 * np.pi * radius if gdim == 2 else 4 * np.pi * radius**2
+        assert abs(area - exact) < tolerance * exact
+        assert world.allreduce(locate_boundary_facets(mesh, name).size) > 0
+
+
+def test_straight_cells_and_interfaces():
+    spec = ShellSpec(2, resolution=0.3, geometry_degree=1, interfaces=(1.72,))
+    mesh = create_shell_mesh(MPI.COMM_WORLD, spec)
+    assert coordinate_map(mesh).degree == 1
+    r = np.linalg.norm(mesh.geometry.x[:, :2], axis=1)
+    assert np.any(np.abs(r - 1.72) < 1e-12)  # vertices on the interface circle
+    volume = _integral(mesh, dolfinx.fem.Constant(mesh, 1.0) * ufl.dx)
+    assert volume < spec.volume  # chords cut the outer circle
+
+
+def test_spec_from_config_and_checks():
+    spec = mesh_spec_from_config({"geometry": "spherical_shell", "radii": [1.0, 2.0], "resolution": 0.4,
+                                  "geometry_degree": 2})
+    assert spec.gdim == 3 and spec.name == "spherical_shell" and spec.gravity == "radial"
+    with pytest.raises(ValueError, match="inner_radius"):
+        ShellSpec(2, 2.0, 1.0)
+    with pytest.raises(ValueError, match="Unknown mesh geometry"):
+        mesh_spec_from_config({"geometry": "torus"})
+
+
+def test_shell_mesh_written_and_read_again(tmp_path):
+    """``msh_file``: the first call meshes and writes the file, the second reads it: the same cells
+    and nodes (to the file's 17 significant digits), the boundary still found by radius."""
+    spec = ShellSpec(2, 1.22, 2.22, resolution=0.4, geometry_degree=2, interfaces=(1.72,))
+    msh = tmp_path / "annulus.msh"
+    made = create_shell_mesh(MPI.COMM_SELF, spec, msh_file=msh)
+    assert msh.exists()
+    read = create_shell_mesh(MPI.COMM_SELF, spec, msh_file=msh)
+    tdim = made.topology.dim
+    assert read.topology.index_map(tdim).size_local == made.topology.index_map(tdim).size_local
+    assert np.allclose(read.geometry.x, made.geometry.x, rtol=0.0, atol=1e-14)
+    facets = locate_boundary_facets(read, "outer")
+    assert facets.size > 0

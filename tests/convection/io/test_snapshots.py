@@ -1,0 +1,221 @@
+"""Snapshot pictures of a run (convection.io.pictures): files, framing and colours of off-screen renders."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib import colormaps
+from matplotlib.image import imread
+from mpi4py import MPI
+
+import dolfinx.fem
+import dolfinx.mesh
+
+from convection.io.fields import FieldOutput
+from convection.io.pictures import main, plot_snapshots, snapshot_times
+from fembase.dolfinx_compat import function_space, refine_keeping_partition
+from particles import Swarm
+from particles.generation import generate
+from particles.output import ParticleWriter
+
+TIMES = (0.0, 1.0, 2.0)
+
+
+def _functions(mesh: dolfinx.mesh.Mesh, temperature: str) -> dict[str, dolfinx.fem.Function]:
+    """material = [z > 1/2] (DG0), temperature = z or 0 (P2), velocity, pressure = x (P1).
+
+    z is the vertical coordinate: y in 2D, z in 3D.
+    """
+    up = mesh.geometry.dim - 1
+    material = dolfinx.fem.Function(function_space(mesh, "DG", 0))
+    material.interpolate(lambda x: (x[up] > 0.5).astype(np.float64))
+    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
+    T.interpolate(lambda x: x[up] if temperature == "z" else 0.0 * x[up])
+    u = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,)))
+    u.interpolate(lambda x: np.stack([x[1] - 0.5, 0.5 - x[0], 0 * x[0]][: mesh.geometry.dim]))
+    p = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1))
+    p.interpolate(lambda x: x[0])
+    return {"temperature": T, "velocity": u, "pressure": p, "material": material}
+
+
+def _run_directory(path: Path, *, temperature: str = "z", dim: int = 2, particles: bool = True) -> Path:
+    """A tiny run: fields at TIMES (the mesh refined before the last), particles, statistics.csv."""
+    comm = MPI.COMM_SELF
+    if dim == 2:
+        mesh = dolfinx.mesh.create_unit_square(comm, 6, 6)
+    else:
+        mesh = dolfinx.mesh.create_unit_cube(comm, 3, 3, 3)
+    mesh.topology.create_entities(1)
+    out = FieldOutput(path)
+    for t in TIMES:
+        if t == TIMES[-1]:
+            mesh = refine_keeping_partition(mesh)
+        out.write(_functions(mesh, temperature), t)
+    out.close()
+    if particles:
+        swarm = Swarm(mesh)
+        swarm.add_property("material")
+        generate(swarm, "random_uniform", num_particles=400, seed=2)
+        writer = ParticleWriter(path)
+        for step, t in enumerate(TIMES):
+            swarm.property("material")[:, 0] = swarm.x[:, 0] + t
+            writer.write(swarm, t, step)
+    lines = ["step,time,vrms,nusselt,cells"] + [f"{k},{t},{1 + t},{2 + t},{100}" for k, t in enumerate(TIMES)]
+    (path / "statistics.csv").write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _check_picture(path: Path) -> None:
+    """A PNG of material = [z > 1/2] (under black particles) or temperature = z on the unit square."""
+    assert path.stat().st_size > 3_000
+    image = imread(path)
+    assert image.shape[0] > 500 and image.shape[1] > 500
+    assert _colours(image) > 50  # not one colour
+    # the unit square fills the picture between the title and the bar below it: sampled in the
+    # middle at z = 3/4 and z = 1/4
+    top, bottom = _patch(image, 0.27, 0.5), _patch(image, 0.67, 0.5)
+    if path.name.startswith("material"):
+        # black particles on top: the field uses viridis from 0.3 to 1
+        assert np.allclose(top, colormaps["viridis"](1.0)[:3], atol=0.03)
+        assert np.allclose(bottom, colormaps["viridis"](0.3)[:3], atol=0.03)
+    else:
+        assert top[0] > top[2] + 0.2 and bottom[2] > bottom[0] + 0.2  # red above, blue below
+
+
+def _colours(image: np.ndarray) -> int:
+    """Number of distinct RGB colours in ``image``."""
+    rgb = np.round(image[..., :3] * 255).astype(np.int64).reshape(-1, 3)
+    return len(np.unique(rgb @ np.array([1 << 16, 1 << 8, 1])))
+
+
+def _viridis_position(rgb: np.ndarray) -> float:
+    """The value in [0, 1] whose viridis colour is nearest to ``rgb``."""
+    values = np.linspace(0.0, 1.0, 256)
+    return float(values[np.argmin(np.linalg.norm(colormaps["viridis"](values)[:, :3] - rgb, axis=1))])
+
+
+def _patch(image: np.ndarray, row: float, col: float) -> np.ndarray:
+    """Median RGB (0..1) of a small patch around the relative position (row, col) of ``image``."""
+    h, w = image.shape[:2]
+    r, c = int(row * h), int(col * w)
+    return np.median(image[r - 8 : r + 8, c - 8 : c + 8, :3].reshape(-1, 3), axis=0)
+
+
+def test_snapshot_times_snap_to_written():
+    written = [0.0, 10.0, 20.0, 30.0]
+    assert snapshot_times(written) == [0.0, 20.0, 30.0]
+    assert snapshot_times(written, [1.0, 9.0, 11.0, 100.0]) == [0.0, 10.0, 30.0]
+    assert snapshot_times([5.0]) == [5.0]
+    assert snapshot_times([]) == []
+
+
+def test_snapshots_of_a_2d_run(tmp_path):
+    directory = _run_directory(tmp_path)
+    skipped: list[str] = []
+    paths = plot_snapshots(directory, log=skipped.append)
+    names = sorted(p.name for p in paths)
+    assert names == sorted(f"{kind}_{k:04d}_t{t:g}.png" for kind in ("material", "temperature")
+                           for k, t in enumerate(TIMES))
+    assert not skipped
+    for path in paths:
+        assert path.parent == directory / "snapshots"
+        _check_picture(path)
+
+
+def test_particle_colours_and_chosen_times(tmp_path):
+    directory = _run_directory(tmp_path, temperature="zero")
+    skipped: list[str] = []
+    paths = plot_snapshots(directory, times=[0.9, 1.2], field="pressure", particle_property="material",
+                           log=skipped.append)
+    assert [p.name for p in paths] == ["pressure_0001_t1.png"]
+    assert skipped == ["t = 1: temperature is constant (0); no temperature picture"]
+    image = imread(paths[0])
+    # field pressure = x in viridis; particles coloured by material = x + 1, blue (left) to red (right)
+    assert _viridis_position(_patch(image, 0.4, 0.12)) < 0.2
+    assert _viridis_position(_patch(image, 0.4, 0.88)) > 0.8
+    r, g, b = np.moveaxis(image[int(0.1 * image.shape[0]) : int(0.85 * image.shape[0]), :, :3], -1, 0)
+    assert ((r > 0.6) & (g < 0.45) & (b < 0.45)).sum() > 50  # red particles (no such viridis colour)
+    assert ((b > 0.65) & (r < 0.45)).sum() > 50  # blue particles
+
+
+def test_temperature_with_particles_coloured_by_a_property(tmp_path):
+    """With a particle property the temperature picture shows the particles on top in viridis (the
+    seed's figure 5, right: a section coloured by initial radius); the pictures go to out_dir."""
+    directory = _run_directory(tmp_path)
+    out = tmp_path / "pictures"
+    paths = plot_snapshots(directory, times=[2.0], particle_property="material", out_dir=out, log=None)
+    assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
+    assert all(p.parent == out for p in paths) and not (directory / "snapshots").exists()
+    image = imread(paths[1])[..., :3]
+    h, w = image.shape[:2]
+    body = image[int(0.1 * h): int(0.85 * h)]
+    left, right = body[:, : w // 2], body[:, w // 2:]
+    # material = x + 2 at t = 2: dark purple particles on the left, yellow ones on the right;
+    # neither colour is in coolwarm (the temperature) or white
+    purple = lambda a: ((a[..., 0] < 0.35) & (a[..., 1] < 0.15) & (a[..., 2] > 0.25) & (a[..., 2] < 0.45)).sum()
+    yellow = lambda a: ((a[..., 0] > 0.75) & (a[..., 1] > 0.75) & (a[..., 2] < 0.35)).sum()
+    assert purple(left) > 50 and yellow(right) > 50
+    assert purple(right) < purple(left) / 5 and yellow(left) < yellow(right) / 5
+    plain = plot_snapshots(directory, times=[2.0], log=None)[1]
+    assert yellow(imread(plain)[..., :3]) == 0  # without a property: the temperature alone
+
+
+def test_unknown_names_list_the_known_ones(tmp_path):
+    directory = _run_directory(tmp_path)
+    with pytest.raises(ValueError, match="fields: .*material"):
+        plot_snapshots(directory, field="density", log=None)
+    with pytest.raises(ValueError, match="properties: id, rank, material"):
+        plot_snapshots(directory, particle_property="density", log=None)
+
+
+def test_snapshots_of_a_3d_run(tmp_path):
+    directory = _run_directory(tmp_path, dim=3)
+    paths = plot_snapshots(directory, times=[2.0], log=None)
+    assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
+    for path in paths:
+        _check_picture(path)  # the x-z section through the centre, z up
+
+
+def test_cli_draws_summary_and_snapshots(tmp_path, capsys):
+    directory = _run_directory(tmp_path, particles=False)
+    assert main([str(directory), "--times", "2"]) == 0
+    printed = capsys.readouterr().out.split()
+    assert printed == [str(directory / "summary.png"), str(directory / "snapshots" / "material_0002_t2.png"),
+                       str(directory / "snapshots" / "temperature_0002_t2.png")]
+    assert all(Path(p).stat().st_size > 3_000 for p in printed)
+    assert main([str(directory), "--field", "density"]) == 2
+
+
+def test_spherical_shell_view_with_particles_coloured_by_displacement(tmp_path):
+    """A spherical shell gets a perspective picture: the equatorial temperature slice (hot inside: red
+    near the core, blue outside) and the particles near the core in viridis by displacement."""
+    pytest.importorskip("gmsh")
+    from convection.geometry.mesh import ShellSpec, create_shell_mesh
+
+    mesh = create_shell_mesh(MPI.COMM_SELF, ShellSpec(3, 1.22, 2.22, resolution=0.6, geometry_degree=1))
+    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1), name="temperature")
+    T.interpolate(lambda x: 2.22 - np.linalg.norm(x, axis=0))
+    out = FieldOutput(tmp_path)
+    out.write({"temperature": T}, 0.0)
+    out.close()
+    swarm = Swarm(mesh)
+    swarm.add_property("displacement")
+    generate(swarm, "metropolis_hastings", num_particles=3000, seed=2,
+             density=lambda x: (np.linalg.norm(x, axis=1) < 1.5).astype(np.float64))
+    swarm.property("displacement")[:, 0] = swarm.x[:, 0]
+    ParticleWriter(tmp_path).write(swarm, 0.0, 0)
+    paths = plot_snapshots(tmp_path, log=None)
+    assert [p.name for p in paths] == ["shell_0000_t0.png", "temperature_0000_t0.png"]
+    image = imread(paths[0])
+    assert image.shape[:2] == (860, 1000) and _colours(image) > 200
+    r, g, b = np.moveaxis(image[int(0.08 * image.shape[0]) : int(0.85 * image.shape[0]), :, :3], -1, 0)
+    assert ((r > 0.6) & (g < 0.35) & (b < 0.35)).sum() > 500  # hot slice next to the core
+    assert ((b > 0.6) & (r < 0.4) & (g < 0.6)).sum() > 500  # cold slice outside
+    viridis = colormaps["viridis"](np.linspace(0.0, 1.0, 16))[:, :3]
+    pixels = image[..., :3].reshape(-1, 3)
+    near = np.min(np.linalg.norm(pixels[:, None, :] - viridis[None, :, :], axis=2), axis=1) < 0.04
+    assert near.sum() > 300  # particles
+    with pytest.raises(ValueError, match="properties: id, rank, displacement"):
+        plot_snapshots(tmp_path, particle_property="density", log=None)

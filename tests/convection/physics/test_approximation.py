@@ -1,0 +1,85 @@
+"""Viscosity laws and buoyancy of the Boussinesq approximation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import ufl
+import dolfinx
+from mpi4py import MPI
+
+from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 2, 2)
+
+
+def _value(mesh, expr) -> float:
+    """Mean of a (constant) scalar UFL expression over the unit square."""
+    local = dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr * ufl.dx(domain=mesh)))
+    return mesh.comm.allreduce(local, op=MPI.SUM)
+
+
+def _evaluator(mesh, law):
+    """f(T, C) -> value of law(T, C), compiled once with Constant T and C."""
+    T = dolfinx.fem.Constant(mesh, 0.0)
+    C = dolfinx.fem.Constant(mesh, 0.0)
+    form = dolfinx.fem.form(law(T, C) * ufl.dx(domain=mesh))
+
+    def evaluate(t: float, c: float) -> float:
+        T.value, C.value = t, c
+        return mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
+
+    return evaluate
+
+
+@pytest.mark.parametrize("mixing, expected", [
+    ("geometric", lambda c: 0.1 ** (1 - c) * 1000.0 ** c),
+    ("arithmetic", lambda c: (1 - c) * 0.1 + c * 1000.0),
+    ("harmonic", lambda c: 1.0 / ((1 - c) / 0.1 + c / 1000.0)),
+])
+def test_mixing_rules_and_clipping(mesh, mixing, expected):
+    eta = _evaluator(mesh, ViscosityLaw((0.1, 1000.0), mixing=mixing))
+    for c in (0.0, 0.3, 1.0):
+        assert eta(0.0, c) == pytest.approx(expected(c), rel=1e-12)
+    assert eta(0.0, -0.5) == pytest.approx(0.1, rel=1e-12)
+    assert eta(0.0, 1.7) == pytest.approx(1000.0, rel=1e-12)
+
+
+def test_frank_kamenetskii(mesh):
+    law = ViscosityLaw(temperature_law="frank_kamenetskii", gamma=math.log(1e4))
+    approx = BoussinesqApproximation(Ra=1.0, viscosity=law)
+    assert approx.is_variable_viscosity
+    eta = _evaluator(mesh, approx.viscosity)
+    assert eta(1.0, 0.0) == pytest.approx(1e-4, rel=1e-12)
+    assert eta(0.0, 0.0) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_constant_viscosity_flags(mesh):
+    assert not BoussinesqApproximation(Ra=1.0).is_variable_viscosity
+    assert not BoussinesqApproximation(Ra=1.0, viscosity=ViscosityLaw((2.0, 2.0))).is_variable_viscosity
+    assert BoussinesqApproximation(Ra=1.0, viscosity=ViscosityLaw((1.0, 2.0))).is_variable_viscosity
+    assert _value(mesh, BoussinesqApproximation(Ra=1.0).viscosity(0.5, 0.5)) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("gdim", [2, 3])
+def test_buoyancy_points_up(mesh, gdim):
+    approx = BoussinesqApproximation(Ra=10.0, Rb=4.0)
+    f = approx.buoyancy(0.5, 0.25, gdim)
+    assert f.ufl_shape == (gdim,)
+    values = [_value(mesh, f[i]) for i in range(gdim)]
+    assert np.allclose(values, [0.0] * (gdim - 1) + [10.0 * 0.5 - 4.0 * 0.25])
+    assert _value(mesh, approx.buoyancy(1.0, None, gdim)[gdim - 1]) == pytest.approx(10.0)
+
+
+def test_unknown_names_are_rejected():
+    with pytest.raises(ValueError, match="valid names"):
+        ViscosityLaw(mixing="median")
+    with pytest.raises(ValueError, match="valid names"):
+        ViscosityLaw(temperature_law="arrhenius")
+    with pytest.raises(ValueError):
+        ViscosityLaw((1.0, -1.0))

@@ -45,7 +45,7 @@ import dolfinx.fem
 from fembase.evaluation import Evaluator
 from particles.kernels import stage_combination
 from particles.migration import migrate
-from particles.registry import Registry
+from fembase.registry import Registry
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
 
@@ -96,7 +96,7 @@ class ButcherTableau:
 
 
 INTEGRATORS: Registry[ButcherTableau] = Registry(
-    "integrator",
+    "particle integrator",
     (
         ButcherTableau("euler", "forward Euler, first order", 1, ((0.0,),), (1.0,), (0.0,)),
         ButcherTableau(

@@ -53,3 +53,118 @@ def test_no_dolfinx_version_checks_outside_the_floor():
     wrong = [f"{path.relative_to(ROOT)}" for package in ("particles", "convection")
              for path in sorted((ROOT / package).rglob("*.py")) if "__version__" in path.read_text()]
     assert not wrong, wrong
+
+
+ROOMS = ("geometry", "physics", "solvers", "adapt", "model", "postprocess", "io", "config", "app")
+"""convection's rooms from the floor up: a room imports only from rooms below it (and from the
+floor modules ``schema``, ``expressions``, ``_lazy``, from particles and fembase)."""
+
+
+def _modules() -> dict[str, Path]:
+    """Every module of the three packages by dotted name (a package by its ``__init__``)."""
+    out = {}
+    for package in PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return out
+
+
+def _runtime_imports(path: Path):
+    """Imported module names of ``path`` (``from a import b`` gives ``a.b`` when that is a module),
+    leaving out imports under ``if TYPE_CHECKING:``."""
+    tree = ast.parse(path.read_text())
+    skipped = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+            skipped.update(id(n) for n in ast.walk(node))
+    modules = _modules()
+    for node in ast.walk(tree):
+        if id(node) in skipped:
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [f"{node.module}.{alias.name}" for alias in node.names]
+            yield from [n for n in names if n in modules] or [node.module]
+        elif isinstance(node, ast.Import):
+            yield from (alias.name for alias in node.names)
+
+
+def _room(module: str) -> int | None:
+    parts = module.split(".")
+    if parts[0] != "convection" or len(parts) < 2 or parts[1] not in ROOMS:
+        return None
+    return ROOMS.index(parts[1])
+
+
+def test_convection_rooms_import_only_downwards():
+    """No room of convection imports a room above it, not even inside a function."""
+    wrong = []
+    for module, path in sorted(_modules().items()):
+        here = _room(module)
+        if here is None:
+            continue
+        for imported in _runtime_imports(path):
+            there = _room(imported)
+            if there is not None and there > here:
+                wrong.append(f"{module} imports {imported}")
+    assert not wrong, wrong
+
+
+def test_no_import_cycles():
+    """The module import graph (every import, those inside functions included) has no cycle."""
+    modules = _modules()
+    graph = {name: sorted({m for m in _runtime_imports(path) if m in modules and m != name})
+             for name, path in modules.items()}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles = []
+
+    def connect(node: str) -> None:  # Tarjan's strongly connected components
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        for child in graph[node]:
+            if child not in index:
+                connect(child)
+                low[node] = min(low[node], low[child])
+            elif child in stack:
+                low[node] = min(low[node], index[child])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                top = stack.pop()
+                component.append(top)
+                if top == node:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            connect(node)
+    assert not cycles, cycles
+
+
+GEOMETRY_WORDS = {"box", "annulus", "spherical_shell", "sector", "shell", "radial", "vertical", "inner", "outer",
+                  "top", "bottom", "left", "right", "front", "back", "west", "east"}
+GEOMETRY_CLASSES = {"BoxDomain", "ShellDomain", "Annulus", "SphericalShell", "Sector", "BoxSpec", "ShellSpec",
+                    "SectorSpec", "VerticalGravity", "RadialGravity"}
+
+
+def test_only_geometry_tests_the_geometry():
+    """Outside convection/geometry/ no code compares with a geometry's or a boundary's name or tests
+    a domain's class: it asks the domain (:mod:`convection.geometry.domain`)."""
+    wrong = []
+    for path in sorted((ROOT / "convection").rglob("*.py")):
+        if "geometry" in path.relative_to(ROOT).parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Compare):
+                words = [n.value for n in ast.walk(node) if isinstance(n, ast.Constant) and n.value in GEOMETRY_WORDS]
+                if words:
+                    wrong.append(f"{path.relative_to(ROOT)}:{node.lineno} compares with {words[0]!r}")
+            elif isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("isinstance", "issubclass"):
+                names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)} & GEOMETRY_CLASSES
+                if names:
+                    wrong.append(f"{path.relative_to(ROOT)}:{node.lineno} tests the class {sorted(names)[0]}")
+    assert not wrong, wrong

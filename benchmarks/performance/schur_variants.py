@@ -32,7 +32,7 @@ from petsc4py import PETSc
 import dolfinx.fem
 import dolfinx.fem.petsc
 
-from convection import stokes, stokes_forms
+from convection.solvers.stokes import forms as stokes_forms, solver as stokes
 from fembase.dolfinx_compat import cell_dofmap, function_space, interpolation_points
 
 sys.modules.setdefault("schur_variants", sys.modules[__name__])  # for pc_python_type

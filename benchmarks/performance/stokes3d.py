@@ -46,7 +46,8 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
-from convection.geometry.boundary import SIDES_3D, VelocityBC
+from convection.geometry.boundary import VelocityBC
+from convection.geometry.box import SIDES_3D
 from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space
 

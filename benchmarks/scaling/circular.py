@@ -86,7 +86,7 @@ if str(ROOT) not in sys.path:
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
 from convection.app.launch import mpi_environment  # noqa: E402
-from convection.geometry.mesh import ShellSpec, create_shell_mesh, shell_confinement  # noqa: E402
+from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_confinement, shell_domain  # noqa: E402
 from convection.solvers.stokes.solver import STOKES_SOLVER_NAMES, StokesSolver  # noqa: E402
 from convection.solvers.timestep import cfl_timestep  # noqa: E402
 from fembase.dolfinx_compat import coordinate_element_from, geometry_dofmap, mesh_domain
@@ -265,9 +265,10 @@ class StokesFlow:
     def __init__(self, mesh: dolfinx.mesh.Mesh, flow: CouetteFlow, /, *, solver: str = "auto",
                  variable_viscosity: bool = True) -> None:
         law = ViscosityLaw(temperature_law="frank_kamenetskii", gamma=1.0) if variable_viscosity else ViscosityLaw()
-        approximation = BoussinesqApproximation(Ra=0.0, viscosity=law, gravity="radial")
+        domain = shell_domain(ShellSpec(flow.dim, R_IN, R_OUT))  # the boundaries are found on the mesh
+        approximation = BoussinesqApproximation(Ra=0.0, viscosity=law, gravity=domain.gravity)
         self.flow = flow
-        self.stokes = StokesSolver(mesh, approximation, bcs=flow.boundary_conditions(), solver=solver)
+        self.stokes = StokesSolver(mesh, approximation, bcs=flow.boundary_conditions(), domain=domain, solver=solver)
         self.temperature = dolfinx.fem.Constant(mesh, 0.0)
         V, Q = self.stokes.V, self.stokes.Q
         self.num_dofs = V.dofmap.index_map.size_global * V.dofmap.index_map_bs + Q.dofmap.index_map.size_global

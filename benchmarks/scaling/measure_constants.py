@@ -297,7 +297,8 @@ def stokes_cost() -> None:
     import dolfinx.mesh
 
     from convection.physics.approximation import BoussinesqApproximation
-    from convection.geometry.boundary import SIDES_2D, SIDES_3D, VelocityBC
+    from convection.geometry.boundary import VelocityBC
+    from convection.geometry.box import SIDES_2D, SIDES_3D
     from convection.solvers.stokes.solver import StokesSolver
 
     comm = MPI.COMM_WORLD

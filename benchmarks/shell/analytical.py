@@ -56,7 +56,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from convection.adapt.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels  # noqa: E402
 from convection.physics.approximation import BoussinesqApproximation  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
-from convection.geometry.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_domain  # noqa: E402
 from convection.solvers.stokes.solver import StokesSolver  # noqa: E402
 from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells  # noqa: E402
 from fembase.manifold import ShellManifold  # noqa: E402
@@ -193,9 +193,10 @@ def solve_on(case: Case, mesh: dolfinx.mesh.Mesh, level: int, h_target: float, *
     solutions = case.solutions()
     kind = "free_slip" if case.free_slip else "no_slip"
     bcs = {"inner": VelocityBC(kind), "outer": VelocityBC(kind)}
-    approximation = BoussinesqApproximation(Ra=1.0, gravity="radial")
-    stokes = StokesSolver(mesh, approximation, bcs=bcs, degree=degree, solver=solver, nitsche_penalty=nitsche_penalty,
-                          petsc_options=petsc_options)
+    domain = shell_domain(ShellSpec(case.dim, R_INNER, R_OUTER))  # the boundaries are found on the mesh
+    approximation = BoussinesqApproximation(Ra=1.0, gravity=domain.gravity)
+    stokes = StokesSolver(mesh, approximation, bcs=bcs, domain=domain, degree=degree, solver=solver,
+                          nitsche_penalty=nitsche_penalty, petsc_options=petsc_options)
     x = ufl.SpatialCoordinate(mesh)
     if case.smooth:
         # rho' = (r / R_p)^k * angular; interpolated at degree k + 2 to keep the forcing error small.

@@ -3,7 +3,7 @@
 =================== ===========================================================================
 section             component
 =================== ===========================================================================
-``mesh``            base mesh (:func:`convection.geometry.mesh.create_mesh`: box, annulus, spherical shell)
+``mesh``            the domain (:func:`convection.geometry.registry.domain_from_config`) and its base mesh
 ``physics``,        :class:`convection.physics.materials.Materials` and the Boussinesq approximation
 ``materials``
 ``boundary``        velocity and temperature conditions per side
@@ -36,7 +36,8 @@ import dolfinx.mesh
 from mpi4py import MPI
 
 from convection.adapt.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy
-from convection.geometry.boundary import SHELL_BOUNDARIES, TemperatureBC, VelocityBC, side_names, temperature_dirichlet_bcs
+from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
+from convection.geometry.domain import Domain
 from convection.io.checkpoint import (
     Checkpointer, CheckpointSettings, SavedRun, restore_mesh, restore_particles, restore_state,
 )
@@ -47,10 +48,9 @@ from convection.config.loader import (
     config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
     viscosity_laws,
 )
-from convection.geometry.domain import domain_from_config
+from convection.geometry.registry import domain_from_config
 from convection.expressions import Expression
 from convection.physics.materials import Material, Materials
-from convection.geometry.mesh import create_mesh
 from convection.model.model import Model
 from convection.geometry.plates import PlateVelocity
 from convection.postprocess.postprocessors import create_postprocessors
@@ -68,20 +68,16 @@ __all__ = ["build_model", "materials_from_config", "run_config", "run_settings",
            "velocity_bcs_from_config"]
 
 
-def _names(section: dict, gdim: int) -> tuple[str, ...]:
-    """The boundary names of a resolved ``boundary.*`` section: the shell's, or the box sides."""
-    return SHELL_BOUNDARIES if any(n in section for n in SHELL_BOUNDARIES) else side_names(gdim)
-
-
-def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
-    """Velocity conditions per side of the ``boundary.velocity`` section (null sides: traction free)."""
+def velocity_bcs_from_config(section: dict, domain: Domain) -> dict[str, VelocityBC]:
+    """Velocity conditions per boundary of ``domain`` from the ``boundary.velocity`` section (null:
+    traction free)."""
     result = {}
-    for side in _names(section, gdim):
+    for side in domain.boundaries:
         value = section[side]
         if value is None:
             continue
         if isinstance(value, dict) and value["kind"] == "plates":
-            result[side] = VelocityBC("prescribed", PlateVelocity.from_config(value, gdim))
+            result[side] = VelocityBC("prescribed", PlateVelocity.from_config(value, domain.gdim))
         elif isinstance(value, dict):
             components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
             result[side] = VelocityBC(value["kind"], components or None)
@@ -90,24 +86,16 @@ def velocity_bcs_from_config(section: dict, gdim: int) -> dict[str, VelocityBC]:
     return result
 
 
-def temperature_bcs_from_config(section: dict, gdim: int) -> dict[str, TemperatureBC]:
-    """Temperature conditions per side of the ``boundary.temperature`` section."""
+def temperature_bcs_from_config(section: dict, domain: Domain) -> dict[str, TemperatureBC]:
+    """Temperature conditions per boundary of ``domain`` from the ``boundary.temperature`` section."""
     result = {}
-    for side in _names(section, gdim):
+    for side in domain.boundaries:
         value = section[side]
         if value is None or value == "insulating":
             result[side] = TemperatureBC("insulating")
         else:
             result[side] = TemperatureBC("dirichlet", float(value["dirichlet"]))
     return result
-
-
-def depth_origin(config: dict[str, Any]) -> tuple[str, float]:
-    """Where the viscosity laws measure the depth from: ``("box", z_top)`` or ``("shell", r_outer)``."""
-    mesh = config["mesh"]
-    if mesh["geometry"] != "box":
-        return ("shell", float(mesh["radii"][1]))
-    return ("box", float(mesh["upper"][-1]) if mesh["upper"] is not None else 1.0)
 
 
 def materials_from_config(config: dict[str, Any]) -> Materials:
@@ -132,8 +120,8 @@ def run_settings(config: dict[str, Any]) -> RunSettings:
                        progress=out["progress"], progress_every=out["progress_every"])
 
 
-def _initial_fields(config: dict[str, Any], materials: Materials,
-                    temperature_bcs: dict[str, TemperatureBC]) -> Callable[[dolfinx.mesh.Mesh], list]:
+def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bcs: dict[str, TemperatureBC],
+                    domain: Domain) -> Callable[[dolfinx.mesh.Mesh], list]:
     """The fields that drive the initial adaptation, set from the initial condition on a mesh."""
     acfg = config["adaptivity"]
     gdim = config_gdim(config)
@@ -143,7 +131,7 @@ def _initial_fields(config: dict[str, Any], materials: Materials,
         V = function_space(mesh, "Lagrange", config["energy"]["degree"])
         T = dolfinx.fem.Function(V)
         T.interpolate(initial_T)
-        dolfinx.fem.petsc.set_bc(petsc_vector(T), temperature_dirichlet_bcs(V, temperature_bcs))
+        dolfinx.fem.petsc.set_bc(petsc_vector(T), temperature_dirichlet_bcs(V, temperature_bcs, domain))
         T.x.scatter_forward()
         fields = [T] if "temperature" in acfg["fields"] else []
         if "composition" in acfg["fields"] and len(materials):
@@ -163,30 +151,29 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     the checkpoint's instead.
     """
     domain = domain_from_config(config)
-    spec = domain.spec
-    gdim = spec.gdim
+    gdim = domain.gdim
     physics = config["physics"]
     materials = materials_from_config(config)
     visc = physics["viscosity"]
     approximation = materials.approximation(Ra=physics["Ra"], H=physics["H"], temperature_law=visc["temperature_law"],
-                                            gamma=visc["gamma"], gravity=spec.gravity, top=depth_origin(config))
-    velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], gdim)
-    temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], gdim)
+                                            gamma=visc["gamma"], gravity=domain.gravity)
+    velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], domain)
+    temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], domain)
 
     acfg, bcfg = config["adaptivity"], config["balance"]
     hierarchical = acfg["enabled"] or bcfg["strategy"] != "none"
-    # A curved shell's hierarchy refines the straight-sided base and curves what it hands out.
+    # A curved domain's hierarchy refines the straight-sided base and curves what it hands out.
     manifold = domain.manifold() if hierarchical else None
-    base_spec = dataclasses.replace(spec, geometry_degree=1) if manifold is not None else spec
+    straight = manifold is not None
     exact = True
     if restore is not None:
-        restored = restore_mesh(restore, comm, lambda owners: create_mesh(comm, base_spec, owners=owners),
+        restored = restore_mesh(restore, comm, lambda owners: domain.create_mesh(comm, owners=owners, straight=straight),
                                 hierarchical=hierarchical, manifold=manifold)
         mesh, hierarchy, exact = restored.mesh, restored.hierarchy, restored.exact
         if restored.note is not None and comm.rank == 0:
             print(f"note: {restored.note}", file=sys.stderr, flush=True)
     else:
-        mesh = create_mesh(comm, base_spec)
+        mesh = domain.create_mesh(comm, straight=straight)
         hierarchy = MeshHierarchy(mesh, manifold=manifold) if hierarchical else None
         if manifold is not None:
             mesh = hierarchy.uniform(0)
@@ -194,7 +181,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     if acfg["enabled"]:
         adaptivity = Adaptivity(hierarchy, AdaptivityParameters.from_config(acfg), fields=acfg["fields"])
         if restore is None:
-            mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs),
+            mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])
     balancer = None
     if bcfg["strategy"] != "none":
@@ -202,10 +189,11 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
                             particle_weight=bcfg["particle_weight"], method=bcfg["method"])
 
     scfg, ecfg = config["stokes"], config["energy"]
-    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, degree=scfg["degree"], solver=scfg["solver"],
+    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, degree=scfg["degree"],
+                          solver=scfg["solver"],
                           petsc_options=scfg["petsc_options"], buoyancy_theta=scfg["buoyancy_theta"],
                           nonlinear=NonlinearSettings.from_config(scfg["nonlinear"]))
-    temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, degree=ecfg["degree"],
+    temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=ecfg["degree"],
                                   stabilisation=ecfg["stabilisation"], velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
                                        gdim=gdim))

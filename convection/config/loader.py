@@ -38,15 +38,14 @@ import yaml
 
 from convection.expressions import Expression, ExpressionError
 from convection.config.files import check_output_directory, check_petsc_options, read_document, safe_load
+from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
+from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config
 from convection.schema import REQUIRED, ConfigError, Field, check_document_shape, key_text, short_repr, validate
 
 __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
            "parse_overrides"]
 
-_SIDES = ("left", "right", "bottom", "top", "front", "back")
-_SHELL_BOUNDARIES = ("inner", "outer")
-_SHELLS = {"annulus": 2, "spherical_shell": 3}
 MAX_DEGREE = 4
 """Highest polynomial degree of a field (form compilation time grows steeply with the degree)."""
 MAX_INITIAL_ROUNDS = 100
@@ -149,21 +148,21 @@ def _is_list(value: Any) -> str | None:
 
 
 def _sides(check, default, forms: str) -> dict[str, Field]:
-    sides = {side: Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v),
-                         help=f"box side {where}: {forms}")
-             for side, where in zip(_SIDES, ("x = lower", "x = upper", "lowest y (2D) or z (3D)", "highest y (2D) or z (3D)",
-                                             "y = lower (3D)", "y = upper (3D)"))}
-    for name in _SHELL_BOUNDARIES:
-        sides[name] = Field("any", default=None, nullable=True, check=lambda v: None if v is None else check(v),
-                            help=f"annulus/spherical shell {name} surface (default: {default}): {forms}")
+    """A field per boundary name of every geometry (:data:`convection.geometry.registry.DOMAINS`);
+    a config keeps its own geometry's (:func:`_resolve_boundaries`)."""
+    sides: dict[str, Field] = {}
+    for name, where in boundary_descriptions().items():
+        sides[name] = Field("any", default=default, nullable=True, check=lambda v: None if v is None else check(v),
+                            help=f"{where}: {forms}")
     return sides
 
 
 SCHEMA: dict[str, Any] = {
     "name": Field("str", default="run", help="a label for the run"),
     "mesh": {
-        "geometry": Field("str", "box", choices=_names("convection.geometry.mesh", "MESH_GEOMETRIES"),
-                          help="box (cells, lower, upper), annulus or spherical_shell (radii, resolution)"),
+        "geometry": Field("str", "box", choices=_names("convection.geometry.registry", "DOMAINS"),
+                          help="box (cells, lower, upper), annulus or spherical_shell (radii, resolution), sector "
+                               "(radii, angles, resolution)"),
         "cells": Field("list[int]", None, nullable=True, length=(2, 3), minimum=1,
                        help="cells per direction, e.g. [32, 32]"),
         "lower": Field("list[float]", None, nullable=True, length=(2, 3), help="lower box corner (default 0)"),
@@ -172,7 +171,9 @@ SCHEMA: dict[str, Any] = {
         "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left"),
                           help="how a 2D simplex box mesh splits its squares into triangles (DOLFINx's diagonal)"),
         "radii": Field("list[float]", [1.22, 2.22], length=(2,), exclusive_minimum=0.0,
-                       help="[inner, outer] radius of an annulus/spherical shell around the origin"),
+                       help="[inner, outer] radius of an annulus/spherical shell/sector around the origin"),
+        "angles": Field("list[float]", [0.0, 90.0], length=(2,),
+                        help="sector: [west, east] angles in degrees, counterclockwise from +x (span below 180)"),
         "resolution": Field("float", None, nullable=True, exclusive_minimum=0.0,
                             help="target cell size of an annulus/spherical shell (gmsh)"),
         "geometry_degree": Field("int", 2, choices=None, minimum=1,
@@ -358,100 +359,76 @@ SCHEMA: dict[str, Any] = {
 }
 
 
+def domain_class(config: dict[str, Any]) -> type[Domain]:
+    """The geometry class of a config (its ``mesh.geometry``)."""
+    return DOMAINS.lookup(config["mesh"].get("geometry", "box"))
+
+
+def config_domain(config: dict[str, Any]) -> Domain:
+    """The domain of a checked config (:func:`convection.geometry.registry.domain_from_config`)."""
+    return domain_from_config(config)
+
+
 def config_gdim(config: dict[str, Any]) -> int:
-    """Geometric dimension of a resolved config's domain (box: from ``mesh.cells``)."""
-    geometry = config["mesh"].get("geometry", "box")
-    return _SHELLS[geometry] if geometry in _SHELLS else len(config["mesh"]["cells"])
+    """Geometric dimension of a resolved config's domain."""
+    return domain_class(config).config_gdim(config["mesh"])
+
+
+def probe_level(config: dict[str, Any]) -> int:
+    """The finest refinement level a run of ``config`` reaches (for the probe points)."""
+    adapt = config["adaptivity"]
+    return min(adapt["max_level"], 30) if adapt["enabled"] else 0
 
 
 def _resolve_boundaries(config: dict[str, Any], document: dict[str, Any]) -> None:
-    """Keep only the boundary names of the config's geometry (box sides, or the shell's inner/outer
-    with defaults free_slip / insulating); names of the other geometry given by the user are errors."""
-    shell = config["mesh"]["geometry"] in _SHELLS
+    """Keep only the boundary names of the config's geometry (box sides, a shell's inner/outer, a
+    sector's inner/outer/west/east); names of other geometries given by the user are errors."""
+    cls = domain_class(config)
     given = (document.get("boundary") or {}) if isinstance(document.get("boundary"), dict) else {}
-    for section, default in (("velocity", "free_slip"), ("temperature", "insulating")):
+    for section in ("velocity", "temperature"):
         user = given.get(section) or {}
-        wrong = [n for n in (_SIDES if shell else _SHELL_BOUNDARIES) if isinstance(user, dict) and n in user]
+        wrong = [n for n in SCHEMA["boundary"][section] if n not in cls.config_boundaries
+                 and isinstance(user, dict) and n in user]
         if wrong:
-            what = "a box side" if shell else "an annulus/spherical-shell boundary"
-            raise ConfigError(f"config key 'boundary.{section}.{wrong[0]}': {what}; mesh.geometry "
-                              f"{config['mesh']['geometry']} has {list(_SHELL_BOUNDARIES if shell else _SIDES)}")
+            raise ConfigError(f"config key 'boundary.{section}.{wrong[0]}': not a boundary of mesh.geometry "
+                              f"{cls.name}, which has {list(cls.config_boundaries)}")
         values = config["boundary"][section]
-        if shell:
-            config["boundary"][section] = {n: default if values[n] is None and n not in user else values[n]
-                                           for n in _SHELL_BOUNDARIES}
-        else:
-            config["boundary"][section] = {n: values[n] for n in _SIDES}
+        config["boundary"][section] = {n: values[n] for n in cls.config_boundaries}
 
 
-def _check_mesh(config: dict[str, Any]) -> None:
-    mesh = config["mesh"]
-    if mesh["geometry"] == "box":
-        if mesh["cells"] is None:
-            raise ConfigError("config key 'mesh.cells': required value missing (cells per direction, e.g. [32, 32])")
-        return
-    for key in ("cells", "lower", "upper"):
-        if mesh[key] is not None:
-            raise ConfigError(f"config key 'mesh.{key}': only for mesh.geometry box (a shell has radii and resolution)")
-    if mesh["resolution"] is None:
-        raise ConfigError(f"config key 'mesh.resolution': required for mesh.geometry {mesh['geometry']} "
-                          "(target cell size)")
-    inner, outer = mesh["radii"]
-    if not inner < outer:
-        raise ConfigError(f"config key 'mesh.radii': the inner radius must be below the outer one, got {mesh['radii']}")
-    if mesh["geometry_degree"] not in (1, 2):
-        raise ConfigError(f"config key 'mesh.geometry_degree': must be 1 or 2, got {mesh['geometry_degree']}")
-    if mesh["cell_type"] != "simplex":
-        raise ConfigError(f"config key 'mesh.cell_type': mesh.geometry {mesh['geometry']} has simplex cells only")
-    for key, enabled in (("adaptivity.enabled", config["adaptivity"]["enabled"]),
-                         ("balance.strategy", config["balance"]["strategy"] != "none")):
-        if not enabled:
-            continue
-        if mesh["geometry_degree"] != 2:
-            surfaces = "circles" if mesh["geometry"] == "annulus" else "spheres"
-            raise ConfigError(f"config key '{key}': on mesh.geometry {mesh['geometry']} needs mesh.geometry_degree 2 "
-                              f"(the refined cells are curved onto the {surfaces})")
+def _check_mesh(config: dict[str, Any], document: dict[str, Any]) -> None:
+    """The keys of the geometry (another geometry's key given a value other than its default is an
+    error: it would be ignored), then the geometry's own checks."""
+    cls = domain_class(config)
+    given = document.get("mesh") if isinstance(document.get("mesh"), dict) else {}
+    for key, field in SCHEMA["mesh"].items():
+        if key in given and key not in (*cls.config_keys, "geometry", "max_cells") \
+                and config["mesh"][key] != field.default:
+            raise ConfigError(f"config key 'mesh.{key}': not a key of mesh.geometry {cls.name}, which reads "
+                              f"{list(cls.config_keys)}")
+    cls.check_config(config)
 
 
-def _check_consistency(config: dict[str, Any]) -> None:
-    _check_mesh(config)
-    mesh, adapt = config["mesh"], config["adaptivity"]
-    gdim = config_gdim(config)
-    if mesh["geometry"] in _SHELLS:
-        _check_boundaries_and_rest(config, gdim)
-        return
-    for key in ("lower", "upper"):
-        if mesh[key] is not None and len(mesh[key]) != gdim:
-            raise ConfigError(f"config key 'mesh.{key}': needs {gdim} entries like mesh.cells")
-    lower = mesh["lower"] or [0.0] * gdim
-    upper = mesh["upper"] or [1.0] * gdim
-    if any(u <= lo for lo, u in zip(lower, upper)):
-        raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs {lower}")
-    if not all(math.isfinite(u - lo) for lo, u in zip(lower, upper)):
-        raise ConfigError(f"config key 'mesh.upper': the box size upper - lower must be a finite number, got {upper} "
-                          f"vs {lower}")
+def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:
+    _check_mesh(config, document)
+    adapt = config["adaptivity"]
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
-    needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
-    if needs_simplices and mesh["cell_type"] != "simplex":
-        what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"
-        raise ConfigError(f"config key '{what}': needs mesh.cell_type: simplex (triangles/tetrahedra)")
-    _check_boundaries_and_rest(config, gdim)
-
-
-def _check_boundaries_and_rest(config: dict[str, Any], gdim: int) -> None:
+    cls = domain_class(config)
+    if not cls.refinable:
+        for key, enabled in (("adaptivity.enabled", adapt["enabled"]),
+                             ("balance.strategy", config["balance"]["strategy"] != "none")):
+            if enabled:
+                raise ConfigError(f"config key '{key}': runs on mesh.geometry {cls.name} do not adapt or "
+                                  "repartition yet")
     _check_materials(config)
-    if gdim == 2 and config["mesh"]["geometry"] == "box":
-        for section in ("velocity", "temperature"):
-            for side in ("front", "back"):
-                if config["boundary"][section][side] not in (None, "free_slip", "insulating"):
-                    raise ConfigError(f"config key 'boundary.{section}.{side}': only exists in 3D")
+    cls.check_boundaries(config)
     for name, value in config["initial"]["constants"].items():
         if _finite_number(value) is None:
             raise ConfigError(f"config key 'initial.constants.{key_text(name)}': expected a finite number, "
                               f"got {short_repr(value)}")
     _check_size(config)
-    _check_velocity_values(config, gdim)
+    _check_velocity_values(config, config_gdim(config))
     for key in ("temperature", "composition"):
         text = config["initial"][key]
         if text is not None:
@@ -471,7 +448,8 @@ def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: 
     try:
         expression = Expression(text, constants=expression_constants(config) if constants else None,
                                 gdim=config_gdim(config))
-        expression.check(domain_probes(config) if boundary is None else boundary_probes(config, boundary))
+        domain, level = config_domain(config), probe_level(config)
+        expression.check(domain_probes(domain, level) if boundary is None else boundary_probes(domain, boundary, level))
     except ExpressionError as err:
         raise ConfigError(f"config key '{key}': {err}") from None
     return expression
@@ -491,36 +469,16 @@ def _check_velocity_values(config: dict[str, Any], gdim: int) -> None:
                                  constants=False)
 
 
-SIMPLICES_PER_BOX = {2: 2, 3: 6}
-
-
-def _product(*factors: float) -> float:
-    """The product of non-negative numbers as a float: inf instead of an overflow (so an estimate
-    from ``cells: [1e18, 4]`` or ``max_level: 10**12`` is a number to compare, not an error)."""
-    logs = [math.log2(f) if f > 0 else -math.inf for f in map(float, factors)]
-    if -math.inf in logs:
-        return 0.0
-    total = sum(logs)
-    return math.inf if total >= 1024 else 2.0**total
-
-
 def _check_size(config: dict[str, Any]) -> None:
     """Refuse meshes (and particle counts) that would exhaust the machine, naming the estimate."""
     mesh, adapt = config["mesh"], config["adaptivity"]
-    gdim = config_gdim(config)
-    if mesh["geometry"] in _SHELLS:
-        # Shell volume over the volume of an equilateral cell of edge `resolution`.
-        inner, outer = mesh["radii"]
-        # products, not powers: a float power raises OverflowError where a product gives inf
-        volume, cell = ((math.pi * (outer - inner) * (outer + inner), 0.4330127) if gdim == 2
-                        else (4.18879020 * (outer - inner) * (outer * outer + outer * inner + inner * inner), 0.11785113))
-        base = _product(volume / cell, *[1.0 / mesh["resolution"]] * gdim) + 1.0
-    else:
-        base = _product(*mesh["cells"], SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1)
+    cls = domain_class(config)
+    gdim = cls.config_gdim(mesh)
+    base = cls.base_cells_bound(mesh)
     level = adapt["max_level"] if adapt["enabled"] else 0
-    most = _product(base, *[2.0] * min(gdim * level, 2048))
+    most = safe_product(base, *[2.0] * min(gdim * level, 2048))
     if most > mesh["max_cells"]:
-        key = "adaptivity.max_level" if level else ("mesh.resolution" if mesh["geometry"] in _SHELLS else "mesh.cells")
+        key = "adaptivity.max_level" if level else f"mesh.{cls.size_key}"
         raise ConfigError(f"config key '{key}': the mesh can reach {most:.3g} cells ({base:.3g} base cells, refined "
                           f"{level} times), more than mesh.max_cells = {mesh['max_cells']}; raise mesh.max_cells "
                           "if the machine can take it")
@@ -541,8 +499,8 @@ def _check_particle_count(config: dict[str, Any], cells: float) -> None:
             number = float(generator.get(key) or 0.0)
         except (TypeError, ValueError, OverflowError):
             continue  # reported by the particle checks
-        asked.append((f"particles.generator.{key}", _product(number, cells) if key == "particles_per_cell" else number))
-    asked.append(("particles.population.min_per_cell", _product(config["particles"]["population"]["min_per_cell"], cells)))
+        asked.append((f"particles.generator.{key}", safe_product(number, cells) if key == "particles_per_cell" else number))
+    asked.append(("particles.population.min_per_cell", safe_product(config["particles"]["population"]["min_per_cell"], cells)))
     for key, count in asked:
         if count > MAX_PARTICLES:
             raise ConfigError(f"config key '{key}': up to {count:.3g} particles on the finest mesh (more than "
@@ -552,10 +510,8 @@ def _check_particle_count(config: dict[str, Any], cells: float) -> None:
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
     """Constants available in initial-condition expressions: Ra, Rb, H and initial.constants."""
     physics = config["physics"]
-    shell = {}
-    if config["mesh"].get("geometry", "box") in _SHELLS:
-        shell = dict(zip(("r_inner", "r_outer"), config["mesh"]["radii"]))
-    return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **shell, **config["initial"]["constants"]}
+    return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **config_domain(config).expression_constants(),
+            **config["initial"]["constants"]}
 
 
 RESERVED_FIELD_NAMES = ("temperature", "velocity", "pressure", "material")
@@ -710,7 +666,7 @@ def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[
     def make(text: str) -> Callable:
         expression = Expression(text, constants=constants, gdim=gdim)
         if probe:
-            expression.check(domain_probes(config))
+            expression.check(domain_probes(config_domain(config), probe_level(config)))
 
         def at(x):
             import numpy as np
@@ -735,8 +691,7 @@ def _check_particles(config: dict[str, Any]) -> None:
         generator = build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.generator': {err}") from None
-    curved = config["mesh"]["geometry"] in _SHELLS and config["mesh"]["geometry_degree"] >= 2
-    if curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
+    if config_domain(config).curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
         raise ConfigError(f"config key 'particles.generator.name': {generator.name} needs straight-sided cells; the "
                           f"{config['mesh']['geometry']} has curved ones (mesh.geometry_degree 2): use "
                           "metropolis_hastings (with a density, e.g. \"r < r_inner + 0.15\", or none for uniform)")
@@ -843,7 +798,7 @@ def _load(path: str | Path | None, overrides: Iterable[str], document: dict | No
     check_document_shape(document)
     config = validate(SCHEMA, document)
     _resolve_boundaries(config, document)
-    _check_consistency(config)
+    _check_consistency(config, document)
     return config
 
 

@@ -1,11 +1,17 @@
-"""The geometry of a run: the domain (ASPECT's GeometryModel: box, annulus, spherical shell), its
-meshes, its boundaries and the conditions on them by name, plate velocities and the probe points
-that configs are checked at."""
+"""The geometry of a run: the domain (ASPECT's GeometryModel) — box, annulus, spherical shell,
+sector — which alone knows its shape (boundaries, gravity, facets, meshes, manifold, probes);
+boundary conditions by name; plate velocities. Nothing outside this package tests which geometry
+a run has: it asks the domain."""
 
 from convection.geometry.boundary import TemperatureBC, VelocityBC
-from convection.geometry.domain import BoxDomain, Domain, ShellDomain, domain_from_config
-from convection.geometry.mesh import BoxSpec, MeshSpec, ShellSpec, create_mesh
+from convection.geometry.box import BoxDomain, BoxSpec
+from convection.geometry.domain import Domain
+from convection.geometry.gravity import Gravity, RadialGravity, VerticalGravity
 from convection.geometry.plates import Plate, PlateVelocity
+from convection.geometry.registry import DOMAINS, domain_from_config
+from convection.geometry.sector import Sector, SectorSpec
+from convection.geometry.shell import Annulus, ShellDomain, ShellSpec, SphericalShell, shell_domain
 
-__all__ = ["BoxDomain", "BoxSpec", "Domain", "MeshSpec", "Plate", "PlateVelocity", "ShellDomain", "ShellSpec",
-           "TemperatureBC", "VelocityBC", "create_mesh", "domain_from_config"]
+__all__ = ["DOMAINS", "Annulus", "BoxDomain", "BoxSpec", "Domain", "Gravity", "Plate", "PlateVelocity",
+           "RadialGravity", "Sector", "SectorSpec", "ShellDomain", "ShellSpec", "SphericalShell", "TemperatureBC",
+           "VelocityBC", "VerticalGravity", "domain_from_config", "shell_domain"]

@@ -1,143 +1,231 @@
-"""The domain of a run (ASPECT's GeometryModel): one object, built from the ``mesh`` config
-section, that answers "box or shell?" and what follows from it.
+"""The domain of a run (ASPECT's GeometryModel): the one object that knows its shape.
 
-A domain knows its boundary names and which are the top and the bottom, the gravity direction,
-the constants it adds to expressions, the mesh spec (:mod:`convection.geometry.mesh`), how particles are
-kept inside (:meth:`ShellDomain.confinement`), an estimate of its base cell count, and the
-*manifold* that places the geometry nodes of refined cells (:class:`fembase.manifold.ShellManifold`
-on the annulus and the spherical shell; none on a box, whose refined cells are straight).
+Every component asks the domain instead of testing "box or shell": the boundary names and which
+are the top and the bottom, the gravity (``up``, depth and height), the facets of each boundary
+(:meth:`Domain.facet_tags`), how free slip is imposed there (:meth:`Domain.normal_axis`), where
+the pressure is pinned, whether rigid rotations solve the homogeneous Stokes problem, the
+conductive reference of the Nusselt number, the mesh and its manifold (the map that curves refined
+cells), how particles are kept inside, the probe points at which a config's expressions are
+checked, and the checks and the cell estimate of its config section.
 
-=================== ================================== ======================================
-query               :class:`BoxDomain`                 :class:`ShellDomain`
-=================== ================================== ======================================
-``boundaries``      left, right, bottom, top (+        inner, outer
-                    front, back in 3D)
-``top / bottom``    top / bottom                       outer / inner
-``gravity``         ``"vertical"`` (``-e_z``)          ``"radial"`` (``-x/|x|``)
-``manifold()``      None                               ShellManifold (annulus, spherical shell)
-=================== ================================== ======================================
+A geometry is one subclass registered in :data:`convection.geometry.registry.DOMAINS` (box,
+annulus, spherical shell, sector). ``mesh.geometry`` in a config names it; its
+:meth:`Domain.from_config` reads the ``mesh`` section.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, Callable, Union
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
 
+import dolfinx
 import numpy as np
 import numpy.typing as npt
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
 
-import dolfinx.mesh
+from convection.geometry.gravity import Gravity
+from fembase.dolfinx_compat import DirichletBC
 
-from convection.geometry.boundary import SHELL_BOUNDARIES, side_names
-from convection.geometry.mesh import BoxSpec, ShellSpec, mesh_spec_from_config, shell_confinement
-from fembase.manifold import ShellManifold
-
-__all__ = ["SHELL_GEOMETRIES", "BoxDomain", "Domain", "ShellDomain", "domain_from_config", "is_shell_geometry"]
-
-SHELL_GEOMETRIES: dict[str, int] = {"annulus": 2, "spherical_shell": 3}
-"""The shell geometries (``mesh.geometry`` name -> dimension)."""
+__all__ = ["Domain", "safe_product"]
 
 
-def is_shell_geometry(config_or_geometry: dict[str, Any] | str, /) -> bool:
-    """Whether a config (or its ``mesh.geometry`` name) is an annulus or spherical shell."""
-    if isinstance(config_or_geometry, str):
-        return config_or_geometry in SHELL_GEOMETRIES
-    return config_or_geometry["mesh"].get("geometry", "box") in SHELL_GEOMETRIES
+def safe_product(*factors: float) -> float:
+    """The product of non-negative numbers as a float: inf instead of an overflow (so an estimate
+    from ``cells: [1e18, 4]`` or ``max_level: 10**12`` is a number to compare, not an error)."""
+    logs = [math.log2(f) if f > 0 else -math.inf for f in map(float, factors)]
+    if -math.inf in logs:
+        return 0.0
+    total = sum(logs)
+    return math.inf if total >= 1024 else 2.0**total
 
 
-@dataclass(frozen=True)
-class BoxDomain:
-    """An axis-aligned box (:class:`convection.geometry.mesh.BoxSpec`)."""
+class Domain(ABC):
+    """What a run needs to know about its domain (see the module docstring).
 
-    spec: BoxSpec
+    Class attributes:
+        name: The ``mesh.geometry`` name.
+        description: One line for the config reference.
+        config_keys: The ``mesh`` section keys this geometry reads (besides ``geometry`` and
+            ``max_cells``); the others are refused.
+        config_boundaries: The boundary names the ``boundary`` sections of its configs hold.
+        size_key: The ``mesh`` key that sets the base mesh's size (named when a mesh is too large).
+        boundary_descriptions: Where each of ``config_boundaries`` is (config reference).
+        top, bottom: The boundary names of the top and bottom surfaces.
+        refinable: Whether runs on it may adapt and repartition (refine a base mesh).
 
-    is_shell = False
-    top = "top"
-    bottom = "bottom"
-    gravity = "vertical"
+    Attributes:
+        gdim: Geometric dimension.
+        boundaries: The boundary names, in the order of their facet tags (1, 2, ...).
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    config_keys: ClassVar[tuple[str, ...]]
+    config_boundaries: ClassVar[tuple[str, ...]]
+    size_key: ClassVar[str] = "resolution"
+    boundary_descriptions: ClassVar[dict[str, str]]
+    top: ClassVar[str]
+    bottom: ClassVar[str]
+    refinable: ClassVar[bool] = True
+
+    gdim: int
+    boundaries: tuple[str, ...]
+
+    # ------------------------------------------------------------------ config
+    @classmethod
+    @abstractmethod
+    def from_config(cls, mesh: Mapping[str, Any], /) -> "Domain":
+        """The domain of a resolved ``mesh`` config section (checked by :meth:`check_config`)."""
+
+    @classmethod
+    @abstractmethod
+    def config_gdim(cls, mesh: Mapping[str, Any], /) -> int:
+        """The dimension of a ``mesh`` config section of this geometry."""
+
+    @classmethod
+    def check_config(cls, config: Mapping[str, Any], /) -> None:
+        """Refuse a resolved config whose ``mesh`` section (or what depends on it) this geometry
+        cannot take (raises :class:`convection.schema.ConfigError`, naming the key)."""
+
+    @classmethod
+    def check_boundaries(cls, config: Mapping[str, Any], /) -> None:
+        """Refuse boundary conditions of a resolved config that this geometry cannot take (raises
+        :class:`convection.schema.ConfigError`)."""
+
+    @classmethod
+    @abstractmethod
+    def base_cells_bound(cls, mesh: Mapping[str, Any], /) -> float:
+        """Cells of the base mesh of a checked ``mesh`` section, estimated for the size check:
+        a float, ``inf`` rather than an overflow."""
 
     @property
-    def gdim(self) -> int:
-        return self.spec.gdim
-
-    @property
-    def boundaries(self) -> tuple[str, ...]:
-        return side_names(self.gdim)
-
-    @property
-    def up(self) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]:
-        """Unit up vector at points x (shape=(n, gdim)): ``e_z``."""
-        def up(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-            out = np.zeros((x.shape[0], self.gdim))
-            out[:, -1] = 1.0
-            return out
-        return up
+    def curved(self) -> bool:
+        """Whether the cells are curved (particle generators that need straight cells refuse)."""
+        return False
 
     def expression_constants(self) -> dict[str, float]:
+        """Named constants this domain adds to a config's expressions."""
         return {}
 
-    def estimated_cells(self) -> float:
-        """Cells of the base mesh."""
-        return float(math.prod(self.spec.cells)) * (math.factorial(self.gdim) if self.spec.cell_type == "simplex"
-                                                    else 1)
+    @abstractmethod
+    def probe_axes(self, level: int, /) -> tuple[list[npt.NDArray[np.float64]], Callable]:
+        """The probe grid of :mod:`convection.geometry.probes`: coordinates along each grid axis
+        (``level``: the finest adaptivity level) and the map from grid coordinates
+        shape=(gdim, n) to points shape=(3, n)."""
 
-    def manifold(self) -> None:
-        """Refined box cells stay straight: no manifold."""
+    @abstractmethod
+    def boundary_axis(self, name: str, /) -> tuple[int, bool]:
+        """The probe grid axis on which boundary ``name`` is one end, and whether the upper one."""
+
+    # ------------------------------------------------------------------ shape
+    @property
+    @abstractmethod
+    def gravity(self) -> Gravity:
+        """Which way is up (:mod:`convection.geometry.gravity`)."""
+
+    def up(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
+        """Unit up vectors at points ``x`` (shape=(n, gdim) or (n, 3)), shape=(n, gdim)."""
+        return self.gravity.up_at(np.asarray(x, dtype=np.float64)[:, : self.gdim])
+
+    def check_boundary_names(self, names: Any, /) -> None:
+        """Raise ValueError naming the valid names if ``names`` holds one that is not a boundary."""
+        unknown = [n for n in names if n not in self.boundaries]
+        if unknown:
+            raise ValueError(f"Unknown boundary name(s) {unknown} of the {self.name}; valid names: "
+                             f"{list(self.boundaries)}")
+
+    # ------------------------------------------------------------------ mesh
+    @abstractmethod
+    def create_mesh(self, comm: MPI.Comm, /, *, owners: npt.NDArray[np.int32] | None = None,
+                    straight: bool = False) -> dolfinx.mesh.Mesh:
+        """The base mesh (collective) on a reproducible partition; ``owners``: a partition to
+        impose (owner rank per cell by input index, on rank 0); ``straight``: straight-sided cells
+        even where the domain is curved (what a mesh hierarchy refines)."""
+
+    @abstractmethod
+    def estimated_cells(self) -> float:
+        """Cells of the base mesh (an estimate where a mesh generator decides)."""
+
+    def manifold(self) -> Any:
+        """What places the geometry nodes of refined cells (:mod:`fembase.manifold`), or None when
+        refined cells stay straight."""
         return None
 
-    def confinement(self, mesh: dolfinx.mesh.Mesh, /) -> None:
-        """Particles in a box need no confinement (the walls are straight)."""
+    def confinement(self, mesh: dolfinx.mesh.Mesh, /) -> Callable[[npt.NDArray[np.float64]], None] | None:
+        """``confine(x)`` that moves particles outside the domain back in (points shape=(n, gdim),
+        in place; collective to build), or None when straight walls need none."""
         return None
 
+    # ------------------------------------------------------------------ boundaries
+    @abstractmethod
+    def locate_facets(self, mesh: dolfinx.mesh.Mesh, name: str, /) -> npt.NDArray[np.int32]:
+        """Local indices of the boundary facets of boundary ``name``. Collective."""
 
-@dataclass(frozen=True)
-class ShellDomain:
-    """An annulus or spherical shell (:class:`convection.geometry.mesh.ShellSpec`)."""
+    def facet_tags(self, mesh: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.MeshTags:
+        """Facet tags of the boundaries: ``boundaries[i]`` gets value ``i + 1``. Collective."""
+        return self.tag_facets(mesh, [self.locate_facets(mesh, name) for name in self.boundaries])
 
-    spec: ShellSpec
+    @staticmethod
+    def tag_facets(mesh: dolfinx.mesh.Mesh, facets: list[npt.NDArray[np.int32]], /) -> dolfinx.mesh.MeshTags:
+        """Facet tags from the facets of each boundary (``facets[i]`` gets ``i + 1``; a facet on two
+        boundaries, e.g. at a box corner, keeps the first)."""
+        idx = np.concatenate(facets)
+        val = np.concatenate([np.full(f.shape, i + 1, dtype=np.int32) for i, f in enumerate(facets)])
+        order = np.argsort(idx, kind="stable")
+        idx, val = idx[order], val[order]
+        keep = np.ones(idx.shape, dtype=bool)
+        keep[1:] = idx[1:] != idx[:-1]
+        return dolfinx.mesh.meshtags(mesh, mesh.topology.dim - 1, idx[keep], val[keep])
 
-    is_shell = True
-    top = "outer"
-    bottom = "inner"
-    gravity = "radial"
-    boundaries = SHELL_BOUNDARIES
+    def tag(self, name: str, /) -> int:
+        """The facet tag value of boundary ``name`` in :meth:`facet_tags`."""
+        self.check_boundary_names([name])
+        return self.boundaries.index(name) + 1
 
-    @property
-    def gdim(self) -> int:
-        return self.spec.gdim
+    def measure(self, mesh: dolfinx.mesh.Mesh, name: str, /, *, tags: dolfinx.mesh.MeshTags | None = None,
+                metadata: dict | None = None) -> ufl.Measure:
+        """``ds`` restricted to boundary ``name``; ``tags``: :meth:`facet_tags` to share between
+        measures of one form (built if omitted; collective then)."""
+        tags = self.facet_tags(mesh) if tags is None else tags
+        return ufl.Measure("ds", domain=mesh, subdomain_data=tags, metadata=metadata or {})(self.tag(name))
 
-    @property
-    def up(self) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]:
-        """Unit up vector at points x (shape=(n, gdim)): ``x/|x|``."""
-        def up(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-            x = np.asarray(x, dtype=np.float64)[:, : self.gdim]
-            return x / np.linalg.norm(x, axis=1)[:, None]
-        return up
+    def locate_dofs(self, V: dolfinx.fem.FunctionSpace, name: str, /) -> npt.NDArray[np.int32]:
+        """Local dof indices of ``V`` (a space or sub-space) on boundary ``name``. Collective."""
+        return dolfinx.fem.locate_dofs_topological(V, V.mesh.topology.dim - 1, self.locate_facets(V.mesh, name))
 
-    def expression_constants(self) -> dict[str, float]:
-        return {"r_inner": self.spec.inner_radius, "r_outer": self.spec.outer_radius}
+    def normal_axis(self, name: str, /) -> int | None:
+        """The coordinate axis normal to boundary ``name`` if it is a plane normal to an axis
+        (free slip is then a zero Dirichlet condition on that velocity component); None where the
+        normal varies or is oblique (free slip is then weak, by Nitsche's method)."""
+        return None
 
-    def estimated_cells(self) -> float:
-        """Shell volume over the volume of an equilateral simplex of edge ``resolution``."""
-        h = self.spec.resolution
-        cell = math.sqrt(3.0) / 4.0 * h * h if self.gdim == 2 else h**3 / (6.0 * math.sqrt(2.0))
-        return self.spec.volume / cell
+    def pressure_pin(self, Q: dolfinx.fem.FunctionSpace, /) -> DirichletBC:
+        """Zero Dirichlet condition on one pressure dof, which removes the constant pressure from a
+        direct solve: the dof numbered 0 globally (whichever point that is). Collective."""
+        owns_first = Q.mesh.comm.rank == 0 and Q.dofmap.index_map.size_local > 0
+        dofs = np.arange(1 if owns_first else 0, dtype=np.int32)
+        return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Q)
 
-    def manifold(self) -> ShellManifold:
-        """Where refined cells' geometry nodes go: a new (unfitted) :class:`ShellManifold`."""
-        return ShellManifold(self.spec.inner_radius, self.spec.outer_radius, self.gdim)
+    def has_rotations(self, free_slip: set[str], /) -> bool:
+        """Whether rigid rotations about the origin solve the homogeneous Stokes problem when the
+        boundaries ``free_slip`` are free slip and the others have a velocity condition."""
+        return False
 
-    def confinement(self, mesh: dolfinx.mesh.Mesh, /) -> Callable[[npt.NDArray[np.float64]], None]:
-        """Moves particles outside the shell back in (:func:`convection.geometry.mesh.shell_confinement`;
-        collective)."""
-        return shell_confinement(mesh, self.spec)
+    # ------------------------------------------------------------------ heat flow
+    def opposite(self, name: str, /) -> tuple[str, str]:
+        """The pair ``(lower, upper)`` of boundaries across which the heat flow through ``name``
+        is measured (``name`` is one of them): bottom and top, left and right, inner and outer."""
+        if name in (self.bottom, self.top):
+            return self.bottom, self.top
+        raise ValueError(f"no Nusselt number through {name!r} of the {self.name}; through {self.bottom!r} or "
+                         f"{self.top!r}")
 
-
-Domain = Union[BoxDomain, ShellDomain]
-
-
-def domain_from_config(config: dict[str, Any], /) -> Domain:
-    """The domain of a resolved config's ``mesh`` section."""
-    spec = mesh_spec_from_config(config["mesh"])
-    return ShellDomain(spec) if isinstance(spec, ShellSpec) else BoxDomain(spec)
+    @abstractmethod
+    def nusselt(self, mesh: dolfinx.mesh.Mesh, name: str, heat_flow: float, delta_T: float, area: float, /) -> float:
+        """The Nusselt number through boundary ``name``: the heat flow from its ``lower`` to its
+        ``upper`` boundary (:meth:`opposite`) over the conductive heat flow of the temperature
+        difference ``delta_T`` between their means (``area``: the measure of ``name``). Collective."""

@@ -39,6 +39,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.adapt.adaptivity import Adaptivity
+from convection.geometry.domain import Domain
 from convection.model.composition import CompositionSource
 from convection.physics.materials import material_index
 from convection.model.rheology_fields import PlasticStrainRate, ViscosityField
@@ -117,6 +118,11 @@ class Model:
     @property
     def mesh(self) -> dolfinx.mesh.Mesh:
         return self.stokes.mesh
+
+    @property
+    def domain(self) -> Domain:
+        """The domain (the flow solver's): boundaries, gravity, ... (:mod:`convection.geometry.domain`)."""
+        return self.stokes.domain
 
     @property
     def comm(self):

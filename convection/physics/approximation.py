@@ -1,7 +1,8 @@
 """Nondimensional Boussinesq approximation: material parameters and constitutive laws.
 
-Equations (``e_up`` the "up" direction, against gravity: ``e_z``, the last coordinate axis, for
-``gravity="vertical"``; ``x / |x|``, away from the origin, for ``gravity="radial"`` in shells)::
+Equations (``e_up`` the "up" direction, against gravity: ``e_z``, the last coordinate axis, in a
+box; ``x / |x|``, away from the origin, in shells and sectors: the domain's
+:mod:`convection.geometry.gravity`)::
 
     -div(2 eta(T, C) eps(u)) + grad p = (Ra T - sum_i Rb_i C_i) e_up,      div u = 0,
     dT/dt + u . grad T = lap T + H,
@@ -19,6 +20,7 @@ from typing import Any, Mapping
 
 import ufl
 
+from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.physics.rheology import FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
 
 MIXING_RULES: dict[str, str] = {
@@ -27,12 +29,6 @@ MIXING_RULES: dict[str, str] = {
     "harmonic": "1/eta = (1-C)/eta_0 + C/eta_1",
 }
 """Registry of composition mixing rules (lowercase name -> one-line description)."""
-
-GRAVITY_DIRECTIONS: dict[str, str] = {
-    "vertical": "gravity along -e_z (the last axis): boxes",
-    "radial": "gravity towards the origin, g = -x/|x|: annulus and spherical shell",
-}
-"""Registry of gravity directions (lowercase name -> one-line description)."""
 
 TEMPERATURE_LAWS: dict[str, str] = {
     "none": "no temperature dependence",
@@ -93,8 +89,8 @@ class ViscosityLaw:
         laws: ``(law_0, law_1, ..., law_n)``: a :mod:`convection.physics.rheology` law per material
             (background first) in place of ``material_viscosities``; the mixing is the same, of
             the laws' values. None: ``material_viscosities``.
-        top: where the depth is measured from: ``("box", z_top)`` (depth ``z_top - z``, the last
-            coordinate) or ``("shell", r_outer)`` (depth ``r_outer - |x|``).
+        gravity: along which the laws' depth is measured (:mod:`convection.geometry.gravity`:
+            ``z_top - z`` in a box, ``r_outer - |x|`` in a shell).
     """
 
     material_viscosities: tuple[float, ...] | None = None
@@ -102,7 +98,7 @@ class ViscosityLaw:
     temperature_law: str = "none"
     gamma: float = 0.0
     laws: tuple[ViscosityLawBase, ...] | None = None
-    top: tuple[str, float] = ("box", 1.0)
+    gravity: Gravity = VerticalGravity()
 
     def __post_init__(self) -> None:
         _check_name(self.mixing, MIXING_RULES, "viscosity mixing rule")
@@ -115,8 +111,6 @@ class ViscosityLaw:
                 raise ValueError("give either material_viscosities or laws, not both")
             if not self.laws:
                 raise ValueError("laws needs at least the background material's law")
-        if self.top[0] not in ("box", "shell"):
-            raise ValueError(f"top must be ('box', z_top) or ('shell', r_outer), got {self.top}")
 
     @property
     def is_nonlinear(self) -> bool:
@@ -130,10 +124,7 @@ class ViscosityLaw:
 
     def depth(self, x: Any, /) -> Any:
         """UFL depth below the top surface at the points ``x`` (``ufl.SpatialCoordinate``)."""
-        kind, level = self.top
-        if kind == "shell":
-            return level - ufl.sqrt(ufl.dot(x, x))
-        return level - x[x.ufl_shape[0] - 1]
+        return self.gravity.depth(x)
 
     @property
     def is_constant(self) -> bool:
@@ -252,7 +243,8 @@ class BoussinesqApproximation:
             (buoyancy ``-sum_i Rb_i C_i e_z``) in the order of the fractions (:func:`fractions`).
         H: nondimensional internal heating rate.
         viscosity: viscosity law ``eta(T, C)``.
-        gravity: name in :data:`GRAVITY_DIRECTIONS` (``"vertical"`` | ``"radial"``).
+        gravity: which way is up (:mod:`convection.geometry.gravity`; the domain's
+            :attr:`~convection.geometry.domain.Domain.gravity`).
     """
 
     def __init__(
@@ -263,9 +255,8 @@ class BoussinesqApproximation:
         Rb: float | tuple[float, ...] = 0.0,
         H: float = 0.0,
         viscosity: ViscosityLaw = ViscosityLaw(),
-        gravity: str = "vertical",
+        gravity: Gravity = VerticalGravity(),
     ) -> None:
-        _check_name(gravity, GRAVITY_DIRECTIONS, "gravity direction")
         self.gravity = gravity
         self.Ra = float(Ra)
         self.Rb: float | tuple[float, ...] = tuple(float(r) for r in Rb) if isinstance(Rb, (list, tuple)) else float(Rb)
@@ -290,10 +281,7 @@ class BoussinesqApproximation:
 
     def up(self, x: Any, /) -> Any:
         """UFL unit vector ``e_up`` against gravity at the points ``x`` (``ufl.SpatialCoordinate``)."""
-        gdim = x.ufl_shape[0]
-        if self.gravity == "radial":
-            return x / ufl.sqrt(ufl.dot(x, x))
-        return ufl.as_vector([0.0] * (gdim - 1) + [1.0])
+        return self.gravity.up(x)
 
     def density(self, T: Any, C: Any) -> Any:
         """UFL scalar ``Ra T - sum_i Rb_i C_i``, the buoyancy's magnitude along ``e_up`` (``C = None`` -> 0)."""
@@ -310,16 +298,15 @@ class BoussinesqApproximation:
     def buoyancy(self, T: Any, C: Any, gdim: int, /, *, x: Any = None) -> Any:
         """UFL vector expression ``(Ra T - sum_i Rb_i C_i) e_up`` of length ``gdim`` (``C = None`` -> 0).
 
-        ``x`` (``ufl.SpatialCoordinate`` of the mesh) is needed for radial gravity."""
-        magnitude = self.density(T, C)
-        if self.gravity == "radial":
-            if x is None:
-                raise ValueError("radial gravity needs the spatial coordinate x")
-            return magnitude * self.up(x)
-        return ufl.as_vector([0.0] * (gdim - 1) + [magnitude])
+        ``x``: ``ufl.SpatialCoordinate`` of the mesh."""
+        if x is None:
+            raise ValueError("the buoyancy needs the spatial coordinate x")
+        if x.ufl_shape[0] != gdim:
+            raise ValueError(f"x has {x.ufl_shape[0]} components, the buoyancy {gdim}")
+        return self.gravity.along_up(self.density(T, C), x)
 
     def __repr__(self) -> str:
         return (
             f"BoussinesqApproximation(Ra={self.Ra}, Rb={self.Rb}, H={self.H}, "
-            f"viscosity={self.viscosity_law}" + (f", gravity={self.gravity!r})" if self.gravity != "vertical" else ")")
+            f"viscosity={self.viscosity_law}, gravity={self.gravity!r})"
         )

@@ -21,6 +21,7 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
+from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.physics.rheology import Constant, ViscosityLawBase
 
@@ -93,9 +94,9 @@ class Materials:
                                                       for m in self.materials)
 
     def viscosity_law(self, *, temperature_law: str = "none", gamma: float = 0.0,
-                      top: tuple[str, float] = ("box", 1.0)) -> ViscosityLaw:
-        """The viscosity law of these materials (with an optional temperature dependence); ``top``:
-        where the laws' depth is measured from (:class:`convection.physics.approximation.ViscosityLaw`)."""
+                      gravity: Gravity = VerticalGravity()) -> ViscosityLaw:
+        """The viscosity law of these materials (with an optional temperature dependence); ``gravity``:
+        along which the laws' depth is measured (:class:`convection.physics.approximation.ViscosityLaw`)."""
         if self.has_laws:
             law0 = self.background_law if self.background_law is not None else Constant(self.background_viscosity)
 
@@ -104,7 +105,7 @@ class Materials:
                     return law0
                 return value if isinstance(value, ViscosityLawBase) else Constant(float(value))
             return ViscosityLaw(mixing=self.mixing, temperature_law=temperature_law, gamma=gamma,
-                                laws=(law0, *(law(m.viscosity) for m in self.materials)), top=top)
+                                laws=(law0, *(law(m.viscosity) for m in self.materials)), gravity=gravity)
         etas = [m.viscosity for m in self.materials]
         contrasts = None
         if any(e is not None for e in etas):
@@ -113,13 +114,12 @@ class Materials:
                             gamma=gamma)
 
     def approximation(self, *, Ra: float, H: float = 0.0, temperature_law: str = "none",
-                      gamma: float = 0.0, gravity: str = "vertical",
-                      top: tuple[str, float] = ("box", 1.0)) -> BoussinesqApproximation:
+                      gamma: float = 0.0, gravity: Gravity = VerticalGravity()) -> BoussinesqApproximation:
         """The Boussinesq approximation with these materials' buoyancy and viscosity."""
         rb = tuple(m.Rb for m in self.materials)
         return BoussinesqApproximation(Ra=Ra, Rb=rb if rb else 0.0, H=H, gravity=gravity,
                                        viscosity=self.viscosity_law(temperature_law=temperature_law, gamma=gamma,
-                                                                    top=top))
+                                                                    gravity=gravity))
 
 
 def material_index(fractions: Sequence[dolfinx.fem.Function], /, *, name: str = "material") -> dolfinx.fem.Function:

@@ -12,11 +12,8 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from convection.geometry.boundary import (
-    SHELL_BOUNDARIES, boundary_measure, locate_side_dofs, shell_radii, side_axis, side_facet_tags, side_names, side_tag,
-)
+from convection.geometry.domain import Domain
 from convection.solvers.transport import TransportSolver
-
 
 class TemperatureStats(NamedTuple):
     """Global temperature statistics.
@@ -64,8 +61,9 @@ def temperature_stats(T: dolfinx.fem.Function) -> TemperatureStats:
     )
 
 
-def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str) -> float:
-    """Consistent boundary flux ``int_side grad T . n ds`` (``n`` the outward normal). Collective.
+def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /) -> float:
+    """Consistent boundary flux ``int_side grad T . n ds`` (``n`` the outward normal) through the
+    boundary ``side`` of ``domain`` (default: the solver's). Collective.
 
     Computed as the residual ``F(T; w)`` of the solver's last step
     (:meth:`TransportSolver.last_step_residual`, with ``u`` as velocity; zero time derivative
@@ -73,24 +71,23 @@ def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str) -
     Dirichlet side this is the flux conjugate to the discrete solution, exact for fields the
     space represents (e.g. the conduction profile). The form is compiled once per solver.
     """
+    domain = solver.domain if domain is None else domain
     key = ("flux", id(u), side)
     if key not in solver.forms or solver.forms[key][1] is not u:
         w = dolfinx.fem.Function(solver.V)
-        w.x.array[locate_side_dofs(solver.V, side)] = 1.0
+        w.x.array[domain.locate_dofs(solver.V, side)] = 1.0
         solver.forms[key] = (dolfinx.fem.form(solver.last_step_residual(u, w)), u, w)
     form = solver.forms[key][0]
     return float(solver.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM))
 
 
-def side_integral(solver: TransportSolver, side: str) -> tuple[float, float]:
+def side_integral(solver: TransportSolver, side: str, domain: Domain | None = None, /) -> tuple[float, float]:
     """``(int_side T ds, int_side 1 ds)`` over the whole mesh for the solver's field. Collective."""
+    domain = solver.domain if domain is None else domain
     key = ("side", side)
     if key not in solver.forms:
         mesh = solver.mesh
-        if side in SHELL_BOUNDARIES:
-            ds = boundary_measure(mesh, side)
-        else:
-            ds = ufl.Measure("ds", domain=mesh, subdomain_data=side_facet_tags(mesh))(side_tag(side, mesh.geometry.dim))
+        ds = domain.measure(mesh, side)
         one = dolfinx.fem.Constant(mesh, np.float64(1.0))
         solver.forms[key] = (dolfinx.fem.form(solver.T * ds), dolfinx.fem.form(one * ds))
     values = np.array([dolfinx.fem.assemble_scalar(f) for f in solver.forms[key]])
@@ -99,83 +96,37 @@ def side_integral(solver: TransportSolver, side: str) -> tuple[float, float]:
     return float(total[0]), float(total[1])
 
 
-def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str = "top") -> float:
-    """Nusselt number through ``side`` from the consistent boundary flux. Collective.
+def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /) -> float:
+    """Nusselt number through the boundary ``side`` of ``domain`` (default: the solver's) from the
+    consistent boundary flux. Collective.
 
-    With ``a`` the coordinate axis normal to ``side``, ``L`` the box extent along ``a``, ``A`` the
-    side's area and ``dT = <T>_{a=min} - <T>_{a=max}`` the difference of the side-averaged
-    temperatures of the two sides normal to ``a``::
+    With ``(lower, upper)`` the pair of boundaries across which the domain measures the heat flow
+    (:meth:`~convection.geometry.domain.Domain.opposite`: bottom and top, inner and outer, ...),
+    the heat flow from ``lower`` to ``upper`` through ``side``, ``Q = -int_side grad T . n ds`` on
+    the upper boundary and ``+int_side grad T . n ds`` on the lower one (the consistent flux of
+    :func:`boundary_flux`), and ``dT = <T>_lower - <T>_upper`` the difference of the boundary-
+    averaged temperatures, the domain divides ``Q`` by the conductive heat flow of ``dT``
+    (:meth:`~convection.geometry.domain.Domain.nusselt`):
 
-        Nu = (q_a / A) / (dT / L),    q_a = -int_side grad T . e_a ds,
+    - a box: ``Nu = (Q / A) / (dT / L)`` with ``A`` the side's area and ``L`` the box extent
+      across (for the unit-height Blankenbach box with ``T = 0`` on top
+      ``Nu = -(int_top dT/dz dx) / (int_bottom T dx)``);
+    - a shell: ``Nu = Q / Q_cond``, ``Q_cond = 2 pi dT / ln(r_o / r_i)`` (annulus, per unit length)
+      or ``4 pi r_i r_o dT / (r_o - r_i)`` (spherical shell);
+    - a sector: ``Q_cond = (phi_east - phi_west) dT / ln(r_o / r_i)``.
 
-    where ``int_side grad T . n ds`` is the consistent (weak-form residual) flux of
-    :func:`boundary_flux`. For the unit-height Blankenbach box with ``T = 0`` on top
-    this is ``Nu = -(int_top dT/dz dx) / (int_bottom T dx)``; the conduction profile gives 1.
-
-    Args:
-        energy_solver: solver holding the temperature and its last step (for ``dT/dt``).
-        u: velocity used in the residual.
-        side: side name (default ``"top"``).
+    The conduction profile gives 1.
     """
-    if side in SHELL_BOUNDARIES:
-        return shell_nusselt(energy_solver, u, side)
-    mesh = energy_solver.mesh
-    gdim = mesh.geometry.dim
-    axis, upper = side_axis(side, gdim)
-    flux_out = boundary_flux(energy_solver, u, side)
-    q_axis = -flux_out if upper else flux_out
-
-    names = side_names(gdim)
-    lower_side, upper_side = [s for s in names if side_axis(s, gdim)[0] == axis]
-    if side_axis(lower_side, gdim)[1]:
-        lower_side, upper_side = upper_side, lower_side
-    area = side_integral(energy_solver, side)[1]
+    domain = energy_solver.domain if domain is None else domain
+    lower, upper = domain.opposite(side)
+    flux_out = boundary_flux(energy_solver, u, side, domain)
+    heat_flow = -flux_out if side == upper else flux_out
+    area = side_integral(energy_solver, side, domain)[1]
     means = []
-    for s in (lower_side, upper_side):
-        integral, measure = side_integral(energy_solver, s)
-        means.append(integral / measure)
-    x = mesh.geometry.x[:, axis]
-    lo = mesh.comm.allreduce(float(x.min()) if x.size else np.inf, op=MPI.MIN)
-    hi = mesh.comm.allreduce(float(x.max()) if x.size else -np.inf, op=MPI.MAX)
-    delta_T = means[0] - means[1]
-    if delta_T == 0.0:
-        raise ZeroDivisionError(f"No temperature difference across the {side!r} axis")
-    return float((q_axis / area) * (hi - lo) / delta_T)
-
-
-def conductive_heat_flow(inner_radius: float, outer_radius: float, delta_T: float, gdim: int) -> float:
-    """Heat flow ``Q`` through an annulus (per unit length, ``gdim = 2``) or spherical shell by pure
-    conduction with temperature difference ``delta_T`` (inner minus outer)::
-
-        2D:  Q = 2 pi delta_T / ln(r_o / r_i),      3D:  Q = 4 pi r_i r_o delta_T / (r_o - r_i).
-    """
-    ri, ro = inner_radius, outer_radius
-    if gdim == 2:
-        return float(2.0 * np.pi * delta_T / np.log(ro / ri))
-    return float(4.0 * np.pi * ri * ro * delta_T / (ro - ri))
-
-
-def shell_nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, boundary: str = "outer") -> float:
-    """Nusselt number through the ``inner`` or ``outer`` surface of an annulus/spherical shell. Collective.
-
-    The heat flow out through the outer surface, ``Q_outer = -int_outer grad T . n ds``, or in
-    through the inner one, ``Q_inner = int_inner grad T . n ds`` (``n`` the outward normal; consistent
-    fluxes of :func:`boundary_flux`), divided by the conductive heat flow
-    (:func:`conductive_heat_flow`) of the difference of the surface-averaged temperatures,
-    ``dT = <T>_inner - <T>_outer``. Both are 1 for the conduction profile and equal at steady state
-    without internal heating.
-    """
-    if boundary not in SHELL_BOUNDARIES:
-        raise ValueError(f"Unknown shell boundary {boundary!r}; valid names: {list(SHELL_BOUNDARIES)}")
-    mesh = energy_solver.mesh
-    flux_out = boundary_flux(energy_solver, u, boundary)
-    heat_flow = -flux_out if boundary == "outer" else flux_out
-    means = []
-    for name in SHELL_BOUNDARIES:
-        integral, measure = side_integral(energy_solver, name)
+    for name in (lower, upper):
+        integral, measure = side_integral(energy_solver, name, domain)
         means.append(integral / measure)
     delta_T = means[0] - means[1]
     if delta_T == 0.0:
-        raise ZeroDivisionError("No temperature difference between the inner and outer surfaces")
-    inner, outer = shell_radii(mesh)
-    return float(heat_flow / conductive_heat_flow(inner, outer, delta_T, mesh.geometry.dim))
+        raise ZeroDivisionError(f"No temperature difference between {lower!r} and {upper!r}")
+    return domain.nusselt(energy_solver.mesh, side, heat_flow, delta_T, area)

@@ -47,7 +47,6 @@ from mpi4py import MPI
 
 import dolfinx.fem
 
-from convection.geometry.boundary import boundary_measure, is_shell, locate_side_dofs
 from fembase.dolfinx_compat import evaluate_expression, interpolation_points
 from convection.postprocess.diagnostics import nusselt
 from convection.model.model import Model
@@ -144,9 +143,9 @@ class Nusselt(_Column):
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         assert model.temperature is not None
-        top, bottom = ("outer", "inner") if is_shell(model.temperature.bcs) else ("top", "bottom")
-        return {"nusselt": nusselt(model.temperature, model.stokes.u, top),
-                "nusselt_bottom": nusselt(model.temperature, model.stokes.u, bottom)}
+        domain = model.domain
+        return {"nusselt": nusselt(model.temperature, model.stokes.u, domain.top, domain),
+                "nusselt_bottom": nusselt(model.temperature, model.stokes.u, domain.bottom, domain)}
 
 
 class TemperatureStatistics(_Column):
@@ -258,8 +257,7 @@ class Entrainment:
 
     def _build(self, model: Model) -> dict[str, Any]:
         x = ufl.SpatialCoordinate(model.mesh)
-        # The height is the radius in shells (radial gravity), else the last coordinate.
-        z = ufl.sqrt(ufl.dot(x, x)) if model.stokes.approximation.gravity == "radial" else x[model.mesh.geometry.dim - 1]
+        z = model.domain.gravity.height(x)  # the radius in shells, else the last coordinate
         forms = {}
         for column, (i, light) in self.amounts.items():
             C = model.fractions[i]
@@ -385,10 +383,10 @@ class SurfaceVelocity(_Rheology):
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         stokes = model.stokes
-        top = "outer" if is_shell(stokes.bcs) else "top"
+        domain = model.domain
 
         def build() -> dict[str, Any]:
-            ds = boundary_measure(model.mesh, top)
+            ds = domain.measure(model.mesh, domain.top)
             u = stokes.u
             return {"u2": dolfinx.fem.form(ufl.inner(u, u) * ds),
                     "area": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * ds)}
@@ -397,7 +395,7 @@ class SurfaceVelocity(_Rheology):
             V0, to_parent = stokes.V.sub(0).collapse()
             gdim = model.mesh.geometry.dim
             # the nodes (blocked dofs of V) on the surface: parent indices are unrolled, node * gdim + 0
-            self._dofs = np.asarray(to_parent)[np.asarray(locate_side_dofs(V0, top))] // gdim
+            self._dofs = np.asarray(to_parent)[np.asarray(domain.locate_dofs(V0, domain.top))] // gdim
             self._version = model.mesh_version
         gdim = model.mesh.geometry.dim
         n_owned = stokes.V.dofmap.index_map.size_local

@@ -48,13 +48,9 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation
-from convection.geometry.boundary import (
-    TemperatureBC,
-    locate_side_dofs,
-    side_facet_tags,
-    side_tag,
-    temperature_dirichlet_bcs,
-)
+from convection.geometry.boundary import TemperatureBC, temperature_dirichlet_bcs
+from convection.geometry.box import BoxDomain
+from convection.geometry.domain import Domain
 from convection.geometry.mesh import cell_diameter
 from convection.solvers.petsc_options import (
     HAS_HYPRE, MUMPS_LU, SCALAR_AMG, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
@@ -97,9 +93,11 @@ class TransportSolver(PetscSolver):
     """Advection-diffusion solver for the temperature (equations in the module docstring).
 
     Args:
-        mesh: box mesh (2D or 3D).
+        mesh: the mesh (2D or 3D).
         approximation: physics parameters (uses the internal heating ``H``).
-        bcs: temperature condition per side; missing sides are insulating.
+        bcs: temperature condition per boundary name; missing boundaries are insulating.
+        domain: the domain whose boundaries ``bcs`` names (default: the box the mesh fills,
+            :meth:`convection.geometry.box.BoxDomain.around`; none needed without ``bcs``).
         degree: polynomial degree of the temperature space.
         stabilisation: ``"supg"`` | ``"none"``.
         solver: ``"iterative"`` | ``"direct"``.
@@ -122,7 +120,8 @@ class TransportSolver(PetscSolver):
     PETSC_OBJECTS = ("ksp", "_A", "_b")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
-                 bcs: dict[str, TemperatureBC], degree: int = 2, stabilisation: str = "supg",
+                 bcs: dict[str, TemperatureBC], domain: Domain | None = None, degree: int = 2,
+                 stabilisation: str = "supg",
                  solver: str = "iterative", petsc_options: dict | None = None, velocity_extrapolation: bool = True,
                  diffusivity: float = 1.0, heating: bool = True, name: str = "temperature") -> None:
         if diffusivity < 0.0:
@@ -134,6 +133,7 @@ class TransportSolver(PetscSolver):
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)
+        self.domain = domain if domain is not None or not self.bcs else BoxDomain.around(mesh)
         self.degree = degree
         self.stabilisation = stabilisation
         self.velocity_extrapolation = velocity_extrapolation
@@ -147,7 +147,7 @@ class TransportSolver(PetscSolver):
         self._T_new = dolfinx.fem.Function(self.V)
         self.dt_old: float | None = None
         self.steps = 0
-        self._dirichlet = temperature_dirichlet_bcs(self.V, self.bcs)
+        self._dirichlet = temperature_dirichlet_bcs(self.V, self.bcs, self.domain)
 
         # BDF coefficients and step of the step being taken, and of the last step taken.
         self._dt = dolfinx.fem.Constant(mesh, PETSc.ScalarType(1.0))
@@ -166,7 +166,7 @@ class TransportSolver(PetscSolver):
         set_owned_options(self, self._prefix, options)
 
     def settings(self) -> dict[str, Any]:
-        return {"bcs": self.bcs, "degree": self.degree, "stabilisation": self.stabilisation, "solver": self.solver,
+        return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "stabilisation": self.stabilisation, "solver": self.solver,
                 "petsc_options": self._user_options, "velocity_extrapolation": self.velocity_extrapolation,
                 "diffusivity": self.diffusivity, "heating": self.heating, "name": self.name}
 

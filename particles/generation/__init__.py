@@ -20,7 +20,7 @@ from particles.generation.metropolis_hastings import MetropolisHastings
 from particles.generation.random_density import RandomDensity, RandomUniform
 from particles.generation.reference_points import ReferencePoints
 from particles.generation.shell import Shell
-from particles.registry import Registry
+from fembase.registry import Registry
 from particles.swarm import Swarm
 
 __all__ = [
@@ -41,7 +41,8 @@ __all__ = [
 ]
 
 GENERATORS: Registry[type[Generator]] = Registry(
-    "generator", (RandomUniform, RandomDensity, MetropolisHastings, BoxLattice, Shell, FromFile, ReferencePoints)
+    "particle generator",
+    (RandomUniform, RandomDensity, MetropolisHastings, BoxLattice, Shell, FromFile, ReferencePoints),
 )
 """Generator classes by their lowercase config name."""
 

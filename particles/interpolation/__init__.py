@@ -24,7 +24,7 @@ from particles.interpolation.distance_weighted import DistanceWeighted
 from particles.interpolation.least_squares import LeastSquares
 from particles.interpolation.nearest import Nearest
 from particles.interpolation.shape_function import ShapeFunction
-from particles.registry import Registry
+from fembase.registry import Registry
 from particles.swarm import Swarm
 
 __all__ = [
@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 INTERPOLATORS: Registry[type[Interpolator]] = Registry(
-    "interpolator", (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares)
+    "particle interpolator", (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares)
 )
 """Interpolator classes by their lowercase config name."""
 

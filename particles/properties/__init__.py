@@ -50,7 +50,7 @@ from particles.properties.temperature import Temperature
 from particles.properties.time_since_creation import TimeSinceCreation
 from particles.properties.velocity import Velocity
 from particles.swarm import PropertyLayout, Swarm
-from particles.registry import Registry
+from fembase.registry import Registry
 
 __all__ = [
     "NEW_PARTICLE_POLICIES",
@@ -79,7 +79,7 @@ __all__ = [
 ]
 
 PROPERTIES: Registry[type[ParticleProperty]] = Registry(
-    "property",
+    "particle property",
     (
         InitialPosition, InitialComposition, FunctionProperty, Velocity, Temperature, Pressure, StrainRate,
         IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank, Displacement, PlasticStrain,

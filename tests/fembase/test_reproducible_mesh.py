@@ -9,17 +9,23 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.adapt.adaptivity import MeshHierarchy
-from convection.geometry.mesh import BoxSpec, ShellSpec, cell_volumes, create_mesh
+from convection.geometry.box import BoxDomain, BoxSpec
+from convection.geometry.mesh import cell_volumes
+from convection.geometry.shell import ShellSpec, shell_domain
 from fembase.distribute import cell_owners_by_input, duplicate_cells, mesh_fingerprint
 from fembase.dolfinx_compat import function_space
 
 pytest.importorskip("gmsh")
 
 SPECS = {
-    "box2d": BoxSpec((12, 10), (0.0, 0.0), (0.9142, 1.0)),
-    "box3d": BoxSpec((4, 3, 3), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
-    "annulus": ShellSpec(2, resolution=0.35),
+    "box2d": BoxDomain.from_spec(BoxSpec((12, 10), (0.0, 0.0), (0.9142, 1.0))),
+    "box3d": BoxDomain.from_spec(BoxSpec((4, 3, 3), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0))),
+    "annulus": shell_domain(ShellSpec(2, resolution=0.35)),
 }
+
+
+def create_mesh(comm, domain, **kwargs):
+    return domain.create_mesh(comm, **kwargs)
 
 
 def _same_everywhere(comm, flag):
@@ -70,7 +76,7 @@ def test_wrong_owners_are_refused_on_every_rank(world):
 def test_refinement_leaves_no_duplicate_ghost_cells(world):
     """DOLFINx 0.5's refinement without redistribution repeats ghost cells where three ranks meet
     (MeshHierarchy._refine makes such meshes again); a jump indicator then loses facets."""
-    base = create_mesh(world, BoxSpec((8, 8), (0.0, 0.0), (0.9142, 1.0)))
+    base = create_mesh(world, BoxDomain.from_spec(BoxSpec((8, 8), (0.0, 0.0), (0.9142, 1.0))))
     hierarchy = MeshHierarchy(base)
     mesh = base
     for level, height in enumerate((0.2, 0.5, 0.8)):

@@ -3,7 +3,7 @@
 import numpy as np
 
 from convection.adapt.adaptivity import MeshHierarchy
-from convection.geometry.mesh import BoxSpec, create_box_mesh
+from convection.geometry.box import BoxSpec, create_box_mesh
 from fembase.geometry import CellGeometry
 from particles import Swarm
 from particles.adaptivity import move_to_mesh

@@ -8,7 +8,7 @@ from particles.advection import INTEGRATORS
 from particles.generation import GENERATORS
 from particles.interpolation import INTERPOLATORS
 from particles.properties import PROPERTIES
-from particles.registry import Registry
+from fembase.registry import Registry
 
 
 @dataclass(frozen=True)
@@ -19,9 +19,9 @@ class _Thing:
 
 
 def test_registry_is_a_dict_with_a_role():
-    reg = Registry("widget", (_Thing,))
+    reg = Registry("particle widget", (_Thing,))
     assert "thing" in reg and sorted(reg) == ["thing"] and reg["thing"] is _Thing
-    assert reg.role == "widget"
+    assert reg.role == "particle widget"
     assert reg.create("thing", size=3) == _Thing(3)
     assert reg.describe() == {"thing": "a test entry"}
     with pytest.raises(ValueError, match=r"unknown particle widget 'gadget'; valid: \['thing'\]"):
@@ -31,7 +31,7 @@ def test_registry_is_a_dict_with_a_role():
 
 
 def test_register_is_a_decorator_and_checks_lowercase():
-    reg: Registry[type] = Registry("widget")
+    reg: Registry[type] = Registry("particle widget")
 
     @reg.register
     class Lower:
@@ -50,5 +50,5 @@ def test_register_is_a_decorator_and_checks_lowercase():
 def test_every_role_describes_every_entry(registry):
     described = registry.describe()
     assert sorted(described) == sorted(registry) and all(described.values())
-    with pytest.raises(ValueError, match=f"unknown particle {registry.role} 'nope'"):
+    with pytest.raises(ValueError, match=f"unknown {registry.role} 'nope'"):
         registry.lookup("nope")

@@ -13,7 +13,7 @@ import dolfinx.fem
 pytest.importorskip("gmsh")
 
 from _helpers import gathered, swarm_at  # noqa: E402
-from convection.geometry.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from convection.geometry.shell import ShellSpec, create_shell_mesh  # noqa: E402
 from fembase.dolfinx_compat import function_space
 from fembase.geometry import locate_owned  # noqa: E402
 from fembase.geometry import CellGeometry  # noqa: E402
@@ -100,7 +100,7 @@ def test_confinement_keeps_particles_crossing_a_curved_boundary(world):
     """Large RK2 steps of a rotation carry particles near the outer circle across it (straight steps
     along a curved boundary): without confinement they are lost, with
     :func:`convection.geometry.mesh.shell_confinement` every particle stays, inside the shell."""
-    from convection.geometry.mesh import shell_confinement
+    from convection.geometry.shell import shell_confinement
 
     spec = ShellSpec(2, RI, RO, resolution=0.4)
     mesh = create_shell_mesh(world, spec)
@@ -127,7 +127,7 @@ def test_confinement_on_straight_cells_puts_points_in_cells(world, gdim, resolut
     the outer polygon/polyhedron), points already inside stay where they are, and the outer bound
     is within a sagitta of the circle/sphere."""
     from fembase.evaluation import locate
-    from convection.geometry.mesh import shell_confinement
+    from convection.geometry.shell import shell_confinement
 
     spec = ShellSpec(gdim, RI, RO, resolution=resolution, geometry_degree=1)
     mesh = create_shell_mesh(world, spec)
@@ -154,7 +154,7 @@ def test_generated_particles_are_confined_on_straight_cells(world):
     """Straight-sided cells cover part of the inscribed hole (r < r_inner): a ParticleManager with
     ``confine`` moves generated particles there to the inner circle before the properties start
     (so initial_position is inside the shell and displacement starts at 0); none is lost."""
-    from convection.geometry.mesh import shell_confinement
+    from convection.geometry.shell import shell_confinement
     from particles.generation import RandomUniform
     from particles.manager import ParticleManager
 

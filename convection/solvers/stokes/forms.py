@@ -37,7 +37,8 @@ import ufl
 from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation
-from convection.geometry.boundary import VelocityBC, free_slip_boundaries, nitsche_free_slip, velocity_dirichlet_bcs
+from convection.geometry.boundary import VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries
+from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
 from fembase.dolfinx_compat import function_space
 
@@ -70,9 +71,10 @@ class StokesDiscretisation:
     Args:
         mesh: the mesh (box or shell, 2D or 3D).
         approximation: physics parameters, viscosity law and body force.
-        bcs: velocity condition per side name (:mod:`convection.geometry.boundary`).
+        domain: the domain (its boundaries; :mod:`convection.geometry.domain`).
+        bcs: velocity condition per boundary name (:mod:`convection.geometry.boundary`).
         degree: velocity degree ``k >= 2``; the pressure has degree ``k - 1``.
-        nitsche_penalty: penalty factor of the weak free-slip condition on curved boundaries.
+        nitsche_penalty: penalty factor of the weak free-slip condition on curved or oblique boundaries.
 
     Attributes:
         V: the vector P(degree) velocity space.
@@ -81,18 +83,19 @@ class StokesDiscretisation:
     """
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
-                 bcs: dict[str, VelocityBC], degree: int, nitsche_penalty: float) -> None:
+                 domain: Domain, bcs: dict[str, VelocityBC], degree: int, nitsche_penalty: float) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.mesh = mesh
         self.approximation = approximation
+        self.domain = domain
         self.bcs = bcs
         self.degree = degree
         self.nitsche_penalty = nitsche_penalty
         cell = mesh.ufl_cell()
         self.V = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
         self.Q = function_space(mesh, "Lagrange", degree - 1)
-        self.dirichlet = velocity_dirichlet_bcs(self.V, bcs)
+        self.dirichlet = velocity_dirichlet_bcs(self.V, bcs, domain)
 
     def viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
         """The viscosity (UFL) for ``T``, ``C`` and, for :mod:`convection.physics.rheology` laws, the flow:
@@ -120,9 +123,9 @@ class StokesDiscretisation:
         F_u = (2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
                - ufl.inner(p, ufl.div(v)) * dx - ufl.inner(f, v) * dx)
         F_p = -ufl.inner(ufl.div(u), q) * dx
-        curved = free_slip_boundaries(self.bcs)
+        curved = weak_free_slip_boundaries(self.bcs, self.domain)
         if curved:
-            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+            nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
                                         metadata=metadata)
             F_u = F_u + nitsche.a_uu + nitsche.a_up
             F_p = F_p + nitsche.a_pu
@@ -157,9 +160,9 @@ class StokesDiscretisation:
              -ufl.inner(p, ufl.div(v)) * dx],
             [-ufl.inner(ufl.div(u), q) * dx, None],
         ]
-        curved = free_slip_boundaries(self.bcs)
+        curved = weak_free_slip_boundaries(self.bcs, self.domain)
         if curved:
-            nitsche = nitsche_free_slip(self.mesh, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+            nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
                                         metadata=metadata)
             a[0][0] += nitsche.a_uu
             a[0][1] += nitsche.a_up

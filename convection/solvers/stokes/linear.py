@@ -16,8 +16,8 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
   near-null space (:func:`convection.solvers.stokes.nullspace.rigid_body_modes`).
 - **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
   ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
-  dof (:func:`convection.solvers.stokes.nullspace.pressure_pin`, a zero pressure block holds its diagonal) and
-  makes the continuity right-hand side sum to zero (:meth:`StokesLinearSystem._consistent_continuity`),
+  dof (:meth:`convection.geometry.domain.Domain.pressure_pin`, a zero pressure block holds its
+  diagonal) and makes the continuity right-hand side sum to zero (:meth:`StokesLinearSystem._consistent_continuity`),
   so both solve the same system.
 - **Warm start**: ``x`` starts from the current ``u``, ``p`` (a Krylov solver's nonzero initial
   guess; a direct solver ignores it), and the solution is written back to them.
@@ -32,8 +32,8 @@ import dolfinx.cpp as _cpp
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from convection.geometry.boundary import VelocityBC
-from convection.solvers.stokes.nullspace import constant_pressure_null_space, pressure_pin, rigid_body_modes
+from convection.geometry.domain import Domain
+from convection.solvers.stokes.nullspace import constant_pressure_null_space, rigid_body_modes
 from convection.solvers.petsc_options import destroy_petsc_objects
 from convection.solvers.stokes.forms import StokesForms
 from fembase.dolfinx_compat import (assemble_block_matrix, assemble_block_vector, assemble_matrix_into,
@@ -50,7 +50,7 @@ class StokesLinearSystem:
         p: pressure Function: the same.
         ksp: the KSP to drive, its options already under its prefix before :meth:`setup`.
         dirichlet: the strong velocity conditions.
-        bcs: velocity condition per side name (where to pin the pressure).
+        domain: the domain (where to pin the pressure).
         iterative: True for a Krylov solver with the fieldsplit preconditioner, False for a
             direct solver.
         pressure_null_space: whether the constant pressure solves the homogeneous problem.
@@ -63,14 +63,14 @@ class StokesLinearSystem:
     PETSC_OBJECTS = ("_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local")
 
     def __init__(self, u: dolfinx.fem.Function, p: dolfinx.fem.Function, ksp: PETSc.KSP, /, *,
-                 dirichlet: list, bcs: dict[str, VelocityBC], iterative: bool, pressure_null_space: bool) -> None:
+                 dirichlet: list, domain: Domain, iterative: bool, pressure_null_space: bool) -> None:
         self.u, self.p, self.ksp = u, p, ksp
         self.V, self.Q = u.function_space, p.function_space
         self.iterative = iterative
         self.pressure_null_space = pressure_null_space
         self.pinned = pressure_null_space and not iterative
         self._lifted = list(dirichlet)  # the pin's value 0 lifts nothing: not in the right-hand side
-        self._bcs = self._lifted + ([pressure_pin(self.Q, bcs)] if self.pinned else [])
+        self._bcs = self._lifted + ([domain.pressure_pin(self.Q)] if self.pinned else [])
         self._A: PETSc.Mat | None = None
         self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
         self._is_velocity_local: PETSc.IS | None = None

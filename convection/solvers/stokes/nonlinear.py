@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from petsc4py import PETSc
 
 from convection.geometry.boundary import VelocityBC, velocity_dirichlet_bcs
-from convection.solvers.stokes.nullspace import pressure_pin
 
 if TYPE_CHECKING:
     from convection.solvers.stokes.solver import StokesSolver
@@ -139,9 +138,9 @@ class NonlinearStokes:
             raise ValueError("Newton's method with a pressure-dependent viscosity needs a defined pressure level: "
                              "leave a side traction free, or use stokes.nonlinear.method: picard")
         system = solver.linear_system
-        self._homogeneous = velocity_dirichlet_bcs(solver.V, homogeneous(solver.bcs))
+        self._homogeneous = velocity_dirichlet_bcs(solver.V, homogeneous(solver.bcs), solver.domain)
         if system.pinned:
-            self._homogeneous.append(pressure_pin(solver.Q, solver.bcs))
+            self._homogeneous.append(solver.domain.pressure_pin(solver.Q))
         self._F: PETSc.Vec | None = None
         self._snes: PETSc.SNES | None = None
         self._newton_forms: tuple[Any, Any] | None = None

@@ -1,10 +1,10 @@
 """Null spaces of the Stokes operator and how the solver deals with them.
 
 - The **constant pressure** solves the homogeneous problem when every boundary fixes the normal
-  velocity: :func:`pressure_pin` removes it for a direct solver (one pressure dof set to zero,
-  exact because the system is consistent), :func:`constant_pressure_null_space` hands it to a
-  Krylov solver, and :class:`PressureMean` normalises the pressure to ``int p dx = 0`` after
-  every solve.
+  velocity: the domain's :meth:`~convection.geometry.domain.Domain.pressure_pin` removes it for a
+  direct solver (one pressure dof set to zero, exact because the system is consistent),
+  :func:`constant_pressure_null_space` hands it to a Krylov solver, and :class:`PressureMean`
+  normalises the pressure to ``int p dx = 0`` after every solve.
 - **Rigid rotations** about the origin solve the homogeneous problem when both shell boundaries
   are free slip; they are only nearly in the discrete null space (the Nitsche penalty pins them
   weakly), so they are not given to PETSc: :class:`RigidRotations` removes the solution's L2
@@ -23,30 +23,9 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from convection.geometry.boundary import VelocityBC, box_bounds, is_shell
-from fembase.dolfinx_compat import DirichletBC, orthonormalize
+from fembase.dolfinx_compat import orthonormalize
 
-__all__ = ["PressureMean", "RigidRotations", "constant_pressure_null_space", "pressure_pin", "rigid_body_modes"]
-
-
-def pressure_pin(Q: dolfinx.fem.FunctionSpace, bcs: dict[str, VelocityBC], /) -> DirichletBC:
-    """Zero Dirichlet condition on the pressure dof(s) at the lower box corner (on a shell: on the
-    pressure dof numbered 0 globally, whichever point that is). Collective."""
-    mesh = Q.mesh
-    if is_shell(bcs):
-        owns_first = mesh.comm.rank == 0 and Q.dofmap.index_map.size_local > 0
-        dofs = np.arange(1 if owns_first else 0, dtype=np.int32)
-        return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Q)
-    bounds = box_bounds(mesh)
-    lower = bounds.lower
-    tol = 1e-10 * float(np.max(bounds.upper - lower))
-    gdim = mesh.geometry.dim
-
-    def corner(x: np.ndarray) -> np.ndarray:
-        return np.all(np.abs(x[:gdim] - lower[:, None]) <= tol, axis=0)
-
-    dofs = dolfinx.fem.locate_dofs_geometrical(Q, corner)
-    return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Q)
+__all__ = ["PressureMean", "RigidRotations", "constant_pressure_null_space", "rigid_body_modes"]
 
 
 def constant_pressure_null_space(template: PETSc.Vec, num_owned_velocity: int, /) -> PETSc.NullSpace:

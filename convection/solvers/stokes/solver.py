@@ -57,7 +57,9 @@ from typing import Any, NamedTuple
 import dolfinx
 
 from convection.physics.approximation import BoussinesqApproximation
-from convection.geometry.boundary import VelocityBC, boundary_names, has_rotation_null_space
+from convection.geometry.boundary import VelocityBC, has_rotation_null_space
+from convection.geometry.box import BoxDomain
+from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
 from convection.solvers.stokes.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
 from convection.solvers.petsc_options import (
@@ -227,8 +229,11 @@ class StokesSolver(PetscSolver):
     Args:
         mesh: box mesh (2D or 3D).
         approximation: physics parameters and viscosity law.
-        bcs: velocity condition per side name (see :mod:`convection.geometry.boundary`); sides not listed
-            are traction free.
+        bcs: velocity condition per boundary name (see :mod:`convection.geometry.boundary`); boundaries
+            not listed are traction free.
+        domain: the domain (:mod:`convection.geometry.domain`; its boundary names, how free slip is
+            imposed, where the pressure is pinned). Default: the box the mesh fills
+            (:meth:`convection.geometry.box.BoxDomain.around`).
         degree: velocity degree ``k >= 2``; the pressure has degree ``k - 1``.
         solver: a name in :data:`STOKES_SOLVER_NAMES`: ``"auto"`` (iterative in 3D, GAMG's for a
             shell free slip on both surfaces; direct in 2D), ``"direct"``, ``"iterative"`` or ``"iterative_gamg"``.
@@ -258,7 +263,7 @@ class StokesSolver(PetscSolver):
     PETSC_OBJECTS = ("_nonlinear", "ksp", "linear_system")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
-                 bcs: dict[str, VelocityBC], degree: int = 2, solver: str = AUTO,
+                 bcs: dict[str, VelocityBC], domain: Domain | None = None, degree: int = 2, solver: str = AUTO,
                  petsc_options: dict | None = None, nitsche_penalty: float | None = None,
                  buoyancy_theta: float = 0.0, nonlinear: NonlinearSettings | None = None) -> None:
         if degree < 2:
@@ -266,9 +271,11 @@ class StokesSolver(PetscSolver):
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)
+        self.domain = domain if domain is not None else BoxDomain.around(mesh)
+        self.domain.check_boundary_names(self.bcs)
         self.degree = degree
         self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
-        self.has_rotation_null_space = has_rotation_null_space(self.bcs)
+        self.has_rotation_null_space = has_rotation_null_space(self.bcs, self.domain)
         self.buoyancy_theta = float(buoyancy_theta)
         self.nonlinear_settings = nonlinear if nonlinear is not None else NonlinearSettings()
         self.is_nonlinear = approximation.is_nonlinear
@@ -280,17 +287,17 @@ class StokesSolver(PetscSolver):
         self._petsc_options = self._create_ksp(
             mesh.comm, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space), petsc_options)
         self.is_iterative = self.solver != "direct"
-        self.discretisation = StokesDiscretisation(mesh, approximation, bcs=self.bcs, degree=degree,
+        self.discretisation = StokesDiscretisation(mesh, approximation, domain=self.domain, bcs=self.bcs, degree=degree,
                                                    nitsche_penalty=self.nitsche_penalty)
         self.V, self.Q = self.discretisation.V, self.discretisation.Q
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 
-        self.has_pressure_null_space = all(s in self.bcs for s in boundary_names(mesh.geometry.dim, self.bcs))
+        self.has_pressure_null_space = all(s in self.bcs for s in self.domain.boundaries)
         self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
         self._pressure_mean = PressureMean(self.p) if self.has_pressure_null_space else None
         self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
-            self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, bcs=self.bcs,
+            self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, domain=self.domain,
             iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space)
 
         self.forms: StokesForms | None = None
@@ -299,7 +306,7 @@ class StokesSolver(PetscSolver):
         self._nonlinear = NonlinearStokes(self, self.nonlinear_settings) if self.is_nonlinear else None
 
     def settings(self) -> dict[str, Any]:
-        return {"bcs": self.bcs, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
+        return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
                 "nonlinear": self.nonlinear_settings}
 

@@ -8,7 +8,8 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.adapt.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels
-from convection.geometry.mesh import BoxSpec, cell_volumes, create_box_mesh
+from convection.geometry.box import BoxSpec, create_box_mesh
+from convection.geometry.mesh import cell_volumes
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from fembase.geometry import CellGeometry

@@ -27,6 +27,7 @@ from convection.config.loader import load_config
 from convection.expressions import MAX_LENGTH, Expression, ExpressionError
 from convection.app.launch import RANK_SHELL, mpi_environment, mpirun
 from convection.geometry.probes import MAX_PROBES, boundary_probes, domain_probes
+from convection.geometry.registry import domain_from_config
 from convection.schema import ConfigError, check_document_shape, short_repr
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -419,15 +420,15 @@ def test_expressions_cannot_grow_without_bound():
 
 def test_probes_cover_the_mesh_nodes_and_the_boundary():
     config = load_config(ROOT / BOX, ["mesh.cells=[4, 3]", "mesh.upper=[2, 1]"])
-    points = domain_probes(config)
+    points = domain_probes(domain_from_config(config))
     assert points.shape == (3, (6 * 4 + 1) * (6 * 3 + 1))
     for x, z in ((0.0, 0.0), (2.0, 1.0), (0.25, 1 / 3), (1.5, 0.5)):  # corners and P2/P3 nodes
         assert np.min(np.hypot(points[0] - x, points[1] - z)) < 1e-12
-    top = boundary_probes(config, "top")
+    top = boundary_probes(domain_from_config(config), "top")
     assert np.all(top[1] == 1.0) and top.shape[1] == 25
     big = load_config(ROOT / BOX, ["mesh.cells=[64, 64, 64]"])
-    assert domain_probes(big).shape[1] <= MAX_PROBES
+    assert domain_probes(domain_from_config(big)).shape[1] <= MAX_PROBES
     shell = load_config(ROOT / SHELL)
-    r = np.linalg.norm(domain_probes(shell)[:2], axis=0)
+    r = np.linalg.norm(domain_probes(domain_from_config(shell))[:2], axis=0)
     assert math.isclose(r.min(), 1.22) and math.isclose(r.max(), 2.22)
-    assert np.allclose(np.linalg.norm(boundary_probes(shell, "outer")[:2], axis=0), 2.22)
+    assert np.allclose(np.linalg.norm(boundary_probes(domain_from_config(shell), "outer")[:2], axis=0), 2.22)

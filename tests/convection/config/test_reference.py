@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from convection.config.loader import SCHEMA, RegistryNames, load_config
+from convection.geometry.registry import DOMAINS
 from convection.config.reference import render_markdown, render_yaml
 from convection.schema import REQUIRED, Field
 
@@ -111,11 +112,15 @@ def test_yaml_form_holds_every_key_and_loads_as_a_config(tmp_path):
                 yield prefix + name, value
 
     values = dict(flat(document))
-    shell = {key for key, _ in _leaves(SCHEMA) if key.startswith("boundary.") and key.endswith(("inner", "outer"))}
-    assert len(shell) == 4
-    for key in shell:  # commented out: the YAML form's mesh is a box
-        assert f"    # {key.split('.')[-1]}: null  # annulus/spherical shell" in render_yaml()
-    expected = {key: field for key, field in _leaves(SCHEMA) if "<material>" not in key and key not in shell}
+    box = DOMAINS["box"]
+    other = {key for key, _ in _leaves(SCHEMA)
+             if key.startswith("boundary.") and key.split(".")[-1] not in box.config_boundaries
+             or key.startswith("mesh.") and key.split(".")[-1] not in (*box.config_keys, "geometry", "max_cells")}
+    assert {key.split(".")[-1] for key in other} == {"inner", "outer", "west", "east", "radii", "angles", "resolution",
+                                                     "geometry_degree"}
+    for key in other:  # commented out: the YAML form's mesh is a box
+        assert re.search(rf"^ +# {key.split('.')[-1]}: ", render_yaml(), re.M), key
+    expected = {key: field for key, field in _leaves(SCHEMA) if "<material>" not in key and key not in other}
     assert set(values) == set(expected)
     for key, field in expected.items():
         assert values[key] == (None if field.default is REQUIRED else field.default), key

@@ -7,6 +7,7 @@ import pytest
 
 from convection.config.loader import ConfigError, load_config
 from convection.app.factory import velocity_bcs_from_config
+from convection.geometry.registry import domain_from_config
 from convection.geometry.plates import Plate, PlateVelocity, unit_vector
 
 PLATES = (Plate((0.0, 0.0), 2.0, (90.0, 30.0)), Plate((180.0, 0.0), -1.0, (0.0, 90.0)),
@@ -61,7 +62,7 @@ def test_plates_config_section_builds_a_prescribed_callable(tmp_path):
     outer = {"kind": "plates", "width": 0.1, "plates": [{"centre": [0, 0], "pole": [90, 30], "rate": 2.0},
                                                       {"centre": [180, 0], "rate": -1}]}
     config = _shell_config(outer, tmp_path)
-    bcs = velocity_bcs_from_config(config["boundary"]["velocity"], 3)
+    bcs = velocity_bcs_from_config(config["boundary"]["velocity"], domain_from_config(config))
     assert bcs["inner"].kind == "free_slip" and bcs["outer"].kind == "prescribed"
     assert isinstance(bcs["outer"].value, PlateVelocity) and len(bcs["outer"].value.plates) == 2
     for bad, needle in (({"kind": "plates"}, "needs 'plates"),

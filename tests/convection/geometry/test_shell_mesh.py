@@ -10,8 +10,10 @@ import dolfinx.fem
 
 pytest.importorskip("gmsh")
 
-from convection.geometry.boundary import SHELL_BOUNDARIES, boundary_measure, locate_boundary_facets, shell_radii  # noqa: E402
-from convection.geometry.mesh import ShellSpec, create_shell_mesh, mesh_spec_from_config  # noqa: E402
+from convection.geometry.registry import DOMAINS  # noqa: E402
+from convection.geometry.shell import (  # noqa: E402
+    SHELL_BOUNDARIES, ShellSpec, SphericalShell, create_shell_mesh, shell_domain, shell_radii,
+)
 from fembase.dolfinx_compat import coordinate_map, evaluate_expression  # noqa: E402
 
 
@@ -35,13 +37,14 @@ def test_curved_shell_mesh(world, gdim, resolution, tolerance):
     assert coordinate_map(mesh).degree == 2
     assert _min_jacobian(mesh) > 0.0  # the coarse 3D mesh needs gmsh's high-order untangling
     assert shell_radii(mesh) == pytest.approx((1.22, 2.22), abs=1e-12)
+    domain = shell_domain(spec)
     volume = _integral(mesh, dolfinx.fem.Constant(mesh, 1.0) * ufl.dx)
     assert abs(volume - spec.volume) < tolerance * spec.volume
     for name, radius in zip(SHELL_BOUNDARIES, (1.22, 2.22)):
-        area = _integral(mesh, dolfinx.fem.Constant(mesh, 1.0) * boundary_measure(mesh, name))
+        area = _integral(mesh, dolfinx.fem.Constant(mesh, 1.0) * domain.measure(mesh, name))
         exact = 2 * np.pi * radius if gdim == 2 else 4 * np.pi * radius**2
         assert abs(area - exact) < tolerance * exact
-        assert world.allreduce(locate_boundary_facets(mesh, name).size) > 0
+        assert world.allreduce(domain.locate_facets(mesh, name).size) > 0
 
 
 def test_straight_cells_and_interfaces():
@@ -55,13 +58,14 @@ def test_straight_cells_and_interfaces():
 
 
 def test_spec_from_config_and_checks():
-    spec = mesh_spec_from_config({"geometry": "spherical_shell", "radii": [1.0, 2.0], "resolution": 0.4,
-                                  "geometry_degree": 2})
-    assert spec.gdim == 3 and spec.name == "spherical_shell" and spec.gravity == "radial"
+    domain = DOMAINS.lookup("spherical_shell").from_config(
+        {"geometry": "spherical_shell", "radii": [1.0, 2.0], "resolution": 0.4, "geometry_degree": 2})
+    assert isinstance(domain, SphericalShell) and domain.spec.gdim == 3 and domain.spec.name == "spherical_shell"
+    assert domain.gravity.name == "radial" and domain.gravity.outer_radius == 2.0
     with pytest.raises(ValueError, match="inner_radius"):
         ShellSpec(2, 2.0, 1.0)
-    with pytest.raises(ValueError, match="Unknown mesh geometry"):
-        mesh_spec_from_config({"geometry": "torus"})
+    with pytest.raises(ValueError, match="unknown geometry 'torus'"):
+        DOMAINS.lookup("torus")
 
 
 def test_shell_mesh_written_and_read_again(tmp_path):
@@ -75,5 +79,5 @@ def test_shell_mesh_written_and_read_again(tmp_path):
     tdim = made.topology.dim
     assert read.topology.index_map(tdim).size_local == made.topology.index_map(tdim).size_local
     assert np.allclose(read.geometry.x, made.geometry.x, rtol=0.0, atol=1e-14)
-    facets = locate_boundary_facets(read, "outer")
+    facets = shell_domain(spec).locate_facets(read, "outer")
     assert facets.size > 0

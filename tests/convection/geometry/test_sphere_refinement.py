@@ -14,7 +14,7 @@ import dolfinx.mesh
 pytest.importorskip("gmsh")
 
 from convection.adapt.adaptivity import MeshHierarchy  # noqa: E402
-from convection.geometry.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from convection.geometry.shell import ShellSpec, create_shell_mesh  # noqa: E402
 from fembase.dolfinx_compat import (coordinate_element_from, evaluate_expression, geometry_dofmap,  # noqa: E402
                                     mesh_domain)
 from fembase.manifold import ShellManifold, boundary_radius_error  # noqa: E402

@@ -192,7 +192,7 @@ def test_spherical_shell_view_with_particles_coloured_by_displacement(tmp_path):
     """A spherical shell gets a perspective picture: the equatorial temperature slice (hot inside: red
     near the core, blue outside) and the particles near the core in viridis by displacement."""
     pytest.importorskip("gmsh")
-    from convection.geometry.mesh import ShellSpec, create_shell_mesh
+    from convection.geometry.shell import ShellSpec, create_shell_mesh
 
     mesh = create_shell_mesh(MPI.COMM_SELF, ShellSpec(3, 1.22, 2.22, resolution=0.6, geometry_degree=1))
     T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1), name="temperature")

@@ -13,7 +13,8 @@ import ufl
 from mpi4py import MPI
 
 from convection.physics.approximation import BoussinesqApproximation
-from convection.geometry.boundary import SIDES_2D, VelocityBC
+from convection.geometry.boundary import VelocityBC
+from convection.geometry.box import SIDES_2D
 from convection.physics.buoyancy import LumpedProjection, SemiImplicitBuoyancy
 from convection.config.loader import ConfigError, load_config
 from convection.app.factory import run_config

@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "benchmarks" / "she
 from analytical import Case, fitted_order, run_level  # noqa: E402
 from convection.physics.approximation import BoussinesqApproximation  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
-from convection.geometry.mesh import ShellSpec, create_shell_mesh  # noqa: E402
+from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_domain  # noqa: E402
 from convection.solvers.stokes.solver import StokesSolver  # noqa: E402
 from fembase.dolfinx_compat import atan2
 from _helpers import ITERATIVE, needs_hypre  # noqa: E402
@@ -52,9 +52,12 @@ def test_straight_cells_limit_free_slip():
 
 
 def _free_slip_solver(comm, solver="direct"):
-    mesh = create_shell_mesh(comm, ShellSpec(2, resolution=0.3))
+    spec = ShellSpec(2, resolution=0.3)
+    domain = shell_domain(spec)
+    mesh = create_shell_mesh(comm, spec)
     bcs = {"inner": VelocityBC("free_slip"), "outer": VelocityBC("free_slip")}
-    return StokesSolver(mesh, BoussinesqApproximation(Ra=1.0, gravity="radial"), bcs=bcs, solver=solver)
+    return StokesSolver(mesh, BoussinesqApproximation(Ra=1.0, gravity=domain.gravity), bcs=bcs, domain=domain,
+                        solver=solver)
 
 
 def _integral(mesh, expr):
@@ -90,9 +93,10 @@ def test_free_slip_null_spaces(solver):
 def test_one_free_slip_surface_keeps_rotation_fixed():
     """Free slip outside, no slip inside: no rotational null space, and the constant pressure is
     still the only pressure null space."""
-    mesh = create_shell_mesh(MPI.COMM_WORLD, ShellSpec(2, resolution=0.3))
+    domain = shell_domain(ShellSpec(2, resolution=0.3))
+    mesh = domain.create_mesh(MPI.COMM_WORLD)
     bcs = {"inner": VelocityBC("no_slip"), "outer": VelocityBC("free_slip")}
-    stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=1.0, gravity="radial"), bcs=bcs)
+    stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=1.0, gravity=domain.gravity), bcs=bcs, domain=domain)
     assert stokes.has_pressure_null_space and not stokes.has_rotation_null_space
     stokes.destroy()
 
@@ -100,10 +104,11 @@ def test_one_free_slip_surface_keeps_rotation_fixed():
 def test_prescribed_rotation_on_both_surfaces_is_rigid():
     """Prescribed tangential velocity omega (-y, x) on both surfaces and no buoyancy: the rigid
     rotation is the exact solution, reproduced to round-off (it is linear, so exact in P2)."""
-    mesh = create_shell_mesh(MPI.COMM_WORLD, ShellSpec(2, resolution=0.3))
+    domain = shell_domain(ShellSpec(2, resolution=0.3))
+    mesh = domain.create_mesh(MPI.COMM_WORLD)
     rotation = VelocityBC("prescribed", ("-0.5 * y", "0.5 * x"))
-    stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=0.0, gravity="radial"),
-                          bcs={"inner": rotation, "outer": rotation})
+    stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=0.0, gravity=domain.gravity),
+                          bcs={"inner": rotation, "outer": rotation}, domain=domain)
     stokes.solve(0.0)
     x = ufl.SpatialCoordinate(mesh)
     exact = 0.5 * ufl.as_vector([-x[1], x[0]])
@@ -154,13 +159,15 @@ def test_spherical_shell_default_solver_converges_to_the_direct_solution(world, 
     4e-6 to 6e-5 from the iterative solutions on 3 ranks, which agree with each other to 1e-9), so
     there the iterative solution is held against the other AMG's at a tight tolerance instead, and
     against MUMPS only loosely."""
-    mesh = create_shell_mesh(world, ShellSpec(3, 1.22, 2.22, resolution=0.6))
+    domain = shell_domain(ShellSpec(3, 1.22, 2.22, resolution=0.6))
+    mesh = domain.create_mesh(world)
     bcs = {"inner": VelocityBC("free_slip"), "outer": VelocityBC("free_slip") if outer == "free_slip" else _plates_bc()}
     x = ufl.SpatialCoordinate(mesh)
     r = ufl.sqrt(ufl.dot(x, x))
     T = (ufl.sin(3 * atan2(x[1], x[0])) + x[2]) * (r - 1.22) * (2.22 - r)
-    approximation = BoussinesqApproximation(Ra=1e4, gravity="radial")
-    solvers = {name: StokesSolver(mesh, approximation, bcs=bcs, solver=name) for name in ("auto", "direct")}
+    approximation = BoussinesqApproximation(Ra=1e4, gravity=domain.gravity)
+    solvers = {name: StokesSolver(mesh, approximation, bcs=bcs, domain=domain, solver=name)
+               for name in ("auto", "direct")}
     iterative, direct = solvers["auto"], solvers["direct"]
     assert iterative.solver == expected and iterative.has_rotation_null_space == (outer == "free_slip")
     cold = iterative.solve(T).iterations
@@ -171,7 +178,7 @@ def test_spherical_shell_default_solver_converges_to_the_direct_solution(world, 
     difference = np.sqrt(_integral(mesh, ufl.inner(iterative.u - direct.u, iterative.u - direct.u)))
     assert scale > 1.0 and difference < (1e-5 if world.size == 1 else 1e-3) * scale
     if world.size > 1 and HAS_HYPRE:  # without hypre there is no other AMG to hold it against
-        other = StokesSolver(mesh, approximation, bcs=bcs, petsc_options={"ksp_rtol": 1e-10},
+        other = StokesSolver(mesh, approximation, bcs=bcs, domain=domain, petsc_options={"ksp_rtol": 1e-10},
                              solver="iterative_gamg" if expected == "iterative" else "iterative")
         other.solve(T)
         solvers["other"] = other

@@ -9,7 +9,8 @@ import dolfinx
 from mpi4py import MPI
 
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
-from convection.geometry.boundary import SIDES_2D, SIDES_3D, VelocityBC
+from convection.geometry.boundary import VelocityBC
+from convection.geometry.box import SIDES_2D, SIDES_3D
 from convection.solvers.stokes.solver import StokesSolver
 from convection.solvers.petsc_options import HAS_HYPRE
 from _helpers import ITERATIVE, needs_hypre

@@ -15,7 +15,8 @@ import dolfinx.fem.petsc
 from mpi4py import MPI
 
 from convection.physics.approximation import BoussinesqApproximation
-from convection.geometry.boundary import SIDES_2D, SIDES_3D, VelocityBC
+from convection.geometry.boundary import VelocityBC
+from convection.geometry.box import SIDES_2D, SIDES_3D
 from convection.config.loader import SCHEMA
 from convection.solvers.stokes.solver import STOKES_SOLVER_NAMES, StokesSolver, resolve_solver, rigid_body_modes
 from convection.solvers.petsc_options import HAS_HYPRE

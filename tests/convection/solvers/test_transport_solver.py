@@ -10,7 +10,8 @@ import dolfinx
 from mpi4py import MPI
 
 from convection.physics.approximation import BoussinesqApproximation
-from convection.geometry.boundary import SIDES_2D, TemperatureBC
+from convection.geometry.boundary import TemperatureBC
+from convection.geometry.box import SIDES_2D
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
 

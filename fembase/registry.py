@@ -1,4 +1,6 @@
-"""One registry per particle role, mapping lowercase config names to implementations.
+"""One registry per plugin role, mapping lowercase config names to implementations (the particle
+roles of :mod:`particles` and the roles of :mod:`convection`: domains, viscosity laws,
+postprocessors, writers, ...).
 
 Every entry carries ``name`` and ``description`` attributes: an implementation class (a frozen
 dataclass of its parameters, with class attributes) or a ready object such as a Butcher tableau.
@@ -6,7 +8,7 @@ A :class:`Registry` is a ``dict[name, entry]`` that also knows its role, so ``na
 ``sorted(REGISTRY)`` and ``REGISTRY[name]`` work as on a plain dict, and an unknown name is an
 error naming the role and listing the valid names::
 
-    GENERATORS = Registry("generator", (RandomUniform, BoxLattice))
+    GENERATORS = Registry("particle generator", (RandomUniform, BoxLattice))
     GENERATORS.create("random_uniform", num_particles=5, seed=1)  # == RandomUniform(5, seed=1)
     GENERATORS.create("random")  # ValueError: unknown particle generator 'random'; valid: [...]
 """
@@ -25,7 +27,7 @@ class Registry(dict[str, E], Generic[E]):
     """Implementations of one role by their lowercase config name.
 
     Args:
-        role: Role name used in error messages ("generator", "interpolator", ...).
+        role: What the entries are, as error messages say it ("particle generator", "domain", ...).
         entries: Objects with ``name`` and ``description`` attributes, registered in order.
 
     Raises:
@@ -42,9 +44,9 @@ class Registry(dict[str, E], Generic[E]):
         """Add ``entry`` under ``entry.name`` and return it (usable as a class decorator)."""
         name = entry.name  # type: ignore[attr-defined]
         if name != name.lower():
-            raise ValueError(f"particle {self.role} name {name!r} is not lowercase")
+            raise ValueError(f"{self.role} name {name!r} is not lowercase")
         if name in self:
-            raise ValueError(f"particle {self.role} {name!r} is registered twice")
+            raise ValueError(f"{self.role} {name!r} is registered twice")
         self[name] = entry
         return entry
 
@@ -57,7 +59,7 @@ class Registry(dict[str, E], Generic[E]):
         try:
             return self[name]
         except KeyError:
-            raise ValueError(f"unknown particle {self.role} {name!r}; valid: {sorted(self)}") from None
+            raise ValueError(f"unknown {self.role} {name!r}; valid: {sorted(self)}") from None
 
     def create(self: Registry[type[T]], name: str, /, **parameters: Any) -> T:
         """The implementation registered as ``name``, built with ``parameters``.

@@ -1,0 +1,315 @@
+"""An axis-aligned box: ``mesh.geometry: box``.
+
+``[lower, upper]`` split into ``cells`` per direction (DOLFINx's rectangle and box meshes, triangles
+or quadrilaterals, tetrahedra or hexahedra). Sides: in 2D ``x`` is left/right and ``y``
+bottom/top; in 3D ``x`` is left/right, ``y`` front/back and ``z`` bottom/top. Gravity along
+``-e_z`` (the last axis). The sides are found from the global (allreduced) bounding box of the
+mesh, so any box works, in serial and in parallel. Free slip on a side is a zero Dirichlet
+condition on the velocity component normal to it; the pressure is pinned at the lower corner.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from convection.geometry.domain import Domain, safe_product
+from convection.geometry.gravity import VerticalGravity
+from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
+from convection.schema import ConfigError
+from fembase.distribute import create_reproducible_mesh
+from fembase.dolfinx_compat import DirichletBC
+
+__all__ = ["SIDES_2D", "SIDES_3D", "BoxBounds", "BoxDomain", "BoxSpec", "box_bounds", "create_box_mesh",
+           "side_names"]
+
+SIDES_2D: tuple[str, ...] = ("left", "right", "bottom", "top")
+SIDES_3D: tuple[str, ...] = ("left", "right", "bottom", "top", "front", "back")
+SIMPLICES_PER_BOX = {2: 2, 3: 6}
+
+
+def side_names(gdim: int) -> tuple[str, ...]:
+    """Valid side names for a ``gdim``-dimensional box."""
+    if gdim == 2:
+        return SIDES_2D
+    if gdim == 3:
+        return SIDES_3D
+    raise ValueError(f"Only 2D and 3D boxes are supported, got gdim={gdim}")
+
+
+def side_axis(side: str, gdim: int) -> tuple[int, bool]:
+    """Coordinate axis normal to ``side`` and whether the side is at the upper end of that axis."""
+    names = side_names(gdim)
+    if side not in names:
+        raise ValueError(f"Unknown side {side!r}; valid names: {list(names)}")
+    axis = {"left": 0, "right": 0, "front": 1, "back": 1, "bottom": gdim - 1, "top": gdim - 1}
+    return axis[side], side in ("right", "back", "top")
+
+
+class BoxBounds(NamedTuple):
+    """Global bounding box of a mesh.
+
+    Attributes:
+        lower: lower corner, shape=(gdim,), float64.
+        upper: upper corner, shape=(gdim,), float64.
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+def box_bounds(mesh: dolfinx.mesh.Mesh) -> BoxBounds:
+    """Global bounding box of the mesh geometry. Collective."""
+    gdim = mesh.geometry.dim
+    x = mesh.geometry.x[:, :gdim]
+    lo = x.min(axis=0) if x.shape[0] else np.full(gdim, np.inf)
+    hi = x.max(axis=0) if x.shape[0] else np.full(gdim, -np.inf)
+    comm = mesh.comm
+    lower = np.empty(gdim)
+    upper = np.empty(gdim)
+    comm.Allreduce(np.ascontiguousarray(lo, dtype=np.float64), lower, op=MPI.MIN)
+    comm.Allreduce(np.ascontiguousarray(hi, dtype=np.float64), upper, op=MPI.MAX)
+    return BoxBounds(lower, upper)
+
+
+def _side_marker(mesh: dolfinx.mesh.Mesh, side: str, bounds: BoxBounds) -> Callable:
+    """Marker ``f(x) -> bool array`` for points on ``side`` (x shape=(3, n))."""
+    axis, upper = side_axis(side, mesh.geometry.dim)
+    coordinate = bounds.upper[axis] if upper else bounds.lower[axis]
+    tol = 1e-10 * float(np.max(bounds.upper - bounds.lower))
+
+    def marker(x: np.ndarray) -> np.ndarray:
+        return np.abs(x[axis] - coordinate) <= tol
+
+    return marker
+
+
+@dataclass(frozen=True)
+class BoxSpec:
+    """An axis-aligned box split into ``cells`` per direction.
+
+    Attributes:
+        cells: Cells per direction, length 2 or 3.
+        lower: Lower corner (same length).
+        upper: Upper corner (same length).
+        cell_type: "simplex" (triangles/tetrahedra) or "box" (quadrilaterals/hexahedra).
+        diagonal: Diagonal direction for 2D simplices.
+    """
+
+    cells: tuple[int, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    cell_type: str = "simplex"
+    diagonal: str = "right"
+
+    @classmethod
+    def from_config(cls, mesh_config: Mapping[str, Any]) -> "BoxSpec":
+        cells = tuple(int(n) for n in mesh_config["cells"])
+        gdim = len(cells)
+        lower = tuple(mesh_config["lower"] or [0.0] * gdim)
+        upper = tuple(mesh_config["upper"] or [1.0] * gdim)
+        return cls(cells, lower, upper, mesh_config["cell_type"], mesh_config["diagonal"])
+
+    @property
+    def gdim(self) -> int:
+        return len(self.cells)
+
+    @property
+    def volume(self) -> float:
+        return float(np.prod(np.subtract(self.upper, self.lower)))
+
+
+def _box(comm: MPI.Comm, spec: BoxSpec) -> dolfinx.mesh.Mesh:
+    """DOLFINx's rectangle or box mesh of ``spec`` on ``comm``."""
+    ghost_mode = dolfinx.mesh.GhostMode.shared_facet
+    if spec.gdim == 2:
+        cell_type = dolfinx.mesh.CellType.triangle if spec.cell_type == "simplex" else dolfinx.mesh.CellType.quadrilateral
+        diagonal = getattr(dolfinx.mesh.DiagonalType, spec.diagonal.replace("/", "_"))
+        return dolfinx.mesh.create_rectangle(
+            comm, [np.array(spec.lower), np.array(spec.upper)], list(spec.cells), cell_type,
+            ghost_mode=ghost_mode, diagonal=diagonal,
+        )
+    cell_type = dolfinx.mesh.CellType.tetrahedron if spec.cell_type == "simplex" else dolfinx.mesh.CellType.hexahedron
+    return dolfinx.mesh.create_box(
+        comm, [np.array(spec.lower), np.array(spec.upper)], list(spec.cells), cell_type, ghost_mode=ghost_mode
+    )
+
+
+def create_box_mesh(comm: MPI.Comm, spec: BoxSpec, /, *, owners: npt.NDArray[np.int32] | None = None
+                    ) -> dolfinx.mesh.Mesh:
+    """The mesh of ``spec`` (collective) on a reproducible partition
+    (:func:`fembase.distribute.create_reproducible_mesh`: the same mesh, numbering and all, in every
+    run on the same ranks); ``owners``: a partition to impose (owner rank per cell by input index,
+    on rank 0), e.g. the one a checkpoint saved."""
+    return create_reproducible_mesh(comm, lambda c: _box(c, spec), owners=owners)
+
+
+class BoxDomain(Domain):
+    """An axis-aligned box ``[lower, upper]`` (see the module docstring).
+
+    Args:
+        lower, upper: The corners, length ``gdim``.
+        spec: How the box is meshed (:class:`BoxSpec`); None for a box around a given mesh
+            (:meth:`around`), which cannot make meshes.
+    """
+
+    name: ClassVar[str] = "box"
+    description: ClassVar[str] = "axis-aligned box [lower, upper] with `cells` per direction (2D or 3D)"
+    config_keys: ClassVar[tuple[str, ...]] = ("cells", "lower", "upper", "cell_type", "diagonal")
+    config_boundaries: ClassVar[tuple[str, ...]] = SIDES_3D
+    size_key: ClassVar[str] = "cells"
+    boundary_descriptions: ClassVar[dict[str, str]] = {
+        "left": "x = lower", "right": "x = upper", "bottom": "lowest y (2D) or z (3D)",
+        "top": "highest y (2D) or z (3D)", "front": "y = lower (3D)", "back": "y = upper (3D)"}
+    top: ClassVar[str] = "top"
+    bottom: ClassVar[str] = "bottom"
+
+    def __init__(self, lower: Sequence[float], upper: Sequence[float], /, *, spec: BoxSpec | None = None) -> None:
+        self.lower = tuple(float(v) for v in lower)
+        self.upper = tuple(float(v) for v in upper)
+        self.gdim = len(self.lower)
+        self.boundaries = side_names(self.gdim)
+        self.spec = spec
+
+    @classmethod
+    def from_spec(cls, spec: BoxSpec, /) -> "BoxDomain":
+        return cls(spec.lower, spec.upper, spec=spec)
+
+    @classmethod
+    def around(cls, mesh: dolfinx.mesh.Mesh, /) -> "BoxDomain":
+        """The box a mesh fills (its global bounding box; collective). For solvers built on a box
+        mesh without a domain."""
+        bounds = box_bounds(mesh)
+        return cls(bounds.lower, bounds.upper)
+
+    def __repr__(self) -> str:
+        return f"BoxDomain(lower={self.lower}, upper={self.upper})"
+
+    # ------------------------------------------------------------------ config
+    @classmethod
+    def from_config(cls, mesh: Mapping[str, Any], /) -> "BoxDomain":
+        return cls.from_spec(BoxSpec.from_config(mesh))
+
+    @classmethod
+    def config_gdim(cls, mesh: Mapping[str, Any], /) -> int:
+        return len(mesh["cells"])
+
+    @classmethod
+    def check_config(cls, config: Mapping[str, Any], /) -> None:
+        mesh, adapt = config["mesh"], config["adaptivity"]
+        if mesh["cells"] is None:
+            raise ConfigError("config key 'mesh.cells': required value missing (cells per direction, e.g. [32, 32])")
+        gdim = len(mesh["cells"])
+        for key in ("lower", "upper"):
+            if mesh[key] is not None and len(mesh[key]) != gdim:
+                raise ConfigError(f"config key 'mesh.{key}': needs {gdim} entries like mesh.cells")
+        lower = mesh["lower"] or [0.0] * gdim
+        upper = mesh["upper"] or [1.0] * gdim
+        if any(u <= lo for lo, u in zip(lower, upper)):
+            raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs "
+                              f"{lower}")
+        if not all(math.isfinite(u - lo) for lo, u in zip(lower, upper)):
+            raise ConfigError(f"config key 'mesh.upper': the box size upper - lower must be a finite number, got "
+                              f"{upper} vs {lower}")
+        needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
+        if needs_simplices and mesh["cell_type"] != "simplex":
+            what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"
+            raise ConfigError(f"config key '{what}': needs mesh.cell_type: simplex (triangles/tetrahedra)")
+
+    @classmethod
+    def check_boundaries(cls, config: Mapping[str, Any], /) -> None:
+        """A 2D box has no front and back: conditions there must be the defaults."""
+        if len(config["mesh"]["cells"]) != 2:
+            return
+        for section in ("velocity", "temperature"):
+            for side in ("front", "back"):
+                if config["boundary"][section][side] not in (None, "free_slip", "insulating"):
+                    raise ConfigError(f"config key 'boundary.{section}.{side}': only exists in 3D")
+
+    @classmethod
+    def base_cells_bound(cls, mesh: Mapping[str, Any], /) -> float:
+        gdim = len(mesh["cells"])
+        return safe_product(*mesh["cells"], SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1)
+
+    def probe_axes(self, level: int, /) -> tuple[list[npt.NDArray[np.float64]], Callable]:
+        """A lattice of ``6 cells 2**level`` intervals per direction, boundary and corners included
+        (see :mod:`convection.geometry.probes`)."""
+        counts = bounded([min(NODES_PER_CELL * n * 2**level, MAX_PROBES) for n in self._spec().cells])
+        axes = [np.linspace(lo, hi, n + 1) for lo, hi, n in zip(self.lower, self.upper, counts)]
+
+        def cartesian(grid: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+            points = np.zeros((3, grid.shape[1]))
+            points[: grid.shape[0]] = grid
+            return points
+        return axes, cartesian
+
+    def boundary_axis(self, name: str, /) -> tuple[int, bool]:
+        return side_axis(name, self.gdim)
+
+    # ------------------------------------------------------------------ shape and mesh
+    @property
+    def gravity(self) -> VerticalGravity:
+        return VerticalGravity(top=self.upper[-1])
+
+    def _spec(self) -> BoxSpec:
+        if self.spec is None:
+            raise ValueError("this box was made around a mesh (BoxDomain.around) and has no mesh spec")
+        return self.spec
+
+    def create_mesh(self, comm: MPI.Comm, /, *, owners: npt.NDArray[np.int32] | None = None,
+                    straight: bool = False) -> dolfinx.mesh.Mesh:
+        return create_box_mesh(comm, self._spec(), owners=owners)
+
+    def estimated_cells(self) -> float:
+        """Cells of the base mesh."""
+        spec = self._spec()
+        return float(math.prod(spec.cells)) * (math.factorial(self.gdim) if spec.cell_type == "simplex" else 1)
+
+    # ------------------------------------------------------------------ boundaries
+    def locate_facets(self, mesh: dolfinx.mesh.Mesh, name: str, /, *,
+                      bounds: BoxBounds | None = None) -> npt.NDArray[np.int32]:
+        fdim = mesh.topology.dim - 1
+        mesh.topology.create_connectivity(fdim, mesh.topology.dim)
+        marker = _side_marker(mesh, name, box_bounds(mesh) if bounds is None else bounds)
+        return dolfinx.mesh.locate_entities_boundary(mesh, fdim, marker).astype(np.int32)
+
+    def facet_tags(self, mesh: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.MeshTags:
+        bounds = box_bounds(mesh)
+        return self.tag_facets(mesh, [self.locate_facets(mesh, side, bounds=bounds) for side in self.boundaries])
+
+    def normal_axis(self, name: str, /) -> int:
+        return side_axis(name, self.gdim)[0]
+
+    def pressure_pin(self, Q: dolfinx.fem.FunctionSpace, /) -> DirichletBC:
+        """Zero Dirichlet condition on the pressure dof(s) at the lower corner. Collective."""
+        bounds = box_bounds(Q.mesh)
+        lower = bounds.lower
+        tol = 1e-10 * float(np.max(bounds.upper - lower))
+        gdim = Q.mesh.geometry.dim
+
+        def corner(x: np.ndarray) -> np.ndarray:
+            return np.all(np.abs(x[:gdim] - lower[:, None]) <= tol, axis=0)
+
+        dofs = dolfinx.fem.locate_dofs_geometrical(Q, corner)
+        return dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, Q)
+
+    def opposite(self, name: str, /) -> tuple[str, str]:
+        axis = side_axis(name, self.gdim)[0]
+        lower, upper = [s for s in self.boundaries if side_axis(s, self.gdim)[0] == axis]
+        return (upper, lower) if side_axis(lower, self.gdim)[1] else (lower, upper)
+
+    def nusselt(self, mesh: dolfinx.mesh.Mesh, name: str, heat_flow: float, delta_T: float, area: float, /) -> float:
+        """``(Q / A) / (delta_T / L)``, ``L`` the box extent along the axis normal to ``name``."""
+        axis = side_axis(name, self.gdim)[0]
+        x = mesh.geometry.x[:, axis]
+        lo = mesh.comm.allreduce(float(x.min()) if x.size else np.inf, op=MPI.MIN)
+        hi = mesh.comm.allreduce(float(x.max()) if x.size else -np.inf, op=MPI.MAX)
+        return float((heat_flow / area) * (hi - lo) / delta_T)

@@ -59,6 +59,7 @@ from convection.app.loop import BlowUp, Resume, RunSettings, RunSummary, run
 from convection.app.run_folder import RunFolderLock
 from convection.solvers.stokes.solver import StokesSolver
 from convection.solvers.stokes.nonlinear import NonlinearSettings
+from convection.solvers.petsc_options import PetscSolver
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space, petsc_vector
 from particles.manager import ParticleManager
@@ -150,6 +151,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     checkpoint of a run of this config) the mesh, fields, particles and time stepping state are
     the checkpoint's instead.
     """
+    PetscSolver.prepare_process()  # before any vector of the run is made
     domain = domain_from_config(config)
     gdim = domain.gdim
     physics = config["physics"]

@@ -11,8 +11,10 @@ default options) built from the same pieces: :data:`MUMPS_LU` (direct; on severa
 :func:`reproducible_lu`, which gives the same bits in every run) and :func:`krylov_options`
 (iterative: Krylov method, stopping rule, then the preconditioner).
 
-Importing this module sets one global option, ``vec_mdot_use_gemv = false`` (unless it is set
-already): :func:`reproducible_vector_kernels`.
+Nothing happens at import: the solvers set what they need when they are made
+(:meth:`PetscSolver.prepare_process`: the global option ``vec_mdot_use_gemv = false`` unless it is
+set already, :func:`reproducible_vector_kernels`, and the process's cache of compiled forms,
+:mod:`fembase.jit_cache`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from types import MappingProxyType
 from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 
 from petsc4py import PETSc
+
+from fembase import jit_cache
 
 __all__ = ["PetscSolver",
     "HAS_HYPRE",
@@ -41,7 +45,7 @@ __all__ = ["PetscSolver",
 def reproducible_vector_kernels() -> None:
     """Make PETSc's multiple dot products (``VecMDot``, the Gram-Schmidt step of GMRES and FGMRES)
     give the same bits in every run of the same problem. Not collective; call before the solvers
-    create their vectors (this module calls it when it is imported).
+    create their vectors (:meth:`PetscSolver.prepare_process` does, first thing in every solver).
 
     Since PETSc 3.20 (Debian 13 has 3.22), ``VecMDot`` calls BLAS ``gemv`` by default
     (``-vec_mdot_use_gemv``). OpenBLAS's ``dgemv`` rounds differently depending on how the
@@ -61,8 +65,6 @@ def reproducible_vector_kernels() -> None:
     # option at all).
     options.getBool("vec_mdot_use_gemv")
 
-
-reproducible_vector_kernels()
 
 MUMPS_LU: Mapping[str, Any] = MappingProxyType(
     {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
@@ -192,6 +194,15 @@ class PetscSolver:
 
     mesh: Any
     approximation: Any
+
+    @staticmethod
+    def prepare_process() -> None:
+        """What every solver needs of the process, set once (idempotent; not collective): PETSc's
+        reproducible vector kernels (:func:`reproducible_vector_kernels`) and the process's cache
+        of compiled forms and elements (:func:`fembase.jit_cache.install`). Subclasses call it first
+        in their constructor, before they make any vector."""
+        reproducible_vector_kernels()
+        jit_cache.install()
 
     def _create_ksp(self, comm: Any, solver: str, petsc_options: Mapping[str, Any] | None) -> dict[str, Any]:
         """Check ``solver``, create the KSP under a fresh prefix; returns the full option set."""

@@ -130,6 +130,7 @@ class TransportSolver(PetscSolver):
             raise ValueError(
                 f"Unknown stabilisation {stabilisation!r}; valid names: {sorted(STABILISATIONS)}"
             )
+        self.prepare_process()
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)

@@ -68,9 +68,6 @@ from convection.solvers.petsc_options import (
 from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
 from convection.solvers.stokes.linear import StokesLinearSystem
 from convection.solvers.stokes.nonlinear import NonlinearResult, NonlinearSettings, NonlinearStokes
-from fembase import jit_cache
-
-jit_cache.install()  # forms and elements compiled once per process (see the module)
 
 _BOOMERAMG_SYSTEMS: dict[str, Any] = {
     # Systems AMG ("unknown" approach: PETSc passes the block size gdim as hypre's number of
@@ -268,6 +265,7 @@ class StokesSolver(PetscSolver):
                  buoyancy_theta: float = 0.0, nonlinear: NonlinearSettings | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
+        self.prepare_process()
         self.mesh = mesh
         self.approximation = approximation
         self.bcs = dict(bcs)

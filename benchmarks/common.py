@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from convection.app.launch import cli_command, mpi_environment
+from convection.launch import cli_command, mpi_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,7 +1,7 @@
 """Names a package re-exports from its modules, imported when first used (PEP 562).
 
 Packages whose modules are heavy (DOLFINx, PETSc, MPI) but whose light parts must stay light — the
-MPI launcher (:mod:`convection.app.launch`), the pictures (:mod:`convection.io.pictures`), the
+MPI launcher (:mod:`convection.launch`), the pictures (:mod:`convection.io.pictures`), the
 config reference — re-export their public names through :func:`lazy_exports` instead of importing
 every module in ``__init__``.
 """

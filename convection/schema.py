@@ -1,4 +1,14 @@
-"""A small declarative schema for YAML run configurations.
+"""A small declarative schema for YAML run configurations, and the parameters of components.
+
+A component declares its parameters once, as a frozen settings dataclass whose fields are made by
+:func:`param` (type from the annotation, default, bounds, allowed names, help) and
+:func:`subsection` (a nested settings dataclass); that dataclass *is* the schema of its config
+section (:func:`section_schema`) and is built from a checked section by :func:`settings_from`::
+
+    @dataclass(frozen=True)
+    class EnergySettings:
+        enabled: bool = param(True, help="false: the temperature stays at its initial value")
+        degree: int = param(2, minimum=1, maximum=MAX_DEGREE, help="temperature degree (Lagrange)")
 
 A schema is a nested mapping of section names to :class:`Field` (a leaf) or to another mapping
 (a section). :func:`validate` walks a user document against it, fills defaults, coerces numbers
@@ -21,14 +31,19 @@ Hostile documents are answered with one short line too:
 
 from __future__ import annotations
 
+import collections.abc
 import copy
+import dataclasses
 import math
 import reprlib
+import types
+import typing
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Union
 
-__all__ = ["MAX_DEPTH", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "check_document_shape",
-           "check_finite_values", "key_text", "short_repr", "validate"]
+__all__ = ["MAX_DEGREE", "MAX_DEPTH", "MAX_ENTRIES", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "Names",
+           "check_document_shape", "check_finite_values", "key_text", "param", "section_schema", "settings_as_section",
+           "settings_from", "short_repr", "subsection", "validate"]
 
 MAX_MESSAGE = 400
 """Longest error message (characters); longer ones are cut with ``...``."""
@@ -36,6 +51,11 @@ MAX_DEPTH = 32
 """Deepest nesting of sections, lists and mappings a config document may have (configs use < 8)."""
 MAX_VALUES = 100_000
 """Most values (mappings, lists and scalars, each alias use counted) a config document may hold."""
+MAX_DEGREE = 4
+"""Highest polynomial degree of a field (form compilation time grows steeply with the degree)."""
+MAX_ENTRIES = 100
+"""Most materials, particle properties, PETSc options or constants (each costs a field, a column, an
+entry of PETSc's options database (512 in all) or an expression check)."""
 INT64 = (-(2**63), 2**63 - 1)
 """Range of an integer key (every integer of a run ends up in int64 arrays or C longs)."""
 
@@ -106,6 +126,26 @@ def check_document_shape(document: Any, /) -> None:
 
 Choices = Union[tuple[str, ...], Callable[[], Iterable[str]]]
 """Allowed names: a tuple, or a callable returning them (e.g. a registry's keys, read when checked)."""
+
+
+class Names:
+    """Allowed names that are a registry's keys, read when a config is checked (so the registry is
+    the one list of names); :meth:`registry` gives the registry itself (the config reference lists
+    its entries' descriptions).
+
+    Args:
+        registry: The registry (name -> entry), or a callable returning it (a registry of a module
+            imported only when needed).
+    """
+
+    def __init__(self, registry: Mapping[str, Any] | Callable[[], Mapping[str, Any]], /) -> None:
+        self._registry = registry
+
+    def registry(self) -> Mapping[str, Any]:
+        return self._registry if isinstance(self._registry, Mapping) else self._registry()
+
+    def __call__(self) -> list[str]:
+        return list(self.registry())
 
 
 @dataclass(frozen=True)
@@ -347,3 +387,104 @@ def validate(schema: Mapping[str, Any], document: Any, prefix: str = "") -> dict
         else:
             result[name] = validate(spec, document.get(name), prefix=f"{key}.")
     return result
+
+
+# ---------------------------------------------------------------------- declared parameters
+_SCALAR_KINDS = {int: "int", float: "float", str: "str", bool: "bool"}
+
+
+def param(default: Any = REQUIRED, /, *, help: str, kind: str | None = None, choices: Choices | None = None,
+          minimum: float | None = None, exclusive_minimum: float | None = None, maximum: float | None = None,
+          length: tuple[int, ...] | None = None, check: Callable[[Any], str | None] | None = None,
+          items: Mapping[str, Any] | None = None, max_items: int | None = None) -> Any:
+    """A field of a settings dataclass that is a key of its config section (see the module
+    docstring): the default (``REQUIRED``: none), the checks of :class:`Field` and a one-line help.
+    The kind (and whether ``null`` is allowed) follows from the field's annotation unless given:
+    ``int``, ``float``, ``str``, ``bool``, ``tuple[int, ...]`` (a list in YAML), ``Mapping``, ``Any``,
+    each ``| None`` for nullable."""
+    spec = {"kind": kind, "default": default, "choices": choices, "minimum": minimum,
+            "exclusive_minimum": exclusive_minimum, "maximum": maximum, "length": length, "check": check,
+            "help": help, "items": items, "max_items": max_items}
+    metadata = {"schema": spec}
+    if default is REQUIRED:
+        return dataclasses.field(metadata=metadata)
+    if isinstance(default, (list, dict)):
+        return dataclasses.field(default_factory=lambda: copy.deepcopy(default), metadata=metadata)
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+def subsection(cls: type, /) -> Any:
+    """A field of a settings dataclass that is a nested config section declared by ``cls``."""
+    return dataclasses.field(default_factory=cls, metadata={"section": cls})
+
+
+def _kind(annotation: Any) -> tuple[str, bool]:
+    """(Field kind, nullable) of a field annotation."""
+    nullable = False
+    if typing.get_origin(annotation) in (Union, types.UnionType):
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        nullable = len(args) < len(typing.get_args(annotation))
+        annotation = args[0] if len(args) == 1 else Any
+    origin = typing.get_origin(annotation)
+    if annotation in _SCALAR_KINDS:
+        return _SCALAR_KINDS[annotation], nullable
+    if origin in (tuple, list):
+        item = typing.get_args(annotation)[0]
+        return f"list[{_SCALAR_KINDS[item]}]", nullable
+    if origin in (dict, collections.abc.Mapping) or annotation in (dict, collections.abc.Mapping):
+        return "mapping", nullable
+    return "any", nullable
+
+
+def section_schema(cls: type, /) -> dict[str, Any]:
+    """The config section a settings dataclass declares: key -> :class:`Field`, or a nested
+    section for a :func:`subsection` field (in the order of the fields)."""
+    hints = typing.get_type_hints(cls)
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if "section" in f.metadata:
+            out[f.name] = section_schema(f.metadata["section"])
+        elif "schema" in f.metadata:
+            spec = dict(f.metadata["schema"])
+            kind, nullable = _kind(hints[f.name])
+            spec["kind"] = spec["kind"] or kind
+            if isinstance(spec["default"], tuple):  # a YAML list
+                spec["default"] = list(spec["default"])
+            out[f.name] = Field(nullable=nullable, **spec)
+    return out
+
+
+def settings_from(cls: type, section: Mapping[str, Any], /) -> Any:
+    """The settings dataclass ``cls`` from a checked config section (lists become tuples where the
+    field is a tuple; nested sections become their dataclasses)."""
+    hints = typing.get_type_hints(cls)
+    values = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in section:
+            continue
+        value = section[f.name]
+        if "section" in f.metadata:
+            value = settings_from(f.metadata["section"], value)
+        elif isinstance(value, list) and _is_tuple(hints[f.name]):
+            value = tuple(value)
+        values[f.name] = value
+    return cls(**values)
+
+
+def _is_tuple(annotation: Any) -> bool:
+    if typing.get_origin(annotation) in (Union, types.UnionType):
+        return any(_is_tuple(a) for a in typing.get_args(annotation))
+    return typing.get_origin(annotation) is tuple
+
+
+def settings_as_section(settings: Any, /) -> dict[str, Any]:
+    """A settings dataclass as its config section (tuples as lists, nested sections as mappings)."""
+    out = {}
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        if dataclasses.is_dataclass(value):
+            value = settings_as_section(value)
+        elif isinstance(value, tuple):
+            value = list(value)
+        out[f.name] = value
+    return out

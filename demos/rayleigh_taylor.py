@@ -37,7 +37,7 @@ import dolfinx.mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from convection.adapt.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy  # noqa: E402
+from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings, MeshHierarchy  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
 from convection.model.composition import ParticleComposition, particle_properties  # noqa: E402
 from convection.physics.materials import Material, Materials  # noqa: E402
@@ -67,9 +67,9 @@ def build(cells: int, particles_per_cell: int, max_level: int, comm: MPI.Comm) -
                                          dolfinx.mesh.CellType.triangle,
                                          ghost_mode=dolfinx.mesh.GhostMode.shared_facet)
     hierarchy = MeshHierarchy(base)
-    adaptivity = Adaptivity(hierarchy, AdaptivityParameters(every=10, min_level=0, max_level=max_level,
-                                                            refine_fraction=0.2, coarsen_fraction=0.5),
-                            fields=["composition"])
+    adaptivity = Adaptivity(hierarchy, AdaptivitySettings(every=10, min_level=0, max_level=max_level,
+                                                            refine_fraction=0.2, coarsen_fraction=0.5,
+                                                            fields=("composition",)))
 
     # The material
     # ------------

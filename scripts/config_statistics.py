@@ -54,7 +54,7 @@ def _shrunk(config: Path, steps: int) -> list[str]:
 def _launcher(tree: Path, ranks: int) -> list[str]:
     if ranks == 1:
         return []
-    out = subprocess.run([sys.executable, "-m", "convection.app.launch", str(ranks)], cwd=tree, check=True,
+    out = subprocess.run([sys.executable, "-m", "convection.launch", str(ranks)], cwd=tree, check=True,
                          capture_output=True, text=True).stdout
     return out.splitlines()
 

@@ -11,7 +11,7 @@
 # machine: `PIC_DOLFINX=pypi bash scripts/in_release_root.sh trixie -- bash scripts/setup.sh`).
 # apt brings only the C compiler and Python headers (the forms' JIT) and the libraries the gmsh
 # and VTK wheels load. Runs on more than one rank use the venv's MPICH launcher (.venv/bin/mpiexec;
-# convection/app/launch.py). The venv remembers its route (.venv/pic-route) and is made again when the
+# convection/launch.py). The venv remembers its route (.venv/pic-route) and is made again when the
 # route changes.
 # Usage: [PIC_DOLFINX=debian|pypi] scripts/setup.sh   (prints the venv python path on its last line)
 set -euo pipefail

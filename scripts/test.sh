@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set everything up (idempotent) and run the test suite: the collective tests under MPI's launcher
 # with 2 ranks and 3 ranks (Open MPI's mpirun --oversubscribe, or MPICH's mpiexec on the PyPI route:
-# python -m convection.app.launch N tells which), then the serial tests (exit 5, none collected,
+# python -m convection.launch N tells which), then the serial tests (exit 5, none collected,
 # fails). Extra arguments go to every pytest call. PIC_DOLFINX=pypi: the PyPI route (setup.sh).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -25,7 +25,7 @@ status=0
 
 logdir="$(mktemp -d)"
 for n in 2 3; do
-    launcher="$("$py" -m convection.app.launch "$n")"
+    launcher="$("$py" -m convection.launch "$n")"
     mapfile -t mpirun <<< "$launcher"
     echo "== collective tests under ${mpirun[*]} =="
     rc=0

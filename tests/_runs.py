@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 import yaml
 
-from convection.app.launch import mpi_environment, mpirun
+from convection.launch import mpi_environment, mpirun
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -31,7 +31,7 @@ def command(args: list[str], ranks: int = 1) -> list[str]:
 
 
 def env() -> dict[str, str]:
-    """The environment of a run under mpirun (:func:`convection.app.launch.mpi_environment`)."""
+    """The environment of a run under mpirun (:func:`convection.launch.mpi_environment`)."""
     return mpi_environment()
 
 

@@ -55,9 +55,9 @@ def test_no_dolfinx_version_checks_outside_the_floor():
     assert not wrong, wrong
 
 
-ROOMS = ("geometry", "physics", "solvers", "adapt", "model", "postprocess", "io", "config", "app")
+ROOMS = ("geometry", "physics", "solvers", "adapt", "model", "postprocess", "io", "run", "config", "app")
 """convection's rooms from the floor up: a room imports only from rooms below it (and from the
-floor modules ``schema``, ``expressions``, ``_lazy``, from particles and fembase)."""
+floor modules ``schema``, ``expressions``, ``launch``, ``_lazy``, from particles and fembase)."""
 
 
 def _modules() -> dict[str, Path]:

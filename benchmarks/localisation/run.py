@@ -39,7 +39,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
-from convection.app.launch import run_config  # noqa: E402
+from convection.launch import run_config  # noqa: E402
 from convection.io.pictures import read_statistics  # noqa: E402
 
 CONFIG = ROOT / "configs" / "localisation.yaml"

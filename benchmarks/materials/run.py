@@ -28,7 +28,7 @@ ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.common import curves_figure  # noqa: E402
-from convection.app.launch import run_config  # noqa: E402
+from convection.launch import run_config  # noqa: E402
 from convection.io.pictures import read_statistics  # noqa: E402
 
 SOURCES = {"particles": ["composition.source=particles", "composition.degree=0"],

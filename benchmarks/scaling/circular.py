@@ -85,7 +85,7 @@ if str(ROOT) not in sys.path:
 
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
-from convection.app.launch import mpi_environment  # noqa: E402
+from convection.launch import mpi_environment  # noqa: E402
 from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_confinement, shell_domain  # noqa: E402
 from convection.solvers.stokes.solver import STOKES_SOLVER_NAMES, StokesSolver  # noqa: E402
 from convection.solvers.timestep import cfl_timestep  # noqa: E402

@@ -53,7 +53,7 @@ import dolfinx.mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from convection.adapt.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels  # noqa: E402
+from convection.adapt.adaptivity import AdaptivitySettings, MeshHierarchy, kelly_indicator, wanted_levels  # noqa: E402
 from convection.physics.approximation import BoussinesqApproximation  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
 from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_domain  # noqa: E402
@@ -265,7 +265,7 @@ def run_hierarchy(case: Case, rounds: int, resolution: float, *, comm: MPI.Comm,
     base = create_shell_mesh(comm, ShellSpec(case.dim, R_INNER, R_OUTER, resolution=resolution, geometry_degree=1,
                                              interfaces=interfaces))
     hierarchy = MeshHierarchy(base, manifold=ShellManifold(R_INNER, R_OUTER, case.dim, interfaces=interfaces))
-    params = AdaptivityParameters(every=1, min_level=0, max_level=rounds, refine_fraction=refine_fraction,
+    params = AdaptivitySettings(every=1, min_level=0, max_level=rounds, refine_fraction=refine_fraction,
                                   coarsen_fraction=0.0)
     results, mesh = [], hierarchy.uniform(0)
     for i in range(rounds + 1):

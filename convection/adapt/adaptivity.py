@@ -52,10 +52,11 @@ from fembase.dolfinx_compat import (SCATTER_ADD, cell_dofmap, coordinate_element
                                     geometry_dofmap, is_discontinuous, mesh_domain)
 from fembase.geometry import Candidates
 from fembase.manifold import ShellManifold
+from convection.schema import Names, param
 from fembase.partition import PARTITIONERS, partition
 
-__all__ = ["INDICATOR_FIELDS", "Adaptivity", "AdaptivityParameters", "MeshHierarchy", "MeshRecipe",
-           "kelly_indicator", "wanted_levels"]
+__all__ = ["INDICATOR_FIELDS", "MAX_INITIAL_ROUNDS", "Adaptivity", "AdaptivitySettings", "MeshHierarchy",
+           "MeshRecipe", "kelly_indicator", "wanted_levels"]
 
 INDICATOR_FIELDS: dict[str, str] = {
     "temperature": "the temperature",
@@ -64,20 +65,31 @@ INDICATOR_FIELDS: dict[str, str] = {
 """Registry of the fields that can drive the refinement indicator (name -> one-line description)."""
 
 
+MAX_INITIAL_ROUNDS = 100
+"""Most rounds of adapting the mesh to the initial condition (each rebuilds the mesh)."""
+
+
 @dataclass(frozen=True)
-class AdaptivityParameters:
-    """Parameters of the ``adaptivity`` config section."""
+class AdaptivitySettings:
+    """The ``adaptivity`` config section: whether, when and how the mesh adapts (:class:`Adaptivity`)."""
 
-    every: int = 10
-    min_level: int = 0
-    max_level: int = 2
-    refine_fraction: float = 0.3
-    coarsen_fraction: float = 0.3
+    enabled: bool = param(False, help="refine and coarsen the mesh by an error indicator during the run")
+    every: int = param(10, minimum=1, help="adapt every N steps")
+    min_level: int = param(0, minimum=0, help="coarsest refinement level of a cell (0: the base mesh)")
+    max_level: int = param(2, minimum=0, help="finest refinement level of a cell (each level halves the cell size)")
+    refine_fraction: float = param(0.3, minimum=0.0, maximum=1.0, help="fraction of cells (by indicator) to refine")
+    coarsen_fraction: float = param(0.3, minimum=0.0, maximum=1.0, help="fraction of cells to coarsen")
+    initial_steps: int | None = param(None, minimum=0, maximum=MAX_INITIAL_ROUNDS,
+                                      help="adapt this many times to the initial condition (default max_level - "
+                                           "min_level)")
+    fields: tuple[str, ...] = param(("temperature",), choices=Names(INDICATOR_FIELDS),
+                                    help="fields whose Kelly error indicators (each normalised, summed) choose the "
+                                         "cells")
 
-    @classmethod
-    def from_config(cls, section: dict) -> "AdaptivityParameters":
-        return cls(section["every"], section["min_level"], section["max_level"],
-                   section["refine_fraction"], section["coarsen_fraction"])
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.fields) - set(INDICATOR_FIELDS))
+        if unknown:
+            raise ValueError(f"unknown adaptivity fields {unknown}; valid: {list(INDICATOR_FIELDS)}")
 
 
 def kelly_indicator(fields: Sequence[dolfinx.fem.Function], /) -> npt.NDArray[np.float64]:
@@ -111,7 +123,7 @@ def kelly_indicator(fields: Sequence[dolfinx.fem.Function], /) -> npt.NDArray[np
 
 
 def wanted_levels(
-    indicator: npt.NDArray[np.float64], levels: npt.NDArray[np.int32], params: AdaptivityParameters, comm: MPI.Comm, /
+    indicator: npt.NDArray[np.float64], levels: npt.NDArray[np.int32], params: AdaptivitySettings, comm: MPI.Comm, /
 ) -> npt.NDArray[np.int32]:
     """Wanted level per owned cell from a global ranking of the indicator (collective).
 
@@ -549,19 +561,15 @@ class Adaptivity:
 
     Args:
         hierarchy: The base mesh the adapted meshes are refined from (shared with load balancing).
-        params: Levels, fractions and interval.
-        fields: Which fields drive the indicator: ``"temperature"`` and/or ``"composition"`` (every
-            material fraction); the model hands their Functions to :meth:`new_mesh`.
+        params: Levels, fractions, interval and the fields that drive the indicator
+            (``"temperature"`` and/or ``"composition"``, every material fraction; the model hands
+            their Functions to :meth:`new_mesh`).
     """
 
-    def __init__(self, hierarchy: MeshHierarchy, params: AdaptivityParameters, /, *,
-                 fields: Sequence[str] = ("temperature",)) -> None:
-        unknown = sorted(set(fields) - set(INDICATOR_FIELDS))
-        if unknown:
-            raise ValueError(f"unknown adaptivity fields {unknown}; valid: {list(INDICATOR_FIELDS)}")
+    def __init__(self, hierarchy: MeshHierarchy, params: AdaptivitySettings = AdaptivitySettings(), /) -> None:
         self.hierarchy = hierarchy
         self.params = params
-        self.fields = tuple(fields)
+        self.fields = params.fields
 
     def due(self, timestep: int, /) -> bool:
         """Whether the mesh is adapted after step ``timestep``."""

@@ -21,10 +21,11 @@ import numpy as np
 import dolfinx.mesh
 
 from convection.adapt.adaptivity import MeshHierarchy
+from convection.schema import Names, param
 from fembase.partition import PARTITIONERS
 from particles.swarm import Swarm
 
-__all__ = ["BALANCE_STRATEGIES", "Balancer", "RankLoads"]
+__all__ = ["BALANCE_STRATEGIES", "BalanceSettings", "Balancer", "RankLoads"]
 
 BALANCE_STRATEGIES: dict[str, str] = {
     "none": "never repartition",
@@ -68,32 +69,49 @@ class RankLoads:
         return cls(*(np.array(column) for column in zip(*gathered)))
 
 
+@dataclass(frozen=True)
+class BalanceSettings:
+    """The ``balance`` config section: when and how :class:`Balancer` repartitions."""
+
+    strategy: str = param("none", choices=Names(BALANCE_STRATEGIES),
+                          help="repartition the mesh: never, every N steps, or when the load imbalance exceeds a "
+                               "threshold")
+    every: int = param(10, minimum=1, help="steps between repartitions (every) or checks (threshold)")
+    threshold: float = param(1.2, minimum=1.0,
+                             help="repartition when max/mean over ranks of the load (cells + W particles) exceeds "
+                                  "this")
+    particle_weight: float = param(0.01, minimum=0.0, help="W in the cell weight 1 + W n_particles(K)")
+    method: str = param("rcb", choices=Names(PARTITIONERS),
+                        help="rcb: recursive bisection balancing cells and particles; morton: space-filling-curve "
+                             "blocks")
+
+    def __post_init__(self) -> None:
+        if self.strategy not in BALANCE_STRATEGIES:
+            raise ValueError(f"unknown balancing strategy {self.strategy!r}; valid: {sorted(BALANCE_STRATEGIES)}")
+        if self.method not in PARTITIONERS:
+            raise ValueError(f"unknown partition method {self.method!r}; valid: {sorted(PARTITIONERS)}")
+        if self.every < 1:
+            raise ValueError(f"every must be >= 1, got {self.every}")
+
+
 class Balancer:
     """When and how to repartition (see the module docstring).
 
     Args:
         hierarchy: The base mesh and its refinements (shared with adaptivity).
-        strategy: Name in :data:`BALANCE_STRATEGIES`.
-        every: Steps between repartitions (``every``) or checks (``threshold``).
-        threshold: Load imbalance (max/mean) that triggers a repartition.
-        particle_weight: W in the cell load ``1 + W n_particles``.
-        method: Partition method name in :data:`fembase.partition.PARTITIONERS`.
+        settings: Strategy (a name in :data:`BALANCE_STRATEGIES`), interval, threshold, the particle
+            weight W of the cell load ``1 + W n_particles`` and the partition method (a name in
+            :data:`fembase.partition.PARTITIONERS`).
     """
 
-    def __init__(self, hierarchy: MeshHierarchy, /, *, strategy: str = "every", every: int = 10,
-                 threshold: float = 1.2, particle_weight: float = 0.01, method: str = "rcb") -> None:
-        if strategy not in BALANCE_STRATEGIES:
-            raise ValueError(f"unknown balancing strategy {strategy!r}; valid: {sorted(BALANCE_STRATEGIES)}")
-        if method not in PARTITIONERS:
-            raise ValueError(f"unknown partition method {method!r}; valid: {sorted(PARTITIONERS)}")
-        if every < 1:
-            raise ValueError(f"every must be >= 1, got {every}")
+    def __init__(self, hierarchy: MeshHierarchy, settings: BalanceSettings = BalanceSettings(), /) -> None:
         self.hierarchy = hierarchy
-        self.strategy = strategy
-        self.every = every
-        self.threshold = threshold
-        self.particle_weight = particle_weight
-        self.method = method
+        self.settings = settings
+        self.strategy = settings.strategy
+        self.every = settings.every
+        self.threshold = settings.threshold
+        self.particle_weight = settings.particle_weight
+        self.method = settings.method
 
     def loads(self, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> RankLoads:
         """Cells, particles and load per rank (collective)."""

@@ -197,7 +197,7 @@ def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
                 raise ConfigError(f"config key '{changed[0]}': differs from the checkpoint's; only "
                                   f"{_RESUMABLE_TEXT} may change when resuming")
     from convection.app.factory import run_config
-    from convection.app.loop import RunFailure
+    from convection.run.loop import RunFailure
 
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)

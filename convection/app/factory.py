@@ -13,7 +13,7 @@ section             component
 ``particles``       :meth:`particles.manager.ParticleManager.from_config`
 ``adaptivity``      :class:`convection.adapt.adaptivity.Adaptivity` (and the initial adapted mesh)
 ``balance``         :class:`convection.adapt.rebalance.Balancer`
-``time``,           :class:`convection.app.loop.RunSettings`
+``time``,           :class:`convection.run.loop.RunSettings`
 ``output``
 ``diagnostics``,    postprocessors (:func:`convection.postprocess.postprocessors.create_postprocessors`)
 ``output``
@@ -35,11 +35,11 @@ import dolfinx.fem.petsc
 import dolfinx.mesh
 from mpi4py import MPI
 
-from convection.adapt.adaptivity import Adaptivity, AdaptivityParameters, MeshHierarchy
+from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings, MeshHierarchy
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
 from convection.io.checkpoint import (
-    Checkpointer, CheckpointSettings, SavedRun, restore_mesh, restore_particles, restore_state,
+    Checkpointer, SavedRun, restore_mesh, restore_particles, restore_state,
 )
 from convection.model.composition import (
     FieldComposition, ParticleComposition, StaticComposition, composition_space, particle_properties,
@@ -53,14 +53,14 @@ from convection.expressions import Expression
 from convection.physics.materials import Material, Materials
 from convection.model.model import Model
 from convection.geometry.plates import PlateVelocity
-from convection.postprocess.postprocessors import create_postprocessors
-from convection.adapt.rebalance import Balancer
-from convection.app.loop import BlowUp, Resume, RunSettings, RunSummary, run
-from convection.app.run_folder import RunFolderLock
-from convection.solvers.stokes.solver import StokesSolver
-from convection.solvers.stokes.nonlinear import NonlinearSettings
+from convection.postprocess.postprocessors import DiagnosticsSettings, create_postprocessors
+from convection.adapt.rebalance import BalanceSettings, Balancer
+from convection.run.loop import BlowUp, OutputSettings, Resume, RunSettings, RunSummary, TimeSettings, run
+from convection.io.run_folder import RunFolderLock
+from convection.solvers.stokes.solver import StokesSettings, StokesSolver
 from convection.solvers.petsc_options import PetscSolver
-from convection.solvers.transport import TransportSolver
+from convection.solvers.transport import EnergySettings, TransportSolver
+from convection.schema import settings_from
 from fembase.dolfinx_compat import function_space, petsc_vector
 from particles.manager import ParticleManager
 from particles.properties import PropertyContext
@@ -114,11 +114,7 @@ def materials_from_config(config: dict[str, Any]) -> Materials:
 
 def run_settings(config: dict[str, Any]) -> RunSettings:
     """The ``time`` and ``output`` sections."""
-    t, out = config["time"], config["output"]
-    return RunSettings(end=t["end"], directory=Path(out["directory"]), cfl=t["cfl"], dt_max=t["dt_max"],
-                       dt_initial=t["dt_initial"], max_increase=t["max_increase"], max_steps=t["max_steps"], steady_tolerance=t["steady_state_tolerance"],
-                       steady_window=t["steady_state_window"], fields_every=out["fields_every"],
-                       progress=out["progress"], progress_every=out["progress_every"])
+    return RunSettings(settings_from(TimeSettings, config["time"]), settings_from(OutputSettings, config["output"]))
 
 
 def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bcs: dict[str, TemperatureBC],
@@ -181,22 +177,19 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
             mesh = hierarchy.uniform(0)
     adaptivity = None
     if acfg["enabled"]:
-        adaptivity = Adaptivity(hierarchy, AdaptivityParameters.from_config(acfg), fields=acfg["fields"])
+        adaptivity = Adaptivity(hierarchy, settings_from(AdaptivitySettings, acfg))
         if restore is None:
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])
     balancer = None
     if bcfg["strategy"] != "none":
-        balancer = Balancer(hierarchy, strategy=bcfg["strategy"], every=bcfg["every"], threshold=bcfg["threshold"],
-                            particle_weight=bcfg["particle_weight"], method=bcfg["method"])
+        balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg))
 
-    scfg, ecfg = config["stokes"], config["energy"]
-    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, degree=scfg["degree"],
-                          solver=scfg["solver"],
-                          petsc_options=scfg["petsc_options"], buoyancy_theta=scfg["buoyancy_theta"],
-                          nonlinear=NonlinearSettings.from_config(scfg["nonlinear"]))
-    temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=ecfg["degree"],
-                                  stabilisation=ecfg["stabilisation"], velocity_extrapolation=False)
+    stokes_settings = settings_from(StokesSettings, config["stokes"])
+    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, **vars(stokes_settings))
+    energy = settings_from(EnergySettings, config["energy"])
+    temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,
+                                  stabilisation=energy.stabilisation, velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
                                        gdim=gdim))
 
@@ -224,7 +217,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
             composition = ParticleComposition(particles, materials)
         elif ccfg["source"] == "field":
             composition = FieldComposition(mesh, approximation, materials, degree=ccfg["degree"],
-                                           stabilisation=ecfg["stabilisation"])
+                                           stabilisation=energy.stabilisation)
         else:
             composition = StaticComposition(mesh, materials, degree=ccfg["degree"])
     if particles is not None:
@@ -232,7 +225,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         # with the particles' interpolator after every step.
         for name in approximation.viscosity_law.field_names:
             particles.track(name)
-    model = Model(stokes, temperature=temperature, solve_temperature=ecfg["enabled"], composition=composition,
+    model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
                   particles=particles, adaptivity=adaptivity, balancer=balancer)
     if restore is not None:
         restore_state(model, restore, exact=exact)
@@ -244,7 +237,7 @@ def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
                resume: SavedRun | None = None) -> RunSummary:
     """Build (unless ``model`` is given, built from this config) and run a resolved configuration
     (collective). The run folder is created and locked for the whole run
-    (:class:`convection.app.run_folder.RunFolderLock`) before anything is written into it, then
+    (:class:`convection.io.run_folder.RunFolderLock`) before anything is written into it, then
     ``config.yaml`` is written. With ``resume`` (a checkpoint of this run) the run continues from
     it: statistics, fields and particle series go on after its step.
 
@@ -261,14 +254,11 @@ def run_config(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         comm.barrier()
         if model is None:
             model = build_model(config, comm=comm, restore=resume)
-        diagnostics = config["diagnostics"]
-        postprocessors = create_postprocessors(model, config["output"]["statistics"], start=start,
-                                               entrainment_material=diagnostics["entrainment_material"],
-                                               entrainment_height=diagnostics["entrainment_height"])
-        ccfg = config["output"]["checkpoint"]
-        checkpoints = Checkpointer(CheckpointSettings(ccfg["every_steps"], ccfg["every_wall_seconds"], ccfg["keep"],
-                                                      ccfg["at_end"]), directory, config,
+        settings = run_settings(config)
+        postprocessors = create_postprocessors(model, settings.output.statistics, start=start,
+                                               diagnostics=settings_from(DiagnosticsSettings, config["diagnostics"]))
+        checkpoints = Checkpointer(settings.output.checkpoint, directory, config,
                                    resumed_at=model.timestep if resume is not None else None)
         resumed = Resume.from_state(resume.state["run"]) if resume is not None else None
-        return run(model, run_settings(config), postprocessors, should_stop=should_stop, start=start,
-                   checkpoints=checkpoints, blowup=BlowUp(**config["blowup"]), resume=resumed)
+        return run(model, settings, postprocessors, should_stop=should_stop, start=start,
+                   checkpoints=checkpoints, blowup=settings_from(BlowUp, config["blowup"]), resume=resumed)

@@ -37,28 +37,30 @@ from typing import Any, Callable, Iterable
 import yaml
 
 from convection.expressions import Expression, ExpressionError
-from convection.config.files import check_output_directory, check_petsc_options, read_document, safe_load
+from convection.config.files import read_document, safe_load
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config
-from convection.schema import REQUIRED, ConfigError, Field, check_document_shape, key_text, short_repr, validate
+from convection.adapt.adaptivity import AdaptivitySettings
+from convection.adapt.rebalance import BalanceSettings
+from convection.model.composition import CompositionSettings
+from convection.postprocess.postprocessors import DiagnosticsSettings
+from convection.run.loop import BlowUp, OutputSettings, TimeSettings
+from convection.schema import (
+    MAX_DEGREE, MAX_ENTRIES, REQUIRED, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
+    short_repr, validate,
+)
+from convection.solvers.stokes.solver import StokesSettings
+from convection.solvers.transport import EnergySettings
 
 __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
            "parse_overrides"]
 
-MAX_DEGREE = 4
-"""Highest polynomial degree of a field (form compilation time grows steeply with the degree)."""
-MAX_INITIAL_ROUNDS = 100
-"""Most rounds of adapting the mesh to the initial condition (each rebuilds the mesh)."""
 MAX_PARTICLES = 1e8
 """Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
 MAX_STEPS = 1e9
 """Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
-MAX_ENTRIES = 100
-"""Most materials, particle properties, PETSc options or constants (each costs a field, a column, an
-entry of PETSc's options database (512 in all) or an expression check)."""
 VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates")
-TEMPERATURE_KINDS = ("dirichlet", "insulating")
 
 
 def _finite_number(value: Any) -> float | None:
@@ -122,25 +124,10 @@ def _check_temperature_bc(value: Any) -> str | None:
     return f"temperature condition {short_repr(value)} must be 'insulating' or {{dirichlet: <number>}}"
 
 
-class RegistryNames:
-    """The names of a registry, read when a config is checked (so the registry is the one list).
+def _names(module: str, name: str) -> Names:
+    """The names of the registry ``module.name``, imported when a config is checked."""
+    return Names(lambda: getattr(importlib.import_module(module), name))
 
-    Called, it returns the names; :meth:`registry` gives the registry itself (for the generated
-    config reference: its entries' descriptions).
-    """
-
-    def __init__(self, module: str, name: str) -> None:
-        self.module = module
-        self.name = name
-
-    def registry(self) -> Any:
-        return getattr(importlib.import_module(self.module), self.name)
-
-    def __call__(self) -> list[str]:
-        return list(self.registry())
-
-
-_names = RegistryNames
 
 
 def _is_list(value: Any) -> str | None:
@@ -222,45 +209,9 @@ SCHEMA: dict[str, Any] = {
                            help="viscosity of the pure material: a number or a law as physics.viscosity.law "
                                 "(null: the background's)"),
     }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
-    "stokes": {
-        "degree": Field("int", 2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)"),
-        "solver": Field("str", "auto", choices=_names("convection.solvers.stokes.solver", "STOKES_SOLVER_CHOICES"),
-                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
-                        "free slip on both surfaces), direct (MUMPS) in 2D"),
-        "petsc_options": Field("mapping", {}, check=check_petsc_options, max_items=MAX_ENTRIES,
-                               help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); viewers may "
-                                    "only print"),
-        "nonlinear": {
-            "method": Field("str", "newton", choices=_names("convection.solvers.stokes.nonlinear", "NONLINEAR_METHODS"),
-                            help="for a viscosity that depends on the flow: picard (defect correction) or newton "
-                                 "(SNES, after picard reached switch_tolerance)"),
-            "rtol": Field("float", 1e-6, exclusive_minimum=0.0, maximum=0.5,
-                          help="stop at |F(u, p)| <= rtol |b| (b: forcing and lifted boundary velocities)"),
-            "max_iterations": Field("int", 50, minimum=1, maximum=10_000,
-                                    help="most nonlinear iterations per solve; more is a solver failure (exit 3)"),
-            "switch_tolerance": Field("float", 0.1, exclusive_minimum=0.0, maximum=1.0,
-                                      help="newton: Picard iterations until the relative residual is below this"),
-            "line_search": Field("str", "bt", choices=_names("convection.solvers.stokes.nonlinear", "LINE_SEARCHES"),
-                                 help="newton: PETSc SNES line search"),
-        },
-        "buoyancy_theta": Field("float", 0.0, minimum=0.0, maximum=1.0,
-                                help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
-                                     "t + theta dt along the flow (semi-implicit, stabilises dense interfaces against "
-                                     "the 'drunken sailor' oscillation; 0.5 is a good choice)"),
-    },
-    "energy": {
-        "enabled": Field("bool", True, help="false: temperature stays at its initial value (e.g. Ra = 0)"),
-        "degree": Field("int", 2, minimum=1, maximum=MAX_DEGREE, help="temperature degree (Lagrange)"),
-        "stabilisation": Field("str", "supg", choices=_names("convection.solvers.transport", "STABILISATIONS"),
-                               help="stabilisation of the advection-diffusion equation of the temperature"),
-    },
-    "composition": {
-        "source": Field("str", "static", choices=_names("convection.model.composition", "COMPOSITION_SOURCES"),
-                        help="static: fractions fixed at their initial regions; particles: averaged from advected "
-                             "particles; field: advected continuous fields (SUPG, no diffusion)"),
-        "degree": Field("int", 0, minimum=0, maximum=MAX_DEGREE, help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); "
-                                                  "source field needs >= 1"),
-    },
+    "stokes": section_schema(StokesSettings),
+    "energy": section_schema(EnergySettings),
+    "composition": section_schema(CompositionSettings),
     "particles": {
         "enabled": Field("bool", None, nullable=True,
                          help="carry particles (null: when composition.source is particles; true: also as tracers)"),
@@ -286,77 +237,23 @@ SCHEMA: dict[str, Any] = {
             "every_nth": Field("int", 1, minimum=1, help="write only particles with id % every_nth == 0"),
         },
     },
-    "time": {
-        "end": Field("float", REQUIRED, exclusive_minimum=0.0, help="end time (nondimensional)"),
-        "cfl": Field("float", 1.0, exclusive_minimum=0.0,
-                     help="time step = cfl * min over cells of (cell size / (velocity degree * |u|))"),
-        "dt_max": Field("float", None, nullable=True, exclusive_minimum=0.0, help="longest time step (null: no limit)"),
-        "dt_initial": Field("float", None, nullable=True, exclusive_minimum=0.0,
-                            help="first step when the initial velocity is zero"),
-        "max_increase": Field("float", None, nullable=True, exclusive_minimum=1.0,
-                              help="a step is at most this many times the previous one (null: no limit); keeps the "
-                                   "velocity extrapolation u* = (1 + w) u^n - w u^(n-1), w = dt/dt_previous, tame "
-                                   "after a fast initial transient"),
-        "max_steps": Field("int", None, nullable=True, minimum=0, help="stop after this many steps (null: at time.end)"),
-        "steady_state_tolerance": Field("float", None, nullable=True, exclusive_minimum=0.0,
-                                        help="stop when Nu and vrms change by less than this (relative) per unit step window"),
-        "steady_state_window": Field("int", 20, minimum=1, help="steps over which the steady-state change is measured"),
-    },
-    "adaptivity": {
-        "enabled": Field("bool", False, help="refine and coarsen the mesh by an error indicator during the run"),
-        "every": Field("int", 10, minimum=1, help="adapt every N steps"),
-        "min_level": Field("int", 0, minimum=0, help="coarsest refinement level of a cell (0: the base mesh)"),
-        "max_level": Field("int", 2, minimum=0, help="finest refinement level of a cell (each level halves the cell size)"),
-        "refine_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells (by indicator) to refine"),
-        "coarsen_fraction": Field("float", 0.3, minimum=0.0, maximum=1.0, help="fraction of cells to coarsen"),
-        "initial_steps": Field("int", None, nullable=True, minimum=0, maximum=MAX_INITIAL_ROUNDS,
-                               help="adapt this many times to the initial condition (default max_level - min_level)"),
-        "fields": Field("list[str]", ["temperature"], choices=_names("convection.adapt.adaptivity", "INDICATOR_FIELDS"),
-                        help="fields whose Kelly error indicators (each normalised, summed) choose the cells"),
-    },
-    "balance": {
-        "strategy": Field("str", "none", choices=_names("convection.adapt.rebalance", "BALANCE_STRATEGIES"),
-                          help="repartition the mesh: never, every N steps, or when the load imbalance exceeds a threshold"),
-        "every": Field("int", 10, minimum=1, help="steps between repartitions (every) or checks (threshold)"),
-        "threshold": Field("float", 1.2, minimum=1.0,
-                           help="repartition when max/mean over ranks of the load (cells + W particles) exceeds this"),
-        "particle_weight": Field("float", 0.01, minimum=0.0, help="W in the cell weight 1 + W n_particles(K)"),
-        "method": Field("str", "rcb", choices=_names("fembase.partition", "PARTITIONERS"),
-                        help="rcb: recursive bisection balancing cells and particles; morton: space-filling-curve blocks"),
-    },
-    "blowup": {
-        "vrms_growth": Field("float", 1.0e3, nullable=True, exclusive_minimum=1.0,
-                             help="fail when vrms grows by more than this factor in one step"),
-        "max_vrms": Field("float", None, nullable=True, exclusive_minimum=0.0, help="fail when vrms exceeds this"),
-        "temperature_margin": Field("float", 1.0, nullable=True, minimum=0.0,
-                                    help="fail when T leaves the initial range widened by this many times its width"),
-        "lost_fraction": Field("float", 1.0e-3, nullable=True, minimum=0.0, maximum=1.0,
-                               help="fail when more than this fraction of the particles is lost"),
-    },
-    "diagnostics": {
-        "entrainment_material": Field("str", None, nullable=True,
-                                      help="material whose entrainment is reported: a material name, all, or with "
-                                           "one material dense (C) or light (1 - C)"),
-        "entrainment_height": Field("float", 0.2, help="entrainment = volume of that material above this height (shells: radius) / its initial volume"),
-    },
-    "output": {
-        "directory": Field("str", REQUIRED, check=check_output_directory,
-                           help="output folder (statistics.csv, fields, config)"),
-        "fields_every": Field("int", 10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)"),
-        "statistics": Field("list[str]", None, nullable=True, choices=_names("convection.postprocess.postprocessors", "POSTPROCESSORS"),
-                            help="postprocessors whose columns statistics.csv holds (null: all that apply)"),
-        "checkpoint": {
-            "every_steps": Field("int", None, nullable=True, minimum=1, help="write a checkpoint every N steps"),
-            "every_wall_seconds": Field("float", 3600.0, nullable=True, exclusive_minimum=0.0,
-                                        help="write a checkpoint when this much wall time passed since the last"),
-            "keep": Field("int", 2, minimum=1, help="how many of the newest checkpoints are kept"),
-            "at_end": Field("bool", True, help="also write one at the end and when stopped by a signal"),
-        },
-        "progress": Field("str", "auto", choices=("auto", "bar", "lines", "none"),
-                          help="progress display: a bar on a terminal, lines in a log (auto: by stdout), or none"),
-        "progress_every": Field("int", 10, minimum=1, help="steps between progress lines"),
-    },
+    "time": section_schema(TimeSettings),
+    "adaptivity": section_schema(AdaptivitySettings),
+    "balance": section_schema(BalanceSettings),
+    "blowup": section_schema(BlowUp),
+    "diagnostics": section_schema(DiagnosticsSettings),
+    "output": section_schema(OutputSettings),
 }
+
+
+def domain_class(config: dict[str, Any]) -> type[Domain]:
+    """The geometry class of a config (its ``mesh.geometry``)."""
+    return DOMAINS.lookup(config["mesh"].get("geometry", "box"))
+
+
+def config_domain(config: dict[str, Any]) -> Domain:
+    """The domain of a checked config (:func:`convection.geometry.registry.domain_from_config`)."""
+    return domain_from_config(config)
 
 
 def domain_class(config: dict[str, Any]) -> type[Domain]:

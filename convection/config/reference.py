@@ -23,9 +23,9 @@ from typing import Any, Callable, Iterator, Mapping
 
 import yaml
 
-from convection.config.loader import SCHEMA, RegistryNames
+from convection.config.loader import SCHEMA
 from convection.geometry.registry import DOMAINS
-from convection.schema import REQUIRED, Field
+from convection.schema import REQUIRED, Field, Names
 
 __all__ = ["KeyDoc", "Parameter", "PluginRole", "plugin_roles", "render_markdown", "render_yaml", "schema_keys"]
 
@@ -231,7 +231,7 @@ def _registry_choices() -> list[tuple[KeyDoc, dict[str, str]]]:
     """Schema keys whose allowed names come from a registry, with each name's description."""
     out = []
     for doc in schema_keys():
-        if isinstance(doc.field.choices, RegistryNames):
+        if isinstance(doc.field.choices, Names):
             registry = doc.field.choices.registry()
             out.append((doc, {name: _describe(registry[name]) + _columns(registry[name]) for name in registry}))
     return out

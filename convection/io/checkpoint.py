@@ -57,6 +57,7 @@ import dolfinx.mesh
 from convection.adapt.adaptivity import MeshHierarchy, MeshRecipe
 from fembase.manifold import ShellManifold
 from convection.model.model import Model
+from convection.schema import param
 from fembase.distribute import MeshPiece, create_mesh_from_piece, mesh_piece
 from fembase.distribute import cell_owners_by_input, mesh_fingerprint
 from fembase.files import H5Sink
@@ -82,7 +83,7 @@ _CHECKPOINT_NAME = re.compile(rf"{_NAME}[0-9]+")
 
 @dataclass(frozen=True)
 class CheckpointSettings:
-    """When checkpoints are written (``output.checkpoint``).
+    """When checkpoints are written: the ``output.checkpoint`` config section.
 
     Attributes:
         every_steps: Every this many steps (None: not by steps).
@@ -91,10 +92,11 @@ class CheckpointSettings:
         at_end: Also at the end of the run and when it is stopped by a signal.
     """
 
-    every_steps: int | None = None
-    every_wall_seconds: float | None = None
-    keep: int = 2
-    at_end: bool = True
+    every_steps: int | None = param(None, minimum=1, help="write a checkpoint every N steps")
+    every_wall_seconds: float | None = param(3600.0, exclusive_minimum=0.0,
+                                             help="write a checkpoint when this much wall time passed since the last")
+    keep: int = param(2, minimum=1, help="how many of the newest checkpoints are kept")
+    at_end: bool = param(True, help="also write one at the end and when stopped by a signal")
 
 
 @dataclass

@@ -16,6 +16,7 @@ one time step with the advecting velocity ``u`` (already extrapolated to the ste
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable, ClassVar, Protocol
 
 import numpy as np
@@ -25,12 +26,13 @@ import dolfinx.mesh
 
 from convection.physics.approximation import BoussinesqApproximation
 from convection.physics.materials import Materials
+from convection.schema import MAX_DEGREE, Names, param
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
-__all__ = ["COMPOSITION_SOURCES", "CompositionSource", "FieldComposition", "ParticleComposition",
+__all__ = ["COMPOSITION_SOURCES", "CompositionSettings", "CompositionSource", "FieldComposition", "ParticleComposition",
            "StaticComposition", "Transfer", "composition_space", "particle_properties"]
 
 Transfer = Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]
@@ -196,3 +198,14 @@ class ParticleComposition:
 
 COMPOSITION_SOURCES: dict[str, type] = {cls.name: cls for cls in (StaticComposition, FieldComposition, ParticleComposition)}
 """Composition sources by their config name (``composition.source``)."""
+
+
+@dataclass(frozen=True)
+class CompositionSettings:
+    """The ``composition`` config section: where the material fractions come from."""
+
+    source: str = param("static", choices=Names(COMPOSITION_SOURCES),
+                        help="static: fractions fixed at their initial regions; particles: averaged from advected "
+                             "particles; field: advected continuous fields (SUPG, no diffusion)")
+    degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
+                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); source field needs >= 1")

@@ -24,7 +24,7 @@ One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
 5. Stokes is solved for ``u^{n+1}, p^{n+1}``; the particles' properties are refreshed from the new
    solution and written when due.
 
-A run (:func:`convection.app.loop.run`) is a loop around :meth:`Model.step`; a user can write the same
+A run (:func:`convection.run.loop.run`) is a loop around :meth:`Model.step`; a user can write the same
 loop in Python (see ``demos/``).
 """
 

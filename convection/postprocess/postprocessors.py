@@ -39,6 +39,7 @@ calls are collective.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, Protocol
 
 import numpy as np
@@ -52,8 +53,19 @@ from convection.postprocess.diagnostics import nusselt
 from convection.model.model import Model
 from convection.adapt.rebalance import RankLoads
 from convection.model.rheology_fields import flow_viscosity
+from convection.schema import param
 
-__all__ = ["POSTPROCESSORS", "Postprocessor", "create_postprocessors", "describe_postprocessors"]
+__all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "Postprocessor", "create_postprocessors", "describe_postprocessors"]
+
+
+@dataclass(frozen=True)
+class DiagnosticsSettings:
+    """The ``diagnostics`` config section: what the :class:`Entrainment` column measures."""
+
+    entrainment_material: str | None = param(None, help="material whose entrainment is reported: a material name, "
+                                                        "all, or with one material dense (C) or light (1 - C)")
+    entrainment_height: float = param(0.2, help="entrainment = volume of that material above this height (shells: "
+                                                "radius) / its initial volume")
 
 
 class Postprocessor(Protocol):
@@ -239,7 +251,8 @@ class Entrainment:
 
     @classmethod
     def create(cls, model: Model, options: Mapping[str, Any]) -> Entrainment | None:
-        material = options.get("entrainment_material")
+        settings = options.get("diagnostics") or DiagnosticsSettings()
+        material = settings.entrainment_material
         names = [f.name for f in model.fractions]
         if material is None or not names:
             return None
@@ -253,7 +266,7 @@ class Entrainment:
             amounts = {"entrainment": (names.index(material), False)}
         else:
             raise ValueError(f"unknown entrainment material {material!r}; valid: {['all', 'dense', 'light', *names]}")
-        return cls(amounts, float(options.get("entrainment_height", 0.2)))
+        return cls(amounts, float(settings.entrainment_height))
 
     def _build(self, model: Model) -> dict[str, Any]:
         x = ufl.SpatialCoordinate(model.mesh)
@@ -421,7 +434,9 @@ def describe_postprocessors() -> dict[str, str]:
 
 
 def create_postprocessors(model: Model, names: list[str] | None = None, /, **options: Any) -> list[Postprocessor]:
-    """The postprocessors ``names`` (default: all that apply to ``model``), in registry order.
+    """The postprocessors ``names`` (default: all that apply to ``model``), in registry order;
+    ``options``: ``start`` (the run's start on ``time.monotonic``'s clock, for the wall time) and
+    ``diagnostics`` (:class:`DiagnosticsSettings`).
 
     A name asked for explicitly that does not apply to the model is an error.
 

@@ -20,6 +20,7 @@ set already, :func:`reproducible_vector_kernels`, and the process's cache of com
 from __future__ import annotations
 
 import itertools
+import re
 import weakref
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -27,9 +28,11 @@ from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 
 from petsc4py import PETSc
 
+from convection.schema import short_repr
 from fembase import jit_cache
 
 __all__ = ["PetscSolver",
+    "check_petsc_options",
     "HAS_HYPRE",
     "MUMPS_LU",
     "SCALAR_AMG",
@@ -41,6 +44,34 @@ __all__ = ["PetscSolver",
     "linear_solvers",
     "set_owned_options",
 ]
+
+_PETSC_WORD = re.compile(r"[A-Za-z0-9_]+")
+_VIEWER_WORDS = frozenset({"view", "monitor", "reason", "draw", "log", "viewer", "lg", "dump", "history"})
+"""Words of PETSc option names whose value is a viewer (``ksp_view``, ``ksp_monitor_true_residual``,
+``ksp_converged_reason``, ``mat_view``, ...)."""
+_PRINTING_VIEWERS = ("", "ascii")
+_STANDARD_STREAMS = ("", "stdout", "stderr")
+
+
+def check_petsc_options(options: dict[str, Any]) -> str | None:
+    """PETSc options must be plain ``name: scalar`` pairs, and a viewer option may only print
+    (``ascii`` to stdout/stderr, any format): a viewer that names a file (``ascii:/some/path``),
+    writes PETSc's default file (``binary``) or opens a window (``draw``) is refused, since PETSc
+    would create it outside the run folder."""
+    for name, value in options.items():
+        if not isinstance(name, str) or not _PETSC_WORD.fullmatch(name):
+            return f"option name {short_repr(name)} must be letters, digits and _ (without the leading -)"
+        if value is not None and not isinstance(value, (str, int, float)):
+            return f"option {name}: the value must be a number, text, true/false or null, got {short_repr(value)}"
+        if _VIEWER_WORDS.isdisjoint(name.lower().split("_")) or value is None or isinstance(value, bool):
+            continue
+        kind, _, rest = str(value).partition(":")
+        filename = rest.partition(":")[0]
+        if kind.strip().lower() not in _PRINTING_VIEWERS or filename.strip() not in _STANDARD_STREAMS:
+            return (f"option {name}: {short_repr(value)} would make PETSc write a file or open a window outside "
+                    "the run folder; viewers may only print (e.g. ascii, ::ascii_info_detail)")
+    return None
+
 
 def reproducible_vector_kernels() -> None:
     """Make PETSc's multiple dot products (``VecMDot``, the Gram-Schmidt step of GMRES and FGMRES)

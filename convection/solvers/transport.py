@@ -38,6 +38,7 @@ one side's dofs gives the consistent boundary flux ``int_side grad T . n ds``
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import dolfinx
@@ -52,6 +53,7 @@ from convection.geometry.boundary import TemperatureBC, temperature_dirichlet_bc
 from convection.geometry.box import BoxDomain
 from convection.geometry.domain import Domain
 from convection.geometry.mesh import cell_diameter
+from convection.schema import MAX_DEGREE, Names, param
 from convection.solvers.petsc_options import (
     HAS_HYPRE, MUMPS_LU, SCALAR_AMG, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
@@ -73,6 +75,20 @@ TRANSPORT_SOLVERS: dict[str, LinearSolver] = linear_solvers(
 )
 """Registry of linear solvers for the transport equation (lowercase name -> description and default
 PETSc options)."""
+
+
+@dataclass(frozen=True)
+class EnergySettings:
+    """The ``energy`` config section: whether and how the temperature is solved (a
+    :class:`TransportSolver`, whose ``degree`` and ``stabilisation`` take their defaults from here)."""
+
+    enabled: bool = param(True, help="false: temperature stays at its initial value (e.g. Ra = 0)")
+    degree: int = param(2, minimum=1, maximum=MAX_DEGREE, help="temperature degree (Lagrange)")
+    stabilisation: str = param("supg", choices=Names(STABILISATIONS),
+                               help="stabilisation of the advection-diffusion equation of the temperature")
+
+
+_DEFAULTS = EnergySettings()
 
 
 class TransportResult(NamedTuple):
@@ -120,8 +136,8 @@ class TransportSolver(PetscSolver):
     PETSC_OBJECTS = ("ksp", "_A", "_b")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
-                 bcs: dict[str, TemperatureBC], domain: Domain | None = None, degree: int = 2,
-                 stabilisation: str = "supg",
+                 bcs: dict[str, TemperatureBC], domain: Domain | None = None, degree: int = _DEFAULTS.degree,
+                 stabilisation: str = _DEFAULTS.stabilisation,
                  solver: str = "iterative", petsc_options: dict | None = None, velocity_extrapolation: bool = True,
                  diffusivity: float = 1.0, heating: bool = True, name: str = "temperature") -> None:
         if diffusivity < 0.0:

@@ -17,7 +17,7 @@ import yaml
 
 from _runs import shrink
 from convection.config.loader import SCHEMA, load_config
-from convection.app.launch import mpi_environment, mpirun
+from convection.launch import mpi_environment, mpirun
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"

@@ -16,7 +16,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from convection.app.launch import mpirun
+from convection.launch import mpirun
 from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.advection import Advector

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from petsc4py import PETSc
 
 from convection.geometry.boundary import VelocityBC, velocity_dirichlet_bcs
+from convection.schema import Names, param
 
 if TYPE_CHECKING:
     from convection.solvers.stokes.solver import StokesSolver
@@ -66,7 +67,7 @@ class NonlinearSolveError(RuntimeError):
 
 @dataclass(frozen=True)
 class NonlinearSettings:
-    """The ``stokes.nonlinear`` config section.
+    """The ``stokes.nonlinear`` config section (the parameters of :class:`NonlinearStokes`).
 
     Attributes:
         method: a name in :data:`NONLINEAR_METHODS`.
@@ -76,11 +77,16 @@ class NonlinearSettings:
         line_search: a name in :data:`LINE_SEARCHES` (Newton).
     """
 
-    method: str = "newton"
-    rtol: float = 1e-6
-    max_iterations: int = 50
-    switch_tolerance: float = 1e-2
-    line_search: str = "bt"
+    method: str = param("newton", choices=Names(NONLINEAR_METHODS),
+                        help="for a viscosity that depends on the flow: picard (defect correction) or newton "
+                             "(SNES, after picard reached switch_tolerance)")
+    rtol: float = param(1e-6, exclusive_minimum=0.0, maximum=0.5,
+                        help="stop at |F(u, p)| <= rtol |b| (b: forcing and lifted boundary velocities)")
+    max_iterations: int = param(50, minimum=1, maximum=10_000,
+                                help="most nonlinear iterations per solve; more is a solver failure (exit 3)")
+    switch_tolerance: float = param(0.1, exclusive_minimum=0.0, maximum=1.0,
+                                    help="newton: Picard iterations until the relative residual is below this")
+    line_search: str = param("bt", choices=Names(LINE_SEARCHES), help="newton: PETSc SNES line search")
 
     def __post_init__(self) -> None:
         if self.method not in NONLINEAR_METHODS:
@@ -89,11 +95,6 @@ class NonlinearSettings:
             raise ValueError(f"unknown line search {self.line_search!r}; valid: {sorted(LINE_SEARCHES)}")
         if not (0.0 < self.rtol < 1.0 and 0.0 < self.switch_tolerance <= 1.0 and self.max_iterations >= 1):
             raise ValueError(f"invalid nonlinear settings {self}")
-
-    @classmethod
-    def from_config(cls, section: dict[str, Any]) -> "NonlinearSettings":
-        return cls(section["method"], section["rtol"], section["max_iterations"], section["switch_tolerance"],
-                   section["line_search"])
 
 
 class NonlinearResult(NamedTuple):

@@ -51,7 +51,8 @@ changes every step).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import dolfinx
@@ -62,8 +63,10 @@ from convection.geometry.box import BoxDomain
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
 from convection.solvers.stokes.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
+from convection.schema import MAX_DEGREE, MAX_ENTRIES, Names, param, subsection
 from convection.solvers.petsc_options import (
-    HAS_HYPRE, MUMPS_LU, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+    HAS_HYPRE, MUMPS_LU, LinearSolver, PetscSolver, check_petsc_options, krylov_options, linear_solvers, reproducible_lu,
+    set_owned_options,
 )
 from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
 from convection.solvers.stokes.linear import StokesLinearSystem
@@ -150,6 +153,28 @@ STOKES_SOLVER_CHOICES: dict[str, str] = {
     **{name: solver.description for name, solver in STOKES_SOLVERS.items()},
 }
 """One line on each of :data:`STOKES_SOLVER_NAMES` (the config reference lists them)."""
+
+
+@dataclass(frozen=True)
+class StokesSettings:
+    """The ``stokes`` config section: the parameters of :class:`StokesSolver` (its keyword arguments
+    of the same names take their defaults from here)."""
+
+    degree: int = param(2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)")
+    solver: str = param(AUTO, choices=Names(STOKES_SOLVER_CHOICES),
+                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
+                             "free slip on both surfaces), direct (MUMPS) in 2D")
+    petsc_options: Mapping[str, Any] = param({}, check=check_petsc_options, max_items=MAX_ENTRIES,
+                                             help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); "
+                                                  "viewers may only print")
+    nonlinear: NonlinearSettings = subsection(NonlinearSettings)
+    buoyancy_theta: float = param(0.0, minimum=0.0, maximum=1.0,
+                                  help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
+                                       "t + theta dt along the flow (semi-implicit, stabilises dense interfaces against "
+                                       "the 'drunken sailor' oscillation; 0.5 is a good choice)")
+
+
+_DEFAULTS = StokesSettings()
 
 
 def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
@@ -260,9 +285,10 @@ class StokesSolver(PetscSolver):
     PETSC_OBJECTS = ("_nonlinear", "ksp", "linear_system")
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
-                 bcs: dict[str, VelocityBC], domain: Domain | None = None, degree: int = 2, solver: str = AUTO,
-                 petsc_options: dict | None = None, nitsche_penalty: float | None = None,
-                 buoyancy_theta: float = 0.0, nonlinear: NonlinearSettings | None = None) -> None:
+                 bcs: dict[str, VelocityBC], domain: Domain | None = None, degree: int = _DEFAULTS.degree,
+                 solver: str = _DEFAULTS.solver, petsc_options: Mapping[str, Any] | None = None,
+                 nitsche_penalty: float | None = None, buoyancy_theta: float = _DEFAULTS.buoyancy_theta,
+                 nonlinear: NonlinearSettings = _DEFAULTS.nonlinear) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.prepare_process()
@@ -275,7 +301,7 @@ class StokesSolver(PetscSolver):
         self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
         self.has_rotation_null_space = has_rotation_null_space(self.bcs, self.domain)
         self.buoyancy_theta = float(buoyancy_theta)
-        self.nonlinear_settings = nonlinear if nonlinear is not None else NonlinearSettings()
+        self.nonlinear_settings = nonlinear
         self.is_nonlinear = approximation.is_nonlinear
         if self.is_nonlinear and self.buoyancy_theta != 0.0:
             raise ValueError("a semi-implicit buoyancy (buoyancy_theta > 0) is not available with a viscosity that "

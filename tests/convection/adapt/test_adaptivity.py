@@ -7,7 +7,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from convection.adapt.adaptivity import AdaptivityParameters, MeshHierarchy, kelly_indicator, wanted_levels
+from convection.adapt.adaptivity import AdaptivitySettings, MeshHierarchy, kelly_indicator, wanted_levels
 from convection.geometry.box import BoxSpec, create_box_mesh
 from convection.geometry.mesh import cell_volumes
 from convection.adapt.transfer import PointEvaluator, transfer_function
@@ -42,7 +42,7 @@ def _adapt_cycle(comm, rounds, params):
 
 
 def _check_adaptation(comm):
-    params = AdaptivityParameters(min_level=0, max_level=3, refine_fraction=0.2, coarsen_fraction=0.3)
+    params = AdaptivitySettings(min_level=0, max_level=3, refine_fraction=0.2, coarsen_fraction=0.3)
     base, mesh, history = _adapt_cycle(comm, 5, params)
     cells = [h[0] for h in history]
     assert cells[0] > base.topology.index_map(2).size_global  # refined near the front
@@ -64,7 +64,7 @@ def _check_adaptation(comm):
 
     # coarsening: a flat field takes the mesh back to the minimum level
     hierarchy = MeshHierarchy(base)
-    flat = AdaptivityParameters(min_level=1, max_level=3, refine_fraction=0.2, coarsen_fraction=1.0)
+    flat = AdaptivitySettings(min_level=1, max_level=3, refine_fraction=0.2, coarsen_fraction=1.0)
     for _ in range(4):
         wanted = wanted_levels(np.zeros(mesh.topology.index_map(2).size_local), hierarchy.levels(mesh), flat, comm)
         mesh = hierarchy.rebuild(mesh, wanted)

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from convection.config.loader import ConfigError, load_config
-from convection.app.launch import mpirun
+from convection.launch import mpirun
 
 ROOT = Path(__file__).resolve().parents[3]
 GOOD = ROOT / "configs" / "blankenbach_1a.yaml"

@@ -15,7 +15,7 @@ from mpi4py import MPI
 from convection.config.loader import load_config
 from convection.io.pictures import read_statistics
 from convection.app.factory import build_model, run_config
-from convection.app.launch import mpirun
+from convection.launch import mpirun
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from convection.config.loader import SCHEMA, RegistryNames, load_config
+from convection.config.loader import SCHEMA, load_config
 from convection.geometry.registry import DOMAINS
 from convection.config.reference import render_markdown, render_yaml
-from convection.schema import REQUIRED, Field
+from convection.schema import REQUIRED, Field, Names
 
 ROOT = Path(__file__).resolve().parents[3]
 COMMITTED = ROOT / "docs" / "config-reference.md"
@@ -70,7 +70,7 @@ def test_every_key_is_listed_with_help_and_default(markdown):
 def test_every_registry_name_is_listed_under_its_key(markdown):
     checked = 0
     for key, field in _leaves(SCHEMA):
-        if isinstance(field.choices, RegistryNames):
+        if isinstance(field.choices, Names):
             names = list(field.choices.registry())
             assert names
             text = _section(markdown, f"### `{key}`")

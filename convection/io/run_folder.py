@@ -21,15 +21,37 @@ from types import TracebackType
 
 from mpi4py import MPI
 
+from convection.schema import short_repr
 from particles.checkpoint import CheckpointError
 
-__all__ = ["LOCK_NAME", "RunFolderError", "RunFolderLock"]
+__all__ = ["LOCK_NAME", "RunFolderError", "RunFolderLock", "check_output_directory"]
 
 LOCK_NAME = ".lock"
 """The lock file in a run folder."""
 
 _UNSUPPORTED = (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL)
 """flock errors of file systems that do not lock (the run goes on unprotected)."""
+
+
+def check_output_directory(text: str) -> str | None:
+    """The run folder must be named, be a folder if it exists, and be creatable otherwise (the
+    ``output.directory`` config key's check)."""
+    if not text.strip():
+        return "must name a folder (an empty name would write into the current folder)"
+    if "\0" in text:
+        return "must not contain a NUL character"
+    try:
+        path = Path(text).absolute()
+        if path.exists() and not path.is_dir():
+            return f"{short_repr(text)} exists and is not a folder"
+        parent = next(p for p in path.parents if p.exists())
+        if not parent.is_dir():
+            return f"{short_repr(text)} lies inside {short_repr(str(parent))}, which is not a folder"
+        if not path.exists() and not os.access(parent, os.W_OK | os.X_OK):
+            return f"cannot create {short_repr(text)}: no write permission in {short_repr(str(parent))}"
+    except OSError as err:
+        return f"{short_repr(text)} cannot be used: {err.strerror or err}"
+    return None
 
 
 class RunFolderError(CheckpointError):

@@ -20,49 +20,65 @@ from petsc4py import PETSc
 
 from convection.model.model import Model, StepReport
 from convection.io.fields import FieldOutput
+from convection.io.run_folder import check_output_directory
+from convection.io.checkpoint import CheckpointSettings
 from convection.postprocess.postprocessors import (
-    Nusselt, ParticleStatistics, Postprocessor, TemperatureStatistics, TimeColumns, Velocity,
+    POSTPROCESSORS, Nusselt, ParticleStatistics, Postprocessor, TemperatureStatistics, TimeColumns, Velocity,
 )
-from convection.app.progress import Progress
-from convection.app.run_folder import RunFolderError
+from convection.schema import REQUIRED, Names, param, subsection
+from convection.run.progress import Progress
+from convection.io.run_folder import RunFolderError
 from particles.checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
-__all__ = ["BlowUp", "Resume", "RunFailure", "RunSettings", "RunSummary", "SteadyState", "Watch", "Watched", "run"]
+__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary", "SteadyState", "Watch", "Watched", "run"]
+
+
+PROGRESS_MODES = ("auto", "bar", "lines", "none")
+
+
+@dataclass(frozen=True)
+class TimeSettings:
+    """The ``time`` config section: how long a run goes and how long its steps are."""
+
+    end: float = param(REQUIRED, exclusive_minimum=0.0, help="end time (nondimensional)")
+    cfl: float = param(1.0, exclusive_minimum=0.0,
+                       help="time step = cfl * min over cells of (cell size / (velocity degree * |u|))")
+    dt_max: float | None = param(None, exclusive_minimum=0.0, help="longest time step (null: no limit)")
+    dt_initial: float | None = param(None, exclusive_minimum=0.0, help="first step when the initial velocity is zero")
+    max_increase: float | None = param(None, exclusive_minimum=1.0,
+                                       help="a step is at most this many times the previous one (null: no limit); "
+                                            "keeps the velocity extrapolation u* = (1 + w) u^n - w u^(n-1), "
+                                            "w = dt/dt_previous, tame after a fast initial transient")
+    max_steps: int | None = param(None, minimum=0, help="stop after this many steps (null: at time.end)")
+    steady_state_tolerance: float | None = param(None, exclusive_minimum=0.0,
+                                                 help="stop when Nu and vrms change by less than this (relative) per "
+                                                      "unit step window")
+    steady_state_window: int = param(20, minimum=1, help="steps over which the steady-state change is measured")
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """The ``output`` config section: the run folder and what is written into it, when."""
+
+    directory: str = param(REQUIRED, check=check_output_directory,
+                           help="output folder (statistics.csv, fields, config)")
+    fields_every: int = param(10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)")
+    statistics: tuple[str, ...] | None = param(None, choices=Names(POSTPROCESSORS),
+                                               help="postprocessors whose columns statistics.csv holds (null: all "
+                                                    "that apply)")
+    checkpoint: CheckpointSettings = subsection(CheckpointSettings)
+    progress: str = param("auto", choices=PROGRESS_MODES,
+                          help="progress display: a bar on a terminal, lines in a log (auto: by stdout), or none")
+    progress_every: int = param(10, minimum=1, help="steps between progress lines")
 
 
 @dataclass(frozen=True)
 class RunSettings:
-    """How long and how a run goes (the ``time`` and ``output`` sections).
+    """How long and how a run goes: the ``time`` and ``output`` sections."""
 
-    Attributes:
-        end: End time.
-        cfl: Courant number of the step.
-        dt_max: Largest step, or None.
-        dt_initial: Step used while the velocity is zero, or None.
-        max_increase: A step is at most this factor times the previous one, or None.
-        max_steps: Stop after this many steps, or None.
-        steady_tolerance: Stop when vrms and Nu change by less than this (relative) over
-            ``steady_window`` steps, or None.
-        steady_window: Steps of the steady-state test.
-        directory: Output folder.
-        fields_every: Field output every this many steps (0: only at the end).
-        progress: ``auto``, ``bar``, ``lines`` or ``none``.
-        progress_every: Steps between progress lines.
-    """
-
-    end: float
-    directory: Path
-    cfl: float = 1.0
-    dt_max: float | None = None
-    dt_initial: float | None = None
-    max_increase: float | None = None
-    max_steps: int | None = None
-    steady_tolerance: float | None = None
-    steady_window: int = 20
-    fields_every: int = 10
-    progress: str = "auto"
-    progress_every: int = 10
+    time: TimeSettings
+    output: OutputSettings
 
 
 @dataclass(frozen=True)
@@ -121,14 +137,14 @@ class SteadyState:
 
 
 def _timestep(model: Model, settings: RunSettings) -> float:
-    dt = model.cfl_dt(settings.cfl, dt_max=settings.dt_max)
+    dt = model.cfl_dt(settings.time.cfl, dt_max=settings.time.dt_max)
     if not np.isfinite(dt) or dt <= 0.0:
-        dt = settings.dt_initial or settings.dt_max or 0.0
+        dt = settings.time.dt_initial or settings.time.dt_max or 0.0
         if dt <= 0.0:
             raise RuntimeError("the velocity is zero and neither time.dt_initial nor time.dt_max is set")
-    if settings.max_increase is not None and model.dt_previous > 0.0:
-        dt = min(dt, settings.max_increase * model.dt_previous)
-    return min(dt, settings.end - model.time)
+    if settings.time.max_increase is not None and model.dt_previous > 0.0:
+        dt = min(dt, settings.time.max_increase * model.dt_previous)
+    return min(dt, settings.time.end - model.time)
 
 
 def _report(report: StepReport, step: int, balance_log: BalanceLog, progress: Progress) -> None:
@@ -225,7 +241,7 @@ class Watch:
 
 @dataclass(frozen=True)
 class BlowUp:
-    """When a run counts as failed (the ``blowup`` section).
+    """When a run counts as failed: the ``blowup`` config section.
 
     The tests read :class:`Watched` quantities, measured whatever statistics columns the run writes.
 
@@ -236,10 +252,14 @@ class BlowUp:
         lost_fraction: More than this fraction of the initial particle count lost.
     """
 
-    vrms_growth: float | None = 1.0e3
-    max_vrms: float | None = None
-    temperature_margin: float | None = 1.0
-    lost_fraction: float | None = 1.0e-3
+    vrms_growth: float | None = param(1.0e3, exclusive_minimum=1.0,
+                                      help="fail when vrms grows by more than this factor in one step")
+    max_vrms: float | None = param(None, exclusive_minimum=0.0, help="fail when vrms exceeds this")
+    temperature_margin: float | None = param(1.0, minimum=0.0,
+                                             help="fail when T leaves the initial range widened by this many times its "
+                                                  "width")
+    lost_fraction: float | None = param(1.0e-3, minimum=0.0, maximum=1.0,
+                                        help="fail when more than this fraction of the particles is lost")
 
     def check(self, now: Watched, first: Watched, previous: Watched | None) -> str | None:
         """What failed at this step (None: nothing); ``first`` is the run's first step (step 0, kept
@@ -302,7 +322,7 @@ class _Outputs:
     """
 
     def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool) -> None:
-        directory = Path(settings.directory)
+        directory = Path(settings.output.directory)
         after = model.timestep if resume else None
         try:
             self.statistics = StatisticsWriter(directory / "statistics.csv", columns, comm=model.comm,
@@ -311,12 +331,13 @@ class _Outputs:
         except StatisticsFileError as err:
             raise RunFolderError(str(err)) from None
         self.fields = FieldOutput(directory, resume_after=model.time if resume else None)
-        self.progress = Progress(settings.end, mode=settings.progress, every=settings.progress_every,
+        output = settings.output
+        self.progress = Progress(settings.time.end, mode=output.progress, every=output.progress_every,
                                  enabled=model.comm.rank == 0)
         if self.statistics.dropped_incomplete:
             self.progress.message("statistics.csv: its last line was cut off when the run stopped; dropped")
-        self.fields_every = settings.fields_every
-        self.written = model.timestep if resume and settings.fields_every and model.timestep % settings.fields_every == 0 \
+        self.fields_every = output.fields_every
+        self.written = model.timestep if resume and output.fields_every and model.timestep % output.fields_every == 0 \
             else -1
 
     def row(self, model: Model, row: dict[str, Any], now: Watched) -> None:
@@ -354,7 +375,7 @@ def _with_time_columns(postprocessors: Sequence[Postprocessor]) -> list[Postproc
 def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postprocessor], /, *,
         should_stop: Callable[[], bool] = lambda: False, start: float | None = None,
         checkpoints: Any = None, blowup: BlowUp = BlowUp(), resume: Resume | None = None) -> RunSummary:
-    """Run ``model`` to ``settings.end`` (or max_steps, steady state, or a stop request). Collective.
+    """Run ``model`` to ``settings.time.end`` (or max_steps, steady state, or a stop request). Collective.
 
     The blow-up and steady-state tests watch the model itself (:class:`Watch`), whatever
     statistics columns the postprocessors write; the columns step, time and dt are always written.
@@ -378,12 +399,12 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
     """
     rank0 = model.comm.rank == 0
     start = time.monotonic() if start is None else start
-    directory = Path(settings.directory)
+    directory = Path(settings.output.directory)
     postprocessors = _with_time_columns(postprocessors)
     columns = [c for pp in postprocessors for c in pp.columns]
     out = _Outputs(model, settings, columns, resume is not None)
-    steady = SteadyState(settings.steady_tolerance, settings.steady_window)
-    watch = Watch(model, postprocessors, nusselt=settings.steady_tolerance is not None)
+    steady = SteadyState(settings.time.steady_state_tolerance, settings.time.steady_state_window)
+    watch = Watch(model, postprocessors, nusselt=settings.time.steady_state_tolerance is not None)
     reason, failure = "end time", None
     row: dict[str, Any] = {}
     first: Watched | None = None
@@ -421,9 +442,9 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
                 if checkpoints is not None and checkpoints.due(model):
                     checkpoints.write(model, _state(postprocessors, start, first, now, steady))
             report = True
-            if model.time >= settings.end * (1.0 - 1e-12):
+            if model.time >= settings.time.end * (1.0 - 1e-12):
                 break
-            if settings.max_steps is not None and model.timestep >= settings.max_steps:
+            if settings.time.max_steps is not None and model.timestep >= settings.time.max_steps:
                 reason = "max steps"
                 break
             if steady(now._asdict(), model.timestep):

@@ -20,7 +20,7 @@ from convection.config.loader import load_config
 from convection.app.factory import build_model
 from convection.io.pictures import read_statistics
 from convection.postprocess.postprocessors import ParticleStatistics, TemperatureStatistics, TimeColumns, Velocity
-from convection.app.loop import BlowUp, SteadyState, Watch, Watched
+from convection.run.loop import BlowUp, SteadyState, Watch, Watched
 
 ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "configs" / "vankeken_1a.yaml"

@@ -2,7 +2,7 @@
 
 import io
 
-from convection.app.progress import Progress, is_terminal
+from convection.run.progress import Progress, is_terminal
 
 
 def test_not_a_terminal_gives_lines():

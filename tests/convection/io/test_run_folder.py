@@ -22,7 +22,7 @@ from _runs import command as _command, env as _env, error_line as _error_line, k
 
 from convection.io.checkpoint import CheckpointError, latest_checkpoint, list_checkpoints, read_checkpoint
 from convection.io.pictures import read_statistics
-from convection.app.run_folder import LOCK_NAME, RunFolderError, RunFolderLock
+from convection.io.run_folder import LOCK_NAME, RunFolderError, RunFolderLock
 from convection.io.statistics import StatisticsFileError, StatisticsWriter, read_table
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -9,8 +9,8 @@ Open MPI's gets ``--oversubscribe`` (more ranks than cores; MPICH's Hydra allows
 and knows no such option). The rank of a launched process is ``OMPI_COMM_WORLD_RANK`` under Open
 MPI and ``PMI_RANK`` under MPICH (:func:`launched_rank`).
 
-``python -m convection.app.launch N`` prints the prefix for N ranks, one word a line (for shell
-scripts: ``mapfile -t mpirun < <(.venv/bin/python -m convection.app.launch 2)``).
+``python -m convection.launch N`` prints the prefix for N ranks, one word a line (for shell
+scripts: ``mapfile -t mpirun < <(.venv/bin/python -m convection.launch 2)``).
 """
 
 from __future__ import annotations
@@ -98,5 +98,5 @@ def run_config(config: str | Path, output: str | Path, /, *, ranks: int = 1, ove
 
 if __name__ == "__main__":
     if len(sys.argv) != 2 or not sys.argv[1].isdigit():
-        sys.exit("usage: python -m convection.app.launch RANKS   (prints the launcher prefix, a word a line)")
+        sys.exit("usage: python -m convection.launch RANKS   (prints the launcher prefix, a word a line)")
     print("\n".join(mpirun(int(sys.argv[1]))))

@@ -7,7 +7,7 @@ import sys
 import time
 from typing import TextIO
 
-from convection.app.launch import launched_rank
+from convection.launch import launched_rank
 
 __all__ = ["Progress", "is_terminal"]
 

@@ -1,0 +1,7 @@
+"""The run loop: time steps of a model with statistics rows, field output, progress display,
+checkpoints and the stops (end time, step limit, steady state, blow-up, a stop request), and the
+settings of the ``time``, ``output`` and ``blowup`` config sections."""
+
+from convection.run.loop import BlowUp, OutputSettings, RunSettings, RunSummary, TimeSettings, run
+
+__all__ = ["BlowUp", "OutputSettings", "RunSettings", "RunSummary", "TimeSettings", "run"]

@@ -1,0 +1,84 @@
+"""Parameters are declared once: each component's settings dataclass is the schema of its config
+section, so a component built from an empty config section and one built in Python without
+arguments have the same settings."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import dolfinx.mesh
+import pytest
+from mpi4py import MPI
+
+from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings, MeshHierarchy
+from convection.adapt.rebalance import BalanceSettings, Balancer
+from convection.app.factory import build_model, run_settings
+from convection.config.loader import SCHEMA, load_config
+from convection.io.checkpoint import CheckpointSettings
+from convection.model.composition import CompositionSettings
+from convection.postprocess.postprocessors import DiagnosticsSettings
+from convection.run.loop import BlowUp, OutputSettings, RunSettings, TimeSettings
+from convection.schema import Field, section_schema, settings_as_section, settings_from
+from convection.solvers.stokes.nonlinear import NonlinearSettings
+from convection.solvers.stokes.solver import StokesSettings, StokesSolver
+from convection.solvers.transport import EnergySettings, TransportSolver
+
+SECTIONS = {"stokes": StokesSettings, "energy": EnergySettings, "composition": CompositionSettings,
+            "adaptivity": AdaptivitySettings, "balance": BalanceSettings, "blowup": BlowUp,
+            "diagnostics": DiagnosticsSettings, "time": TimeSettings, "output": OutputSettings}
+"""Every config section a component's settings dataclass declares."""
+REQUIRED = {"time": {"end": 0.1}, "output": {"directory": "unused"}}
+
+
+def _minimal(**sections) -> dict:
+    return load_config(None, document={"mesh": {"cells": [4, 4]}, "physics": {"Ra": 1.0e3}, "time": {"end": 0.1},
+                                       "output": {"directory": "unused"}, **sections})
+
+
+@pytest.mark.parametrize("section", sorted(SECTIONS))
+def test_the_schema_of_a_section_is_its_settings_dataclass(section):
+    cls = SECTIONS[section]
+    assert SCHEMA[section] == section_schema(cls)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    assert set(SCHEMA[section]) == fields
+    leaves = [f for f in SCHEMA[section].values() if isinstance(f, Field)]
+    assert leaves and all(f.help for f in leaves)
+
+
+@pytest.mark.parametrize("section", sorted(SECTIONS))
+def test_an_empty_section_gives_the_python_defaults(section):
+    cls = SECTIONS[section]
+    from_config = settings_from(cls, _minimal()[section])
+    assert from_config == cls(**REQUIRED.get(section, {}))
+    assert settings_as_section(from_config) == _minimal()[section]
+
+
+def test_the_drifted_defaults_are_one_value():
+    """stokes.nonlinear.switch_tolerance and output.checkpoint.every_wall_seconds had other defaults
+    in Python than in YAML; the YAML ones (documented, and what every shipped config ran with) won."""
+    assert NonlinearSettings().switch_tolerance == 0.1
+    assert CheckpointSettings().every_wall_seconds == 3600.0
+    config = _minimal()
+    assert config["stokes"]["nonlinear"]["switch_tolerance"] == 0.1
+    assert config["output"]["checkpoint"]["every_wall_seconds"] == 3600.0
+
+
+def test_components_built_from_empty_sections_equal_those_built_without_arguments():
+    config = _minimal(adaptivity={"enabled": True}, balance={"strategy": "every"})
+    model = build_model(config, comm=MPI.COMM_WORLD)
+    stokes, temperature = model.stokes, model.temperature
+    mesh = model.mesh
+    python_stokes = StokesSolver(mesh, stokes.approximation, bcs=stokes.bcs, domain=model.domain)
+    assert python_stokes.settings() == stokes.settings()
+    python_temperature = TransportSolver(mesh, stokes.approximation, bcs=temperature.bcs, domain=model.domain,
+                                         velocity_extrapolation=False)
+    assert python_temperature.settings() == temperature.settings()
+    assert model.solve_temperature == EnergySettings().enabled
+    hierarchy = MeshHierarchy(dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 2, 2))
+    assert model.adaptivity.params == dataclasses.replace(Adaptivity(hierarchy).params, enabled=True)
+    assert model.balancer.settings == dataclasses.replace(Balancer(hierarchy).settings, strategy="every")
+    settings = run_settings(config)
+    assert settings == RunSettings(TimeSettings(end=0.1), OutputSettings(directory="unused"))
+    assert settings.output.checkpoint == CheckpointSettings()
+    for solver in (python_stokes, python_temperature, stokes, temperature):
+        solver.destroy()

@@ -48,6 +48,7 @@ import dolfinx.mesh
 
 from fembase.dolfinx_compat import function_space
 from fembase.geometry import Candidates
+from fembase.state import State
 from particles.adaptivity import move_to_mesh
 from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
@@ -508,25 +509,31 @@ class ParticleManager:
         return record
 
     # ------------------------------------------------------------------ checkpoints
-    def counters(self) -> dict[str, Any]:
-        """What a checkpoint needs besides the swarm (JSON-able): counters, output schedule, timings."""
-        return {"lost": self.lost, "added": self.added, "removed": self.removed,
-                "last_output": list(self._last_output) if self._last_output else None,
-                "next_output_time": self._next_output_time, "timings": dict(self.timings)}
+    def state(self) -> State:
+        """What a checkpoint needs besides the swarm (:mod:`fembase.state`; JSON-able scalars):
+        counters, output schedule, timings. The swarm is a checkpoint part of its own
+        (:mod:`particles.checkpoint`), given back by :meth:`adopt`."""
+        return State(scalars={"lost": self.lost, "added": self.added, "removed": self.removed,
+                              "last_output": list(self._last_output) if self._last_output else None,
+                              "next_output_time": self._next_output_time, "timings": dict(self.timings)})
 
-    def adopt(self, swarm: Swarm, counters: dict[str, Any], /, *, context: PropertyContext) -> None:
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
+        """Take the saved :meth:`state` scalars back (after :meth:`adopt`); no fields to fill."""
+        self.lost, self.added, self.removed = int(scalars["lost"]), int(scalars["added"]), int(scalars["removed"])
+        last = scalars["last_output"]
+        self._last_output = (int(last[0]), float(last[1])) if last else None
+        self._next_output_time = float(scalars["next_output_time"])
+        self.timings.update(scalars["timings"])
+        return {}
+
+    def adopt(self, swarm: Swarm, /, *, context: PropertyContext) -> None:
         """Continue with ``swarm`` (e.g. restored from a checkpoint, with this manager's property
-        columns) and the saved :meth:`counters`; rebuilds the tracked fields (collective)."""
+        columns); rebuilds the tracked fields (collective)."""
         self.swarm = swarm
         self.properties.attach(swarm)
         self.properties.set_context(context)
         self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(),
                                   confine=self.confine)
-        self.lost, self.added, self.removed = int(counters["lost"]), int(counters["added"]), int(counters["removed"])
-        last = counters["last_output"]
-        self._last_output = (int(last[0]), float(last[1])) if last else None
-        self._next_output_time = float(counters["next_output_time"])
-        self.timings.update(counters["timings"])
         self._space = None
         for tracked in self._tracked.values():
             tracked.function = self._new_field(tracked.function.name)

@@ -208,7 +208,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
             generate_particles=restore is None,
             confine=domain.confinement(confinement_mesh))
         if restore is not None:
-            saved = restore.state["model"]
+            saved = restore.components["model"]
             restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],
                                                                        dt=saved["dt_previous"]))
     composition = None

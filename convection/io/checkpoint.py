@@ -3,16 +3,20 @@
 A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the step) holding
 
 - ``state.h5``: format and version attributes, the resolved config (YAML text), the run state
-  (JSON: step, time, previous step, Stokes iterations, the temperature and composition solvers'
-  time history scalars, the particle manager's counters, postprocessor and run-loop state, timers),
-  how the mesh was made — the owner rank of every cell of the mesh :func:`convection.geometry.mesh.create_mesh`
-  made (``mesh/created_owners``, while the run still stands on it) and
+  (JSON: the scalars of every stateful component of the model by its name —
+  :meth:`convection.model.Model.components`, each a :class:`fembase.state.Stateful`: the model's
+  time stepping, the flow, the temperature's and the advected fractions' time history, the particle
+  manager's counters — and the run loop's state with its postprocessors'), how the mesh was made —
+  the owner rank of every cell of the base mesh the domain made
+  (:meth:`convection.geometry.domain.Domain.create_mesh`; ``mesh/created_owners``, while the run
+  still stands on it) and
   :class:`convection.adapt.adaptivity.MeshRecipe` (the refinement rounds since, or every rank's pieces
   handed to ``create_mesh`` at the latest repartition) — every rank's fingerprint of the base and of
   the current mesh (:func:`fembase.distribute.mesh_fingerprint`), the mesh's cells (global vertex
   indices, the owned vertex coordinates and the base cell, for a restart on another rank count), and
-  every Function with time history (``u``, ``p``, ``T^n``, ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``,
-  advected or static material fractions): owned dof values with the owned dof coordinates;
+  the fields of every component (``functions/<component>/<name>``: ``u``, ``p``, ``T^n``,
+  ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``, advected or static material fractions): owned dof values
+  with the owned dof coordinates;
 - ``particles.h5``: the particles with their properties (:func:`particles.checkpoint.save_checkpoint`).
 
 The folder is written under a hidden temporary name and renamed when complete, so a run killed at
@@ -58,6 +62,7 @@ from convection.adapt.adaptivity import MeshHierarchy, MeshRecipe
 from fembase.manifold import ShellManifold
 from convection.model.model import Model
 from convection.schema import param
+from fembase.state import State
 from fembase.distribute import MeshPiece, create_mesh_from_piece, mesh_piece
 from fembase.distribute import cell_owners_by_input, mesh_fingerprint
 from fembase.files import H5Sink
@@ -70,8 +75,9 @@ __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpoin
            "write_checkpoint"]
 
 FORMAT = "convection-checkpoint"
-VERSION = 3  # 3: created owners and mesh fingerprints; 2: the recipe and the mesh's cells as distributed pieces
-READABLE_VERSIONS = (2, 3)  # 2 is continued by coordinates (no fingerprints to prove an exact replay)
+VERSION = 4  # 4: the scalars of each component (state "components"); 3: created owners and mesh fingerprints;
+# 2: the recipe and the mesh's cells as distributed pieces
+READABLE_VERSIONS = (2, 3, 4)  # 2 is continued by coordinates (no fingerprints to prove an exact replay)
 CONFIG_VERSION = 1
 """Version of the config schema a checkpoint's config was written with; raise it when a change of
 the schema would change the meaning of an old config."""
@@ -115,6 +121,22 @@ class SavedRun:
     state: dict[str, Any]
     num_ranks: int
 
+    @property
+    def components(self) -> dict[str, Any]:
+        """The saved scalars of each component by name (:meth:`convection.model.Model.components`);
+        a checkpoint of format 2 or 3 kept them in one ``model`` dict, read here the same way."""
+        if "components" in self.state:
+            return self.state["components"]
+        old = self.state["model"]
+        out = {"model": {key: old[key] for key in ("time", "timestep", "dt_previous", "has_u_previous", "flow",
+                                                   "timers")},
+               "stokes": {}, "composition": {"solvers": old["composition"]}}
+        if old["temperature"] is not None:
+            out["temperature"] = old["temperature"]
+        if old["particles"] is not None:
+            out["particles"] = old["particles"]
+        return out
+
 
 # ---------------------------------------------------------------------- listing
 def list_checkpoints(run_dir: str | os.PathLike[str], /) -> list[Path]:
@@ -136,35 +158,9 @@ def latest_checkpoint(run_dir: str | os.PathLike[str], /) -> Path | None:
 
 
 # ---------------------------------------------------------------------- what is saved
-def state_functions(model: Model) -> dict[str, dolfinx.fem.Function]:
-    """Every Function a continuation needs, by a stable name."""
-    out = {"stokes/u": model.stokes.u, "stokes/p": model.stokes.p}
-    if model.temperature is not None:
-        out.update({f"temperature/{k}": f for k, f in model.temperature.history().items()})
-    if model.u_previous is not None:
-        out["model/u_previous"] = model.u_previous
-    composition = model.composition
-    if composition is not None and hasattr(composition, "solvers"):
-        for solver in composition.solvers:
-            out.update({f"composition/{solver.name}/{k}": f for k, f in solver.history().items()})
-    elif composition is not None and composition.name == "static":
-        out.update({f"composition/{f.name}": f for f in composition.fields})
-    return out
-
-
-def model_state(model: Model) -> dict[str, Any]:
-    """The model's scalar state (JSON-able)."""
-    composition = model.composition
-    flow = model.flow_result
-    return {
-        "time": model.time, "timestep": model.timestep, "dt_previous": model.dt_previous,
-        "has_u_previous": model.u_previous is not None,
-        "flow": None if flow is None else [int(flow.iterations), float(flow.residual_norm)],
-        "temperature": model.temperature.history_scalars() if model.temperature is not None else None,
-        "composition": [s.history_scalars() for s in composition.solvers] if hasattr(composition, "solvers") else [],
-        "particles": model.particles.counters() if model.particles is not None else None,
-        "timers": {"seconds": model.timers.seconds, "calls": model.timers.calls},
-    }
+def component_states(model: Model) -> dict[str, State]:
+    """What every stateful component of ``model`` keeps (:meth:`convection.model.Model.components`)."""
+    return {name: component.state() for name, component in model.components().items()}
 
 
 # ---------------------------------------------------------------------- write
@@ -237,7 +233,8 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
         tmp.mkdir(parents=True)
     comm.Barrier()
     hierarchy = model.adaptivity.hierarchy if model.adaptivity else (model.balancer.hierarchy if model.balancer else None)
-    state = {"model": model_state(model), "run": run_state, "num_ranks": comm.size,
+    states = component_states(model)
+    state = {"components": {name: s.scalars for name, s in states.items()}, "run": run_state, "num_ranks": comm.size,
              "recipe_rounds": None, "hierarchy": hierarchy is not None}
     with H5Sink(tmp / "state.h5", comm) as sink:
         if hierarchy is not None:
@@ -250,7 +247,8 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
         sink.distributed("mesh/base_cells", hierarchy.base_cells(mesh) if hierarchy is not None
                          else np.zeros(n, dtype=np.int64))
         _write_partition(sink, mesh, hierarchy)
-        for name, f in state_functions(model).items():
+        functions = {f"{component}/{name}": f for component, s in states.items() for name, f in s.fields.items()}
+        for name, f in functions.items():
             values, coords = _owned(f)
             sink.distributed(f"functions/{name}/values", values)
             sink.distributed(f"functions/{name}/coords", coords)
@@ -305,11 +303,16 @@ def _inspect(path: Path) -> SavedRun | str:
             identity = _identity(f)
     except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError) as err:
         return f"damaged ({' '.join(str(err).split())})"
-    if state.get("model", {}).get("particles") is not None:
+    saved = SavedRun(path, config, state, num_ranks)
+    try:
+        has_particles = "particles" in saved.components
+    except (KeyError, TypeError, AttributeError) as err:
+        return f"damaged (its state lacks {err})"
+    if has_particles:
         problem = _other_part(path / "particles.h5", identity)
         if problem is not None:
             return problem
-    return SavedRun(path, config, state, num_ranks)
+    return saved
 
 
 def _identity(f: h5py.File) -> tuple[str | None, int]:
@@ -487,13 +490,18 @@ def _base_owners(hierarchy: MeshHierarchy) -> npt.NDArray[np.int32]:
 
 
 def restore_state(model: Model, saved: SavedRun, /, *, exact: bool) -> None:
-    """Put the checkpoint's fields and scalars into ``model`` (built on the restored mesh from the
-    checkpoint's config; the particles: :func:`restore_particles`). Collective."""
+    """Give every stateful component of ``model`` (built on the restored mesh from the checkpoint's
+    config) its saved scalars, then fill the Functions it hands back with the saved values: copied
+    when ``exact`` (the same mesh, partition and numbering), else matched by coordinates. The
+    particle swarm is restored before (:func:`restore_particles`). Collective."""
     comm = model.comm
-    ms = saved.state["model"]
-    if ms["has_u_previous"]:
-        model.u_previous = dolfinx.fem.Function(model.stokes.u.function_space)
-    functions = state_functions(model)
+    saved_scalars = saved.components
+    functions: dict[str, dolfinx.fem.Function] = {}
+    for component, stateful in model.components().items():
+        if component not in saved_scalars:
+            raise CheckpointError(f"checkpoint {saved.path}: no saved state of the {component}")
+        for name, target in stateful.restore(saved_scalars[component]).items():
+            functions[f"{component}/{name}"] = target
     with h5py.File(saved.path / "state.h5", "r") as f:
         nested: dict[str, h5py.Group] = {}
         _collect(f["functions"], "", nested)
@@ -512,25 +520,14 @@ def restore_state(model: Model, saved: SavedRun, /, *, exact: bool) -> None:
             else:
                 _match_by_coordinates(target, group["coords"][...], group["values"][...])
             target.x.scatter_forward()
-    model.time, model.timestep, model.dt_previous = ms["time"], ms["timestep"], ms["dt_previous"]
-    if ms["flow"] is not None:
-        from convection.solvers.stokes.solver import StokesResult
-
-        model.flow_result = StokesResult(int(ms["flow"][0]), float(ms["flow"][1]))
-    if model.temperature is not None and ms["temperature"] is not None:
-        model.temperature.restore_history_scalars(ms["temperature"])
-    if ms["composition"]:
-        for solver, scalars in zip(model.composition.solvers, ms["composition"]):
-            solver.restore_history_scalars(scalars)
-    model.timers.seconds = dict(ms["timers"]["seconds"])
-    model.timers.calls = dict(ms["timers"]["calls"])
 
 
 def restore_particles(saved: SavedRun, manager: ParticleManager, context: PropertyContext, /) -> bool:
-    """Give ``manager`` the checkpoint's particles and counters (collective). Returns whether the
-    particles came back exactly (same ranks, same order)."""
+    """Give ``manager`` the checkpoint's particle swarm (collective; its scalars come back with the
+    other components', :func:`restore_state`). Returns whether the particles came back exactly
+    (same ranks, same order)."""
     restored = load_checkpoint(saved.path / "particles.h5", manager.mesh)
-    manager.adopt(restored.swarm, saved.state["model"]["particles"], context=context)
+    manager.adopt(restored.swarm, context=context)
     return restored.exact
 
 

@@ -17,7 +17,7 @@ one time step with the advecting velocity ``u`` (already extrapolated to the ste
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, ClassVar, Protocol
+from typing import Any, Callable, ClassVar, Mapping, Protocol
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from convection.physics.materials import Materials
 from convection.schema import MAX_DEGREE, Names, param
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
+from fembase.state import State
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
@@ -54,6 +55,10 @@ class CompositionSource(Protocol):
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None: ...
 
     def destroy(self) -> None: ...
+
+    def state(self) -> State: ...
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]: ...
 
 
 def composition_space(mesh: dolfinx.mesh.Mesh, degree: int, /) -> dolfinx.fem.FunctionSpace:
@@ -97,6 +102,13 @@ class StaticComposition:
         for old, f in zip(self._fields, new):
             transfer(old, f)
         self._fields = new
+
+    def state(self) -> State:
+        """The fractions (fixed, but a mesh change moved them with the mesh)."""
+        return State(fields={f.name: f for f in self.fields})
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        return self.state().fields
 
     def destroy(self) -> None:
         """Nothing to free."""
@@ -143,6 +155,16 @@ class FieldComposition:
         for new, previous in zip(self.solvers, old):
             new.transfer_from(previous, transfer)
             previous.destroy()
+
+    def state(self) -> State:
+        """Every material's transport history (Functions ``<material>/<name>``, scalars by material)."""
+        fields = {f"{s.name}/{k}": f for s in self.solvers for k, f in s.history().items()}
+        return State(fields=fields, scalars={"solvers": [s.history_scalars() for s in self.solvers]})
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        for solver, saved in zip(self.solvers, scalars["solvers"]):
+            solver.restore_history_scalars(saved)
+        return self.state().fields
 
     def destroy(self) -> None:
         for solver in self.solvers:
@@ -191,6 +213,13 @@ class ParticleComposition:
 
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None:
         """The model moves the particles (and with them these fields)."""
+
+    def state(self) -> State:
+        """Nothing: the particles carry the fractions (the particle manager keeps its own state)."""
+        return State()
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        return {}
 
     def destroy(self) -> None:
         """Nothing to free."""

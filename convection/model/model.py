@@ -30,7 +30,7 @@ loop in Python (see ``demos/``).
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from typing import Any, Callable, Mapping, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -42,13 +42,14 @@ from convection.adapt.adaptivity import Adaptivity
 from convection.geometry.domain import Domain
 from convection.model.composition import CompositionSource
 from convection.physics.materials import material_index
-from convection.model.rheology_fields import PlasticStrainRate, ViscosityField
+from convection.model.rheology_fields import Flow, RheologyFields
 from convection.adapt.rebalance import Balancer, RankLoads
 from convection.solvers.stokes.solver import StokesResult, StokesSolver
 from convection.solvers.timestep import cfl_timestep
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from convection.solvers.transport import TransportSolver
 from fembase.geometry import Candidates
+from fembase.state import State, Stateful
 from fembase.timing import Timers
 from particles.manager import ParticleManager
 from particles.properties import PropertyContext
@@ -106,13 +107,7 @@ class Model:
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
         self._point_evaluator: PointEvaluator | None = None
-        rates = particles.properties.rate_fields if particles is not None else ()
-        unknown = [name for name in rates if name != "plastic_strain_rate"]
-        if unknown:
-            raise ValueError(f"no mesh field {unknown[0]!r} for the particles to integrate; the model provides "
-                             "plastic_strain_rate")
-        self._plastic_rate = PlasticStrainRate() if rates else None
-        self._viscosity_field: ViscosityField | None = None
+        self.rheology = RheologyFields(stokes, particles)
 
     # ------------------------------------------------------------------ state
     @property
@@ -155,50 +150,78 @@ class Model:
             out["material"] = material_index(self.fractions)
         if self.stokes.approximation.is_nonlinear or self.stokes.approximation.viscosity_law.laws is not None:
             # The viscosity of the flow (cell midpoints), the particle fields it reads (e.g. plastic
-            # strain) and the plastic strain rate.
-            rheology = self.rheology_fields()
-            if self._viscosity_field is None:
-                self._viscosity_field = ViscosityField()
-            out["viscosity"] = self._viscosity_field.update(self, rheology)
-            out.update(rheology)
+            # strain) and the rates the particles integrate.
+            flow = self.flow()
+            out["viscosity"] = self.rheology.viscosity(flow)
+            out.update(flow.fields)
             out.update(self.particle_fields())
         return out
 
-    def rheology_fields(self) -> dict[str, dolfinx.fem.Function]:
-        """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
-        mesh (the particles' tracked fields, e.g. ``plastic_strain``)."""
-        names = self.stokes.approximation.viscosity_law.field_names
-        if not names:
-            return {}
-        if self.particles is None:
-            raise ValueError(f"the viscosity laws read the fields {list(names)}, which come from particles")
-        return {name: self.particles.field(name) for name in names}
+    def flow(self) -> Flow:
+        """What the rheology reads now: the flow solver, temperature, fractions and the particle
+        fields the viscosity laws read (:class:`convection.model.rheology_fields.Flow`)."""
+        return Flow(self.stokes, self.T if self.T is not None else 0.0, self.fractions or None,
+                    self.rheology.law_fields(self.stokes))
 
     def particle_fields(self) -> dict[str, dolfinx.fem.Function]:
-        """The mesh fields the particles integrate (``plastic_strain_rate``), as of the last flow
-        solve (computed here after a restart, which restores the flow without solving it;
-        collective then)."""
-        if self._plastic_rate is None:
+        """The mesh fields the particles integrate (the rates the rheology declares, e.g.
+        ``plastic_strain_rate``), as of the last flow solve (computed here after a restart, which
+        restores the flow without solving it; collective then)."""
+        if not self.rheology.rates:
             return {}
-        if self._plastic_rate.function is None and self.flow_result is not None:
-            self._plastic_rate.update(self, self.rheology_fields())
-        return {} if self._plastic_rate.function is None else {self._plastic_rate.name: self._plastic_rate.function}
+        return self.rheology.rate_functions(self.flow() if self.flow_result is not None else None)
 
     def property_context(self) -> PropertyContext:
         """The current fields and time, for particle properties."""
         return PropertyContext(time=self.time, dt=self.dt_previous, u_new=self.stokes.u, temperature=self.T,
                                pressure=self.stokes.p)
 
+    # ------------------------------------------------------------------ checkpoints
+    def components(self) -> dict[str, Stateful]:
+        """The stateful components by the name a checkpoint keeps them under (:mod:`fembase.state`):
+        the model's own time stepping, the flow, the temperature, the material fractions and the
+        particle manager (whose swarm is a checkpoint part of its own)."""
+        out: dict[str, Stateful] = {"model": self, "stokes": self.stokes}
+        if self.temperature is not None:
+            out["temperature"] = self.temperature
+        if self.composition is not None:
+            out["composition"] = self.composition
+        if self.particles is not None:
+            out["particles"] = self.particles
+        return out
+
+    def state(self) -> State:
+        """The time stepping: time, step, last step, the previous velocity (for the extrapolation),
+        the last flow solve's outcome and the timers."""
+        flow = self.flow_result
+        fields = {"u_previous": self.u_previous} if self.u_previous is not None else {}
+        return State(fields=fields, scalars={
+            "time": self.time, "timestep": self.timestep, "dt_previous": self.dt_previous,
+            "has_u_previous": self.u_previous is not None,
+            "flow": None if flow is None else [int(flow.iterations), float(flow.residual_norm)],
+            "timers": {"seconds": self.timers.seconds, "calls": self.timers.calls}})
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        """Take the time stepping back; returns the previous velocity to fill (if the run had one)."""
+        self.time, self.timestep, self.dt_previous = scalars["time"], scalars["timestep"], scalars["dt_previous"]
+        flow = scalars["flow"]
+        self.flow_result = None if flow is None else StokesResult(int(flow[0]), float(flow[1]))
+        self.timers.seconds = dict(scalars["timers"]["seconds"])
+        self.timers.calls = dict(scalars["timers"]["calls"])
+        if not scalars["has_u_previous"]:
+            return {}
+        self.u_previous = dolfinx.fem.Function(self.stokes.u.function_space)
+        return {"u_previous": self.u_previous}
+
     # ------------------------------------------------------------------ time stepping
     def solve_flow(self) -> StokesResult:
         """Solve Stokes for the current temperature and fractions."""
         # dt: the step just taken predicts the coming one (for a semi-implicit buoyancy).
-        fields = self.rheology_fields()
-        result = self.stokes.solve(self.T if self.T is not None else 0.0, self.fractions or None,
-                                   dt=self.dt_previous, fields=fields or None)
-        if self._plastic_rate is not None:
+        flow = self.flow()
+        result = self.stokes.solve(flow.T, flow.fractions, dt=self.dt_previous, fields=flow.fields or None)
+        if self.rheology.rates:
             with self.timers("plastic_strain_rate"):
-                self._plastic_rate.update(self, fields)
+                self.rheology.update_rates(flow)
         self.timers.add("stokes_assembly", result.assembly_seconds)
         self.timers.add("stokes_solve", result.solve_seconds)
         self.flow_result = result

@@ -1,43 +1,61 @@
-"""Mesh fields of the rheology: the plastic strain rate (for the ``plastic_strain`` particle
-property) and the viscosity (for output).
+"""Mesh fields of the rheology (:class:`RheologyFields`): the particle fields the viscosity laws
+read, the rates the particles integrate, and the viscosity (for output).
 
-``plastic_strain_rate = eps_II sum_l C_l [eta_yield,l < eta_viscous,l]``
-(:meth:`convection.physics.approximation.ViscosityLaw.plastic_strain_rate`): the second invariant of the
-strain rate where a visco-plastic law yields, weighted by the volume fractions. It is interpolated
-into the discontinuous space of degree ``k - 1`` of a P(k) velocity (where ``eps(u)`` lives) after
-every Stokes solve; the particles integrate it over the next step (explicit Euler).
-
-``viscosity``: the viscosity of the current flow (all laws, mixing and bounds), cell by cell at the
-cell midpoints (DG0, cell data in ParaView), written with the fields.
+- The laws' fields (e.g. ``plastic_strain``) are particle properties averaged onto the mesh by the
+  particle manager.
+- The rates are declared by the rheology (:meth:`convection.physics.approximation.ViscosityLaw.rate_fields`):
+  ``plastic_strain_rate = eps_II sum_l C_l [eta_yield,l < eta_viscous,l]``, the second invariant of
+  the strain rate where a visco-plastic law yields, weighted by the volume fractions. Each is
+  interpolated into the discontinuous space of degree ``k - 1`` of a P(k) velocity (where
+  ``eps(u)`` lives) after every Stokes solve; the particles integrate it over the next step
+  (explicit Euler).
+- ``viscosity``: the viscosity of the current flow (all laws, mixing and bounds), cell by cell at
+  the cell midpoints (DG0, cell data in ParaView), written with the fields.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Callable
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import dolfinx.fem
 import ufl
 
+from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space, interpolation_points
+from particles.manager import ParticleManager
 
-if TYPE_CHECKING:
-    from convection.model.model import Model
+__all__ = ["ExpressionField", "Flow", "RheologyFields", "flow_viscosity"]
 
-__all__ = ["ExpressionField", "PlasticStrainRate", "ViscosityField", "flow_viscosity"]
+
+@dataclass(frozen=True)
+class Flow:
+    """What the rheology reads of a model now.
+
+    Attributes:
+        stokes: The flow solver (velocity, pressure, mesh, approximation).
+        T: The temperature (a Function, or 0.0 without one).
+        fractions: The material fractions (None without materials).
+        fields: The particle fields the viscosity laws read, by name.
+    """
+
+    stokes: StokesSolver
+    T: Any
+    fractions: tuple[dolfinx.fem.Function, ...] | None
+    fields: dict[str, dolfinx.fem.Function]
 
 
 class ExpressionField:
-    """A UFL expression of a model's flow interpolated into a discontinuous space, rebuilt when
-    the model's Stokes solver (hence the mesh) changes.
+    """A UFL expression of the flow interpolated into a discontinuous space, rebuilt when the flow
+    solver (hence the mesh) changes.
 
     Args:
         name: The Function's name.
-        expression: ``f(model, fields) -> UFL`` on the model's current mesh.
-        degree: ``f(model) -> int``, the DG degree.
+        expression: ``f(flow) -> UFL`` on the flow's current mesh.
+        degree: ``f(stokes) -> int``, the DG degree.
     """
 
-    def __init__(self, name: str, expression: Callable[["Model", dict[str, Any]], Any],
-                 degree: Callable[["Model"], int]) -> None:
+    def __init__(self, name: str, expression: Callable[[Flow], Any], degree: Callable[[StokesSolver], int]) -> None:
         self.name = name
         self.function: dolfinx.fem.Function | None = None
         self._make = expression
@@ -45,49 +63,85 @@ class ExpressionField:
         self._expression: Any = None
         self._stokes: Any = None
 
-    def update(self, model: "Model", fields: dict[str, Any], /) -> dolfinx.fem.Function:
-        """Interpolate the field for the model's current flow (collective); returns it."""
-        stokes = model.stokes
+    def update(self, flow: Flow, /) -> dolfinx.fem.Function:
+        """Interpolate the field for ``flow`` (collective); returns it."""
+        stokes = flow.stokes
         if self._stokes is not stokes or self.function is None:
-            space = function_space(stokes.mesh, "DG", self._degree(model))
+            space = function_space(stokes.mesh, "DG", self._degree(stokes))
             self.function = dolfinx.fem.Function(space, name=self.name)
-            self._expression = dolfinx.fem.Expression(self._make(model, fields), interpolation_points(space))
+            self._expression = dolfinx.fem.Expression(self._make(flow), interpolation_points(space))
             self._stokes = stokes
         self.function.interpolate(self._expression)
         self.function.x.scatter_forward()
         return self.function
 
 
-def _plastic_rate(model: "Model", fields: dict[str, Any]) -> Any:
-    stokes = model.stokes
-    law = stokes.approximation.viscosity_law
-    if not law.yields:
-        raise ValueError("particle property plastic_strain needs a material with a viscoplastic law "
-                         "(it accumulates strain where the material yields)")
-    T = model.T if model.T is not None else 0.0
-    return law.plastic_strain_rate(T, model.fractions or None, u=stokes.u, p=stokes.p, fields=fields,
-                                   x=ufl.SpatialCoordinate(stokes.mesh))
+def flow_viscosity(flow: Flow, /) -> Any:
+    """The viscosity as UFL at the flow's temperature, fractions, velocity, pressure and fields."""
+    stokes = flow.stokes
+    return stokes.discretisation.viscosity(flow.T, flow.fractions, {"u": stokes.u, "p": stokes.p,
+                                                                     "fields": flow.fields})
 
 
-def flow_viscosity(model: "Model", fields: dict[str, Any] | None = None) -> Any:
-    """The model's viscosity as UFL at its current temperature, fractions, flow and rheology
-    fields (``fields``; None: :meth:`convection.model.model.Model.rheology_fields`)."""
-    if fields is None:
-        fields = model.rheology_fields()
-    stokes = model.stokes
-    T = model.T if model.T is not None else 0.0
-    return stokes.discretisation.viscosity(T, model.fractions or None, {"u": stokes.u, "p": stokes.p, "fields": fields})
+def _rate(name: str, builder: Callable[..., Any]) -> Callable[[Flow], Any]:
+    def expression(flow: Flow) -> Any:
+        stokes = flow.stokes
+        return builder(flow.T, flow.fractions, u=stokes.u, p=stokes.p, fields=flow.fields,
+                       x=ufl.SpatialCoordinate(stokes.mesh))
+    return expression
 
 
-class PlasticStrainRate(ExpressionField):
-    """The field ``plastic_strain_rate`` of a model, DG(k-1) for a P(k) velocity."""
+class RheologyFields:
+    """The mesh fields of a model's rheology (see the module docstring).
 
-    def __init__(self, name: str = "plastic_strain_rate") -> None:
-        super().__init__(name, _plastic_rate, lambda model: max(model.stokes.degree - 1, 0))
+    Args:
+        stokes: The flow solver (its approximation's viscosity law declares the rates).
+        particles: The particles (their properties ask for rates; they average the laws' fields),
+            or None.
 
+    Raises:
+        ValueError: The particles ask for a rate the rheology does not provide.
+    """
 
-class ViscosityField(ExpressionField):
-    """The field ``viscosity`` of a model, DG0 (its value at each cell's midpoint)."""
+    def __init__(self, stokes: StokesSolver, particles: ParticleManager | None, /) -> None:
+        self.particles = particles
+        law = stokes.approximation.viscosity_law
+        declared = law.rate_fields()
+        wanted = particles.properties.rate_fields if particles is not None else ()
+        unknown = [name for name in wanted if name not in declared]
+        if unknown:
+            raise ValueError(f"no mesh field {unknown[0]!r} for the particles to integrate; the rheology provides "
+                             f"{', '.join(sorted(declared))}")
+        self.rates = {name: ExpressionField(name, _rate(name, declared[name]), lambda s: max(s.degree - 1, 0))
+                      for name in wanted}
+        self._viscosity = ExpressionField("viscosity", flow_viscosity, lambda s: 0)
 
-    def __init__(self, name: str = "viscosity") -> None:
-        super().__init__(name, flow_viscosity, lambda model: 0)
+    def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
+        """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
+        mesh (the particles' tracked fields, e.g. ``plastic_strain``)."""
+        names = stokes.approximation.viscosity_law.field_names
+        if not names:
+            return {}
+        if self.particles is None:
+            raise ValueError(f"the viscosity laws read the fields {list(names)}, which come from particles")
+        return {name: self.particles.field(name) for name in names}
+
+    def update_rates(self, flow: Flow, /) -> None:
+        """Interpolate the rates for the flow just solved (collective)."""
+        for rate in self.rates.values():
+            rate.update(flow)
+
+    def rate_functions(self, flow: Flow | None, /) -> dict[str, dolfinx.fem.Function]:
+        """The rates as of the last flow solve; ``flow`` (the current one, or None before any solve)
+        computes them after a restart, which restores the flow without solving it (collective then)."""
+        out = {}
+        for name, rate in self.rates.items():
+            if rate.function is None and flow is not None:
+                rate.update(flow)
+            if rate.function is not None:
+                out[name] = rate.function
+        return out
+
+    def viscosity(self, flow: Flow, /) -> dolfinx.fem.Function:
+        """The viscosity of ``flow`` at the cell midpoints (DG0; collective)."""
+        return self._viscosity.update(flow)

@@ -179,6 +179,18 @@ class ViscosityLaw:
         """True when some material has a visco-plastic law (it can yield)."""
         return self.laws is not None and any(yield_law(law) is not None for law in self.laws)
 
+    def rate_fields(self) -> dict[str, Any]:
+        """The rates this rheology provides for particles to integrate, by name: ``f(T, C, *, u, p,
+        fields, x) -> UFL`` (``plastic_strain_rate``: :meth:`plastic_strain_rate`, of a rheology
+        that can yield; it refuses one that cannot when evaluated)."""
+        return {"plastic_strain_rate": self._yielding_rate}
+
+    def _yielding_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+        if not self.yields:
+            raise ValueError("particle property plastic_strain needs a material with a viscoplastic law "
+                             "(it accumulates strain where the material yields)")
+        return self.plastic_strain_rate(T, C, u=u, p=p, fields=fields, x=x)
+
     def plastic_strain_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
         """UFL ``eps_II sum_l C_l [eta_yield,l < eta_viscous,l]``: the strain rate where the
         visco-plastic laws yield (their yield viscosity below the viscous one), weighted by the

@@ -54,6 +54,7 @@ from convection.model.model import Model
 from convection.adapt.rebalance import RankLoads
 from convection.model.rheology_fields import flow_viscosity
 from convection.schema import param
+from fembase.state import State
 
 __all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "Postprocessor", "create_postprocessors", "describe_postprocessors"]
 
@@ -76,6 +77,12 @@ class Postprocessor(Protocol):
     columns: tuple[str, ...]
 
     def __call__(self, model: Model, /) -> dict[str, float]: ...
+
+    def state(self) -> State:
+        """What a checkpoint keeps (:mod:`fembase.state`): JSON-able scalars, no fields."""
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
+        """Take the saved scalars back (empty: measure afresh); returns no fields."""
 
 
 def _integral(model: Model, form: Any) -> float:
@@ -115,6 +122,13 @@ class _Column:
     @classmethod
     def create(cls, model: Model, options: Mapping[str, Any]) -> Any:
         return cls() if cls.applies(model) else None
+
+    def state(self) -> State:
+        """Nothing to keep: the columns are measured afresh every step."""
+        return State()
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
+        return {}
 
 
 class TimeColumns(_Column):
@@ -279,12 +293,13 @@ class Entrainment:
                              dolfinx.fem.form(amount * ufl.dx))
         return forms
 
-    def state(self) -> dict[str, float] | None:
-        """The initial volumes (what a checkpoint keeps)."""
-        return self._initial
+    def state(self) -> State:
+        """The initial volumes by column (empty before they are measured)."""
+        return State(scalars=dict(self._initial or {}))
 
-    def restore(self, state: dict[str, float] | None) -> None:
-        self._initial = state
+    def restore(self, scalars: Mapping[str, Any] | None, /) -> dict[str, Any]:
+        self._initial = dict(scalars) if scalars else None
+        return {}
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         forms = self._forms.get(model, lambda: self._build(model))
@@ -304,6 +319,13 @@ class WallTime:
     @classmethod
     def create(cls, model: Model, options: Mapping[str, Any]) -> WallTime:
         return cls(float(options.get("start", time.monotonic())))
+
+    def state(self) -> State:
+        """Nothing: the run loop keeps the wall time of a resumed run."""
+        return State()
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
+        return {}
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         return {"wall_time": time.monotonic() - self.start}
@@ -341,7 +363,7 @@ class ViscosityRange(_Rheology):
     def __call__(self, model: Model, /) -> dict[str, float]:
         if self._version != model.mesh_version or self._expression is None:
             points = interpolation_points(model.stokes.V)
-            self._expression = dolfinx.fem.Expression(flow_viscosity(model), points)
+            self._expression = dolfinx.fem.Expression(flow_viscosity(model.flow()), points)
             self._version = model.mesh_version
         mesh = model.mesh
         owned = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
@@ -373,7 +395,7 @@ class EnergyBalance(_Rheology):
             eps = ufl.sym(ufl.grad(u))
             dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 3 * stokes.degree})
             return {"W": dolfinx.fem.form(model.T * ufl.dot(u, up) * dx),
-                    "Phi": dolfinx.fem.form(2.0 * flow_viscosity(model) * ufl.inner(eps, eps) * dx),
+                    "Phi": dolfinx.fem.form(2.0 * flow_viscosity(model.flow()) * ufl.inner(eps, eps) * dx),
                     "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
         forms = self._forms.get(model, build)
         volume = _integral(model, forms["volume"])

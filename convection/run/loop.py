@@ -413,8 +413,7 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
     if resume is not None:
         start -= resume.wall_seconds
         for pp in postprocessors:
-            if hasattr(pp, "restore") and pp.name in resume.postprocessors:
-                pp.restore(resume.postprocessors[pp.name])
+            pp.restore(resume.postprocessors.get(pp.name) or {})
             if pp.name == "wall_time":
                 pp.start = start
         # A checkpoint written before the references were kept: they are measured now.
@@ -497,6 +496,6 @@ def _state(postprocessors: Sequence[Postprocessor], start: float, first: Watched
            steady: SteadyState) -> dict[str, Any]:
     """The run loop's part of a checkpoint (JSON-able): what :meth:`Resume.from_state` reads."""
     return {"wall_seconds": time.monotonic() - start,
-            "postprocessors": {pp.name: pp.state() for pp in postprocessors if hasattr(pp, "state")},
+            "postprocessors": {pp.name: pp.state().scalars for pp in postprocessors},
             "watched": {"first": first._asdict() if first else None, "last": last._asdict() if last else None},
             "steady": steady.state()}

@@ -37,7 +37,7 @@ one side's dofs gives the consistent boundary flux ``int_side grad T . n ds``
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -58,6 +58,7 @@ from convection.solvers.petsc_options import (
     HAS_HYPRE, MUMPS_LU, SCALAR_AMG, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
 )
 from fembase.dolfinx_compat import create_vector, function_space, petsc_vector
+from fembase.state import State
 
 STABILISATIONS: dict[str, str] = {
     "supg": "streamline-upwind Petrov-Galerkin with the residual of the full equation",
@@ -319,6 +320,15 @@ class TransportSolver(PetscSolver):
         self.steps = int(scalars["steps"])
         self._dt_last.value = scalars["dt_last"]
         self._coef_last.value[:] = scalars["coef_last"]
+
+    def state(self) -> State:
+        """The time history: its Functions (:meth:`history`) and scalars (:meth:`history_scalars`)."""
+        return State(fields=self.history(), scalars=self.history_scalars())
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        """Take the history's scalars back; returns its Functions for the checkpoint to fill."""
+        self.restore_history_scalars(dict(scalars))
+        return self.history()
 
     def last_step_residual(self, u: Any, w: Any, /) -> Any:
         """UFL residual ``F(T; w)`` of the last step taken (module docstring) with velocity ``u``:

@@ -71,6 +71,7 @@ from convection.solvers.petsc_options import (
 from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
 from convection.solvers.stokes.linear import StokesLinearSystem
 from convection.solvers.stokes.nonlinear import NonlinearResult, NonlinearSettings, NonlinearStokes
+from fembase.state import State
 
 _BOOMERAMG_SYSTEMS: dict[str, Any] = {
     # Systems AMG ("unknown" approach: PETSc passes the block size gdim as hypre's number of
@@ -395,6 +396,15 @@ class StokesSolver(PetscSolver):
         norm = self.linear_system.residual_norm()
         return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
                             setup_seconds)
+
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> State:
+        """The solution (the next iterative solve's initial guess); no scalars."""
+        return State(fields={"u": self.u, "p": self.p})
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        """The Functions a checkpoint fills: ``u`` and ``p``."""
+        return self.state().fields
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(

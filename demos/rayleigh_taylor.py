@@ -37,7 +37,9 @@ import dolfinx.mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings, MeshHierarchy  # noqa: E402
+from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings  # noqa: E402
+
+from convection.adapt.hierarchy import MeshHierarchy  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
 from convection.model.composition import ParticleComposition, particle_properties  # noqa: E402
 from convection.physics.materials import Material, Materials  # noqa: E402

@@ -27,7 +27,7 @@ Usage (ranks via mpirun; prints one JSON document on rank 0)::
     python benchmarks/shell/analytical.py --kind smooth_free_slip --dim 3 --n 2 --m 1 --levels 0 1 --resolution 0.5
     python benchmarks/shell/analytical.py --kind smooth_free_slip --adaptive 3 --resolution 0.4
 
-``--adaptive ROUNDS``: the meshes of a :class:`convection.adapt.adaptivity.MeshHierarchy` with the shell
+``--adaptive ROUNDS``: the meshes of a :class:`convection.adapt.hierarchy.MeshHierarchy` with the shell
 manifold (:mod:`fembase.manifold`; for the delta cases it also keeps the surface ``r'`` the force
 acts on): the straight gmsh mesh of cell size ``resolution`` curved, solved, then ``ROUNDS`` times
 refined where the Kelly indicator of the velocity is largest (``--refine-fraction`` of the cells up
@@ -53,7 +53,9 @@ import dolfinx.mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from convection.adapt.adaptivity import AdaptivitySettings, MeshHierarchy, kelly_indicator, wanted_levels  # noqa: E402
+from convection.adapt.adaptivity import AdaptivitySettings, kelly_indicator, wanted_levels  # noqa: E402
+
+from convection.adapt.hierarchy import MeshHierarchy  # noqa: E402
 from convection.physics.approximation import BoussinesqApproximation  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
 from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_domain  # noqa: E402

@@ -1,7 +1,7 @@
 """The load-balancing component of a model: when to repartition and the loads per rank.
 
 The work of a cell is about ``1 + W n_particles(K)``. :class:`Balancer` repartitions the mesh
-(:meth:`convection.adapt.adaptivity.MeshHierarchy.repartition`: the base mesh and the current mesh move
+(:meth:`convection.adapt.hierarchy.MeshHierarchy.repartition`: the base mesh and the current mesh move
 together, with a partition method of :data:`fembase.partition.PARTITIONERS`) with strategy
 
 - ``every``: every ``every`` steps;
@@ -20,7 +20,7 @@ import numpy as np
 
 import dolfinx.mesh
 
-from convection.adapt.adaptivity import MeshHierarchy
+from convection.adapt.hierarchy import MeshHierarchy
 from convection.schema import Names, param
 from fembase.partition import PARTITIONERS
 from particles.swarm import Swarm

@@ -259,7 +259,7 @@ def transfer_function(
     points in 2D); other elements go through ``Function.interpolate``.
 
     ``candidates`` maps the local cell of mesh B holding each point to the cells of mesh A to test
-    first (e.g. :meth:`convection.adapt.adaptivity.MeshHierarchy.candidates` for nested meshes); points
+    first (e.g. :meth:`convection.adapt.hierarchy.MeshHierarchy.candidates` for nested meshes); points
     not found among them are searched with the bounding-box tree.
     """
     evaluator = evaluator or PointEvaluator(source.function_space.mesh)

@@ -28,21 +28,23 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import dolfinx.fem
 import dolfinx.fem.petsc
 import dolfinx.mesh
 from mpi4py import MPI
 
-from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings, MeshHierarchy
+from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings
+
+from convection.adapt.hierarchy import MeshHierarchy
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
 from convection.io.checkpoint import (
     Checkpointer, SavedRun, restore_mesh, restore_particles, restore_state,
 )
 from convection.model.composition import (
-    FieldComposition, ParticleComposition, StaticComposition, composition_space, particle_properties,
+    CompositionSettings, FieldComposition, ParticleComposition, StaticComposition, particle_properties,
 )
 from convection.config.loader import (
     config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
@@ -138,26 +140,21 @@ def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bc
     return fields_on
 
 
-def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
-                restore: SavedRun | None = None) -> Model:
-    """The model of a resolved configuration (collective).
+class _Meshes(NamedTuple):
+    """The mesh of a run and what changes it: the hierarchy it is refined from (with the domain's
+    manifold), adaptivity and balancing; ``exact``: a restored mesh is the saved one."""
 
-    The mesh is adapted to the initial condition first (``adaptivity.initial_steps`` rounds); the
-    composition source and the particles are then created on that mesh. With ``restore`` (a
-    checkpoint of a run of this config) the mesh, fields, particles and time stepping state are
-    the checkpoint's instead.
-    """
-    PetscSolver.prepare_process()  # before any vector of the run is made
-    domain = domain_from_config(config)
-    gdim = domain.gdim
-    physics = config["physics"]
-    materials = materials_from_config(config)
-    visc = physics["viscosity"]
-    approximation = materials.approximation(Ra=physics["Ra"], H=physics["H"], temperature_law=visc["temperature_law"],
-                                            gamma=visc["gamma"], gravity=domain.gravity)
-    velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], domain)
-    temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], domain)
+    mesh: dolfinx.mesh.Mesh
+    hierarchy: MeshHierarchy | None
+    manifold: Any
+    adaptivity: Adaptivity | None
+    balancer: Balancer | None
+    exact: bool
 
+
+def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temperature_bcs: dict[str, TemperatureBC],
+            comm: MPI.Comm, restore: SavedRun | None) -> _Meshes:
+    """The run's mesh: the base mesh (adapted to the initial condition), or the checkpoint's."""
     acfg, bcfg = config["adaptivity"], config["balance"]
     hierarchical = acfg["enabled"] or bcfg["strategy"] != "none"
     # A curved domain's hierarchy refines the straight-sided base and curves what it hands out.
@@ -181,54 +178,85 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         if restore is None:
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])
-    balancer = None
-    if bcfg["strategy"] != "none":
-        balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg))
+    balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if bcfg["strategy"] != "none" else None
+    return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact)
 
-    stokes_settings = settings_from(StokesSettings, config["stokes"])
-    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, **vars(stokes_settings))
+
+def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, materials: Materials, stokes: StokesSolver,
+               temperature: TransportSolver, restore: SavedRun | None) -> ParticleManager | None:
+    """The run's particles (None without), generated or the checkpoint's swarm."""
+    # The confinement margin follows the curvature of the coarsest cells a hierarchy hands out (its
+    # base, curved): it covers every mesh of the run, and a resumed run gets the same margin as the
+    # run it continues (the mesh it starts from is refined differently from the first one).
+    if not particles_enabled(config):
+        return None
+    manifold = meshes.manifold
+    confinement_mesh = manifold.curve(meshes.hierarchy.base) if manifold is not None else meshes.mesh
+    ccfg = config["composition"]
+    extra = particle_properties(materials, domain.gdim) if ccfg["source"] == "particles" else []
+    context = PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p)
+    particles = ParticleManager.from_config(
+        config["particles"], meshes.mesh, directory=config["output"]["directory"], extra_properties=extra,
+        make_function=point_function(config), field_degree=ccfg["degree"], context=context,
+        generate_particles=restore is None, confine=domain.confinement(confinement_mesh))
+    if restore is not None:
+        saved = restore.components["model"]
+        restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],
+                                                                   dt=saved["dt_previous"]))
+    return particles
+
+
+def _composition(config: dict[str, Any], mesh: dolfinx.mesh.Mesh, approximation: Any, materials: Materials,
+                 particles: ParticleManager | None, stabilisation: str) -> Any:
+    """Where the material fractions come from (None without materials)."""
+    if not len(materials):
+        return None
+    composition = settings_from(CompositionSettings, config["composition"])
+    if composition.source == "particles":
+        return ParticleComposition(particles, materials)
+    if composition.source == "field":
+        return FieldComposition(mesh, approximation, materials, degree=composition.degree, stabilisation=stabilisation)
+    return StaticComposition(mesh, materials, degree=composition.degree)
+
+
+def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
+                restore: SavedRun | None = None) -> Model:
+    """The model of a resolved configuration (collective).
+
+    The mesh is adapted to the initial condition first (``adaptivity.initial_steps`` rounds); the
+    composition source and the particles are then created on that mesh. With ``restore`` (a
+    checkpoint of a run of this config) the mesh, fields, particles and time stepping state are
+    the checkpoint's instead.
+    """
+    PetscSolver.prepare_process()  # before any vector of the run is made
+    domain = domain_from_config(config)
+    physics = config["physics"]
+    materials = materials_from_config(config)
+    visc = physics["viscosity"]
+    approximation = materials.approximation(Ra=physics["Ra"], H=physics["H"], temperature_law=visc["temperature_law"],
+                                            gamma=visc["gamma"], gravity=domain.gravity)
+    velocity_bcs = velocity_bcs_from_config(config["boundary"]["velocity"], domain)
+    temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], domain)
+    meshes = _meshes(config, domain, materials, temperature_bcs, comm, restore)
+    mesh = meshes.mesh
+    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain,
+                          **vars(settings_from(StokesSettings, config["stokes"])))
     energy = settings_from(EnergySettings, config["energy"])
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,
                                   stabilisation=energy.stabilisation, velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
-                                       gdim=gdim))
-
-    ccfg = config["composition"]
-    particles = None
-    # The confinement margin follows the curvature of the coarsest cells a hierarchy hands out (its
-    # base, curved): it covers every mesh of the run, and a resumed run gets the same margin as the
-    # run it continues (the mesh it starts from is refined differently from the first one).
-    confinement_mesh = manifold.curve(hierarchy.base) if manifold is not None and particles_enabled(config) else mesh
-    if particles_enabled(config):
-        extra = particle_properties(materials, gdim) if ccfg["source"] == "particles" else []
-        context = PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p)
-        particles = ParticleManager.from_config(
-            config["particles"], mesh, directory=config["output"]["directory"], extra_properties=extra,
-            make_function=point_function(config), field_degree=ccfg["degree"], context=context,
-            generate_particles=restore is None,
-            confine=domain.confinement(confinement_mesh))
-        if restore is not None:
-            saved = restore.components["model"]
-            restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],
-                                                                       dt=saved["dt_previous"]))
-    composition = None
-    if len(materials):
-        if ccfg["source"] == "particles":
-            composition = ParticleComposition(particles, materials)
-        elif ccfg["source"] == "field":
-            composition = FieldComposition(mesh, approximation, materials, degree=ccfg["degree"],
-                                           stabilisation=energy.stabilisation)
-        else:
-            composition = StaticComposition(mesh, materials, degree=ccfg["degree"])
+                                       gdim=domain.gdim))
+    particles = _particles(config, meshes, domain, materials, stokes, temperature, restore)
+    composition = _composition(config, mesh, approximation, materials, particles, energy.stabilisation)
     if particles is not None:
         # Particle properties the viscosity laws read (e.g. plastic_strain), averaged onto the mesh
         # with the particles' interpolator after every step.
         for name in approximation.viscosity_law.field_names:
             particles.track(name)
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
-                  particles=particles, adaptivity=adaptivity, balancer=balancer)
+                  particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer)
     if restore is not None:
-        restore_state(model, restore, exact=exact)
+        restore_state(model, restore, exact=meshes.exact)
     return model
 
 

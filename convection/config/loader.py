@@ -47,7 +47,7 @@ from convection.model.composition import CompositionSettings
 from convection.postprocess.postprocessors import DiagnosticsSettings
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
 from convection.schema import (
-    MAX_DEGREE, MAX_ENTRIES, REQUIRED, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
+    MAX_ENTRIES, REQUIRED, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
     short_repr, validate,
 )
 from convection.solvers.stokes.solver import StokesSettings
@@ -244,16 +244,6 @@ SCHEMA: dict[str, Any] = {
     "diagnostics": section_schema(DiagnosticsSettings),
     "output": section_schema(OutputSettings),
 }
-
-
-def domain_class(config: dict[str, Any]) -> type[Domain]:
-    """The geometry class of a config (its ``mesh.geometry``)."""
-    return DOMAINS.lookup(config["mesh"].get("geometry", "box"))
-
-
-def config_domain(config: dict[str, Any]) -> Domain:
-    """The domain of a checked config (:func:`convection.geometry.registry.domain_from_config`)."""
-    return domain_from_config(config)
 
 
 def domain_class(config: dict[str, Any]) -> type[Domain]:

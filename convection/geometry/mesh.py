@@ -8,7 +8,7 @@ DOLFINx 0.5's (Plaza) refinement fails on meshes with second-order geometry ("Da
 between local and global adjacency lists"), and on straight-sided meshes it puts the new boundary
 vertices on the chords, inside the circle. Adaptive (and load-balanced) runs on curved domains
 therefore refine the straight-sided gmsh mesh and curve every mesh they use by the domain's
-manifold (:mod:`fembase.manifold`, :class:`convection.adapt.adaptivity.MeshHierarchy` with
+manifold (:mod:`fembase.manifold`, :class:`convection.adapt.hierarchy.MeshHierarchy` with
 ``manifold=``).
 """
 

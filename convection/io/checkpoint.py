@@ -10,7 +10,7 @@ A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the
   the owner rank of every cell of the base mesh the domain made
   (:meth:`convection.geometry.domain.Domain.create_mesh`; ``mesh/created_owners``, while the run
   still stands on it) and
-  :class:`convection.adapt.adaptivity.MeshRecipe` (the refinement rounds since, or every rank's pieces
+  :class:`convection.adapt.hierarchy.MeshRecipe` (the refinement rounds since, or every rank's pieces
   handed to ``create_mesh`` at the latest repartition) — every rank's fingerprint of the base and of
   the current mesh (:func:`fembase.distribute.mesh_fingerprint`), the mesh's cells (global vertex
   indices, the owned vertex coordinates and the base cell, for a restart on another rank count), and
@@ -58,7 +58,7 @@ from scipy.spatial import cKDTree
 import dolfinx.fem
 import dolfinx.mesh
 
-from convection.adapt.adaptivity import MeshHierarchy, MeshRecipe
+from convection.adapt.hierarchy import MeshHierarchy, MeshRecipe
 from fembase.manifold import ShellManifold
 from convection.model.model import Model
 from convection.schema import param
@@ -404,7 +404,7 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArr
     On the rank count it was written on the mesh is made as the run made it: the base mesh with the
     saved owner of every cell imposed (``make_base(owners)``, owners by input index on rank 0), or
     the saved base pieces of the latest repartition, then the saved refinement rounds or pieces
-    (:class:`convection.adapt.adaptivity.MeshRecipe`). The result must have the saved fingerprint on every
+    (:class:`convection.adapt.hierarchy.MeshRecipe`). The result must have the saved fingerprint on every
     rank (:func:`fembase.distribute.mesh_fingerprint`); otherwise, and on another rank count, the mesh
     is rebuilt from the saved cells and partitioned afresh (each rank reads an equal block of the
     saved cells and vertices; no rank reads all; the base cells go to ranks in equal blocks of
@@ -415,7 +415,7 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArr
         saved: The checkpoint.
         comm: The run's communicator.
         make_base: Makes the config's base mesh, on the given partition (None: its own choice).
-        hierarchical: Whether the run has a :class:`convection.adapt.adaptivity.MeshHierarchy`
+        hierarchical: Whether the run has a :class:`convection.adapt.hierarchy.MeshHierarchy`
             (adaptivity or balancing).
         manifold: The hierarchy's manifold (curved shells; ``make_base`` then makes the straight base).
     """

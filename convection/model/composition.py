@@ -158,13 +158,15 @@ class FieldComposition:
 
     def state(self) -> State:
         """Every material's transport history (Functions ``<material>/<name>``, scalars by material)."""
-        fields = {f"{s.name}/{k}": f for s in self.solvers for k, f in s.history().items()}
-        return State(fields=fields, scalars={"solvers": [s.history_scalars() for s in self.solvers]})
+        states = [s.state() for s in self.solvers]
+        fields = {f"{s.name}/{k}": f for s, state in zip(self.solvers, states) for k, f in state.fields.items()}
+        return State(fields=fields, scalars={"solvers": [state.scalars for state in states]})
 
     def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        fields = {}
         for solver, saved in zip(self.solvers, scalars["solvers"]):
-            solver.restore_history_scalars(saved)
-        return self.state().fields
+            fields.update({f"{solver.name}/{k}": f for k, f in solver.restore(saved).items()})
+        return fields
 
     def destroy(self) -> None:
         for solver in self.solvers:

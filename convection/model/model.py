@@ -30,10 +30,7 @@ loop in Python (see ``demos/``).
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping, NamedTuple
-
-import numpy as np
-import numpy.typing as npt
+from typing import Any, Mapping, NamedTuple
 
 import dolfinx.fem
 import dolfinx.mesh
@@ -41,14 +38,13 @@ import dolfinx.mesh
 from convection.adapt.adaptivity import Adaptivity
 from convection.geometry.domain import Domain
 from convection.model.composition import CompositionSource
+from convection.model.mesh_changes import MeshChanges
 from convection.physics.materials import material_index
 from convection.model.rheology_fields import Flow, RheologyFields
 from convection.adapt.rebalance import Balancer, RankLoads
 from convection.solvers.stokes.solver import StokesResult, StokesSolver
 from convection.solvers.timestep import cfl_timestep
-from convection.adapt.transfer import PointEvaluator, transfer_function
 from convection.solvers.transport import TransportSolver
-from fembase.geometry import Candidates
 from fembase.state import State, Stateful
 from fembase.timing import Timers
 from particles.manager import ParticleManager
@@ -106,7 +102,7 @@ class Model:
         self.u_previous: dolfinx.fem.Function | None = None
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
-        self._point_evaluator: PointEvaluator | None = None
+        self._mesh_changes = MeshChanges(self)
         self.rheology = RheologyFields(stokes, particles)
 
     # ------------------------------------------------------------------ state
@@ -283,97 +279,17 @@ class Model:
     def adapt(self) -> tuple[int, int]:
         """Adapt the mesh once (needs ``adaptivity``) and carry everything to it. Returns the global
         cell counts before and after."""
-        assert self.adaptivity is not None
-        before = self.num_cells
-        with self.timers("adaptation"):
-            fields = []
-            if "temperature" in self.adaptivity.fields and self.T is not None:
-                fields.append(self.T)
-            if "composition" in self.adaptivity.fields:
-                fields.extend(self.fractions)
-            mesh = self.adaptivity.new_mesh(self.mesh, fields or [self._indicator_fallback()], locator=self._locator())
-            # Both meshes are refined from one base: each particle is looked for first among the
-            # new cells of its old cell's base cell, not with a bounding-box search of the new mesh.
-            swarm = self._swarm()
-            candidates = None if swarm is None else \
-                self.adaptivity.hierarchy.candidates(mesh, self.mesh, swarm.cells)
-        self._move_to(mesh, candidates=candidates, nested=True)
-        return before, self.num_cells
-
-    def _locator(self) -> PointEvaluator:
-        """Point location and evaluation on the current mesh (built once per mesh; shares the
-        particles' cell geometry when they live on it)."""
-        if self._point_evaluator is None or self._point_evaluator.mesh is not self.mesh:
-            swarm = self._swarm()
-            geometry = swarm.geometry if swarm is not None and swarm.mesh is self.mesh else None
-            self._point_evaluator = PointEvaluator(self.mesh, geometry=geometry)
-        return self._point_evaluator
-
-    def _indicator_fallback(self) -> dolfinx.fem.Function:
-        return self.T if self.T is not None else self.stokes.u
-
-    def _swarm(self):
-        return self.particles.swarm if self.particles is not None else None
-
-    def _rebalance_if_due(self) -> tuple[RankLoads, RankLoads] | None:
-        if self.balancer is None or not self.balancer.due(self.timestep, self.mesh, self._swarm()):
-            return None
-        return self.rebalance()
+        return self._mesh_changes.adapt()
 
     def rebalance(self) -> tuple[RankLoads, RankLoads]:
         """Repartition now (needs ``balancer``); returns the loads per rank before and after."""
-        assert self.balancer is not None
-        with self.timers("balancing"):
-            before = self.balancer.loads(self.mesh, self._swarm())
-            mesh = self.balancer.new_mesh(self.mesh, self._swarm())
-        self._move_to(mesh)
-        return before, self.balancer.loads(self.mesh, self._swarm())
+        return self._mesh_changes.rebalance()
 
-    def _move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Candidates | None = None,
-                 nested: bool = False) -> None:
-        """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles
-        (``candidates``: where to look for each particle first, see ``ParticleManager.to_mesh``;
-        ``nested``: both meshes are refined from the adaptivity's base mesh, so the fields' nodes are
-        looked for among the old cells of their base cell first)."""
-        nodes_in = None
-        if nested and self.adaptivity is not None:
-            hierarchy, old_mesh = self.adaptivity.hierarchy, self.mesh
-
-            def nodes_in(cells: npt.NDArray[np.int32]) -> Candidates | None:
-                return hierarchy.candidates(old_mesh, mesh, cells)
-
-        with self.timers("field_transfer"):
-            old = self._transfer_fields(mesh, nodes_in)
-        if self.particles is not None:  # the manager times its own move
-            self.particles.to_mesh(mesh, context=self.property_context(), step=self.timestep, candidates=candidates)
-        for solver in old:
-            if solver is not None:
-                solver.destroy()
-        self._point_evaluator = None  # it holds the old mesh
-        self.mesh_version += 1
-
-    def _transfer_fields(self, mesh: dolfinx.mesh.Mesh,
-                         candidates: Callable[[npt.NDArray[np.int32]], Candidates | None] | None = None) -> list:
-        """New solvers on ``mesh`` with the fields carried over; returns the old solvers
-        (``candidates``: see :func:`convection.adapt.transfer.transfer_function`)."""
-        evaluator = self._locator()
-
-        def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
-            transfer_function(src, dst, evaluator=evaluator, candidates=candidates)
-
-        old = [self.stokes, self.temperature]
-        self.stokes = self.stokes.on_mesh(mesh)
-        self.stokes.transfer_from(old[0], transfer)
-        if self.temperature is not None:
-            self.temperature = self.temperature.on_mesh(mesh)
-            self.temperature.transfer_from(old[1], transfer)
-        if self.u_previous is not None:
-            u_previous = dolfinx.fem.Function(self.stokes.u.function_space)
-            transfer(self.u_previous, u_previous)
-            self.u_previous = u_previous
-        if self.composition is not None:
-            self.composition.to_mesh(mesh, transfer)
-        return old
+    def _rebalance_if_due(self) -> tuple[RankLoads, RankLoads] | None:
+        swarm = self.particles.swarm if self.particles is not None else None
+        if self.balancer is None or not self.balancer.due(self.timestep, self.mesh, swarm):
+            return None
+        return self.rebalance()
 
     def destroy(self) -> None:
         """Free the solvers' PETSc objects now, on every rank together."""

@@ -357,7 +357,7 @@ class DepthTable(ViscosityLawBase):
 
     def __call__(self, state: FlowState) -> Any:
         d = state.depth
-        (d0, f0), rest = self.table[0], self.table[1:]
+        f0 = self.table[0][1]
         value: Any = ufl.as_ufl(f0)  # constant above the first row, linear between rows, constant below
         for (da, fa), (db, fb) in zip(self.table, self.table[1:]):
             s = ufl.min_value(ufl.max_value((d - da) / (db - da), 0.0), 1.0)

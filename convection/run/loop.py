@@ -397,99 +397,153 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
         RunFailure: The run blew up or a solver failed (summary.json says so; on every rank).
         RunFolderError: A file to continue is missing or damaged (on every rank, before any step).
     """
-    rank0 = model.comm.rank == 0
-    start = time.monotonic() if start is None else start
-    directory = Path(settings.output.directory)
-    postprocessors = _with_time_columns(postprocessors)
-    columns = [c for pp in postprocessors for c in pp.columns]
-    out = _Outputs(model, settings, columns, resume is not None)
-    steady = SteadyState(settings.time.steady_state_tolerance, settings.time.steady_state_window)
-    watch = Watch(model, postprocessors, nusselt=settings.time.steady_state_tolerance is not None)
-    reason, failure = "end time", None
-    row: dict[str, Any] = {}
-    first: Watched | None = None
-    now: Watched | None = None
-    report = True
+    loop = _RunLoop(model, settings, postprocessors, start=start, checkpoints=checkpoints, blowup=blowup)
     if resume is not None:
-        start -= resume.wall_seconds
-        for pp in postprocessors:
+        loop.resume(resume)
+    return loop.run(should_stop)
+
+
+class _RunLoop:
+    """The state of one :func:`run`: its outputs, the watched quantities and the stop tests."""
+
+    def __init__(self, model: Model, settings: RunSettings, postprocessors: Sequence[Postprocessor], /, *,
+                 start: float | None, checkpoints: Any, blowup: BlowUp) -> None:
+        self.model = model
+        self.settings = settings
+        self.start = time.monotonic() if start is None else start
+        self.postprocessors = _with_time_columns(postprocessors)
+        self.checkpoints = checkpoints
+        self.blowup = blowup
+        self.out: _Outputs | None = None
+        self.steady = SteadyState(settings.time.steady_state_tolerance, settings.time.steady_state_window)
+        self.watch = Watch(model, self.postprocessors, nusselt=settings.time.steady_state_tolerance is not None)
+        self.first: Watched | None = None
+        self.now: Watched | None = None
+        self.report = True
+        self.resumed = False
+
+    def resume(self, resume: Resume, /) -> None:
+        """Continue a run restored from a checkpoint (its references and postprocessor states)."""
+        self.start -= resume.wall_seconds
+        for pp in self.postprocessors:
             pp.restore(resume.postprocessors.get(pp.name) or {})
             if pp.name == "wall_time":
-                pp.start = start
+                pp.start = self.start
         # A checkpoint written before the references were kept: they are measured now.
-        now = resume.last or watch.measure(model)
-        first = resume.first or now
-        steady.restore(resume.steady or [])
-        report = False
-    try:
+        self.now = resume.last or self.watch.measure(self.model)
+        self.first = resume.first or self.now
+        self.steady.restore(resume.steady or [])
+        self.report = False
+        self.resumed = True
+
+    def run(self, should_stop: Callable[[], bool], /) -> RunSummary:
+        """Step to the end (see :func:`run`). Collective."""
+        model = self.model
+        columns = [c for pp in self.postprocessors for c in pp.columns]
+        self.out = out = _Outputs(model, self.settings, columns, self.resumed)
+        reason, failure = "end time", None
+        try:
+            reason, failure = self._steps(should_stop)
+            if failure is None:
+                self._finish()
+        except BaseException as err:
+            # Closing the files and freeing the solvers are collective: only when every rank is here.
+            # An error met on one rank alone (a bug, a failed write) may leave the others inside a
+            # collective call, where cleaning up would wait forever; the command line stops them all.
+            if model.comm.size == 1 or isinstance(err, CheckpointError):  # CheckpointErrors: raised on every rank
+                _close(out, model)
+            raise
+        _close(out, model)
+        if failure is not None:
+            reason = f"failed at step {model.timestep}, t={model.time:.6g}: {failure}"
+        summary = self._summary(reason)
+        if failure is not None:
+            raise RunFailure(reason)
+        return summary
+
+    def _steps(self, should_stop: Callable[[], bool]) -> tuple[str, str | None]:
+        """The steps: (why they stopped, what failed or None)."""
+        model, out = self.model, self.out
         if model.flow_result is None:
             try:
                 _report(model.start(), model.timestep, out.balance, out.progress)
             except SOLVER_ERRORS as err:
-                failure = " ".join(str(err).split())
-        while failure is None:
-            if report:
-                previous = now
-                with model.timers("postprocess"):
-                    row = {k: v for pp in postprocessors for k, v in pp(model).items()}
-                    now = watch(model, row)
-                first = first or now
-                out.row(model, row, now)
-                failure = blowup.check(now, first, previous)
+                return "end time", " ".join(str(err).split())
+        while True:
+            if self.report:
+                failure = self._row()
                 if failure:
-                    break
-                if checkpoints is not None and checkpoints.due(model):
-                    checkpoints.write(model, _state(postprocessors, start, first, now, steady))
-            report = True
-            if model.time >= settings.time.end * (1.0 - 1e-12):
-                break
-            if settings.time.max_steps is not None and model.timestep >= settings.time.max_steps:
-                reason = "max steps"
-                break
-            if steady(now._asdict(), model.timestep):
-                reason = "steady state"
-                break
-            if model.comm.allreduce(bool(should_stop()), op=MPI.LOR):
-                reason = "stopped by signal"
-                break
+                    return "end time", failure
+            self.report = True
+            reason = self._stop(should_stop)
+            if reason is not None:
+                return reason, None
             try:
-                _report(model.step(_timestep(model, settings)), model.timestep, out.balance, out.progress)
+                _report(model.step(_timestep(model, self.settings)), model.timestep, out.balance, out.progress)
             except SOLVER_ERRORS as err:
-                failure = " ".join(str(err).split())
-                break
-        if failure is None:
-            if out.written != model.timestep:
-                out.write_fields(model)
-            with model.timers("output"):
-                if model.particles is not None and model.particles.writer is not None:
-                    model.particles.update(model.property_context(), step=model.timestep, final=True)
-            if checkpoints is not None and checkpoints.settings.at_end:
-                checkpoints.write(model, _state(postprocessors, start, first, now, steady), only_if_new=True)
-    except BaseException as err:
-        # Closing the files and freeing the solvers are collective: only when every rank is here.
-        # An error met on one rank alone (a bug, a failed write) may leave the others inside a
-        # collective call, where cleaning up would wait forever; the command line stops them all.
-        if model.comm.size == 1 or isinstance(err, CheckpointError):  # CheckpointErrors: raised on every rank
-            _close(out, model)
-        raise
-    _close(out, model)
-    if failure is not None:
-        reason = f"failed at step {model.timestep}, t={model.time:.6g}: {failure}"
-    wall = time.monotonic() - start
-    timings = model.timers.summary(model.comm, extra=model.particles.timings if model.particles else None, total=wall)
-    vrms = now.vrms if now is not None else np.nan
-    nusselt = now.nusselt if now is not None and now.nusselt is not None else np.nan
-    summary = RunSummary(model.timestep, model.time, float(vrms), float(nusselt), model.num_cells, wall, reason,
-                         timings)
-    if rank0:
-        (directory / "summary.json").write_text(json.dumps(summary.as_dict(), indent=2) + "\n")
-        out.progress.message(f"finished ({reason}): step {summary.steps}, t={summary.time:.6g}, "
-                             f"vrms={summary.vrms:.6g}, Nu={summary.nusselt:.6g}, {summary.cells} cells, "
-                             f"{summary.wall_time:.1f} s")
-        out.progress.message("time per phase (max over ranks):\n" + model.timers.table(timings))
-    if failure is not None:
-        raise RunFailure(reason)
-    return summary
+                return "end time", " ".join(str(err).split())
+
+    def _row(self) -> str | None:
+        """This step's statistics row, outputs and checkpoint; what blew up, or None."""
+        model = self.model
+        previous = self.now
+        with model.timers("postprocess"):
+            row = {k: v for pp in self.postprocessors for k, v in pp(model).items()}
+            self.now = self.watch(model, row)
+        self.first = self.first or self.now
+        self.out.row(model, row, self.now)
+        failure = self.blowup.check(self.now, self.first, previous)
+        if failure:
+            return failure
+        if self.checkpoints is not None and self.checkpoints.due(model):
+            self.checkpoints.write(model, self._state())
+        return None
+
+    def _stop(self, should_stop: Callable[[], bool]) -> str | None:
+        """Why the run stops after this step, or None."""
+        model, time_settings = self.model, self.settings.time
+        if model.time >= time_settings.end * (1.0 - 1e-12):
+            return "end time"
+        if time_settings.max_steps is not None and model.timestep >= time_settings.max_steps:
+            return "max steps"
+        if self.steady(self.now._asdict(), model.timestep):
+            return "steady state"
+        if model.comm.allreduce(bool(should_stop()), op=MPI.LOR):
+            return "stopped by signal"
+        return None
+
+    def _state(self) -> dict[str, Any]:
+        return _state(self.postprocessors, self.start, self.first, self.now, self.steady)
+
+    def _finish(self) -> None:
+        """The last fields, particles and checkpoint of a run that did not fail."""
+        model, out = self.model, self.out
+        if out.written != model.timestep:
+            out.write_fields(model)
+        with model.timers("output"):
+            if model.particles is not None and model.particles.writer is not None:
+                model.particles.update(model.property_context(), step=model.timestep, final=True)
+        if self.checkpoints is not None and self.checkpoints.settings.at_end:
+            self.checkpoints.write(model, self._state(), only_if_new=True)
+
+    def _summary(self, reason: str) -> RunSummary:
+        """The summary (written to summary.json and shown by rank 0)."""
+        model, now = self.model, self.now
+        wall = time.monotonic() - self.start
+        timings = model.timers.summary(model.comm, extra=model.particles.timings if model.particles else None,
+                                       total=wall)
+        vrms = now.vrms if now is not None else np.nan
+        nusselt = now.nusselt if now is not None and now.nusselt is not None else np.nan
+        summary = RunSummary(model.timestep, model.time, float(vrms), float(nusselt), model.num_cells, wall, reason,
+                             timings)
+        if model.comm.rank == 0:
+            (Path(self.settings.output.directory) / "summary.json").write_text(
+                json.dumps(summary.as_dict(), indent=2) + "\n")
+            self.out.progress.message(f"finished ({reason}): step {summary.steps}, t={summary.time:.6g}, "
+                                      f"vrms={summary.vrms:.6g}, Nu={summary.nusselt:.6g}, {summary.cells} cells, "
+                                      f"{summary.wall_time:.1f} s")
+            self.out.progress.message("time per phase (max over ranks):\n" + model.timers.table(timings))
+        return summary
 
 
 def _state(postprocessors: Sequence[Postprocessor], start: float, first: Watched | None, last: Watched | None,

@@ -45,7 +45,6 @@ import dolfinx
 import dolfinx.fem.petsc
 import numpy as np
 import ufl
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation
@@ -90,6 +89,15 @@ class EnergySettings:
 
 
 _DEFAULTS = EnergySettings()
+
+
+def bdf_coefficients(dt: float, dt_old: float | None, /) -> tuple[float, tuple[float, float, float], int]:
+    """``(omega, (a0, a1, a2), order)`` of the step ``dt`` after ``dt_old`` (module docstring): BDF1
+    on the first step (``dt_old`` None), then variable-step BDF2 with ``omega = dt / dt_old``."""
+    if dt_old is None:
+        return 0.0, (1.0, -1.0, 0.0), 1
+    omega = dt / dt_old
+    return omega, ((1.0 + 2.0 * omega) / (1.0 + omega), -(1.0 + omega), omega**2 / (1.0 + omega)), 2
 
 
 class TransportResult(NamedTuple):
@@ -261,12 +269,7 @@ class TransportSolver(PetscSolver):
         if not dt > 0.0:
             raise ValueError(f"time step must be positive, got {dt}")
         self._ensure_forms(u)
-        if self.dt_old is None:
-            omega, coef, order = 0.0, (1.0, -1.0, 0.0), 1
-        else:
-            omega = dt / self.dt_old
-            coef = ((1.0 + 2.0 * omega) / (1.0 + omega), -(1.0 + omega), omega**2 / (1.0 + omega))
-            order = 2
+        omega, coef, order = bdf_coefficients(dt, self.dt_old)
         self._dt.value = dt
         self._coef.value[:] = coef
         if self.velocity_extrapolation and self._u_prev is not None and order == 2:
@@ -305,30 +308,20 @@ class TransportSolver(PetscSolver):
         iterations = self.ksp.getIterationNumber() if self.solver == "iterative" else 1
         return TransportResult(int(iterations), order, float(dt))
 
-    def history(self) -> dict[str, dolfinx.fem.Function]:
-        """The Functions of the time history: ``T`` (T^n), ``T_old``, ``T_old2``."""
-        return {"T": self.T, "T_old": self.T_old, "T_old2": self.T_old2}
+    def state(self) -> State:
+        """The time history: ``T`` (T^n), ``T_old``, ``T_old2`` and the scalars (previous step,
+        steps taken, the last BDF step)."""
+        return State(fields={"T": self.T, "T_old": self.T_old, "T_old2": self.T_old2},
+                     scalars={"dt_old": self.dt_old, "steps": self.steps, "dt_last": float(self._dt_last.value),
+                              "coef_last": [float(c) for c in self._coef_last.value]})
 
-    def history_scalars(self) -> dict[str, Any]:
-        """The scalars of the time history (JSON-able): previous step, steps taken, last BDF step."""
-        return {"dt_old": self.dt_old, "steps": self.steps, "dt_last": float(self._dt_last.value),
-                "coef_last": [float(c) for c in self._coef_last.value]}
-
-    def restore_history_scalars(self, scalars: dict[str, Any], /) -> None:
-        """Set what :meth:`history_scalars` returned (the Functions are restored by the caller)."""
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        """Take the history's scalars back; returns its Functions for the checkpoint to fill."""
         self.dt_old = scalars["dt_old"]
         self.steps = int(scalars["steps"])
         self._dt_last.value = scalars["dt_last"]
         self._coef_last.value[:] = scalars["coef_last"]
-
-    def state(self) -> State:
-        """The time history: its Functions (:meth:`history`) and scalars (:meth:`history_scalars`)."""
-        return State(fields=self.history(), scalars=self.history_scalars())
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
-        """Take the history's scalars back; returns its Functions for the checkpoint to fill."""
-        self.restore_history_scalars(dict(scalars))
-        return self.history()
+        return self.state().fields
 
     def last_step_residual(self, u: Any, w: Any, /) -> Any:
         """UFL residual ``F(T; w)`` of the last step taken (module docstring) with velocity ``u``:

@@ -136,7 +136,7 @@ def _band_adapt(hierarchy, mesh, z0):
 def _band_history(comm, repartition):
     """Adapt a band moving upwards five times, optionally repartitioning after each adaptation;
     returns per adaptation (sorted midpoints, interior facets, loads per rank)."""
-    from convection.adapt.adaptivity import MeshHierarchy
+    from convection.adapt.hierarchy import MeshHierarchy
 
     base = dolfinx.mesh.create_rectangle(comm, [np.zeros(2), np.array([0.9142, 1.0])], [16, 16],
                                          dolfinx.mesh.CellType.triangle, ghost_mode=dolfinx.mesh.GhostMode.shared_facet)

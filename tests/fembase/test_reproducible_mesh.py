@@ -8,7 +8,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from convection.adapt.adaptivity import MeshHierarchy
+from convection.adapt.hierarchy import MeshHierarchy
 from convection.geometry.box import BoxDomain, BoxSpec
 from convection.geometry.mesh import cell_volumes
 from convection.geometry.shell import ShellSpec, shell_domain

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from convection.adapt.adaptivity import MeshHierarchy
+from convection.adapt.hierarchy import MeshHierarchy
 from convection.geometry.box import BoxSpec, create_box_mesh
 from fembase.geometry import CellGeometry
 from particles import Swarm

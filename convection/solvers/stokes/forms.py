@@ -92,7 +92,6 @@ class StokesDiscretisation:
         self.bcs = bcs
         self.degree = degree
         self.nitsche_penalty = nitsche_penalty
-        cell = mesh.ufl_cell()
         self.V = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
         self.Q = function_space(mesh, "Lagrange", degree - 1)
         self.dirichlet = velocity_dirichlet_bcs(self.V, bcs, domain)

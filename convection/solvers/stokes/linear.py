@@ -17,7 +17,7 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
 - **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
   ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
   dof (:meth:`convection.geometry.domain.Domain.pressure_pin`, a zero pressure block holds its
-  diagonal) and makes the continuity right-hand side sum to zero (:meth:`StokesLinearSystem._consistent_continuity`),
+  diagonal) and makes the continuity right-hand side sum to zero (:func:`consistent_continuity`),
   so both solve the same system.
 - **Warm start**: ``x`` starts from the current ``u``, ``p`` (a Krylov solver's nonzero initial
   guess; a direct solver ignores it), and the solution is written back to them.
@@ -36,10 +36,53 @@ from convection.geometry.domain import Domain
 from convection.solvers.stokes.nullspace import constant_pressure_null_space, rigid_body_modes
 from convection.solvers.petsc_options import destroy_petsc_objects
 from convection.solvers.stokes.forms import StokesForms
-from fembase.dolfinx_compat import (assemble_block_matrix, assemble_block_vector, assemble_matrix_into,
+from fembase.dolfinx_compat import (DirichletBC, assemble_block_matrix, assemble_block_vector, assemble_matrix_into,
                                     create_block_matrix, create_block_vector)
 
-__all__ = ["StokesLinearSystem"]
+__all__ = ["StokesLinearSystem", "consistent_continuity", "owned_sizes", "pack_solution", "unpack_solution"]
+
+
+def owned_sizes(V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace, /) -> tuple[int, int]:
+    """Owned velocity dofs (unrolled: nodes times block size) and owned pressure dofs."""
+    return V.dofmap.index_map.size_local * V.dofmap.index_map_bs, Q.dofmap.index_map.size_local
+
+
+def pack_solution(u: dolfinx.fem.Function, p: dolfinx.fem.Function, x: PETSc.Vec, /) -> None:
+    """Copy the owned values of ``u`` and ``p`` into the block vector ``x``."""
+    n_u, n_p = owned_sizes(u.function_space, p.function_space)
+    x.array[:n_u] = u.x.array[:n_u]
+    x.array[n_u:] = p.x.array[:n_p]
+
+
+def unpack_solution(x: PETSc.Vec, u: dolfinx.fem.Function, p: dolfinx.fem.Function, /) -> None:
+    """Copy the block vector ``x`` into ``u`` and ``p`` and update their ghosts (collective)."""
+    n_u, n_p = owned_sizes(u.function_space, p.function_space)
+    u.x.array[:n_u] = x.array_r[:n_u]
+    p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
+    u.x.scatter_forward()
+    p.x.scatter_forward()
+
+
+def consistent_continuity(vec: PETSc.Vec, V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace,
+                          pin: DirichletBC, /) -> None:
+    """Make the continuity part of the block vector ``vec`` sum to zero, then zero the row of the
+    pressure ``pin`` (direct solver with a pressure null space). Collective.
+
+    The constant pressure is in the null space of the (symmetric) operator, so the system is
+    solvable only if the continuity part of ``b`` sums to zero: the discrete flux of the
+    prescribed velocities, ``int u . n ds``, must vanish. A velocity tangent to a circle or
+    sphere, interpolated on the curved (or straight) cells, has a small flux, and pinning a
+    pressure dof would put the whole defect into that one dof's continuity equation. Removing
+    the mean instead spreads it over the domain, as the iterative solvers' null space does, so
+    both solve the same system. With zero velocity data the continuity part is exactly zero
+    and nothing changes."""
+    n_u, n_p = owned_sizes(V, Q)
+    g = vec.array[n_u:n_u + n_p]
+    total = V.mesh.comm.allreduce(float(g.sum()), op=MPI.SUM)
+    if total != 0.0:
+        g -= total / Q.dofmap.index_map.size_global
+    pinned = pin.dof_indices()[0]
+    g[pinned[pinned < n_p]] = 0.0
 
 
 class StokesLinearSystem:
@@ -179,7 +222,7 @@ class StokesLinearSystem:
         if self._null_space is not None:
             self._null_space.remove(self._b)
         elif self.pinned:
-            self._consistent_continuity()
+            consistent_continuity(self._b, self.V, self.Q, self._bcs[-1])
 
     def _add_velocity_block(self, form: dolfinx.fem.FormMetaClass) -> None:
         """Add a velocity-velocity form to A's (0, 0) block, skipping the Dirichlet rows and columns
@@ -211,11 +254,11 @@ class StokesLinearSystem:
 
     def pack(self) -> None:
         """Copy ``u``, ``p`` into :attr:`x`."""
-        self._pack_solution(self._x)
+        pack_solution(self.u, self.p, self._x)
 
     def unpack(self, x: PETSc.Vec, /) -> None:
         """Copy the block vector ``x`` into ``u``, ``p`` (ghosts updated). Collective."""
-        self._unpack_solution(x)
+        unpack_solution(x, self.u, self.p)
 
     def assemble_residual(self, F: PETSc.Vec, F_forms: list, J_forms: list, homogeneous: list, /) -> None:
         """The nonlinear residual ``F(u, p)`` of the current ``u``, ``p`` into ``F``: the residual
@@ -228,7 +271,7 @@ class StokesLinearSystem:
         if self._null_space is not None:
             self._null_space.remove(F)
         elif self.pinned:
-            self._consistent_continuity(F)
+            consistent_continuity(F, self.V, self.Q, self._bcs[-1])
 
     def assemble_jacobian(self, J_forms: list, a_pc: list | None, /) -> None:
         """Newton's Jacobian into the operator matrix (unit diagonal on the strong conditions'
@@ -244,27 +287,6 @@ class StokesLinearSystem:
             assemble_block_matrix(self._P, a_pc, bcs=self._bcs)
             self._P.assemble()
 
-    def _consistent_continuity(self, vec: PETSc.Vec | None = None) -> None:
-        """Make the continuity right-hand side sum to zero, then zero the pinned row (direct solver
-        with a pressure null space).
-
-        The constant pressure is in the null space of the (symmetric) operator, so the system is
-        solvable only if the continuity part of ``b`` sums to zero: the discrete flux of the
-        prescribed velocities, ``int u . n ds``, must vanish. A velocity tangent to a circle or
-        sphere, interpolated on the curved (or straight) cells, has a small flux, and pinning a
-        pressure dof would put the whole defect into that one dof's continuity equation. Removing
-        the mean instead spreads it over the domain, as the iterative solvers' null space does, so
-        both solve the same system. With zero velocity data the continuity part is exactly zero
-        and nothing changes."""
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        g = (self._b if vec is None else vec).array[n_u:n_u + n_p]
-        total = self.V.mesh.comm.allreduce(float(g.sum()), op=MPI.SUM)
-        if total != 0.0:
-            g -= total / self.Q.dofmap.index_map.size_global
-        pinned = self._bcs[-1].dof_indices()[0]
-        g[pinned[pinned < n_p]] = 0.0
-
     # ------------------------------------------------------------------ solve
     def solve(self) -> float:
         """Solve ``K x = b`` from ``x = (u, p)`` and write ``x`` back to ``u``, ``p``. Collective.
@@ -276,14 +298,14 @@ class StokesLinearSystem:
             RuntimeError: the KSP diverged.
         """
         t1 = time.perf_counter()
-        self._pack_solution(self._x)
+        pack_solution(self.u, self.p, self._x)
         self.ksp.setUp()  # a no-op unless the operator changed
         setup_seconds = time.perf_counter() - t1
         self.ksp.solve(self._b, self._x)
         reason = self.ksp.getConvergedReason()
         if reason < 0:
             raise RuntimeError(f"Stokes solver did not converge (PETSc reason {reason})")
-        self._unpack_solution(self._x)
+        unpack_solution(self._x, self.u, self.p)
         return setup_seconds
 
     def residual_norm(self) -> float:
@@ -294,20 +316,6 @@ class StokesLinearSystem:
         norm = float(residual.norm())
         residual.destroy()
         return norm
-
-    def _pack_solution(self, x: PETSc.Vec) -> None:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        x.array[:n_u] = self.u.x.array[:n_u]
-        x.array[n_u:] = self.p.x.array[:n_p]
-
-    def _unpack_solution(self, x: PETSc.Vec) -> None:
-        n_u = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        n_p = self.Q.dofmap.index_map.size_local
-        self.u.x.array[:n_u] = x.array_r[:n_u]
-        self.p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
-        self.u.x.scatter_forward()
-        self.p.x.scatter_forward()
 
     def destroy(self) -> None:
         """Free the matrices, vectors and null spaces now (collective; not the KSP, which the caller owns)."""

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
 from petsc4py import PETSc
 
@@ -41,7 +41,8 @@ from convection.geometry.boundary import VelocityBC, velocity_dirichlet_bcs
 from convection.schema import Names, param
 
 if TYPE_CHECKING:
-    from convection.solvers.stokes.solver import StokesSolver
+    from convection.solvers.stokes.forms import StokesDiscretisation
+    from convection.solvers.stokes.linear import StokesLinearSystem
 
 __all__ = ["LINE_SEARCHES", "NONLINEAR_METHODS", "NonlinearResult", "NonlinearSettings", "NonlinearSolveError",
            "NonlinearStokes"]
@@ -121,27 +122,34 @@ def homogeneous(bcs: dict[str, VelocityBC]) -> dict[str, VelocityBC]:
 
 
 class NonlinearStokes:
-    """Picard and Newton iterations on a :class:`~convection.solvers.stokes.solver.StokesSolver` (module docstring).
+    """Picard and Newton iterations of a Stokes problem (module docstring).
 
     Args:
-        solver: the Stokes solver whose linear system, forms and ``u``, ``p`` are used.
-        settings: method and tolerances.
+        discretisation: The spaces, conditions and forms (:class:`~convection.solvers.stokes.forms.StokesDiscretisation`).
+        system: The linear system whose matrices, vectors, ``u`` and ``p`` are used
+            (:class:`~convection.solvers.stokes.linear.StokesLinearSystem`).
+        settings: Method and tolerances.
+        normalise: Normalises the pressure after a solve (zero mean where the constant pressure is
+            free; nothing otherwise).
     """
 
-    def __init__(self, solver: "StokesSolver", settings: NonlinearSettings, /) -> None:
-        self.solver = solver
+    def __init__(self, discretisation: StokesDiscretisation, system: StokesLinearSystem, settings: NonlinearSettings,
+                 /, *, normalise: Callable[[], None]) -> None:
+        self.discretisation = discretisation
+        self.system = system
         self.settings = settings
-        law = solver.approximation.viscosity_law
+        self._normalise = normalise
+        law = discretisation.approximation.viscosity_law
         depends = set()
         for item in law.laws or ():
             depends |= item.depends_on
-        if settings.method == "newton" and "pressure" in depends and solver.has_pressure_null_space:
+        if settings.method == "newton" and "pressure" in depends and system.pressure_null_space:
             raise ValueError("Newton's method with a pressure-dependent viscosity needs a defined pressure level: "
                              "leave a side traction free, or use stokes.nonlinear.method: picard")
-        system = solver.linear_system
-        self._homogeneous = velocity_dirichlet_bcs(solver.V, homogeneous(solver.bcs), solver.domain)
+        domain = discretisation.domain
+        self._homogeneous = velocity_dirichlet_bcs(discretisation.V, homogeneous(discretisation.bcs), domain)
         if system.pinned:
-            self._homogeneous.append(solver.domain.pressure_pin(solver.Q))
+            self._homogeneous.append(domain.pressure_pin(discretisation.Q))
         self._F: PETSc.Vec | None = None
         self._snes: PETSc.SNES | None = None
         self._newton_forms: tuple[Any, Any] | None = None
@@ -150,14 +158,14 @@ class NonlinearStokes:
     # ------------------------------------------------------------------ pieces
     def _forms(self, key: Any, T: Any, C: Any, fields: Any) -> tuple[Any, Any]:
         if self._newton_forms is None or self._newton_key is not key:
-            s = self.solver
-            self._newton_forms = s.discretisation.nonlinear_forms(
-                T, C, s.u, s.p, fields=fields, pressure_block=s.linear_system.pinned)
+            system = self.system
+            self._newton_forms = self.discretisation.nonlinear_forms(
+                T, C, system.u, system.p, fields=fields, pressure_block=system.pinned)
             self._newton_key = key
         return self._newton_forms
 
     def _residual_norm(self, F_forms: Any, J_forms: Any) -> float:
-        system = self.solver.linear_system
+        system = self.system
         if self._F is None:
             self._F = system.b.duplicate()
         system.assemble_residual(self._F, F_forms, J_forms, self._homogeneous)
@@ -177,8 +185,7 @@ class NonlinearStokes:
             NonlinearSolveError: ``rtol`` not reached within ``max_iterations``.
         """
         settings = self.settings
-        s = self.solver
-        system = s.linear_system
+        system = self.system
         F_forms, J_forms = self._forms(key, T, C, fields)
         system.assemble_operator(forms, refresh=True)  # the lifting of b uses the operator at the iterate
         system.assemble_rhs(forms)
@@ -199,8 +206,7 @@ class NonlinearStokes:
                 system.assemble_operator(forms, refresh=True)
                 system.assemble_rhs(forms)
             system.solve()
-            if s._pressure_mean is not None:
-                s._pressure_mean.normalise()
+            self._normalise()
             linear += int(system.iterations)
             picard += 1
             history.append(self._residual_norm(F_forms, J_forms) / reference)
@@ -213,8 +219,7 @@ class NonlinearStokes:
             iterations += its
             linear += lin
             history.extend(residuals)
-        if s._pressure_mean is not None:
-            s._pressure_mean.normalise()
+        self._normalise()
         if not history[-1] <= settings.rtol:
             raise NonlinearSolveError(
                 f"nonlinear Stokes solve ({settings.method}) did not reach the relative residual "
@@ -226,8 +231,7 @@ class NonlinearStokes:
                 max_iterations: int) -> tuple[int, int, list[float]]:
         """SNES Newton from the current iterate; returns (iterations, linear iterations, relative
         residuals after each iteration)."""
-        s = self.solver
-        system = s.linear_system
+        system = self.system
         residuals: list[float] = []
 
         def function(snes: PETSc.SNES, x: PETSc.Vec, F: PETSc.Vec) -> None:
@@ -243,11 +247,11 @@ class NonlinearStokes:
                 residuals.append(float(norm) / reference)
 
         if self._snes is None:
-            snes = PETSc.SNES().create(s.mesh.comm)
-            snes.setKSP(s.ksp)
+            snes = PETSc.SNES().create(self.discretisation.mesh.comm)
+            snes.setKSP(system.ksp)
             # petsc4py 3.18 has no line-search object: the type goes through the options database,
             # read once here and removed again.
-            prefix = f"{s.ksp.getOptionsPrefix()}nonlinear_"
+            prefix = f"{system.ksp.getOptionsPrefix()}nonlinear_"
             snes.setOptionsPrefix(prefix)
             options = PETSc.Options()
             options[f"{prefix}snes_type"] = "newtonls"
@@ -266,14 +270,14 @@ class NonlinearStokes:
         snes.cancelMonitor()
         snes.setMonitor(monitor)
         snes.setConvergenceHistory(reset=True)
-        guess = s.ksp.getInitialGuessNonzero()
-        s.ksp.setInitialGuessNonzero(False)  # a Newton increment starts from zero
+        guess = system.ksp.getInitialGuessNonzero()
+        system.ksp.setInitialGuessNonzero(False)  # a Newton increment starts from zero
         system.pack()
         x = system.x
         try:
             snes.solve(None, x)
         finally:
-            s.ksp.setInitialGuessNonzero(guess)
+            system.ksp.setInitialGuessNonzero(guess)
         system.unpack(x)
         return int(snes.getIterationNumber()), int(snes.getLinearSolveIterations()), residuals
 

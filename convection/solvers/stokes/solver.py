@@ -328,7 +328,8 @@ class StokesSolver(PetscSolver):
         self.forms: StokesForms | None = None
         self._forms_key: tuple[Any, Any] | None = None
         self._operator_current = False
-        self._nonlinear = NonlinearStokes(self, self.nonlinear_settings) if self.is_nonlinear else None
+        self._nonlinear = (NonlinearStokes(self.discretisation, self.linear_system, self.nonlinear_settings,
+                                           normalise=self._normalise_pressure) if self.is_nonlinear else None)
 
     def settings(self) -> dict[str, Any]:
         return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
@@ -389,13 +390,17 @@ class StokesSolver(PetscSolver):
 
         t1 = time.perf_counter()
         setup_seconds = self.linear_system.solve()
-        if self._pressure_mean is not None:
-            self._pressure_mean.normalise()
+        self._normalise_pressure()
         if self._rotations is not None:
             self._rotations.remove(self.u)
         norm = self.linear_system.residual_norm()
         return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
                             setup_seconds)
+
+    def _normalise_pressure(self) -> None:
+        """Shift the pressure to zero mean where the constant pressure is free (collective)."""
+        if self._pressure_mean is not None:
+            self._pressure_mean.normalise()
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> State:

@@ -7,7 +7,9 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from convection.adapt.adaptivity import AdaptivitySettings, MeshHierarchy, kelly_indicator, wanted_levels
+from convection.adapt.adaptivity import AdaptivitySettings, kelly_indicator, wanted_levels
+
+from convection.adapt.hierarchy import MeshHierarchy
 from convection.geometry.box import BoxSpec, create_box_mesh
 from convection.geometry.mesh import cell_volumes
 from convection.adapt.transfer import PointEvaluator, transfer_function

@@ -9,7 +9,7 @@ import dolfinx.fem
 import dolfinx.mesh
 import ufl
 
-from convection.adapt.adaptivity import MeshHierarchy
+from convection.adapt.hierarchy import MeshHierarchy
 from fembase.distribute import (
     create_partitioned_mesh, gather_cell_layout, mesh_piece, owner_partitioner, pull, redistribute,
 )

@@ -10,7 +10,9 @@ import dolfinx.mesh
 import pytest
 from mpi4py import MPI
 
-from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings, MeshHierarchy
+from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings
+
+from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.rebalance import BalanceSettings, Balancer
 from convection.app.factory import build_model, run_settings
 from convection.config.loader import SCHEMA, load_config

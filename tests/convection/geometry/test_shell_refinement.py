@@ -12,7 +12,7 @@ import dolfinx.fem
 
 pytest.importorskip("gmsh")
 
-from convection.adapt.adaptivity import MeshHierarchy  # noqa: E402
+from convection.adapt.hierarchy import MeshHierarchy  # noqa: E402
 from convection.geometry.shell import ShellSpec, create_shell_mesh  # noqa: E402
 from fembase.dolfinx_compat import coordinate_map, evaluate_expression, geometry_dofmap  # noqa: E402
 from fembase.manifold import ShellManifold, boundary_radius_error  # noqa: E402

@@ -13,7 +13,7 @@ import dolfinx.mesh
 
 pytest.importorskip("gmsh")
 
-from convection.adapt.adaptivity import MeshHierarchy  # noqa: E402
+from convection.adapt.hierarchy import MeshHierarchy  # noqa: E402
 from convection.geometry.shell import ShellSpec, create_shell_mesh  # noqa: E402
 from fembase.dolfinx_compat import (coordinate_element_from, evaluate_expression, geometry_dofmap,  # noqa: E402
                                     mesh_domain)

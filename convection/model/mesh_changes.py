@@ -1,0 +1,136 @@
+"""Carrying a model to a new mesh: adaptation and repartitioning (:class:`MeshChanges`).
+
+After a mesh change every solver is made again on the new mesh with the same settings and its
+fields are carried over (:func:`convection.adapt.transfer.transfer_function`), the previous
+velocity and the material fractions too; the particles move with the particle manager. When both
+meshes are refined from the adaptivity's base mesh (an adaptation), each field node and each
+particle is looked for first among the new cells of its old cell's base cell.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Callable
+
+import dolfinx.fem
+import dolfinx.mesh
+import numpy as np
+import numpy.typing as npt
+
+from convection.adapt.rebalance import RankLoads
+from convection.adapt.transfer import PointEvaluator, transfer_function
+from fembase.geometry import Candidates
+
+if TYPE_CHECKING:
+    from convection.model.model import Model
+
+__all__ = ["MeshChanges"]
+
+
+class MeshChanges:
+    """Adapts and repartitions a model's mesh and carries the model to it (see the module
+    docstring). All methods are collective.
+
+    Args:
+        model: The model whose mesh changes (its solvers, history, fractions and particles).
+    """
+
+    def __init__(self, model: Model, /) -> None:
+        self.model = model
+        self._point_evaluator: PointEvaluator | None = None
+
+    def _swarm(self):
+        particles = self.model.particles
+        return particles.swarm if particles is not None else None
+
+    def locator(self) -> PointEvaluator:
+        """Point location and evaluation on the current mesh (built once per mesh; shares the
+        particles' cell geometry when they live on it)."""
+        mesh = self.model.mesh
+        if self._point_evaluator is None or self._point_evaluator.mesh is not mesh:
+            swarm = self._swarm()
+            geometry = swarm.geometry if swarm is not None and swarm.mesh is mesh else None
+            self._point_evaluator = PointEvaluator(mesh, geometry=geometry)
+        return self._point_evaluator
+
+    def adapt(self) -> tuple[int, int]:
+        """Adapt the mesh once (needs the model's ``adaptivity``) and carry the model to it.
+        Returns the global cell counts before and after."""
+        model = self.model
+        adaptivity = model.adaptivity
+        assert adaptivity is not None
+        before = model.num_cells
+        with model.timers("adaptation"):
+            fields = []
+            if "temperature" in adaptivity.fields and model.T is not None:
+                fields.append(model.T)
+            if "composition" in adaptivity.fields:
+                fields.extend(model.fractions)
+            fallback = model.T if model.T is not None else model.stokes.u
+            mesh = adaptivity.new_mesh(model.mesh, fields or [fallback], locator=self.locator())
+            # Both meshes are refined from one base: each particle is looked for first among the
+            # new cells of its old cell's base cell, not with a bounding-box search of the new mesh.
+            swarm = self._swarm()
+            candidates = None if swarm is None else adaptivity.hierarchy.candidates(mesh, model.mesh, swarm.cells)
+        self.move_to(mesh, candidates=candidates, nested=True)
+        return before, model.num_cells
+
+    def rebalance(self) -> tuple[RankLoads, RankLoads]:
+        """Repartition now (needs the model's ``balancer``); returns the loads per rank before and
+        after."""
+        model = self.model
+        balancer = model.balancer
+        assert balancer is not None
+        with model.timers("balancing"):
+            before = balancer.loads(model.mesh, self._swarm())
+            mesh = balancer.new_mesh(model.mesh, self._swarm())
+        self.move_to(mesh)
+        return before, balancer.loads(model.mesh, self._swarm())
+
+    def move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Candidates | None = None,
+                nested: bool = False) -> None:
+        """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles
+        (``candidates``: where to look for each particle first, see ``ParticleManager.to_mesh``;
+        ``nested``: both meshes are refined from the adaptivity's base mesh, so the fields' nodes are
+        looked for among the old cells of their base cell first)."""
+        model = self.model
+        nodes_in = None
+        if nested and model.adaptivity is not None:
+            hierarchy, old_mesh = model.adaptivity.hierarchy, model.mesh
+
+            def nodes_in(cells: npt.NDArray[np.int32]) -> Candidates | None:
+                return hierarchy.candidates(old_mesh, mesh, cells)
+
+        with model.timers("field_transfer"):
+            old = self._transfer_fields(mesh, nodes_in)
+        if model.particles is not None:  # the manager times its own move
+            model.particles.to_mesh(mesh, context=model.property_context(), step=model.timestep,
+                                    candidates=candidates)
+        for solver in old:
+            if solver is not None:
+                solver.destroy()
+        self._point_evaluator = None  # it holds the old mesh
+        model.mesh_version += 1
+
+    def _transfer_fields(self, mesh: dolfinx.mesh.Mesh,
+                         candidates: Callable[[npt.NDArray[np.int32]], Candidates | None] | None = None) -> list:
+        """New solvers on ``mesh`` with the fields carried over; returns the old solvers
+        (``candidates``: see :func:`convection.adapt.transfer.transfer_function`)."""
+        model = self.model
+        evaluator = self.locator()
+
+        def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
+            transfer_function(src, dst, evaluator=evaluator, candidates=candidates)
+
+        old = [model.stokes, model.temperature]
+        model.stokes = model.stokes.on_mesh(mesh)
+        model.stokes.transfer_from(old[0], transfer)
+        if model.temperature is not None:
+            model.temperature = model.temperature.on_mesh(mesh)
+            model.temperature.transfer_from(old[1], transfer)
+        if model.u_previous is not None:
+            u_previous = dolfinx.fem.Function(model.stokes.u.function_space)
+            transfer(model.u_previous, u_previous)
+            model.u_previous = u_previous
+        if model.composition is not None:
+            model.composition.to_mesh(mesh, transfer)
+        return old

@@ -52,17 +52,11 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase import dolfinx_compat as compat
-from fembase.distribute import MeshPiece, create_mesh_from_piece
-from fembase.dolfinx_compat import coordinate_element_from, coordinate_map, geometry_dofmap
+from fembase.curved_mesh import curve_mesh, straighten_mesh
+from fembase.dolfinx_compat import coordinate_map
+from fembase.entities import EDGES, boundary_entities
 
 __all__ = ["EDGES", "ShellManifold", "boundary_entities", "boundary_radius_error"]
-
-EDGES: dict[int, tuple[tuple[int, int], ...]] = {
-    2: ((1, 2), (0, 2), (0, 1)),
-    3: ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1)),
-}
-"""The local vertices of each edge of a triangle / tetrahedron in the reference (basix) order, the
-order of the edge nodes of a second-order Lagrange cell."""
 
 _ZERO = 1e-13
 """Barycentric coordinates below this count as 0 (points on a base cell's edge or vertex)."""
@@ -317,141 +311,14 @@ class ShellManifold:
 
     def curve(self, straight: dolfinx.mesh.Mesh, /, *, degree: int = 2) -> dolfinx.mesh.Mesh:
         """The curved mesh of a straight-sided (P1) simplex mesh: the same cells on the same ranks,
-        geometry of ``degree`` (1 or 2) with every node at ``Phi`` of the straight node (collective).
-
-        The new mesh's nodes are numbered rank by rank: each rank's owned straight vertices, then
-        its owned edges (a node per edge midpoint), so the result depends on the straight mesh only.
-        """
-        if coordinate_map(straight).degree != 1:
-            raise ValueError("curve() takes a straight-sided (P1) mesh")
-        comm = straight.comm
-        tdim, gdim = straight.topology.dim, straight.geometry.dim
-        num_owned = straight.topology.index_map(tdim).size_local
-        dofs = geometry_dofmap(straight)[:num_owned]
-        node_map = straight.geometry.index_map()
-        x = straight.geometry.x
-        vertex_global = np.asarray(node_map.local_to_global(np.ascontiguousarray(dofs.reshape(-1), dtype=np.int32)),
-                                   dtype=np.int64).reshape(num_owned, -1)
-        owned_nodes = node_map.size_local
-        starts = np.concatenate([[0], np.cumsum(comm.allgather(owned_nodes))]).astype(np.int64)
-        total_nodes = int(starts[-1])
-        own_x = [x[:owned_nodes, :gdim]]
-        cells = [vertex_global]
-        if degree == 2:
-            straight.topology.create_entities(1)
-            straight.topology.create_connectivity(tdim, 1)
-            c2e = straight.topology.connectivity(tdim, 1)
-            edge_map = straight.topology.index_map(1)
-            width = len(EDGES[tdim])
-            local_edges = np.asarray(c2e.array, dtype=np.int32).reshape(-1, width)[:num_owned]
-            # DOLFINx's cell-edge connectivity is in the reference order of the edges (the same as
-            # EDGES), which the check below confirms through the vertices.
-            edge_global = np.asarray(edge_map.local_to_global(np.ascontiguousarray(local_edges.reshape(-1))),
-                                     dtype=np.int64).reshape(num_owned, width) + total_nodes
-            cells.append(edge_global)
-            owned_edges = edge_map.size_local
-            # The straight midpoint of each owned edge, from the cell that lists it first.
-            midpoint = np.full((owned_edges, gdim), np.nan)
-            for j, (a, b) in enumerate(EDGES[tdim]):
-                e = local_edges[:, j]
-                mine = e < owned_edges
-                midpoint[e[mine]] = 0.5 * (x[dofs[mine, a], :gdim] + x[dofs[mine, b], :gdim])
-            # Owned edges of no owned cell (their owner holds only ghost cells around them): their
-            # midpoints from the edge-vertex connectivity.
-            missing = np.flatnonzero(np.isnan(midpoint[:, 0]))
-            if missing.size:
-                straight.topology.create_connectivity(1, 0)
-                e2v = straight.topology.connectivity(1, 0)
-                verts = np.asarray(e2v.array, dtype=np.int32).reshape(-1, 2)[missing]
-                geo = compat.entities_to_geometry(straight, 0, verts.reshape(-1)).reshape(-1, 2)
-                midpoint[missing] = 0.5 * (x[geo[:, 0], :gdim] + x[geo[:, 1], :gdim])
-            own_x.append(midpoint)
-            self._check_edges(straight, dofs, local_edges)
-        # The global node numbering is vertices block by block, then edges: rank r's piece holds its
-        # owned vertices and its owned edges, which is not one contiguous block of that numbering,
-        # so the cells are renumbered to the pieces' concatenation order.
-        edge_starts = (np.concatenate([[0], np.cumsum(comm.allgather(own_x[1].shape[0]))]).astype(np.int64)
-                       if degree == 2 else None)
-        piece_starts = starts + (edge_starts if edge_starts is not None else 0)
-
-        def renumber_vertices(g: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
-            rank = np.searchsorted(starts, g, side="right") - 1
-            return g - starts[rank] + piece_starts[rank]
-
-        renumbered = [renumber_vertices(vertex_global)]
-        if degree == 2:
-            g = edge_global - total_nodes
-            rank = np.searchsorted(edge_starts, g, side="right") - 1
-            renumbered.append(g - edge_starts[rank] + piece_starts[rank] + (starts[rank + 1] - starts[rank]))
-        node_x = np.concatenate(own_x)
-        curved_x = self.curved_points(node_x)
-        piece = MeshPiece(np.concatenate(renumbered, axis=1), curved_x, np.full(num_owned, comm.rank, dtype=np.int32))
-        domain = compat.mesh_domain(coordinate_element_from((straight.topology.cell_name(), degree, gdim)))
-        return create_mesh_from_piece(comm, piece, domain).mesh
-
-    @staticmethod
-    def _check_edges(mesh: dolfinx.mesh.Mesh, dofs: npt.NDArray[np.int32], local_edges: npt.NDArray[np.int32]) -> None:
-        """Raise if DOLFINx's cell-edge connectivity is not in the reference order of :data:`EDGES`."""
-        tdim = mesh.topology.dim
-        mesh.topology.create_connectivity(1, 0)
-        e2v = np.asarray(mesh.topology.connectivity(1, 0).array, dtype=np.int32).reshape(-1, 2)
-        mesh.topology.create_connectivity(tdim, 0)
-        c2v = np.asarray(mesh.topology.connectivity(tdim, 0).array, dtype=np.int32).reshape(-1, tdim + 1)
-        for j, (a, b) in enumerate(EDGES[tdim]):
-            expected = np.sort(c2v[: dofs.shape[0]][:, [a, b]], axis=1)
-            if not np.array_equal(np.sort(e2v[local_edges[:, j]], axis=1), expected):
-                raise RuntimeError("the cell-edge connectivity is not in the reference edge order")
+        geometry of ``degree`` (1 or 2) with every node at ``Phi`` of the straight node (collective;
+        :func:`fembase.curved_mesh.curve_mesh`)."""
+        return curve_mesh(straight, self.curved_points, degree=degree)
 
     def straighten(self, curved: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.Mesh:
         """The straight-sided (P1) mesh of a curved one: its vertices mapped back by ``Phi^-1``,
         the same cells on the same ranks (collective)."""
-        comm = curved.comm
-        tdim, gdim = curved.topology.dim, curved.geometry.dim
-        num_owned = curved.topology.index_map(tdim).size_local
-        dofs = geometry_dofmap(curved)[:num_owned, : tdim + 1]
-        node_map = curved.geometry.index_map()
-        glob = np.asarray(node_map.local_to_global(np.ascontiguousarray(dofs.reshape(-1), dtype=np.int32)),
-                          dtype=np.int64).reshape(num_owned, -1)
-        x = self.straight_points(curved.geometry.x[: node_map.size_local, :gdim])
-        piece = MeshPiece(glob, x, np.full(num_owned, comm.rank, dtype=np.int32))
-        domain = compat.mesh_domain(coordinate_element_from((curved.topology.cell_name(), 1, gdim)))
-        return create_mesh_from_piece(comm, piece, domain).mesh
-
-
-def boundary_entities(mesh: dolfinx.mesh.Mesh, dim: int, /) -> npt.NDArray[np.bool_]:
-    """Whether each local (owned and ghost) entity of dimension ``dim`` (edges, or faces in 3D)
-    lies on the domain's boundary, shape=(num_local_entities,) (collective).
-
-    ``locate_entities_boundary`` sees the boundary facets a rank owns: a ghost cell's boundary face
-    owned by another rank, and its edges, are missed. Each rank marks what it found in a Lagrange
-    function of degree ``dim + 1`` (one degree of freedom inside each entity of dimension ``dim``),
-    the marks are summed onto the owners and sent back to every rank holding the entity.
-    """
-    tdim = mesh.topology.dim
-    mesh.topology.create_entities(dim)
-    mesh.topology.create_connectivity(tdim, dim)
-    mesh.topology.create_connectivity(tdim - 1, tdim)
-    imap = mesh.topology.index_map(dim)
-    num_entities = imap.size_local + imap.num_ghosts
-    V = compat.function_space(mesh, "Lagrange", dim + 1)
-    cells = compat.cell_dofmap(V)
-    per_cell = len(EDGES[tdim]) if dim == 1 else tdim + 1
-    c2e = np.asarray(mesh.topology.connectivity(tdim, dim).array, dtype=np.int64).reshape(-1, per_cell)
-    # Local dof layout of P(dim+1): the vertices' dofs, then dim (edges: 1 each; P3 on a tetrahedron
-    # has 2 per edge, then 1 per face), entities in the reference order of c2e.
-    first = tdim + 1 if dim == 1 else (tdim + 1) + 2 * len(EDGES[tdim])
-    entity_dof = np.full(num_entities, -1, dtype=np.int64)
-    local = cells[:, first:first + per_cell]
-    entity_dof[c2e[: cells.shape[0]].reshape(-1)] = local.reshape(-1)
-    if not np.array_equal(entity_dof[c2e[: cells.shape[0]]], local):
-        raise RuntimeError(f"the P{dim + 1} dofs are not one per entity of dimension {dim} in the reference order")
-    marker = dolfinx.fem.Function(V)
-    marker.x.array[:] = 0.0
-    found = dolfinx.mesh.locate_entities_boundary(mesh, dim, lambda x: np.full(x.shape[1], True))
-    marker.x.array[entity_dof[found]] = 1.0
-    marker.x.scatter_reverse(compat.SCATTER_ADD)
-    marker.x.scatter_forward()
-    return marker.x.array[entity_dof] > 0.5
+        return straighten_mesh(curved, self.straight_points)
 
 
 def boundary_radius_error(mesh: dolfinx.mesh.Mesh, r_inner: float, r_outer: float, /) -> float:

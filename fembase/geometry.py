@@ -7,25 +7,26 @@ without calling back into DOLFINx:
 - for affine simplices, the map ``x = origin + J X`` and its inverse ``X = K (x - origin)``
   precomputed per cell;
 - the vertex-to-cell adjacency (CSR) and the cell centres, used to order the neighbour search of
-  the transport step (seed paper 2.4), and the facet neighbours of simplices for its first guess;
+  the transport step (seed paper 2.4), and the facet neighbours of simplices for its first guess
+  (:class:`fembase.adjacency.CellAdjacency`);
 - a lazily built DOLFINx bounding-box tree for the global fallback search.
 
 Non-affine cells (quadrilaterals, hexahedra, degree-2 geometry) are pulled back with a vectorised
 Newton iteration on the basix coordinate element.
 
-Points are located without DOLFINx's ``compute_colliding_cells``: every candidate cell of the
-bounding-box tree is tested by pull-back and the reference-cell inside test (for affine cells a
-matrix-vector product, 3-4 times cheaper than DOLFINx 0.5's GJK distance; for curved cells a Newton
-iteration). For curved (degree-2) cells DOLFINx 0.5 measures the distance to the cell's vertex
-simplex only, so it misses points in the part of a cell that bulges beyond its straight edges (near
-a convex curved boundary) and accepts points between a straight edge and a concave curved one
-(outside the domain); the bounding boxes are therefore padded by the cells' largest bulge
-(:attr:`CellGeometry.curvature_padding`).
+Points are located without DOLFINx's ``compute_colliding_cells`` (:mod:`fembase.location`): every
+candidate cell of the bounding-box tree is tested by pull-back and the reference-cell inside test
+(for affine cells a matrix-vector product, 3-4 times cheaper than DOLFINx 0.5's GJK distance; for
+curved cells a Newton iteration). For curved (degree-2) cells DOLFINx 0.5 measures the distance to
+the cell's vertex simplex only, so it misses points in the part of a cell that bulges beyond its
+straight edges (near a convex curved boundary) and accepts points between a straight edge and a
+concave curved one (outside the domain); the bounding boxes are therefore padded by the cells'
+largest bulge (:attr:`CellGeometry.curvature_padding`).
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import basix
 import numpy as np
@@ -34,8 +35,10 @@ import numpy.typing as npt
 import dolfinx.geometry
 import dolfinx.mesh
 
-from fembase import kernels
+from fembase import location
+from fembase.adjacency import CellAdjacency, unique_pairs
 from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, coordinate_map, geometry_dofmap
+from fembase.location import Candidates, Located
 
 __all__ = ["Candidates", "CellGeometry", "Located", "OwnedLocation", "cell_geometry", "cell_nodes", "geometry_dofmap",
            "is_affine_simplex", "locate", "locate_owned", "owned_box", "pull_back", "push_forward", "unique_pairs"]
@@ -50,35 +53,12 @@ _BASIX_CELL = {
 _SIMPLICES = (dolfinx.mesh.CellType.interval, dolfinx.mesh.CellType.triangle, dolfinx.mesh.CellType.tetrahedron)
 
 
-class Located(NamedTuple):
-    """Result of a point search.
-
-    Attributes:
-        cells: Local cell containing each point (-1 if none on this rank), shape=(m,), int32.
-        xref: Reference coordinates in that cell (undefined where cells == -1), shape=(m, tdim).
-    """
-
-    cells: npt.NDArray[np.int32]
-    xref: npt.NDArray[np.float64]
-
-
-class Candidates(NamedTuple):
-    """Cells to search first, shared by groups of points (e.g. the cells of a new mesh refined from
-    the base cell each point's old cell descends from).
-
-    Attributes:
-        groups: The candidate group of each point, shape=(m,), int64 in [0, G).
-        offsets: Group ``g``'s cells are ``cells[offsets[g]:offsets[g + 1]]``, shape=(G + 1,), int64.
-        cells: Local cell indices, shape=(offsets[-1],), int32.
-    """
-
-    groups: npt.NDArray[np.int64]
-    offsets: npt.NDArray[np.int64]
-    cells: npt.NDArray[np.int32]
-
-
 class CellGeometry:
     """Geometry data of all local cells (owned + ghost) of a mesh, built once.
+
+    The cells' adjacency is a :class:`fembase.adjacency.CellAdjacency` (:attr:`adjacency`, its
+    arrays repeated here); the point searches are those of :mod:`fembase.location`, among the
+    candidates of this geometry's bounding-box tree.
 
     Args:
         mesh: A DOLFINx mesh with degree-1 or degree-2 Lagrange geometry.
@@ -92,6 +72,7 @@ class CellGeometry:
         J: Jacobian of each cell map, shape=(num_local_cells, gdim, tdim).
         K: (Pseudo-)inverse Jacobian, shape=(num_local_cells, tdim, gdim).
         centres: Vertex average of each cell, shape=(num_local_cells, gdim).
+        adjacency: The cells' adjacency through their vertices.
         v2c_offsets, v2c_cells: CSR vertex-to-cell adjacency over geometry nodes (int64 / int32).
     """
 
@@ -130,10 +111,10 @@ class CellGeometry:
         self.K = np.ascontiguousarray(np.linalg.inv(self.J) if self.gdim == self.tdim and self.num_local_cells
                                       else np.linalg.pinv(self.J))
         self.curvature_padding: float = self._curvature_padding()
-        self._build_adjacency()
+        self.adjacency = CellAdjacency(self.nodes[:, : self.num_vertices], self.coords.shape[0])
+        self.v2c_offsets, self.v2c_cells = self.adjacency.v2c_offsets, self.adjacency.v2c_cells
+        self.max_valence = self.adjacency.max_valence
         self._tree: Any | None = None
-        self._c2c: tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]] | None = None
-        self._facet_nbrs: npt.NDArray[np.int32] | None = None
 
     def _curvature_padding(self) -> float:
         """Largest distance of a geometry node from its position in the straight-sided (degree-1)
@@ -147,55 +128,15 @@ class CellGeometry:
         straight = np.einsum("nv,cvg->cng", phi, vertices)
         return float(np.linalg.norm(self.coords[self.nodes] - straight, axis=2).max())
 
-    def _build_adjacency(self) -> None:
-        nv = self.num_vertices
-        vnodes = self.nodes[:, :nv].reshape(-1)
-        owner = np.repeat(np.arange(self.num_local_cells, dtype=np.int32), nv)
-        order = np.argsort(vnodes, kind="stable")
-        self.v2c_cells = np.ascontiguousarray(owner[order])
-        counts = np.bincount(vnodes, minlength=self.coords.shape[0])
-        self.v2c_offsets = np.zeros(self.coords.shape[0] + 1, dtype=np.int64)
-        np.cumsum(counts, out=self.v2c_offsets[1:])
-        self.max_valence = int(counts.max()) if counts.size else 0
-
     @property
     def vertex_neighbours(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
-        """CSR ``(offsets, cells)`` of the cells sharing a vertex with each cell (itself excluded)."""
-        if self._c2c is None:
-            nv = self.num_vertices
-            vnodes = self.nodes[:, :nv].reshape(-1)
-            starts = self.v2c_offsets[vnodes]
-            lengths = self.v2c_offsets[vnodes + 1] - starts
-            seg = np.cumsum(lengths) - lengths
-            idx = np.repeat(starts - seg, lengths) + np.arange(int(lengths.sum()))
-            owner = np.repeat(np.repeat(np.arange(self.num_local_cells, dtype=np.int64), nv), lengths)
-            pairs = unique_pairs(np.stack([owner, self.v2c_cells[idx].astype(np.int64)], axis=1))
-            pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-            offsets = np.zeros(self.num_local_cells + 1, dtype=np.int64)
-            np.cumsum(np.bincount(pairs[:, 0], minlength=self.num_local_cells), out=offsets[1:])
-            self._c2c = (offsets, pairs[:, 1].astype(np.int32))
-        return self._c2c
+        """:attr:`fembase.adjacency.CellAdjacency.vertex_neighbours` of the local cells."""
+        return self.adjacency.vertex_neighbours
 
     @property
     def facet_neighbours(self) -> npt.NDArray[np.int32]:
-        """Local cell across the facet opposite each vertex of each cell (the facet that vertex's
-        barycentric coordinate measures), shape=(num_local_cells, num_vertices), int32; -1 on the
-        boundary of this rank's owned + ghost cells. Built on first use (simplices)."""
-        if self._facet_nbrs is None:
-            nv, nc = self.num_vertices, self.num_local_cells
-            verts = self.nodes[:, :nv].astype(np.int64)
-            faces = np.concatenate([np.sort(np.delete(verts, i, axis=1), axis=1) for i in range(nv)])
-            cell = np.tile(np.arange(nc, dtype=np.int64), nv)
-            local = np.repeat(np.arange(nv, dtype=np.int64), nc)
-            order = np.lexsort(faces.T[::-1])
-            f = faces[order]
-            same = np.flatnonzero(np.all(f[1:] == f[:-1], axis=1))
-            a, b = order[same], order[same + 1]
-            nbrs = np.full((nc, nv), -1, dtype=np.int32)
-            nbrs[cell[a], local[a]] = cell[b]
-            nbrs[cell[b], local[b]] = cell[a]
-            self._facet_nbrs = nbrs
-        return self._facet_nbrs
+        """:attr:`fembase.adjacency.CellAdjacency.facet_neighbours` of the local cells."""
+        return self.adjacency.facet_neighbours
 
     # ------------------------------------------------------------------ maps
     def jacobians(self, cells: npt.NDArray[np.int32], xref: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -283,35 +224,8 @@ class CellGeometry:
         Returns:
             :class:`Located` with cells (-1 where no local cell contains the point) and xref.
         """
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, self.gdim)
-        m = pts.shape[0]
-        cells = np.full(m, -1, dtype=np.int32)
-        xref = np.zeros((m, self.tdim), dtype=np.float64)
-        if self.affine and self.gdim == self.tdim and self.gdim in (2, 3) and m > 0:
-            # One compiled pass over the candidates (the vectorised path below costs ~5 numpy
-            # temporaries per candidate).
-            pts = np.ascontiguousarray(pts)
-            limit = self.num_owned_cells if owned_only else self.num_local_cells
-
-            def search(rows: slice | npt.NDArray[np.int64], among: Candidates) -> None:
-                found, found_xref = cells[rows], xref[rows]
-                kernels.locate_among_candidates(*among, pts[rows], self.origin, self.K, self.tol, limit,
-                                                found, found_xref)
-                cells[rows], xref[rows] = found, found_xref
-
-            self._first_then_tree(pts, candidates, search, lambda: cells < 0)
-            return Located(cells, xref)
-        offsets, links, X = self.colliding(pts, owned_only=owned_only)
-        hit = offsets[1:] > offsets[:-1]
-        if np.any(hit):
-            lowest = np.minimum.reduceat(links, offsets[:-1][hit])
-            # the row of each point's lowest cell: the first row whose cell is its point's lowest
-            rows = np.flatnonzero(links == np.repeat(lowest, np.diff(offsets)[hit]))
-            point_of = np.repeat(np.flatnonzero(hit), np.diff(offsets)[hit])[rows]
-            first = rows[np.r_[True, point_of[1:] != point_of[:-1]]]
-            cells[hit] = lowest
-            xref[hit] = X[first]
-        return Located(cells, xref)
+        return location.locate_points(self, points, self._tree_candidates, owned_only=owned_only,
+                                      candidates=candidates)
 
     def _tree_candidates(self, pts: npt.NDArray[np.float64]) -> Candidates:
         """The bounding-box tree's candidate cells of each point (one group per point)."""
@@ -320,20 +234,6 @@ class CellGeometry:
         found = compute_collisions(self.tree, p3)
         return Candidates(np.arange(pts.shape[0], dtype=np.int64), np.asarray(found.offsets, dtype=np.int64),
                           np.asarray(found.array, dtype=np.int32))
-
-    def _first_then_tree(self, pts: npt.NDArray[np.float64], candidates: Candidates | None,
-                         search: Callable[[slice | npt.NDArray[np.int64], Candidates], None],
-                         missed: Callable[[], npt.NDArray[np.bool_]]) -> None:
-        """Run ``search(rows, candidates)`` on every point with the given candidates, then on the
-        points ``missed()`` still flags with the tree's candidates (on all points without any)."""
-        rows: slice | npt.NDArray[np.int64] = slice(None)
-        if candidates is not None:
-            search(rows, Candidates(*(np.ascontiguousarray(a, dtype=t) for a, t in
-                                      zip(candidates, (np.int64, np.int64, np.int32)))))
-            rows = np.flatnonzero(missed())
-            if rows.size == 0:
-                return
-        search(rows, self._tree_candidates(np.ascontiguousarray(pts[rows])))
 
     def max_over_containing(self, points: npt.ArrayLike, values: npt.NDArray[np.int32], /, *, default: int = -1,
                             candidates: Candidates | None = None
@@ -352,30 +252,8 @@ class CellGeometry:
             ``(largest, hit, touches_ghost)``, each shape=(m,): the largest value (``default``
             where no local cell contains the point), whether one does, whether a ghost cell does.
         """
-        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, self.gdim))
-        m = pts.shape[0]
-        values = np.ascontiguousarray(values, dtype=np.int32)
-        largest = np.full(m, default, dtype=np.int32)
-        hit = np.zeros(m, dtype=np.bool_)
-        ghost = np.zeros(m, dtype=np.bool_)
-        if m == 0:
-            return largest, hit, ghost
-        if self.affine and self.gdim == self.tdim and self.gdim in (2, 3):
-            def search(rows: slice | npt.NDArray[np.int64], among: Candidates) -> None:
-                out = largest[rows], hit[rows], ghost[rows]
-                kernels.max_among_candidates(*among, pts[rows], self.origin, self.K, self.tol, values,
-                                             self.num_owned_cells, *out)
-                largest[rows], hit[rows], ghost[rows] = out
-
-            self._first_then_tree(pts, candidates, search, lambda: ~hit)
-            return largest, hit, ghost
-        offsets, cells, _ = self.colliding(pts)
-        hit = offsets[1:] > offsets[:-1]
-        if np.any(hit):
-            largest[hit] = np.maximum.reduceat(values[cells], offsets[:-1][hit])
-            is_ghost = (cells >= self.num_owned_cells).astype(np.int64)
-            ghost[hit] = np.add.reduceat(is_ghost, offsets[:-1][hit]) > 0
-        return largest, hit, ghost
+        return location.max_over_containing(self, points, values, self._tree_candidates, default=default,
+                                            candidates=candidates)
 
     def colliding(self, points: npt.ArrayLike, *, owned_only: bool = False
                   ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], npt.NDArray[np.float64]]:
@@ -390,47 +268,7 @@ class CellGeometry:
             ``cells[offsets[i]:offsets[i+1]]`` (in the tree's order), with the point's reference
             coordinates in each (``xref`` shape=(offsets[-1], tdim)).
         """
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, self.gdim)
-        m = pts.shape[0]
-        if m == 0:
-            return np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int32), np.zeros((0, self.tdim))
-        p3 = np.zeros((m, 3), dtype=np.float64)
-        p3[:, : self.gdim] = pts
-        candidates = compute_collisions(self.tree, p3)
-        offsets = np.asarray(candidates.offsets, dtype=np.int64)
-        links = np.asarray(candidates.array, dtype=np.int32)
-        if owned_only:
-            offsets, links = _restrict(offsets, links, links < self.num_owned_cells)
-        point_of = np.repeat(np.arange(m), np.diff(offsets))
-        X = self.pull_back(links, pts[point_of])
-        ok = self.inside(X)
-        new_offsets = np.zeros(m + 1, dtype=np.int64)
-        np.cumsum(np.bincount(point_of[ok], minlength=m), out=new_offsets[1:])
-        return new_offsets, links[ok], X[ok]
-
-
-def unique_pairs(pairs: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
-    """The distinct rows of an integer table ``pairs`` (shape=(n, 2)), sorted lexicographically:
-    ``np.unique(pairs, axis=0)`` by one packed int64 key per row (several times faster)."""
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    if pairs.shape[0] == 0:
-        return pairs.copy()
-    low = pairs.min(axis=0)
-    span = pairs.max(axis=0) - low + 1
-    if float(span[0]) * float(span[1]) >= 2.0**62:
-        return np.unique(pairs, axis=0)
-    keys = np.unique((pairs[:, 0] - low[0]) * span[1] + (pairs[:, 1] - low[1]))
-    return np.stack([keys // span[1] + low[0], keys % span[1] + low[1]], axis=1)
-
-
-def _restrict(offsets: npt.NDArray[np.int64], links: npt.NDArray[np.int32], keep: npt.NDArray[np.bool_]
-              ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
-    """The CSR adjacency ``(offsets, links)`` with only the links where ``keep`` is true."""
-    segment = np.repeat(np.arange(offsets.size - 1), np.diff(offsets))
-    counts = np.bincount(segment[keep], minlength=offsets.size - 1)
-    new_offsets = np.zeros_like(offsets)
-    np.cumsum(counts, out=new_offsets[1:])
-    return new_offsets, links[keep]
+        return location.containing_cells(self, points, owned_only=owned_only)
 
 
 def cell_geometry(mesh: dolfinx.mesh.Mesh, /, *, tol: float = 1e-12) -> CellGeometry:

@@ -52,24 +52,12 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase import dolfinx_compat as compat
-from fembase.distribute import MeshPiece, create_mesh_from_piece
-from fembase.dolfinx_compat import coordinate_element_from, coordinate_map, geometry_dofmap
+from fembase.curved_mesh import curve_mesh, straighten_mesh
+from fembase.dolfinx_compat import coordinate_map
+from fembase.entities import EDGES, boundary_entities
+from fembase.shell_map import ShellMap
 
 __all__ = ["EDGES", "ShellManifold", "boundary_entities", "boundary_radius_error"]
-
-EDGES: dict[int, tuple[tuple[int, int], ...]] = {
-    2: ((1, 2), (0, 2), (0, 1)),
-    3: ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1)),
-}
-"""The local vertices of each edge of a triangle / tetrahedron in the reference (basix) order, the
-order of the edge nodes of a second-order Lagrange cell."""
-
-_ZERO = 1e-13
-"""Barycentric coordinates below this count as 0 (points on a base cell's edge or vertex)."""
-
-_SLOTS = 3
-"""Curved entities a tetrahedron can have (a face on one sphere and none on the other, or up to
-three boundary edges on one sphere without their face, or an edge on each sphere)."""
 
 
 class ShellManifold:
@@ -96,362 +84,53 @@ class ShellManifold:
             raise ValueError(f"interface radii must lie strictly between {r_inner} and {r_outer}, got {interfaces}")
         self.r_inner, self.r_outer, self.gdim = float(r_inner), float(r_outer), gdim
         self.interfaces = tuple(float(r) for r in interfaces)
-        self._geometry = None
-        self._bubbles: npt.NDArray[np.float64] | None = None
-        self._radius: npt.NDArray[np.float64] | None = None
-        self._masks: npt.NDArray[np.float64] | None = None  # 3D: (cells, _SLOTS, 4) vertices of each entity
+        self._map: ShellMap | None = None
 
     @property
     def fitted(self) -> bool:
         """Whether :meth:`fit` has given the manifold its base mesh."""
-        return self._geometry is not None
+        return self._map is not None
 
     def fit(self, base: dolfinx.mesh.Mesh, /) -> None:
-        """Take the straight base mesh the points lie in (not collective; again after the base is
-        repartitioned): per local base cell and edge, the bubble ``d_e`` of a boundary edge (0 for
-        interior edges) and the radius of its circle."""
-        from fembase.geometry import CellGeometry
-
+        """Take the straight base mesh the points lie in (collective; again after the base is
+        repartitioned): per local base cell its vertices in a canonical order, the inverse of its
+        affine map and its curved entities (:meth:`fembase.shell_map.ShellMap.fit`)."""
         if coordinate_map(base).degree != 1:
             raise ValueError("the manifold is fitted to a straight-sided (P1) base mesh")
-        tdim, gdim = base.topology.dim, self.gdim
-        base.topology.create_entities(1)
-        base.topology.create_connectivity(tdim - 1, tdim)
-        base.topology.create_connectivity(tdim, 1)
-        geometry = CellGeometry(base)
-        n = geometry.num_local_cells
-        boundary = boundary_entities(base, 1)
-        c2e = np.asarray(base.topology.connectivity(tdim, 1).array, dtype=np.int32).reshape(-1, len(EDGES[tdim]))[:n]
-        # Each cell's vertices in a canonical order (by coordinates), so the barycentric coordinates
-        # of a point do not depend on the order a mesh lists them in (ranks may list them otherwise).
-        x = geometry.coords[geometry.nodes[:, : tdim + 1]]  # shape=(n, tdim + 1, gdim)
-        order = np.lexsort(x.transpose(2, 0, 1)[::-1], axis=-1)
-        x = np.take_along_axis(x, order[:, :, None], axis=1)
-        c2e = self._sorted_edges(c2e, order, tdim)
-        self._origin = np.ascontiguousarray(x[:, 0])
-        self._vertices = np.ascontiguousarray(x)
-        self._order = order  # sorted vertex j of cell c is the mesh's local vertex order[c, j]
-        self._inverse = np.linalg.inv(np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))) if n else np.zeros((0, gdim, gdim))
-        radii = np.linalg.norm(x, axis=2)  # shape=(n, tdim + 1)
-        targets = (self.r_inner, self.r_outer, *self.interfaces)
-        on_sphere = {t: np.abs(radii - t) < 1e-8 * t for t in targets}
-        interface = {t: t in self.interfaces for t in targets}  # interior surfaces: any edge/face on them
-        if tdim == 3:
-            self._geometry = geometry
-            self._fit_faces(base, n, c2e, order, boundary, on_sphere, interface)
-            return
-        bubbles = np.zeros((n, len(EDGES[tdim]), gdim))
-        radius = np.zeros((n, len(EDGES[tdim])))
-        for j, (a, b) in enumerate(EDGES[tdim]):
-            m = 0.5 * (x[:, a] + x[:, b])
-            r = np.linalg.norm(m, axis=1)
-            for target in targets:
-                on = (interface[target] | boundary[c2e[:, j]]) & on_sphere[target][:, a] & on_sphere[target][:, b]
-                bubbles[on, j] = m[on] * (target / r[on] - 1.0)[:, None]
-                radius[on, j] = target
-        self._geometry, self._bubbles, self._radius = geometry, bubbles, radius
+        self._map = ShellMap.fit(base, self.r_inner, self.r_outer, self.interfaces)
 
-    @staticmethod
-    def _sorted_edges(c2e: npt.NDArray[np.int32], order: npt.NDArray[np.int64], tdim: int) -> npt.NDArray[np.int32]:
-        """The cell-edge connectivity for the cells' vertices taken in ``order`` (edge j of the
-        sorted cell joins sorted vertices EDGES[tdim][j])."""
-        index = np.full((tdim + 1, tdim + 1), -1, dtype=np.int64)
-        for j, (a, b) in enumerate(EDGES[tdim]):
-            index[a, b] = index[b, a] = j
-        rows = np.arange(c2e.shape[0])
-        out = np.empty_like(c2e)
-        for j, (a, b) in enumerate(EDGES[tdim]):
-            out[:, j] = c2e[rows, index[order[:, a], order[:, b]]]
-        return out
-
-    def _fit_faces(self, base: dolfinx.mesh.Mesh, n: int, c2e: npt.NDArray[np.int32], order: npt.NDArray[np.int64],
-                   boundary_edge: npt.NDArray[np.bool_], on_sphere: dict[float, npt.NDArray[np.bool_]],
-                   interface: dict[float, bool]) -> None:
-        """3D: per cell the curved entities (a boundary or interface face on a sphere, else its
-        boundary or interface edges on that sphere) as vertex masks (sorted order) and radii."""
-        base.topology.create_connectivity(3, 2)
-        c2f = np.asarray(base.topology.connectivity(3, 2).array, dtype=np.int32).reshape(-1, 4)[:n]
-        c2f = np.take_along_axis(c2f, order, axis=1)  # face j is opposite vertex j, also after sorting
-        boundary_face = boundary_entities(base, 2)
-        masks = np.zeros((n, _SLOTS, 4))
-        radius = np.zeros((n, _SLOTS))
-        used = np.zeros(n, dtype=np.int64)
-
-        def add(cells: npt.NDArray[np.int64], vertices: tuple[int, ...], target: float) -> None:
-            slot = used[cells]
-            if np.any(slot >= _SLOTS):
-                raise ValueError("a base cell touches the shell's boundary in too many entities to be curved")
-            masks[cells, slot] = 0.0
-            for v in vertices:
-                masks[cells, slot, v] = 1.0
-            radius[cells, slot] = target
-            used[cells] += 1
-
-        for target, on in on_sphere.items():
-            if np.any(on.all(axis=1)):
-                raise ValueError(f"{int(on.all(axis=1).sum())} base cell(s) have all four vertices on the sphere "
-                                 f"r = {target:g}: the manifold cannot curve them (remesh the base)")
-            face_on = np.zeros(n, dtype=bool)
-            for j in range(4):  # face j: the vertices other than j
-                others = [v for v in range(4) if v != j]
-                cells = np.flatnonzero((interface[target] | boundary_face[c2f[:, j]]) & on[:, others].all(axis=1))
-                face_on[cells] = True
-                add(cells, tuple(others), target)
-            for j, (a, b) in enumerate(EDGES[3]):
-                cells = np.flatnonzero(~face_on & (interface[target] | boundary_edge[c2e[:, j]]) & on[:, a] & on[:, b])
-                add(cells, (a, b), target)
-        self._masks, self._radius = masks, radius
-
-    def _displacement(self, x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """``Phi(x) - x`` before the radial step, and the radius of the circle each point lies on
-        (0: none), for points of the base, x shape=(n, gdim)."""
-        if self._geometry is None:
+    def _fitted_map(self) -> ShellMap:
+        """The map :meth:`fit` made."""
+        if self._map is None:
             raise RuntimeError("ShellManifold.fit(base) first")
-        found = self._geometry.locate(x)
-        if np.any(found.cells < 0):
-            raise ValueError(f"{int(np.sum(found.cells < 0))} points lie outside this rank's base cells")
-        return self._displacement_in(found.cells, x)
-
-    def _barycentric(self, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Barycentric coordinates (sorted vertex order) of points x in the straight base cells
-        ``cells`` (also of points outside them), shape=(n, tdim + 1)."""
-        xref = np.einsum("mtg,mg->mt", self._inverse[cells], x - self._origin[cells])
-        return np.concatenate([1.0 - xref.sum(axis=1, keepdims=True), xref], axis=1)
-
-    def _displacement_in(self, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64]
-                         ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """:meth:`_displacement` through the map of the given base cells (shape=(n,)); the formula
-        extends smoothly beyond a cell, which the inverse uses."""
-        lam = self._barycentric(cells, x)
-        lam[np.abs(lam) < _ZERO] = 0.0
-        displacement = np.zeros_like(x)
-        on_circle = np.zeros(x.shape[0])
-        if self.gdim == 3:
-            vertices = self._vertices[cells]  # shape=(m, 4, 3), sorted order
-            for k in range(_SLOTS):
-                radius = self._radius[cells, k]
-                on = radius > 0.0
-                if not np.any(on):
-                    continue
-                weights = lam[on] * self._masks[cells[on], k]  # shape=(m_on, 4)
-                s = weights.sum(axis=1)
-                inside = s > 0.0
-                rows = np.flatnonzero(on)[inside]
-                xe = np.einsum("mv,mvg->mg", weights[inside], vertices[rows]) / s[inside, None]
-                projected = xe * (radius[rows] / np.linalg.norm(xe, axis=1))[:, None]
-                displacement[rows] += (s[inside] ** 2)[:, None] * (projected - xe)
-            return displacement, on_circle
-        for j, (a, b) in enumerate(EDGES[2]):
-            displacement += (4.0 * lam[:, a] * lam[:, b])[:, None] * self._bubbles[cells, j]
-            radius = self._radius[cells, j]
-            on = (radius > 0.0) & (lam[:, j] == 0.0)  # edge j is opposite vertex j
-            on_circle[on] = radius[on]
-        return displacement, on_circle
+        return self._map
 
     def curved_points(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
         """``Phi(x)``: points of this rank's base cells mapped onto the annulus, x shape=(n, gdim)."""
         x = np.ascontiguousarray(np.asarray(x, dtype=np.float64)[:, : self.gdim])
-        displacement, on_circle = self._displacement(x)
-        y = x + displacement
-        on = on_circle > 0.0
-        y[on] *= (on_circle[on] / np.linalg.norm(y[on], axis=1))[:, None]
-        return y
+        return self._fitted_map().curved_points(x)
 
     def straight_points(self, y: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
         """``Phi^-1(y)``, y shape=(n, gdim) (not collective).
 
-        Each point starts in the base cell holding it (else the nearest, :meth:`_start_cells`), iterates ``x = y - d_K(x)``
-        through that cell's map ``d_K`` (extended beyond the cell: a contraction, ``d_K`` has
-        derivative ``O(h_base / r)``) until its step is at round-off, and moves to the cell across
-        the facet where the result left its cell (up to 4 times). In 2D the radial step is not
-        undone (``O(h_base^4)``)."""
-        if self._geometry is None:
-            raise RuntimeError("ShellManifold.fit(base) first")
-        y = np.ascontiguousarray(np.asarray(y, dtype=np.float64)[:, : self.gdim])
-        cells = self._start_cells(y)
-        neighbours = self._geometry.facet_neighbours
-        x = y.copy()
-        todo = np.arange(y.shape[0])
-        for _ in range(5):
-            if todo.size == 0:
-                break
-            x[todo] = self._fixed_point(cells[todo], y[todo], x[todo])
-            lam = self._barycentric(cells[todo], x[todo])
-            worst = np.argmin(lam, axis=1)
-            outside = lam[np.arange(todo.size), worst] < -1e-10
-            rows, j = todo[outside], worst[outside]
-            nxt = neighbours[cells[rows], self._order[cells[rows], j]]  # across the facet opposite vertex j
-            moves = nxt >= 0
-            cells[rows[moves]] = nxt[moves]
-            todo = rows[moves]
-        return x
-
-    def _fixed_point(self, cells: npt.NDArray[np.int32], y: npt.NDArray[np.float64], x: npt.NDArray[np.float64]
-                     ) -> npt.NDArray[np.float64]:
-        """Solve ``x + d_K(x) = y`` in fixed cells by iteration; each point until its own step is at round-off."""
-        x = x.copy()
-        active = np.arange(y.shape[0])
-        for _ in range(60):
-            if active.size == 0:
-                break
-            new = y[active] - self._displacement_in(cells[active], x[active])[0]
-            moving = np.abs(new - x[active]).max(axis=1) > 1e-15 * self.r_outer
-            x[active] = new
-            active = active[moving]
-        return x
-
-    def _start_cells(self, y: npt.NDArray[np.float64]) -> npt.NDArray[np.int32]:
-        """A local base cell near each point: the one holding it, else the one with the nearest
-        centre (a point between a flat boundary face and its sphere, or moved by ``Phi`` across a
-        base facet into a cell this rank does not hold), shape=(n,)."""
-        cells = self._geometry.locate(y).cells.copy()
-        missing = np.flatnonzero(cells < 0)
-        centres = self._geometry.centres
-        if missing.size and centres.shape[0] == 0:
-            raise ValueError(f"{missing.size} points, and no base cell on this rank")
-        for chunk in np.array_split(missing, max(1, missing.size // 256)):
-            if chunk.size:
-                distance = np.linalg.norm(y[chunk, None, :] - centres[None, :, :], axis=2)
-                cells[chunk] = np.argmin(distance, axis=1)
-        return cells
+        Each point starts in the base cell holding it (else the one with the nearest centre),
+        iterates ``x = y - d_K(x)`` through that cell's map ``d_K`` (extended beyond the cell: a
+        contraction, ``d_K`` has derivative ``O(h_base / r)``) until its step is at round-off, and
+        moves to the cell across the facet where the result left its cell (up to 4 times). In 2D the
+        radial step is not undone (``O(h_base^4)``)."""
+        phi = self._fitted_map()
+        return phi.straight_points(np.ascontiguousarray(np.asarray(y, dtype=np.float64)[:, : self.gdim]))
 
     def curve(self, straight: dolfinx.mesh.Mesh, /, *, degree: int = 2) -> dolfinx.mesh.Mesh:
         """The curved mesh of a straight-sided (P1) simplex mesh: the same cells on the same ranks,
-        geometry of ``degree`` (1 or 2) with every node at ``Phi`` of the straight node (collective).
-
-        The new mesh's nodes are numbered rank by rank: each rank's owned straight vertices, then
-        its owned edges (a node per edge midpoint), so the result depends on the straight mesh only.
-        """
-        if coordinate_map(straight).degree != 1:
-            raise ValueError("curve() takes a straight-sided (P1) mesh")
-        comm = straight.comm
-        tdim, gdim = straight.topology.dim, straight.geometry.dim
-        num_owned = straight.topology.index_map(tdim).size_local
-        dofs = geometry_dofmap(straight)[:num_owned]
-        node_map = straight.geometry.index_map()
-        x = straight.geometry.x
-        vertex_global = np.asarray(node_map.local_to_global(np.ascontiguousarray(dofs.reshape(-1), dtype=np.int32)),
-                                   dtype=np.int64).reshape(num_owned, -1)
-        owned_nodes = node_map.size_local
-        starts = np.concatenate([[0], np.cumsum(comm.allgather(owned_nodes))]).astype(np.int64)
-        total_nodes = int(starts[-1])
-        own_x = [x[:owned_nodes, :gdim]]
-        cells = [vertex_global]
-        if degree == 2:
-            straight.topology.create_entities(1)
-            straight.topology.create_connectivity(tdim, 1)
-            c2e = straight.topology.connectivity(tdim, 1)
-            edge_map = straight.topology.index_map(1)
-            width = len(EDGES[tdim])
-            local_edges = np.asarray(c2e.array, dtype=np.int32).reshape(-1, width)[:num_owned]
-            # DOLFINx's cell-edge connectivity is in the reference order of the edges (the same as
-            # EDGES), which the check below confirms through the vertices.
-            edge_global = np.asarray(edge_map.local_to_global(np.ascontiguousarray(local_edges.reshape(-1))),
-                                     dtype=np.int64).reshape(num_owned, width) + total_nodes
-            cells.append(edge_global)
-            owned_edges = edge_map.size_local
-            # The straight midpoint of each owned edge, from the cell that lists it first.
-            midpoint = np.full((owned_edges, gdim), np.nan)
-            for j, (a, b) in enumerate(EDGES[tdim]):
-                e = local_edges[:, j]
-                mine = e < owned_edges
-                midpoint[e[mine]] = 0.5 * (x[dofs[mine, a], :gdim] + x[dofs[mine, b], :gdim])
-            # Owned edges of no owned cell (their owner holds only ghost cells around them): their
-            # midpoints from the edge-vertex connectivity.
-            missing = np.flatnonzero(np.isnan(midpoint[:, 0]))
-            if missing.size:
-                straight.topology.create_connectivity(1, 0)
-                e2v = straight.topology.connectivity(1, 0)
-                verts = np.asarray(e2v.array, dtype=np.int32).reshape(-1, 2)[missing]
-                geo = compat.entities_to_geometry(straight, 0, verts.reshape(-1)).reshape(-1, 2)
-                midpoint[missing] = 0.5 * (x[geo[:, 0], :gdim] + x[geo[:, 1], :gdim])
-            own_x.append(midpoint)
-            self._check_edges(straight, dofs, local_edges)
-        # The global node numbering is vertices block by block, then edges: rank r's piece holds its
-        # owned vertices and its owned edges, which is not one contiguous block of that numbering,
-        # so the cells are renumbered to the pieces' concatenation order.
-        edge_starts = (np.concatenate([[0], np.cumsum(comm.allgather(own_x[1].shape[0]))]).astype(np.int64)
-                       if degree == 2 else None)
-        piece_starts = starts + (edge_starts if edge_starts is not None else 0)
-
-        def renumber_vertices(g: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
-            rank = np.searchsorted(starts, g, side="right") - 1
-            return g - starts[rank] + piece_starts[rank]
-
-        renumbered = [renumber_vertices(vertex_global)]
-        if degree == 2:
-            g = edge_global - total_nodes
-            rank = np.searchsorted(edge_starts, g, side="right") - 1
-            renumbered.append(g - edge_starts[rank] + piece_starts[rank] + (starts[rank + 1] - starts[rank]))
-        node_x = np.concatenate(own_x)
-        curved_x = self.curved_points(node_x)
-        piece = MeshPiece(np.concatenate(renumbered, axis=1), curved_x, np.full(num_owned, comm.rank, dtype=np.int32))
-        domain = compat.mesh_domain(coordinate_element_from((straight.topology.cell_name(), degree, gdim)))
-        return create_mesh_from_piece(comm, piece, domain).mesh
-
-    @staticmethod
-    def _check_edges(mesh: dolfinx.mesh.Mesh, dofs: npt.NDArray[np.int32], local_edges: npt.NDArray[np.int32]) -> None:
-        """Raise if DOLFINx's cell-edge connectivity is not in the reference order of :data:`EDGES`."""
-        tdim = mesh.topology.dim
-        mesh.topology.create_connectivity(1, 0)
-        e2v = np.asarray(mesh.topology.connectivity(1, 0).array, dtype=np.int32).reshape(-1, 2)
-        mesh.topology.create_connectivity(tdim, 0)
-        c2v = np.asarray(mesh.topology.connectivity(tdim, 0).array, dtype=np.int32).reshape(-1, tdim + 1)
-        for j, (a, b) in enumerate(EDGES[tdim]):
-            expected = np.sort(c2v[: dofs.shape[0]][:, [a, b]], axis=1)
-            if not np.array_equal(np.sort(e2v[local_edges[:, j]], axis=1), expected):
-                raise RuntimeError("the cell-edge connectivity is not in the reference edge order")
+        geometry of ``degree`` (1 or 2) with every node at ``Phi`` of the straight node (collective;
+        :func:`fembase.curved_mesh.curve_mesh`)."""
+        return curve_mesh(straight, self.curved_points, degree=degree)
 
     def straighten(self, curved: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.Mesh:
         """The straight-sided (P1) mesh of a curved one: its vertices mapped back by ``Phi^-1``,
         the same cells on the same ranks (collective)."""
-        comm = curved.comm
-        tdim, gdim = curved.topology.dim, curved.geometry.dim
-        num_owned = curved.topology.index_map(tdim).size_local
-        dofs = geometry_dofmap(curved)[:num_owned, : tdim + 1]
-        node_map = curved.geometry.index_map()
-        glob = np.asarray(node_map.local_to_global(np.ascontiguousarray(dofs.reshape(-1), dtype=np.int32)),
-                          dtype=np.int64).reshape(num_owned, -1)
-        x = self.straight_points(curved.geometry.x[: node_map.size_local, :gdim])
-        piece = MeshPiece(glob, x, np.full(num_owned, comm.rank, dtype=np.int32))
-        domain = compat.mesh_domain(coordinate_element_from((curved.topology.cell_name(), 1, gdim)))
-        return create_mesh_from_piece(comm, piece, domain).mesh
-
-
-def boundary_entities(mesh: dolfinx.mesh.Mesh, dim: int, /) -> npt.NDArray[np.bool_]:
-    """Whether each local (owned and ghost) entity of dimension ``dim`` (edges, or faces in 3D)
-    lies on the domain's boundary, shape=(num_local_entities,) (collective).
-
-    ``locate_entities_boundary`` sees the boundary facets a rank owns: a ghost cell's boundary face
-    owned by another rank, and its edges, are missed. Each rank marks what it found in a Lagrange
-    function of degree ``dim + 1`` (one degree of freedom inside each entity of dimension ``dim``),
-    the marks are summed onto the owners and sent back to every rank holding the entity.
-    """
-    tdim = mesh.topology.dim
-    mesh.topology.create_entities(dim)
-    mesh.topology.create_connectivity(tdim, dim)
-    mesh.topology.create_connectivity(tdim - 1, tdim)
-    imap = mesh.topology.index_map(dim)
-    num_entities = imap.size_local + imap.num_ghosts
-    V = compat.function_space(mesh, "Lagrange", dim + 1)
-    cells = compat.cell_dofmap(V)
-    per_cell = len(EDGES[tdim]) if dim == 1 else tdim + 1
-    c2e = np.asarray(mesh.topology.connectivity(tdim, dim).array, dtype=np.int64).reshape(-1, per_cell)
-    # Local dof layout of P(dim+1): the vertices' dofs, then dim (edges: 1 each; P3 on a tetrahedron
-    # has 2 per edge, then 1 per face), entities in the reference order of c2e.
-    first = tdim + 1 if dim == 1 else (tdim + 1) + 2 * len(EDGES[tdim])
-    entity_dof = np.full(num_entities, -1, dtype=np.int64)
-    local = cells[:, first:first + per_cell]
-    entity_dof[c2e[: cells.shape[0]].reshape(-1)] = local.reshape(-1)
-    if not np.array_equal(entity_dof[c2e[: cells.shape[0]]], local):
-        raise RuntimeError(f"the P{dim + 1} dofs are not one per entity of dimension {dim} in the reference order")
-    marker = dolfinx.fem.Function(V)
-    marker.x.array[:] = 0.0
-    found = dolfinx.mesh.locate_entities_boundary(mesh, dim, lambda x: np.full(x.shape[1], True))
-    marker.x.array[entity_dof[found]] = 1.0
-    marker.x.scatter_reverse(compat.SCATTER_ADD)
-    marker.x.scatter_forward()
-    return marker.x.array[entity_dof] > 0.5
+        return straighten_mesh(curved, self.straight_points)
 
 
 def boundary_radius_error(mesh: dolfinx.mesh.Mesh, r_inner: float, r_outer: float, /) -> float:

@@ -42,10 +42,11 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
-from fembase.evaluation import Evaluator
+from fembase.registry import Registry
+from particles._stages import IntegratedState, StagePlan
+from particles._velocity import EvaluatorCache, LinearVelocity
 from particles.kernels import stage_combination
 from particles.migration import migrate
-from fembase.registry import Registry
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
 
@@ -145,13 +146,52 @@ class AdvectionStats:
     communication_seconds: float
 
 
-class _Timer:
-    def __init__(self) -> None:
+class _StepRecord:
+    """Moves the particles after a stage and keeps what one step did (counts and seconds).
+
+    Args:
+        swarm: The particles.
+        confine: Moves positions that left the domain back inside (in place), or None.
+    """
+
+    def __init__(self, swarm: Swarm, confine: Callable[[npt.NDArray[np.float64]], None] | None, /) -> None:
+        self.swarm = swarm
+        self.confine = confine
         self.evaluation = self.relocation = self.communication = 0.0
+        self.transport = TransportStats(0, 0, 0, 0)
+        self.moved = [0, 0, 0, 0]  # sent, received, lost, global lost
+
+    def move(self, *, last: bool) -> None:
+        """Confine (if set), relocate after positions changed and migrate.
+
+        Only the move after the last stage sorts: the stages in between need each particle's cell
+        and reference position, not the cell order, so particles that arrived stay appended and
+        departed ones stay marked (the kernels skip them) until that one sort places and drops
+        them all."""
+        t0 = time.perf_counter()
+        if self.confine is not None:
+            self.confine(self.swarm.x)
+        stats = relocate(self.swarm, sort=False)
+        t1 = time.perf_counter()
+        mig = _migrate(self.swarm)
+        t2 = time.perf_counter()
+        if last:
+            self.swarm.sort()
+        self.relocation += (t1 - t0) + (time.perf_counter() - t2)
+        self.communication += t2 - t1
+        for idx, value in enumerate(mig):
+            self.moved[idx] += value
+        self.transport = self.transport + stats
+
+    def stats(self) -> AdvectionStats:
+        return AdvectionStats(self.transport, *self.moved, self.evaluation, self.relocation, self.communication)
 
 
 class Advector:
     """Advance the particles of a swarm with an explicit Runge-Kutta method (collective).
+
+    The velocity between two Functions is evaluated by :class:`particles._velocity.LinearVelocity`;
+    which slopes are stored, and the integrated state, are :mod:`particles._stages`.
 
     Args:
         swarm: The particles (sorted, all in owned cells).
@@ -174,15 +214,7 @@ class Advector:
         names = [ode.name for ode in self.odes]
         if len(set(names)) != len(names):
             raise ValueError(f"ODE properties must be distinct, got {names}")
-        self._evaluators: dict[int, Evaluator] = {}
-        self._blends: dict[int, dolfinx.fem.Function] = {}
-
-    def _evaluator(self, V: dolfinx.fem.FunctionSpace) -> Evaluator:
-        ev = self._evaluators.get(id(V))
-        if ev is None or ev.V is not V:
-            ev = Evaluator(V, geometry=self.swarm.geometry)
-            self._evaluators[id(V)] = ev
-        return ev
+        self._cache = EvaluatorCache()
 
     def step(self, u_old: dolfinx.fem.Function, u_new: dolfinx.fem.Function, dt: float) -> AdvectionStats:
         """Advance all particles by ``dt`` in the velocity linear in time from ``u_old`` to ``u_new``.
@@ -192,57 +224,8 @@ class Advector:
             u_new: Velocity at the end of the step (may be ``u_old`` for a steady field).
             dt: Time step.
         """
-        ev_old = self._evaluator(u_old.function_space)
-        ev_new = ev_old if u_new.function_space is u_old.function_space else self._evaluator(u_new.function_space)
-        if ev_old.value_size != self.swarm.gdim or ev_new.value_size != self.swarm.gdim:
-            raise ValueError("the velocity must have gdim components")
-
-        def at(c: float) -> tuple[Evaluator, dolfinx.fem.Function] | None:
-            """The velocity at stage node c as one Function (None: blend two evaluations)."""
-            if c == 0.0 or u_new is u_old:
-                return ev_old, u_old
-            if c == 1.0:
-                return ev_new, u_new
-            if ev_new is not ev_old:
-                return None
-            # u is linear in its coefficients: interpolating the coefficients in time gives the
-            # same field as blending two evaluations (up to round-off), at the cost of one.
-            if c not in blended:
-                w = self._blend_function(u_old.function_space)
-                np.multiply(u_old.x.array, 1.0 - c, out=w.x.array)
-                w.x.array[:] += c * u_new.x.array
-                blended[c] = w
-            return ev_old, blended[c]
-
-        blended: dict[float, dolfinx.fem.Function] = {}
-
-        def blend(c: float, kind: str) -> npt.NDArray[np.float64]:
-            s = self.swarm
-            one = at(c)
-            if one is not None:
-                return getattr(one[0], kind)(one[1], s.cells, s.xref)
-            return ((1.0 - c) * getattr(ev_old, kind)(u_old, s.cells, s.xref)
-                    + c * getattr(ev_new, kind)(u_new, s.cells, s.xref))
-
-        def push(c: float, alpha: float) -> None:
-            """x += alpha u(c) at the current cells/xref, fused into the evaluation kernel."""
-            s = self.swarm
-            one = at(c)
-            if one is not None:
-                one[0].values(one[1], s.cells, s.xref, out=s.x, alpha=alpha, beta=1.0)
-            else:
-                ev_old.values(u_old, s.cells, s.xref, out=s.x, alpha=alpha * (1.0 - c), beta=1.0)
-                ev_new.values(u_new, s.cells, s.xref, out=s.x, alpha=alpha * c, beta=1.0)
-
-        return self._advance(lambda c: blend(c, "values"), lambda c: blend(c, "gradients"), dt, push=push)
-
-    def _blend_function(self, V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.Function:
-        """A scratch Function in ``V`` for time-interpolated velocity coefficients (kept)."""
-        w = self._blends.get(id(V))
-        if w is None or w.function_space is not V:
-            w = dolfinx.fem.Function(V)
-            self._blends[id(V)] = w
-        return w
+        velocity = LinearVelocity(self._cache, self.swarm, u_old, u_new)
+        return self._advance(velocity.values, velocity.gradients, dt, push=velocity.push)
 
     def step_callable(
         self,
@@ -272,52 +255,6 @@ class Advector:
 
         return self._advance(lambda c: np.asarray(velocity(self.swarm.x, t + c * dt), dtype=np.float64), gradient, dt)
 
-    def _state(self) -> npt.NDArray[np.float64]:
-        """The integrated state [x, y_1, y_2, ...], shape=(n, gdim + sum of ODE sizes)."""
-        swarm = self.swarm
-        if not self.odes:
-            return swarm.x.copy()
-        return np.concatenate([swarm.x] + [swarm.property(ode.name) for ode in self.odes], axis=1)
-
-    def _set_state(self, state: npt.NDArray[np.float64]) -> None:
-        swarm = self.swarm
-        gdim = swarm.gdim
-        swarm.x[:] = state[:, :gdim]
-        col = gdim
-        for ode in self.odes:
-            lay = swarm.layout(ode.name)
-            swarm.properties[:, lay.columns] = state[:, col : col + lay.size]
-            col += lay.size
-
-    def _slope(
-        self,
-        velocity: Callable[[float], npt.NDArray[np.float64]],
-        gradient: Callable[[float], npt.NDArray[np.float64]],
-        c: float,
-    ) -> npt.NDArray[np.float64]:
-        """d/dt of the state at the current (stage) positions, shape=(n, width)."""
-        k = velocity(c)
-        if not self.odes:
-            return k
-        swarm = self.swarm
-        grad_u = gradient(c)
-        parts = [k]
-        for ode in self.odes:
-            y = swarm.property(ode.name)
-            dy = np.asarray(ode.rhs(swarm, c, y.copy(), grad_u), dtype=np.float64)
-            parts.append(dy.reshape(y.shape))
-        return np.concatenate(parts, axis=1)
-
-    def _stored_slopes(self, fused: bool) -> tuple[int, ...]:
-        """Stages ``j < s - 1`` whose slope is kept in the stage table. With the fused push, a slope
-        needed only for the next stage position is pushed into ``x`` directly instead."""
-        tab = self.tableau
-        s = tab.stages
-        if not fused:
-            return tuple(range(s - 1))
-        return tuple(j for j in range(s - 1)
-                     if tab.b[j] != 0.0 or any(tab.a[m][j] != 0.0 for m in range(j + 2, s)))
-
     def _advance(
         self,
         velocity: Callable[[float], npt.NDArray[np.float64]],
@@ -335,103 +272,53 @@ class Advector:
         from step to step."""
         swarm, tab = self.swarm, self.tableau
         s = tab.stages
-        w = swarm.gdim + sum(swarm.layout(ode.name).size for ode in self.odes)
+        state = IntegratedState(swarm, self.odes)
+        w = state.width
         fused = push is not None and not self.odes
-        stored = self._stored_slopes(fused)
-        block = {j: 1 + q for q, j in enumerate(stored)}
-        timer = _Timer()
-        transport = TransportStats(0, 0, 0, 0)
-        moved = [0, 0, 0, 0]
+        plan = StagePlan.of(tab, fused)
+        record = _StepRecord(swarm, self.confine)
         if s > 1:
-            table = swarm.stage_table(w * (1 + len(stored)))
-            table[:, : swarm.gdim] = swarm.x
-            col = swarm.gdim
-            for ode in self.odes:
-                lay = swarm.layout(ode.name)
-                table[:, col : col + lay.size] = swarm.properties[:, lay.columns]
-                col += lay.size
+            state.save_start(swarm.stage_table(w * (1 + len(plan.stored))))
         try:
             pushed = False  # x already holds the next stage position (set by a fused push)
             for i in range(s):
                 if i > 0:
                     if not pushed:
                         t0 = time.perf_counter()
-                        self._combine(tab.a[i], stored, block, dt, w, upto=i)
-                        timer.evaluation += time.perf_counter() - t0
+                        state.combine(plan.combination(tab.a[i], dt, upto=i))
+                        record.evaluation += time.perf_counter() - t0
                     # (with ODEs or a callable velocity every stage sorts, so user callbacks never
                     # see discarded rows)
-                    transport = transport + self._move(timer, moved, last=not fused)
+                    record.move(last=not fused)
                 pushed = False
                 t0 = time.perf_counter()
-                if fused and (i == s - 1 or i not in block):
+                if fused and (i == s - 1 or i not in plan.block):
                     assert push is not None
                     # x = x0 + dt sum_j coef_j k_j over the stored slopes, then x += dt coef_i k_i
                     # from the current cells/xref (still those of stage i)
                     coef = tab.b if i == s - 1 else tab.a[i + 1]
                     if i > 0:  # (at stage 0, x is the start state already)
-                        self._combine(coef, stored, block, dt, w, upto=i)
+                        state.combine(plan.combination(coef, dt, upto=i))
                     push(tab.c[i], dt * coef[i])
                     pushed = i < s - 1
-                    timer.evaluation += time.perf_counter() - t0
+                    record.evaluation += time.perf_counter() - t0
                     continue
-                k = self._slope(velocity, gradient, tab.c[i])
+                k = state.slope(velocity, gradient, tab.c[i])
                 if i < s - 1:
-                    swarm.stage[:, w * block[i] : w * (block[i] + 1)] = k
+                    swarm.stage[:, w * plan.block[i] : w * (plan.block[i] + 1)] = k
                 else:
                     if s == 1:
-                        y = self._state() + (dt * tab.b[0]) * k
+                        y = state.current() + (dt * tab.b[0]) * k
                     else:
                         y = np.empty((swarm.num_particles, w))
-                        stage_combination(swarm.stage, 0, w, self._coefficients(tab.b, stored, dt, i), y)
+                        stage_combination(swarm.stage, 0, w, plan.coefficients(tab.b, dt, i), y)
                         y += (dt * tab.b[i]) * k
-                    self._set_state(y)
-                timer.evaluation += time.perf_counter() - t0
-            transport = transport + self._move(timer, moved, last=True)
+                    state.set(y)
+                record.evaluation += time.perf_counter() - t0
+            record.move(last=True)
         finally:
             swarm.release_stage_table()
-        return AdvectionStats(transport, moved[0], moved[1], moved[2], moved[3],
-                              timer.evaluation, timer.relocation, timer.communication)
-
-    @staticmethod
-    def _coefficients(row: Sequence[float], stored: Sequence[int], dt: float, upto: int) -> npt.NDArray[np.float64]:
-        """``dt * row[j]`` for the stored slopes ``j < upto``, in stage-table order."""
-        return np.array([dt * row[j] for j in stored if j < upto], dtype=np.float64)
-
-    def _combine(self, row: Sequence[float], stored: Sequence[int], block: dict[int, int], dt: float, w: int,
-                 *, upto: int) -> None:
-        """Set the state to the start state plus ``dt sum_j row[j] k_j`` over the stored slopes
-        ``j < upto``."""
-        swarm = self.swarm
-        coefs = self._coefficients(row, stored, dt, upto)
-        if any(row[j] != 0.0 for j in range(upto) if j not in block):
-            raise AssertionError("a stage combination needs a slope that was not stored")
-        out = swarm.x if not self.odes else np.empty((swarm.num_particles, w))
-        stage_combination(swarm.stage, 0, w, coefs, out)
-        if self.odes:
-            self._set_state(out)
-
-    def _move(self, timer: _Timer, moved: list[int], *, last: bool) -> TransportStats:
-        """Confine (if set), relocate after positions changed and migrate; accumulates counts into
-        ``moved``.
-
-        Only the move after the last stage sorts: the stages in between need each particle's cell
-        and reference position, not the cell order, so particles that arrived stay appended and
-        departed ones stay marked (the kernels skip them) until that one sort places and drops
-        them all."""
-        t0 = time.perf_counter()
-        if self.confine is not None:
-            self.confine(self.swarm.x)
-        stats = relocate(self.swarm, sort=False)
-        t1 = time.perf_counter()
-        mig = _migrate(self.swarm)
-        t2 = time.perf_counter()
-        if last:
-            self.swarm.sort()
-        timer.relocation += (t1 - t0) + (time.perf_counter() - t2)
-        timer.communication += t2 - t1
-        for idx, value in enumerate(mig):
-            moved[idx] += value
-        return stats
+        return record.stats()
 
 
 def _migrate(swarm: Swarm) -> tuple[int, int, int, int]:

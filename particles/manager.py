@@ -29,15 +29,20 @@ their cell (from neighbouring cells' averages in a cell that had none; both acro
 result does not depend on the rank count, :func:`particles.population.copy_nearest`); properties
 whose new-particle policy is ``"reinitialise"`` are then evaluated afresh at the new particles.
 
+The tracked mesh fields live in :class:`particles._tracked_fields.TrackedFields`; when output is
+next due is kept by this module's ``_OutputClock``.
+
 This module never imports ``convection``; it works on any DOLFINx mesh.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from contextlib import contextmanager
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -46,9 +51,9 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from fembase.dolfinx_compat import function_space
 from fembase.geometry import Candidates
 from fembase.state import State
+from particles._tracked_fields import TrackedFields
 from particles.adaptivity import move_to_mesh
 from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
@@ -75,6 +80,9 @@ PointFunction = Callable[[npt.NDArray[np.float64]], npt.ArrayLike]
 
 MakeFunction = Callable[[str], PointFunction]
 """Turns a text (e.g. a config expression such as ``"z > 0.5"``) into a :data:`PointFunction`."""
+
+Confine = Callable[[npt.NDArray[np.float64]], None]
+"""``confine(x)``: moves positions (shape=(n, gdim), in place) that left the domain back inside."""
 
 # Parameters that take a callable of the position; a config may give them as text.
 _FUNCTION_PARAMETERS = ("function", "source", "density")
@@ -227,13 +235,96 @@ def particles_per_cell_summary(swarm: Swarm, /) -> tuple[int, float, int]:
     return int(lo), float(total) / max(int(cells), 1), int(hi)
 
 
-@dataclass
-class _Tracked:
-    """A property interpolated into a mesh field: the Function is rebuilt on every mesh."""
+def _config_arguments(section: Mapping[str, Any], mesh: dolfinx.mesh.Mesh, directory: str | Path | None,
+                      extra_properties: Sequence[ParticleProperty], make_function: MakeFunction | None
+                      ) -> dict[str, Any]:
+    """The :class:`ParticleManager` keyword arguments a config section gives (see
+    :meth:`ParticleManager.from_config`): generator, integrator, properties, interpolator,
+    population, writer and output."""
+    num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
+    generator = build_generator(section.get("generator") or {"name": "random_uniform", "particles_per_cell": 20},
+                                num_cells=num_cells, make_function=make_function)
+    properties = [*extra_properties, *build_properties(section.get("properties") or (), make_function=make_function)]
+    interp = dict(section.get("interpolator") or {"name": "cell_average"})
+    interpolator = get_interpolator(interp.pop("name"), **interp)
+    pop = section.get("population")
+    population = None
+    if pop and (pop.get("min_per_cell") or pop.get("max_per_cell") is not None):
+        population = PopulationControl(int(pop.get("min_per_cell") or 0), pop.get("max_per_cell"),
+                                       int(pop.get("seed") or 0))
+    out = section.get("output") or {}
+    schedule = OutputSchedule(out.get("every_steps"), out.get("every_time"))
+    writer = None
+    if schedule.enabled:
+        if directory is None:
+            raise ValueError("particle output needs an output directory")
+        writer = ParticleWriter(directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
+    return {"generator": generator, "integrator": str(section.get("integrator") or "rk2"), "properties": properties,
+            "interpolator": interpolator, "population": population, "writer": writer, "output": schedule}
 
-    name: str
-    component: int | None
-    function: dolfinx.fem.Function = field(repr=False)
+
+def _confine_generated(swarm: Swarm, confine: Confine) -> int:
+    """Apply ``confine`` to freshly generated positions (collective). Returns the particles lost.
+
+    A generator samples the mesh's cells, and the cells may reach outside the region ``confine``
+    keeps particles in (straight-sided shell cells cover part of the inscribed hole, r < r_inner);
+    without this the first step would move such particles there, a jump their displacement
+    would record. Moved particles are relocated (and migrated, should one change rank); a
+    confined point lies in a cell, so none is lost."""
+    x = swarm.x
+    before = x.copy()
+    confine(x)
+    moved = swarm.comm.allreduce(int(np.count_nonzero(np.any(x != before, axis=1))), op=MPI.SUM)
+    if not moved:
+        return 0
+    relocate(swarm, sort=False)
+    return migrate(swarm, sort=True).global_lost
+
+
+@contextmanager
+def _timed(timings: dict[str, float], phase: str) -> Iterator[None]:
+    """Add the wall seconds of the ``with`` block to ``timings[phase]`` (not if it raises)."""
+    t0 = time.perf_counter()
+    yield
+    timings[phase] += time.perf_counter() - t0
+
+
+def _initialise_new(properties: PropertyManager, swarm: Swarm, rows: npt.NDArray[np.int64]) -> None:
+    """Population hook: copy the nearest older particle, then re-evaluate "reinitialise" properties."""
+    copy_nearest(swarm, rows)
+    for prop in properties.properties:
+        if prop.new_particles_policy == "reinitialise":
+            prop.initialise(swarm, rows, properties.context)
+
+
+class _OutputClock:
+    """When the particles were last written (step, time) and when they are next due by time."""
+
+    def __init__(self) -> None:
+        self.last: tuple[int, float] | None = None
+        self.next_time = float("inf")
+
+    def due(self, schedule: OutputSchedule, step: int, t: float, final: bool) -> bool:
+        """Whether ``schedule`` asks for output at ``step`` (time ``t``; ``final``: at the end of a
+        run, unless this step was written), given a writer."""
+        if self.last is not None and self.last[0] == step:
+            return False
+        if final or self.last is None:
+            return final or schedule.enabled
+        every = schedule.every_steps
+        return bool((every is not None and step % every == 0) or t >= self.next_time * (1.0 - 1e-12))
+
+    def written(self, schedule: OutputSchedule, step: int, t: float) -> None:
+        self.last = (step, t)
+        self.next_time = schedule.next_time(t)
+
+    def state(self) -> dict[str, Any]:
+        return {"last_output": list(self.last) if self.last else None, "next_output_time": self.next_time}
+
+    def restore(self, scalars: Mapping[str, Any]) -> None:
+        last = scalars["last_output"]
+        self.last = (int(last[0]), float(last[1])) if last else None
+        self.next_time = float(scalars["next_output_time"])
 
 
 class ParticleManager:
@@ -260,86 +351,41 @@ class ParticleManager:
         generate_particles: False starts with no particles (e.g. to :meth:`adopt` restored ones).
     """
 
-    def __init__(
-        self,
-        mesh: dolfinx.mesh.Mesh,
-        /,
-        *,
-        generator: Generator,
-        integrator: str = "rk2",
-        properties: Sequence[ParticleProperty | str] = (),
-        interpolator: Interpolator | None = None,
-        field_degree: int = 0,
-        population: PopulationControl | None = None,
-        writer: ParticleWriter | None = None,
-        output: OutputSchedule = OutputSchedule(),
-        context: PropertyContext | None = None,
-        confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
-        generate_particles: bool = True,
-    ) -> None:
+    def __init__(self, mesh: dolfinx.mesh.Mesh, /, *, generator: Generator, integrator: str = "rk2",
+                 properties: Sequence[ParticleProperty | str] = (), interpolator: Interpolator | None = None,
+                 field_degree: int = 0, population: PopulationControl | None = None,
+                 writer: ParticleWriter | None = None, output: OutputSchedule = OutputSchedule(),
+                 context: PropertyContext | None = None, confine: Confine | None = None,
+                 generate_particles: bool = True) -> None:
         get_integrator(integrator)  # ValueError listing the valid names
         self.confine = confine
         if output.enabled and writer is None:
             raise ValueError("an output schedule needs a ParticleWriter")
-        if field_degree < 0:
-            raise ValueError(f"field_degree must be >= 0, got {field_degree}")
         self.integrator = integrator
-        self.interpolator: Interpolator = interpolator or CellAverage()
-        self.field_degree = field_degree
         self.population = population
         self.writer = writer
         self.output = output
         self.timings: dict[str, float] = dict.fromkeys(TIMING_PHASES, 0.0)
-        self.lost = 0
-        self.added = 0
-        self.removed = 0
+        self.lost = self.added = self.removed = 0
+        self._fields = TrackedFields(interpolator or CellAverage(), field_degree, self.timings)
+        self._clock = _OutputClock()
         self.swarm = Swarm(mesh)
         self.properties = PropertyManager(self.swarm, properties)
-        self._advector = Advector(self.swarm, integrator=integrator, odes=self.properties.odes(), confine=confine)
-        self._tracked: dict[str, _Tracked] = {}
-        self._space: dolfinx.fem.FunctionSpace | None = None
-        self._last_output: tuple[int, float] | None = None
-        self._next_output_time = float("inf")
+        self._advector = self._new_advector()
         self.generation = GenerationResult(0, 0, 0)
         if generate_particles:
             self.generation = generate(self.swarm, generator)
             if confine is not None:
-                self._confine_generated()
+                self.lost += _confine_generated(self.swarm, confine)
             self.properties.initialise(context if context is not None else PropertyContext())
             self._bound(step=0, salt=0)
 
-    def _confine_generated(self) -> None:
-        """Apply ``confine`` to freshly generated positions (collective).
-
-        A generator samples the mesh's cells, and the cells may reach outside the region ``confine``
-        keeps particles in (straight-sided shell cells cover part of the inscribed hole, r < r_inner);
-        without this the first step would move such particles there, a jump their displacement
-        would record. Moved particles are relocated (and migrated, should one change rank); a
-        confined point lies in a cell, so none is lost."""
-        x = self.swarm.x
-        before = x.copy()
-        self.confine(x)
-        moved = self.swarm.comm.allreduce(int(np.count_nonzero(np.any(x != before, axis=1))), op=MPI.SUM)
-        if moved:
-            relocate(self.swarm, sort=False)
-            self.lost += migrate(self.swarm, sort=True).global_lost
-
     # ------------------------------------------------------------------ construction from a config
     @classmethod
-    def from_config(
-        cls,
-        section: Mapping[str, Any],
-        mesh: dolfinx.mesh.Mesh,
-        /,
-        *,
-        directory: str | Path | None = None,
-        extra_properties: Sequence[ParticleProperty] = (),
-        make_function: MakeFunction | None = None,
-        field_degree: int = 0,
-        context: PropertyContext | None = None,
-        confine: Callable[[npt.NDArray[np.float64]], None] | None = None,
-        generate_particles: bool = True,
-    ) -> ParticleManager:
+    def from_config(cls, section: Mapping[str, Any], mesh: dolfinx.mesh.Mesh, /, *, directory: str | Path | None = None,
+                    extra_properties: Sequence[ParticleProperty] = (), make_function: MakeFunction | None = None,
+                    field_degree: int = 0, context: PropertyContext | None = None, confine: Confine | None = None,
+                    generate_particles: bool = True) -> ParticleManager:
         """One manager from one config section (collective).
 
         ``section`` holds ``generator`` ({name, parameters; particles_per_cell allowed}),
@@ -356,33 +402,11 @@ class ParticleManager:
             extra_properties: Properties the caller needs besides the section's (e.g. one
                 composition per material), carried first.
             make_function: Text -> function of the position.
-            field_degree: Degree of tracked fields.
-            context: Fields for the initial property values.
-            confine: Moves positions that left the domain back inside (see the class).
-            generate_particles: False: no particles yet (see :meth:`adopt`).
+            field_degree, context, confine, generate_particles: As for the class.
         """
-        num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
-        generator = build_generator(section.get("generator") or {"name": "random_uniform", "particles_per_cell": 20},
-                                    num_cells=num_cells, make_function=make_function)
-        properties = [*extra_properties, *build_properties(section.get("properties") or (), make_function=make_function)]
-        interp = dict(section.get("interpolator") or {"name": "cell_average"})
-        interpolator = get_interpolator(interp.pop("name"), **interp)
-        pop = section.get("population")
-        population = None
-        if pop and (pop.get("min_per_cell") or pop.get("max_per_cell") is not None):
-            population = PopulationControl(int(pop.get("min_per_cell") or 0), pop.get("max_per_cell"),
-                                           int(pop.get("seed") or 0))
-        out = section.get("output") or {}
-        schedule = OutputSchedule(out.get("every_steps"), out.get("every_time"))
-        writer = None
-        if schedule.enabled:
-            if directory is None:
-                raise ValueError("particle output needs an output directory")
-            writer = ParticleWriter(directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
-        return cls(mesh, generator=generator, integrator=str(section.get("integrator") or "rk2"),
-                   properties=properties, interpolator=interpolator, field_degree=field_degree,
-                   population=population, writer=writer, output=schedule, context=context,
-                   generate_particles=generate_particles, confine=confine)
+        return cls(mesh, **_config_arguments(section, mesh, directory, extra_properties, make_function),
+                   field_degree=field_degree, context=context, generate_particles=generate_particles,
+                   confine=confine)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -403,6 +427,16 @@ class ParticleManager:
         """Names of the carried properties."""
         return self.properties.names
 
+    @property
+    def interpolator(self) -> Interpolator:
+        """The particle-to-mesh interpolator of the tracked fields."""
+        return self._fields.interpolator
+
+    @property
+    def field_degree(self) -> int:
+        """Degree of the tracked fields."""
+        return self._fields.degree
+
     # ------------------------------------------------------------------ mesh fields
     def track(self, name: str, /, *, component: int | None = None, label: str | None = None) -> dolfinx.fem.Function:
         """Interpolate property ``name`` into a mesh field, now and after every advance and mesh
@@ -414,37 +448,15 @@ class ParticleManager:
             component: Column of a multi-column property.
             label: Field name (default ``name``, or ``name_<component>``).
         """
-        self.swarm.layout(name)  # KeyError listing the known names
-        label = label or (name if component is None else f"{name}_{component}")
-        tracked = _Tracked(name, component, self._new_field(label))
-        self._tracked[label] = tracked
-        self._interpolate(tracked)
-        return tracked.function
+        return self._fields.track(self.swarm, name, component, label)
 
     def field(self, label: str, /) -> dolfinx.fem.Function:
         """The current mesh field ``label`` (see :meth:`track`)."""
-        try:
-            return self._tracked[label].function
-        except KeyError:
-            raise KeyError(f"no tracked particle field {label!r}; tracked: {sorted(self._tracked)}") from None
-
-    def _new_field(self, label: str) -> dolfinx.fem.Function:
-        """A Function for a tracked field; all tracked fields of one mesh share one space."""
-        if self._space is None or self._space.mesh is not self.mesh:
-            discontinuous = self.field_degree == 0 or self.interpolator.name in ("cell_average", "least_squares")
-            family = "DG" if discontinuous else "Lagrange"
-            self._space = function_space(self.mesh, family, self.field_degree)
-        return dolfinx.fem.Function(self._space, name=label)
-
-    def _interpolate(self, tracked: _Tracked) -> None:
-        t0 = time.perf_counter()
-        self.interpolator.interpolate(self.swarm, tracked.name, tracked.function, component=tracked.component)
-        self.timings["particle_interpolation"] += time.perf_counter() - t0
+        return self._fields.field(label)
 
     def update_fields(self) -> None:
         """Re-interpolate every tracked field from the particles (collective)."""
-        for tracked in self._tracked.values():
-            self._interpolate(tracked)
+        self._fields.update(self.swarm)
 
     # ------------------------------------------------------------------ time stepping
     def advance(self, u_old: dolfinx.fem.Function, u_new: dolfinx.fem.Function, dt: float, /, *,
@@ -483,29 +495,18 @@ class ParticleManager:
         Returns:
             The output record if the particles were written.
         """
-        due = self._output_due(step, context.time, final)
-        t0 = time.perf_counter()
-        self.properties.update(context, at_output=due)
-        self.timings["particle_properties"] += time.perf_counter() - t0
+        due = self.writer is not None and self._clock.due(self.output, step, context.time, final)
+        with _timed(self.timings, "particle_properties"):
+            self.properties.update(context, at_output=due)
         return self.write(context.time, step) if due else None
-
-    def _output_due(self, step: int, t: float, final: bool) -> bool:
-        if self.writer is None or (self._last_output is not None and self._last_output[0] == step):
-            return False
-        if final or self._last_output is None:
-            return self.writer is not None and (final or self.output.enabled)
-        every = self.output.every_steps
-        return bool((every is not None and step % every == 0) or t >= self._next_output_time * (1.0 - 1e-12))
 
     def write(self, t: float, step: int, /) -> OutputRecord:
         """Write the particles now (collective; needs a writer)."""
         if self.writer is None:
             raise ValueError("this ParticleManager has no writer")
-        t0 = time.perf_counter()
-        record = self.writer.write(self.swarm, t, step)
-        self._last_output = (step, t)
-        self._next_output_time = self.output.next_time(t)
-        self.timings["particle_output"] += time.perf_counter() - t0
+        with _timed(self.timings, "particle_output"):
+            record = self.writer.write(self.swarm, t, step)
+            self._clock.written(self.output, step, t)
         return record
 
     # ------------------------------------------------------------------ checkpoints
@@ -514,30 +515,20 @@ class ParticleManager:
         counters, output schedule, timings. The swarm is a checkpoint part of its own
         (:mod:`particles.checkpoint`), given back by :meth:`adopt`."""
         return State(scalars={"lost": self.lost, "added": self.added, "removed": self.removed,
-                              "last_output": list(self._last_output) if self._last_output else None,
-                              "next_output_time": self._next_output_time, "timings": dict(self.timings)})
+                              **self._clock.state(), "timings": dict(self.timings)})
 
     def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
         """Take the saved :meth:`state` scalars back (after :meth:`adopt`); no fields to fill."""
         self.lost, self.added, self.removed = int(scalars["lost"]), int(scalars["added"]), int(scalars["removed"])
-        last = scalars["last_output"]
-        self._last_output = (int(last[0]), float(last[1])) if last else None
-        self._next_output_time = float(scalars["next_output_time"])
+        self._clock.restore(scalars)
         self.timings.update(scalars["timings"])
         return {}
 
     def adopt(self, swarm: Swarm, /, *, context: PropertyContext) -> None:
         """Continue with ``swarm`` (e.g. restored from a checkpoint, with this manager's property
         columns); rebuilds the tracked fields (collective)."""
-        self.swarm = swarm
-        self.properties.attach(swarm)
-        self.properties.set_context(context)
-        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(),
-                                  confine=self.confine)
-        self._space = None
-        for tracked in self._tracked.values():
-            tracked.function = self._new_field(tracked.function.name)
-            self._interpolate(tracked)
+        self._attach(swarm, context=context)
+        self._fields.rebuild(self.swarm, new_space=True)
 
     # ------------------------------------------------------------------ mesh changes
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, /, *, context: PropertyContext | None = None, step: int = 0,
@@ -555,35 +546,32 @@ class ParticleManager:
         Returns:
             Particles lost in the move (global; 0 unless the meshes cover different domains).
         """
-        t0 = time.perf_counter()
-        self.swarm, stats = move_to_mesh(self.swarm, mesh, candidates=candidates)
-        self.timings["particle_mesh_change"] += time.perf_counter() - t0
+        with _timed(self.timings, "particle_mesh_change"):
+            swarm, stats = move_to_mesh(self.swarm, mesh, candidates=candidates)
         self.lost += stats.lost
-        self.properties.attach(self.swarm)
+        self._attach(swarm, context=context)
+        self._bound(step=step, salt=1)
+        self._fields.rebuild(self.swarm, new_space=False)
+        return int(stats.lost)
+
+    def _attach(self, swarm: Swarm, /, *, context: PropertyContext | None) -> None:
+        """Continue with ``swarm``: the properties (with ``context``, if given) and the advector act on it."""
+        self.swarm = swarm
+        self.properties.attach(swarm)
         if context is not None:
             self.properties.set_context(context)
-        self._advector = Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(),
-                                  confine=self.confine)
-        self._bound(step=step, salt=1)
-        for tracked in self._tracked.values():
-            tracked.function = self._new_field(tracked.function.name)
-            self._interpolate(tracked)
-        return int(stats.lost)
+        self._advector = self._new_advector()
+
+    def _new_advector(self) -> Advector:
+        return Advector(self.swarm, integrator=self.integrator, odes=self.properties.odes(), confine=self.confine)
 
     def _bound(self, *, step: int, salt: int) -> PopulationStats | None:
         """Population bounds; ``salt`` separates the random draws of the calls within one step."""
         if self.population is None:
             return None
-        t0 = time.perf_counter()
-        stats = self.population.apply(self.swarm, step=2 * step + salt, initialise=self._initialise_new)
-        self.added += stats.global_added
-        self.removed += stats.global_removed
-        self.timings["particle_population"] += time.perf_counter() - t0
+        with _timed(self.timings, "particle_population"):
+            stats = self.population.apply(self.swarm, step=2 * step + salt,
+                                          initialise=partial(_initialise_new, self.properties))
+            self.added += stats.global_added
+            self.removed += stats.global_removed
         return stats
-
-    def _initialise_new(self, swarm: Swarm, rows: npt.NDArray[np.int64]) -> None:
-        """Population hook: copy the nearest older particle, then re-evaluate "reinitialise" properties."""
-        copy_nearest(swarm, rows)
-        for prop in self.properties.properties:
-            if prop.new_particles_policy == "reinitialise":
-                prop.initialise(swarm, rows, self.properties.context)

@@ -29,10 +29,11 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-import dolfinx.geometry
 import dolfinx.mesh
 
-from fembase.geometry import OwnedLocation, locate_owned, owned_box
+from fembase.geometry import owned_box
+from particles._exchange import neighbour_exchange, sparse_exchange
+from particles._offers import Kept, append_kept, offers_by_rank, settle_offers
 from particles.kernels import pack_by_slot
 from particles.swarm import Swarm
 
@@ -78,13 +79,32 @@ def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], slots: npt.NDArray[np.int64
                         swarm.x, swarm.xref, swarm.properties, stage)
 
 
-def _positions(swarm: Swarm, table: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """The positions in a packed table, shape=(m, gdim)."""
-    return table[:, 2: 2 + swarm.gdim]
+@dataclass(frozen=True)
+class _Offer:
+    """Unlocated particles offered to neighbours: their rows, shape=(m,), and to which ranks each
+    goes, shape=(m, size), bool."""
+
+    rows: npt.NDArray[np.int64]
+    inside: npt.NDArray[np.bool_]
+
+
+def _neighbour_ranks(comm: MPI.Intracomm, ghost_owners: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """Ranks that own one of my ghost cells or ghost one of my cells, sorted (collective)."""
+    rank = comm.rank
+    out_ranks = np.unique(ghost_owners)
+    out_ranks = out_ranks[out_ranks != rank]
+    # The ranks that ghost my cells: let MPI invert the "I ghost a cell of" graph.
+    graph = comm.Create_dist_graph([rank], [len(out_ranks)], [int(r) for r in out_ranks], reorder=False)
+    sources, _ = graph.Get_dist_neighbors()[:2]
+    graph.Free()
+    return np.union1d(out_ranks, np.asarray(sources, dtype=np.int32)).astype(np.int32)
 
 
 class Migrator:
     """Communication pattern of one mesh, computed once (collective constructor).
+
+    The messages go point-to-point (:mod:`particles._exchange`); who keeps an unlocated particle
+    is settled by offer rounds (:mod:`particles._offers`).
 
     Attributes:
         neighbours: Ranks that own one of my ghost cells or ghost one of my cells, sorted, int32.
@@ -95,21 +115,13 @@ class Migrator:
     def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
         self.mesh = mesh
         self.comm: MPI.Intracomm = mesh.comm.Dup()  # private tag space for the messages below
-        tdim, gdim = mesh.topology.dim, mesh.geometry.dim
-        cmap = mesh.topology.index_map(tdim)
+        cmap = mesh.topology.index_map(mesh.topology.dim)
         self.num_owned_cells = cmap.size_local
         self.cell_range = tuple(int(r) for r in cmap.local_range)
         self.ghost_owners = np.asarray(cmap.owners, dtype=np.int32)
         self.ghost_globals = np.asarray(cmap.ghosts, dtype=np.int64)
-        rank = self.comm.rank
-        out_ranks = np.unique(self.ghost_owners)
-        out_ranks = out_ranks[out_ranks != rank]
-        # The ranks that ghost my cells: let MPI invert the "I ghost a cell of" graph.
-        graph = self.comm.Create_dist_graph([rank], [len(out_ranks)], [int(r) for r in out_ranks], reorder=False)
-        sources, _ = graph.Get_dist_neighbors()[:2]
-        graph.Free()
-        self.neighbours = np.union1d(out_ranks, np.asarray(sources, dtype=np.int32)).astype(np.int32)
-        self.owned_boxes = self._gather_boxes(gdim)
+        self.neighbours = _neighbour_ranks(self.comm, self.ghost_owners)
+        self.owned_boxes = self._gather_boxes(mesh.geometry.dim)
         self._is_neighbour = np.zeros(self.comm.size, dtype=bool)
         self._is_neighbour[self.neighbours] = True
         # Per ghost cell: the position of its owner among the neighbours, and its global index as
@@ -125,42 +137,11 @@ class Migrator:
         self.comm.Allgather(box, boxes)
         return boxes
 
-    # ------------------------------------------------------------------ exchange helpers
     def _neighbour_exchange(self, table: npt.NDArray[np.float64], offsets: npt.NDArray[np.int64]
                             ) -> dict[int, npt.NDArray[np.float64]]:
-        """Send rows ``offsets[s]:offsets[s + 1]`` of ``table`` to neighbour ``s`` (one message
-        each, empty ones included); return {source: table} of the non-empty ones received. The
-        receiver learns a message's size from the message itself (matched probe), so one round
-        trip suffices."""
-        comm = self.comm
-        ncols = table.shape[1]
-        reqs = [comm.Isend(table[offsets[s]: offsets[s + 1]], dest=int(r), tag=_TAG_DATA)
-                for s, r in enumerate(self.neighbours)]
-        recv: dict[int, npt.NDArray[np.float64]] = {}
-        status = MPI.Status()
-        for r in self.neighbours:
-            message = comm.Mprobe(source=int(r), tag=_TAG_DATA, status=status)
-            buffer = np.empty((status.Get_count(MPI.DOUBLE) // ncols, ncols))
-            message.Recv(buffer)
-            if buffer.shape[0]:
-                recv[int(r)] = buffer
-        MPI.Request.Waitall(reqs)
-        return recv
-
-    def _sparse_exchange(self, tables: dict[int, npt.NDArray[np.float64]], ncols: int
-                         ) -> dict[int, npt.NDArray[np.float64]]:
-        """Send tables[r] to any rank r (collective; counts by alltoall). Returns {source: table}."""
-        comm = self.comm
-        send_counts = np.zeros(comm.size, dtype=np.int64)
-        for r, t in tables.items():
-            send_counts[r] = t.shape[0]
-        recv_counts = np.empty(comm.size, dtype=np.int64)
-        comm.Alltoall(send_counts, recv_counts)
-        recv = {r: np.empty((int(recv_counts[r]), ncols)) for r in range(comm.size) if recv_counts[r] > 0}
-        reqs = [comm.Irecv(recv[r], source=r, tag=_TAG_DATA) for r in recv]
-        reqs += [comm.Isend(np.ascontiguousarray(tables[r]), dest=r, tag=_TAG_DATA) for r in tables if tables[r].shape[0]]
-        MPI.Request.Waitall(reqs)
-        return recv
+        """Send rows ``offsets[s]:offsets[s + 1]`` of ``table`` to neighbour ``s``; return {source:
+        table} of the non-empty ones received (:func:`particles._exchange.neighbour_exchange`)."""
+        return neighbour_exchange(self.comm, self.neighbours, table, offsets, _TAG_DATA)
 
     # ------------------------------------------------------------------ migration
     def migrate(self, swarm: Swarm, /, *, sort: bool = True) -> MigrationStats:
@@ -198,58 +179,17 @@ class Migrator:
                 swarm.sort()
             return MigrationStats(sent, 0, 0, lost, sent, 0, 0, lost)
 
-        # Unlocated particles: offered to neighbours here if every candidate rank is one.
-        lost = 0
-        offer_rows = global_rows = np.empty(0, dtype=np.int64)
-        offer_inside = np.zeros((0, self.comm.size), dtype=bool)
-        if unlocated_rows.size:
-            inside = self._box_candidates(swarm.x[unlocated_rows])
-            num_candidates = inside.sum(axis=1)
-            local = np.all(~inside | self._is_neighbour[None, :], axis=1) & (num_candidates > 0)
-            offer_rows, offer_inside = unlocated_rows[local], inside[local]
-            global_rows = unlocated_rows[~local & (num_candidates > 0)]
-            lost = int(np.count_nonzero(num_candidates == 0))
-            swarm.discard_rows(unlocated_rows[num_candidates == 0])
-
-        # One table, grouped by neighbour: the ghost-cell particles (global cell as the hint), then
-        # one copy of each offered particle per candidate (-(number of candidates) as the hint).
-        g = swarm.cells[ghost_rows] - self.num_owned_cells
-        rows, slots, hints = ghost_rows, self._ghost_slots[g], self._ghost_hints[g]
-        if offer_rows.size:
-            which, ranks = np.nonzero(offer_inside)
-            minus = -offer_inside.sum(axis=1).astype(np.int64)
-            rows = np.concatenate([rows, offer_rows[which]])
-            slots = np.concatenate([slots, self._slot_of_rank[ranks]])
-            hints = np.concatenate([hints, minus[which].view(np.float64)])
-        table, offsets = _pack(swarm, rows, slots, self.neighbours.shape[0], hints)
-        incoming = self._neighbour_exchange(table, offsets)
+        offer, global_rows, lost = self._split_unlocated(swarm, unlocated_rows)
+        incoming = self._neighbour_exchange(*self._outgoing(swarm, ghost_rows, offer))
         swarm.discard_rows(ghost_rows)
-        swarm.discard_rows(offer_rows)
-        received = 0
-        offers_in: dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]] = {}
-        handed = []
-        for src in sorted(incoming):
-            t = incoming[src]
-            hint = np.ascontiguousarray(t[:, 1]).view(np.int64)
-            offered = hint < 0
-            if not offered.any():
-                handed.append(t)
-                continue
-            handed.append(t[~offered])
-            offers_in[src] = (t[offered], -hint[offered])
-        if handed:
-            table = np.concatenate(handed) if len(handed) > 1 else handed[0]
-            local_cells = np.ascontiguousarray(table[:, 1]).view(np.int64) - self.cell_range[0]
-            if np.any((local_cells < 0) | (local_cells >= self.num_owned_cells)):
-                raise RuntimeError("migration received a particle for a cell this rank does not own")
-            swarm.append_packed(table, local_cells.astype(np.int32))
-            received += table.shape[0]
+        swarm.discard_rows(offer.rows)
+        received, offers_in = self._receive(swarm, incoming)
         nb_lost = 0
-        if offer_rows.size or offers_in:
-            kept, nb_lost = self._decide(swarm, offer_inside, offers_in, (_TAG_NB_REPLY, _TAG_NB_VERDICT))
-            received += self._append_kept(swarm, kept)
+        if offer.rows.size or offers_in:
+            kept, nb_lost = self._decide(swarm, offer.inside, offers_in, (_TAG_NB_REPLY, _TAG_NB_VERDICT))
+            received += append_kept(swarm, kept)
         lost += nb_lost
-        fallback_sent = int(offer_rows.shape[0])
+        fallback_sent = int(offer.rows.shape[0])
 
         first = _sum_over_ranks(self.comm, [sent, received, fallback_sent, lost, global_rows.shape[0]])
         if first[4] > 0:
@@ -264,6 +204,60 @@ class Migrator:
             swarm.sort()
         return MigrationStats(sent, received, fallback_sent, lost, *(int(t) for t in totals))
 
+    def _split_unlocated(self, swarm: Swarm, rows: npt.NDArray[np.int64]
+                         ) -> tuple[_Offer, npt.NDArray[np.int64], int]:
+        """Sort the unlocated ``rows``: those whose candidate ranks are all neighbours are offered to
+        them with the neighbour messages, those with another candidate go to the global fallback,
+        those without a candidate are discarded as lost. Returns the offer, the fallback rows
+        and the number lost."""
+        if not rows.size:
+            return _Offer(rows, np.zeros((0, self.comm.size), dtype=bool)), rows, 0
+        inside = self._box_candidates(swarm.x[rows])
+        num_candidates = inside.sum(axis=1)
+        local = np.all(~inside | self._is_neighbour[None, :], axis=1) & (num_candidates > 0)
+        swarm.discard_rows(rows[num_candidates == 0])
+        return (_Offer(rows[local], inside[local]), rows[~local & (num_candidates > 0)],
+                int(np.count_nonzero(num_candidates == 0)))
+
+    def _outgoing(self, swarm: Swarm, ghost_rows: npt.NDArray[np.int64], offer: _Offer
+                  ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+        """One table grouped by neighbour, with the first row of each: the ghost-cell particles
+        (global cell as the hint), then one copy of each offered particle per candidate (-(number
+        of candidates) as the hint)."""
+        g = swarm.cells[ghost_rows] - self.num_owned_cells
+        rows, slots, hints = ghost_rows, self._ghost_slots[g], self._ghost_hints[g]
+        if offer.rows.size:
+            which, ranks = np.nonzero(offer.inside)
+            minus = -offer.inside.sum(axis=1).astype(np.int64)
+            rows = np.concatenate([rows, offer.rows[which]])
+            slots = np.concatenate([slots, self._slot_of_rank[ranks]])
+            hints = np.concatenate([hints, minus[which].view(np.float64)])
+        return _pack(swarm, rows, slots, self.neighbours.shape[0], hints)
+
+    def _receive(self, swarm: Swarm, incoming: dict[int, npt.NDArray[np.float64]]
+                 ) -> tuple[int, dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]]]:
+        """Append the particles handed to this rank's cells; return how many, and per source the
+        offered rows with their number of candidates."""
+        offers_in: dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]] = {}
+        handed = []
+        for src in sorted(incoming):
+            t = incoming[src]
+            hint = np.ascontiguousarray(t[:, 1]).view(np.int64)
+            offered = hint < 0
+            if not offered.any():
+                handed.append(t)
+                continue
+            handed.append(t[~offered])
+            offers_in[src] = (t[offered], -hint[offered])
+        if not handed:
+            return 0, offers_in
+        table = np.concatenate(handed) if len(handed) > 1 else handed[0]
+        local_cells = np.ascontiguousarray(table[:, 1]).view(np.int64) - self.cell_range[0]
+        if np.any((local_cells < 0) | (local_cells >= self.num_owned_cells)):
+            raise RuntimeError("migration received a particle for a cell this rank does not own")
+        swarm.append_packed(table, local_cells.astype(np.int32))
+        return table.shape[0], offers_in
+
     def _box_candidates(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
         """Other ranks whose owned bounding box contains each point, shape=(m, size), bool."""
         lower, upper = self.owned_boxes[:, 0, :], self.owned_boxes[:, 1, :]
@@ -272,20 +266,6 @@ class Migrator:
         inside = np.all((x[:, None, :] >= lower[None] - tol) & (x[:, None, :] <= upper[None] + tol), axis=2)
         inside[:, self.comm.rank] = False
         return inside
-
-    @staticmethod
-    def _append_kept(swarm: Swarm, kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64],
-                                                    npt.NDArray[np.int32]]]) -> int:
-        """Append the kept rows of packed tables with the reference positions and owned cells found
-        here (the offering rank did not know them). Returns how many."""
-        n_in = 0
-        for t, xref, cells in kept:
-            if t.shape[0]:
-                t = t.copy()
-                t[:, 2 + swarm.gdim: 2 + swarm.gdim + swarm.tdim] = xref
-                swarm.append_packed(t, np.asarray(cells, dtype=np.int32))
-                n_in += t.shape[0]
-        return n_in
 
     def _fallback(self, swarm: Swarm, rows: npt.NDArray[np.int64], ncols: int) -> tuple[int, int, int]:
         """Global search for the unlocated particles in ``rows`` (collective). Returns (offered,
@@ -300,13 +280,13 @@ class Migrator:
         table, _ = _pack(swarm, rows, np.zeros(rows.shape[0], dtype=np.int64), 1,
                          num_candidates.astype(np.int64).view(np.float64))
         swarm.discard_rows(rows)
-        offers = {int(r): np.flatnonzero(inside[:, r]) for r in np.flatnonzero(inside.any(axis=0))}
-        received = self._sparse_exchange({r: table[idx] for r, idx in offers.items()}, ncols)
+        offers = offers_by_rank(inside)
+        received = sparse_exchange(self.comm, {r: table[idx] for r, idx in offers.items()}, ncols, _TAG_DATA)
         decided = {src: (t, np.ascontiguousarray(t[:, 1]).view(np.int64)) for src, t in received.items()}
         kept, lost = self._decide(swarm, inside, decided, (_TAG_REPLY, _TAG_REPLY))
         lost += int(np.count_nonzero(num_candidates == 0))
         offered = int(np.count_nonzero(num_candidates > 0))
-        return offered, self._append_kept(swarm, kept), lost
+        return offered, append_kept(swarm, kept), lost
 
     def _decide(
         self,
@@ -314,57 +294,11 @@ class Migrator:
         inside: npt.NDArray[np.bool_],
         received: dict[int, tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]],
         tags: tuple[int, int],
-    ) -> tuple[list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]], int]:
-        """Settle offered particles point-to-point between the pairs of an offer round.
-
-        ``inside`` (shape=(m, size)) says to which ranks this rank offered each of its ``m``
-        particles (in row order per rank); ``received`` holds, per source, the offered rows and
-        their number of candidates. A sole candidate decides alone: it keeps the particle if one
-        of its owned cells contains it, else counts it lost. For particles with several
-        candidates, the candidates answer found/not found and the offering rank tells each
-        candidate whether it is the lowest finder (or counts the particle lost if none found it).
-
-        Returns the kept rows (table, xref, owned cell) per batch and the particles lost here.
-        """
-        num_candidates = inside.sum(axis=1)
-        lost = 0
-        kept: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]] = []
-        shared: dict[int, tuple[npt.NDArray[np.int64], OwnedLocation]] = {}
-        answers: dict[int, npt.NDArray[np.float64]] = {}
-        for src in sorted(received):
-            t, candidates = received[src]
-            loc = locate_owned(self.mesh, _positions(swarm, t), geometry=swarm.geometry)
-            sole = candidates == 1
-            found = sole & (loc.cells >= 0)
-            kept.append((t[found], loc.xref[found], loc.cells[found]))
-            lost += int(np.count_nonzero(sole & (loc.cells < 0)))
-            if (~sole).any():
-                shared[src] = (np.flatnonzero(~sole), loc)
-                answers[src] = (loc.cells[~sole] >= 0).astype(np.float64)[:, None]
-        offers = {int(r): np.flatnonzero(inside[:, r]) for r in np.flatnonzero(inside.any(axis=0))}
-        multi = {r: idx[num_candidates[idx] > 1] for r, idx in offers.items()}
-        multi = {r: idx for r, idx in multi.items() if idx.size}
-        replies = self._known_exchange(answers, {r: idx.shape[0] for r, idx in multi.items()}, tags[0])
-        keeper = np.full(inside.shape[0], self.comm.size, dtype=np.int64)
-        for r in sorted(replies, reverse=True):
-            keeper[multi[r][replies[r][:, 0] > 0]] = r
-        lost += int(np.count_nonzero((keeper == self.comm.size) & (num_candidates > 1)))
-        decisions = {r: (keeper[idx] == r).astype(np.float64)[:, None] for r, idx in multi.items()}
-        verdicts = self._known_exchange(decisions, {r: a.shape[0] for r, a in answers.items()}, tags[1])
-        for src in sorted(verdicts):
-            rows_shared, loc = shared[src]
-            sel = rows_shared[verdicts[src][:, 0] > 0]
-            kept.append((received[src][0][sel], loc.xref[sel], loc.cells[sel]))
-        return kept, lost
-
-    def _known_exchange(self, tables: dict[int, npt.NDArray[np.float64]], expected: dict[int, int], tag: int
-                        ) -> dict[int, npt.NDArray[np.float64]]:
-        """Point-to-point exchange of one-column tables when both sides know the sizes."""
-        recv = {r: np.empty((n, 1)) for r, n in expected.items() if n > 0}
-        reqs = [self.comm.Irecv(recv[r], source=r, tag=tag) for r in recv]
-        reqs += [self.comm.Isend(np.ascontiguousarray(t), dest=r, tag=tag) for r, t in tables.items() if t.shape[0]]
-        MPI.Request.Waitall(reqs)
-        return recv
+    ) -> tuple[Kept, int]:
+        """Settle offered particles point-to-point between the pairs of an offer round
+        (:func:`particles._offers.settle_offers`). Returns the kept rows (table, xref, owned cell)
+        per batch and the particles lost here."""
+        return settle_offers(self.comm, self.mesh, swarm, inside, received, tags)
 
 
 def _sum_over_ranks(comm: MPI.Comm, counts: list[int]) -> npt.NDArray[np.int64]:

@@ -17,12 +17,13 @@ appended in O(rows) and rows leaving are only marked (:data:`particles.kernels.D
 :meth:`Swarm.sort` places the new rows and drops the marked ones in the same pass, so a migration
 costs O(particles sent + received) plus that one sort. The sort writes into the buffers the
 previous sort released (fresh memory costs page faults that dominate a sort).
+
+A :class:`Swarm` delegates to three parts: the buffers (:mod:`particles._swarm_rows`), the order
+by cell (:mod:`particles._cell_order`: the sort and the rows per cell a relocation hands it) and
+the named column ranges of the property table (:mod:`particles._property_layout`).
 """
 
 from __future__ import annotations
-
-import sys
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -31,36 +32,26 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase.geometry import CellGeometry
-from particles.kernels import (
-    DEAD, append_packed, count_buckets, gather_particles, rows_outside, scatter_particles, sort_destinations,
-)
+from particles._cell_order import CellOrder
+from particles._property_layout import PropertyLayout, PropertyLayouts
+from particles._swarm_rows import RowBuffers
+from particles.kernels import DEAD, rows_outside
 
 __all__ = ["PropertyLayout", "Swarm"]
 
-_FIELDS = ("_ids", "_x", "_xref", "_cells", "_props", "_stage")
 
+def _column(name: str, dtype: type, width: str | None, doc: str) -> property:
+    """A per-particle array of the swarm: the rows in use of buffer ``name`` (a view); assigning an
+    array of shape (n,) (``width`` None) or (n, the swarm's attribute ``width``) replaces it."""
 
-@dataclass(frozen=True)
-class PropertyLayout:
-    """Where a named property lives in the property table.
+    def get(swarm: Swarm) -> npt.NDArray:
+        return swarm._rows.column(name)
 
-    Attributes:
-        name: Property name.
-        start: First column in :attr:`Swarm.properties`.
-        size: Number of scalar columns (1 for a scalar, gdim for a vector, gdim**2 for a tensor).
-    """
+    def set_(swarm: Swarm, value: npt.ArrayLike) -> None:
+        swarm._rows.set_column(name, value, dtype, None if width is None else getattr(swarm, width))
+        swarm._order.clear()
 
-    name: str
-    start: int
-    size: int
-
-    @property
-    def columns(self) -> slice:
-        return slice(self.start, self.start + self.size)
-
-
-def _capacity_for(n: int) -> int:
-    return n + n // 8 + 16
+    return property(get, set_, doc=doc)
 
 
 class Swarm:
@@ -90,25 +81,11 @@ class Swarm:
         cell_map = mesh.topology.index_map(self.tdim)
         self.num_owned_cells: int = cell_map.size_local
         self.num_local_cells: int = cell_map.size_local + cell_map.num_ghosts
-        self._n = 0
-        self._ids = np.empty(0, dtype=np.int64)
-        self._x = np.empty((0, self.gdim), dtype=np.float64)
-        self._xref = np.empty((0, self.tdim), dtype=np.float64)
-        self._cells = np.empty(0, dtype=np.int32)
-        self._props = np.empty((0, 0), dtype=np.float64)
-        self._stage = np.empty((0, 0), dtype=np.float64)
-        self._stage_width = 0
-        self._layout: dict[str, PropertyLayout] = {}
         self.offsets = np.zeros(self.num_owned_cells + 1, dtype=np.int64)
+        self._rows = RowBuffers(self.gdim, self.tdim)
+        self._order = CellOrder(self.num_owned_cells)
+        self._layout = PropertyLayouts()
         self._geometry: CellGeometry | None = None
-        self._spare: tuple[npt.NDArray, ...] | None = None
-        # Rows per sort bucket (owned cells, then ghost/unlocated, then discarded) and whether the
-        # rows are in bucket order, when known from the last relocation; None: count in sort().
-        self._pending: tuple[npt.NDArray[np.int64], bool] | None = None
-        # The rows in a ghost cell or unlocated (a superset: discarded ones are filtered out), when
-        # known from the last relocation; None: scan in outside_rows(). Valid while _pending is.
-        self._outside: npt.NDArray[np.int64] | None = None
-        self._dest = np.empty(0, dtype=np.int64)  # sort destinations, reused
 
     @property
     def geometry(self) -> CellGeometry:
@@ -119,62 +96,18 @@ class Swarm:
         return self._geometry
 
     # ------------------------------------------------------------------ per-particle arrays
-    def _column(self, name: str) -> npt.NDArray:
-        return getattr(self, name)[: self._n]
-
-    def _set_column(self, name: str, value: npt.ArrayLike, dtype: type, width: int | None) -> None:
-        shape = (self._n,) if width is None else (self._n, width)
-        arr = np.ascontiguousarray(value, dtype=dtype)
-        if arr.shape != shape:
-            raise ValueError(f"expected shape {shape} for {name[1:]}, got {arr.shape}")
-        self._pending = None
-        setattr(self, name, arr)
-
-    @property
-    def ids(self) -> npt.NDArray[np.int64]:
-        return self._column("_ids")
-
-    @ids.setter
-    def ids(self, value: npt.ArrayLike) -> None:
-        self._set_column("_ids", value, np.int64, None)
-
-    @property
-    def x(self) -> npt.NDArray[np.float64]:
-        return self._column("_x")
-
-    @x.setter
-    def x(self, value: npt.ArrayLike) -> None:
-        self._set_column("_x", value, np.float64, self.gdim)
-
-    @property
-    def xref(self) -> npt.NDArray[np.float64]:
-        return self._column("_xref")
-
-    @xref.setter
-    def xref(self, value: npt.ArrayLike) -> None:
-        self._set_column("_xref", value, np.float64, self.tdim)
-
-    @property
-    def cells(self) -> npt.NDArray[np.int32]:
-        return self._column("_cells")
-
-    @cells.setter
-    def cells(self, value: npt.ArrayLike) -> None:
-        self._set_column("_cells", value, np.int32, None)
-
-    @property
-    def properties(self) -> npt.NDArray[np.float64]:
-        return self._column("_props")
-
-    @properties.setter
-    def properties(self, value: npt.ArrayLike) -> None:
-        self._set_column("_props", value, np.float64, self.num_property_columns)
+    ids = _column("ids", np.int64, None, "Global ids, shape=(n,), int64.")
+    x = _column("x", np.float64, "gdim", "Physical positions, shape=(n, gdim), float64.")
+    xref = _column("xref", np.float64, "tdim", "Reference positions in ``cells``, shape=(n, tdim), float64.")
+    cells = _column("cells", np.int32, None, "Local cell indices, shape=(n,), int32.")
+    properties = _column("props", np.float64, "num_property_columns",
+                         "Property table, shape=(n, num_property_columns), float64.")
 
     # ------------------------------------------------------------------ integrator stage table
     @property
     def stage_width(self) -> int:
         """Number of columns of the stage table (0 when not in use)."""
-        return self._stage_width
+        return self._rows.stage_width
 
     def stage_table(self, width: int, /) -> npt.NDArray[np.float64]:
         """Scratch columns that travel with the particles, shape=(n, width), float64 (contents
@@ -186,31 +119,22 @@ class Swarm:
         checkpoints, and its buffer is kept by :meth:`release_stage_table`, so asking for it again
         every time step allocates nothing. Ask again after a sort or migration: they move it.
         """
-        if width < 0:
-            raise ValueError(f"stage table width must be >= 0, got {width}")
-        self._stage_width = 0
-        capacity = self._capacity()
-        if self._stage.shape[1] != width or self._stage.shape[0] < capacity:
-            self._stage = np.empty((capacity, width), dtype=np.float64)
-        self._stage_width = width
-        return self._stage[: self._n]
+        return self._rows.stage_table(width)
 
     @property
     def stage(self) -> npt.NDArray[np.float64]:
         """The current stage table, shape=(n, stage_width) (see :meth:`stage_table`)."""
-        if not self._stage_width:
-            return np.empty((self._n, 0), dtype=np.float64)
-        return self._stage[: self._n, : self._stage_width]
+        return self._rows.stage_in_use()
 
     def release_stage_table(self) -> None:
         """Stop carrying the stage table (its buffer is kept for the next :meth:`stage_table`)."""
-        self._stage_width = 0
+        self._rows.stage_width = 0
 
     # ------------------------------------------------------------------ properties
     @property
     def num_particles(self) -> int:
         """Number of particles on this rank."""
-        return self._n
+        return self._rows.n
 
     def global_num_particles(self) -> int:
         """Total number of particles over all ranks (collective)."""
@@ -218,45 +142,25 @@ class Swarm:
 
     @property
     def property_names(self) -> list[str]:
-        return list(self._layout)
+        return self._layout.names
 
     @property
     def num_property_columns(self) -> int:
-        return int(self._props.shape[1])
+        return int(self._rows.props.shape[1])
 
     def layout(self, name: str) -> PropertyLayout:
         """Column range of property ``name``; KeyError lists the known names."""
-        try:
-            return self._layout[name]
-        except KeyError:
-            raise KeyError(f"unknown particle property {name!r}; known: {sorted(self._layout)}") from None
+        return self._layout[name]
 
     def add_property(self, name: str, size: int = 1, value: float = 0.0) -> PropertyLayout:
         """Append ``size`` scalar columns named ``name`` filled with ``value``. Returns the layout."""
-        if name in self._layout:
-            raise ValueError(f"particle property {name!r} exists already")
-        if size < 1:
-            raise ValueError(f"property size must be >= 1, got {size}")
-        start = self.num_property_columns
-        props = np.empty((self._capacity(), start + size), dtype=np.float64)
-        props[: self._n, :start] = self.properties
-        props[: self._n, start:] = value
-        self._props = props
-        self._layout[name] = PropertyLayout(name, start, size)
-        return self._layout[name]
+        lay = self._layout.add(name, self.num_property_columns, size)
+        self._rows.add_property_columns(size, value)
+        return lay
 
     def remove_property(self, name: str) -> None:
         """Drop the columns of property ``name``."""
-        lay = self.layout(name)
-        keep = np.ones(self.num_property_columns, dtype=bool)
-        keep[lay.columns] = False
-        props = np.empty((self._capacity(), int(np.count_nonzero(keep))), dtype=np.float64)
-        props[: self._n] = self.properties[:, keep]
-        self._props = props
-        del self._layout[name]
-        for key, other in list(self._layout.items()):
-            if other.start > lay.start:
-                self._layout[key] = PropertyLayout(key, other.start - lay.size, other.size)
+        self._rows.drop_property_columns(self._layout.remove(name).columns)
 
     def has_property(self, name: str) -> bool:
         return name in self._layout
@@ -315,72 +219,24 @@ class Swarm:
         (shape=(m, stage_width)). Call :meth:`sort` before using ``offsets``.
         """
         ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-        m = ids.shape[0]
-        cells = np.asarray(cells, dtype=np.int32).reshape(m)
-        n = self._n
-        self._reserve(n + m)
-        end = n + m
-        self._ids[n:end] = ids
-        self._x[n:end] = np.asarray(x, dtype=np.float64).reshape(m, self.gdim)
-        self._xref[n:end] = np.asarray(xref, dtype=np.float64).reshape(m, self.tdim)
-        self._cells[n:end] = cells
-        ncols = self.num_property_columns
-        if properties is None:
-            self._props[n:end] = 0.0
-        else:
-            self._props[n:end] = np.asarray(properties, dtype=np.float64).reshape(m, ncols)
-        if self._stage_width:
-            if stage is None:
-                self._stage[n:end, : self._stage_width] = 0.0
-            else:
-                self._stage[n:end, : self._stage_width] = np.asarray(stage, dtype=np.float64).reshape(
-                    m, self._stage_width)
-        self._n = end
-        if self._pending is not None and m:
-            counts, _ = self._pending
-            owned = (cells >= 0) & (cells < self.num_owned_cells)
-            counts[: self.num_owned_cells] += np.bincount(cells[owned], minlength=self.num_owned_cells)
-            outside = int(np.count_nonzero((cells >= self.num_owned_cells) | (cells == -1)))
-            counts[self.num_owned_cells] += outside
-            counts[self.num_owned_cells + 1] += int(np.count_nonzero(cells < -1))
-            self._pending = (counts, False)
-            if outside:
-                self._outside = None
+        cells = np.asarray(cells, dtype=np.int32).reshape(ids.shape[0])
+        self._rows.append(ids, x, xref, cells, properties, stage)
+        self._order.appended(cells)
 
     def append_packed(self, table: npt.NDArray[np.float64], cells: npt.NDArray[np.int32], /) -> None:
         """Append the particles of a message table (the rows :func:`particles.kernels.pack_by_slot`
         makes: [id bits, hint, x, xref, properties, stage], shape=(m, 2 + gdim + tdim + columns +
         stage_width)) in the given cells (shape=(m,)), unsorted, in one compiled pass; as
         :meth:`append_rows`."""
-        m = table.shape[0]
-        width = 2 + self.gdim + self.tdim + self.num_property_columns + self._stage_width
-        if table.shape != (m, width) or cells.shape != (m,):
-            raise ValueError(f"a packed table of shape (m, {width}) and m cells expected")
-        n = self._n
-        self._reserve(n + m)
-        counts = self._pending[0] if self._pending is not None else np.empty(0, dtype=np.int64)
-        outside_before = int(counts[self.num_owned_cells]) if counts.size else 0
-        stage = self._stage[:, : self._stage_width] if self._stage_width else np.empty((self._ids.shape[0], 0))
-        append_packed(np.ascontiguousarray(table), np.asarray(cells, dtype=np.int32), n, self._ids.view(np.float64),
-                      self._x, self._xref, self._cells, self._props, stage, counts, self.num_owned_cells)
-        self._n = n + m
-        if self._pending is not None and m:
-            self._pending = (counts, False)
-            if counts[self.num_owned_cells] != outside_before:
-                self._outside = None
+        self._order.append_packed(self._rows, table, cells)
 
     def outside_rows(self) -> npt.NDArray[np.int64]:
         """Rows whose particle is in a ghost cell or unlocated (cells >= num_owned_cells or -1),
         in row order, shape=(m,), int64. O(m) when the last relocation handed over its counts and
         rows (:meth:`set_pending_counts`), else one scan; so ``cells`` must not be changed between
         a relocation with ``sort=False`` and the migration that follows it."""
-        if self._pending is not None:
-            if self._pending[0][self.num_owned_cells] == 0:
-                return np.empty(0, dtype=np.int64)
-            if self._outside is not None:
-                cells = self._cells[self._outside]
-                return self._outside[(cells >= self.num_owned_cells) | (cells == -1)]
-        return rows_outside(self.cells, self.num_owned_cells)
+        rows = self._order.outside_rows(self._rows.cells)
+        return rows if rows is not None else rows_outside(self.cells, self.num_owned_cells)
 
     def discard_rows(self, rows: npt.NDArray[np.integer]) -> None:
         """Mark ``rows`` (currently in ghost cells or unlocated) as removed, in O(len(rows)); the
@@ -388,17 +244,9 @@ class Swarm:
         rows = np.asarray(rows, dtype=np.int64)
         if rows.size == 0:
             return
-        if self._pending is not None:
-            counts, _ = self._pending
-            cells = self._cells[rows]
-            outside = (cells >= self.num_owned_cells) | (cells == -1)
-            if not np.all(outside):
-                self._pending = None
-            else:
-                counts[self.num_owned_cells] -= rows.size
-                counts[self.num_owned_cells + 1] += rows.size
-                self._pending = (counts, False)
-        self._cells[rows] = DEAD
+        if self._order.counts is not None:
+            self._order.discarded(self._rows.cells[rows])
+        self._rows.cells[rows] = DEAD
 
     def remove(self, mask: npt.NDArray[np.bool_]) -> int:
         """Remove the particles where ``mask`` is True (shape=(n,)); keeps the order. Returns count."""
@@ -410,14 +258,7 @@ class Swarm:
 
     def take(self, rows: npt.NDArray[np.integer]) -> None:
         """Keep only ``rows`` (in that order) of every per-particle array; offsets are rebuilt."""
-        rows = np.ascontiguousarray(rows, dtype=np.int64)
-        n = rows.shape[0]
-        buffers = self._spare_buffers(n)
-        gather_particles(rows, *self._views(self._buffers(), self._n), *self._views(buffers, n))
-        self._install(buffers, n)
-        counts = np.zeros(self.num_owned_cells + 2, dtype=np.int64)
-        count_buckets(self.cells, self.num_owned_cells, counts)
-        self._set_offsets(counts)
+        self.offsets = self._order.take(self._rows, np.ascontiguousarray(rows, dtype=np.int64))
 
     def sort(self) -> None:
         """Restore the order by cell after ``cells`` changed (stable: ties keep their order).
@@ -427,27 +268,7 @@ class Swarm:
         (ghost or -1) are placed last; the offsets only describe owned cells. Rows marked by
         :meth:`discard_rows` are dropped.
         """
-        pending, self._pending = self._pending, None
-        if pending is not None and not pending[1]:
-            counts, already = pending[0], False
-        else:
-            counts = np.zeros(self.num_owned_cells + 2, dtype=np.int64)
-            already = count_buckets(self.cells, self.num_owned_cells, counts)
-        if not already:
-            if self._dest.shape[0] < self._n:
-                self._dest = np.empty(_capacity_for(self._n), dtype=np.int64)
-            dest = self._dest[: self._n]
-            if not sort_destinations(self.num_owned_cells, counts, self.cells, dest):
-                # counts from a relocation no longer match (cells changed since): count afresh
-                counts = np.zeros(self.num_owned_cells + 2, dtype=np.int64)
-                count_buckets(self.cells, self.num_owned_cells, counts)
-                ok = sort_destinations(self.num_owned_cells, counts, self.cells, dest)
-                assert ok
-            n_out = self._n - int(counts[-1])
-            buffers = self._spare_buffers(n_out)
-            scatter_particles(dest, *self._views(self._buffers(), self._n), *self._views(buffers, n_out))
-            self._install(buffers, n_out)
-        self._set_offsets(counts)
+        self.offsets = self._order.sort(self._rows)
 
     def set_pending_counts(self, counts: npt.NDArray[np.int64], in_order: bool,
                            outside: npt.NDArray[np.int64] | None = None, /) -> None:
@@ -457,86 +278,21 @@ class Swarm:
         discards keep them up to date; counts that no longer match the cells are detected by the
         sort, which then counts afresh. ``outside`` (shape=(m,), increasing) lists every row then
         in a ghost cell or unlocated, so :meth:`outside_rows` need not scan all rows."""
-        counts = np.asarray(counts, dtype=np.int64)
-        if counts.shape != (self.num_owned_cells + 2,):
-            raise ValueError(f"counts must have shape {(self.num_owned_cells + 2,)}")
-        self._pending = (counts, bool(in_order))
-        self._outside = None if outside is None else np.asarray(outside, dtype=np.int64)
-
-    # ------------------------------------------------------------------ buffers
-    def _in_use(self) -> tuple[str, ...]:
-        return _FIELDS if self._stage_width else _FIELDS[:5]
-
-    def _capacity(self) -> int:
-        return min(getattr(self, f).shape[0] for f in self._in_use())
-
-    def _buffers(self) -> tuple[npt.NDArray, ...]:
-        return tuple(getattr(self, f) for f in _FIELDS)
-
-    def _views(self, buffers: tuple[npt.NDArray, ...], n: int) -> tuple[npt.NDArray, ...]:
-        """The first ``n`` rows of each buffer (the stage table: its columns in use)."""
-        ids, x, xref, cells, props, stage = buffers
-        w = self._stage_width
-        return ids[:n], x[:n], xref[:n], cells[:n], props[:n], stage[:n, :w] if w else np.empty((n, 0))
-
-    def _install(self, buffers: tuple[npt.NDArray, ...], n: int) -> None:
-        """Make the output buffers of a permutation current; the old ones become spare. Counts and
-        rows handed over by a relocation describe the old rows, so they are dropped."""
-        self._pending = None
-        self._outside = None
-        old = self._buffers()
-        if self._stage_width:
-            current, spare = buffers, old
-        else:  # the stage buffer was not permuted: it stays current, the spare keeps its own
-            current, spare = buffers[:5] + (old[5],), old[:5] + (buffers[5],)
-        for f, b in zip(_FIELDS, current):
-            setattr(self, f, b)
-        self._n = n
-        self._spare = spare
-
-    def _spare_buffers(self, n: int) -> tuple[npt.NDArray, ...]:
-        """Buffers with at least ``n`` rows for the next permutation: the ones released by the
-        previous sort if nothing else refers to them any more and they fit, else new ones (with
-        room to grow). Arrays handed out before a sort are therefore never overwritten."""
-        spare, self._spare = self._spare, None
-        current = self._buffers()
-        if spare is not None:
-            for k in range(len(current)):
-                # references: the tuple ``spare`` and getrefcount's argument; more means a user holds it
-                if (spare[k].shape[0] < n or spare[k].shape[1:] != current[k].shape[1:]
-                        or sys.getrefcount(spare[k]) > 2):
-                    spare = None
-                    break
-        if spare is None:
-            cap = _capacity_for(n)
-            spare = tuple(np.empty((cap,) + c.shape[1:], dtype=c.dtype) for c in current)
-        return spare
-
-    def _reserve(self, n: int) -> None:
-        """Grow the buffers in use (copying the rows in use) if fewer than ``n`` rows fit."""
-        if n <= self._capacity():
-            return
-        cap = _capacity_for(n)
-        for f in self._in_use():
-            old = getattr(self, f)
-            new = np.empty((cap,) + old.shape[1:], dtype=old.dtype)
-            new[: self._n] = old[: self._n]
-            setattr(self, f, new)
-
-    def _set_offsets(self, counts: npt.NDArray[np.int64]) -> None:
-        offsets = np.empty(self.num_owned_cells + 1, dtype=np.int64)
-        offsets[0] = 0
-        np.cumsum(counts[: self.num_owned_cells], out=offsets[1:])
-        self.offsets = offsets
+        self._order.set(counts, in_order, outside)
 
     def check_invariants(self) -> None:
         """Raise AssertionError if the store is inconsistent (for tests and debugging)."""
-        n = self.num_particles
-        assert self.x.shape == (n, self.gdim) and self.xref.shape == (n, self.tdim)
-        assert self.cells.shape == (n,) and self.properties.shape[0] == n
-        assert np.all(np.diff(self.cells) >= 0), "particles are not sorted by cell"
-        assert np.all((self.cells >= 0) & (self.cells < self.num_owned_cells)), "particle outside owned cells"
-        assert self.offsets[-1] == n
-        assert np.array_equal(self.offsets, np.concatenate([[0], np.cumsum(np.bincount(
-            self.cells, minlength=self.num_owned_cells))])), "offsets do not match the cells"
-        assert np.unique(self.ids).shape[0] == n, "duplicate ids on this rank"
+        _check_invariants(self)
+
+
+def _check_invariants(swarm: Swarm) -> None:
+    """Raise AssertionError if ``swarm`` is inconsistent (see :meth:`Swarm.check_invariants`)."""
+    n = swarm.num_particles
+    assert swarm.x.shape == (n, swarm.gdim) and swarm.xref.shape == (n, swarm.tdim)
+    assert swarm.cells.shape == (n,) and swarm.properties.shape[0] == n
+    assert np.all(np.diff(swarm.cells) >= 0), "particles are not sorted by cell"
+    assert np.all((swarm.cells >= 0) & (swarm.cells < swarm.num_owned_cells)), "particle outside owned cells"
+    assert swarm.offsets[-1] == n
+    assert np.array_equal(swarm.offsets, np.concatenate([[0], np.cumsum(np.bincount(
+        swarm.cells, minlength=swarm.num_owned_cells))])), "offsets do not match the cells"
+    assert np.unique(swarm.ids).shape[0] == n, "duplicate ids on this rank"

@@ -125,7 +125,7 @@ def test_relocation_hands_over_the_outside_rows(kind):
     relocate(swarm, sort=False)
     scanned = rows_outside(swarm.cells, swarm.num_owned_cells)
     listed = swarm.outside_rows()
-    assert swarm._outside is not None  # the listed path, not the scan
+    assert swarm._order.outside is not None  # the listed path, not the scan
     assert np.array_equal(listed, scanned)
     assert comm.allreduce(scanned.size, op=MPI.SUM) > 0
     swarm.discard_rows(scanned[::3])
@@ -153,7 +153,7 @@ def test_sort_reuses_buffers_but_never_overwrites_held_arrays():
         assert np.all(np.diff(swarm.cells) >= 0)
     del held, held_view
     # the address of the released buffer, not a reference (a reference would block the reuse)
-    spare_x = swarm._spare[1].__array_interface__["data"][0]
+    spare_x = swarm._rows.spare[1].__array_interface__["data"][0]
     swarm.cells[:] = rng.integers(0, swarm.num_owned_cells, swarm.num_particles)
     swarm.sort()
     assert swarm.x.__array_interface__["data"][0] == spare_x  # released buffers are reused

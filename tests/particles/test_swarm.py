@@ -188,7 +188,7 @@ def test_packed_rows_round_trip(mesh, stage_width):
     assert np.array_equal(target.properties[20:], source.properties[rows[order]])
     assert np.array_equal(target.stage[20:], stage[rows[order]])
     assert np.array_equal(target.cells[20:], new_cells)
-    pending = target._pending[0].copy()
+    pending = target._order.counts.copy()
     target.sort()  # with the pending counts: they must describe the appended rows
     target.check_invariants()
     assert np.array_equal(pending[: target.num_owned_cells], target.particles_per_cell())

@@ -32,7 +32,6 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 import numpy.typing as npt
-import ufl
 
 import dolfinx.fem
 import dolfinx.io

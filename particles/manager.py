@@ -59,7 +59,7 @@ from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
 from particles.interpolation import CellAverage, Interpolator, get_interpolator
 from particles.migration import migrate
-from particles.output import OutputRecord, ParticleWriter
+from particles.output import PARTICLE_WRITERS, OutputRecord, ParticleWriter
 from particles.population import PopulationControl, PopulationStats, copy_nearest
 from particles.properties import PROPERTIES, ParticleProperty, PropertyContext, PropertyManager, create_property
 from particles.swarm import Swarm
@@ -258,7 +258,8 @@ def _config_arguments(section: Mapping[str, Any], mesh: dolfinx.mesh.Mesh, direc
     if schedule.enabled:
         if directory is None:
             raise ValueError("particle output needs an output directory")
-        writer = ParticleWriter(directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
+        writer = PARTICLE_WRITERS.lookup(out.get("format") or "xdmf")(
+            directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
     return {"generator": generator, "integrator": str(section.get("integrator") or "rk2"), "properties": properties,
             "interpolator": interpolator, "population": population, "writer": writer, "output": schedule}
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import NamedTuple, Sequence
+from typing import ClassVar, NamedTuple, Protocol, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -38,10 +38,12 @@ import dolfinx.io
 import dolfinx.mesh
 
 from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
-from fembase.files import H5Sink, atomic_write_text, exclusive_offset
+from fembase.files import H5Sink, exclusive_offset
+from fembase.registry import Registry
+from fembase.xdmf import XdmfSeries, data_item
 from particles.swarm import Swarm
 
-__all__ = ["OutputRecord", "ParticleWriter", "write_mesh_fields"]
+__all__ = ["PARTICLE_WRITERS", "OutputRecord", "ParticleOutput", "ParticleWriter", "write_mesh_fields"]
 
 
 class OutputRecord(NamedTuple):
@@ -66,12 +68,15 @@ def _attribute_type(k: int) -> str:
     return {1: "Scalar", 2: "Vector", 3: "Vector", 6: "Tensor6", 9: "Tensor"}.get(k, "Matrix")
 
 
-def _data_item(h5name: str, dataset: str, shape: tuple[int, ...], dtype: np.dtype) -> ET.Element:
-    kind = "Float" if dtype.kind == "f" else ("UInt" if dtype.kind == "u" else "Int")
-    item = ET.Element("DataItem", Dimensions=" ".join(str(s) for s in shape), NumberType=kind,
-                      Precision=str(dtype.itemsize), Format="HDF")
-    item.text = f"{h5name}:/{dataset}"
-    return item
+class ParticleOutput(Protocol):
+    """A particle output format: writes the selected particles of a swarm at an output step
+    (collective). An implementation is a class with ``name`` and ``description``, made with the
+    keywords of :class:`ParticleWriter`'s constructor and registered in :data:`PARTICLE_WRITERS`."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+
+    def write(self, swarm: Swarm, t: float, step: int) -> OutputRecord: ...
 
 
 class ParticleWriter:
@@ -94,6 +99,9 @@ class ParticleWriter:
         >>> writer.write(swarm, t, step)
     """
 
+    name: ClassVar[str] = "xdmf"
+    description: ClassVar[str] = "one HDF5 file per output step and one XDMF time series (particles.xdmf)"
+
     def __init__(
         self,
         directory: str | os.PathLike[str],
@@ -112,7 +120,7 @@ class ParticleWriter:
         self.every_nth = int(every_nth)
         self.ids = None if ids is None else np.unique(np.asarray(ids, dtype=np.int64))
         self.xdmf_path = self.directory / f"{name}.xdmf"
-        self._grids: list[tuple[int, ET.Element]] | None = None
+        self._series: XdmfSeries | None = None
 
     def h5_path(self, step: int) -> Path:
         """The HDF5 file of output step ``step``."""
@@ -170,51 +178,42 @@ class ParticleWriter:
             sink.attrs(time=float(t), step=int(step), num_ranks=comm.size, gdim=swarm.gdim)
         if comm.rank == 0:
             self._add_grid(step, float(t), path.name, total, shapes)
-            atomic_write_text(self.xdmf_path, self._xdmf_text())
+            self._series.write()
         comm.Barrier()
         return OutputRecord(int(step), float(t), path, total)
 
     # ------------------------------------------------------------------ XDMF (rank 0 only)
-    def _load_grids(self) -> list[tuple[int, ET.Element]]:
-        if self._grids is None:
-            self._grids = []
-            if self.xdmf_path.exists():
-                try:
-                    root = ET.parse(self.xdmf_path).getroot()
-                except ET.ParseError:
-                    return self._grids
-                for grid in root.iter("Grid"):
-                    label = grid.get("Name", "")
-                    if grid.get("GridType") == "Uniform" and label.startswith("step_"):
-                        self._grids.append((int(label[5:]), grid))
-        return self._grids
-
     def _add_grid(self, step: int, t: float, h5name: str, total: int, shapes: dict[str, tuple[int, ...]]) -> None:
-        grids = [(s, g) for s, g in self._load_grids() if s < step]
+        """The grid of output step ``step``; the series keeps the steps before it (a restarted run
+        replaces the later ones)."""
+        if self._series is None:
+            self._series = XdmfSeries(self.xdmf_path, self.name)
+            self._series.load(_step_of, strict=False)
+        self._series.keep(lambda s: s < step)
         grid = ET.Element("Grid", Name=f"step_{step}", GridType="Uniform")
         ET.SubElement(grid, "Time", Value=repr(t))
         topo = ET.SubElement(grid, "Topology", TopologyType="Polyvertex", NumberOfElements=str(total),
                              NodesPerElement="1")
-        topo.append(_data_item(h5name, "connectivity", (total,), np.dtype(np.int64)))
+        topo.append(data_item(h5name, "connectivity", (total,), np.dtype(np.int64)))
         geom = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
-        geom.append(_data_item(h5name, "positions", (total, 3), np.dtype(np.float64)))
+        geom.append(data_item(h5name, "positions", (total, 3), np.dtype(np.float64)))
         fields = [("id", "ids", (total,), np.dtype(np.int64)), ("rank", "rank", (total,), np.dtype(np.int32))]
         fields += [(p, f"properties/{p}", shape, np.dtype(np.float64)) for p, shape in shapes.items()]
         for label, dataset, shape, dtype in fields:
             k = int(np.prod(shape[1:])) if len(shape) > 1 else 1
             attr = ET.SubElement(grid, "Attribute", Name=label, AttributeType=_attribute_type(k), Center="Node")
-            attr.append(_data_item(h5name, dataset, shape, dtype))
-        grids.append((step, grid))
-        self._grids = grids
+            attr.append(data_item(h5name, dataset, shape, dtype))
+        self._series.append(step, grid)
 
-    def _xdmf_text(self) -> str:
-        root = ET.Element("Xdmf", Version="3.0")
-        domain = ET.SubElement(root, "Domain")
-        series = ET.SubElement(domain, "Grid", Name=self.name, GridType="Collection", CollectionType="Temporal")
-        for _, grid in self._load_grids():
-            series.append(grid)
-        ET.indent(root)
-        return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+PARTICLE_WRITERS: Registry[type[ParticleOutput]] = Registry("particle writer", (ParticleWriter,))
+"""Every particle output format by its config name (``particles.output.format``)."""
+
+
+def _step_of(grid: ET.Element) -> int | None:
+    """The output step of a grid of the series (``step_N``), or None."""
+    label = grid.get("Name", "")
+    return int(label[5:]) if label.startswith("step_") else None
 
 
 def write_mesh_fields(

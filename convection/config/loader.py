@@ -235,6 +235,8 @@ SCHEMA: dict[str, Any] = {
                                 help="write particles at the first step after every multiple of this time"),
             "properties": Field("list[str]", None, nullable=True, help="properties written (null: all)"),
             "every_nth": Field("int", 1, minimum=1, help="write only particles with id % every_nth == 0"),
+            "format": Field("str", "xdmf", choices=_names("particles.output", "PARTICLE_WRITERS"),
+                            help="the particles' file format"),
         },
     },
     "time": section_schema(TimeSettings),

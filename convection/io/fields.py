@@ -20,18 +20,31 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import Mapping
-
-import h5py
+from typing import ClassVar, Mapping, Protocol
 
 import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
 
 from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
-from fembase.files import atomic_write_text
+from fembase.registry import Registry
+from fembase.xdmf import XdmfSeries, declare_types, grid_time
 
-__all__ = ["FieldOutput"]
+__all__ = ["FIELD_WRITERS", "FieldOutput", "FieldWriter"]
+
+
+class FieldWriter(Protocol):
+    """A field output format (collective): writes named Functions of one mesh at a time (the mesh
+    may change between calls) and closes its files. An implementation is a class with ``name`` and
+    ``description``, made with ``(directory, /, *, resume_after)`` (see :class:`FieldOutput`) and
+    registered in :data:`FIELD_WRITERS`."""
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+
+    def write(self, functions: Mapping[str, dolfinx.fem.Function], t: float) -> None: ...
+
+    def close(self) -> None: ...
 
 
 class FieldOutput:
@@ -58,6 +71,10 @@ class FieldOutput:
         >>> out.close()
     """
 
+    name: ClassVar[str] = "xdmf"
+    description: ClassVar[str] = ("XDMF/HDF5 per mesh and one time series over all meshes (fields.xdmf; what the "
+                                  "pictures read)")
+
     def __init__(self, directory: str | Path, /, *, prefix: str = "fields", resume_after: float | None = None) -> None:
         self.directory = Path(directory)
         self.prefix = prefix
@@ -68,7 +85,7 @@ class FieldOutput:
         self._out: dict[str, dolfinx.fem.Function] = {}
         self.files: list[Path] = []
         self.series_path = self.directory / f"{prefix}.xdmf"
-        self._grids: list[tuple[float, ET.Element]] = []
+        self._series = XdmfSeries(self.series_path, prefix)
 
     def _open(self, mesh: dolfinx.mesh.Mesh) -> None:
         self.close()
@@ -127,7 +144,7 @@ class FieldOutput:
         if mesh.comm.rank == 0:
             try:
                 self._add_grid(self.files[-1], list(functions), float(t))
-                atomic_write_text(self.series_path, self._series_text())
+                self._series.write()
             except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
                 error = f"{type(exc).__name__}: {exc}"
         error = mesh.comm.bcast(error, root=0)
@@ -146,13 +163,8 @@ class FieldOutput:
         if comm.rank == 0:
             numbers = [int(p.stem.rsplit("_", 1)[1]) for p in self.directory.glob(f"{self.prefix}_[0-9][0-9][0-9].xdmf")]
             last = max(numbers, default=-1)
-            if self.series_path.exists():
-                for grid in ET.parse(self.series_path).getroot().iter("Grid"):
-                    time = grid.find("Time")
-                    if grid.get("GridType") == "Uniform" and time is not None:
-                        t = float(time.get("Value"))
-                        if t <= self._resume_after * (1.0 + 1e-14):
-                            self._grids.append((t, grid))
+            self._series.load(grid_time)
+            self._series.keep(lambda t: t <= self._resume_after * (1.0 + 1e-14))
         self.epoch = comm.bcast(last, root=0)
         self._resume_after = None
 
@@ -165,7 +177,7 @@ class FieldOutput:
         mesh_grid = next((g for g in domain.findall("Grid") if g.get("GridType") == "Uniform"), None)
         if mesh_grid is None:
             raise ValueError(f"{epoch_file.name} has no mesh grid")
-        grid = ET.Element("Grid", Name=f"{self.prefix}_{len(self._grids):06d}", GridType="Uniform")
+        grid = ET.Element("Grid", Name=f"{self.prefix}_{len(self._series.grids):06d}", GridType="Uniform")
         ET.SubElement(grid, "Time", Value=repr(t))
         for tag in ("Topology", "Geometry"):
             node = mesh_grid.find(tag)
@@ -182,34 +194,10 @@ class FieldOutput:
             if written != t:
                 raise ValueError(f"{epoch_file.name}: last '{name}' is at t = {written!r}, expected {t!r}")
             grid.extend(steps[-1].findall("Attribute"))
-        _declare_types(grid, self.directory)
-        self._grids = [(s, g) for s, g in self._grids if s != t] + [(t, grid)]
-
-    def _series_text(self) -> str:
-        root = ET.Element("Xdmf", Version="3.0")
-        domain = ET.SubElement(root, "Domain")
-        series = ET.SubElement(domain, "Grid", Name=self.prefix, GridType="Collection", CollectionType="Temporal")
-        series.extend(g for _, g in self._grids)
-        ET.indent(root)
-        return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+        declare_types(grid, self.directory)
+        self._series.keep(lambda s: s != t)
+        self._series.append(t, grid)
 
 
-def _declare_types(grid: ET.Element, directory: Path) -> None:
-    """Give every HDF DataItem of ``grid`` the NumberType and Precision of its dataset.
-
-    dolfinx leaves them out, and XDMF readers then assume 4-byte floats (VTK converts the
-    doubles to float32 on reading); the datasets' own types keep the values exact.
-    """
-    items = [item for item in grid.iter("DataItem") if item.get("Format") == "HDF" and item.text]
-    files: dict[str, list[tuple[ET.Element, str]]] = {}
-    for item in items:
-        h5name, _, dataset = item.text.strip().partition(":")
-        files.setdefault(h5name, []).append((item, dataset))
-    for h5name, entries in files.items():
-        with h5py.File(directory / h5name, "r") as h5:
-            for item, dataset in entries:
-                dtype = h5[dataset].dtype
-                kind = {"f": "Float", "i": "Int", "u": "UInt"}.get(dtype.kind)
-                if kind is not None:
-                    item.set("NumberType", kind)
-                    item.set("Precision", str(dtype.itemsize))
+FIELD_WRITERS: Registry[type[FieldWriter]] = Registry("field writer", (FieldOutput,))
+"""Every field output format by its config name (``output.fields_format``)."""

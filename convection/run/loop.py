@@ -19,7 +19,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.model.model import Model, StepReport
-from convection.io.fields import FieldOutput
+from convection.io.fields import FIELD_WRITERS
 from convection.io.run_folder import check_output_directory
 from convection.io.checkpoint import CheckpointSettings
 from convection.postprocess.postprocessors import (
@@ -63,7 +63,8 @@ class OutputSettings:
 
     directory: str = param(REQUIRED, check=check_output_directory,
                            help="output folder (statistics.csv, fields, config)")
-    fields_every: int = param(10, minimum=0, help="write XDMF fields every K steps (0 = only at the end)")
+    fields_every: int = param(10, minimum=0, help="write the fields every K steps (0 = only at the end)")
+    fields_format: str = param("xdmf", choices=Names(FIELD_WRITERS), help="the fields' file format")
     statistics: tuple[str, ...] | None = param(None, choices=Names(POSTPROCESSORS),
                                                help="postprocessors whose columns statistics.csv holds (null: all "
                                                     "that apply)")
@@ -322,7 +323,8 @@ class _Outputs:
     """
 
     def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool) -> None:
-        directory = Path(settings.output.directory)
+        output = settings.output
+        directory = Path(output.directory)
         after = model.timestep if resume else None
         try:
             self.statistics = StatisticsWriter(directory / "statistics.csv", columns, comm=model.comm,
@@ -330,8 +332,8 @@ class _Outputs:
             self.balance = BalanceLog(directory / "balance.csv", comm=model.comm, resume_after_step=after)
         except StatisticsFileError as err:
             raise RunFolderError(str(err)) from None
-        self.fields = FieldOutput(directory, resume_after=model.time if resume else None)
-        output = settings.output
+        writer = FIELD_WRITERS.lookup(output.fields_format)
+        self.fields = writer(directory, resume_after=model.time if resume else None)
         self.progress = Progress(settings.time.end, mode=output.progress, every=output.progress_every,
                                  enabled=model.comm.rank == 0)
         if self.statistics.dropped_incomplete:

@@ -40,7 +40,7 @@ from fembase.adjacency import CellAdjacency, unique_pairs
 from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, coordinate_map, geometry_dofmap
 from fembase.location import Candidates, Located
 
-__all__ = ["Candidates", "CellGeometry", "Located", "OwnedLocation", "cell_geometry", "cell_nodes", "geometry_dofmap",
+__all__ = ["Candidates", "CellGeometry", "Located", "OwnedLocation", "cell_nodes", "geometry_dofmap",
            "is_affine_simplex", "locate", "locate_owned", "owned_box", "pull_back", "push_forward", "unique_pairs"]
 
 _BASIX_CELL = {
@@ -269,11 +269,6 @@ class CellGeometry:
             coordinates in each (``xref`` shape=(offsets[-1], tdim)).
         """
         return location.containing_cells(self, points, owned_only=owned_only)
-
-
-def cell_geometry(mesh: dolfinx.mesh.Mesh, /, *, tol: float = 1e-12) -> CellGeometry:
-    """Build the :class:`CellGeometry` of ``mesh``."""
-    return CellGeometry(mesh, tol=tol)
 
 
 def locate(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike, /, *, geometry: CellGeometry | None = None) -> Located:

@@ -50,7 +50,7 @@ from convection.io.xdmf_check import RunFilesError, XdmfSeries
 if TYPE_CHECKING:
     import pyvista as pv
 
-__all__ = ["RunFilesError", "read_statistics", "read_last_field", "plot_run", "import_pyvista", "field_times",
+__all__ = ["RunFilesError", "read_statistics", "read_last_field", "plot_run", "import_pyvista",
            "snapshot_times", "plot_snapshots", "field_files", "check_run_folder"]
 
 _FIELD_FILE = re.compile(r"fields_([0-9]+)\.h5")
@@ -268,11 +268,6 @@ class _View(NamedTuple):
 
 _VIEW_2D = _View((0, 1), 2, 1.0)  # from +z: x right, y up
 _VIEW_3D = _View((0, 2), 1, -1.0)  # from -y: x right, z up
-
-
-def field_times(directory: str | Path) -> np.ndarray:
-    """Times written to ``fields.xdmf`` in ``directory``, sorted, shape=(n,), float64."""
-    return _Series(Path(directory) / "fields.xdmf").times
 
 
 def snapshot_times(available: Sequence[float], requested: Sequence[float] | None = None) -> list[float]:

@@ -58,7 +58,7 @@ import ufl
 from convection.schema import ConfigError, short_repr
 
 __all__ = ["FlowState", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase", "build_law",
-           "describe_laws", "laws_field_names", "strain_rate_measure", "weakening_factor", "yield_law"]
+           "laws_field_names", "strain_rate_measure", "weakening_factor", "yield_law"]
 
 STRAIN_RATE_MEASURES: dict[str, str] = {
     "second_invariant": "eps_II = sqrt(eps:eps / 2); yield viscosity sigma_y / (2 eps_II) (ASPECT)",
@@ -118,9 +118,6 @@ def weakening_factor(e: Any, start: float, end: float, factor: float) -> Any:
 
 
 # ---------------------------------------------------------------------- parameter parsing
-_NUMBER_CHECKS = ("minimum", "exclusive_minimum", "maximum", "exclusive_maximum")
-
-
 def _param(kind: str = "float", default: Any = dataclasses.MISSING, **checks: Any) -> Any:
     """A dataclass field of a law: ``kind`` (float | int | str | law | laws | table | list[str]),
     a default and checks (minimum, exclusive_minimum, maximum, exclusive_maximum, choices, help)."""
@@ -587,12 +584,7 @@ VISCOSITY_LAWS: dict[str, type[ViscosityLawBase]] = {
     law.name: law for law in (Constant, Exponential, Arrhenius, DepthTable, PowerLaw, Composite, VonMises,
                               DruckerPrager, ViscoPlastic, Weakened, Damaged)
 }
-"""Registry of viscosity laws (config name -> law class; ``describe_laws()`` gives one line each)."""
-
-
-def describe_laws() -> dict[str, str]:
-    """One-line description of every registered viscosity law, by name."""
-    return {name: law.description for name, law in VISCOSITY_LAWS.items()}
+"""Registry of viscosity laws (config name -> law class)."""
 
 
 def build_law(spec: Any, key: str) -> ViscosityLawBase:

@@ -56,7 +56,7 @@ from convection.model.rheology_fields import flow_viscosity
 from convection.schema import param
 from fembase.state import State
 
-__all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "Postprocessor", "create_postprocessors", "describe_postprocessors"]
+__all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "Postprocessor", "create_postprocessors"]
 
 
 @dataclass(frozen=True)
@@ -448,11 +448,6 @@ POSTPROCESSORS: dict[str, type] = {
                               ViscosityRange, EnergyBalance, SurfaceVelocity)
 }
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
-
-
-def describe_postprocessors() -> dict[str, str]:
-    """One-line description of every postprocessor, by name."""
-    return {name: cls.description for name, cls in POSTPROCESSORS.items()}
 
 
 def create_postprocessors(model: Model, names: list[str] | None = None, /, **options: Any) -> list[Postprocessor]:

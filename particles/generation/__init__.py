@@ -36,7 +36,6 @@ __all__ = [
     "ReferencePoints",
     "Shell",
     "create_generator",
-    "describe_generators",
     "generate",
 ]
 
@@ -47,7 +46,6 @@ GENERATORS: Registry[type[Generator]] = Registry(
 """Generator classes by their lowercase config name."""
 
 create_generator = GENERATORS.create
-describe_generators = GENERATORS.describe
 
 
 def generate(swarm: Swarm, generator: Generator | str, /, **parameters: Any) -> GenerationResult:

@@ -75,7 +75,6 @@ __all__ = [
     "Velocity",
     "create_property",
     "dependency_order",
-    "describe_properties",
 ]
 
 PROPERTIES: Registry[type[ParticleProperty]] = Registry(
@@ -88,7 +87,6 @@ PROPERTIES: Registry[type[ParticleProperty]] = Registry(
 """Property classes by their lowercase config name."""
 
 create_property = PROPERTIES.create
-describe_properties = PROPERTIES.describe
 
 PropertySpec = Union[ParticleProperty, str]
 

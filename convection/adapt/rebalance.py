@@ -22,17 +22,43 @@ import dolfinx.mesh
 
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.schema import Names, param
+from fembase.registry import Registry
 from fembase.partition import PARTITIONERS
 from particles.swarm import Swarm
 
 __all__ = ["BALANCE_STRATEGIES", "BalanceSettings", "Balancer", "RankLoads"]
 
-BALANCE_STRATEGIES: dict[str, str] = {
-    "none": "never repartition",
-    "every": "repartition every N steps",
-    "threshold": "repartition when max/mean of the load over ranks exceeds a threshold (checked every N steps)",
-}
-"""Registry of balancing strategies (name -> one-line description)."""
+class _Never:
+    name = "none"
+    description = "never repartition"
+
+    @staticmethod
+    def wants(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
+        return False
+
+
+class _Every:
+    name = "every"
+    description = "repartition every N steps"
+
+    @staticmethod
+    def wants(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
+        return True
+
+
+class _Threshold:
+    name = "threshold"
+    description = "repartition when max/mean of the load over ranks exceeds a threshold (checked every N steps)"
+
+    @staticmethod
+    def wants(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
+        """Collective."""
+        return balancer.loads(mesh, swarm).load_imbalance > balancer.threshold
+
+
+BALANCE_STRATEGIES: Registry[type] = Registry("balancing strategy", (_Never, _Every, _Threshold))
+"""Balancing strategies by name: each decides, on a step that is due, whether to repartition
+(``wants(balancer, mesh, swarm)``)."""
 
 
 @dataclass(frozen=True)
@@ -119,11 +145,9 @@ class Balancer:
 
     def due(self, timestep: int, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
         """Whether to repartition after step ``timestep`` (collective for ``threshold``)."""
-        if self.strategy == "none" or mesh.comm.size == 1 or timestep % self.every != 0:
+        if mesh.comm.size == 1 or timestep % self.every != 0:
             return False
-        if self.strategy == "every":
-            return True
-        return self.loads(mesh, swarm).load_imbalance > self.threshold
+        return BALANCE_STRATEGIES[self.strategy].wants(self, mesh, swarm)
 
     def new_mesh(self, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> dolfinx.mesh.Mesh:
         """The same cells on a partition with equal loads (collective)."""

@@ -35,7 +35,7 @@ import dolfinx.fem.petsc
 import dolfinx.mesh
 from mpi4py import MPI
 
-from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings
+from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, AdaptivitySettings
 
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
@@ -44,7 +44,7 @@ from convection.io.checkpoint import (
     Checkpointer, SavedRun, restore_mesh, restore_particles, restore_state,
 )
 from convection.model.composition import (
-    CompositionSettings, FieldComposition, ParticleComposition, StaticComposition, particle_properties,
+    COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
 )
 from convection.config.loader import (
     config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
@@ -132,10 +132,12 @@ def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bc
         T.interpolate(initial_T)
         dolfinx.fem.petsc.set_bc(petsc_vector(T), temperature_dirichlet_bcs(V, temperature_bcs, domain))
         T.x.scatter_forward()
-        fields = [T] if "temperature" in acfg["fields"] else []
-        if "composition" in acfg["fields"] and len(materials):
-            degree = config["composition"]["degree"]
-            fields += list(StaticComposition(mesh, materials, degree=degree).fields)
+        indicator_fields = {
+            "temperature": lambda: [T],
+            "composition": lambda: list(StaticComposition(mesh, materials, degree=config["composition"]["degree"])
+                                        .fields) if len(materials) else [],
+        }
+        fields = [f for name in INDICATOR_FIELDS if name in acfg["fields"] for f in indicator_fields[name]()]
         return fields or [T]
     return fields_on
 
@@ -212,11 +214,8 @@ def _composition(config: dict[str, Any], mesh: dolfinx.mesh.Mesh, approximation:
     if not len(materials):
         return None
     composition = settings_from(CompositionSettings, config["composition"])
-    if composition.source == "particles":
-        return ParticleComposition(particles, materials)
-    if composition.source == "field":
-        return FieldComposition(mesh, approximation, materials, degree=composition.degree, stabilisation=stabilisation)
-    return StaticComposition(mesh, materials, degree=composition.degree)
+    inputs = CompositionInputs(mesh, approximation, materials, particles, composition.degree, stabilisation)
+    return COMPOSITION_SOURCES.lookup(composition.source).build(inputs)
 
 
 def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,

@@ -17,7 +17,7 @@ one time step with the advecting velocity ``u`` (already extrapolated to the ste
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar, Mapping, Protocol
+from typing import Any, Callable, ClassVar, Mapping, NamedTuple, Protocol
 
 import numpy as np
 
@@ -29,15 +29,36 @@ from convection.physics.materials import Materials
 from convection.schema import MAX_DEGREE, Names, param
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
+from fembase.registry import Registry
 from fembase.state import State
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
-__all__ = ["COMPOSITION_SOURCES", "CompositionSettings", "CompositionSource", "FieldComposition", "ParticleComposition",
+__all__ = ["COMPOSITION_SOURCES", "CompositionInputs", "CompositionSettings", "CompositionSource", "FieldComposition", "ParticleComposition",
            "StaticComposition", "Transfer", "composition_space", "particle_properties"]
 
 Transfer = Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]
 """``transfer(source_on_old_mesh, target_on_new_mesh)`` fills the target (collective)."""
+
+
+class CompositionInputs(NamedTuple):
+    """What a composition source is made from (each takes what it needs).
+
+    Attributes:
+        mesh: The model's mesh.
+        approximation: The physics (advected fields use its transport).
+        materials: The materials whose fractions the source gives.
+        particles: The particles (None without).
+        degree: The fields' degree (``composition.degree``).
+        stabilisation: The advection's stabilisation (``energy.stabilisation``).
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    approximation: BoussinesqApproximation
+    materials: Materials
+    particles: ParticleManager | None
+    degree: int
+    stabilisation: str
 
 
 class CompositionSource(Protocol):
@@ -77,6 +98,10 @@ class StaticComposition:
 
     name: ClassVar[str] = "static"
     description: ClassVar[str] = "fractions set from the initial regions and kept fixed"
+
+    @classmethod
+    def build(cls, inputs: CompositionInputs, /) -> StaticComposition:
+        return cls(inputs.mesh, inputs.materials, degree=inputs.degree)
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, materials: Materials, /, *, degree: int = 0) -> None:
         self.materials = materials
@@ -127,6 +152,11 @@ class FieldComposition:
 
     name: ClassVar[str] = "field"
     description: ClassVar[str] = "fractions advected as continuous fields (SUPG + BDF2, no diffusion)"
+
+    @classmethod
+    def build(cls, inputs: CompositionInputs, /) -> FieldComposition:
+        return cls(inputs.mesh, inputs.approximation, inputs.materials, degree=inputs.degree,
+                   stabilisation=inputs.stabilisation)
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, materials: Materials, /, *,
                  degree: int = 2, stabilisation: str = "supg") -> None:
@@ -200,6 +230,10 @@ class ParticleComposition:
     name: ClassVar[str] = "particles"
     description: ClassVar[str] = "fractions averaged per cell from the particles' material properties"
 
+    @classmethod
+    def build(cls, inputs: CompositionInputs, /) -> ParticleComposition:
+        return cls(inputs.particles, inputs.materials)
+
     def __init__(self, manager: ParticleManager, materials: Materials, /) -> None:
         self.materials = materials
         self.manager = manager
@@ -227,8 +261,10 @@ class ParticleComposition:
         """Nothing to free."""
 
 
-COMPOSITION_SOURCES: dict[str, type] = {cls.name: cls for cls in (StaticComposition, FieldComposition, ParticleComposition)}
-"""Composition sources by their config name (``composition.source``)."""
+COMPOSITION_SOURCES: Registry[type] = Registry("composition source",
+                                               (StaticComposition, FieldComposition, ParticleComposition))
+"""Composition sources by their config name (``composition.source``); each is made from
+:class:`CompositionInputs` by its ``build``."""
 
 
 @dataclass(frozen=True)

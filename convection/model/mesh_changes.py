@@ -16,6 +16,7 @@ import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
+from convection.adapt.adaptivity import INDICATOR_FIELDS
 from convection.adapt.rebalance import RankLoads
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from fembase.geometry import Candidates
@@ -60,11 +61,9 @@ class MeshChanges:
         assert adaptivity is not None
         before = model.num_cells
         with model.timers("adaptation"):
-            fields = []
-            if "temperature" in adaptivity.fields and model.T is not None:
-                fields.append(model.T)
-            if "composition" in adaptivity.fields:
-                fields.extend(model.fractions)
+            indicator_fields = {"temperature": lambda: [model.T] if model.T is not None else [],
+                                "composition": lambda: list(model.fractions)}
+            fields = [f for name in INDICATOR_FIELDS if name in adaptivity.fields for f in indicator_fields[name]()]
             fallback = model.T if model.T is not None else model.stokes.u
             mesh = adaptivity.new_mesh(model.mesh, fields or [fallback], locator=self.locator())
             # Both meshes are refined from one base: each particle is looked for first among the

@@ -56,6 +56,7 @@ from typing import Any, ClassVar, Mapping, NamedTuple, Sequence
 import ufl
 
 from convection.schema import ConfigError, short_repr
+from fembase.registry import Registry
 
 __all__ = ["FlowState", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase", "build_law",
            "laws_field_names", "strain_rate_measure", "weakening_factor", "yield_law"]
@@ -580,10 +581,9 @@ class Bounded(ViscosityLawBase):
         return 1.0 / self(state)
 
 
-VISCOSITY_LAWS: dict[str, type[ViscosityLawBase]] = {
-    law.name: law for law in (Constant, Exponential, Arrhenius, DepthTable, PowerLaw, Composite, VonMises,
-                              DruckerPrager, ViscoPlastic, Weakened, Damaged)
-}
+VISCOSITY_LAWS: Registry[type[ViscosityLawBase]] = Registry("viscosity law", (
+    Constant, Exponential, Arrhenius, DepthTable, PowerLaw, Composite, VonMises, DruckerPrager, ViscoPlastic,
+    Weakened, Damaged))
 """Registry of viscosity laws (config name -> law class)."""
 
 

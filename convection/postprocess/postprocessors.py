@@ -54,6 +54,7 @@ from convection.model.model import Model
 from convection.adapt.rebalance import RankLoads
 from convection.model.rheology_fields import flow_viscosity
 from convection.schema import param
+from fembase.registry import Registry
 from fembase.state import State
 
 __all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "Postprocessor", "create_postprocessors"]
@@ -442,11 +443,9 @@ class SurfaceVelocity(_Rheology):
         return {"vrms_surface": float(rms), "vmax_surface": model.mesh.comm.allreduce(local, op=MPI.MAX)}
 
 
-POSTPROCESSORS: dict[str, type] = {
-    cls.name: cls for cls in (TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics,
-                              ParticleStatistics, LoadStatistics, Entrainment, WallTime, NonlinearStatistics,
-                              ViscosityRange, EnergyBalance, SurfaceVelocity)
-}
+POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
+    TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
+    LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance, SurfaceVelocity))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

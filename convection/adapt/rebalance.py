@@ -15,6 +15,7 @@ them); results do not change, only where they are computed.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -28,35 +29,26 @@ from particles.swarm import Swarm
 
 __all__ = ["BALANCE_STRATEGIES", "BalanceSettings", "Balancer", "RankLoads"]
 
-class _Never:
-    name = "none"
-    description = "never repartition"
+@dataclass(frozen=True)
+class BalancingStrategy:
+    """A balancing strategy: on a step that is due, ``wants(balancer, mesh, swarm)`` decides whether
+    to repartition (collective where it measures the loads)."""
 
-    @staticmethod
-    def wants(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
-        return False
-
-
-class _Every:
-    name = "every"
-    description = "repartition every N steps"
-
-    @staticmethod
-    def wants(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
-        return True
+    name: str
+    description: str
+    wants: Callable[[Balancer, dolfinx.mesh.Mesh, Swarm | None], bool]
 
 
-class _Threshold:
-    name = "threshold"
-    description = "repartition when max/mean of the load over ranks exceeds a threshold (checked every N steps)"
-
-    @staticmethod
-    def wants(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
-        """Collective."""
-        return balancer.loads(mesh, swarm).load_imbalance > balancer.threshold
+def _over_threshold(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
+    return balancer.loads(mesh, swarm).load_imbalance > balancer.threshold
 
 
-BALANCE_STRATEGIES: Registry[type] = Registry("balancing strategy", (_Never, _Every, _Threshold))
+BALANCE_STRATEGIES: Registry[BalancingStrategy] = Registry("balancing strategy", (
+    BalancingStrategy("none", "never repartition", lambda balancer, mesh, swarm: False),
+    BalancingStrategy("every", "repartition every N steps", lambda balancer, mesh, swarm: True),
+    BalancingStrategy("threshold", "repartition when max/mean of the load over ranks exceeds a threshold (checked "
+                      "every N steps)", _over_threshold),
+))
 """Balancing strategies by name: each decides, on a step that is due, whether to repartition
 (``wants(balancer, mesh, swarm)``)."""
 

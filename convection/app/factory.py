@@ -105,13 +105,11 @@ def materials_from_config(config: dict[str, Any]) -> Materials:
     """The materials of the ``materials`` section (or of the two-material keys)."""
     gdim = config_gdim(config)
     constants = expression_constants(config)
-    table, background = material_table(config)
-    laws = viscosity_laws(config)
-    viscosities = [m["viscosity"] for m in table] if laws is None else laws[1]
+    table, _ = material_table(config)
+    background_law, laws = viscosity_laws(config)
     materials = tuple(Material(m["name"], Expression(m["initial"], constants=constants, gdim=gdim), Rb=m["Rb"],
-                               viscosity=eta) for m, eta in zip(table, viscosities))
-    return Materials(materials, background_viscosity=background if laws is None else 1.0,
-                     mixing=config["physics"]["viscosity"]["mixing"], background_law=None if laws is None else laws[0])
+                               viscosity=law) for m, law in zip(table, laws))
+    return Materials(materials, mixing=config["physics"]["viscosity"]["mixing"], background_law=background_law)
 
 
 def run_settings(config: dict[str, Any]) -> RunSettings:

@@ -426,9 +426,17 @@ def material_table(config: dict[str, Any]) -> tuple[list[dict[str, Any]], float]
             etas[0] if etas else viscosity["background"])
 
 
-def viscosity_laws(config: dict[str, Any]) -> tuple[Any, list[Any]] | None:
-    """The rheology laws of a resolved config: ``(background law, [law per material])``, or None
-    when the config uses no law (numbers only: the classic viscosity keys). A material without a
+def laws_given(config: dict[str, Any]) -> bool:
+    """Whether a resolved config gives a viscosity law (``physics.viscosity.law`` or a material's
+    ``{name: ...}``) rather than numbers only."""
+    table, _ = material_table(config)
+    return config["physics"]["viscosity"]["law"] is not None or any(isinstance(m["viscosity"], dict) for m in table)
+
+
+def viscosity_laws(config: dict[str, Any]) -> tuple[Any, list[Any]]:
+    """The rheology laws of a resolved config: ``(background law, [law per material])``. Numbers
+    (the classic keys ``physics.viscosity.background``, ``material_viscosities``, a material's
+    number) become :class:`convection.physics.rheology.Constant` laws; a material without a
     viscosity takes the background's law.
 
     Raises:
@@ -438,9 +446,6 @@ def viscosity_laws(config: dict[str, Any]) -> tuple[Any, list[Any]] | None:
 
     visc = config["physics"]["viscosity"]
     table, background = material_table(config)
-    given = visc["law"] is not None or any(isinstance(m["viscosity"], dict) for m in table)
-    if not given:
-        return None
     law0 = build_law(visc["law"] if visc["law"] is not None else background, "physics.viscosity.law")
     keyed = config["materials"] and True
     laws = []
@@ -458,9 +463,9 @@ def _check_rheology(config: dict[str, Any]) -> None:
                 isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0):
             raise ConfigError(f"config key 'materials.{name}.viscosity': expected a positive number or a law "
                               f"{{name: ..., ...}}, got {short_repr(value)}")
-    laws = viscosity_laws(config)
-    if laws is None:
+    if not laws_given(config):
         return
+    laws = viscosity_laws(config)
     if visc["law"] is not None and visc["background"] != 1.0:
         raise ConfigError("config key 'physics.viscosity.background': not with physics.viscosity.law (the law is the "
                           "background's)")

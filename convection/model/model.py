@@ -144,7 +144,7 @@ class Model:
             out[f.name] = f
         if len(self.fractions) >= 2:
             out["material"] = material_index(self.fractions)
-        if self.stokes.approximation.is_nonlinear or self.stokes.approximation.viscosity_law.laws is not None:
+        if self.stokes.approximation.viscosity_law.numbers is None:
             # The viscosity of the flow (cell midpoints), the particle fields it reads (e.g. plastic
             # strain) and the rates the particles integrate.
             flow = self.flow()

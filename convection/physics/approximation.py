@@ -21,7 +21,7 @@ from typing import Any, Mapping
 import ufl
 
 from convection.geometry.gravity import Gravity, VerticalGravity
-from convection.physics.rheology import FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
+from convection.physics.rheology import Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
 
 MIXING_RULES: dict[str, str] = {
     "geometric": "eta = eta_0^(1-C) * eta_1^C",
@@ -66,29 +66,33 @@ def fractions(C: Any) -> tuple[Any, ...]:
 
 @dataclass(frozen=True)
 class ViscosityLaw:
-    """Viscosity law ``eta(T, C_1, ..., C_n)``.
+    """Viscosity law ``eta(T, C_1, ..., C_n)``: one :mod:`convection.physics.rheology` law per
+    material, mixed.
 
     The domain holds a background material and ``n`` materials with volume fractions ``C_i``
     (clipped to ``[0, 1]``; the background has ``C_0 = 1 - sum_i C_i``). Their viscosities are
     mixed, weighted by volume fraction, by ``mixing``::
 
         arithmetic:  eta = C_0 eta_0 + sum_i C_i eta_i
-        geometric:   eta = eta_0 exp(sum_i C_i ln(eta_i / eta_0))
+        geometric:   eta = exp(C_0 ln eta_0 + sum_i C_i ln eta_i)
         harmonic:    1 / eta = C_0 / eta_0 + sum_i C_i / eta_i
 
-    With one material this is the classic two-material rule in ``C`` and ``1 - C``.
+    With one material this is the classic two-material rule in ``C`` and ``1 - C``. Where every
+    law is a plain number (:class:`~convection.physics.rheology.Constant`), the mixture is the
+    closed form of those numbers (equal numbers: that number; geometric:
+    ``eta_0 exp(sum_i C_i ln(eta_i / eta_0))``), which needs neither the flow nor the position.
 
     Attributes:
-        material_viscosities: ``(eta_0, eta_1, ..., eta_n)``: the background's viscosity, then one
-            per material, in the order of the fractions passed to :meth:`__call__`. ``None``
-            means reference viscosity 1 regardless of ``C``.
+        material_viscosities: ``(eta_0, eta_1, ..., eta_n)``, numbers in place of ``laws``: each
+            becomes a :class:`~convection.physics.rheology.Constant` law. With neither, the
+            viscosity is 1.
         mixing: name in :data:`MIXING_RULES` (``"geometric"`` | ``"arithmetic"`` | ``"harmonic"``).
         temperature_law: name in :data:`TEMPERATURE_LAWS` (``"none"`` | ``"frank_kamenetskii"``,
-            which multiplies the viscosity by ``exp(-gamma T)``).
+            which multiplies the mixed viscosity by ``exp(-gamma T)``).
         gamma: Frank-Kamenetskii parameter (``ln`` of the thermal viscosity contrast).
-        laws: ``(law_0, law_1, ..., law_n)``: a :mod:`convection.physics.rheology` law per material
-            (background first) in place of ``material_viscosities``; the mixing is the same, of
-            the laws' values. None: ``material_viscosities``.
+        laws: ``(law_0, law_1, ..., law_n)``: a law per material (background first), in the
+            order of the fractions passed to :meth:`__call__`; made from ``material_viscosities``
+            when not given.
         gravity: along which the laws' depth is measured (:mod:`convection.geometry.gravity`:
             ``z_top - z`` in a box, ``r_outer - |x|`` in a shell).
     """
@@ -106,73 +110,64 @@ class ViscosityLaw:
         if self.material_viscosities is not None:
             if len(self.material_viscosities) < 2 or min(self.material_viscosities) <= 0.0:
                 raise ValueError("material_viscosities must be at least two positive numbers (eta_0, eta_1, ...)")
-        if self.laws is not None:
-            if self.material_viscosities is not None:
+            if self.laws is not None:
                 raise ValueError("give either material_viscosities or laws, not both")
-            if not self.laws:
-                raise ValueError("laws needs at least the background material's law")
+            object.__setattr__(self, "laws", tuple(Constant(float(v)) for v in self.material_viscosities))
+        elif self.laws is None:
+            object.__setattr__(self, "laws", (Constant(1.0),))
+        if not self.laws:
+            raise ValueError("laws needs at least the background material's law")
 
     @property
     def is_nonlinear(self) -> bool:
         """True when the viscosity depends on the flow (strain rate or pressure)."""
-        return self.laws is not None and any(law.is_nonlinear for law in self.laws)
+        return any(law.is_nonlinear for law in self.laws)
 
     @property
     def field_names(self) -> tuple[str, ...]:
         """Named mesh fields the laws read (e.g. ``plastic_strain``)."""
-        return laws_field_names(self.laws) if self.laws is not None else ()
+        return laws_field_names(self.laws)
 
     def depth(self, x: Any, /) -> Any:
         """UFL depth below the top surface at the points ``x`` (``ufl.SpatialCoordinate``)."""
         return self.gravity.depth(x)
 
     @property
+    def numbers(self) -> tuple[float, ...] | None:
+        """The viscosities when every law is a plain number (:class:`Constant`), else None."""
+        if all(type(law) is Constant for law in self.laws):
+            return tuple(law.eta0 for law in self.laws)
+        return None
+
+    @property
     def is_constant(self) -> bool:
         """True when ``eta`` depends on neither ``T`` nor ``C`` (nor on the flow or a field)."""
         temperature_free = self.temperature_law == "none" or self.gamma == 0.0
-        if self.laws is not None:
-            # Only plain constants are known to be equal (a clipped constant counts as variable).
-            values = {law.eta0 if law.name == "constant" else None for law in self.laws}
-            return None not in values and len(values) == 1 and temperature_free
-        composition_free = (
-            self.material_viscosities is None
-            or len(set(self.material_viscosities)) == 1
-        )
-        temperature_free = self.temperature_law == "none" or self.gamma == 0.0
-        return composition_free and temperature_free
+        # Only plain constants are known to be equal (a clipped constant counts as variable).
+        values = {law.eta0 if law.name == "constant" else None for law in self.laws}
+        return None not in values and len(values) == 1 and temperature_free
 
     def __call__(self, T: Any, C: Any, /, *, u: Any = None, p: Any = None,
                  fields: Mapping[str, Any] | None = None, x: Any = None) -> Any:
         """UFL expression of the viscosity for temperature ``T`` and composition ``C``
-        (see :func:`fractions`; one fraction per material after the background).
-
-        With :attr:`laws`, also of the velocity ``u`` (its strain rate), the pressure ``p``, the
-        named ``fields`` and the position ``x`` (``ufl.SpatialCoordinate``, for the depth); a law
-        that needs one of them fails without it."""
-        if self.laws is not None:
-            return self._mixed_laws(T, C, u=u, p=p, fields=fields or {}, x=x)
-        if self.material_viscosities is None:
-            eta = ufl.as_ufl(1.0)
+        (see :func:`fractions`; one fraction per material after the background), and of the
+        velocity ``u`` (its strain rate), the pressure ``p``, the named ``fields`` and the position
+        ``x`` (``ufl.SpatialCoordinate``, for the depth) for the laws that read them (a law that
+        needs one fails without it)."""
+        numbers = self.numbers
+        if numbers is not None:
+            eta = self._mixed_numbers(numbers, C)
         else:
-            eta0, *etas = (float(v) for v in self.material_viscosities)
-            if all(e == eta0 for e in etas):
-                eta = ufl.as_ufl(eta0)
-            else:
-                cs = fractions(C)
-                if len(cs) != len(etas):
-                    raise ValueError(f"the viscosity law has {len(etas)} material(s), got {len(cs)} fraction(s)")
-                cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
-                background = 1.0 - _sum(cs)
-                if self.mixing == "geometric":
-                    eta = eta0 * ufl.exp(_sum([c * ufl.ln(e / eta0) for c, e in zip(cs, etas)]))
-                elif self.mixing == "arithmetic":
-                    eta = background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
-                else:
-                    eta = 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
+            eta = self._mixed_laws(T, C, u=u, p=p, fields=fields or {}, x=x)
         if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
             eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
         return eta
 
+    def _mixed_numbers(self, numbers: tuple[float, ...], C: Any) -> Any:
+        eta0, *etas = numbers
+        if all(e == eta0 for e in etas):
+            return ufl.as_ufl(eta0)
+        return self._mix(eta0, etas, C, closed_form=True)
 
     @property
     def yields(self) -> bool:
@@ -218,24 +213,25 @@ class ViscosityLaw:
         state = self._state(T, u, p, fields, x)
         law0, *others = self.laws
         eta0 = law0(state)
-        if others:
-            cs = fractions(C)
-            if len(cs) != len(others):
-                raise ValueError(f"the viscosity law has {len(others)} material(s), got {len(cs)} fraction(s)")
-            etas = [law(state) for law in others]
-            cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
-            background = 1.0 - _sum(cs)
-            if self.mixing == "geometric":
-                eta = ufl.exp(background * ufl.ln(eta0) + _sum([c * ufl.ln(e) for c, e in zip(cs, etas)]))
-            elif self.mixing == "arithmetic":
-                eta = background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
-            else:
-                eta = 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
-        else:
-            eta = eta0
-        if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
-            eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
-        return eta
+        if not others:
+            return eta0
+        return self._mix(eta0, [law(state) for law in others], C, closed_form=False)
+
+    def _mix(self, eta0: Any, etas: list[Any], C: Any, *, closed_form: bool) -> Any:
+        """The volume-fraction mixture of the background's ``eta0`` and the materials' ``etas``
+        (``closed_form``: numbers, the geometric mean as ``eta0 exp(sum C ln(eta / eta0))``)."""
+        cs = fractions(C)
+        if len(cs) != len(etas):
+            raise ValueError(f"the viscosity law has {len(etas)} material(s), got {len(cs)} fraction(s)")
+        cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
+        background = 1.0 - _sum(cs)
+        if self.mixing == "geometric":
+            if closed_form:
+                return eta0 * ufl.exp(_sum([c * ufl.ln(e / eta0) for c, e in zip(cs, etas)]))
+            return ufl.exp(background * ufl.ln(eta0) + _sum([c * ufl.ln(e) for c, e in zip(cs, etas)]))
+        if self.mixing == "arithmetic":
+            return background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
+        return 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
 
 
 def _sum(terms: list[Any]) -> Any:

@@ -87,31 +87,20 @@ class Materials:
     def __len__(self) -> int:
         return len(self.materials)
 
-    @property
-    def has_laws(self) -> bool:
-        """True when a material (or the background) has a rheology law rather than a number."""
-        return self.background_law is not None or any(isinstance(m.viscosity, ViscosityLawBase)
-                                                      for m in self.materials)
-
     def viscosity_law(self, *, temperature_law: str = "none", gamma: float = 0.0,
                       gravity: Gravity = VerticalGravity()) -> ViscosityLaw:
-        """The viscosity law of these materials (with an optional temperature dependence); ``gravity``:
+        """The viscosity law of these materials (with an optional temperature dependence): the
+        background's law (or its number) and each material's (a number is a
+        :class:`~convection.physics.rheology.Constant`; none: the background's), mixed; ``gravity``:
         along which the laws' depth is measured (:class:`convection.physics.approximation.ViscosityLaw`)."""
-        if self.has_laws:
-            law0 = self.background_law if self.background_law is not None else Constant(self.background_viscosity)
+        law0 = self.background_law if self.background_law is not None else Constant(self.background_viscosity)
 
-            def law(value: Any) -> ViscosityLawBase:
-                if value is None:
-                    return law0
-                return value if isinstance(value, ViscosityLawBase) else Constant(float(value))
-            return ViscosityLaw(mixing=self.mixing, temperature_law=temperature_law, gamma=gamma,
-                                laws=(law0, *(law(m.viscosity) for m in self.materials)), gravity=gravity)
-        etas = [m.viscosity for m in self.materials]
-        contrasts = None
-        if any(e is not None for e in etas):
-            contrasts = (self.background_viscosity, *(self.background_viscosity if e is None else e for e in etas))
-        return ViscosityLaw(material_viscosities=contrasts, mixing=self.mixing, temperature_law=temperature_law,
-                            gamma=gamma)
+        def law(value: Any) -> ViscosityLawBase:
+            if value is None:
+                return law0
+            return value if isinstance(value, ViscosityLawBase) else Constant(float(value))
+        return ViscosityLaw(mixing=self.mixing, temperature_law=temperature_law, gamma=gamma,
+                            laws=(law0, *(law(m.viscosity) for m in self.materials)), gravity=gravity)
 
     def approximation(self, *, Ra: float, H: float = 0.0, temperature_law: str = "none",
                       gamma: float = 0.0, gravity: Gravity = VerticalGravity()) -> BoussinesqApproximation:

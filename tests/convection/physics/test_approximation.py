@@ -85,3 +85,19 @@ def test_unknown_names_are_rejected():
         ViscosityLaw(temperature_law="arrhenius")
     with pytest.raises(ValueError):
         ViscosityLaw((1.0, -1.0))
+
+
+def test_numbers_are_constant_laws_of_one_path(mesh):
+    """Numbers (the classic keys) are Constant laws mixed in closed form: a background viscosity
+    is kept when no material has one of its own (it was dropped for 1 before the two viscosity
+    paths became one), and numbers mix as before (geometric: eta_0 exp(C ln(eta_1 / eta_0)))."""
+    from convection.physics.materials import Material, Materials
+    from convection.physics.rheology import Constant
+
+    region = lambda x: x[0] < 0.5  # noqa: E731
+    alone = Materials((Material("a", region),), background_viscosity=5.0).viscosity_law()
+    assert alone.laws == (Constant(5.0), Constant(5.0)) and alone.numbers == (5.0, 5.0) and alone.is_constant
+    assert _value(mesh, alone(0.0, 0.5)) == pytest.approx(5.0, rel=1e-14)
+    law = ViscosityLaw((0.1, 1.0))
+    assert law.numbers == (0.1, 1.0) and not law.is_constant
+    assert _value(mesh, law(0.0, 0.5)) == pytest.approx(0.1 * math.exp(0.5 * math.log(10.0)), rel=1e-12)

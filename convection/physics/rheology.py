@@ -58,7 +58,7 @@ import ufl
 from convection.schema import ConfigError, short_repr
 from fembase.registry import Registry
 
-__all__ = ["FlowState", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase", "build_law",
+__all__ = ["FlowState", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase", "build_law", "law_param",
            "laws_field_names", "strain_rate_measure", "weakening_factor", "yield_law"]
 
 STRAIN_RATE_MEASURES: dict[str, str] = {
@@ -119,7 +119,7 @@ def weakening_factor(e: Any, start: float, end: float, factor: float) -> Any:
 
 
 # ---------------------------------------------------------------------- parameter parsing
-def _param(kind: str = "float", default: Any = dataclasses.MISSING, **checks: Any) -> Any:
+def law_param(kind: str = "float", default: Any = dataclasses.MISSING, **checks: Any) -> Any:
     """A dataclass field of a law: ``kind`` (float | int | str | law | laws | table | list[str]),
     a default and checks (minimum, exclusive_minimum, maximum, exclusive_maximum, choices, help)."""
     metadata = {"kind": kind, **checks}
@@ -191,7 +191,7 @@ def _parse_value(kind: str, value: Any, key: str, checks: Mapping[str, Any]) -> 
 class ViscosityLawBase:
     """Base of every law: parsing from a config mapping, and what the law depends on.
 
-    Subclasses are frozen dataclasses whose fields are made by :func:`_param`; they set the class
+    Subclasses are frozen dataclasses whose fields are made by :func:`law_param`; they set the class
     attributes ``name`` and ``description`` and implement ``__call__(state) -> UFL expression``.
     """
 
@@ -293,7 +293,7 @@ class Weakening:
 class Constant(ViscosityLawBase):
     name: ClassVar[str] = "constant"
     description: ClassVar[str] = "eta = eta0"
-    eta0: float = _param(default=1.0, exclusive_minimum=0.0, help="viscosity")
+    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity")
 
     def __call__(self, state: FlowState) -> Any:
         return ufl.as_ufl(self.eta0)
@@ -303,9 +303,9 @@ class Constant(ViscosityLawBase):
 class Exponential(ViscosityLawBase):
     name: ClassVar[str] = "exponential"
     description: ClassVar[str] = "eta = eta0 exp(-gamma_T T + gamma_z depth) (Frank-Kamenetskii, linear in depth)"
-    eta0: float = _param(default=1.0, exclusive_minimum=0.0, help="viscosity at T = 0, depth 0")
-    gamma_T: float = _param(default=0.0, minimum=0.0, help="ln of the thermal viscosity contrast")
-    gamma_z: float = _param(default=0.0, minimum=0.0, help="ln of the viscosity contrast over unit depth")
+    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity at T = 0, depth 0")
+    gamma_T: float = law_param(default=0.0, minimum=0.0, help="ln of the thermal viscosity contrast")
+    gamma_z: float = law_param(default=0.0, minimum=0.0, help="ln of the viscosity contrast over unit depth")
 
     @property
     def uses(self) -> frozenset[str]:  # type: ignore[override]
@@ -326,12 +326,12 @@ class Arrhenius(ViscosityLawBase):
     description: ClassVar[str] = ("eta = eta0 exp((E + V d)/(T + T_offset) - (E + V d_ref)/(T_ref + T_offset)) "
                                   "(nondimensional activation energy and volume)")
     uses: ClassVar[frozenset[str]] = frozenset({"temperature", "depth"})
-    E: float = _param(minimum=0.0, help="nondimensional activation energy E*/(R Delta T)")
-    V: float = _param(default=0.0, minimum=0.0, help="nondimensional activation volume per unit depth")
-    eta0: float = _param(default=1.0, exclusive_minimum=0.0, help="viscosity at T_ref, d_ref")
-    T_offset: float = _param(default=0.0, minimum=0.0, help="surface temperature / Delta T (keeps T + T_offset > 0)")
-    T_ref: float = _param(default=1.0, help="reference temperature")
-    depth_ref: float = _param(default=0.0, help="reference depth")
+    E: float = law_param(minimum=0.0, help="nondimensional activation energy E*/(R Delta T)")
+    V: float = law_param(default=0.0, minimum=0.0, help="nondimensional activation volume per unit depth")
+    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity at T_ref, d_ref")
+    T_offset: float = law_param(default=0.0, minimum=0.0, help="surface temperature / Delta T (keeps T + T_offset > 0)")
+    T_ref: float = law_param(default=1.0, help="reference temperature")
+    depth_ref: float = law_param(default=0.0, help="reference depth")
 
     def check(self, key: str) -> None:
         if not self.T_ref + self.T_offset > 0.0:
@@ -350,8 +350,8 @@ class DepthTable(ViscosityLawBase):
     name: ClassVar[str] = "depth_table"
     description: ClassVar[str] = "eta = eta0 f(depth), f piecewise linear through [[depth, factor], ...]"
     uses: ClassVar[frozenset[str]] = frozenset({"depth"})
-    table: tuple = _param("table", help="[[depth, factor], ...] with increasing depths")
-    eta0: float = _param(default=1.0, exclusive_minimum=0.0, help="viscosity scale")
+    table: tuple = law_param("table", help="[[depth, factor], ...] with increasing depths")
+    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity scale")
 
     def __call__(self, state: FlowState) -> Any:
         d = state.depth
@@ -368,12 +368,12 @@ class PowerLaw(ViscosityLawBase):
     name: ClassVar[str] = "power_law"
     description: ClassVar[str] = ("eta = eta0 (eps_II/eps_ref)^((1-n)/n) exp((-gamma_T T + gamma_z d)/n) "
                                   "(dislocation creep)")
-    n: float = _param(exclusive_minimum=0.0, help="stress exponent (1: linear)")
-    eta0: float = _param(default=1.0, exclusive_minimum=0.0, help="viscosity at the reference strain rate")
-    reference_strain_rate: float = _param(default=1.0, exclusive_minimum=0.0, help="eps_ref")
-    gamma_T: float = _param(default=0.0, minimum=0.0, help="ln of the thermal contrast of the prefactor")
-    gamma_z: float = _param(default=0.0, minimum=0.0, help="ln of the depth contrast of the prefactor")
-    strain_rate_floor: float = _param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0,
+    n: float = law_param(exclusive_minimum=0.0, help="stress exponent (1: linear)")
+    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity at the reference strain rate")
+    reference_strain_rate: float = law_param(default=1.0, exclusive_minimum=0.0, help="eps_ref")
+    gamma_T: float = law_param(default=0.0, minimum=0.0, help="ln of the thermal contrast of the prefactor")
+    gamma_z: float = law_param(default=0.0, minimum=0.0, help="ln of the depth contrast of the prefactor")
+    strain_rate_floor: float = law_param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0,
                                       help="eps_II is at least this")
 
     @property
@@ -400,7 +400,7 @@ class PowerLaw(ViscosityLawBase):
 class Composite(ViscosityLawBase):
     name: ClassVar[str] = "composite"
     description: ClassVar[str] = "1/eta = sum_i 1/eta_i (e.g. diffusion + dislocation creep)"
-    laws: tuple = _param("laws", help="the creep laws combined")
+    laws: tuple = law_param("laws", help="the creep laws combined")
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
         return self.laws
@@ -416,8 +416,8 @@ class Composite(ViscosityLawBase):
 class Weakened(ViscosityLawBase):
     name: ClassVar[str] = "weakened"
     description: ClassVar[str] = "eta = w(e) eta_law: a viscous law weakened linearly by an accumulated strain e"
-    law: Any = _param("law", help="the law weakened")
-    weakening: Any = _param("weakening", help="{field, start, end, factor}")
+    law: Any = law_param("law", help="the law weakened")
+    weakening: Any = law_param("weakening", help="{field, start, end, factor}")
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
         return (self.law,)
@@ -433,9 +433,9 @@ class Weakened(ViscosityLawBase):
 class Damaged(ViscosityLawBase):
     name: ClassVar[str] = "damaged"
     description: ClassVar[str] = "eta = max(1 - D, residual) eta_law: damage D in [0, 1] (a named field) weakens"
-    law: Any = _param("law", help="the law damaged")
-    field: str = _param("str", default="damage", help="the damage field")
-    residual: float = _param(default=1e-3, exclusive_minimum=0.0, maximum=1.0,
+    law: Any = law_param("law", help="the law damaged")
+    field: str = law_param("str", default="damage", help="the damage field")
+    residual: float = law_param(default=1e-3, exclusive_minimum=0.0, maximum=1.0,
                              help="the factor at full damage")
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
@@ -477,11 +477,11 @@ class VonMises(_Yield):
     name: ClassVar[str] = "von_mises"
     description: ClassVar[str] = "eta_y = eta_star + sigma_y / (2 eps_II) (or / |eps|): a constant yield stress"
     uses: ClassVar[frozenset[str]] = frozenset({"strain_rate"})
-    yield_stress: float = _param(exclusive_minimum=0.0, help="yield stress sigma_y")
-    eta_star: float = _param(default=0.0, minimum=0.0, help="viscosity added to the yield viscosity")
-    strain_rate_measure: str = _param("str", default="second_invariant", choices=tuple(STRAIN_RATE_MEASURES))
-    strain_rate_floor: float = _param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0)
-    weakening: Any = _param("weakening", default=None, help="{field, start, end, factor}: weakens the yield stress")
+    yield_stress: float = law_param(exclusive_minimum=0.0, help="yield stress sigma_y")
+    eta_star: float = law_param(default=0.0, minimum=0.0, help="viscosity added to the yield viscosity")
+    strain_rate_measure: str = law_param("str", default="second_invariant", choices=tuple(STRAIN_RATE_MEASURES))
+    strain_rate_floor: float = law_param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0)
+    weakening: Any = law_param("weakening", default=None, help="{field, start, end, factor}: weakens the yield stress")
 
     def sigma_y(self, state: FlowState) -> Any:
         sigma: Any = ufl.as_ufl(self.yield_stress)
@@ -496,15 +496,15 @@ class DruckerPrager(_Yield):
     description: ClassVar[str] = ("eta_y = eta_star + sigma_y / (2 eps_II), sigma_y = C cos(phi) + max(p, 0) "
                                   "sin(phi) (2D; ASPECT's 3D form)")
     uses: ClassVar[frozenset[str]] = frozenset({"strain_rate", "pressure", "depth"})
-    cohesion: float = _param(minimum=0.0, help="cohesion C")
-    friction_angle: float = _param(minimum=0.0, exclusive_maximum=90.0, help="friction angle phi in degrees")
-    lithostatic_gradient: float = _param(default=0.0, minimum=0.0,
+    cohesion: float = law_param(minimum=0.0, help="cohesion C")
+    friction_angle: float = law_param(minimum=0.0, exclusive_maximum=90.0, help="friction angle phi in degrees")
+    lithostatic_gradient: float = law_param(default=0.0, minimum=0.0,
                                          help="p' = p + this x depth: the lithostatic part of the pressure")
-    eta_star: float = _param(default=0.0, minimum=0.0, help="viscosity added to the yield viscosity")
-    strain_rate_measure: str = _param("str", default="second_invariant", choices=tuple(STRAIN_RATE_MEASURES))
-    strain_rate_floor: float = _param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0)
-    weakening: Any = _param("weakening", default=None, help="{field, start, end, factor}")
-    weaken: tuple = _param("list[str]", default=["cohesion", "friction_angle"],
+    eta_star: float = law_param(default=0.0, minimum=0.0, help="viscosity added to the yield viscosity")
+    strain_rate_measure: str = law_param("str", default="second_invariant", choices=tuple(STRAIN_RATE_MEASURES))
+    strain_rate_floor: float = law_param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0)
+    weakening: Any = law_param("weakening", default=None, help="{field, start, end, factor}")
+    weaken: tuple = law_param("list[str]", default=["cohesion", "friction_angle"],
                            choices=("cohesion", "friction_angle"), help="what the weakening scales")
 
     def check(self, key: str) -> None:
@@ -534,9 +534,9 @@ class DruckerPrager(_Yield):
 class ViscoPlastic(ViscosityLawBase):
     name: ClassVar[str] = "viscoplastic"
     description: ClassVar[str] = "a viscous law and a yield law combined: tosi (2/(1/a+1/b)), minimum or harmonic"
-    viscous: Any = _param("law", help="the viscous law")
-    plastic: Any = _param("law", help="a yield law: von_mises or drucker_prager")
-    combination: str = _param("str", default="tosi", choices=tuple(COMBINATIONS))
+    viscous: Any = law_param("law", help="the viscous law")
+    plastic: Any = law_param("law", help="a yield law: von_mises or drucker_prager")
+    combination: str = law_param("str", default="tosi", choices=tuple(COMBINATIONS))
 
     def check(self, key: str) -> None:
         if not isinstance(self.plastic, (_Yield, Bounded)) or (
@@ -562,9 +562,9 @@ class Bounded(ViscosityLawBase):
 
     name: ClassVar[str] = "bounded"
     description: ClassVar[str] = "a law clipped to [min_viscosity, max_viscosity] (any law's min_/max_viscosity keys)"
-    law: Any = _param("law")
-    min_viscosity: Any = _param(default=None, exclusive_minimum=0.0)
-    max_viscosity: Any = _param(default=None, exclusive_minimum=0.0)
+    law: Any = law_param("law")
+    min_viscosity: Any = law_param(default=None, exclusive_minimum=0.0)
+    max_viscosity: Any = law_param(default=None, exclusive_minimum=0.0)
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
         return (self.law,)

@@ -31,15 +31,16 @@ Hostile documents are answered with one short line too:
 
 from __future__ import annotations
 
-import collections.abc
 import copy
 import dataclasses
 import math
-import reprlib
-import types
 import typing
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping, Union
+from typing import Any, Callable, Mapping
+
+from fembase.params import (  # re-exported: the declaration helpers live in the floor
+    MAX_ENTRIES, REQUIRED, Names, annotation_kind, param, settings_as_section, settings_from, short_repr, subsection,
+)
 
 __all__ = ["MAX_DEGREE", "MAX_DEPTH", "MAX_ENTRIES", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "Names",
            "check_document_shape", "check_finite_values", "key_text", "param", "section_schema", "settings_as_section",
@@ -53,34 +54,8 @@ MAX_VALUES = 100_000
 """Most values (mappings, lists and scalars, each alias use counted) a config document may hold."""
 MAX_DEGREE = 4
 """Highest polynomial degree of a field (form compilation time grows steeply with the degree)."""
-MAX_ENTRIES = 100
-"""Most materials, particle properties, PETSc options or constants (each costs a field, a column, an
-entry of PETSc's options database (512 in all) or an expression check)."""
 INT64 = (-(2**63), 2**63 - 1)
 """Range of an integer key (every integer of a run ends up in int64 arrays or C longs)."""
-
-_REPR = reprlib.Repr()
-_REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxset = 2, 5, 5, 5, 5
-_REPR.maxstring, _REPR.maxlong, _REPR.maxother = 80, 40, 80
-_REPR_CHARACTERS = 120
-
-
-def short_repr(value: Any) -> str:
-    """``repr(value)`` bounded in length and depth (for error messages: never expands a large value)."""
-    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
-        return f"<integer of about {int(value.bit_length() * 0.30103)} digits>"
-    text = _REPR.repr(value)
-    return text if len(text) <= _REPR_CHARACTERS else text[: _REPR_CHARACTERS - 3] + "..."
-
-
-class _Required:
-    def __repr__(self) -> str:
-        return "REQUIRED"
-
-
-REQUIRED: Any = _Required()
-"""Marker default: the user must give this key."""
-
 
 class ConfigError(ValueError):
     """A configuration problem, described in one line that names the offending key.
@@ -122,30 +97,6 @@ def check_document_shape(document: Any, /) -> None:
                 stack.extend(((name, depth + 1, sub), (item, depth + 1, sub)))
         elif isinstance(value, (list, tuple)):
             stack.extend((item, depth + 1, f"{key}[{i}]") for i, item in enumerate(value))
-
-
-Choices = Union[tuple[str, ...], Callable[[], Iterable[str]]]
-"""Allowed names: a tuple, or a callable returning them (e.g. a registry's keys, read when checked)."""
-
-
-class Names:
-    """Allowed names that are a registry's keys, read when a config is checked (so the registry is
-    the one list of names); :meth:`registry` gives the registry itself (the config reference lists
-    its entries' descriptions).
-
-    Args:
-        registry: The registry (name -> entry), or a callable returning it (a registry of a module
-            imported only when needed).
-    """
-
-    def __init__(self, registry: Mapping[str, Any] | Callable[[], Mapping[str, Any]], /) -> None:
-        self._registry = registry
-
-    def registry(self) -> Mapping[str, Any]:
-        return self._registry if isinstance(self._registry, Mapping) else self._registry()
-
-    def __call__(self) -> list[str]:
-        return list(self.registry())
 
 
 @dataclass(frozen=True)
@@ -390,52 +341,6 @@ def validate(schema: Mapping[str, Any], document: Any, prefix: str = "") -> dict
 
 
 # ---------------------------------------------------------------------- declared parameters
-_SCALAR_KINDS = {int: "int", float: "float", str: "str", bool: "bool"}
-
-
-def param(default: Any = REQUIRED, /, *, help: str, kind: str | None = None, choices: Choices | None = None,
-          minimum: float | None = None, exclusive_minimum: float | None = None, maximum: float | None = None,
-          length: tuple[int, ...] | None = None, check: Callable[[Any], str | None] | None = None,
-          items: Mapping[str, Any] | None = None, max_items: int | None = None) -> Any:
-    """A field of a settings dataclass that is a key of its config section (see the module
-    docstring): the default (``REQUIRED``: none), the checks of :class:`Field` and a one-line help.
-    The kind (and whether ``null`` is allowed) follows from the field's annotation unless given:
-    ``int``, ``float``, ``str``, ``bool``, ``tuple[int, ...]`` (a list in YAML), ``Mapping``, ``Any``,
-    each ``| None`` for nullable."""
-    spec = {"kind": kind, "default": default, "choices": choices, "minimum": minimum,
-            "exclusive_minimum": exclusive_minimum, "maximum": maximum, "length": length, "check": check,
-            "help": help, "items": items, "max_items": max_items}
-    metadata = {"schema": spec}
-    if default is REQUIRED:
-        return dataclasses.field(metadata=metadata)
-    if isinstance(default, (list, dict)):
-        return dataclasses.field(default_factory=lambda: copy.deepcopy(default), metadata=metadata)
-    return dataclasses.field(default=default, metadata=metadata)
-
-
-def subsection(cls: type, /) -> Any:
-    """A field of a settings dataclass that is a nested config section declared by ``cls``."""
-    return dataclasses.field(default_factory=cls, metadata={"section": cls})
-
-
-def _kind(annotation: Any) -> tuple[str, bool]:
-    """(Field kind, nullable) of a field annotation."""
-    nullable = False
-    if typing.get_origin(annotation) in (Union, types.UnionType):
-        args = [a for a in typing.get_args(annotation) if a is not type(None)]
-        nullable = len(args) < len(typing.get_args(annotation))
-        annotation = args[0] if len(args) == 1 else Any
-    origin = typing.get_origin(annotation)
-    if annotation in _SCALAR_KINDS:
-        return _SCALAR_KINDS[annotation], nullable
-    if origin in (tuple, list):
-        item = typing.get_args(annotation)[0]
-        return f"list[{_SCALAR_KINDS[item]}]", nullable
-    if origin in (dict, collections.abc.Mapping) or annotation in (dict, collections.abc.Mapping):
-        return "mapping", nullable
-    return "any", nullable
-
-
 def section_schema(cls: type, /) -> dict[str, Any]:
     """The config section a settings dataclass declares: key -> :class:`Field`, or a nested
     section for a :func:`subsection` field (in the order of the fields)."""
@@ -446,7 +351,7 @@ def section_schema(cls: type, /) -> dict[str, Any]:
             out[f.name] = section_schema(f.metadata["section"])
         elif "schema" in f.metadata:
             spec = dict(f.metadata["schema"])
-            kind, nullable = _kind(hints[f.name])
+            kind, nullable = annotation_kind(hints[f.name])
             spec["kind"] = spec["kind"] or kind
             if isinstance(spec["default"], tuple):  # a YAML list
                 spec["default"] = list(spec["default"])
@@ -454,37 +359,3 @@ def section_schema(cls: type, /) -> dict[str, Any]:
     return out
 
 
-def settings_from(cls: type, section: Mapping[str, Any], /) -> Any:
-    """The settings dataclass ``cls`` from a checked config section (lists become tuples where the
-    field is a tuple; nested sections become their dataclasses)."""
-    hints = typing.get_type_hints(cls)
-    values = {}
-    for f in dataclasses.fields(cls):
-        if f.name not in section:
-            continue
-        value = section[f.name]
-        if "section" in f.metadata:
-            value = settings_from(f.metadata["section"], value)
-        elif isinstance(value, list) and _is_tuple(hints[f.name]):
-            value = tuple(value)
-        values[f.name] = value
-    return cls(**values)
-
-
-def _is_tuple(annotation: Any) -> bool:
-    if typing.get_origin(annotation) in (Union, types.UnionType):
-        return any(_is_tuple(a) for a in typing.get_args(annotation))
-    return typing.get_origin(annotation) is tuple
-
-
-def settings_as_section(settings: Any, /) -> dict[str, Any]:
-    """A settings dataclass as its config section (tuples as lists, nested sections as mappings)."""
-    out = {}
-    for f in dataclasses.fields(settings):
-        value = getattr(settings, f.name)
-        if dataclasses.is_dataclass(value):
-            value = settings_as_section(value)
-        elif isinstance(value, tuple):
-            value = list(value)
-        out[f.name] = value
-    return out

@@ -61,6 +61,7 @@ from particles.interpolation import CellAverage, Interpolator, get_interpolator
 from particles.migration import migrate
 from particles.output import PARTICLE_WRITERS, OutputRecord, ParticleWriter
 from particles.population import PopulationControl, PopulationStats, copy_nearest
+from particles.settings import ParticleSettings, particle_settings
 from particles.properties import PROPERTIES, ParticleProperty, PropertyContext, PropertyManager, create_property
 from particles.swarm import Swarm
 from particles.transport import relocate
@@ -235,32 +236,29 @@ def particles_per_cell_summary(swarm: Swarm, /) -> tuple[int, float, int]:
     return int(lo), float(total) / max(int(cells), 1), int(hi)
 
 
-def _config_arguments(section: Mapping[str, Any], mesh: dolfinx.mesh.Mesh, directory: str | Path | None,
-                      extra_properties: Sequence[ParticleProperty], make_function: MakeFunction | None
-                      ) -> dict[str, Any]:
+def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh,
+                      directory: str | Path | None, extra_properties: Sequence[ParticleProperty],
+                      make_function: MakeFunction | None) -> dict[str, Any]:
     """The :class:`ParticleManager` keyword arguments a config section gives (see
     :meth:`ParticleManager.from_config`): generator, integrator, properties, interpolator,
     population, writer and output."""
+    settings = particle_settings(section)
     num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
-    generator = build_generator(section.get("generator") or {"name": "random_uniform", "particles_per_cell": 20},
-                                num_cells=num_cells, make_function=make_function)
-    properties = [*extra_properties, *build_properties(section.get("properties") or (), make_function=make_function)]
-    interp = dict(section.get("interpolator") or {"name": "cell_average"})
+    generator = build_generator(settings.generator, num_cells=num_cells, make_function=make_function)
+    properties = [*extra_properties, *build_properties(settings.properties, make_function=make_function)]
+    interp = dict(settings.interpolator)
     interpolator = get_interpolator(interp.pop("name"), **interp)
-    pop = section.get("population")
-    population = None
-    if pop and (pop.get("min_per_cell") or pop.get("max_per_cell") is not None):
-        population = PopulationControl(int(pop.get("min_per_cell") or 0), pop.get("max_per_cell"),
-                                       int(pop.get("seed") or 0))
-    out = section.get("output") or {}
-    schedule = OutputSchedule(out.get("every_steps"), out.get("every_time"))
+    pop = settings.population
+    population = PopulationControl(pop.min_per_cell, pop.max_per_cell, pop.seed) if pop.enabled else None
+    out = settings.output
+    schedule = OutputSchedule(out.every_steps, out.every_time)
     writer = None
     if schedule.enabled:
         if directory is None:
             raise ValueError("particle output needs an output directory")
-        writer = PARTICLE_WRITERS.lookup(out.get("format") or "xdmf")(
-            directory, properties=out.get("properties"), every_nth=int(out.get("every_nth") or 1))
-    return {"generator": generator, "integrator": str(section.get("integrator") or "rk2"), "properties": properties,
+        writer = PARTICLE_WRITERS.lookup(out.format)(
+            directory, properties=None if out.properties is None else list(out.properties), every_nth=out.every_nth)
+    return {"generator": generator, "integrator": settings.integrator, "properties": properties,
             "interpolator": interpolator, "population": population, "writer": writer, "output": schedule}
 
 
@@ -383,17 +381,18 @@ class ParticleManager:
 
     # ------------------------------------------------------------------ construction from a config
     @classmethod
-    def from_config(cls, section: Mapping[str, Any], mesh: dolfinx.mesh.Mesh, /, *, directory: str | Path | None = None,
+    def from_config(cls, section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh, /, *, directory: str | Path | None = None,
                     extra_properties: Sequence[ParticleProperty] = (), make_function: MakeFunction | None = None,
                     field_degree: int = 0, context: PropertyContext | None = None, confine: Confine | None = None,
                     generate_particles: bool = True) -> ParticleManager:
         """One manager from one config section (collective).
 
-        ``section`` holds ``generator`` ({name, parameters; particles_per_cell allowed}),
-        ``integrator`` (name), ``interpolator`` ({name, parameters}), ``properties`` (list of names
-        or {name, parameters}), ``population`` ({min_per_cell, max_per_cell, seed} or None) and
-        ``output`` ({every_steps, every_time, properties, every_nth} or None); missing keys take
-        the defaults of :class:`ParticleManager`. Text values of callable parameters (``function``,
+        ``section`` is a :class:`~particles.settings.ParticleSettings` or its config section:
+        ``generator`` ({name, parameters; particles_per_cell allowed}), ``integrator`` (name),
+        ``interpolator`` ({name, parameters}), ``properties`` (list of names or {name,
+        parameters}), ``population`` ({min_per_cell, max_per_cell, seed} or None) and ``output``
+        ({every_steps, every_time, properties, every_nth, format} or None); missing keys take the
+        defaults of :class:`~particles.settings.ParticleSettings`. Text values of callable parameters (``function``,
         ``source``, ``density``) are turned into functions by ``make_function``.
 
         Args:

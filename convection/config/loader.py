@@ -52,6 +52,7 @@ from convection.schema import (
 )
 from convection.solvers.stokes.solver import StokesSettings
 from convection.solvers.transport import EnergySettings
+from particles.settings import ParticleSettings
 
 __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
            "parse_overrides"]
@@ -215,29 +216,7 @@ SCHEMA: dict[str, Any] = {
     "particles": {
         "enabled": Field("bool", None, nullable=True,
                          help="carry particles (null: when composition.source is particles; true: also as tracers)"),
-        "generator": Field("mapping", {"name": "random_uniform", "particles_per_cell": 20, "seed": 1},
-                           help="generator name and parameters; particles_per_cell may replace num_particles"),
-        "integrator": Field("str", "rk2", choices=_names("particles.advection", "INTEGRATORS"),
-                            help="time integrator of the particle positions (and integrated properties)"),
-        "interpolator": Field("mapping", {"name": "cell_average", "mean": "arithmetic"},
-                              help="particle-to-mesh interpolator name and parameters"),
-        "properties": Field("any", [], check=_is_list, max_items=MAX_ENTRIES,
-                            help="properties every particle carries: names or {name: ..., parameters}"),
-        "population": {
-            "min_per_cell": Field("int", 0, minimum=0, help="cells with fewer particles get new ones"),
-            "max_per_cell": Field("int", None, nullable=True, minimum=1,
-                                  help="cells with more particles lose some (null: never)"),
-            "seed": Field("int", 0, help="random seed of the population control"),
-        },
-        "output": {
-            "every_steps": Field("int", None, nullable=True, minimum=1, help="write particles every N steps"),
-            "every_time": Field("float", None, nullable=True, exclusive_minimum=0.0,
-                                help="write particles at the first step after every multiple of this time"),
-            "properties": Field("list[str]", None, nullable=True, help="properties written (null: all)"),
-            "every_nth": Field("int", 1, minimum=1, help="write only particles with id % every_nth == 0"),
-            "format": Field("str", "xdmf", choices=_names("particles.output", "PARTICLE_WRITERS"),
-                            help="the particles' file format"),
-        },
+        **section_schema(ParticleSettings),
     },
     "time": section_schema(TimeSettings),
     "adaptivity": section_schema(AdaptivitySettings),

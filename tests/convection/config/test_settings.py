@@ -84,3 +84,29 @@ def test_components_built_from_empty_sections_equal_those_built_without_argument
     assert settings.output.checkpoint == CheckpointSettings()
     for solver in (python_stokes, python_temperature, stokes, temperature):
         solver.destroy()
+
+
+def test_the_particles_section_is_declared_once_in_particles():
+    """The particles section's keys (all but the front end's ``enabled``) are
+    :class:`particles.settings.ParticleSettings`; an empty section gives its Python defaults."""
+    from particles.settings import ParticleSettings, particle_settings
+
+    schema = dict(SCHEMA["particles"])
+    assert schema.pop("enabled").default is None
+    assert schema == section_schema(ParticleSettings)
+    section = _minimal()["particles"]
+    assert particle_settings(section) == ParticleSettings()
+    assert settings_as_section(ParticleSettings()) == {k: v for k, v in section.items() if k != "enabled"}
+    assert particle_settings({"population": None, "output": None}) == ParticleSettings()
+
+
+def test_a_manager_from_an_empty_section_is_the_one_the_config_defaults_give():
+    """ParticleManager.from_config({}) used a generator without the YAML's seed 1 (another drift):
+    now both place the same particles."""
+    from particles.manager import ParticleManager
+
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 3, 3)
+    empty = ParticleManager.from_config({}, mesh)
+    config = ParticleManager.from_config(_minimal()["particles"], mesh)
+    assert empty.num_particles == config.num_particles == 20 * 18
+    assert (empty.swarm.x == config.swarm.x).all()

@@ -1,0 +1,81 @@
+"""The parameters of a particle system, declared once: :class:`ParticleSettings`.
+
+The dataclasses are the one declaration of a ``particles`` config section: their defaults are the
+defaults of :meth:`particles.manager.ParticleManager.from_config`, and ``convection``'s config
+loader turns them into the schema of its ``particles`` section (and its config reference), so
+the two cannot drift apart. Names are checked against the registries
+(:data:`particles.advection.INTEGRATORS`, :data:`particles.output.PARTICLE_WRITERS`), read when a
+config is checked.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from fembase.params import MAX_ENTRIES, Names, param, settings_from, short_repr, subsection
+
+__all__ = ["ParticleOutputSettings", "ParticleSettings", "PopulationSettings", "particle_settings"]
+
+
+def _names(module: str, name: str) -> Names:
+    """The names of the registry ``module.name``, imported when a config is checked."""
+    return Names(lambda: getattr(importlib.import_module(module), name))
+
+
+def _is_list(value: Any) -> str | None:
+    return None if isinstance(value, list) else f"expected a list, got {short_repr(value)}"
+
+
+@dataclass(frozen=True)
+class PopulationSettings:
+    """Particles per cell kept within bounds (:class:`particles.population.PopulationControl`)."""
+
+    min_per_cell: int = param(0, minimum=0, help="cells with fewer particles get new ones")
+    max_per_cell: int | None = param(None, minimum=1, help="cells with more particles lose some (null: never)")
+    seed: int = param(0, help="random seed of the population control")
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the bounds ask for anything (a minimum above 0 or a maximum)."""
+        return bool(self.min_per_cell) or self.max_per_cell is not None
+
+
+@dataclass(frozen=True)
+class ParticleOutputSettings:
+    """When and what particle output is written (:mod:`particles.output`)."""
+
+    every_steps: int | None = param(None, minimum=1, help="write particles every N steps")
+    every_time: float | None = param(None, exclusive_minimum=0.0,
+                                     help="write particles at the first step after every multiple of this time")
+    properties: tuple[str, ...] | None = param(None, help="properties written (null: all)")
+    every_nth: int = param(1, minimum=1, help="write only particles with id % every_nth == 0")
+    format: str = param("xdmf", choices=_names("particles.output", "PARTICLE_WRITERS"),
+                        help="the particles' file format")
+
+
+@dataclass(frozen=True)
+class ParticleSettings:
+    """One particle system: how particles are made, moved, carried, averaged, kept and written."""
+
+    generator: Mapping[str, Any] = param({"name": "random_uniform", "particles_per_cell": 20, "seed": 1},
+                                         help="generator name and parameters; particles_per_cell may replace "
+                                              "num_particles")
+    integrator: str = param("rk2", choices=_names("particles.advection", "INTEGRATORS"),
+                            help="time integrator of the particle positions (and integrated properties)")
+    interpolator: Mapping[str, Any] = param({"name": "cell_average", "mean": "arithmetic"},
+                                            help="particle-to-mesh interpolator name and parameters")
+    properties: list[Any] = param([], kind="any", check=_is_list, max_items=MAX_ENTRIES,
+                                  help="properties every particle carries: names or {name: ..., parameters}")
+    population: PopulationSettings = subsection(PopulationSettings)
+    output: ParticleOutputSettings = subsection(ParticleOutputSettings)
+
+
+def particle_settings(section: Mapping[str, Any] | ParticleSettings, /) -> ParticleSettings:
+    """:class:`ParticleSettings` from a (possibly partial) config section: missing keys, and a
+    ``null`` population or output, take the defaults; keys that are not settings (a front end's
+    ``enabled``) are ignored. Values are not checked here (a config loader checks them)."""
+    if isinstance(section, ParticleSettings):
+        return section
+    return settings_from(ParticleSettings, {k: v for k, v in section.items() if v is not None})

@@ -16,28 +16,69 @@ nondimensional internal heating ``H`` and viscosity ``eta(T, C)`` given by a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import ufl
 
+from fembase.registry import Registry
 from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.physics.rheology import Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
 
-MIXING_RULES: dict[str, str] = {
-    "geometric": "eta = eta_0^(1-C) * eta_1^C",
-    "arithmetic": "eta = (1-C) eta_0 + C eta_1",
-    "harmonic": "1/eta = (1-C)/eta_0 + C/eta_1",
-}
-"""Registry of composition mixing rules (lowercase name -> one-line description)."""
 
-TEMPERATURE_LAWS: dict[str, str] = {
-    "none": "no temperature dependence",
-    "frank_kamenetskii": "eta *= exp(-gamma T)",
-}
-"""Registry of temperature dependences (lowercase name -> one-line description)."""
+def _geometric(eta0: Any, etas: list[Any], cs: list[Any], background: Any, closed_form: bool) -> Any:
+    if closed_form:  # numbers: eta0 exp(sum C ln(eta / eta0))
+        return eta0 * ufl.exp(_sum([c * ufl.ln(e / eta0) for c, e in zip(cs, etas)]))
+    return ufl.exp(background * ufl.ln(eta0) + _sum([c * ufl.ln(e) for c, e in zip(cs, etas)]))
 
 
-def _check_name(name: str, registry: dict[str, str], what: str) -> None:
+def _arithmetic(eta0: Any, etas: list[Any], cs: list[Any], background: Any, closed_form: bool) -> Any:
+    return background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
+
+
+def _harmonic(eta0: Any, etas: list[Any], cs: list[Any], background: Any, closed_form: bool) -> Any:
+    return 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
+
+
+@dataclass(frozen=True)
+class MixingRule:
+    """A volume-fraction mixture of viscosities: ``mix(eta0, etas, cs, background, closed_form)``
+    of the background's ``eta0``, the materials' ``etas`` with fractions ``cs`` (clipped to [0, 1])
+    and the background's fraction ``1 - sum(cs)`` (UFL; ``closed_form``: the viscosities are
+    numbers)."""
+
+    name: str
+    description: str
+    mix: Callable[[Any, list[Any], list[Any], Any, bool], Any]
+
+
+MIXING_RULES: Registry[MixingRule] = Registry("viscosity mixing rule", (
+    MixingRule("geometric", "eta = eta_0^(1-C) * eta_1^C", _geometric),
+    MixingRule("arithmetic", "eta = (1-C) eta_0 + C eta_1", _arithmetic),
+    MixingRule("harmonic", "1/eta = (1-C)/eta_0 + C/eta_1", _harmonic),
+))
+"""Registry of composition mixing rules."""
+
+@dataclass(frozen=True)
+class TemperatureDependence:
+    """A factor ``factor(gamma, T)`` the mixed viscosity is multiplied by (None: no factor)."""
+
+    name: str
+    description: str
+    factor: Callable[[float, Any], Any] | None
+
+
+def _frank_kamenetskii(gamma: float, T: Any) -> Any:
+    return ufl.exp(-gamma * T)
+
+
+TEMPERATURE_LAWS: Registry[TemperatureDependence] = Registry("viscosity temperature law", (
+    TemperatureDependence("none", "no temperature dependence", None),
+    TemperatureDependence("frank_kamenetskii", "eta *= exp(-gamma T)", _frank_kamenetskii),
+))
+"""Registry of temperature dependences of the classic viscosity keys."""
+
+
+def _check_name(name: str, registry: Mapping[str, Any], what: str) -> None:
     if name not in registry:
         raise ValueError(f"Unknown {what} {name!r}; valid names: {sorted(registry)}")
 
@@ -142,7 +183,7 @@ class ViscosityLaw:
     @property
     def is_constant(self) -> bool:
         """True when ``eta`` depends on neither ``T`` nor ``C`` (nor on the flow or a field)."""
-        temperature_free = self.temperature_law == "none" or self.gamma == 0.0
+        temperature_free = TEMPERATURE_LAWS[self.temperature_law].factor is None or self.gamma == 0.0
         # Only plain constants are known to be equal (a clipped constant counts as variable).
         values = {law.eta0 if law.name == "constant" else None for law in self.laws}
         return None not in values and len(values) == 1 and temperature_free
@@ -159,8 +200,9 @@ class ViscosityLaw:
             eta = self._mixed_numbers(numbers, C)
         else:
             eta = self._mixed_laws(T, C, u=u, p=p, fields=fields or {}, x=x)
-        if self.temperature_law == "frank_kamenetskii" and self.gamma != 0.0:
-            eta = eta * ufl.exp(-self.gamma * _as_ufl(T))
+        factor = TEMPERATURE_LAWS[self.temperature_law].factor
+        if factor is not None and self.gamma != 0.0:
+            eta = eta * factor(self.gamma, _as_ufl(T))
         return eta
 
     def _mixed_numbers(self, numbers: tuple[float, ...], C: Any) -> Any:
@@ -225,13 +267,7 @@ class ViscosityLaw:
             raise ValueError(f"the viscosity law has {len(etas)} material(s), got {len(cs)} fraction(s)")
         cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
         background = 1.0 - _sum(cs)
-        if self.mixing == "geometric":
-            if closed_form:
-                return eta0 * ufl.exp(_sum([c * ufl.ln(e / eta0) for c, e in zip(cs, etas)]))
-            return ufl.exp(background * ufl.ln(eta0) + _sum([c * ufl.ln(e) for c, e in zip(cs, etas)]))
-        if self.mixing == "arithmetic":
-            return background * eta0 + _sum([c * e for c, e in zip(cs, etas)])
-        return 1.0 / (background / eta0 + _sum([c / e for c, e in zip(cs, etas)]))
+        return MIXING_RULES[self.mixing].mix(eta0, etas, cs, background, closed_form)
 
 
 def _sum(terms: list[Any]) -> Any:

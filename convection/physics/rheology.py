@@ -51,7 +51,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping, NamedTuple, Sequence
+from typing import Any, Callable, ClassVar, Mapping, NamedTuple, Sequence
 
 import ufl
 
@@ -61,18 +61,53 @@ from fembase.registry import Registry
 __all__ = ["FlowState", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase", "build_law", "law_param",
            "laws_field_names", "strain_rate_measure", "weakening_factor", "yield_law"]
 
-STRAIN_RATE_MEASURES: dict[str, str] = {
-    "second_invariant": "eps_II = sqrt(eps:eps / 2); yield viscosity sigma_y / (2 eps_II) (ASPECT)",
-    "norm": "|eps| = sqrt(eps:eps); yield viscosity sigma_y / |eps| (Tosi et al. 2015)",
-}
-"""Registry of strain-rate measures of the yield laws (name -> one-line description)."""
+@dataclass(frozen=True)
+class StrainRateMeasure:
+    """A strain-rate measure of the yield laws, ``sqrt(square_scale eps:eps + floor^2)``; the
+    yield viscosity is ``sigma_y / (yield_scale measure)``."""
 
-COMBINATIONS: dict[str, str] = {
-    "tosi": "eta = 2 / (1/eta_viscous + 1/eta_yield) (Tosi et al. 2015)",
-    "minimum": "eta = min(eta_viscous, eta_yield) (ASPECT)",
-    "harmonic": "eta = 1 / (1/eta_viscous + 1/eta_yield)",
-}
-"""Registry of the visco-plastic combination rules (name -> one-line description)."""
+    name: str
+    description: str
+    square_scale: float
+    yield_scale: float
+
+
+STRAIN_RATE_MEASURES: Registry[StrainRateMeasure] = Registry("strain-rate measure", (
+    StrainRateMeasure("second_invariant", "eps_II = sqrt(eps:eps / 2); yield viscosity sigma_y / (2 eps_II) (ASPECT)",
+                      0.5, 2.0),
+    StrainRateMeasure("norm", "|eps| = sqrt(eps:eps); yield viscosity sigma_y / |eps| (Tosi et al. 2015)", 1.0, 1.0),
+))
+"""Registry of strain-rate measures of the yield laws."""
+
+
+@dataclass(frozen=True)
+class CombinationRule:
+    """How a visco-plastic law combines its viscous viscosity ``eta_v`` with its yield law:
+    ``combine(eta_v, plastic, state)`` (UFL)."""
+
+    name: str
+    description: str
+    combine: Callable[[Any, Any, FlowState], Any]
+
+
+def _minimum(eta_v: Any, plastic: Any, state: FlowState) -> Any:
+    return ufl.min_value(eta_v, plastic(state))
+
+
+def _scaled_harmonic(scale: float) -> Callable[[Any, Any, FlowState], Any]:
+    """``scale / (1/eta_v + 1/eta_y)``, with ``1/eta_y`` written to be 0 at rest for a yield law."""
+    def combine(eta_v: Any, plastic: Any, state: FlowState) -> Any:
+        inverse_y = plastic.inverse(state) if isinstance(plastic, _Yield) else 1.0 / plastic(state)
+        return scale / (1.0 / eta_v + inverse_y)
+    return combine
+
+
+COMBINATIONS: Registry[CombinationRule] = Registry("visco-plastic combination rule", (
+    CombinationRule("tosi", "eta = 2 / (1/eta_viscous + 1/eta_yield) (Tosi et al. 2015)", _scaled_harmonic(2.0)),
+    CombinationRule("minimum", "eta = min(eta_viscous, eta_yield) (ASPECT)", _minimum),
+    CombinationRule("harmonic", "eta = 1 / (1/eta_viscous + 1/eta_yield)", _scaled_harmonic(1.0)),
+))
+"""Registry of the visco-plastic combination rules."""
 
 DEFAULT_STRAIN_RATE_FLOOR = 1.0e-20
 """Floor of the strain-rate measures (nondimensional): keeps a fluid at rest finite and differentiable."""
@@ -105,7 +140,7 @@ def strain_rate_measure(state: FlowState, measure: str, floor: float) -> Any:
     if state.strain_rate is None:
         raise ValueError("this viscosity law depends on the strain rate, which the caller did not provide")
     eps = state.strain_rate
-    scale = 0.5 if measure == "second_invariant" else 1.0
+    scale = STRAIN_RATE_MEASURES.lookup(measure).square_scale
     return ufl.sqrt(scale * ufl.inner(eps, eps) + floor * floor)
 
 
@@ -459,13 +494,13 @@ class _Yield(ViscosityLawBase):
 
     def __call__(self, state: FlowState) -> Any:
         e = strain_rate_measure(state, self.strain_rate_measure, self.strain_rate_floor)
-        scale = 2.0 if self.strain_rate_measure == "second_invariant" else 1.0
+        scale = STRAIN_RATE_MEASURES[self.strain_rate_measure].yield_scale
         return self.eta_star + self.sigma_y(state) / (scale * e)
 
     def inverse(self, state: FlowState) -> Any:
         """``1 / eta_y``, written so that it is 0 (and smooth) at rest."""
         e = strain_rate_measure(state, self.strain_rate_measure, self.strain_rate_floor)
-        scale = 2.0 if self.strain_rate_measure == "second_invariant" else 1.0
+        scale = STRAIN_RATE_MEASURES[self.strain_rate_measure].yield_scale
         return scale * e / (self.eta_star * scale * e + self.sigma_y(state))
 
     def field_names(self) -> tuple[str, ...]:
@@ -548,12 +583,7 @@ class ViscoPlastic(ViscosityLawBase):
         return (self.viscous, self.plastic)
 
     def __call__(self, state: FlowState) -> Any:
-        eta_v = self.viscous(state)
-        if self.combination == "minimum":
-            return ufl.min_value(eta_v, self.plastic(state))
-        inverse_y = self.plastic.inverse(state) if isinstance(self.plastic, _Yield) else 1.0 / self.plastic(state)
-        scale = 2.0 if self.combination == "tosi" else 1.0
-        return scale / (1.0 / eta_v + inverse_y)
+        return COMBINATIONS[self.combination].combine(self.viscous(state), self.plastic, state)
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,7 @@ from convection.schema import (
     MAX_ENTRIES, REQUIRED, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
     short_repr, validate,
 )
-from convection.solvers.stokes.solver import StokesSettings
+from convection.solvers.stokes.solver import StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings
 
@@ -452,19 +452,10 @@ def _check_rheology(config: dict[str, Any]) -> None:
         raise ConfigError("config key 'physics.viscosity.temperature_law': not with viscosity laws (give the "
                           "temperature dependence in the law, e.g. {name: exponential, gamma_T: ...})")
     law0, others = laws
-    depends = set(law0.depends_on)
-    for law in others:
-        depends |= law.depends_on
-    nonlinear = bool(depends & {"strain_rate", "pressure"})
-    if nonlinear and config["stokes"]["buoyancy_theta"] != 0.0:
-        raise ConfigError("config key 'stokes.buoyancy_theta': the semi-implicit buoyancy is not available with a "
-                          "viscosity that depends on the flow (strain rate or pressure)")
-    sides = config["boundary"]["velocity"]
-    closed = all(value is not None for value in sides.values())
-    if nonlinear and "pressure" in depends and closed and config["stokes"]["nonlinear"]["method"] == "newton":
-        raise ConfigError("config key 'stokes.nonlinear.method': newton with a pressure-dependent viscosity "
-                          "(drucker_prager) needs a defined pressure level: leave a side traction free (null) or "
-                          "use picard")
+    stokes = config["stokes"]
+    check_viscosity_rules(frozenset().union(*(law.depends_on for law in (law0, *others))),
+                          buoyancy_theta=stokes["buoyancy_theta"], method=stokes["nonlinear"]["method"],
+                          pressure_level_free=all(v is not None for v in config["boundary"]["velocity"].values()))
     fields = sorted({d.split(":", 1)[1] for law in (law0, *others) for d in law.depends_on if d.startswith("field:")})
     if fields:
         if not particles_enabled(config):

@@ -165,6 +165,12 @@ class ViscosityLaw:
         return any(law.is_nonlinear for law in self.laws)
 
     @property
+    def depends_on(self) -> frozenset[str]:
+        """What the laws read (``"temperature"``, ``"strain_rate"``, ``"pressure"``, ``"depth"``,
+        ``"field:<name>"``): the union over the background and the materials."""
+        return frozenset().union(*(law.depends_on for law in self.laws))
+
+    @property
     def field_names(self) -> tuple[str, ...]:
         """Named mesh fields the laws read (e.g. ``plastic_strain``)."""
         return laws_field_names(self.laws)

@@ -139,13 +139,6 @@ class NonlinearStokes:
         self.system = system
         self.settings = settings
         self._normalise = normalise
-        law = discretisation.approximation.viscosity_law
-        depends = set()
-        for item in law.laws or ():
-            depends |= item.depends_on
-        if settings.method == "newton" and "pressure" in depends and system.pressure_null_space:
-            raise ValueError("Newton's method with a pressure-dependent viscosity needs a defined pressure level: "
-                             "leave a side traction free, or use stokes.nonlinear.method: picard")
         domain = discretisation.domain
         self._homogeneous = velocity_dirichlet_bcs(discretisation.V, homogeneous(discretisation.bcs), domain)
         if system.pinned:

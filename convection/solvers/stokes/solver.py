@@ -51,7 +51,7 @@ changes every step).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -63,7 +63,7 @@ from convection.geometry.box import BoxDomain
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
 from convection.solvers.stokes.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
-from convection.schema import MAX_DEGREE, MAX_ENTRIES, Names, param, subsection
+from convection.schema import MAX_DEGREE, MAX_ENTRIES, ConfigError, Names, param, subsection
 from convection.solvers.petsc_options import (
     HAS_HYPRE, MUMPS_LU, LinearSolver, PetscSolver, check_petsc_options, krylov_options, linear_solvers, reproducible_lu,
     set_owned_options,
@@ -176,6 +176,32 @@ class StokesSettings:
 
 
 _DEFAULTS = StokesSettings()
+
+
+def check_viscosity_rules(depends_on: Collection[str], /, *, buoyancy_theta: float, method: str,
+                          pressure_level_free: bool) -> None:
+    """The rules that tie the Stokes settings to the viscosity, stated once for the config check
+    and for :class:`StokesSolver`: a semi-implicit buoyancy needs a viscosity that does not depend
+    on the flow, and Newton's method with a pressure-dependent viscosity needs a defined pressure
+    level (a traction-free side).
+
+    Args:
+        depends_on: What the viscosity laws read (:attr:`ViscosityLaw.depends_on`: ``"strain_rate"``,
+            ``"pressure"``, ``"field:<name>"``, ...).
+        buoyancy_theta, method: ``stokes.buoyancy_theta`` and ``stokes.nonlinear.method``.
+        pressure_level_free: Every side has a velocity condition (the pressure is determined up
+            to a constant).
+
+    Raises:
+        ConfigError: A rule is broken (one line naming the key).
+    """
+    if {"strain_rate", "pressure"} & set(depends_on) and buoyancy_theta != 0.0:
+        raise ConfigError("config key 'stokes.buoyancy_theta': the semi-implicit buoyancy is not available with a "
+                          "viscosity that depends on the flow (strain rate or pressure)")
+    if "pressure" in depends_on and pressure_level_free and method == "newton":
+        raise ConfigError("config key 'stokes.nonlinear.method': newton with a pressure-dependent viscosity "
+                          "(drucker_prager) needs a defined pressure level: leave a side traction free (null) or "
+                          "use picard")
 
 
 def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
@@ -304,9 +330,8 @@ class StokesSolver(PetscSolver):
         self.buoyancy_theta = float(buoyancy_theta)
         self.nonlinear_settings = nonlinear
         self.is_nonlinear = approximation.is_nonlinear
-        if self.is_nonlinear and self.buoyancy_theta != 0.0:
-            raise ValueError("a semi-implicit buoyancy (buoyancy_theta > 0) is not available with a viscosity that "
-                             "depends on the flow")
+        check_viscosity_rules(approximation.viscosity_law.depends_on, buoyancy_theta=self.buoyancy_theta,
+                              method=nonlinear.method, pressure_level_free=all(s in self.bcs for s in self.domain.boundaries))
         self._semi_implicit = (SemiImplicitBuoyancy(mesh, approximation, self.buoyancy_theta)
                                if self.buoyancy_theta != 0.0 else None)
         self._petsc_options = self._create_ksp(

@@ -48,7 +48,7 @@ from convection.postprocess.postprocessors import DiagnosticsSettings
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
 from convection.schema import (
     MAX_ENTRIES, REQUIRED, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
-    short_repr, validate,
+    settings_from, short_repr, validate,
 )
 from convection.solvers.stokes.solver import StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
@@ -502,8 +502,7 @@ def _check_materials(config: dict[str, Any]) -> None:
     if source != "static" and not table:
         raise ConfigError(f"config key 'composition.source': {source} needs materials (the materials section or "
                           "initial.composition)")
-    if source == "field" and config["composition"]["degree"] < 1:
-        raise ConfigError("config key 'composition.degree': an advected composition field needs degree >= 1")
+    settings_from(CompositionSettings, config["composition"])  # its checks (the degree a source needs)
     material = config["diagnostics"]["entrainment_material"]
     if material is not None:
         valid = ["all", *names] + (["dense", "light"] if len(names) == 1 else [])

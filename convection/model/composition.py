@@ -26,7 +26,7 @@ import dolfinx.mesh
 
 from convection.physics.approximation import BoussinesqApproximation
 from convection.physics.materials import Materials
-from convection.schema import MAX_DEGREE, Names, param
+from convection.schema import MAX_DEGREE, ConfigError, Names, param
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
 from fembase.registry import Registry
@@ -66,6 +66,7 @@ class CompositionSource(Protocol):
 
     name: ClassVar[str]
     description: ClassVar[str]
+    min_degree: ClassVar[int]
     materials: Materials
 
     @property
@@ -97,6 +98,7 @@ class StaticComposition:
     """
 
     name: ClassVar[str] = "static"
+    min_degree: ClassVar[int] = 0
     description: ClassVar[str] = "fractions set from the initial regions and kept fixed"
 
     @classmethod
@@ -151,6 +153,7 @@ class FieldComposition:
     """
 
     name: ClassVar[str] = "field"
+    min_degree: ClassVar[int] = 1
     description: ClassVar[str] = "fractions advected as continuous fields (SUPG + BDF2, no diffusion)"
 
     @classmethod
@@ -160,8 +163,7 @@ class FieldComposition:
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, materials: Materials, /, *,
                  degree: int = 2, stabilisation: str = "supg") -> None:
-        if degree < 1:
-            raise ValueError("an advected composition field needs degree >= 1")
+        check_degree(self.name, degree)
         self.materials = materials
         self.solvers = [
             TransportSolver(mesh, approximation, bcs={}, degree=degree, stabilisation=stabilisation, diffusivity=0.0,
@@ -228,6 +230,7 @@ class ParticleComposition:
     """
 
     name: ClassVar[str] = "particles"
+    min_degree: ClassVar[int] = 0
     description: ClassVar[str] = "fractions averaged per cell from the particles' material properties"
 
     @classmethod
@@ -267,6 +270,15 @@ COMPOSITION_SOURCES: Registry[type] = Registry("composition source",
 :class:`CompositionInputs` by its ``build``."""
 
 
+def check_degree(source: str, degree: int, /) -> None:
+    """Raise :class:`ConfigError` (naming ``composition.degree``) if the composition source
+    ``source`` cannot use fields of ``degree`` (its ``min_degree``: an advected field needs >= 1)."""
+    need = COMPOSITION_SOURCES.lookup(source).min_degree
+    if degree < need:
+        raise ConfigError(f"config key 'composition.degree': the composition source {source!r} needs degree >= {need}, "
+                          f"got {degree}")
+
+
 @dataclass(frozen=True)
 class CompositionSettings:
     """The ``composition`` config section: where the material fractions come from."""
@@ -276,3 +288,6 @@ class CompositionSettings:
                              "particles; field: advected continuous fields (SUPG, no diffusion)")
     degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
                         help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); source field needs >= 1")
+
+    def __post_init__(self) -> None:
+        check_degree(self.source, self.degree)

@@ -110,3 +110,18 @@ def test_a_manager_from_an_empty_section_is_the_one_the_config_defaults_give():
     config = ParticleManager.from_config(_minimal()["particles"], mesh)
     assert empty.num_particles == config.num_particles == 20 * 18
     assert (empty.swarm.x == config.swarm.x).all()
+
+
+def test_the_degree_a_composition_source_needs_is_one_check():
+    """composition.source field with degree 0 is refused by the config and by the component, with
+    one message (the check lives beside the composition sources)."""
+    from convection.config.loader import ConfigError
+    from convection.model.composition import COMPOSITION_SOURCES
+
+    with pytest.raises(ConfigError) as from_config:
+        _minimal(composition={"source": "field", "degree": 0}, initial={"composition": "y < 0.2"})
+    with pytest.raises(ConfigError) as from_python:
+        CompositionSettings(source="field", degree=0)
+    assert str(from_config.value) == str(from_python.value)
+    assert "'composition.degree'" in str(from_python.value)
+    assert COMPOSITION_SOURCES["field"].min_degree == 1 and CompositionSettings(source="field", degree=1).degree == 1

@@ -40,7 +40,7 @@ from convection.expressions import Expression, ExpressionError
 from convection.config.files import read_document, safe_load
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
-from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config
+from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
 from convection.adapt.adaptivity import AdaptivitySettings
 from convection.adapt.rebalance import BalanceSettings
 from convection.model.composition import CompositionSettings
@@ -50,6 +50,7 @@ from convection.schema import (
     MAX_ENTRIES, REQUIRED, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
     settings_from, short_repr, validate,
 )
+from convection.physics.approximation import PhysicsSettings
 from convection.solvers.stokes.solver import StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings
@@ -147,49 +148,8 @@ def _sides(check, default, forms: str) -> dict[str, Field]:
 
 SCHEMA: dict[str, Any] = {
     "name": Field("str", default="run", help="a label for the run"),
-    "mesh": {
-        "geometry": Field("str", "box", choices=_names("convection.geometry.registry", "DOMAINS"),
-                          help="box (cells, lower, upper), annulus or spherical_shell (radii, resolution), sector "
-                               "(radii, angles, resolution)"),
-        "cells": Field("list[int]", None, nullable=True, length=(2, 3), minimum=1,
-                       help="cells per direction, e.g. [32, 32]"),
-        "lower": Field("list[float]", None, nullable=True, length=(2, 3), help="lower box corner (default 0)"),
-        "upper": Field("list[float]", None, nullable=True, length=(2, 3), help="upper box corner (default 1)"),
-        "cell_type": Field("str", "simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes"),
-        "diagonal": Field("str", "right", choices=("right", "left", "crossed", "left/right", "right/left"),
-                          help="how a 2D simplex box mesh splits its squares into triangles (DOLFINx's diagonal)"),
-        "radii": Field("list[float]", [1.22, 2.22], length=(2,), exclusive_minimum=0.0,
-                       help="[inner, outer] radius of an annulus/spherical shell/sector around the origin"),
-        "angles": Field("list[float]", [0.0, 90.0], length=(2,),
-                        help="sector: [west, east] angles in degrees, counterclockwise from +x (span below 180)"),
-        "resolution": Field("float", None, nullable=True, exclusive_minimum=0.0,
-                            help="target cell size of an annulus/spherical shell (gmsh)"),
-        "geometry_degree": Field("int", 2, choices=None, minimum=1,
-                                 help="1: straight-sided cells; 2: curved cells on the circles/spheres (shells)"),
-        "max_cells": Field("int", 2_000_000, minimum=1,
-                           help="refuse configs whose mesh can grow beyond this many cells (base x refinement)"),
-    },
-    "physics": {
-        "Ra": Field("float", REQUIRED, minimum=0.0, help="thermal Rayleigh number"),
-        "Rb": Field("float", 0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_up)"),
-        "H": Field("float", 0.0, help="internal heating"),
-        "viscosity": {
-            "material_viscosities": Field("list[float]", None, nullable=True, length=(2,), exclusive_minimum=0.0,
-                                          help="[eta of C=0 material, eta of C=1 material] (with initial.composition)"),
-            "background": Field("float", 1.0, exclusive_minimum=0.0,
-                                help="viscosity of the background material (with the materials section)"),
-            "mixing": Field("str", "geometric", choices=_names("convection.physics.approximation", "MIXING_RULES"),
-                            help="volume-fraction weighted mixing of the material viscosities"),
-            "temperature_law": Field("str", "none", choices=_names("convection.physics.approximation", "TEMPERATURE_LAWS"),
-                                     help="temperature dependence of the material viscosities (older than law)"),
-            "gamma": Field("float", 0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii"),
-            "law": Field("any", None, nullable=True,
-                         help="the background material's viscosity law: a number or {name: <law>, ...} "
-                              "(convection.physics.rheology: constant, exponential, arrhenius, depth_table, power_law, "
-                              "composite, von_mises, drucker_prager, viscoplastic, weakened, damaged; any law "
-                              "may add min_viscosity, max_viscosity)"),
-        },
-    },
+    "mesh": mesh_section_schema(),
+    "physics": section_schema(PhysicsSettings),
     "boundary": {
         "velocity": _sides(_check_velocity_bc, "free_slip",
                            "free_slip, no_slip, {kind: prescribed, value: [vx, vy(, vz)]} (numbers or expressions) "

@@ -24,7 +24,7 @@ from petsc4py import PETSc
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.gravity import VerticalGravity
 from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
-from convection.schema import ConfigError
+from convection.schema import ConfigError, param
 from fembase.distribute import create_reproducible_mesh
 from fembase.dolfinx_compat import DirichletBC
 
@@ -127,6 +127,18 @@ class BoxSpec:
         return float(np.prod(np.subtract(self.upper, self.lower)))
 
 
+@dataclass(frozen=True)
+class BoxMeshSettings:
+    """The ``mesh`` keys of a box."""
+
+    cells: tuple[int, ...] | None = param(None, length=(2, 3), minimum=1, help="cells per direction, e.g. [32, 32]")
+    lower: tuple[float, ...] | None = param(None, length=(2, 3), help="lower box corner (default 0)")
+    upper: tuple[float, ...] | None = param(None, length=(2, 3), help="upper box corner (default 1)")
+    cell_type: str = param("simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes")
+    diagonal: str = param("right", choices=("right", "left", "crossed", "left/right", "right/left"),
+                          help="how a 2D simplex box mesh splits its squares into triangles (DOLFINx's diagonal)")
+
+
 def _box(comm: MPI.Comm, spec: BoxSpec) -> dolfinx.mesh.Mesh:
     """DOLFINx's rectangle or box mesh of ``spec`` on ``comm``."""
     ghost_mode = dolfinx.mesh.GhostMode.shared_facet
@@ -163,7 +175,7 @@ class BoxDomain(Domain):
 
     name: ClassVar[str] = "box"
     description: ClassVar[str] = "axis-aligned box [lower, upper] with `cells` per direction (2D or 3D)"
-    config_keys: ClassVar[tuple[str, ...]] = ("cells", "lower", "upper", "cell_type", "diagonal")
+    mesh_settings: ClassVar[type] = BoxMeshSettings
     config_boundaries: ClassVar[tuple[str, ...]] = SIDES_3D
     size_key: ClassVar[str] = "cells"
     boundary_descriptions: ClassVar[dict[str, str]] = {

@@ -15,6 +15,7 @@ annulus, spherical shell, sector). ``mesh.geometry`` in a config names it; its
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
@@ -49,8 +50,10 @@ class Domain(ABC):
     Class attributes:
         name: The ``mesh.geometry`` name.
         description: One line for the config reference.
-        config_keys: The ``mesh`` section keys this geometry reads (besides ``geometry`` and
-            ``max_cells``); the others are refused.
+        mesh_settings: The settings dataclass declaring the ``mesh`` section keys this geometry
+            reads besides ``geometry`` and ``max_cells`` (:func:`convection.schema.param` fields;
+            the config schema is made from it).
+        config_keys: Their names (from ``mesh_settings``); a config's other keys are refused.
         config_boundaries: The boundary names the ``boundary`` sections of its configs hold.
         size_key: The ``mesh`` key that sets the base mesh's size (named when a mesh is too large).
         boundary_descriptions: Where each of ``config_boundaries`` is (config reference).
@@ -64,6 +67,7 @@ class Domain(ABC):
 
     name: ClassVar[str]
     description: ClassVar[str]
+    mesh_settings: ClassVar[type]
     config_keys: ClassVar[tuple[str, ...]]
     config_boundaries: ClassVar[tuple[str, ...]]
     size_key: ClassVar[str] = "resolution"
@@ -71,6 +75,11 @@ class Domain(ABC):
     top: ClassVar[str]
     bottom: ClassVar[str]
     refinable: ClassVar[bool] = True
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "mesh_settings" in cls.__dict__:
+            cls.config_keys = tuple(f.name for f in dataclasses.fields(cls.mesh_settings))
 
     gdim: int
     boundaries: tuple[str, ...]

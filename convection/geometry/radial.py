@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import dolfinx
@@ -24,11 +24,23 @@ from mpi4py import MPI
 from convection.geometry.domain import Domain
 from convection.geometry.gravity import RadialGravity
 from convection.geometry.probes import MAX_PROBES, bounded
-from convection.schema import ConfigError
+from convection.schema import ConfigError, param
 from fembase.dolfinx_compat import coordinate_map, entities_to_geometry
 
 __all__ = ["RadialDomain", "check_radial_section", "polar_points", "radius_marker", "shell_confinement",
            "shell_radii"]
+
+
+@dataclass(frozen=True)
+class RadialMeshSettings:
+    """The ``mesh`` keys of a domain between two radii around the origin (gmsh-meshed)."""
+
+    radii: tuple[float, ...] = param((1.22, 2.22), length=(2,), exclusive_minimum=0.0,
+                                     help="[inner, outer] radius of an annulus/spherical shell/sector around the origin")
+    resolution: float | None = param(None, exclusive_minimum=0.0,
+                                     help="target cell size of an annulus/spherical shell (gmsh)")
+    geometry_degree: int = param(2, minimum=1,
+                                 help="1: straight-sided cells; 2: curved cells on the circles/spheres (shells)")
 
 
 def shell_radii(mesh: dolfinx.mesh.Mesh) -> tuple[float, float]:

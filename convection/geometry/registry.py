@@ -4,18 +4,49 @@ subclass. A new geometry is one class registered here."""
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from convection.geometry.box import BoxDomain
 from convection.geometry.domain import Domain
 from convection.geometry.sector import Sector
 from convection.geometry.shell import Annulus, SphericalShell
+from convection.schema import Names, param, section_schema
 from fembase.registry import Registry
 
-__all__ = ["DOMAINS", "boundary_descriptions", "domain_from_config"]
+__all__ = ["DOMAINS", "MeshSettings", "boundary_descriptions", "domain_from_config", "mesh_section_schema"]
 
 DOMAINS: Registry[type[Domain]] = Registry("geometry", (BoxDomain, Annulus, SphericalShell, Sector))
 """Every geometry by its ``mesh.geometry`` name."""
+
+
+@dataclass(frozen=True)
+class MeshSettings:
+    """The ``mesh`` keys of every geometry: which one, and a bound on the cells."""
+
+    geometry: str = param("box", choices=Names(DOMAINS),
+                          help="box (cells, lower, upper), annulus or spherical_shell (radii, resolution), sector "
+                               "(radii, angles, resolution)")
+    max_cells: int = param(2_000_000, minimum=1,
+                           help="refuse configs whose mesh can grow beyond this many cells (base x refinement)")
+
+
+def mesh_section_schema() -> dict[str, Any]:
+    """The ``mesh`` config section: ``geometry``, every geometry's keys
+    (:attr:`~convection.geometry.domain.Domain.mesh_settings`, in the order of :data:`DOMAINS`,
+    a key shared by several geometries once), then ``max_cells``.
+
+    Raises:
+        ValueError: Two geometries declare one key differently.
+    """
+    common = section_schema(MeshSettings)
+    out = {"geometry": common["geometry"]}
+    for cls in DOMAINS.values():
+        for key, field in section_schema(cls.mesh_settings).items():
+            if out.setdefault(key, field) != field:
+                raise ValueError(f"mesh key {key!r} is declared differently by the {cls.name!r} geometry")
+    out["max_cells"] = common["max_cells"]
+    return out
 
 
 def domain_from_config(config: Mapping[str, Any], /) -> Domain:

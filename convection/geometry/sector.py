@@ -27,12 +27,21 @@ from mpi4py import MPI
 
 from convection.geometry.domain import safe_product
 from convection.geometry.mesh import gmsh_mesh, mesh_uniformly
-from convection.geometry.radial import RadialDomain, check_radial_section, shell_radii
-from convection.schema import ConfigError
+from convection.geometry.radial import RadialDomain, RadialMeshSettings, check_radial_section, shell_radii
+from convection.schema import ConfigError, param
 
 __all__ = ["SECTOR_BOUNDARIES", "Sector", "SectorSpec", "create_sector_mesh"]
 
 SECTOR_BOUNDARIES: tuple[str, ...] = ("inner", "outer", "west", "east")
+
+
+@dataclass(frozen=True)
+class SectorMeshSettings(RadialMeshSettings):
+    """The ``mesh`` keys of a sector: a radial domain's and its angles."""
+
+    angles: tuple[float, ...] = param((0.0, 90.0), length=(2,),
+                                      help="sector: [west, east] angles in degrees, counterclockwise from +x (span "
+                                           "below 180)")
 
 
 @dataclass(frozen=True)
@@ -127,7 +136,7 @@ class Sector(RadialDomain):
     name: ClassVar[str] = "sector"
     description: ClassVar[str] = ("2D cylindrical sector (ASPECT's 2D chunk) between two radii and two angles "
                                   "(gmsh, curved cells)")
-    config_keys: ClassVar[tuple[str, ...]] = ("radii", "angles", "resolution", "geometry_degree")
+    mesh_settings: ClassVar[type] = SectorMeshSettings
     config_boundaries: ClassVar[tuple[str, ...]] = SECTOR_BOUNDARIES
     boundary_descriptions: ClassVar[dict[str, str]] = {
         "inner": "the inner surface r = r_inner", "outer": "the outer surface r = r_outer",

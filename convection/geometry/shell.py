@@ -29,7 +29,9 @@ from mpi4py import MPI
 
 from convection.geometry.domain import safe_product
 from convection.geometry.mesh import gmsh_mesh, mesh_uniformly
-from convection.geometry.radial import RadialDomain, check_radial_section, shell_confinement, shell_radii
+from convection.geometry.radial import (
+    RadialDomain, RadialMeshSettings, check_radial_section, shell_confinement, shell_radii,
+)
 from convection.schema import ConfigError
 from fembase.manifold import ShellManifold
 
@@ -137,7 +139,7 @@ class ShellDomain(RadialDomain):
 
     name: ClassVar[str] = "shell"
     description: ClassVar[str] = "annulus or spherical shell r_inner <= |x| <= r_outer around the origin (gmsh)"
-    config_keys: ClassVar[tuple[str, ...]] = ("radii", "resolution", "geometry_degree")
+    mesh_settings: ClassVar[type] = RadialMeshSettings
     config_boundaries: ClassVar[tuple[str, ...]] = SHELL_BOUNDARIES
     boundary_descriptions: ClassVar[dict[str, str]] = {"inner": "the inner surface r = r_inner",
                                                          "outer": "the outer surface r = r_outer"}

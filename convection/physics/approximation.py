@@ -22,6 +22,7 @@ import ufl
 
 from fembase.registry import Registry
 from convection.geometry.gravity import Gravity, VerticalGravity
+from convection.schema import REQUIRED, Names, param, subsection
 from convection.physics.rheology import Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
 
 
@@ -106,6 +107,41 @@ def fractions(C: Any) -> tuple[Any, ...]:
 
 
 @dataclass(frozen=True)
+class ViscositySettings:
+    """The ``physics.viscosity`` config section: the classic keys (numbers per material, their
+    mixing and temperature dependence) or a law. The defaults of :class:`ViscosityLaw` and
+    :class:`~convection.physics.materials.Materials` come from here."""
+
+    material_viscosities: tuple[float, ...] | None = param(
+        None, length=(2,), exclusive_minimum=0.0,
+        help="[eta of C=0 material, eta of C=1 material] (with initial.composition)")
+    background: float = param(1.0, exclusive_minimum=0.0,
+                              help="viscosity of the background material (with the materials section)")
+    mixing: str = param("geometric", choices=Names(MIXING_RULES),
+                        help="volume-fraction weighted mixing of the material viscosities")
+    temperature_law: str = param("none", choices=Names(TEMPERATURE_LAWS),
+                                 help="temperature dependence of the material viscosities (older than law)")
+    gamma: float = param(0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii")
+    law: Any | None = param(None, help="the background material's viscosity law: a number or {name: <law>, ...} "
+                                       "(convection.physics.rheology: constant, exponential, arrhenius, depth_table, "
+                                       "power_law, composite, von_mises, drucker_prager, viscoplastic, weakened, "
+                                       "damaged; any law may add min_viscosity, max_viscosity)")
+
+
+@dataclass(frozen=True)
+class PhysicsSettings:
+    """The ``physics`` config section: the nondimensional numbers and the viscosity."""
+
+    Ra: float = param(REQUIRED, minimum=0.0, help="thermal Rayleigh number")
+    Rb: float = param(0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_up)")
+    H: float = param(0.0, help="internal heating")
+    viscosity: ViscositySettings = subsection(ViscositySettings)
+
+
+VISCOSITY_DEFAULTS = ViscositySettings()
+
+
+@dataclass(frozen=True)
 class ViscosityLaw:
     """Viscosity law ``eta(T, C_1, ..., C_n)``: one :mod:`convection.physics.rheology` law per
     material, mixed.
@@ -139,9 +175,9 @@ class ViscosityLaw:
     """
 
     material_viscosities: tuple[float, ...] | None = None
-    mixing: str = "geometric"
-    temperature_law: str = "none"
-    gamma: float = 0.0
+    mixing: str = VISCOSITY_DEFAULTS.mixing
+    temperature_law: str = VISCOSITY_DEFAULTS.temperature_law
+    gamma: float = VISCOSITY_DEFAULTS.gamma
     laws: tuple[ViscosityLawBase, ...] | None = None
     gravity: Gravity = VerticalGravity()
 

@@ -22,7 +22,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from convection.geometry.gravity import Gravity, VerticalGravity
-from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.physics.approximation import VISCOSITY_DEFAULTS, BoussinesqApproximation, ViscosityLaw
 from convection.physics.rheology import Constant, ViscosityLawBase
 
 __all__ = ["Material", "Materials", "material_index"]
@@ -69,8 +69,8 @@ class Materials:
     """
 
     materials: tuple[Material, ...] = ()
-    background_viscosity: float = 1.0
-    mixing: str = "geometric"
+    background_viscosity: float = VISCOSITY_DEFAULTS.background
+    mixing: str = VISCOSITY_DEFAULTS.mixing
     background_law: ViscosityLawBase | None = None
 
     def __post_init__(self) -> None:

@@ -18,6 +18,8 @@ from convection.app.factory import build_model, run_settings
 from convection.config.loader import SCHEMA, load_config
 from convection.io.checkpoint import CheckpointSettings
 from convection.model.composition import CompositionSettings
+from convection.physics.approximation import PhysicsSettings, ViscosityLaw, ViscositySettings
+from convection.physics.materials import Materials
 from convection.postprocess.postprocessors import DiagnosticsSettings
 from convection.run.loop import BlowUp, OutputSettings, RunSettings, TimeSettings
 from convection.schema import Field, section_schema, settings_as_section, settings_from
@@ -27,9 +29,10 @@ from convection.solvers.transport import EnergySettings, TransportSolver
 
 SECTIONS = {"stokes": StokesSettings, "energy": EnergySettings, "composition": CompositionSettings,
             "adaptivity": AdaptivitySettings, "balance": BalanceSettings, "blowup": BlowUp,
-            "diagnostics": DiagnosticsSettings, "time": TimeSettings, "output": OutputSettings}
+            "diagnostics": DiagnosticsSettings, "time": TimeSettings, "output": OutputSettings,
+            "physics": PhysicsSettings}
 """Every config section a component's settings dataclass declares."""
-REQUIRED = {"time": {"end": 0.1}, "output": {"directory": "unused"}}
+REQUIRED = {"time": {"end": 0.1}, "output": {"directory": "unused"}, "physics": {"Ra": 1.0e3}}
 
 
 def _minimal(**sections) -> dict:
@@ -125,3 +128,27 @@ def test_the_degree_a_composition_source_needs_is_one_check():
     assert str(from_config.value) == str(from_python.value)
     assert "'composition.degree'" in str(from_python.value)
     assert COMPOSITION_SOURCES["field"].min_degree == 1 and CompositionSettings(source="field", degree=1).degree == 1
+
+
+def test_the_mesh_section_is_declared_by_the_geometries():
+    """``mesh`` is ``geometry``, each geometry's own keys (its ``mesh_settings``), ``max_cells``;
+    a geometry's config_keys are its declared keys."""
+    from convection.geometry.registry import DOMAINS, MeshSettings, mesh_section_schema
+
+    assert SCHEMA["mesh"] == mesh_section_schema()
+    declared = {"geometry", "max_cells"}
+    for cls in DOMAINS.values():
+        keys = tuple(section_schema(cls.mesh_settings))
+        assert cls.config_keys == keys and keys
+        assert all(SCHEMA["mesh"][k] == f for k, f in section_schema(cls.mesh_settings).items())
+        declared |= set(keys)
+    assert set(SCHEMA["mesh"]) == declared
+    assert _minimal()["mesh"]["geometry"] == MeshSettings().geometry
+
+
+def test_the_viscosity_defaults_are_one_declaration():
+    """ViscosityLaw and Materials take their defaults from the physics.viscosity section."""
+    settings = ViscositySettings()
+    law, materials = ViscosityLaw(), Materials()
+    assert (law.mixing, law.temperature_law, law.gamma) == (settings.mixing, settings.temperature_law, settings.gamma)
+    assert (materials.mixing, materials.background_viscosity) == (settings.mixing, settings.background)

@@ -47,10 +47,11 @@ from convection.model.composition import CompositionSettings
 from convection.postprocess.postprocessors import DiagnosticsSettings
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
 from convection.schema import (
-    MAX_ENTRIES, REQUIRED, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
+    MAX_ENTRIES, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
     settings_from, short_repr, validate,
 )
 from convection.physics.approximation import PhysicsSettings
+from convection.physics.materials import MaterialSettings
 from convection.solvers.stokes.solver import StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings
@@ -163,13 +164,8 @@ SCHEMA: dict[str, Any] = {
                              help="expression in x, y, z (1 = dense/second material), or null for none"),
         "constants": Field("mapping", {}, max_items=MAX_ENTRIES, help="named constants usable in the expressions"),
     },
-    "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items={
-        "initial": Field("str", REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")"),
-        "Rb": Field("float", 0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)"),
-        "viscosity": Field("any", None, nullable=True,
-                           help="viscosity of the pure material: a number or a law as physics.viscosity.law "
-                                "(null: the background's)"),
-    }, help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
+    "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(MaterialSettings),
+                       help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "stokes": section_schema(StokesSettings),
     "energy": section_schema(EnergySettings),
     "composition": section_schema(CompositionSettings),

@@ -24,11 +24,26 @@ import dolfinx.fem
 from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.physics.approximation import VISCOSITY_DEFAULTS, BoussinesqApproximation, ViscosityLaw
 from convection.physics.rheology import Constant, ViscosityLawBase
+from convection.schema import REQUIRED, param
 
 __all__ = ["Material", "Materials", "material_index"]
 
 InitialRegion = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
 """Initial volume fraction of a material: points shape=(3, n) -> values shape=(n,) in [0, 1]."""
+
+
+@dataclass(frozen=True)
+class MaterialSettings:
+    """One entry of the ``materials`` config section (``materials.<name>``); :class:`Material`'s
+    defaults come from here."""
+
+    initial: str = param(REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")")
+    Rb: float = param(0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)")
+    viscosity: Any | None = param(None, help="viscosity of the pure material: a number or a law as "
+                                             "physics.viscosity.law (null: the background's)")
+
+
+_MATERIAL_DEFAULTS = MaterialSettings(initial="0")
 
 
 @dataclass(frozen=True)
@@ -46,8 +61,8 @@ class Material:
 
     name: str
     initial: InitialRegion
-    Rb: float = 0.0
-    viscosity: float | ViscosityLawBase | None = None
+    Rb: float = _MATERIAL_DEFAULTS.Rb
+    viscosity: float | ViscosityLawBase | None = _MATERIAL_DEFAULTS.viscosity
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():

@@ -152,3 +152,14 @@ def test_the_viscosity_defaults_are_one_declaration():
     law, materials = ViscosityLaw(), Materials()
     assert (law.mixing, law.temperature_law, law.gamma) == (settings.mixing, settings.temperature_law, settings.gamma)
     assert (materials.mixing, materials.background_viscosity) == (settings.mixing, settings.background)
+
+
+def test_a_material_entry_is_declared_once():
+    """``materials.<name>`` is :class:`MaterialSettings`; :class:`Material`'s defaults are its."""
+    from convection.physics.materials import Material, MaterialSettings
+
+    assert SCHEMA["materials"].items == section_schema(MaterialSettings)
+    material = Material("crust", lambda x: x[0])
+    assert (material.Rb, material.viscosity) == (MaterialSettings(initial="0").Rb, MaterialSettings(initial="0").viscosity)
+    config = _minimal(materials={"crust": {"initial": "z > 0.9"}})
+    assert config["materials"]["crust"] == settings_as_section(MaterialSettings(initial="z > 0.9"))

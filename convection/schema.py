@@ -12,8 +12,8 @@ section (:func:`section_schema`) and is built from a checked section by :func:`s
 
 A schema is a nested mapping of section names to :class:`Field` (a leaf) or to another mapping
 (a section). :func:`validate` walks a user document against it, fills defaults, coerces numbers
-written as strings (PyYAML reads ``1e4`` as a string) and raises :class:`ConfigError` with one
-line naming the dotted key and what is allowed.
+written as strings (a quoted ``"1e4"``; :mod:`convection.config.files` reads ``1e4`` itself as a
+number) and raises :class:`ConfigError` with one line naming the dotted key and what is allowed.
 
 Hostile documents are answered with one short line too:
 

@@ -216,10 +216,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     debug = args.debug_all or getattr(args, "debug", False) or os.environ.get("CONVECTION_DEBUG", "") not in ("", "0")
     comm = MPI.COMM_WORLD
+    errors = comm.Dup() if comm.size > 1 else comm  # the error report's own channel (_report)
     try:
         return _run(args, comm)
     except Exception as err:  # noqa: BLE001 - sorted out by _expected_code
-        return _report(err, comm, debug)
+        return _report(err, errors, debug)
 
 
 def _expected_code(err: Exception) -> int | None:
@@ -246,13 +247,42 @@ def _report(err: Exception, comm: MPI.Comm, debug: bool) -> int:
         return code
     if debug:
         traceback.print_exc()
-    else:
+    line = f"{_one_line(f'{type(err).__name__}: {err}')} (--debug shows the traceback)"
+    if comm.size > 1 and _all_ranks_failed(comm):
+        lines = comm.gather(line, root=0)
+        if comm.rank == 0 and not debug:
+            for text in dict.fromkeys(lines or ()):  # each distinct message once, in rank order
+                ranks = [r for r, other in enumerate(lines or ()) if other == text]
+                where = "every rank" if len(ranks) == comm.size else f"rank{'s' if len(ranks) > 1 else ''} " \
+                    + ", ".join(map(str, ranks))
+                print(f"error ({where}): {text}", file=sys.stderr, flush=True)
+        return EXIT_RUNTIME_ERROR
+    if not debug:
         where = f" (rank {comm.rank})" if comm.size > 1 else ""
-        print(f"error{where}: {_one_line(f'{type(err).__name__}: {err}')} (--debug shows the traceback)",
-              file=sys.stderr, flush=True)
+        print(f"error{where}: {line}", file=sys.stderr, flush=True)
     if comm.size > 1:
         comm.Abort(EXIT_RUNTIME_ERROR)
     return EXIT_RUNTIME_ERROR
+
+
+ALL_FAILED_WAIT = 2.0
+"""Seconds a rank with an unexpected error waits for the others to report one too (then it stops
+every rank)."""
+
+
+def _all_ranks_failed(comm: MPI.Comm) -> bool:
+    """Whether every rank of ``comm`` (the report's own channel, so no other call can match it)
+    reached the error report within :data:`ALL_FAILED_WAIT` seconds: then the ranks can agree on
+    one report and exit without an MPI abort. Collective only among failing ranks."""
+    import time
+
+    request = comm.Ibarrier()
+    deadline = time.monotonic() + ALL_FAILED_WAIT
+    while time.monotonic() < deadline:
+        if request.Test():
+            return True
+        time.sleep(0.01)
+    return False
 
 
 if __name__ == "__main__":

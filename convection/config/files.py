@@ -3,11 +3,16 @@
 - :func:`read_document` reads a config file of at most :data:`MAX_CONFIG_BYTES` as UTF-8 YAML, and
   :func:`safe_load` turns what PyYAML raises on hostile text (deep nesting, integers with more
   digits than Python converts, impossible dates) into a one-line :class:`ConfigError`;
+- numbers are read as YAML 1.2 (and every other language) reads them: PyYAML follows YAML 1.1,
+  where ``1e3``, ``1.0e3`` and ``-.5`` are text (a float needs a dot and a signed exponent, as in
+  ``1.0e+3``); :class:`ConfigLoader` reads them as floats, so every numeric key, a viscosity or a
+  law parameter included, takes them;
 - the run folder's check lives with the run folder (:func:`convection.io.run_folder.check_output_directory`).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -15,14 +20,26 @@ import yaml
 
 from convection.schema import MAX_DEPTH, ConfigError
 
-__all__ = ["MAX_CONFIG_BYTES", "read_document", "safe_load"]
+__all__ = ["MAX_CONFIG_BYTES", "ConfigLoader", "read_document", "safe_load"]
 
 MAX_CONFIG_BYTES = 1 << 20
 """Largest config file (1 MiB; configs are a few kB)."""
 
 
+class ConfigLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with YAML 1.2's floats: ``1e3``, ``1.0e3``, ``1E-3``, ``+2.5e-7``, ``.5``
+    and ``-.5`` are numbers (YAML 1.1 reads the first four and the last as text). Integers, the
+    YAML 1.1 floats and every other scalar are read as before."""
+
+
+ConfigLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)?$"),
+    list("-+0123456789."))
+
+
 def safe_load(text: str, where: str) -> Any:
-    """``yaml.safe_load(text)``; what else PyYAML raises on hostile input becomes a ConfigError
+    """``yaml.load(text, ConfigLoader)`` (safe, with YAML 1.2's floats); what else PyYAML raises on hostile input becomes a ConfigError
     naming ``where``: RecursionError (deep nesting), ValueError (an integer with more digits than
     Python converts, an impossible date), MemoryError.
 
@@ -30,7 +47,7 @@ def safe_load(text: str, where: str) -> Any:
         yaml.YAMLError: the text is not YAML.
     """
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=ConfigLoader)  # noqa: S506 - a SafeLoader
     except yaml.YAMLError:
         raise
     except RecursionError:

@@ -44,7 +44,7 @@ from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_
 from convection.adapt.adaptivity import AdaptivitySettings
 from convection.adapt.rebalance import BalanceSettings
 from convection.model.composition import CompositionSettings
-from convection.postprocess.postprocessors import DiagnosticsSettings
+from convection.postprocess.postprocessors import DiagnosticsSettings, ModelFeatures, check_statistics
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
 from convection.schema import (
     MAX_ENTRIES, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
@@ -258,6 +258,21 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
         if text is not None:
             _check_expression(config, f"initial.{key}", text)
     _check_particles(config)
+    _check_statistics(config)
+
+
+def _check_statistics(config: dict[str, Any]) -> None:
+    """Every postprocessor ``output.statistics`` names applies to the model (else it would fail
+    at the first step)."""
+    table, _ = material_table(config)
+    features = ModelFeatures(energy=config["energy"]["enabled"], particles=particles_enabled(config),
+                             materials=tuple(m["name"] for m in table),
+                             entrainment_material=config["diagnostics"]["entrainment_material"],
+                             Ra=config["physics"]["Ra"])
+    try:
+        check_statistics(config["output"]["statistics"], features)
+    except ValueError as err:
+        raise ConfigError(f"config key 'output.statistics': {err}") from None
 
 
 def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: str | None = None,

@@ -57,7 +57,8 @@ from convection.schema import param
 from fembase.registry import Registry
 from fembase.state import State
 
-__all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "Postprocessor", "create_postprocessors"]
+__all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "ModelFeatures", "Postprocessor", "check_statistics",
+           "create_postprocessors"]
 
 
 @dataclass(frozen=True)
@@ -104,16 +105,50 @@ class _Forms:
         return self._forms
 
 
+@dataclass(frozen=True)
+class ModelFeatures:
+    """What a model has that decides which postprocessors apply to it; made from a model
+    (:meth:`of_model`) or, before any model exists, from a checked config (the loader), so that a
+    statistic that cannot be measured is refused when the config is checked.
+
+    Attributes:
+        energy: The temperature equation is solved.
+        particles: The model carries particles.
+        materials: The material names (the fields of the composition).
+        entrainment_material: ``diagnostics.entrainment_material`` (None: not set).
+        Ra: The thermal Rayleigh number.
+    """
+
+    energy: bool
+    particles: bool
+    materials: tuple[str, ...]
+    entrainment_material: str | None
+    Ra: float
+
+    @classmethod
+    def of_model(cls, model: Model, diagnostics: DiagnosticsSettings | None = None) -> ModelFeatures:
+        diagnostics = diagnostics or DiagnosticsSettings()
+        return cls(energy=model.solve_temperature, particles=model.particles is not None,
+                   materials=tuple(f.name for f in model.fractions),
+                   entrainment_material=diagnostics.entrainment_material, Ra=model.stokes.approximation.Ra)
+
+
 class _Column:
-    """Default construction: no options; applies to every model unless :meth:`applies` says otherwise."""
+    """Default construction: no options; applies to every model unless :meth:`missing` says otherwise."""
 
     name: ClassVar[str]
     description: ClassVar[str]
     columns: tuple[str, ...]
 
     @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        """What a model lacks for these columns (None: they apply), e.g. ``"needs the energy equation
+        (energy.enabled: true)"``."""
+        return None
+
+    @classmethod
     def applies(cls, model: Model) -> bool:
-        return True
+        return cls.missing(ModelFeatures.of_model(model)) is None
 
     @classmethod
     def by_default(cls, model: Model) -> bool:
@@ -165,8 +200,8 @@ class Nusselt(_Column):
     columns = ("nusselt", "nusselt_bottom")
 
     @classmethod
-    def applies(cls, model: Model) -> bool:
-        return model.solve_temperature
+    def missing(cls, features: ModelFeatures) -> str | None:
+        return None if features.energy else _NEEDS_ENERGY
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         assert model.temperature is not None
@@ -182,10 +217,6 @@ class TemperatureStatistics(_Column):
 
     def __init__(self) -> None:
         self._forms = _Forms()
-
-    @classmethod
-    def applies(cls, model: Model) -> bool:
-        return model.T is not None
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         T = model.T
@@ -224,8 +255,8 @@ class ParticleStatistics(_Column):
     columns = ("n_particles", "n_lost", "n_added", "n_removed", "ppc_min", "ppc_mean", "ppc_max")
 
     @classmethod
-    def applies(cls, model: Model) -> bool:
-        return model.particles is not None
+    def missing(cls, features: ModelFeatures) -> str | None:
+        return None if features.particles else "needs particles (particles.enabled: true)"
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         manager = model.particles
@@ -265,11 +296,18 @@ class Entrainment:
         self._initial: dict[str, float] | None = None
 
     @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        if not features.materials:
+            return "needs materials (the materials section or initial.composition)"
+        return None if features.entrainment_material is not None else \
+            "needs diagnostics.entrainment_material (a material name, all, dense or light)"
+
+    @classmethod
     def create(cls, model: Model, options: Mapping[str, Any]) -> Entrainment | None:
         settings = options.get("diagnostics") or DiagnosticsSettings()
         material = settings.entrainment_material
         names = [f.name for f in model.fractions]
-        if material is None or not names:
+        if cls.missing(ModelFeatures.of_model(model, settings)) is not None:
             return None
         if material == "all":
             amounts = {f"entrainment_{n}": (i, False) for i, n in enumerate(names)}
@@ -383,8 +421,10 @@ class EnergyBalance(_Rheology):
         self._forms = _Forms()
 
     @classmethod
-    def applies(cls, model: Model) -> bool:
-        return model.T is not None
+    def missing(cls, features: ModelFeatures) -> str | None:
+        if not features.energy:
+            return _NEEDS_ENERGY
+        return None if features.Ra > 0.0 else "needs physics.Ra > 0 (it reports the dissipation over Ra)"
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         stokes = model.stokes
@@ -443,6 +483,22 @@ class SurfaceVelocity(_Rheology):
         return {"vrms_surface": float(rms), "vmax_surface": model.mesh.comm.allreduce(local, op=MPI.MAX)}
 
 
+_NEEDS_ENERGY = "needs the energy equation (energy.enabled: true)"
+
+
+def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelFeatures) -> None:
+    """Refuse a postprocessor asked for by name that does not apply to a model with ``features``.
+
+    Raises:
+        ValueError: naming the first such postprocessor and what it needs.
+    """
+    for name in names or ():
+        cls = POSTPROCESSORS.get(name)
+        problem = getattr(cls, "missing", lambda _: None)(features) if cls is not None else None
+        if problem is not None:
+            raise ValueError(f"{name!r} {problem}")
+
+
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
     LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance, SurfaceVelocity))
@@ -471,7 +527,8 @@ def create_postprocessors(model: Model, names: list[str] | None = None, /, **opt
             continue
         pp = cls.create(model, options)
         if pp is None and names is not None:
-            raise ValueError(f"postprocessor {name!r} does not apply to this model")
+            problem = getattr(cls, "missing", lambda _: None)(ModelFeatures.of_model(model, options.get("diagnostics")))
+            raise ValueError(f"postprocessor {name!r} does not apply to this model: {problem or 'not measurable'}")
         if pp is not None:
             out.append(pp)
     return out

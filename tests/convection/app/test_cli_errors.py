@@ -131,3 +131,34 @@ def test_error_on_one_rank_stops_every_rank(tmp_path):
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0
     assert "error (rank 1): RuntimeError: injected failure on rank 1" in proc.stderr
+
+
+def test_error_on_every_rank_prints_once(tmp_path):
+    """The same unexpected error on every rank (here: both ranks fail at the same field output)
+    prints one line for all of them, exit code 1, without an MPI abort."""
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    script = FAIL_ON_RANK_1.replace(" and MPI.COMM_WORLD.rank == 1", "").replace("on rank 1", "everywhere")
+    cmd = [*mpirun(2), sys.executable, "-c", script, "run", str(GOOD), "--output", str(tmp_path / "run"),
+           "--set", "mesh.cells=[8,8]", "--set", "time.max_steps=3", "--set", "output.fields_every=1",
+           "--set", "output.progress=none"]
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1, proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if "error" in line]
+    assert errors[0] == ("error (every rank): RuntimeError: injected failure everywhere (--debug shows the "
+                         "traceback)"), proc.stderr
+    assert sum("injected failure" in line for line in proc.stderr.splitlines()) == 1, proc.stderr
+    assert "MPI_ABORT" not in proc.stderr
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("statistic, needle", [
+    ("nusselt", "'nusselt' needs the energy equation (energy.enabled: true)"),
+    ("entrainment", "'entrainment' needs diagnostics.entrainment_material"),
+])
+def test_statistic_that_does_not_apply_is_refused_by_check(tmp_path, ranks, statistic, needle):
+    """A statistic the model cannot measure is a config error at check time (exit 2, one line)."""
+    proc = _run(["check", str(GOOD), "--set", "energy.enabled=false", "--set", "initial.composition=z < 0.2",
+                 "--set", f"output.statistics=[time, {statistic}]"], ranks=ranks)
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
+    assert len(lines) == 1 and lines[0].startswith(f"error: config key 'output.statistics': {needle}"), proc.stderr

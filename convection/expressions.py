@@ -83,15 +83,36 @@ def _replace_children(tree: ast.AST, replace: Any) -> None:
 
 def _numeric(tree: ast.Expression) -> dict[str, Any]:
     """Rewrite a checked tree so that every value is a NumPy number, and return the names it now
-    uses: ``not a`` becomes ``logical_not(a)``, and each literal a name bound to a ``numpy.float64``
+    uses: ``not a`` becomes ``logical_not(a)``, ``a and b`` ``logical_and(a, b)`` (``or`` alike), a
+    chained comparison ``0 < x < 1`` the ``and`` of its pairs (all elementwise on arrays), and each literal a name bound to a ``numpy.float64``
     (``True`` is 1.0), so no exact (unbounded) Python integer or bool can arise."""
-    values: dict[str, Any] = {f"{_HIDDEN}not": np.logical_not}
+    values: dict[str, Any] = {f"{_HIDDEN}not": np.logical_not, f"{_HIDDEN}and": np.logical_and,
+                              f"{_HIDDEN}or": np.logical_or}
 
-    def logical_not(node: ast.AST) -> ast.AST | None:
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
-            call = ast.Call(func=ast.Name(id=f"{_HIDDEN}not", ctx=ast.Load()), args=[node.operand], keywords=[])
-            return ast.copy_location(call, node)
-        return None
+    def call(name: str, args: list[ast.AST], node: ast.AST) -> ast.AST:
+        return ast.copy_location(ast.Call(func=ast.Name(id=f"{_HIDDEN}{name}", ctx=ast.Load()), args=args,
+                                          keywords=[]), node)
+
+    def pairwise(name: str, args: list[ast.AST], node: ast.AST) -> ast.AST:
+        return args[0] if len(args) == 1 else call(name, [args[0], pairwise(name, args[1:], node)], node)
+
+    class Logical(ast.NodeTransformer):  # bottom-up (the depth is bounded before this runs)
+        def visit_UnaryOp(self, node: ast.UnaryOp) -> ast.AST:
+            self.generic_visit(node)
+            return call("not", [node.operand], node) if isinstance(node.op, ast.Not) else node
+
+        def visit_BoolOp(self, node: ast.BoolOp) -> ast.AST:  # elementwise: a and b -> logical_and(a, b)
+            self.generic_visit(node)
+            return pairwise("and" if isinstance(node.op, ast.And) else "or", list(node.values), node)
+
+        def visit_Compare(self, node: ast.Compare) -> ast.AST:  # 0 < x < 1 -> (0 < x) and (x < 1)
+            self.generic_visit(node)
+            if len(node.ops) == 1:
+                return node
+            operands = [node.left, *node.comparators]
+            return pairwise("and", [ast.copy_location(ast.Compare(left=operands[i], ops=[op],
+                                                                  comparators=[operands[i + 1]]), node)
+                                    for i, op in enumerate(node.ops)], node)
 
     def literal(node: ast.AST) -> ast.AST | None:
         if isinstance(node, ast.Constant):
@@ -100,7 +121,7 @@ def _numeric(tree: ast.Expression) -> dict[str, Any]:
             return ast.copy_location(ast.Name(id=name, ctx=ast.Load()), node)
         return None
 
-    _replace_children(tree, logical_not)
+    Logical().visit(tree)
     _replace_children(tree, literal)
     return values
 

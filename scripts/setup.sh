@@ -45,9 +45,10 @@ esac
 # (0.56.4 with numpy 1.24.2 on 12, 0.61.2 with numpy 2.2.4 on 13); on 12 it comes anyway through
 # python3-basix's dependencies, on 13 it must be asked for.
 # Off-screen pictures (pyvista/VTK) need Mesa's EGL and software rasteriser; VTK loads them at run
-# time. gmsh meshes the annulus/spherical-shell geometries (convection/geometry/mesh.py).
+# time. gmsh meshes the annulus/spherical-shell geometries (convection/geometry/mesh.py). pint reads
+# the physical units of configs (convection/physics/scaling.py; 0.19 on 12, 0.24 on 13).
 apt_packages=(python3-dolfinx python3-h5py-mpi python3-numba python3-venv python3-pip python3-yaml
-              python3-scipy python3-gmsh libegl1 libegl-mesa0 libgl1-mesa-dri)
+              python3-scipy python3-gmsh python3-pint libegl1 libegl-mesa0 libgl1-mesa-dri)
 if [ "$route" = pypi ]; then
     # The wheels bring DOLFINx, PETSc, MPICH, h5py, gmsh and numba; Debian gives the Python, the C
     # compiler and headers for the forms' JIT (ffcx + cffi), and the X/GL libraries that the gmsh

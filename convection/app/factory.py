@@ -46,6 +46,7 @@ from convection.io.checkpoint import (
 from convection.model.composition import (
     COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
 )
+from convection.config.units import scaling_of
 from convection.config.loader import (
     config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
     viscosity_laws,
@@ -113,8 +114,9 @@ def materials_from_config(config: dict[str, Any]) -> Materials:
 
 
 def run_settings(config: dict[str, Any]) -> RunSettings:
-    """The ``time`` and ``output`` sections."""
-    return RunSettings(settings_from(TimeSettings, config["time"]), settings_from(OutputSettings, config["output"]))
+    """The ``time`` and ``output`` sections, and the model's units (the ``scaling`` section)."""
+    return RunSettings(settings_from(TimeSettings, config["time"]), settings_from(OutputSettings, config["output"]),
+                       scaling_of(config))
 
 
 def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bcs: dict[str, TemperatureBC],

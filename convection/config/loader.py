@@ -38,6 +38,7 @@ import yaml
 
 from convection.expressions import Expression, ExpressionError
 from convection.config.files import read_document, safe_load
+from convection.config.units import apply_scaling, scaling_of
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
@@ -52,6 +53,7 @@ from convection.schema import (
 )
 from convection.physics.approximation import PhysicsSettings
 from convection.physics.materials import MaterialSettings
+from convection.physics.scaling import ScalingSettings
 from convection.solvers.stokes.solver import StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings
@@ -149,6 +151,7 @@ def _sides(check, default, forms: str) -> dict[str, Field]:
 
 SCHEMA: dict[str, Any] = {
     "name": Field("str", default="run", help="a label for the run"),
+    "scaling": section_schema(ScalingSettings),
     "mesh": mesh_section_schema(),
     "physics": section_schema(PhysicsSettings),
     "boundary": {
@@ -202,6 +205,17 @@ def probe_level(config: dict[str, Any]) -> int:
     """The finest refinement level a run of ``config`` reaches (for the probe points)."""
     adapt = config["adaptivity"]
     return min(adapt["max_level"], 30) if adapt["enabled"] else 0
+
+
+def _resolve_rayleigh(config: dict[str, Any]) -> None:
+    """physics.Ra not given: 0 for a model without the energy equation (a mechanical model needs
+    none), else a missing required value."""
+    if config["physics"]["Ra"] is None:
+        if config["energy"]["enabled"]:
+            raise ConfigError("config key 'physics.Ra': required value missing (the thermal Rayleigh number; in a "
+                              "model with units it follows from scaling.thermal_expansivity; a model without the "
+                              "energy equation, energy.enabled: false, needs none)")
+        config["physics"]["Ra"] = 0.0
 
 
 def _resolve_boundaries(config: dict[str, Any], document: dict[str, Any]) -> None:
@@ -347,10 +361,14 @@ def _check_particle_count(config: dict[str, Any], cells: float) -> None:
 
 
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
-    """Constants available in initial-condition expressions: Ra, Rb, H and initial.constants."""
+    """Constants available in initial-condition expressions: Ra, Rb, H, the domain's, the unit
+    constants of a scaled model (:meth:`convection.physics.scaling.Scaling.expression_constants`) and
+    initial.constants."""
     physics = config["physics"]
+    scaling = scaling_of(config)
+    units = scaling.expression_constants() if scaling is not None else {}
     return {"Ra": physics["Ra"], "Rb": physics["Rb"], "H": physics["H"], **config_domain(config).expression_constants(),
-            **config["initial"]["constants"]}
+            **units, **config["initial"]["constants"]}
 
 
 RESERVED_FIELD_NAMES = ("temperature", "velocity", "pressure", "material")
@@ -630,7 +648,9 @@ def _load(path: str | Path | None, overrides: Iterable[str], document: dict | No
     for key_path, value in parse_overrides(overrides):
         _apply_override(document, key_path, value)
     check_document_shape(document)
+    document = apply_scaling(document)
     config = validate(SCHEMA, document)
+    _resolve_rayleigh(config)
     _resolve_boundaries(config, document)
     _check_consistency(config, document)
     return config

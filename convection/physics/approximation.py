@@ -22,7 +22,7 @@ import ufl
 
 from fembase.registry import Registry
 from convection.geometry.gravity import Gravity, VerticalGravity
-from convection.schema import REQUIRED, Names, param, subsection
+from convection.schema import Names, param, subsection
 from convection.physics.rheology import Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
 
 
@@ -132,7 +132,8 @@ class ViscositySettings:
 class PhysicsSettings:
     """The ``physics`` config section: the nondimensional numbers and the viscosity."""
 
-    Ra: float = param(REQUIRED, minimum=0.0, help="thermal Rayleigh number")
+    Ra: float | None = param(None, minimum=0.0, help="thermal Rayleigh number (required with the energy equation; "
+                                                     "with units: from scaling.thermal_expansivity)")
     Rb: float = param(0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_up)")
     H: float = param(0.0, help="internal heating")
     viscosity: ViscositySettings = subsection(ViscositySettings)

@@ -39,6 +39,8 @@ class MaterialSettings:
 
     initial: str = param(REQUIRED, help="initial volume fraction: expression in x, y, z (e.g. \"z < 0.2\")")
     Rb: float = param(0.0, help="compositional Rayleigh number: buoyancy -Rb C e_z (> 0: denser)")
+    density: str | None = param(None, help="density with a unit (e.g. 3300 kg/m^3; needs the scaling section): "
+                                           "gives Rb = (rho - scaling.density) g L^3 / (eta0 kappa)")
     viscosity: Any | None = param(None, help="viscosity of the pure material: a number or a law as "
                                              "physics.viscosity.law (null: the background's)")
 

@@ -139,6 +139,9 @@ class _Column:
     name: ClassVar[str]
     description: ClassVar[str]
     columns: tuple[str, ...]
+    quantities: ClassVar[Mapping[str, str]] = {}
+    """Column -> what it measures (a kind of :data:`convection.physics.scaling.UNIT_KINDS`: a model with
+    units writes it in that kind's unit); columns not named are numbers without a unit."""
 
     @classmethod
     def missing(cls, features: ModelFeatures) -> str | None:
@@ -171,6 +174,7 @@ class TimeColumns(_Column):
     name: ClassVar[str] = "time"
     description: ClassVar[str] = "step number, time and the last step length"
     columns = ("step", "time", "dt")
+    quantities: ClassVar[Mapping[str, str]] = {"time": "time", "dt": "time"}
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         return {"step": model.timestep, "time": model.time, "dt": model.dt_previous}
@@ -180,6 +184,7 @@ class Velocity(_Column):
     name: ClassVar[str] = "velocity"
     description: ClassVar[str] = "root-mean-square velocity"
     columns = ("vrms",)
+    quantities: ClassVar[Mapping[str, str]] = {"vrms": "velocity"}
 
     def __init__(self) -> None:
         self._forms = _Forms()
@@ -214,6 +219,7 @@ class TemperatureStatistics(_Column):
     name: ClassVar[str] = "temperature"
     description: ClassVar[str] = "volume-mean, minimum and maximum temperature"
     columns = ("T_mean", "T_min", "T_max")
+    quantities: ClassVar[Mapping[str, str]] = dict.fromkeys(columns, "temperature")
 
     def __init__(self) -> None:
         self._forms = _Forms()
@@ -394,6 +400,7 @@ class ViscosityRange(_Rheology):
     name: ClassVar[str] = "rheology"
     description: ClassVar[str] = "smallest and largest viscosity at the velocity nodes of every cell"
     columns = ("eta_min", "eta_max")
+    quantities: ClassVar[Mapping[str, str]] = dict.fromkeys(columns, "viscosity")
 
     def __init__(self) -> None:
         self._version: int | None = None
@@ -451,6 +458,7 @@ class SurfaceVelocity(_Rheology):
     name: ClassVar[str] = "surface"
     description: ClassVar[str] = "rms and largest nodal speed on the top (shells: outer) surface"
     columns = ("vrms_surface", "vmax_surface")
+    quantities: ClassVar[Mapping[str, str]] = dict.fromkeys(columns, "velocity")
 
     def __init__(self) -> None:
         self._forms = _Forms()

@@ -27,6 +27,7 @@ from convection.postprocess.postprocessors import (
 )
 from convection.schema import REQUIRED, Names, param, subsection
 from convection.run.progress import Progress
+from convection.physics.scaling import ColumnUnits, Scaling
 from convection.io.run_folder import RunFolderError
 from particles.checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
@@ -80,6 +81,8 @@ class RunSettings:
 
     time: TimeSettings
     output: OutputSettings
+    scaling: Scaling | None = None
+    """The model's units (None: a nondimensional model): statistics_physical.csv and progress lines."""
 
 
 @dataclass(frozen=True)
@@ -322,20 +325,32 @@ class _Outputs:
             file cannot be written.
     """
 
-    def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool) -> None:
+    def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool,
+                 kinds: Mapping[str, str] | None = None) -> None:
         output = settings.output
         directory = Path(output.directory)
         after = model.timestep if resume else None
+        scaling = settings.scaling
+        self.units = ColumnUnits(scaling, columns, kinds or {}) if scaling is not None else None
         try:
             self.statistics = StatisticsWriter(directory / "statistics.csv", columns, comm=model.comm,
                                                resume_after_step=after)
+            self.physical = StatisticsWriter(directory / "statistics_physical.csv", self.units.header, comm=model.comm,
+                                             resume_after_step=after) if self.units is not None else None
             self.balance = BalanceLog(directory / "balance.csv", comm=model.comm, resume_after_step=after)
         except StatisticsFileError as err:
             raise RunFolderError(str(err)) from None
         writer = FIELD_WRITERS.lookup(output.fields_format)
         self.fields = writer(directory, resume_after=model.time if resume else None)
+        units = None if scaling is None else (scaling.factor("time"), scaling.unit_label("time"),
+                                              scaling.factor("velocity"), scaling.unit_label("velocity"))
         self.progress = Progress(settings.time.end, mode=output.progress, every=output.progress_every,
-                                 enabled=model.comm.rank == 0)
+                                 enabled=model.comm.rank == 0, units=units)
+        if scaling is not None and not resume:
+            approximation = model.stokes.approximation
+            numbers = [f"Ra = {approximation.Ra:.6g}"] + [
+                f"Rb_{f.name} = {rb:.6g}" for f, rb in zip(model.fractions, np.atleast_1d(approximation.Rb))]
+            self.progress.message(f"{scaling.describe()}; {', '.join(numbers)}")
         if self.statistics.dropped_incomplete:
             self.progress.message("statistics.csv: its last line was cut off when the run stopped; dropped")
         self.fields_every = output.fields_every
@@ -344,6 +359,8 @@ class _Outputs:
 
     def row(self, model: Model, row: dict[str, Any], now: Watched) -> None:
         self.statistics.write(row)
+        if self.physical is not None and self.units is not None:
+            self.physical.write(self.units.convert(row))
         extra = f"Nu={now.nusselt:.5g}" if now.nusselt is not None else ""
         self.progress.update(model.timestep, model.time, model.dt_previous, now.vrms, extra=extra)
         if self.fields_every and model.timestep % self.fields_every == 0:
@@ -356,6 +373,8 @@ class _Outputs:
 
     def close(self) -> None:
         self.statistics.close()
+        if self.physical is not None:
+            self.physical.close()
         self.balance.close()
         self.progress.close()
         self.fields.close()
@@ -442,7 +461,8 @@ class _RunLoop:
         """Step to the end (see :func:`run`). Collective."""
         model = self.model
         columns = [c for pp in self.postprocessors for c in pp.columns]
-        self.out = out = _Outputs(model, self.settings, columns, self.resumed)
+        kinds = {c: k for pp in self.postprocessors for c, k in getattr(pp, "quantities", {}).items()}
+        self.out = out = _Outputs(model, self.settings, columns, self.resumed, kinds)
         reason, failure = "end time", None
         try:
             reason, failure = self._steps(should_stop)
@@ -541,9 +561,11 @@ class _RunLoop:
         if model.comm.rank == 0:
             (Path(self.settings.output.directory) / "summary.json").write_text(
                 json.dumps(summary.as_dict(), indent=2) + "\n")
-            self.out.progress.message(f"finished ({reason}): step {summary.steps}, t={summary.time:.6g}, "
-                                      f"vrms={summary.vrms:.6g}, Nu={summary.nusselt:.6g}, {summary.cells} cells, "
-                                      f"{summary.wall_time:.1f} s")
+            progress = self.out.progress
+            nusselt = f"Nu={summary.nusselt:.6g}, " if np.isfinite(summary.nusselt) else ""
+            progress.message(f"finished ({reason}): step {summary.steps}, t={progress.time_text(summary.time)}, "
+                             f"vrms={progress.velocity_text(summary.vrms)}, {nusselt}{summary.cells} cells, "
+                             f"{summary.wall_time:.1f} s")
             self.out.progress.message("time per phase (max over ranks):\n" + model.timers.table(timings))
         return summary
 

@@ -39,11 +39,14 @@ class Progress:
         every: Steps between plain lines.
         enabled: False on ranks other than 0.
         stream: Where to write (default stderr for the bar, stdout for lines).
+        units: Show times and velocities in a model's units: ``(time factor, time unit, velocity
+            factor, velocity unit)``, each factor turning the solver's number into the unit.
     """
 
     def __init__(self, end_time: float, /, *, mode: str = "auto", every: int = 10, enabled: bool = True,
-                 stream: TextIO | None = None) -> None:
+                 stream: TextIO | None = None, units: tuple[float, str, float, str] | None = None) -> None:
         self.end_time = end_time
+        self._units = units or (1.0, "", 1.0, "")
         self.every = max(1, every)
         self._start = time.monotonic()
         self._bar = None
@@ -58,8 +61,20 @@ class Progress:
         if mode == "bar":
             from tqdm import tqdm
 
-            self._bar = tqdm(total=end_time, unit="t", file=stream or sys.stderr, dynamic_ncols=True,
-                             bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}] {postfix}")
+            self._bar = tqdm(total=end_time * self._units[0], unit="t", file=stream or sys.stderr, dynamic_ncols=True,
+                             bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g}" + self._label(1)
+                             + " [{elapsed}<{remaining}] {postfix}")
+
+    def time_text(self, t: float) -> str:
+        """A time in the shown unit (``"0.875 Myr"``; nondimensional: ``"0.000110457"``)."""
+        return f"{t * self._units[0]:.6g}{self._label(1)}"
+
+    def velocity_text(self, v: float) -> str:
+        """A velocity in the shown unit."""
+        return f"{v * self._units[2]:.6g}{self._label(3)}"
+
+    def _label(self, i: int) -> str:
+        return f" {self._units[i]}" if self._units[i] else ""
 
     def eta(self, t: float) -> float:
         """Seconds left, extrapolated from the simulated-time rate so far (inf before any progress)."""
@@ -69,13 +84,16 @@ class Progress:
         return elapsed * max(self.end_time - t, 0.0) / t
 
     def update(self, step: int, t: float, dt: float, vrms: float, *, extra: str = "", force: bool = False) -> None:
+        tf, vf = self._units[0], self._units[2]
         if self.mode == "bar" and self._bar is not None:
-            self._bar.set_postfix_str(f"step={step} dt={dt:.3g} vrms={vrms:.5g} {extra}".strip(), refresh=False)
-            self._bar.update(min(t, self.end_time) - self._bar.n)
+            self._bar.set_postfix_str(f"step={step} dt={dt * tf:.3g}{self._label(1)} vrms={vrms * vf:.5g}{self._label(3)} "
+                                      f"{extra}".strip(), refresh=False)
+            self._bar.update(min(t, self.end_time) * tf - self._bar.n)
         elif self.mode == "lines" and (force or step % self.every == 0):
             eta = self.eta(t)
             eta_text = "?" if eta == float("inf") else f"{eta:.0f}s"
-            line = f"step {step:6d}  t={t:.6g}  dt={dt:.4g}  vrms={vrms:.6g}  ETA {eta_text}"
+            line = (f"step {step:6d}  t={t * tf:.6g}{self._label(1)}  dt={dt * tf:.4g}{self._label(1)}  "
+                    f"vrms={vrms * vf:.6g}{self._label(3)}  ETA {eta_text}")
             print(f"{line}  {extra}".rstrip(), file=self._stream or sys.stdout, flush=True)
 
     def message(self, text: str) -> None:

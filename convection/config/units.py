@@ -1,0 +1,187 @@
+"""Values with units in a config: the pass that turns a model written in physical units into the
+nondimensional config the schema checks and the solver runs.
+
+A config with a ``scaling`` section (:class:`convection.physics.scaling.ScalingSettings`) may write
+any quantity as ``<number> <unit>`` (``3300 kg/m^3``, ``1e21 Pa s``, ``9.81 m/s^2``, ``100 km``,
+``10 Myr``, ``1600 K``, ``5 cm/yr``). Before the schema checks it, :func:`apply_scaling` rewrites it:
+
+- a value with a unit becomes the solver's number, ``q / scale`` by its dimension
+  (:meth:`Scaling.nondimensional`); a temperature *value* (a boundary temperature ``dirichlet``,
+  a law's ``T_ref``, a constant of ``initial.constants``, ``initial.temperature`` written as one
+  value) counts from the reference temperature: ``(T - T0) / dT``;
+- a number without a unit is nondimensional, as in every nondimensional config (so those keep
+  working unchanged, and a scaled model may still give, e.g., a law's exponent as a number);
+- ``materials.<name>.density`` becomes that material's ``Rb = (rho - rho0) g L^3 / (eta0 kappa)``
+  (``rho0``: scaling.density, the background's density);
+- ``physics.Ra`` follows from the scaling (``rho0 alpha dT g L^3 / (eta0 kappa)``) when
+  ``scaling.thermal_expansivity`` is given; a model without the energy equation needs none;
+- ``physics.H`` in W/kg becomes ``H t0 / (c_p dT)``; as a heating rate (K/s, K/Myr) it is scaled
+  as any quantity;
+- expressions (initial conditions, material regions, particle densities and properties) stay
+  text; in a scaled model they may use the unit constants ``m``, ``km``, ``s``, ``yr``, ``kyr``,
+  ``Myr`` and ``K`` (the nondimensional value of one of each: ``"z > 1 - 100*km"``).
+
+The result keeps the ``scaling`` section (the output units come from it) and is itself a valid
+config: written to a run folder and read again (a restart), it gives the same model.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any
+
+from convection.physics.scaling import Scaling, ScalingSettings, looks_like_quantity, parse_quantity, registry
+from convection.schema import ConfigError, key_text, section_schema, short_repr, validate
+
+__all__ = ["apply_scaling", "scaling_of"]
+
+_NUMBERS = ("Ra", "Rb")
+"""Keys that are nondimensional numbers by definition (a unit there is a mistake)."""
+
+
+_VISCOSITY, _STRESS = "[mass] / [length] / [time]", "[mass] / [length] / [time] ** 2"
+EXPECTED: dict[str, str] = {
+    **dict.fromkeys(("end", "dt_max", "dt_initial", "every_time"), "[time]"),
+    **dict.fromkeys(("upper", "lower", "radii", "resolution", "entrainment_height", "depth_ref", "width"), "[length]"),
+    **dict.fromkeys(("dirichlet", "T_ref", "T_offset"), "[temperature]"),
+    **dict.fromkeys(("background", "viscosity", "eta0", "eta_star", "min_viscosity", "max_viscosity",
+                     "material_viscosities"), _VISCOSITY),
+    **dict.fromkeys(("yield_stress", "cohesion"), _STRESS),
+    "reference_strain_rate": "1 / [time]",
+    "H": "[temperature] / [time]",
+}
+"""The dimension a value with a unit must have, by the name of its key (a key not named here takes
+any dimension)."""
+
+
+def _absolute(path: tuple[str, ...]) -> bool:
+    """Whether the value at ``path`` is a temperature value (counted from T0), not a difference."""
+    return path[-1] in ("dirichlet", "T_ref") or path[:2] == ("initial", "constants") \
+        or path == ("initial", "temperature")
+
+
+def _first_quantity(node: Any, path: tuple[str, ...] = ()) -> tuple[str, str] | None:
+    """The dotted key and text of the first value with a unit in a document, or None."""
+    if isinstance(node, dict):
+        for name, value in node.items():
+            found = _first_quantity(value, (*path, key_text(name)))
+            if found:
+                return found
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            found = _first_quantity(value, (*path[:-1], f"{path[-1]}[{i}]") if path else (f"[{i}]",))
+            if found:
+                return found
+    elif parse_quantity(node) is not None:
+        return ".".join(path), node
+    return None
+
+
+def _convert(node: Any, scaling: Scaling, path: tuple[str, ...]) -> Any:
+    """``node`` with every value with a unit made nondimensional (module docstring)."""
+    if isinstance(node, dict):
+        return {name: _convert(value, scaling, (*path, key_text(name))) for name, value in node.items()}
+    if isinstance(node, list):
+        return [_convert(value, scaling, path) for value in node]
+    quantity = parse_quantity(node)
+    key = ".".join(path)
+    if quantity is None:
+        if looks_like_quantity(node) and path[:1] != ("initial",) and "initial" not in path:
+            raise ConfigError(f"config key '{key}': {short_repr(node)} is not a number with a unit pint knows "
+                              "(e.g. 660 km, 1e21 Pa s, 10 Myr, 5 cm/yr)")
+        return node
+    if path and path[-1] in _NUMBERS:
+        raise ConfigError(f"config key '{key}': a nondimensional number; in a model with units give the "
+                          "materials' densities (materials.<name>.density) or the scaling's thermal expansivity")
+    expected = EXPECTED.get(path[-1].split("[")[0]) if path else None
+    if path[:2] == ("boundary", "velocity"):
+        expected = "[length] / [time]"
+    if expected is not None and quantity.dimensionality != registry().get_dimensionality(expected):
+        raise ConfigError(f"config key '{key}': {short_repr(node)} is not of {expected} (its dimension: "
+                          f"{quantity.dimensionality})")
+    if quantity.dimensionless:
+        return float(quantity.to("").magnitude)
+    value = scaling.nondimensional(quantity, absolute=_absolute(path))
+    return repr(value) if path == ("initial", "temperature") else value
+
+
+def _densities(document: dict[str, Any], scaling: Scaling) -> None:
+    """Each material's density -> its Rb (in place)."""
+    materials = document.get("materials")
+    if not isinstance(materials, dict):
+        return
+    for name, spec in materials.items():
+        if not isinstance(spec, dict) or spec.get("density") is None:
+            continue
+        key = f"materials.{key_text(name)}"
+        if "Rb" in spec:
+            raise ConfigError(f"config key '{key}.Rb': not with {key}.density (the density gives Rb)")
+        quantity = parse_quantity(spec["density"])
+        if quantity is None or quantity.dimensionality != registry().get_dimensionality("[mass] / [length] ** 3"):
+            raise ConfigError(f"config key '{key}.density': expected a density with a unit (e.g. 3300 kg/m^3), got "
+                              f"{short_repr(spec['density'])}")
+        rho = float(quantity.to("kg/m^3").magnitude)
+        spec["Rb"] = scaling.buoyancy_number(rho - scaling.needed("density"))
+        del spec["density"]
+
+
+def _physics(document: dict[str, Any], scaling: Scaling) -> None:
+    """physics.Ra from the scaling; physics.H in W/kg (in place)."""
+    physics = document.get("physics")
+    if physics is None:
+        physics = document["physics"] = {}
+    if not isinstance(physics, dict):
+        return  # the schema reports it
+    heating = parse_quantity(physics.get("H"))
+    if heating is not None and heating.dimensionality == registry().get_dimensionality("[length] ** 2 / [time] ** 3"):
+        rate = heating / registry().Quantity(scaling.needed("heat_capacity"), "J/kg/K")
+        physics["H"] = scaling.nondimensional(rate.to("K/s"))
+    if scaling.thermal_expansivity is None:
+        return
+    Ra = scaling.rayleigh()
+    given = physics.get("Ra")
+    if given is not None and not (isinstance(given, (int, float)) and math.isclose(float(given), Ra, rel_tol=1e-12)):
+        raise ConfigError(f"config key 'physics.Ra': {short_repr(given)} given, but the scaling gives Ra = {Ra:.6g} "
+                          "(rho0 alpha dT g L^3 / (eta0 kappa)); give one or the other")
+    physics["Ra"] = Ra
+
+
+def apply_scaling(document: dict[str, Any]) -> dict[str, Any]:
+    """The nondimensional document of ``document`` (module docstring); a document without a
+    ``scaling`` section is returned as it is, unless it has a value with a unit.
+
+    Raises:
+        ConfigError: one line naming the key: a value with a unit without a scaling, a unit of the
+            wrong dimension, a scale the model needs that is missing, Ra or Rb given twice.
+    """
+    schema = section_schema(ScalingSettings)
+    checked = validate(schema, document.get("scaling"), prefix="scaling.")
+    if checked == validate(schema, {}):  # no scaling (or its defaults, as a written config has them)
+        found = _first_quantity({name: value for name, value in document.items() if name != "scaling"})
+        if found is not None:
+            raise ConfigError(f"config key '{found[0]}': {short_repr(found[1])} has a unit; a model with units needs "
+                              "the scaling section (scaling.length, scaling.viscosity, ...)")
+        return document
+    scaling = Scaling.from_section(checked)
+    result = copy.deepcopy(document)
+    _densities(result, scaling)
+    _physics(result, scaling)
+    converted = {name: value if name == "scaling" else _convert(value, scaling, (key_text(name),))
+                 for name, value in result.items()}
+    return converted
+
+
+_CACHE: dict[str, Scaling] = {}
+
+
+def scaling_of(config: dict[str, Any]) -> Scaling | None:
+    """The :class:`Scaling` of a resolved config (None: a nondimensional model). Cached by the
+    section's text (expressions ask for it often)."""
+    section = config.get("scaling") or {}
+    if section.get("length") is None:
+        return None
+    key = repr(sorted((k, repr(v)) for k, v in section.items()))
+    if key not in _CACHE:
+        _CACHE[key] = Scaling.from_section(section)
+    return _CACHE[key]

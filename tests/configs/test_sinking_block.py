@@ -1,0 +1,56 @@
+"""configs/sinking_block.yaml, a model written in physical units, at CI size: the scaling's numbers
+are printed, statistics_physical.csv holds the nondimensional statistics in Myr and cm/yr (checked
+against the scales computed by hand), 1 and 2 ranks agree, and a resumed run continues both files."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+from _runs import CONFIGS, rows, run_cli, sets
+
+CONFIG = CONFIGS / "sinking_block.yaml"
+SMALL = ["mesh.cells=[16,16]", "time.end=200 Myr", "particles.generator.particles_per_cell=8", "time.max_steps=6",
+         "output.progress=lines", "output.progress_every=1", "output.fields_every=0"]
+YEAR = 365.25 * 86400.0
+L, KAPPA = 512e3, 1e-6
+
+
+def _physical(run_dir):
+    with open(run_dir / "statistics_physical.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_sinking_block_in_units(tmp_path, ranks):
+    out = tmp_path / "run"
+    proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets(SMALL)], ranks)
+    assert proc.returncode == 0, proc.stderr
+    rb = 8 * 9.81 * L**3 / (1e21 * KAPPA)
+    assert f"Ra = 0, Rb_block = {rb:.6g}" in proc.stdout
+    assert "time unit L^2/kappa = 8306.84 Myr" in proc.stdout
+    assert " Myr  dt=" in proc.stdout and " cm/yr  ETA" in proc.stdout
+    plain, physical = rows(out), _physical(out)
+    assert list(physical[0])[:4] == ["step", "time [Myr]", "dt [Myr]", "vrms [cm/yr]"]
+    assert "T_mean" not in plain[0]  # no energy equation: no temperature columns
+    for a, b in zip(plain, physical, strict=True):
+        assert a["step"] == b["step"] and a["cells"] == b["cells"]
+        assert float(b["time [Myr]"]) == pytest.approx(float(a["time"]) * L**2 / KAPPA / (1e6 * YEAR), rel=1e-12)
+        assert float(b["vrms [cm/yr]"]) == pytest.approx(float(a["vrms"]) * KAPPA / L * 100 * YEAR, rel=1e-12)
+    assert 0.01 < float(physical[-1]["vrms [cm/yr]"]) < 1.0  # the block sinks at a fraction of a cm/yr
+    assert int(plain[-1]["n_lost"]) == 0
+
+
+def test_one_and_two_ranks_agree_and_resume_continues(tmp_path):
+    one, two = tmp_path / "one", tmp_path / "two"
+    for out, ranks in ((one, 1), (two, 2)):
+        proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets(SMALL)], ranks)
+        assert proc.returncode == 0, proc.stderr
+    for a, b in zip(_physical(one), _physical(two), strict=True):
+        assert float(a["vrms [cm/yr]"]) == pytest.approx(float(b["vrms [cm/yr]"]), rel=1e-8)
+        assert float(a["time [Myr]"]) == pytest.approx(float(b["time [Myr]"]), rel=1e-8)
+    proc = run_cli(["resume", str(two), "--set", "time.max_steps=9"], 2)
+    assert proc.returncode == 0, proc.stderr
+    assert [r["step"] for r in _physical(two)] == [str(i) for i in range(10)]
+    assert [r["step"] for r in rows(two)] == [str(i) for i in range(10)]

@@ -282,7 +282,15 @@ def _check_statistics(config: dict[str, Any]) -> None:
     features = ModelFeatures(energy=config["energy"]["enabled"], particles=particles_enabled(config),
                              materials=tuple(m["name"] for m in table),
                              entrainment_material=config["diagnostics"]["entrainment_material"],
-                             Ra=config["physics"]["Ra"])
+                             Ra=config["physics"]["Ra"], points=bool(config["diagnostics"]["points"]))
+    gdim = config_gdim(config)
+    for name, point in config["diagnostics"]["points"].items():
+        if not (isinstance(point, list) and len(point) == gdim and all(_finite_number(c) is not None for c in point)):
+            raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': expected [x, y{', z' if gdim == 3 else ''}] "
+                              f"({gdim} numbers), got {short_repr(point)}")
+        if not str(name).isidentifier():
+            raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': a point's name is a column suffix: "
+                              "letters, digits and _")
     try:
         check_statistics(config["output"]["statistics"], features)
     except ValueError as err:

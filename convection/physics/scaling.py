@@ -95,13 +95,15 @@ class OutputUnits:
     viscosity: str = param("Pa*s", help="viscosities")
     stress: str = param("MPa", help="stresses and pressures")
     density: str = param("kg/m^3", help="densities")
+    area: str = param("km^2", help="areas (a material's volume in 2D)")
+    volume: str = param("km^3", help="volumes")
     strain_rate: str = param("1/s", help="strain rates")
 
 
 UNIT_KINDS: dict[str, str] = {"length": "[length]", "time": "[time]", "velocity": "[length] / [time]",
                               "temperature": "[temperature]", "viscosity": "[mass] / [length] / [time]",
                               "stress": "[mass] / [length] / [time] ** 2", "density": "[mass] / [length] ** 3",
-                              "strain_rate": "1 / [time]"}
+                              "strain_rate": "1 / [time]", "area": "[length] ** 2", "volume": "[length] ** 3"}
 """The kinds of :class:`OutputUnits` and their dimensions."""
 
 

@@ -26,10 +26,19 @@ name            columns
                 delta = |W - Phi/Ra| / max(W, Phi/Ra): the energy balance of steady convection
 ``surface``     vrms_surface = sqrt(int_top |u|^2 ds / |top|), vmax_surface (largest nodal |u| on
                 the top; shells: the outer surface)
+``materials``   per material ``<m>``: volume_<m>, centroid x_<m>, y_<m> (, z_<m>), vup_<m> (mean
+                upward velocity), vrms_<m>, vmax_<m>, depth_<m> (deepest point)
+                (:mod:`convection.postprocess.geodynamics`)
+``points``      every output field at the named points of ``diagnostics.points``: T_<p>,
+                vx_<p>, vy_<p> (, vz_<p>), p_<p>, <material>_<p>, ...
 =============== =======================================================================
 
-The last four apply by default to a model whose viscosity depends on the flow (the others may
-ask for them in ``output.statistics``).
+``nonlinear``, ``rheology``, ``energy`` and ``surface`` apply by default to a model whose viscosity
+depends on the flow (the others may ask for them in ``output.statistics``); ``materials`` and
+``points`` only when asked for. A postprocessor says what a model needs for it (``missing``), and
+a config that asks for one its model lacks is refused when it is checked. Columns that have a unit
+are named in ``quantities`` (column -> ``time``, ``velocity``, ``temperature``, ...): a model with
+units (:mod:`convection.physics.scaling`) writes them converted to ``statistics_physical.csv``.
 
 A postprocessor is built by ``create(model, options)`` (None when it does not apply, e.g.
 ``nusselt`` without a temperature equation) and called with the model after every step; all
@@ -39,8 +48,7 @@ calls are collective.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping, Protocol
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 import ufl
@@ -53,7 +61,10 @@ from convection.postprocess.diagnostics import nusselt
 from convection.model.model import Model
 from convection.adapt.rebalance import RankLoads
 from convection.model.rheology_fields import flow_viscosity
-from convection.schema import param
+from convection.postprocess.base import (
+    NEEDS_ENERGY, Column, DiagnosticsSettings, Forms, ModelFeatures, Postprocessor, integral,
+)
+from convection.postprocess.geodynamics import MaterialStatistics, PointValues
 from fembase.registry import Registry
 from fembase.state import State
 
@@ -61,116 +72,7 @@ __all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "ModelFeatures", "Postproces
            "create_postprocessors"]
 
 
-@dataclass(frozen=True)
-class DiagnosticsSettings:
-    """The ``diagnostics`` config section: what the :class:`Entrainment` column measures."""
-
-    entrainment_material: str | None = param(None, help="material whose entrainment is reported: a material name, "
-                                                        "all, or with one material dense (C) or light (1 - C)")
-    entrainment_height: float = param(0.2, help="entrainment = volume of that material above this height (shells: "
-                                                "radius) / its initial volume")
-
-
-class Postprocessor(Protocol):
-    """Computes some statistics columns of a model (collective)."""
-
-    name: ClassVar[str]
-    description: ClassVar[str]
-    columns: tuple[str, ...]
-
-    def __call__(self, model: Model, /) -> dict[str, float]: ...
-
-    def state(self) -> State:
-        """What a checkpoint keeps (:mod:`fembase.state`): JSON-able scalars, no fields."""
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
-        """Take the saved scalars back (empty: measure afresh); returns no fields."""
-
-
-def _integral(model: Model, form: Any) -> float:
-    return float(model.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM))
-
-
-class _Forms:
-    """Compiled forms of one postprocessor, rebuilt when the model's mesh changes."""
-
-    def __init__(self) -> None:
-        self._version: int | None = None
-        self._forms: dict[str, Any] = {}
-
-    def get(self, model: Model, build: Any) -> dict[str, Any]:
-        if self._version != model.mesh_version or not self._forms:
-            self._forms = build()
-            self._version = model.mesh_version
-        return self._forms
-
-
-@dataclass(frozen=True)
-class ModelFeatures:
-    """What a model has that decides which postprocessors apply to it; made from a model
-    (:meth:`of_model`) or, before any model exists, from a checked config (the loader), so that a
-    statistic that cannot be measured is refused when the config is checked.
-
-    Attributes:
-        energy: The temperature equation is solved.
-        particles: The model carries particles.
-        materials: The material names (the fields of the composition).
-        entrainment_material: ``diagnostics.entrainment_material`` (None: not set).
-        Ra: The thermal Rayleigh number.
-    """
-
-    energy: bool
-    particles: bool
-    materials: tuple[str, ...]
-    entrainment_material: str | None
-    Ra: float
-
-    @classmethod
-    def of_model(cls, model: Model, diagnostics: DiagnosticsSettings | None = None) -> ModelFeatures:
-        diagnostics = diagnostics or DiagnosticsSettings()
-        return cls(energy=model.solve_temperature, particles=model.particles is not None,
-                   materials=tuple(f.name for f in model.fractions),
-                   entrainment_material=diagnostics.entrainment_material, Ra=model.stokes.approximation.Ra)
-
-
-class _Column:
-    """Default construction: no options; applies to every model unless :meth:`missing` says otherwise."""
-
-    name: ClassVar[str]
-    description: ClassVar[str]
-    columns: tuple[str, ...]
-    quantities: ClassVar[Mapping[str, str]] = {}
-    """Column -> what it measures (a kind of :data:`convection.physics.scaling.UNIT_KINDS`: a model with
-    units writes it in that kind's unit); columns not named are numbers without a unit."""
-
-    @classmethod
-    def missing(cls, features: ModelFeatures) -> str | None:
-        """What a model lacks for these columns (None: they apply), e.g. ``"needs the energy equation
-        (energy.enabled: true)"``."""
-        return None
-
-    @classmethod
-    def applies(cls, model: Model) -> bool:
-        return cls.missing(ModelFeatures.of_model(model)) is None
-
-    @classmethod
-    def by_default(cls, model: Model) -> bool:
-        """Whether a run without ``output.statistics`` gets these columns."""
-        return True
-
-    @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> Any:
-        return cls() if cls.applies(model) else None
-
-    def state(self) -> State:
-        """Nothing to keep: the columns are measured afresh every step."""
-        return State()
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
-        return {}
-
-
-class TimeColumns(_Column):
+class TimeColumns(Column):
     name: ClassVar[str] = "time"
     description: ClassVar[str] = "step number, time and the last step length"
     columns = ("step", "time", "dt")
@@ -180,14 +82,14 @@ class TimeColumns(_Column):
         return {"step": model.timestep, "time": model.time, "dt": model.dt_previous}
 
 
-class Velocity(_Column):
+class Velocity(Column):
     name: ClassVar[str] = "velocity"
     description: ClassVar[str] = "root-mean-square velocity"
     columns = ("vrms",)
     quantities: ClassVar[Mapping[str, str]] = {"vrms": "velocity"}
 
     def __init__(self) -> None:
-        self._forms = _Forms()
+        self._forms = Forms()
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         u = model.stokes.u
@@ -195,10 +97,10 @@ class Velocity(_Column):
             "u2": dolfinx.fem.form(ufl.inner(u, u) * ufl.dx),
             "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * ufl.dx(domain=model.mesh)),
         })
-        return {"vrms": float(np.sqrt(_integral(model, forms["u2"]) / _integral(model, forms["volume"])))}
+        return {"vrms": float(np.sqrt(integral(model, forms["u2"]) / integral(model, forms["volume"])))}
 
 
-class Nusselt(_Column):
+class Nusselt(Column):
     name: ClassVar[str] = "nusselt"
     description: ClassVar[str] = ("Nusselt numbers at the top and bottom (shells: outer and inner surface) from the "
                                   "consistent boundary flux")
@@ -206,7 +108,7 @@ class Nusselt(_Column):
 
     @classmethod
     def missing(cls, features: ModelFeatures) -> str | None:
-        return None if features.energy else _NEEDS_ENERGY
+        return None if features.energy else NEEDS_ENERGY
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         assert model.temperature is not None
@@ -215,14 +117,14 @@ class Nusselt(_Column):
                 "nusselt_bottom": nusselt(model.temperature, model.stokes.u, domain.bottom, domain)}
 
 
-class TemperatureStatistics(_Column):
+class TemperatureStatistics(Column):
     name: ClassVar[str] = "temperature"
     description: ClassVar[str] = "volume-mean, minimum and maximum temperature"
     columns = ("T_mean", "T_min", "T_max")
     quantities: ClassVar[Mapping[str, str]] = dict.fromkeys(columns, "temperature")
 
     def __init__(self) -> None:
-        self._forms = _Forms()
+        self._forms = Forms()
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         T = model.T
@@ -234,10 +136,10 @@ class TemperatureStatistics(_Column):
         owned = T.x.array[: T.function_space.dofmap.index_map.size_local]
         lo = comm.allreduce(float(owned.min()) if owned.size else np.inf, op=MPI.MIN)
         hi = comm.allreduce(float(owned.max()) if owned.size else -np.inf, op=MPI.MAX)
-        return {"T_mean": _integral(model, forms["T"]) / _integral(model, forms["volume"]), "T_min": lo, "T_max": hi}
+        return {"T_mean": integral(model, forms["T"]) / integral(model, forms["volume"]), "T_min": lo, "T_max": hi}
 
 
-class MeshStatistics(_Column):
+class MeshStatistics(Column):
     name: ClassVar[str] = "mesh"
     description: ClassVar[str] = "global number of cells"
     columns = ("cells",)
@@ -246,7 +148,7 @@ class MeshStatistics(_Column):
         return {"cells": model.num_cells}
 
 
-class StokesStatistics(_Column):
+class StokesStatistics(Column):
     name: ClassVar[str] = "stokes"
     description: ClassVar[str] = "iterations of the last Stokes solve"
     columns = ("stokes_iterations",)
@@ -255,7 +157,7 @@ class StokesStatistics(_Column):
         return {"stokes_iterations": model.flow_result.iterations if model.flow_result else 0}
 
 
-class ParticleStatistics(_Column):
+class ParticleStatistics(Column):
     name: ClassVar[str] = "particles"
     description: ClassVar[str] = "particle count, lost/added/removed particles, particles per cell min/mean/max"
     columns = ("n_particles", "n_lost", "n_added", "n_removed", "ppc_min", "ppc_mean", "ppc_max")
@@ -272,7 +174,7 @@ class ParticleStatistics(_Column):
                 "n_removed": manager.removed, "ppc_min": lo, "ppc_mean": mean, "ppc_max": hi}
 
 
-class LoadStatistics(_Column):
+class LoadStatistics(Column):
     name: ClassVar[str] = "load"
     description: ClassVar[str] = "imbalance (max/mean over ranks) of owned cells and particles"
     columns = ("cell_imbalance", "particle_imbalance")
@@ -298,7 +200,7 @@ class Entrainment:
         self.amounts = amounts  # column -> (material index, background instead)
         self.height = height
         self.columns = tuple(amounts)
-        self._forms = _Forms()
+        self._forms = Forms()
         self._initial: dict[str, float] | None = None
 
     @classmethod
@@ -349,8 +251,8 @@ class Entrainment:
     def __call__(self, model: Model, /) -> dict[str, float]:
         forms = self._forms.get(model, lambda: self._build(model))
         if self._initial is None:
-            self._initial = {column: _integral(model, total) for column, (_, total) in forms.items()}
-        return {column: _integral(model, above) / self._initial[column] for column, (above, _) in forms.items()}
+            self._initial = {column: integral(model, total) for column, (_, total) in forms.items()}
+        return {column: integral(model, above) / self._initial[column] for column, (above, _) in forms.items()}
 
 
 class WallTime:
@@ -376,7 +278,7 @@ class WallTime:
         return {"wall_time": time.monotonic() - self.start}
 
 
-class _Rheology(_Column):
+class _Rheology(Column):
     """Columns for models whose viscosity depends on the flow (by default there only)."""
 
     @classmethod
@@ -425,12 +327,12 @@ class EnergyBalance(_Rheology):
     columns = ("W", "Phi_over_Ra", "delta")
 
     def __init__(self) -> None:
-        self._forms = _Forms()
+        self._forms = Forms()
 
     @classmethod
     def missing(cls, features: ModelFeatures) -> str | None:
         if not features.energy:
-            return _NEEDS_ENERGY
+            return NEEDS_ENERGY
         return None if features.Ra > 0.0 else "needs physics.Ra > 0 (it reports the dissipation over Ra)"
 
     def __call__(self, model: Model, /) -> dict[str, float]:
@@ -446,10 +348,10 @@ class EnergyBalance(_Rheology):
                     "Phi": dolfinx.fem.form(2.0 * flow_viscosity(model.flow()) * ufl.inner(eps, eps) * dx),
                     "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
         forms = self._forms.get(model, build)
-        volume = _integral(model, forms["volume"])
-        W = _integral(model, forms["W"]) / volume
+        volume = integral(model, forms["volume"])
+        W = integral(model, forms["W"]) / volume
         ra = stokes.approximation.Ra
-        phi = _integral(model, forms["Phi"]) / volume / ra if ra else float("nan")
+        phi = integral(model, forms["Phi"]) / volume / ra if ra else float("nan")
         scale = max(abs(W), abs(phi))
         return {"W": W, "Phi_over_Ra": phi, "delta": abs(W - phi) / scale if scale > 0 else 0.0}
 
@@ -461,7 +363,7 @@ class SurfaceVelocity(_Rheology):
     quantities: ClassVar[Mapping[str, str]] = dict.fromkeys(columns, "velocity")
 
     def __init__(self) -> None:
-        self._forms = _Forms()
+        self._forms = Forms()
         self._dofs: Any = None
         self._version: int | None = None
 
@@ -487,11 +389,8 @@ class SurfaceVelocity(_Rheology):
         nodes = nodes[nodes < n_owned]
         values = stokes.u.x.array.reshape(-1, gdim)[nodes]
         local = float(np.sqrt((values ** 2).sum(axis=1)).max()) if len(nodes) else 0.0
-        rms = np.sqrt(_integral(model, forms["u2"]) / _integral(model, forms["area"]))
+        rms = np.sqrt(integral(model, forms["u2"]) / integral(model, forms["area"]))
         return {"vrms_surface": float(rms), "vmax_surface": model.mesh.comm.allreduce(local, op=MPI.MAX)}
-
-
-_NEEDS_ENERGY = "needs the energy equation (energy.enabled: true)"
 
 
 def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelFeatures) -> None:
@@ -509,7 +408,8 @@ def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelF
 
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
-    LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance, SurfaceVelocity))
+    LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance, SurfaceVelocity,
+    MaterialStatistics, PointValues))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

@@ -106,7 +106,7 @@ def test_yaml_form_holds_every_key_and_loads_as_a_config(tmp_path):
     def flat(mapping, prefix=""):
         for name, value in mapping.items():
             if isinstance(value, dict) and not (prefix + name).endswith(("generator", "interpolator")) \
-                    and name not in ("materials", "constants", "petsc_options"):
+                    and name not in ("materials", "constants", "petsc_options", "points"):
                 yield from flat(value, prefix + name + ".")
             else:
                 yield prefix + name, value

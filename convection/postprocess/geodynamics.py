@@ -1,0 +1,214 @@
+"""Statistics geodynamicists read off a model: per-material statistics (a sinking block's velocity,
+a slab tip's depth) and the values of the fields at named points.
+
+``materials`` (one group of columns per material ``<m>``, with fraction ``C``, volume ``V = int C``,
+``e_up`` the up direction and ``d`` the depth below the top surface)::
+
+    volume_<m>       V                                      (an area in 2D)
+    x_<m>, y_<m>,    centroid int C x / V (per axis: x, y in 2D; x, y, z in 3D)
+    vup_<m>          int C u . e_up / V                     (mean upward velocity: < 0 sinks)
+    vrms_<m>         sqrt(int C |u|^2 / V)
+    vmax_<m>         largest cell-average |u| of the cells the material fills at least half
+    depth_<m>        largest cell-average depth of those cells (the deepest point: a slab's tip)
+
+(cell averages ``int_K f / |K|`` of the cells ``K`` whose average fraction is at least 0.5; so
+``depth`` is resolution-limited to about half a cell).
+
+``points``: for every point of ``diagnostics.points`` (``{name: [x, y(, z)]}``) and every field of
+the field output (temperature, velocity components, pressure, material fractions, viscosity where
+it varies, ...), the column ``<field>_<name>`` (a vector field: ``<field>_x_<name>``, ...; the
+velocity ``vx_<name>``, ``vy_<name>`` (, ``vz_<name>``)), evaluated in the owned cell that holds
+the point (the lowest rank's where several do).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Mapping
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+import dolfinx.fem
+import dolfinx.fem.petsc
+
+from convection.model.model import Model
+from convection.postprocess.base import DiagnosticsSettings, Forms, ModelFeatures, integral
+from convection.schema import ConfigError
+from fembase.dolfinx_compat import function_space, value_size
+from fembase.geometry import locate_owned
+from fembase.state import State
+
+__all__ = ["MaterialStatistics", "PointValues"]
+
+_AXES = ("x", "y", "z")
+FIELD_KINDS = {"temperature": "temperature", "velocity": "velocity", "pressure": "stress", "viscosity": "viscosity"}
+"""The unit kind (:data:`convection.physics.scaling.UNIT_KINDS`) of the fields that have one."""
+
+
+class _Stateless:
+    """Columns measured afresh every step: a checkpoint keeps nothing."""
+
+    def state(self) -> State:
+        return State()
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
+        return {}
+
+
+class MaterialStatistics(_Stateless):
+    """Volume, centroid, velocities and deepest point of every material (module docstring)."""
+
+    name: ClassVar[str] = "materials"
+    description: ClassVar[str] = ("per material: volume, centroid, mean upward velocity, rms and largest speed, "
+                                  "deepest point")
+
+    def __init__(self, names: list[str], gdim: int) -> None:
+        self.names = names
+        self.gdim = gdim
+        self.columns = tuple(c for n in names for c in self._columns(n))
+        self.quantities = {f"volume_{n}": "area" if gdim == 2 else "volume" for n in names}
+        for n in names:
+            self.quantities |= {f"{a}_{n}": "length" for a in _AXES[:gdim]} | {f"depth_{n}": "length"}
+            self.quantities |= dict.fromkeys((f"vup_{n}", f"vrms_{n}", f"vmax_{n}"), "velocity")
+        self._forms = Forms()
+
+    def _columns(self, n: str) -> tuple[str, ...]:
+        return (f"volume_{n}", *(f"{a}_{n}" for a in _AXES[: self.gdim]), f"vup_{n}", f"vrms_{n}", f"vmax_{n}",
+                f"depth_{n}")
+
+    @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        return None if features.materials else "needs materials (the materials section or initial.composition)"
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return False
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> MaterialStatistics | None:
+        names = [f.name for f in model.fractions]
+        return cls(names, model.domain.gdim) if names else None
+
+    def _build(self, model: Model) -> dict[str, Any]:
+        mesh = model.mesh
+        x = ufl.SpatialCoordinate(mesh)
+        u = model.stokes.u
+        gravity = model.domain.gravity
+        cells = function_space(mesh, "DG", 0)
+        v = ufl.TestFunction(cells)
+        speed = ufl.sqrt(ufl.inner(u, u))
+        forms: dict[str, Any] = {"cell_volume": dolfinx.fem.form(v * ufl.dx),
+                                 "cell_speed": dolfinx.fem.form(speed * v * ufl.dx),
+                                 "cell_depth": dolfinx.fem.form(gravity.depth(x) * v * ufl.dx)}
+        for n, C in zip(self.names, model.fractions):
+            forms[f"volume_{n}"] = dolfinx.fem.form(C * ufl.dx)
+            for i, a in enumerate(_AXES[: self.gdim]):
+                forms[f"{a}_{n}"] = dolfinx.fem.form(C * x[i] * ufl.dx)
+            forms[f"vup_{n}"] = dolfinx.fem.form(C * ufl.dot(u, gravity.up(x)) * ufl.dx)
+            forms[f"vrms_{n}"] = dolfinx.fem.form(C * ufl.inner(u, u) * ufl.dx)
+            forms[f"cell_{n}"] = dolfinx.fem.form(C * v * ufl.dx)
+        return forms
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        forms = self._forms.get(model, lambda: self._build(model))
+        owned = model.mesh.topology.index_map(model.mesh.topology.dim).size_local
+        cell = {name: _cell_integrals(forms[f"cell_{name}"], owned) for name in ("volume", "speed", "depth")}
+        out: dict[str, float] = {}
+        for n in self.names:
+            volume = integral(model, forms[f"volume_{n}"])
+            scale = 1.0 / volume if volume > 0.0 else np.nan
+            out[f"volume_{n}"] = volume
+            for a in _AXES[: self.gdim]:
+                out[f"{a}_{n}"] = integral(model, forms[f"{a}_{n}"]) * scale
+            out[f"vup_{n}"] = integral(model, forms[f"vup_{n}"]) * scale
+            out[f"vrms_{n}"] = float(np.sqrt(max(integral(model, forms[f"vrms_{n}"]), 0.0) * scale))
+            filled = _cell_integrals(forms[f"cell_{n}"], owned) >= 0.5 * cell["volume"]
+            for column, what in ((f"vmax_{n}", "speed"), (f"depth_{n}", "depth")):
+                local = float((cell[what][filled] / cell["volume"][filled]).max(initial=-np.inf))
+                best = model.comm.allreduce(local, op=MPI.MAX)
+                out[column] = best if np.isfinite(best) else np.nan
+        return out
+
+
+def _cell_integrals(form: Any, owned: int) -> np.ndarray:
+    """``int_K f`` of every owned cell ``K`` (a DG0 vector form; no ghost exchange needed)."""
+    vector = dolfinx.fem.petsc.assemble_vector(form)
+    values = vector.array[:owned].copy()
+    vector.destroy()
+    return values
+
+
+class PointValues(_Stateless):
+    """The fields at named points (module docstring)."""
+
+    name: ClassVar[str] = "points"
+    description: ClassVar[str] = "every output field at the points of diagnostics.points"
+
+    def __init__(self, points: Mapping[str, list[float]], fields: Mapping[str, int], gdim: int) -> None:
+        self.points = {name: np.asarray(x, dtype=np.float64) for name, x in points.items()}
+        self.fields = dict(fields)  # field name -> number of components
+        self.gdim = gdim
+        self.columns = tuple(c for p in self.points for f, size in self.fields.items() for c in self._names(f, size, p))
+        self.quantities = {c: FIELD_KINDS[f] for p in self.points for f, size in self.fields.items()
+                           if f in FIELD_KINDS for c in self._names(f, size, p)}
+        self._version: int | None = None
+        self._cells = np.zeros(0, dtype=np.int32)
+        self._mine = np.zeros(0, dtype=bool)
+
+    @staticmethod
+    def _names(field: str, size: int, point: str) -> list[str]:
+        if size == 1:
+            return [f"{'T' if field == 'temperature' else 'p' if field == 'pressure' else field}_{point}"]
+        prefix = "v" if field == "velocity" else f"{field}_"
+        return [f"{prefix}{a}_{point}" for a in _AXES[:size]]
+
+    @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        return None if features.points else "needs diagnostics.points ({name: [x, y(, z)]})"
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return False
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> PointValues | None:
+        settings = options.get("diagnostics") or DiagnosticsSettings()
+        if not settings.points:
+            return None
+        fields = {name: value_size(f.function_space) for name, f in model.fields().items()}
+        return cls(settings.points, fields, model.domain.gdim)
+
+    def _locate(self, model: Model) -> None:
+        """The owned cell of each point on the rank that evaluates it (collective)."""
+        mesh = model.mesh
+        x = np.array([p[: self.gdim] for p in self.points.values()]).reshape(-1, self.gdim)
+        cells = locate_owned(mesh, x).cells
+        rank = np.where(cells >= 0, model.comm.rank, model.comm.size).astype(np.int64)
+        lowest = np.empty_like(rank)
+        model.comm.Allreduce(rank, lowest, op=MPI.MIN)
+        outside = [name for name, r in zip(self.points, lowest) if r == model.comm.size]
+        if outside:
+            raise ConfigError(f"config key 'diagnostics.points.{outside[0]}': {self.points[outside[0]].tolist()} is not "
+                              "in the domain")
+        self._cells, self._mine = cells, lowest == model.comm.rank
+        self._version = model.mesh_version
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        if self._version != model.mesh_version:
+            self._locate(model)
+        fields = model.fields()
+        values = np.zeros(len(self.columns))
+        x = np.zeros((len(self.points), 3))
+        x[:, : self.gdim] = np.array([p[: self.gdim] for p in self.points.values()]).reshape(-1, self.gdim)
+        i = 0
+        for k in range(len(self.points)):
+            for name, size in self.fields.items():
+                if self._mine[k]:
+                    value = fields[name].eval(x[k: k + 1], self._cells[k: k + 1])
+                    values[i: i + size] = np.asarray(value).reshape(-1)[:size]
+                i += size
+        total = np.zeros_like(values)
+        model.comm.Allreduce(values, total, op=MPI.SUM)
+        return dict(zip(self.columns, total.tolist()))
+

@@ -282,7 +282,13 @@ def _check_statistics(config: dict[str, Any]) -> None:
     features = ModelFeatures(energy=config["energy"]["enabled"], particles=particles_enabled(config),
                              materials=tuple(m["name"] for m in table),
                              entrainment_material=config["diagnostics"]["entrainment_material"],
-                             Ra=config["physics"]["Ra"], points=bool(config["diagnostics"]["points"]))
+                             Ra=config["physics"]["Ra"], points=bool(config["diagnostics"]["points"]),
+                             topography_material=config["diagnostics"]["topography_material"],
+                             columns=config_domain(config).columns(1, 1) is not None)
+    material = config["diagnostics"]["topography_material"]
+    if material is not None and material not in features.materials:
+        raise ConfigError(f"config key 'diagnostics.topography_material': {material!r} is not one of the materials "
+                          f"{list(features.materials)}")
     gdim = config_gdim(config)
     for name, point in config["diagnostics"]["points"].items():
         if not (isinstance(point, list) and len(point) == gdim and all(_finite_number(c) is not None for c in point)):

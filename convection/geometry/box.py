@@ -21,7 +21,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from convection.geometry.domain import Domain, safe_product
+from convection.geometry.domain import Columns, Domain, safe_product
 from convection.geometry.gravity import VerticalGravity
 from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
 from convection.schema import ConfigError, param
@@ -262,6 +262,20 @@ class BoxDomain(Domain):
             points[: grid.shape[0]] = grid
             return points
         return axes, cartesian
+
+    def columns(self, across: int, along: int, /) -> Columns:
+        """Vertical lines at the midpoints of ``across`` equal intervals of each horizontal axis
+        (``across`` lines in 2D, ``across^2`` in 3D), ``along`` midpoint samples from bottom to top."""
+        gdim = self.gdim
+        axes = [self.lower[i] + (np.arange(across) + 0.5) * (self.upper[i] - self.lower[i]) / across
+                for i in range(gdim - 1)]
+        positions = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+        height = self.upper[-1] - self.lower[-1]
+        z = self.lower[-1] + (np.arange(along) + 0.5) * height / along
+        points = np.zeros((len(positions), along, 3))
+        points[:, :, : gdim - 1] = positions[:, None, :]
+        points[:, :, gdim - 1] = z[None, :]
+        return Columns(positions, points, height, self.upper[-1])
 
     def boundary_axis(self, name: str, /) -> tuple[int, bool]:
         return side_axis(name, self.gdim)

@@ -31,7 +31,7 @@ from petsc4py import PETSc
 from convection.geometry.gravity import Gravity
 from fembase.dolfinx_compat import DirichletBC
 
-__all__ = ["Domain", "safe_product"]
+__all__ = ["Columns", "Domain", "safe_product"]
 
 
 def safe_product(*factors: float) -> float:
@@ -42,6 +42,23 @@ def safe_product(*factors: float) -> float:
         return 0.0
     total = sum(logs)
     return math.inf if total >= 1024 else 2.0**total
+
+
+@dataclasses.dataclass(frozen=True)
+class Columns:
+    """Sample points on lines along ``up`` (:meth:`Domain.columns`).
+
+    Attributes:
+        positions: Where each line is, across the domain, shape=(n, gdim - 1).
+        points: The samples, shape=(n, m, 3): ``m`` midpoints of equal segments of each line.
+        length: The length of the lines (each sample stands for ``length / m``).
+        top: The height of the top end of the lines.
+    """
+
+    positions: npt.NDArray[np.float64]
+    points: npt.NDArray[np.float64]
+    length: float
+    top: float
 
 
 class Domain(ABC):
@@ -119,6 +136,12 @@ class Domain(ABC):
     def expression_constants(self) -> dict[str, float]:
         """Named constants this domain adds to a config's expressions."""
         return {}
+
+    def columns(self, across: int, along: int, /) -> Columns | None:
+        """Sample points on lines along ``up`` through the whole domain, for integrals along them
+        (the height of a material interface): ``across`` lines, ``along`` midpoint samples on each.
+        None: this geometry has no such columns (the default)."""
+        return None
 
     @abstractmethod
     def probe_axes(self, level: int, /) -> tuple[list[npt.NDArray[np.float64]], Callable]:

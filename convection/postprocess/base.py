@@ -28,6 +28,8 @@ class DiagnosticsSettings:
                                                         "all, or with one material dense (C) or light (1 - C)")
     entrainment_height: float = param(0.2, help="entrainment = volume of that material above this height (shells: "
                                                 "radius) / its initial volume")
+    topography_material: str | None = param(None, help="the material above the surface whose height the topography "
+                                                       "statistic reports (sticky air): h = top - int C dz")
     points: Mapping[str, Any] = param({}, help="named points {name: [x, y(, z)]} whose field values the points "
                                                "statistic reports (coordinates may have units: [100 km, 600 km])")
 
@@ -79,6 +81,8 @@ class ModelFeatures:
         entrainment_material: ``diagnostics.entrainment_material`` (None: not set).
         Ra: The thermal Rayleigh number.
         points: ``diagnostics.points`` names points.
+        topography_material: ``diagnostics.topography_material``.
+        columns: The geometry has lines along ``up`` through it (a box).
     """
 
     energy: bool
@@ -87,6 +91,8 @@ class ModelFeatures:
     entrainment_material: str | None
     Ra: float
     points: bool = False
+    topography_material: str | None = None
+    columns: bool = True
 
     @classmethod
     def of_model(cls, model: Model, diagnostics: DiagnosticsSettings | None = None) -> ModelFeatures:
@@ -94,7 +100,8 @@ class ModelFeatures:
         return cls(energy=model.solve_temperature, particles=model.particles is not None,
                    materials=tuple(f.name for f in model.fractions),
                    entrainment_material=diagnostics.entrainment_material, Ra=model.stokes.approximation.Ra,
-                   points=bool(diagnostics.points))
+                   points=bool(diagnostics.points), topography_material=diagnostics.topography_material,
+                   columns=model.domain.columns(1, 1) is not None)
 
 
 class Column:

@@ -19,6 +19,14 @@ the field output (temperature, velocity components, pressure, material fractions
 it varies, ...), the column ``<field>_<name>`` (a vector field: ``<field>_x_<name>``, ...; the
 velocity ``vx_<name>``, ``vy_<name>`` (, ``vz_<name>``)), evaluated in the owned cell that holds
 the point (the lowest rank's where several do).
+
+``topography``: the height of the surface under the material ``diagnostics.topography_material``
+(sticky air) that fills the top of a box: along vertical lines at ``x_j``,
+
+    h(x_j) = z_top - int C dz          (midpoint samples, 8 per cell height),
+
+and ``topography_max``, ``topography_min``, ``topography_rms`` of ``h - mean_j h`` (the mean over
+the lines: the undisturbed level, which the material's volume keeps).
 """
 
 from __future__ import annotations
@@ -39,7 +47,7 @@ from fembase.dolfinx_compat import function_space, value_size
 from fembase.geometry import locate_owned
 from fembase.state import State
 
-__all__ = ["MaterialStatistics", "PointValues"]
+__all__ = ["MaterialStatistics", "PointValues", "Topography"]
 
 _AXES = ("x", "y", "z")
 FIELD_KINDS = {"temperature": "temperature", "velocity": "velocity", "pressure": "stress", "viscosity": "viscosity"}
@@ -153,8 +161,7 @@ class PointValues(_Stateless):
         self.quantities = {c: FIELD_KINDS[f] for p in self.points for f, size in self.fields.items()
                            if f in FIELD_KINDS for c in self._names(f, size, p)}
         self._version: int | None = None
-        self._cells = np.zeros(0, dtype=np.int32)
-        self._mine = np.zeros(0, dtype=bool)
+        self._samples: _Samples | None = None
 
     @staticmethod
     def _names(field: str, size: int, point: str) -> list[str]:
@@ -180,35 +187,108 @@ class PointValues(_Stateless):
         return cls(settings.points, fields, model.domain.gdim)
 
     def _locate(self, model: Model) -> None:
-        """The owned cell of each point on the rank that evaluates it (collective)."""
-        mesh = model.mesh
-        x = np.array([p[: self.gdim] for p in self.points.values()]).reshape(-1, self.gdim)
-        cells = locate_owned(mesh, x).cells
-        rank = np.where(cells >= 0, model.comm.rank, model.comm.size).astype(np.int64)
-        lowest = np.empty_like(rank)
-        model.comm.Allreduce(rank, lowest, op=MPI.MIN)
-        outside = [name for name, r in zip(self.points, lowest) if r == model.comm.size]
-        if outside:
-            raise ConfigError(f"config key 'diagnostics.points.{outside[0]}': {self.points[outside[0]].tolist()} is not "
-                              "in the domain")
-        self._cells, self._mine = cells, lowest == model.comm.rank
+        """Which rank evaluates which point (collective)."""
+        x = np.zeros((len(self.points), 3))
+        x[:, : self.gdim] = np.array([p[: self.gdim] for p in self.points.values()]).reshape(-1, self.gdim)
+        self._samples = _Samples(model, x)
+        if self._samples.outside.any():
+            name = list(self.points)[int(np.flatnonzero(self._samples.outside)[0])]
+            raise ConfigError(f"config key 'diagnostics.points.{name}': {self.points[name].tolist()} is not in the "
+                              "domain")
         self._version = model.mesh_version
 
     def __call__(self, model: Model, /) -> dict[str, float]:
-        if self._version != model.mesh_version:
+        if self._version != model.mesh_version or self._samples is None:
             self._locate(model)
+        samples = self._samples
         fields = model.fields()
-        values = np.zeros(len(self.columns))
-        x = np.zeros((len(self.points), 3))
-        x[:, : self.gdim] = np.array([p[: self.gdim] for p in self.points.values()]).reshape(-1, self.gdim)
-        i = 0
-        for k in range(len(self.points)):
-            for name, size in self.fields.items():
-                if self._mine[k]:
-                    value = fields[name].eval(x[k: k + 1], self._cells[k: k + 1])
-                    values[i: i + size] = np.asarray(value).reshape(-1)[:size]
-                i += size
+        values = np.zeros((len(self.points), sum(self.fields.values())))
+        start = 0
+        for name, size in self.fields.items():
+            if len(samples.rows):
+                found = np.asarray(fields[name].eval(samples.points, samples.cells)).reshape(len(samples.rows), -1)
+                values[samples.rows, start: start + size] = found[:, :size]
+            start += size
         total = np.zeros_like(values)
         model.comm.Allreduce(values, total, op=MPI.SUM)
-        return dict(zip(self.columns, total.tolist()))
+        return dict(zip(self.columns, total.ravel().tolist()))
 
+
+class _Samples:
+    """Points evaluated each on one rank: the lowest that owns a cell holding it (collective)."""
+
+    def __init__(self, model: Model, points: np.ndarray) -> None:
+        gdim = model.domain.gdim
+        cells = locate_owned(model.mesh, points[:, :gdim]).cells
+        rank = np.where(cells >= 0, model.comm.rank, model.comm.size).astype(np.int64)
+        lowest = np.empty_like(rank)
+        model.comm.Allreduce(rank, lowest, op=MPI.MIN)
+        mine = lowest == model.comm.rank
+        self.outside = lowest == model.comm.size
+        self.rows = np.flatnonzero(mine)
+        self.points = np.ascontiguousarray(points[mine])
+        self.cells = cells[mine]
+
+
+class Topography(_Stateless):
+    """The surface under a material that fills the top (module docstring)."""
+
+    name: ClassVar[str] = "topography"
+    description: ClassVar[str] = "max, min and rms height of the surface under diagnostics.topography_material"
+    columns = ("topography_max", "topography_min", "topography_rms")
+    quantities: ClassVar[Mapping[str, str]] = dict.fromkeys(columns, "length")
+
+    def __init__(self, index: int) -> None:
+        self.index = index
+        self._version: int | None = None
+        self._samples: _Samples | None = None
+        self._shape = (0, 0)
+        self._length, self._top = 0.0, 0.0
+
+    @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        if not features.columns:
+            return "needs vertical columns through the domain (a box)"
+        return None if features.topography_material is not None else \
+            "needs diagnostics.topography_material (the material above the surface, e.g. sticky air)"
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return False
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> Topography | None:
+        settings = options.get("diagnostics") or DiagnosticsSettings()
+        names = [f.name for f in model.fractions]
+        if settings.topography_material not in names or model.domain.columns(1, 1) is None:
+            return None
+        return cls(names.index(settings.topography_material))
+
+    def _sample(self, model: Model) -> None:
+        gdim = model.domain.gdim
+        per_side = max(4, round((model.num_cells / (2 if gdim == 2 else 6)) ** (1.0 / gdim)))
+        columns = model.domain.columns(2 * per_side, 8 * per_side)
+        assert columns is not None
+        self._shape = columns.points.shape[:2]
+        self._length, self._top = columns.length, columns.top
+        self._samples = _Samples(model, columns.points.reshape(-1, 3))
+        self._version = model.mesh_version
+
+    def heights(self, model: Model) -> np.ndarray:
+        """h at every line, shape=(n,) (collective)."""
+        if self._version != model.mesh_version or self._samples is None:
+            self._sample(model)
+        samples = self._samples
+        values = np.zeros(self._shape[0] * self._shape[1])
+        if len(samples.rows):
+            values[samples.rows] = np.asarray(model.fractions[self.index].eval(samples.points, samples.cells)).ravel()
+        local = values.reshape(self._shape).sum(axis=1)
+        total = np.zeros_like(local)
+        model.comm.Allreduce(local, total, op=MPI.SUM)
+        return self._top - total * self._length / self._shape[1]
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        h = self.heights(model)
+        relative = h - h.mean()
+        return {"topography_max": float(relative.max()), "topography_min": float(relative.min()),
+                "topography_rms": float(np.sqrt(np.mean(relative**2)))}

@@ -31,11 +31,13 @@ name            columns
                 (:mod:`convection.postprocess.geodynamics`)
 ``points``      every output field at the named points of ``diagnostics.points``: T_<p>,
                 vx_<p>, vy_<p> (, vz_<p>), p_<p>, <material>_<p>, ...
+``topography``  topography_max, topography_min, topography_rms: the surface under the material
+                ``diagnostics.topography_material`` (sticky air), about its mean level
 =============== =======================================================================
 
 ``nonlinear``, ``rheology``, ``energy`` and ``surface`` apply by default to a model whose viscosity
-depends on the flow (the others may ask for them in ``output.statistics``); ``materials`` and
-``points`` only when asked for. A postprocessor says what a model needs for it (``missing``), and
+depends on the flow (the others may ask for them in ``output.statistics``); ``materials``,
+``points`` and ``topography`` only when asked for. A postprocessor says what a model needs for it (``missing``), and
 a config that asks for one its model lacks is refused when it is checked. Columns that have a unit
 are named in ``quantities`` (column -> ``time``, ``velocity``, ``temperature``, ...): a model with
 units (:mod:`convection.physics.scaling`) writes them converted to ``statistics_physical.csv``.
@@ -64,7 +66,7 @@ from convection.model.rheology_fields import flow_viscosity
 from convection.postprocess.base import (
     NEEDS_ENERGY, Column, DiagnosticsSettings, Forms, ModelFeatures, Postprocessor, integral,
 )
-from convection.postprocess.geodynamics import MaterialStatistics, PointValues
+from convection.postprocess.geodynamics import MaterialStatistics, PointValues, Topography
 from fembase.registry import Registry
 from fembase.state import State
 
@@ -409,7 +411,7 @@ def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelF
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
     LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance, SurfaceVelocity,
-    MaterialStatistics, PointValues))
+    MaterialStatistics, PointValues, Topography))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

@@ -98,3 +98,49 @@ def test_points_need_points_and_materials_need_materials(tmp_path):
     with pytest.raises(ConfigError, match=r"'diagnostics.points.p': expected \[x, y\]"):
         load_config(None, document={"mesh": {"cells": [4, 4]}, "physics": {"Ra": 1.0}, "time": {"end": 1.0},
                                     "diagnostics": {"points": {"p": [0.5]}}, "output": {"directory": "o"}})
+
+
+def _air(tmp_path, comm, cells):
+    """Sticky air over a cosine surface h = 0.8 + 0.1 cos(pi x) in the unit square."""
+    document = {
+        "mesh": {"cells": [cells, cells]}, "time": {"end": 1.0}, "energy": {"enabled": False},
+        "initial": {"temperature": "0"},
+        "materials": {"air": {"initial": "z > 0.8 + 0.1*cos(pi*x)", "Rb": -1.0, "viscosity": 0.01}},
+        "composition": {"source": "static", "degree": 1},
+        "diagnostics": {"topography_material": "air"},
+        "output": {"directory": str(tmp_path / "out"), "progress": "none", "statistics": ["time", "topography"]},
+    }
+    config = load_config(None, document=document)
+    model = build_model(config, comm=comm)
+    model.start()
+    diagnostics = DiagnosticsSettings(topography_material="air")
+    return _row(model, create_postprocessors(model, ["topography"], diagnostics=diagnostics))
+
+
+@pytest.mark.parametrize("cells", [16, 32, 64])
+def test_topography_of_a_cosine_surface(tmp_path, cells):
+    """max, min and rms of h - mean(h) against 0.1, -0.1 and 0.1/sqrt(2), within half a cell."""
+    row = _air(tmp_path, MPI.COMM_WORLD, cells)
+    h = 1.0 / cells
+    assert row["topography_max"] == pytest.approx(0.1, abs=h / 2)
+    assert row["topography_min"] == pytest.approx(-0.1, abs=h / 2)
+    assert row["topography_rms"] == pytest.approx(0.1 / np.sqrt(2), abs=h / 2)
+
+
+@pytest.mark.mpi
+def test_topography_same_on_every_rank_count(tmp_path):
+    comm = MPI.COMM_WORLD
+    parallel = _air(tmp_path / str(comm.rank), comm, 32)
+    if comm.rank == 0:
+        serial = _air(tmp_path / "serial", MPI.COMM_SELF, 32)
+        for column, value in serial.items():
+            assert parallel[column] == pytest.approx(value, rel=1e-12, abs=1e-14), column
+
+
+def test_topography_needs_a_material_above(tmp_path):
+    base = {"mesh": {"cells": [4, 4]}, "physics": {"Ra": 1.0}, "time": {"end": 1.0},
+            "materials": {"air": {"initial": "z > 0.9"}}, "output": {"directory": "o", "statistics": ["topography"]}}
+    with pytest.raises(ConfigError, match="'topography' needs diagnostics.topography_material"):
+        load_config(None, document=base)
+    with pytest.raises(ConfigError, match="'diagnostics.topography_material': 'rock' is not one of the materials"):
+        load_config(None, document={**base, "diagnostics": {"topography_material": "rock"}})

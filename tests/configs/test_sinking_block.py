@@ -27,7 +27,7 @@ def test_sinking_block_in_units(tmp_path, ranks):
     out = tmp_path / "run"
     proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets(SMALL)], ranks)
     assert proc.returncode == 0, proc.stderr
-    rb = 8 * 9.81 * L**3 / (1e21 * KAPPA)
+    rb = 8 * 10.0 * L**3 / (1e21 * KAPPA)
     assert f"Ra = 0, Rb_block = {rb:.6g}" in proc.stdout
     assert "time unit L^2/kappa = 8306.84 Myr" in proc.stdout
     assert " Myr  dt=" in proc.stdout and " cm/yr  ETA" in proc.stdout
@@ -60,3 +60,28 @@ def test_one_and_two_ranks_agree_and_resume_continues(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert [r["step"] for r in _physical(two)] == [str(i) for i in range(10)]
     assert [r["step"] for r in rows(two)] == [str(i) for i in range(10)]
+
+
+def _benchmark():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("sinking_block_run", CONFIGS.parent / "benchmarks" / "sinking_block"
+                                                  / "run.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_benchmark_at_ci_size():
+    """benchmarks/sinking_block/run.py's measurement at 32 x 32 cells: the scaled velocity
+    |v| eta1 / delta_rho is the same for every delta_rho (a linear problem), grows as the block
+    weakens, and no longer depends on eta2 for a stiff block (< 1 % from eta2/eta1 = 1e3 to 1e6)."""
+    bench = _benchmark()
+    scaled = {(ratio, rho): bench.scaled(bench.block_velocity(32, rho, ratio), rho)
+              for ratio in (1e-2, 1.0, 1e3, 1e6) for rho in (8.0, 128.0)}
+    for ratio in (1e-2, 1.0, 1e3, 1e6):
+        assert scaled[ratio, 8.0] == pytest.approx(scaled[ratio, 128.0], rel=1e-9)
+    assert scaled[1e-2, 8.0] > scaled[1.0, 8.0] > scaled[1e3, 8.0]
+    assert abs(scaled[1e3, 8.0] - scaled[1e6, 8.0]) < 0.01 * scaled[1e6, 8.0]
+    # an isoviscous block (eta* = 1) at 32^2 against the table's 128^2 value, to the discretisation error
+    assert scaled[1.0, 8.0] == pytest.approx(1.24e10, rel=0.02)

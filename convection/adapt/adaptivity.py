@@ -7,6 +7,13 @@ h_F * integral_F [df/dn]^2``; for a discontinuous field (e.g. DG0 composition), 
 the jump of the normal derivative. Each field's indicator is scaled by its global maximum and the
 largest scaled value is used. The ``refine_fraction`` of cells with the largest indicator go up one
 level, the ``coarsen_fraction`` with the smallest go down one, within [min_level, max_level].
+
+Geometric bounds (:class:`LevelBounds`): ``min_level_where`` and ``max_level_where`` are expressions
+of position and time ``t`` (config expressions, with the config's constants) giving the coarsest and
+finest level a cell may have, evaluated at the cell's midpoint (rounded down); the indicator's
+choice is clipped to them, and they to [min_level, max_level]. So ``min_level_where: "3*(z > 0.9)"``
+keeps the top tenth at level 3 whatever the indicator says; with both fractions 0 the mesh follows
+the expressions alone.
 """
 
 from __future__ import annotations
@@ -26,11 +33,12 @@ import ufl
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.transfer import PointEvaluator
 from convection.geometry.mesh import cell_diameter
+from convection.expressions import Expression
 from convection.schema import Names, param
 from fembase.dolfinx_compat import SCATTER_ADD, cell_dofmap, function_space, is_discontinuous
 
-__all__ = ["INDICATOR_FIELDS", "MAX_INITIAL_ROUNDS", "Adaptivity", "AdaptivitySettings", "kelly_indicator",
-           "wanted_levels"]
+__all__ = ["INDICATOR_FIELDS", "MAX_INITIAL_ROUNDS", "Adaptivity", "AdaptivitySettings", "LevelBounds",
+           "kelly_indicator", "wanted_levels"]
 
 INDICATOR_FIELDS: dict[str, str] = {
     "temperature": "the temperature",
@@ -59,6 +67,9 @@ class AdaptivitySettings:
     fields: tuple[str, ...] = param(("temperature",), choices=Names(INDICATOR_FIELDS),
                                     help="fields whose Kelly error indicators (each normalised, summed) choose the "
                                          "cells")
+    min_level_where: str | None = param(None, help="coarsest level by position and time: an expression of x, y, z, "
+                                                   "t (rounded down at each cell's midpoint), e.g. \"3*(z > 0.9)\"")
+    max_level_where: str | None = param(None, help="finest level by position and time, e.g. \"1 + 2*(x < 0.5)\"")
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.fields) - set(INDICATOR_FIELDS))
@@ -125,6 +136,35 @@ def wanted_levels(
     return np.clip(wanted, params.min_level, params.max_level).astype(np.int32)
 
 
+class LevelBounds:
+    """Coarsest and finest level by position and time (module docstring).
+
+    Args:
+        lowest, highest: Expression texts (None: no bound).
+        constants: Named constants of the expressions (the config's); ``t`` is added, set to the
+            time of each evaluation.
+        gdim: Geometric dimension.
+    """
+
+    def __init__(self, lowest: str | None, highest: str | None, /, *, constants: dict[str, float] | None = None,
+                 gdim: int = 2) -> None:
+        names = {**(constants or {}), "t": 0.0}
+        self.expressions = [None if text is None else Expression(text, constants=names, gdim=gdim)
+                            for text in (lowest, highest)]
+
+    def clip(self, wanted: npt.NDArray[np.int32], midpoints: npt.NDArray[np.float64], time: float, /
+             ) -> npt.NDArray[np.int32]:
+        """``wanted`` clipped to the bounds at ``midpoints`` (shape=(n, 3)) at ``time``."""
+        out = wanted.astype(np.int32).copy()
+        for i, expression in enumerate(self.expressions):
+            if expression is None or not len(out):
+                continue
+            expression.constants["t"] = float(time)
+            bound = np.floor(expression(np.ascontiguousarray(midpoints.T))).astype(np.int64)
+            out = np.maximum(out, bound) if i == 0 else np.minimum(out, bound)
+        return out.astype(np.int32)
+
+
 class Adaptivity:
     """The mesh-adaptivity component of a model: every ``params.every`` steps, a new mesh rebuilt
     from the base mesh with one level more where the indicator of the chosen fields is largest and
@@ -137,21 +177,28 @@ class Adaptivity:
             their Functions to :meth:`new_mesh`).
     """
 
-    def __init__(self, hierarchy: MeshHierarchy, params: AdaptivitySettings = AdaptivitySettings(), /) -> None:
+    def __init__(self, hierarchy: MeshHierarchy, params: AdaptivitySettings = AdaptivitySettings(), /, *,
+                 bounds: LevelBounds | None = None) -> None:
         self.hierarchy = hierarchy
         self.params = params
         self.fields = params.fields
+        self.bounds = bounds
 
     def due(self, timestep: int, /) -> bool:
         """Whether the mesh is adapted after step ``timestep``."""
         return timestep % self.params.every == 0
 
     def new_mesh(self, mesh: dolfinx.mesh.Mesh, fields: Sequence[dolfinx.fem.Function], /, *,
-                 locator: PointEvaluator | None = None) -> dolfinx.mesh.Mesh:
-        """The adapted mesh for the indicator of ``fields`` on ``mesh`` (collective); ``locator``:
-        a :class:`PointEvaluator` of ``mesh`` to reuse."""
+                 locator: PointEvaluator | None = None, time: float = 0.0) -> dolfinx.mesh.Mesh:
+        """The adapted mesh for the indicator of ``fields`` on ``mesh`` within the level bounds at
+        ``time`` (collective); ``locator``: a :class:`PointEvaluator` of ``mesh`` to reuse."""
         indicator = kelly_indicator(fields)
         wanted = wanted_levels(indicator, self.hierarchy.levels(mesh), self.params, mesh.comm)
+        if self.bounds is not None:
+            owned = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
+            midpoints = dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim, owned)
+            wanted = np.clip(self.bounds.clip(wanted, midpoints, time), self.params.min_level,
+                             self.params.max_level).astype(np.int32)
         return self.hierarchy.rebuild(mesh, wanted, locator=locator)
 
     def initial_mesh(self, fields_on: Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.fem.Function]], /, *,

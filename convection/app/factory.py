@@ -35,7 +35,7 @@ import dolfinx.fem.petsc
 import dolfinx.mesh
 from mpi4py import MPI
 
-from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, AdaptivitySettings
+from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, AdaptivitySettings, LevelBounds
 
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
@@ -176,7 +176,11 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
             mesh = hierarchy.uniform(0)
     adaptivity = None
     if acfg["enabled"]:
-        adaptivity = Adaptivity(hierarchy, settings_from(AdaptivitySettings, acfg))
+        bounds = None
+        if acfg["min_level_where"] is not None or acfg["max_level_where"] is not None:
+            bounds = LevelBounds(acfg["min_level_where"], acfg["max_level_where"], constants=expression_constants(config),
+                                 gdim=domain.gdim)
+        adaptivity = Adaptivity(hierarchy, settings_from(AdaptivitySettings, acfg), bounds=bounds)
         if restore is None:
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])

@@ -271,6 +271,12 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
         text = config["initial"][key]
         if text is not None:
             _check_expression(config, f"initial.{key}", text)
+    for key in ("min_level_where", "max_level_where"):
+        text = adapt[key]
+        if text is not None:
+            if not adapt["enabled"]:
+                raise ConfigError(f"config key 'adaptivity.{key}': only with adaptivity.enabled: true")
+            _check_expression(config, f"adaptivity.{key}", text, extra={"t": 0.0})
     _check_particles(config)
     _check_statistics(config)
 
@@ -304,7 +310,7 @@ def _check_statistics(config: dict[str, Any]) -> None:
 
 
 def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: str | None = None,
-                     constants: bool = True) -> Expression:
+                     constants: bool = True, extra: dict[str, float] | None = None) -> Expression:
     """The expression ``text`` of config key ``key``, evaluated at the probe points of the domain
     (or of ``boundary``) of a resolved config (see :mod:`convection.geometry.probes`).
 
@@ -313,8 +319,8 @@ def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: 
             finite at a probe point.
     """
     try:
-        expression = Expression(text, constants=expression_constants(config) if constants else None,
-                                gdim=config_gdim(config))
+        names = {**expression_constants(config), **(extra or {})} if constants else None
+        expression = Expression(text, constants=names, gdim=config_gdim(config))
         domain, level = config_domain(config), probe_level(config)
         expression.check(domain_probes(domain, level) if boundary is None else boundary_probes(domain, boundary, level))
     except ExpressionError as err:

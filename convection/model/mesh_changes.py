@@ -65,7 +65,7 @@ class MeshChanges:
                                 "composition": lambda: list(model.fractions)}
             fields = [f for name in INDICATOR_FIELDS if name in adaptivity.fields for f in indicator_fields[name]()]
             fallback = model.T if model.T is not None else model.stokes.u
-            mesh = adaptivity.new_mesh(model.mesh, fields or [fallback], locator=self.locator())
+            mesh = adaptivity.new_mesh(model.mesh, fields or [fallback], locator=self.locator(), time=model.time)
             # Both meshes are refined from one base: each particle is looked for first among the
             # new cells of its old cell's base cell, not with a bounding-box search of the new mesh.
             swarm = self._swarm()

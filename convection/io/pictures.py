@@ -124,10 +124,63 @@ def check_run_folder(directory: str | Path) -> Path:
     return directory
 
 
+def _field_names(directory: Path) -> list[str]:
+    """The fields of the last field file (empty if it cannot be read)."""
+    import h5py
+
+    files = field_files(directory)
+    try:
+        with h5py.File(files[-1], "r") as h5:
+            return list(h5["Function"].keys()) if "Function" in h5 else []
+    except (OSError, KeyError, ValueError, IndexError):
+        return []
+
+
+def _summary_field(directory: Path) -> tuple[str, tuple[np.ndarray, np.ndarray, np.ndarray, float]] | None:
+    """The field the summary shows: the temperature, unless it is constant (no energy equation) and
+    the run has materials; then the material index (or the one material's fraction)."""
+    if not field_files(directory):
+        return None
+    names = _field_names(directory)
+    temperature = read_last_field(directory, "temperature") if "temperature" in names else None
+    if temperature is not None and np.ptp(temperature[2]) > 0.0:
+        return "temperature", temperature
+    others = [n for n in names if n not in ("temperature", "velocity", "pressure")]
+    material = "material" if "material" in names else (others[0] if others else None)
+    if material is not None:
+        return material, read_last_field(directory, material)
+    return ("temperature", temperature) if temperature is not None else None
+
+
+def _panels(directory: Path, stats: dict[str, np.ndarray], log: Callable[[str], None] | None
+            ) -> tuple[np.ndarray, str, list[tuple[np.ndarray, str]]]:
+    """(time, its label, [(values, label)] of the lower panels): vrms, the Nusselt number where the run
+    measured one, topography and cells; from statistics_physical.csv (with units) where the run wrote it."""
+    physical = directory / "statistics_physical.csv"
+    table, time_label = stats, "time"
+    if physical.is_file():
+        try:
+            table = read_statistics(physical, log=log)
+        except (OSError, StatisticsFileError):
+            table = stats
+    labelled = {name.split(" [")[0]: (values, name) for name, values in table.items()}
+    time, time_label = labelled.get("time", (stats.get("time", np.zeros(0)), "time"))
+    panels = []
+    for key, label in (("vrms", "vrms"), ("nusselt", "Nusselt (top)"), ("topography_max", "topography (max)"),
+                       ("cells", "cells")):
+        if key not in labelled or not np.isfinite(labelled[key][0]).any():
+            continue
+        values, name = labelled[key]
+        panels.append((values, label + name[len(key):] if name != key else label))
+    return time, time_label, panels[:3]
+
+
 def plot_run(directory: str | Path, png: str | Path | None = None, *, log: Callable[[str], None] | None = None) -> Path:
     """Draw the run in ``directory`` into a PNG (default ``<directory>/summary.png``): the last
-    temperature with the mesh (a note instead if the run wrote no fields), vrms, Nusselt number
-    and cells over time. ``log`` hears about a cut-off last line of statistics.csv.
+    temperature with the mesh (for a model without an energy equation its materials; a note instead
+    if the run wrote no fields), then up to three of vrms, the Nusselt number, the topography and
+    the cells over time -- only what the run measured, in its units where it has them
+    (``statistics_physical.csv``). ``log`` hears about a cut-off last line of statistics.csv.
 
     Raises:
         RunFilesError: ``statistics.csv`` or the last field file is missing or damaged.
@@ -144,27 +197,32 @@ def plot_run(directory: str | Path, png: str | Path | None = None, *, log: Calla
         stats = read_statistics(directory / "statistics.csv", log=log)
     except StatisticsFileError as err:
         raise RunFilesError(str(err)) from None
-    field = read_last_field(directory, "temperature") if field_files(directory) else None
+    shown = _summary_field(directory)
+    time, time_label, panels = _panels(directory, stats, log)
     fig = plt.figure(figsize=(12, 7), constrained_layout=True)
-    grid = fig.add_gridspec(2, 3)
+    grid = fig.add_gridspec(2, max(1, len(panels)))
     ax = fig.add_subplot(grid[0, :])
-    if field is None:
+    if shown is None:
         ax.text(0.5, 0.5, "no field output", ha="center", va="center", transform=ax.transAxes)
         ax.set_axis_off()
     else:
-        points, cells, values, t = field
+        name, (points, cells, values, t) = shown
         if cells.shape[1] == 3:
             tri = mtri.Triangulation(points[:, 0], points[:, 1], cells)
-            image = ax.tripcolor(tri, values.reshape(-1), shading="gouraud", cmap="coolwarm", vmin=0.0, vmax=1.0)
+            values = values.reshape(-1)
+            if name == "temperature":
+                image = ax.tripcolor(tri, values, shading="gouraud", cmap="coolwarm", vmin=0.0, vmax=1.0)
+            else:
+                image = ax.tripcolor(tri, values if values.size == len(points) else values[: len(cells)],
+                                     shading="gouraud" if values.size == len(points) else "flat", cmap="viridis")
             ax.triplot(tri, color="k", linewidth=0.1, alpha=0.4)
-            fig.colorbar(image, ax=ax, label="T")
+            fig.colorbar(image, ax=ax, label="T" if name == "temperature" else name)
         ax.set_aspect("equal")
-        ax.set_title(f"temperature and mesh at t = {t:.4g}")
-    for i, (key, label) in enumerate((("vrms", "vrms"), ("nusselt", "Nusselt (top)"), ("cells", "cells"))):
+        ax.set_title(f"{name} and mesh at t = {t:.4g} (solver's units)")
+    for i, (values, label) in enumerate(panels):
         axi = fig.add_subplot(grid[1, i])
-        if key in stats:
-            axi.plot(stats["time"], stats[key])
-        axi.set_xlabel("time")
+        axi.plot(time[: len(values)], values)
+        axi.set_xlabel(time_label)
         axi.set_ylabel(label)
     fig.savefig(png, dpi=110)
     plt.close(fig)

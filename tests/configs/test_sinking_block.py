@@ -85,3 +85,19 @@ def test_benchmark_at_ci_size():
     assert abs(scaled[1e3, 8.0] - scaled[1e6, 8.0]) < 0.01 * scaled[1e6, 8.0]
     # an isoviscous block (eta* = 1) at 32^2 against the table's 128^2 value, to the discretisation error
     assert scaled[1.0, 8.0] == pytest.approx(1.24e10, rel=0.02)
+
+
+def test_summary_picture_fits_the_model(tmp_path):
+    """No energy equation: the summary shows the block, not a constant temperature, and plots vrms in
+    cm/yr against Myr, without a Nusselt panel."""
+    from convection.io.pictures import _panels, _summary_field, plot_run, read_statistics
+
+    out = tmp_path / "run"
+    proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets([*SMALL, "output.fields_every=2"])], 1)
+    assert proc.returncode == 0, proc.stderr
+    name, _ = _summary_field(out)
+    assert name == "block"
+    time, time_label, panels = _panels(out, read_statistics(out / "statistics.csv"), None)
+    assert time_label == "time [Myr]"
+    assert [label for _, label in panels] == ["vrms [cm/yr]", "cells"]
+    assert plot_run(out).stat().st_size > 10_000

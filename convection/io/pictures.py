@@ -145,7 +145,7 @@ def _summary_field(directory: Path) -> tuple[str, tuple[np.ndarray, np.ndarray, 
     temperature = read_last_field(directory, "temperature") if "temperature" in names else None
     if temperature is not None and np.ptp(temperature[2]) > 0.0:
         return "temperature", temperature
-    others = [n for n in names if n not in ("temperature", "velocity", "pressure")]
+    others = [n for n in names if n not in (*NON_MATERIAL_FIELDS, "viscosity")]
     material = "material" if "material" in names else (others[0] if others else None)
     if material is not None:
         return material, read_last_field(directory, material)
@@ -230,7 +230,7 @@ def plot_run(directory: str | Path, png: str | Path | None = None, *, log: Calla
 
 
 # --------------------------------------------------------------------------- snapshots (pyvista)
-NON_MATERIAL_FIELDS = ("temperature", "pressure", "velocity")
+NON_MATERIAL_FIELDS = ("temperature", "pressure", "velocity", "strain_rate_II", "stress_II")
 MATERIAL_FIELDS = ("material", "composition")
 _SIDE, _TOP, _BOTTOM = 30, 50, 100  # margins of a snapshot in pixels: sides, title, scalar bars
 _MAX_WIDTH, _MAX_HEIGHT, _MIN_WIDTH = 1000, 700, 600  # size of the domain in the picture, pixels

@@ -136,7 +136,9 @@ class Model:
 
     def fields(self) -> dict[str, dolfinx.fem.Function]:
         """Every field by name, for output: temperature, velocity, pressure, the material fractions
-        and, with two or more materials, ``material`` (:func:`convection.physics.materials.material_index`)."""
+        and, with two or more materials, ``material`` (:func:`convection.physics.materials.material_index`);
+        the viscosity wherever it varies; the second invariants of the strain rate and of the
+        deviatoric stress, ``strain_rate_II`` and ``stress_II`` (cell midpoints; collective)."""
         out = {"velocity": self.stokes.u, "pressure": self.stokes.p}
         if self.temperature is not None:
             out = {"temperature": self.temperature.T, **out}
@@ -151,6 +153,9 @@ class Model:
             out["viscosity"] = self.rheology.viscosity(flow)
             out.update(flow.fields)
             out.update(self.particle_fields())
+        elif self.stokes.approximation.is_variable_viscosity:
+            out["viscosity"] = self.rheology.viscosity(self.flow())
+        out.update(self.rheology.invariants(self.flow()))
         return out
 
     def flow(self) -> Flow:

@@ -10,7 +10,10 @@ read, the rates the particles integrate, and the viscosity (for output).
   ``eps(u)`` lives) after every Stokes solve; the particles integrate it over the next step
   (explicit Euler).
 - ``viscosity``: the viscosity of the current flow (all laws, mixing and bounds), cell by cell at
-  the cell midpoints (DG0, cell data in ParaView), written with the fields.
+  the cell midpoints (DG0, cell data in ParaView), written with the fields;
+- ``strain_rate_II = sqrt(eps : eps / 2)`` and ``stress_II = 2 eta strain_rate_II``, the second
+  invariants of the strain rate and of the deviatoric stress (ASPECT's convention), at the cell
+  midpoints too.
 """
 
 from __future__ import annotations
@@ -115,6 +118,9 @@ class RheologyFields:
         self.rates = {name: ExpressionField(name, _rate(name, declared[name]), lambda s: max(s.degree - 1, 0))
                       for name in wanted}
         self._viscosity = ExpressionField("viscosity", flow_viscosity, lambda s: 0)
+        self._invariants = (ExpressionField("strain_rate_II", _strain_rate_II, lambda s: 0),
+                            ExpressionField("stress_II", lambda f: 2.0 * flow_viscosity(f) * _strain_rate_II(f),
+                                            lambda s: 0))
 
     def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
         """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
@@ -145,3 +151,12 @@ class RheologyFields:
     def viscosity(self, flow: Flow, /) -> dolfinx.fem.Function:
         """The viscosity of ``flow`` at the cell midpoints (DG0; collective)."""
         return self._viscosity.update(flow)
+
+    def invariants(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
+        """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0; collective)."""
+        return {field.name: field.update(flow) for field in self._invariants}
+
+
+def _strain_rate_II(flow: Flow, /) -> Any:
+    eps = ufl.sym(ufl.grad(flow.stokes.u))
+    return ufl.sqrt(ufl.inner(eps, eps) / 2.0)

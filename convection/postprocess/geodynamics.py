@@ -18,7 +18,9 @@ a slab tip's depth) and the values of the fields at named points.
 the field output (temperature, velocity components, pressure, material fractions, viscosity where
 it varies, ...), the column ``<field>_<name>`` (a vector field: ``<field>_x_<name>``, ...; the
 velocity ``vx_<name>``, ``vy_<name>`` (, ``vz_<name>``)), evaluated in the owned cell that holds
-the point (the lowest rank's where several do).
+the point (the lowest rank's where several do). A cell field (the viscosity, ``strain_rate_II``)
+jumps across the cells' faces: at a point on a face it takes one of the cells' values, which may
+differ between rank counts -- keep such points off the faces.
 
 ``topography``: the height of the surface under the material ``diagnostics.topography_material``
 (sticky air) that fills the top of a box: along vertical lines at ``x_j``,

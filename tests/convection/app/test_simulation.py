@@ -53,7 +53,7 @@ def test_run_writes_statistics_config_and_fields(tmp_path):
 
     with h5py.File(tmp_path / "fields_000.h5", "r") as h5:
         assert len(h5["Function/temperature"]) == 4  # steps 0, 5, 10, 15
-        assert set(h5["Function"]) == {"temperature", "velocity", "pressure"}
+        assert set(h5["Function"]) == {"temperature", "velocity", "pressure", "strain_rate_II", "stress_II"}
 
 
 def test_adaptive_run_changes_cells_and_keeps_fields(tmp_path):

@@ -146,9 +146,11 @@ def _quantity(text: Any, key: str, dimension: str) -> Quantity:
 
 
 def _is_offset(quantity: Quantity) -> bool:
-    """Whether ``quantity``'s unit has an offset (degC, degF): a temperature value, not a difference."""
-    return not quantity.units == registry().Unit("K") and not quantity._ok_for_muldiv(no_offset_units=None) \
-        if hasattr(quantity, "_ok_for_muldiv") else "deg" in str(quantity.units)
+    """Whether ``quantity``'s unit has an offset (degC, degF): a temperature value, not a difference.
+    Public pint only: 0 of a unit without an offset is 0 K."""
+    if quantity.dimensionality != registry().get_dimensionality("[temperature]"):
+        return False
+    return registry().Quantity(0.0, quantity.units).to("K").magnitude != 0.0
 
 
 _EXAMPLES = {"[length]": "660 km", "[mass] / [length] / [time]": "1e21 Pa s", "[length] ** 2 / [time]": "1e-6 m^2/s",

@@ -18,7 +18,10 @@ One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
    previous velocity;
 2. the temperature is advanced with ``u*`` (SUPG, BDF2), then the advected material fields;
 3. the particles move in the velocity linear in time from ``u^n`` to ``u*`` (with their ODE
-   properties), then the population bounds apply and the material fields are re-averaged;
+   properties), then the population bounds apply and the material fields are re-averaged. With a
+   predicted buoyancy (``stokes.buoyancy_theta > 0``) ``u^n`` is the flow at ``t^n + theta dt`` and
+   the material (particles, advected fractions) moves in ``u^n`` over the whole step: the pairing
+   that keeps a dense interface stable at any step (:mod:`convection.physics.buoyancy`);
 4. ``t += dt``; the mesh is adapted and/or repartitioned if due (every field, the velocity history
    and the particles follow);
 5. Stokes is solved for ``u^{n+1}, p^{n+1}``; the particles' properties are refreshed from the new
@@ -246,14 +249,15 @@ class Model:
             self.start()
         u = self.stokes.u
         u_end = self._velocity_at_step_end(dt)
+        u_materials = u if self.stokes.buoyancy_theta > 0.0 else u_end
         if self.solve_temperature:
             with self.timers("temperature"):
                 self.temperature.step(u_end, dt)
         if self.composition is not None:
             with self.timers("composition"):
-                self.composition.advance(u_end, dt)
+                self.composition.advance(u_materials, dt)
         if self.particles is not None:
-            self.particles.advance(u, u_end, dt, step=self.timestep, fields=self.particle_fields())
+            self.particles.advance(u, u_materials, dt, step=self.timestep, fields=self.particle_fields())
         self.time += dt
         self.timestep += 1
         self.dt_previous = dt

@@ -171,8 +171,10 @@ class StokesSettings:
     nonlinear: NonlinearSettings = subsection(NonlinearSettings)
     buoyancy_theta: float = param(0.0, minimum=0.0, maximum=1.0,
                                   help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
-                                       "t + theta dt along the flow (semi-implicit, stabilises dense interfaces against "
-                                       "the 'drunken sailor' oscillation; 0.5 is a good choice)")
+                                       "t + theta dt along the flow, the material moved in the velocity so solved "
+                                       "(semi-implicit, stabilises dense interfaces against the 'drunken sailor' "
+                                       "oscillation; 0.5: second order in time; 1: no swinging at steps far above an "
+                                       "interface's relaxation time, e.g. sticky air under a slow slab)")
 
 
 _DEFAULTS = StokesSettings()

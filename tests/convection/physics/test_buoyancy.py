@@ -180,10 +180,12 @@ def _thick_layer(out: Path, theta: float) -> dict[str, np.ndarray]:
 
 def test_cfl_steps_oscillate_without_and_stay_smooth_with_the_prediction(tmp_path):
     """The drunken sailor: at the CFL step the explicit buoyancy makes vrms jump by a factor of 2-4
-    from step to step (measured 3.5); the predicted buoyancy keeps it within 20 % (measured 0.19),
-    no particle lost."""
+    from step to step (measured 3.5); the predicted buoyancy keeps it within 30 % (measured 0.11 with
+    theta = 1, 0.25 with theta = 0.5), no particle lost. With theta = 0.5 this holds because the
+    particles move in the velocity solved for the predicted buoyancy (the step's midpoint velocity);
+    moving them in the velocity extrapolated to the step's end made vrms jump by 1.9 (measured)."""
     jumps = {}
-    for theta in (0.0, 1.0):
+    for theta in (0.0, 0.5, 1.0):
         stats = _thick_layer(tmp_path / f"theta{theta}", theta)
         assert np.all(stats["n_lost"] == 0) or theta == 0.0
         vrms = stats["vrms"]
@@ -191,4 +193,5 @@ def test_cfl_steps_oscillate_without_and_stay_smooth_with_the_prediction(tmp_pat
         jumps[theta] = float(np.max(np.abs(np.diff(vrms))[late] / vrms[1:][late]))
         assert stats["time"][-1] == pytest.approx(0.002)
     assert jumps[0.0] > 1.0
-    assert jumps[1.0] < 0.3
+    assert jumps[0.5] < 0.4
+    assert jumps[1.0] < 0.2

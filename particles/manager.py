@@ -59,7 +59,7 @@ from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
 from particles.interpolation import CellAverage, Interpolator, get_interpolator
 from particles.migration import migrate
-from particles.output import PARTICLE_WRITERS, OutputRecord, ParticleWriter
+from particles.output import PARTICLE_WRITERS, OutputRecord, OutputUnits, ParticleWriter
 from particles.population import PopulationControl, PopulationStats, copy_nearest
 from particles.settings import ParticleSettings, particle_settings
 from particles.properties import PROPERTIES, ParticleProperty, PropertyContext, PropertyManager, create_property
@@ -238,7 +238,7 @@ def particles_per_cell_summary(swarm: Swarm, /) -> tuple[int, float, int]:
 
 def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh,
                       directory: str | Path | None, extra_properties: Sequence[ParticleProperty],
-                      make_function: MakeFunction | None) -> dict[str, Any]:
+                      make_function: MakeFunction | None, output_units: OutputUnits | None = None) -> dict[str, Any]:
     """The :class:`ParticleManager` keyword arguments a config section gives (see
     :meth:`ParticleManager.from_config`): generator, integrator, properties, interpolator,
     population, writer and output."""
@@ -257,7 +257,8 @@ def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfi
         if directory is None:
             raise ValueError("particle output needs an output directory")
         writer = PARTICLE_WRITERS.lookup(out.format)(
-            directory, properties=None if out.properties is None else list(out.properties), every_nth=out.every_nth)
+            directory, properties=None if out.properties is None else list(out.properties), every_nth=out.every_nth,
+            units=output_units)
     return {"generator": generator, "integrator": settings.integrator, "properties": properties,
             "interpolator": interpolator, "population": population, "writer": writer, "output": schedule}
 
@@ -384,7 +385,7 @@ class ParticleManager:
     def from_config(cls, section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh, /, *, directory: str | Path | None = None,
                     extra_properties: Sequence[ParticleProperty] = (), make_function: MakeFunction | None = None,
                     field_degree: int = 0, context: PropertyContext | None = None, confine: Confine | None = None,
-                    generate_particles: bool = True) -> ParticleManager:
+                    generate_particles: bool = True, output_units: OutputUnits | None = None) -> ParticleManager:
         """One manager from one config section (collective).
 
         ``section`` is a :class:`~particles.settings.ParticleSettings` or its config section:
@@ -403,8 +404,9 @@ class ParticleManager:
                 composition per material), carried first.
             make_function: Text -> function of the position.
             field_degree, context, confine, generate_particles: As for the class.
+            output_units: The particle output's conversion to physical units (None: as they are).
         """
-        return cls(mesh, **_config_arguments(section, mesh, directory, extra_properties, make_function),
+        return cls(mesh, **_config_arguments(section, mesh, directory, extra_properties, make_function, output_units),
                    field_degree=field_degree, context=context, generate_particles=generate_particles,
                    confine=confine)
 

@@ -79,6 +79,27 @@ class ParticleOutput(Protocol):
     def write(self, swarm: Swarm, t: float, step: int) -> OutputRecord: ...
 
 
+class Conversion(Protocol):
+    """``values = factor * values + offset`` in place (e.g. :class:`convection.io.output_units.Conversion`)."""
+
+    label: str
+
+    def apply(self, values: np.ndarray, /) -> None: ...
+
+
+class OutputUnits(Protocol):
+    """How the output is converted to physical units (e.g. :class:`convection.io.output_units.OutputUnits`):
+    positions by ``length``, times by ``time``, a property by ``of(name)`` (None: as it is); the
+    units are named in a JSON file by ``write_json(path, names)``."""
+
+    length: Conversion
+    time: Conversion
+
+    def of(self, name: str, /) -> Conversion | None: ...
+
+    def write_json(self, path: Path, names: Sequence[str], /) -> None: ...
+
+
 class ParticleWriter:
     """Write particles with chosen properties, one HDF5 file per step and one XDMF series.
 
@@ -93,6 +114,8 @@ class ParticleWriter:
             ``_``, which are temporary columns such as integrator stages).
         every_nth: Write only particles whose ``id % every_nth == 0`` (a rank-independent subset).
         ids: Write only these particle ids (combined with ``every_nth`` if both are given).
+        units: Write positions, times and properties converted (:class:`OutputUnits`; their
+            units in ``{name}_units.json``); None: as they are.
 
     Example:
         >>> writer = ParticleWriter("out", properties=["temperature"], every_nth=10)
@@ -111,6 +134,7 @@ class ParticleWriter:
         properties: Sequence[str] | None = None,
         every_nth: int = 1,
         ids: npt.ArrayLike | None = None,
+        units: OutputUnits | None = None,
     ) -> None:
         if every_nth < 1:
             raise ValueError(f"every_nth must be >= 1, got {every_nth}")
@@ -120,6 +144,7 @@ class ParticleWriter:
         self.every_nth = int(every_nth)
         self.ids = None if ids is None else np.unique(np.asarray(ids, dtype=np.int64))
         self.xdmf_path = self.directory / f"{name}.xdmf"
+        self.units = units
         self._series: XdmfSeries | None = None
 
     def h5_path(self, step: int) -> Path:
@@ -147,7 +172,7 @@ class ParticleWriter:
 
         Args:
             swarm: The particles.
-            t: Simulation time (the XDMF time value).
+            t: Simulation time (the XDMF time value, converted by ``units``).
             step: Step number (names the HDF5 file).
 
         Returns:
@@ -162,6 +187,11 @@ class ParticleWriter:
         n = rows.shape[0]
         positions = np.zeros((n, 3), dtype=np.float64)
         positions[:, : swarm.gdim] = swarm.x[rows]
+        if self.units is not None:
+            self.units.length.apply(positions)
+            time = np.array([float(t)])
+            self.units.time.apply(time)
+            t = float(time[0])
         path = self.h5_path(step)
         with H5Sink(path, comm) as sink:
             offset, total = exclusive_offset(comm, n)
@@ -173,12 +203,18 @@ class ParticleWriter:
             for p in names:
                 values = swarm.property(p)[rows]
                 values = values[:, 0] if values.shape[1] == 1 else values
+                conversion = None if self.units is None else self.units.of(p)
+                if conversion is not None:
+                    values = values.copy()
+                    conversion.apply(values)
                 sink.distributed(f"properties/{p}", values)
                 shapes[p] = (total, *values.shape[1:])
             sink.attrs(time=float(t), step=int(step), num_ranks=comm.size, gdim=swarm.gdim)
         if comm.rank == 0:
             self._add_grid(step, float(t), path.name, total, shapes)
             self._series.write()
+            if self.units is not None:
+                self.units.write_json(self.directory / f"{self.name}_units.json", names)
         comm.Barrier()
         return OutputRecord(int(step), float(t), path, total)
 

@@ -47,6 +47,7 @@ from convection.model.composition import (
     COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
 )
 from convection.config.units import scaling_of
+from convection.io.output_units import output_units
 from convection.config.loader import (
     config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
     viscosity_laws,
@@ -204,7 +205,8 @@ def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, material
     particles = ParticleManager.from_config(
         config["particles"], meshes.mesh, directory=config["output"]["directory"], extra_properties=extra,
         make_function=point_function(config), field_degree=ccfg["degree"], context=context,
-        generate_particles=restore is None, confine=domain.confinement(confinement_mesh))
+        generate_particles=restore is None, confine=domain.confinement(confinement_mesh),
+        output_units=output_units(scaling) if (scaling := scaling_of(config)) is not None else None)
     if restore is not None:
         saved = restore.components["model"]
         restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],

@@ -303,6 +303,10 @@ def _check_statistics(config: dict[str, Any]) -> None:
         if not str(name).isidentifier():
             raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': a point's name is a column suffix: "
                               "letters, digits and _")
+        inside = config_domain(config).contains([[float(c) for c in point]])
+        if inside is not None and not inside[0]:
+            raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': {short_repr(point)} is not in the "
+                              "domain")
     try:
         check_statistics(config["output"]["statistics"], features)
     except ValueError as err:

@@ -263,6 +263,12 @@ class BoxDomain(Domain):
             return points
         return axes, cartesian
 
+    def contains(self, points: npt.ArrayLike, /) -> npt.NDArray[np.bool_]:
+        lower, upper = np.asarray(self.lower, dtype=float), np.asarray(self.upper, dtype=float)
+        slack = 1e-12 * np.max(upper - lower)
+        x = np.asarray(points, dtype=float).reshape(-1, self.gdim)
+        return np.all((x >= lower - slack) & (x <= upper + slack), axis=1)
+
     def columns(self, across: int, along: int, /) -> Columns:
         """Vertical lines at the midpoints of ``across`` equal intervals of each horizontal axis
         (``across`` lines in 2D, ``across^2`` in 3D), ``along`` midpoint samples from bottom to top."""

@@ -137,6 +137,11 @@ class Domain(ABC):
         """Named constants this domain adds to a config's expressions."""
         return {}
 
+    def contains(self, points: npt.ArrayLike, /) -> npt.NDArray[np.bool_] | None:
+        """Whether each point (shape=(n, gdim)) lies in the domain (its closure, to a relative
+        1e-12), shape=(n,); None: this geometry cannot tell without a mesh (the default)."""
+        return None
+
     def columns(self, across: int, along: int, /) -> Columns | None:
         """Sample points on lines along ``up`` through the whole domain, for integrals along them
         (the height of a material interface): ``across`` lines, ``along`` midpoint samples on each.

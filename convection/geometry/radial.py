@@ -169,6 +169,11 @@ class RadialDomain(Domain):
     def expression_constants(self) -> dict[str, float]:
         return {"r_inner": self.spec.inner_radius, "r_outer": self.spec.outer_radius}
 
+    def contains(self, points: npt.ArrayLike, /) -> npt.NDArray[np.bool_]:
+        inner, outer = self.spec.inner_radius, self.spec.outer_radius
+        r = np.linalg.norm(np.asarray(points, dtype=float).reshape(-1, self.gdim), axis=1)
+        return (r >= inner * (1.0 - 1e-12)) & (r <= outer * (1.0 + 1e-12))
+
     @property
     def curved(self) -> bool:
         return self.spec.geometry_degree >= 2

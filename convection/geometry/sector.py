@@ -191,6 +191,14 @@ class Sector(RadialDomain):
             return "inner", "outer"
         raise ValueError(f"no Nusselt number through {name!r} of the sector; through 'inner' or 'outer'")
 
+    def contains(self, points: npt.ArrayLike, /) -> npt.NDArray[np.bool_]:
+        x = np.asarray(points, dtype=float).reshape(-1, 2)
+        west, east = self.spec.radians
+        # the angle from the sector's middle, in (-pi, pi]: no wrap-around at +-pi
+        middle = 0.5 * (west + east)
+        offset = np.angle(np.exp(1j * (np.arctan2(x[:, 1], x[:, 0]) - middle)))
+        return super().contains(x) & (np.abs(offset) <= 0.5 * (east - west) + 1e-12)
+
     def nusselt(self, mesh: dolfinx.mesh.Mesh, name: str, heat_flow: float, delta_T: float, area: float, /) -> float:
         """``Q / Q_conductive``, ``Q_conductive = (phi_east - phi_west) delta_T / ln(r_o / r_i)``."""
         inner, outer = shell_radii(mesh)

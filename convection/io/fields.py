@@ -14,6 +14,9 @@ The epoch file is closed after every write (and reopened in append mode for the 
 locks a file that is open for writing, and only a closed file is complete on disk, so everything
 ``fields.xdmf`` references can be read at any moment, also while the run goes on. Rank 0 rewrites
 ``fields.xdmf`` atomically (temporary file + ``os.replace``) after each write.
+
+A model in physical units writes coordinates, times and fields in its output units
+(:mod:`convection.io.output_units`) and names them in ``fields_units.json``.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
 
+from convection.io.output_units import OutputUnits
 from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
 from fembase.registry import Registry
 from fembase.xdmf import XdmfSeries, declare_types, grid_time
@@ -36,8 +40,8 @@ __all__ = ["FIELD_WRITERS", "FieldOutput", "FieldWriter"]
 class FieldWriter(Protocol):
     """A field output format (collective): writes named Functions of one mesh at a time (the mesh
     may change between calls) and closes its files. An implementation is a class with ``name`` and
-    ``description``, made with ``(directory, /, *, resume_after)`` (see :class:`FieldOutput`) and
-    registered in :data:`FIELD_WRITERS`."""
+    ``description``, made with ``(directory, /, *, resume_after, units)`` (see :class:`FieldOutput`)
+    and registered in :data:`FIELD_WRITERS`."""
 
     name: ClassVar[str]
     description: ClassVar[str]
@@ -60,6 +64,8 @@ class FieldOutput:
         resume_after: Continue the series already in ``directory`` (a resumed run): its times up
             to this one are kept, later ones dropped, and new mesh files get numbers after the
             existing ones.
+        units: Write in these units (:mod:`convection.io.output_units`: coordinates, times and
+            fields converted, their units in ``{prefix}_units.json``); None: as given.
 
     Attributes:
         files: The per-mesh ``.xdmf`` files written so far, in order.
@@ -75,11 +81,14 @@ class FieldOutput:
     description: ClassVar[str] = ("XDMF/HDF5 per mesh and one time series over all meshes (fields.xdmf; what the "
                                   "pictures read)")
 
-    def __init__(self, directory: str | Path, /, *, prefix: str = "fields", resume_after: float | None = None) -> None:
+    def __init__(self, directory: str | Path, /, *, prefix: str = "fields", resume_after: float | None = None,
+                 units: OutputUnits | None = None) -> None:
         self.directory = Path(directory)
         self.prefix = prefix
         self.epoch = -1
-        self._resume_after = resume_after
+        self.units = units
+        self._resume_after = None if resume_after is None else self._time(resume_after)
+        self._names_written: list[str] = []
         self._mesh: dolfinx.mesh.Mesh | None = None
         self._file: dolfinx.io.XDMFFile | None = None
         self._out: dict[str, dolfinx.fem.Function] = {}
@@ -94,7 +103,17 @@ class FieldOutput:
         self.epoch += 1
         path = self.directory / f"{self.prefix}_{self.epoch:03d}.xdmf"
         self._file = dolfinx.io.XDMFFile(mesh.comm, str(path), "w")
-        self._file.write_mesh(mesh)
+        length = None if self.units is None else self.units.length
+        if length is None or length.factor == 1.0:
+            self._file.write_mesh(mesh)
+        else:  # the coordinates in the output unit, for the writing only
+            x = mesh.geometry.x
+            saved = x.copy()
+            try:
+                length.apply(x)
+                self._file.write_mesh(mesh)
+            finally:
+                x[:] = saved
         self._mesh = mesh
         self._out = {}
         self.files.append(path)
@@ -112,7 +131,14 @@ class FieldOutput:
             out = dolfinx.fem.Function(space, name=name)
             self._out[name] = out
         out.interpolate(f)
+        conversion = None if self.units is None else self.units.of(name)
+        if conversion is not None:
+            conversion.apply(out.x.array)
         return out
+
+    def _time(self, t: float) -> float:
+        """A simulation time in the output's unit."""
+        return float(t) if self.units is None else float(t) * self.units.time.factor
 
     def write(self, functions: Mapping[str, dolfinx.fem.Function], t: float) -> None:
         """Write every Function (all on one mesh) at time ``t`` (collective).
@@ -123,7 +149,7 @@ class FieldOutput:
 
         Args:
             functions: Name -> Function; the names become the field names in the files.
-            t: Simulation time.
+            t: Simulation time (nondimensional; written in the output's time unit).
 
         Raises:
             ValueError: ``functions`` is empty.
@@ -137,14 +163,18 @@ class FieldOutput:
         elif self._file is None:
             self._file = dolfinx.io.XDMFFile(mesh.comm, str(self.files[-1]), "a")
         assert self._file is not None
+        t = self._time(t)
         for name, f in functions.items():
-            self._file.write_function(self._output_function(name, f), float(t))
+            self._file.write_function(self._output_function(name, f), t)
         self.close()
         error = None
         if mesh.comm.rank == 0:
             try:
-                self._add_grid(self.files[-1], list(functions), float(t))
+                self._add_grid(self.files[-1], list(functions), t)
                 self._series.write()
+                if self.units is not None and list(functions) != self._names_written:
+                    self.units.write_json(self.directory / f"{self.prefix}_units.json", functions)
+                    self._names_written = list(functions)
             except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
                 error = f"{type(exc).__name__}: {exc}"
         error = mesh.comm.bcast(error, root=0)

@@ -34,13 +34,15 @@ cut off (a run killed while writing it) is read without that line.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import sys
 import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Callable, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -50,7 +52,7 @@ from convection.io.xdmf_check import RunFilesError, XdmfSeries
 if TYPE_CHECKING:
     import pyvista as pv
 
-__all__ = ["RunFilesError", "read_statistics", "read_last_field", "plot_run", "import_pyvista",
+__all__ = ["RunFilesError", "read_statistics", "read_last_field", "field_units", "plot_run", "import_pyvista",
            "snapshot_times", "plot_snapshots", "field_files", "check_run_folder"]
 
 _FIELD_FILE = re.compile(r"fields_([0-9]+)\.h5")
@@ -198,6 +200,8 @@ def plot_run(directory: str | Path, png: str | Path | None = None, *, log: Calla
     except StatisticsFileError as err:
         raise RunFilesError(str(err)) from None
     shown = _summary_field(directory)
+    units = field_units(directory)
+    labels = _Labels(units or {})
     time, time_label, panels = _panels(directory, stats, log)
     fig = plt.figure(figsize=(12, 7), constrained_layout=True)
     grid = fig.add_gridspec(2, max(1, len(panels)))
@@ -211,14 +215,17 @@ def plot_run(directory: str | Path, png: str | Path | None = None, *, log: Calla
             tri = mtri.Triangulation(points[:, 0], points[:, 1], cells)
             values = values.reshape(-1)
             if name == "temperature":
-                image = ax.tripcolor(tri, values, shading="gouraud", cmap="coolwarm", vmin=0.0, vmax=1.0)
+                limits = (0.0, 1.0) if units is None else (float(values.min()), float(values.max()))
+                image = ax.tripcolor(tri, values, shading="gouraud", cmap="coolwarm", vmin=limits[0], vmax=limits[1])
             else:
                 image = ax.tripcolor(tri, values if values.size == len(points) else values[: len(cells)],
                                      shading="gouraud" if values.size == len(points) else "flat", cmap="viridis")
             ax.triplot(tri, color="k", linewidth=0.1, alpha=0.4)
-            fig.colorbar(image, ax=ax, label="T" if name == "temperature" else name)
+            label = labels.of(name)
+            fig.colorbar(image, ax=ax, label="T" if label == "temperature" else label)
         ax.set_aspect("equal")
-        ax.set_title(f"{name} and mesh at t = {t:.4g} (solver's units)")
+        where = f"({units['length']})" if units is not None and units.get("length") else "(solver's units)"
+        ax.set_title(f"{name} and mesh at t = {labels.time(t)} {where}")
     for i, (values, label) in enumerate(panels):
         axi = fig.add_subplot(grid[1, i])
         axi.plot(time[: len(values)], values)
@@ -489,6 +496,32 @@ def _time_label(t: float) -> str:
     return f"{t:.6g}"
 
 
+def field_units(directory: str | Path) -> dict[str, Any] | None:
+    """The units of a run's field output (``fields_units.json``: ``{"time", "length", "fields"}``,
+    written by a model in physical units), or None (nondimensional output)."""
+    path = Path(directory) / "fields_units.json"
+    try:
+        units = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return units if isinstance(units, dict) else None
+
+
+@dataclass(frozen=True)
+class _Labels:
+    """Titles in the output's units (:func:`field_units`; none: the solver's numbers)."""
+
+    units: Mapping[str, Any] = field(default_factory=dict)
+
+    def time(self, t: float) -> str:
+        unit = self.units.get("time")
+        return f"{t:.6g} {unit}" if unit else f"{t:.6g}"
+
+    def of(self, name: str) -> str:
+        unit = (self.units.get("fields") or {}).get(name)
+        return f"{name} [{unit}]" if unit and unit != "1" else name
+
+
 def plot_snapshots(
     directory: str | Path,
     times: Sequence[float] | None = None,
@@ -531,6 +564,7 @@ def plot_snapshots(
     particles = _Series(directory / "particles.xdmf") if (directory / "particles.xdmf").is_file() else None
     out_dir = directory / "snapshots" if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    labels = _Labels(field_units(directory) or {})
     written: list[Path] = []
     for t in snapshot_times(fields.times, times):
         index = int(np.argmin(np.abs(fields.times - t))) if fields.times.size else 0
@@ -544,11 +578,11 @@ def plot_snapshots(
                 "no composition picture")
         else:
             written.append(_composition_picture(section, view, plane, name, t, particles, particle_property,
-                                                cell_size, out_dir / f"{name}_{stem}.png"))
+                                                cell_size, out_dir / f"{name}_{stem}.png", labels=labels))
         radii = _shell_radii(data)
         if radii is not None and "temperature" in data.point_data.keys():
             written.append(_shell_picture(data, radii, t, particles, particle_property, out_dir / f"shell_{stem}.png",
-                                          max_radius=particle_radius))
+                                          max_radius=particle_radius, labels=labels))
         if "temperature" not in data.point_data.keys() and "temperature" not in data.cell_data.keys():
             say(f"t = {_time_label(t)}: no temperature field; no temperature picture")
         elif _is_constant(_values(data, "temperature")):
@@ -560,7 +594,7 @@ def plot_snapshots(
             shown = particles if particle_property is not None else None
             written.append(_temperature_picture(section, view, plane, t, out_dir / f"temperature_{stem}.png",
                                                 particles=shown, particle_property=particle_property,
-                                                cell_size=cell_size))
+                                                cell_size=cell_size, labels=labels))
     return written
 
 
@@ -570,19 +604,19 @@ def _plane_label(plane: float | None) -> str:
 
 def _composition_picture(data: pv.DataSet, view: _View, plane: float | None, name: str, t: float,
                          particles: _Series | None, particle_property: str | None, cell_size: float,
-                         path: Path) -> Path:
+                         path: Path, *, labels: _Labels = _Labels()) -> Path:
     cloud = None
-    title = f"{name} at t = {_time_label(t)}{_plane_label(plane)}"
+    title = f"{name} at t = {labels.time(t)}{_plane_label(plane)}"
     if particles is not None:
         cloud, tp = _read_particles(particles, t, particle_property)
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
-            title += f"; particles at t = {_time_label(tp)}"
+            title += f"; particles at t = {labels.time(tp)}"
     colour_particles = cloud is not None and particle_property is not None
     picture = _Picture(data, view, bars=2 if colour_particles else 1)
     # under black particles the field keeps to the lighter part of viridis, so the dots stay visible
     cmap = _light_viridis() if cloud is not None and not colour_particles else "viridis"
     picture.plotter.add_mesh(data, scalars=name, cmap=cmap, clim=_clim(_values(data, name)), lighting=False,
-                             scalar_bar_args=picture.bar(name, 0))
+                             scalar_bar_args=picture.bar(labels.of(name), 0))
     if cloud is not None:
         shown = _particles_near(cloud, picture, plane, cell_size)
         if shown.n_points:
@@ -623,7 +657,7 @@ def _read_particles(particles: _Series, t: float, particle_property: str | None)
 
 def _temperature_picture(data: pv.DataSet, view: _View, plane: float | None, t: float, path: Path, *,
                          particles: _Series | None = None, particle_property: str | None = None,
-                         cell_size: float = 0.0) -> Path:
+                         cell_size: float = 0.0, labels: _Labels = _Labels()) -> Path:
     """The temperature with the mesh; with ``particles`` and ``particle_property`` also the particles
     near the picture plane coloured by that property (viridis, beside the temperature's coolwarm)."""
     picture = _Picture(data, view, bars=2 if particles is not None and particle_property is not None else 1)
@@ -631,8 +665,8 @@ def _temperature_picture(data: pv.DataSet, view: _View, plane: float | None, t: 
     edges = bool(picture.domain_pixels[0] * picture.domain_pixels[1] / max(data.n_cells, 1) >= _MIN_EDGE_CELL_PIXELS)
     picture.plotter.add_mesh(data, scalars="temperature", cmap="coolwarm", clim=_clim(_values(data, "temperature")),
                              lighting=False, show_edges=edges, edge_color="black", edge_opacity=0.2, line_width=0.5,
-                             scalar_bar_args=picture.bar("temperature", 0))
-    title = f"temperature at t = {_time_label(t)}{_plane_label(plane)}"
+                             scalar_bar_args=picture.bar(labels.of("temperature"), 0))
+    title = f"temperature at t = {labels.time(t)}{_plane_label(plane)}"
     if particles is not None and particle_property is not None and particles.times.size:
         cloud, tp = _read_particles(particles, t, particle_property)
         shown = _particles_near(cloud, picture, plane, cell_size)
@@ -643,7 +677,7 @@ def _temperature_picture(data: pv.DataSet, view: _View, plane: float | None, t: 
         where = f" within {cell_size:.2g}" if plane is not None else ""
         title += f"; {shown.n_points} particles{where}"
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
-            title += f" at t = {_time_label(tp)}"
+            title += f" at t = {labels.time(tp)}"
     return picture.save(title, path)
 
 def _shell_radii(data: pv.DataSet) -> tuple[float, float] | None:
@@ -662,7 +696,8 @@ _SHELL_CAMERA = np.array([1.6, -2.2, 1.5])  # view direction, from above the equ
 
 
 def _shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, particles: _Series | None,
-                   particle_property: str | None, path: Path, max_radius: float | None = None) -> Path:
+                   particle_property: str | None, path: Path, max_radius: float | None = None,
+                   labels: _Labels = _Labels()) -> Path:
     """Perspective view of a spherical shell: equatorial temperature slice, the core, the
     particles of the northern hemisphere (within ``max_radius`` of the centre if given)."""
     pv = import_pyvista()
@@ -674,10 +709,10 @@ def _shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, parti
     section = data.slice(normal="z", origin=(0.0, 0.0, 0.0))
     values = _values(section, "temperature")
     plotter.add_mesh(section, scalars="temperature", cmap="coolwarm", clim=_clim(values), lighting=False,
-                     scalar_bar_args=dict(bar, title="temperature (equatorial plane)", position_x=0.06))
+                     scalar_bar_args=dict(bar, title=f"{labels.of('temperature')} (equatorial plane)", position_x=0.06))
     plotter.add_mesh(pv.Sphere(radius=inner, theta_resolution=96, phi_resolution=48), color="lightgrey",
                      smooth_shading=True)
-    title = f"spherical shell at t = {_time_label(t)}"
+    title = f"spherical shell at t = {labels.time(t)}"
     if particles is not None and particles.times.size:
         tp = particles.nearest(t)
         cloud, dropped = particles.read(tp)
@@ -706,7 +741,7 @@ def _shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, parti
         where = "z >= 0" + (f", r <= {max_radius:.4g}" if max_radius is not None else "")
         title += f"; {int(keep.sum())} particles ({where})"
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
-            title += f" at t = {_time_label(tp)}"
+            title += f" at t = {labels.time(tp)}"
     plotter.add_text(title, position="upper_edge", font_size=10, color="black")
     for scalar_bar in plotter.scalar_bars.values():
         scalar_bar.SetTextPositionToPrecedeScalarBar()

@@ -37,6 +37,7 @@ from typing import Any, Mapping, NamedTuple
 
 import dolfinx.fem
 import dolfinx.mesh
+import numpy as np
 
 from convection.adapt.adaptivity import Adaptivity
 from convection.geometry.domain import Domain
@@ -140,8 +141,9 @@ class Model:
     def fields(self) -> dict[str, dolfinx.fem.Function]:
         """Every field by name, for output: temperature, velocity, pressure, the material fractions
         and, with two or more materials, ``material`` (:func:`convection.physics.materials.material_index`);
-        the viscosity wherever it varies; the second invariants of the strain rate and of the
-        deviatoric stress, ``strain_rate_II`` and ``stress_II`` (cell midpoints; collective)."""
+        with materials of different densities, the ``density`` anomaly; the viscosity wherever it varies; the second
+        invariants of the strain rate and of the deviatoric stress, ``strain_rate_II`` and
+        ``stress_II`` (the last four at the cell midpoints; collective)."""
         out = {"velocity": self.stokes.u, "pressure": self.stokes.p}
         if self.temperature is not None:
             out = {"temperature": self.temperature.T, **out}
@@ -149,6 +151,9 @@ class Model:
             out[f.name] = f
         if len(self.fractions) >= 2:
             out["material"] = material_index(self.fractions)
+        approximation = self.stokes.approximation
+        if self.fractions and (approximation.Ra != 0.0 or any(rb != 0.0 for rb in np.atleast_1d(approximation.Rb))):
+            out["density"] = self.rheology.density(self.flow())
         if self.stokes.approximation.viscosity_law.numbers is None:
             # The viscosity of the flow (cell midpoints), the particle fields it reads (e.g. plastic
             # strain) and the rates the particles integrate.

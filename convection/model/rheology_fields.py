@@ -13,7 +13,10 @@ read, the rates the particles integrate, and the viscosity (for output).
   the cell midpoints (DG0, cell data in ParaView), written with the fields;
 - ``strain_rate_II = sqrt(eps : eps / 2)`` and ``stress_II = 2 eta strain_rate_II``, the second
   invariants of the strain rate and of the deviatoric stress (ASPECT's convention), at the cell
-  midpoints too.
+  midpoints too;
+- ``density``: the density anomaly ``rho' = sum_i Rb_i C_i - Ra T`` (in units of ``eta0 kappa /
+  (g L^3)``: a model in physical units writes ``rho0 + rho' eta0 kappa / (g L^3)`` in kg/m^3,
+  :mod:`convection.io.output_units`), at the cell midpoints.
 """
 
 from __future__ import annotations
@@ -118,6 +121,7 @@ class RheologyFields:
         self.rates = {name: ExpressionField(name, _rate(name, declared[name]), lambda s: max(s.degree - 1, 0))
                       for name in wanted}
         self._viscosity = ExpressionField("viscosity", flow_viscosity, lambda s: 0)
+        self._density = ExpressionField("density", _density_anomaly, lambda s: 0)
         self._invariants = (ExpressionField("strain_rate_II", _strain_rate_II, lambda s: 0),
                             ExpressionField("stress_II", lambda f: 2.0 * flow_viscosity(f) * _strain_rate_II(f),
                                             lambda s: 0))
@@ -148,6 +152,11 @@ class RheologyFields:
                 out[name] = rate.function
         return out
 
+    def density(self, flow: Flow, /) -> dolfinx.fem.Function:
+        """The density anomaly ``sum_i Rb_i C_i - Ra T`` of ``flow`` at the cell midpoints (DG0, in
+        units of ``eta0 kappa / (g L^3)``; collective)."""
+        return self._density.update(flow)
+
     def viscosity(self, flow: Flow, /) -> dolfinx.fem.Function:
         """The viscosity of ``flow`` at the cell midpoints (DG0; collective)."""
         return self._viscosity.update(flow)
@@ -155,6 +164,10 @@ class RheologyFields:
     def invariants(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
         """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0; collective)."""
         return {field.name: field.update(flow) for field in self._invariants}
+
+
+def _density_anomaly(flow: Flow, /) -> Any:
+    return -flow.stokes.approximation.density(flow.T, flow.fractions)
 
 
 def _strain_rate_II(flow: Flow, /) -> Any:

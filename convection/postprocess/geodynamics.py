@@ -28,7 +28,9 @@ differ between rank counts -- keep such points off the faces.
     h(x_j) = z_top - int C dz          (midpoint samples, 8 per cell height),
 
 and ``topography_max``, ``topography_min``, ``topography_rms`` of ``h - mean_j h`` (the mean over
-the lines: the undisturbed level, which the material's volume keeps).
+the lines: the undisturbed level, which the material's volume keeps). Whenever the fields are
+written, the profile ``h(x_j) - mean h`` is written too (``topography_profile.csv``: one row per
+line and output time, in the model's units).
 """
 
 from __future__ import annotations
@@ -272,6 +274,7 @@ class Topography(_Stateless):
         columns = model.domain.columns(2 * per_side, 8 * per_side)
         assert columns is not None
         self._shape = columns.points.shape[:2]
+        self._positions = columns.positions
         self._length, self._top = columns.length, columns.top
         self._samples = _Samples(model, columns.points.reshape(-1, 3))
         self._version = model.mesh_version
@@ -288,6 +291,15 @@ class Topography(_Stateless):
         total = np.zeros_like(local)
         model.comm.Allreduce(local, total, op=MPI.SUM)
         return self._top - total * self._length / self._shape[1]
+
+    profile_quantities: ClassVar[dict[str, str]] = {"x": "length", "y": "length", "topography": "length"}
+
+    def profile(self, model: Model, /) -> dict[str, np.ndarray]:
+        """The surface now, for the field output: the lines' horizontal coordinates (``x``, and
+        ``y`` in 3D) and ``h - mean h`` there (``topography``), each shape=(n,) (collective)."""
+        h = self.heights(model)
+        out = {axis: self._positions[:, i].copy() for i, axis in enumerate(_AXES[: self._positions.shape[1]])}
+        return {**out, "topography": h - h.mean()}
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         h = self.heights(model)

@@ -20,6 +20,8 @@ from petsc4py import PETSc
 
 from convection.model.model import Model, StepReport
 from convection.io.fields import FIELD_WRITERS
+from convection.io.output_units import output_units
+from convection.io.profiles import ProfileFile
 from convection.io.run_folder import check_output_directory
 from convection.io.checkpoint import CheckpointSettings
 from convection.postprocess.postprocessors import (
@@ -326,9 +328,13 @@ class _Outputs:
     """
 
     def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool,
-                 kinds: Mapping[str, str] | None = None) -> None:
+                 kinds: Mapping[str, str] | None = None, profiles: Sequence[Any] = ()) -> None:
         output = settings.output
         directory = Path(output.directory)
+        # the profiles written with the fields (topography): postprocessors with a ``profile``
+        self.profiles = [(pp, ProfileFile(directory / f"{pp.name}_profile.csv", model.comm,
+                                          getattr(pp, "profile_quantities", {}), scaling=settings.scaling,
+                                          resume_after=model.time if resume else None)) for pp in profiles]
         after = model.timestep if resume else None
         scaling = settings.scaling
         self.units = ColumnUnits(scaling, columns, kinds or {}) if scaling is not None else None
@@ -341,7 +347,8 @@ class _Outputs:
         except StatisticsFileError as err:
             raise RunFolderError(str(err)) from None
         writer = FIELD_WRITERS.lookup(output.fields_format)
-        self.fields = writer(directory, resume_after=model.time if resume else None)
+        self.fields = writer(directory, resume_after=model.time if resume else None,
+                             units=output_units(scaling) if scaling is not None else None)
         units = None if scaling is None else (scaling.factor("time"), scaling.unit_label("time"),
                                               scaling.factor("velocity"), scaling.unit_label("velocity"))
         self.progress = Progress(settings.time.end, mode=output.progress, every=output.progress_every,
@@ -369,6 +376,8 @@ class _Outputs:
     def write_fields(self, model: Model) -> None:
         with model.timers("output"):
             self.fields.write(model.fields(), model.time)
+            for pp, file in self.profiles:
+                file.write(model.time, pp.profile(model))
         self.written = model.timestep
 
     def close(self) -> None:
@@ -462,7 +471,8 @@ class _RunLoop:
         model = self.model
         columns = [c for pp in self.postprocessors for c in pp.columns]
         kinds = {c: k for pp in self.postprocessors for c, k in getattr(pp, "quantities", {}).items()}
-        self.out = out = _Outputs(model, self.settings, columns, self.resumed, kinds)
+        profiles = [pp for pp in self.postprocessors if callable(getattr(pp, "profile", None))]
+        self.out = out = _Outputs(model, self.settings, columns, self.resumed, kinds, profiles)
         reason, failure = "end time", None
         try:
             reason, failure = self._steps(should_stop)

@@ -101,3 +101,33 @@ def test_summary_picture_fits_the_model(tmp_path):
     assert time_label == "time [Myr]"
     assert [label for _, label in panels] == ["vrms [cm/yr]", "cells"]
     assert plot_run(out).stat().st_size > 10_000
+
+
+def test_fields_in_units(tmp_path):
+    """The field output of a model in physical units: km, Myr, cm/yr, Pa s and the density in kg/m^3
+    (the mantle's 3200, the block's 3208 in the cells the block fills), named in fields_units.json."""
+    import json
+
+    import h5py
+
+    out = tmp_path / "run"
+    small = [s for s in SMALL if not s.startswith("output.fields_every")]
+    proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets([*small, "output.fields_every=3"])], 1)
+    assert proc.returncode == 0, proc.stderr
+    units = json.loads((out / "fields_units.json").read_text())
+    assert units["time"] == "Myr" and units["length"] == "km"
+    assert {k: units["fields"][k] for k in ("velocity", "pressure", "viscosity", "density", "block")} == {
+        "velocity": "cm/yr", "pressure": "MPa", "viscosity": "Pa*s", "density": "kg/m^3", "block": "1"}
+    times = {r["step"]: float(r["time [Myr]"]) for r in _physical(out)}
+    with h5py.File(out / "fields_000.h5", "r") as h5:
+        x = h5["Mesh/mesh/geometry"][...]
+        assert x.min() == pytest.approx(0.0, abs=1e-9) and x.max() == pytest.approx(512.0, rel=1e-12)
+        keys = sorted(h5["Function/density"], key=lambda k: float(k.replace("_", ".")))
+        assert [float(k.replace("_", ".")) for k in keys] == pytest.approx([times["0"], times["3"], times["6"]],
+                                                                           rel=1e-12, abs=1e-12)
+        density = h5[f"Function/density/{keys[0]}"][...]
+        block = h5[f"Function/block/{keys[0]}"][...]
+        viscosity = h5[f"Function/viscosity/{keys[0]}"][...]
+    assert density == pytest.approx(3200.0 + 8.0 * block, rel=1e-12)
+    assert density.min() == pytest.approx(3200.0, rel=1e-12) and density.max() == pytest.approx(3208.0, rel=1e-12)
+    assert viscosity.min() == pytest.approx(1e21, rel=1e-9) and viscosity.max() > 1e21

@@ -6,6 +6,7 @@ the list of failures is broadcast so every rank passes or fails together.
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -18,6 +19,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.io.fields import FieldOutput
+from convection.io.output_units import Conversion, OutputUnits
 from convection.io.pictures import import_pyvista
 from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from particles import Swarm
@@ -180,3 +182,70 @@ def test_particle_series_parallel(tmp_path):
 @pytest.mark.filterwarnings("ignore:UnstructuredGrid mesh is not valid")
 def test_particle_series_two_component_property(tmp_path):
     _particle_series(tmp_path, MPI.COMM_WORLD, vector_size=2)
+
+
+def _units() -> OutputUnits:
+    """Coordinates x 10 (km), times x 2 (Myr), temperature 3 T + 1 (K), velocity x 5 (cm/yr)."""
+    return OutputUnits(length=Conversion(10.0, 0.0, "km"), time=Conversion(2.0, 0.0, "Myr"),
+                       fields={"temperature": Conversion(3.0, 1.0, "K"), "velocity": Conversion(5.0, 0.0, "cm/yr")})
+
+
+def _series_in_units(tmp_path: Path, comm: MPI.Intracomm) -> None:
+    """Fields and particles written with units: ParaView reads the converted coordinates, times and
+    values (the material, dimensionless, as it is); the mesh and swarm keep the solver's numbers."""
+    directory = _shared_dir(tmp_path, comm)
+    mesh = dolfinx.mesh.create_unit_square(comm, 4, 4)
+    before = mesh.geometry.x.copy()
+    out = FieldOutput(directory, units=_units())
+    for t in (0.0, 0.5):
+        out.write(_fields(mesh, t), t)
+    out.close()
+    swarm = Swarm(mesh)
+    swarm.add_property("velocity", 2)
+    generate(swarm, "random_uniform", num_particles=100, seed=3)
+    swarm.property("velocity")[:] = swarm.x[:, ::-1]
+    x_before = swarm.x.copy()
+    ParticleWriter(directory, units=_units()).write(swarm, 0.5, 0)
+    errors: list[str] = []
+    if not np.array_equal(mesh.geometry.x, before) or not np.array_equal(swarm.x, x_before):
+        errors.append("writing changed the mesh's or the particles' coordinates")
+    if comm.rank == 0:
+        reader = import_pyvista().get_reader(str(directory / "fields.xdmf"))
+        if list(reader.time_values) != [0.0, 1.0]:
+            errors.append(f"field times {reader.time_values}, expected [0, 1] Myr")
+        reader.set_active_time_value(1.0)
+        grid = reader.read()
+        x = grid.points / 10.0  # the solver's coordinates
+        if not np.allclose(grid.bounds, (0.0, 10.0, 0.0, 10.0, 0.0, 0.0)):
+            errors.append(f"field bounds {grid.bounds}, expected a 10 km square")
+        if not np.allclose(grid.point_data["temperature"], 3.0 * 1.5 * (x[:, 0] + 2.0 * x[:, 1]) + 1.0, atol=1e-11):
+            errors.append("temperature is not 3 T + 1")
+        if not np.allclose(grid.point_data["velocity"][:, :2], 5.0 * np.stack([x[:, 1], -x[:, 0]], axis=1), atol=1e-11):
+            errors.append("velocity is not 5 u")
+        centres = grid.cell_centers().points / 10.0
+        if not np.array_equal(grid.cell_data["material"], (centres[:, 1] > 0.5).astype(float)):
+            errors.append("the dimensionless material changed")
+        cloud = import_pyvista().get_reader(str(directory / "particles.xdmf")).read()
+        p = cloud.points / 10.0
+        if list(import_pyvista().get_reader(str(directory / "particles.xdmf")).time_values) != [1.0]:
+            errors.append("particle time not in Myr")
+        if not (p.min() >= 0.0 and p.max() <= 1.0 and p[:, :2].max() > 0.8):
+            errors.append(f"particle positions not in km: {cloud.bounds}")
+        if not np.allclose(cloud.point_data["velocity"][:, :2], 5.0 * p[:, 1::-1], atol=1e-11):
+            errors.append("particle velocity is not 5 v")
+        for name, fields in (("fields", {"temperature": "K", "velocity": "cm/yr", "material": "1"}),
+                             ("particles", {"velocity": "cm/yr"})):
+            units = json.loads((directory / f"{name}_units.json").read_text())
+            if units != {"time": "Myr", "length": "km", "fields": fields}:
+                errors.append(f"{name}_units.json: {units}")
+    errors = comm.bcast(errors, root=0)
+    assert not errors, "\n".join(errors)
+
+
+def test_series_in_units_serial(tmp_path):
+    _series_in_units(tmp_path, MPI.COMM_WORLD)
+
+
+@pytest.mark.mpi
+def test_series_in_units_parallel(tmp_path):
+    _series_in_units(tmp_path, MPI.COMM_WORLD)

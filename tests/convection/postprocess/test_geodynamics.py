@@ -89,6 +89,23 @@ def test_point_outside_the_domain_is_named(tmp_path):
         _row(model, pps)
 
 
+@pytest.mark.parametrize("mesh, inside, outside", [
+    ({"cells": [4, 4]}, [1.0, 0.0], [0.5, 1.01]),
+    ({"geometry": "annulus", "radii": [1.0, 2.0], "resolution": 0.5}, [0.0, -2.0], [0.5, 0.5]),
+    ({"geometry": "sector", "radii": [1.0, 2.0], "angles": [60.0, 120.0], "resolution": 0.5}, [0.0, 1.5],
+     [1.5, 0.0]),
+])
+def test_point_outside_the_domain_is_refused_by_check(mesh, inside, outside):
+    """A point outside the domain is a config error at check time (box, annulus, sector), one on
+    its boundary is not."""
+    def document(point):
+        return {"mesh": mesh, "physics": {"Ra": 1.0}, "time": {"end": 1.0}, "diagnostics": {"points": {"p": point}},
+                "output": {"directory": "o", "statistics": ["time", "points"]}}
+    load_config(None, document=document(inside))
+    with pytest.raises(ConfigError, match=r"'diagnostics.points.p': \[.*\] is not in the domain"):
+        load_config(None, document=document(outside))
+
+
 def test_points_need_points_and_materials_need_materials(tmp_path):
     with pytest.raises(ConfigError, match="'points' needs diagnostics.points"):
         load_config(None, document={"mesh": {"cells": [4, 4]}, "physics": {"Ra": 1.0}, "time": {"end": 1.0},

@@ -1,0 +1,111 @@
+"""Field and particle output in the units a model in physical units chose (``scaling.units``).
+
+The solver's fields are nondimensional (:mod:`convection.physics.scaling`). A run with a
+``scaling`` writes its field output (``fields.xdmf``) and its particle output (``particles.xdmf``)
+converted, so that ParaView shows kilometres, centimetres per year, pascal seconds and kelvin:
+
+- coordinates and particle positions: ``x = L x'`` in ``units.length``;
+- times: ``t = t0 t'`` (``t0 = L^2 / kappa``) in ``units.time``;
+- each field by its kind (:data:`FIELD_KINDS`): the velocity in ``units.velocity``, the pressure
+  and ``stress_II`` in ``units.stress``, the viscosity in ``units.viscosity``, ``strain_rate_II``
+  and the rates in ``units.strain_rate``, the temperature as a value ``T0 + dT T'`` in
+  ``units.temperature``;
+- the density, ``rho = rho0 + rho' eta0 kappa / (g L^3)`` in ``units.density``, where ``rho' =
+  sum_i Rb_i C_i - Ra T`` is the field's nondimensional density anomaly (the buoyancy numbers are
+  ``Rb = Delta rho g L^3 / (eta0 kappa)``);
+- material fractions, the material index, strains: as they are (dimensionless).
+
+``fields_units.json`` (and ``particles_units.json``) beside the output name the units of the
+time, the coordinates and every field. A run without a ``scaling`` writes nondimensional output
+and no such file.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from convection.physics.scaling import Scaling, registry
+from fembase.files import atomic_write_text
+
+__all__ = ["FIELD_KINDS", "Conversion", "OutputUnits", "output_units"]
+
+FIELD_KINDS: dict[str, str] = {
+    "temperature": "temperature", "velocity": "velocity", "pressure": "stress", "stress_II": "stress",
+    "viscosity": "viscosity", "strain_rate_II": "strain_rate", "plastic_strain_rate": "strain_rate",
+    "strain_rate": "strain_rate", "density": "density", "initial_position": "length", "displacement": "length",
+    "time_since_creation": "time",
+}
+"""The unit kind (:data:`convection.physics.scaling.UNIT_KINDS`) of each field or particle
+property by name; a name not here is dimensionless."""
+
+
+@dataclass(frozen=True)
+class Conversion:
+    """``value = factor * value' + offset`` in the unit ``label``."""
+
+    factor: float = 1.0
+    offset: float = 0.0
+    label: str = "1"
+
+    def apply(self, values: np.ndarray, /) -> None:
+        """Convert ``values`` in place (any shape)."""
+        if self.factor != 1.0:
+            values *= self.factor
+        if self.offset != 0.0:
+            values += self.offset
+
+
+@dataclass(frozen=True)
+class OutputUnits:
+    """How one output (fields or particles) is converted.
+
+    Attributes:
+        length: Coordinates and positions.
+        time: The time values of the series.
+        fields: Field (or property) name -> conversion; a name not here is written as it is.
+    """
+
+    length: Conversion = Conversion()
+    time: Conversion = Conversion()
+    fields: Mapping[str, Conversion] = field(default_factory=dict)
+
+    def of(self, name: str, /) -> Conversion | None:
+        """The conversion of field ``name``, or None (dimensionless: written as it is)."""
+        return self.fields.get(name)
+
+    def write_json(self, path: Path, names: Iterable[str], /) -> None:
+        """Write ``{"time": unit, "length": unit, "fields": {name: unit}}`` to ``path`` (one rank)."""
+        units = {n: (self.fields[n].label if n in self.fields else "1") for n in names}
+        atomic_write_text(path, json.dumps({"time": self.time.label, "length": self.length.label, "fields": units},
+                                           indent=1) + "\n")
+
+
+def _density(scaling: Scaling) -> Conversion | None:
+    if scaling.gravity is None or scaling.density is None:
+        return None
+    per_kg = float(registry().Quantity(1.0, "kg/m^3").to(scaling.unit_label("density")).magnitude)
+    return Conversion(per_kg / scaling.buoyancy_number(1.0), scaling.density * per_kg, scaling.unit_label("density"))
+
+
+def output_units(scaling: Scaling, /) -> OutputUnits:
+    """The conversions of a scaled model's output (module docstring)."""
+    fields: dict[str, Conversion] = {}
+    for name, kind in FIELD_KINDS.items():
+        if kind == "density":
+            conversion = _density(scaling)
+        elif kind == "temperature":
+            if scaling.temperature_difference is None:
+                continue
+            offset = scaling.dimensional("temperature", 0.0)
+            conversion = Conversion(scaling.dimensional("temperature", 1.0) - offset, offset, scaling.unit_label(kind))
+        else:
+            conversion = Conversion(scaling.factor(kind), 0.0, scaling.unit_label(kind))
+        if conversion is not None:
+            fields[name] = conversion
+    return OutputUnits(length=Conversion(scaling.factor("length"), 0.0, scaling.unit_label("length")),
+                       time=Conversion(scaling.factor("time"), 0.0, scaling.unit_label("time")), fields=fields)

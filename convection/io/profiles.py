@@ -1,0 +1,80 @@
+"""Profiles written with the fields: a quantity along a line at each field-output time (the
+topography of a surface, :class:`convection.postprocess.geodynamics.Topography`).
+
+``<name>_profile.csv`` holds one row per sample and output time: ``time``, the sample's
+coordinates, the values; in the model's units where it has them (``time [Myr], x [km],
+topography [km]``). A resumed run keeps the rows up to the time it resumes from.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+from mpi4py import MPI
+
+from convection.physics.scaling import Scaling
+from fembase.files import atomic_write_text
+
+__all__ = ["ProfileFile"]
+
+
+class ProfileFile:
+    """One profile's CSV file (rank 0 writes; the calls are collective only in that every rank
+    makes them).
+
+    Args:
+        path: The file.
+        comm: The run's communicator.
+        kinds: Column -> unit kind (:data:`convection.physics.scaling.UNIT_KINDS`) of the profile's
+            columns (coordinates and values); the time column is added.
+        scaling: The model's scaling (None: nondimensional).
+        resume_after: Keep the existing rows up to this (nondimensional) time; None: a new file.
+    """
+
+    def __init__(self, path: Path, comm: MPI.Comm, kinds: Mapping[str, str], /, *, scaling: Scaling | None = None,
+                 resume_after: float | None = None) -> None:
+        self.path = Path(path)
+        self.comm = comm
+        self.scaling = scaling
+        self.kinds = {"time": "time", **kinds}
+        self.header: list[str] | None = None
+        self._resume_after = resume_after
+
+    def _label(self, column: str) -> str:
+        kind = self.kinds.get(column)
+        return column if self.scaling is None or kind is None else f"{column} [{self.scaling.unit_label(kind)}]"
+
+    def _factor(self, column: str) -> float:
+        kind = self.kinds.get(column)
+        return 1.0 if self.scaling is None or kind is None else self.scaling.factor(kind)
+
+    def write(self, t: float, profile: Mapping[str, np.ndarray], /) -> None:
+        """Append the profile at time ``t`` (nondimensional; converted here)."""
+        if self.comm.rank != 0:
+            return
+        columns = ["time", *profile]
+        header = [self._label(c) for c in columns]
+        if self.header is None:
+            self._start(header)
+        n = len(next(iter(profile.values())))
+        table = np.empty((n, len(columns)))
+        table[:, 0] = t * self._factor("time")
+        for j, column in enumerate(columns[1:], start=1):
+            table[:, j] = np.asarray(profile[column]) * self._factor(column)
+        with open(self.path, "a", newline="") as f:
+            csv.writer(f).writerows([[repr(float(v)) for v in row] for row in table])
+
+    def _start(self, header: list[str]) -> None:
+        kept: list[list[str]] = []
+        if self._resume_after is not None and self.path.exists():
+            with open(self.path, newline="") as f:
+                rows = list(csv.reader(f))
+            limit = self._resume_after * self._factor("time") * (1.0 + 1e-12)
+            if rows and rows[0] == header:
+                kept = [r for r in rows[1:] if r and float(r[0]) <= limit]
+        text = ",".join(header) + "\n" + "".join(",".join(r) + "\n" for r in kept)
+        atomic_write_text(self.path, text)
+        self.header = header

@@ -31,3 +31,69 @@ def test_subduction_in_units(tmp_path):
     assert tip[0] == pytest.approx(200.0, abs=25.0)  # 25 km cells
     assert all(float(r["vup_lithosphere [cm/yr]"]) < 0.0 for r in rows)  # the plate and slab sink on average
     assert float(rows[0]["topography_max [km]"]) == pytest.approx(0.0, abs=1e-6)  # the surface starts flat
+    # the benchmark's table and picture from this run (benchmarks/schmeling/run.py --collect)
+    bench = _benchmark()
+    text = bench.write(tmp_path / "bench", [out])
+    ours = next(line for line in text.splitlines() if line.startswith("| this project 120x30 |"))
+    assert ours.split("|")[2].strip() == "-"  # 4 steps do not reach 10 Myr
+    assert (tmp_path / "bench" / "results.png").stat().st_size > 10_000
+
+
+def _benchmark():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("schmeling_run", CONFIGS.parent / "benchmarks" / "schmeling" / "run.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_published_curves():
+    """reference.csv holds the paper's five geometric-mixing curves: each starts at the initial 200 km
+    and they reach 400 km between 35 and 42 Myr (Schmeling et al. 2008, Fig. 5)."""
+    bench = _benchmark()
+    curves = {name: c for name, c in bench.reference().items() if name.endswith("geom")}
+    assert len(curves) == 5
+    for name, curve in curves.items():
+        assert bench.at(curve, 0.0) == pytest.approx(200.0, abs=3.0), name
+    passing = [bench.passing(c, 400.0) for c in curves.values()]
+    assert sorted(p for p in passing if p == p) == pytest.approx([35.5, 36.4, 37.5, 41.1], abs=0.1)
+    t = pytest.importorskip("numpy").array([0.0, 1.0, 2.0])
+    assert bench.passing((t, t * 300.0 + 200.0), 350.0) == pytest.approx(0.5)
+
+
+def test_topography_profile_with_the_fields(tmp_path):
+    """The topography profile is written whenever the fields are (km against Myr), its extremes are
+    the statistics' topography_max/min of those steps, and a resumed run continues the file."""
+    out = tmp_path / "run"
+    small = ["mesh.cells=[60,15]", "particles.generator.particles_per_cell=8", "time.max_steps=4",
+             "output.progress=none", "output.fields_every=2"]
+    proc = run_cli(["run", str(CONFIGS / "subduction.yaml"), "--output", str(out), *sets(small)], 1)
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli(["resume", str(out), "--set", "time.max_steps=6"], 1)
+    assert proc.returncode == 0, proc.stderr
+    with open(out / "statistics_physical.csv", newline="") as f:
+        stats = {float(r["time [Myr]"]): r for r in csv.DictReader(f) if int(r["step"]) % 2 == 0}
+    with open(out / "topography_profile.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["time [Myr]", "x [km]", "topography [km]"]
+    times = sorted({float(r["time [Myr]"]) for r in rows})
+    assert times == pytest.approx(sorted(stats), rel=1e-12) and len(times) == 4  # steps 0, 2, 4, 6
+    for t in times:
+        profile = [r for r in rows if float(r["time [Myr]"]) == t]
+        x = [float(r["x [km]"]) for r in profile]
+        h = [float(r["topography [km]"]) for r in profile]
+        assert len(profile) == 60 and x == sorted(x) and x[0] == pytest.approx(25.0) and x[-1] == pytest.approx(2975.0)
+        row = stats[min(stats, key=lambda s: abs(s - t))]
+        assert max(h) == pytest.approx(float(row["topography_max [km]"]), rel=1e-9, abs=1e-9)
+        assert min(h) == pytest.approx(float(row["topography_min [km]"]), rel=1e-9, abs=1e-9)
+
+
+def test_the_page_shows_the_shipped_config():
+    """docs/own-model.md builds configs/subduction.yaml: its full listing is the shipped file."""
+    import yaml
+
+    page = (CONFIGS.parent / "docs" / "own-model.md").read_text()
+    blocks = [b.split("```", 1)[0] for b in page.split("```yaml\n")[1:]]
+    (listing,) = [b for b in blocks if b.startswith("name: subduction")]
+    assert yaml.safe_load(listing) == yaml.safe_load((CONFIGS / "subduction.yaml").read_text())

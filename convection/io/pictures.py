@@ -1,8 +1,9 @@
 """Pictures of a run: ``python -m convection.plot RUN_DIR [--png FILE] [--times T ...]``.
 
-``summary.png`` (matplotlib): the final temperature with the mesh, read from the last field file
-(``fields_NNN.h5`` written by :mod:`convection.io.fields`), and vrms, Nusselt number and cell count
-over time from ``statistics.csv``.
+``summary.png`` (matplotlib): the final temperature (or, without an energy equation, the material
+field) with the mesh, read from the last field file (``fields_NNN.h5`` written by
+:mod:`convection.io.fields`), and vrms, the Nusselt number and the topography where measured, and
+the cell count over time from ``statistics.csv`` (``statistics_physical.csv`` in a model's units).
 
 ``snapshots/*.png`` (pyvista, rendered off-screen): at chosen times of ``fields.xdmf`` (default: the
 first, middle and last written time; a requested time snaps to the nearest written one),
@@ -11,7 +12,11 @@ first, middle and last written time; a requested time snaps to the nearest writt
   not temperature, pressure or velocity; or ``--field NAME``) with the particles of
   ``particles.xdmf`` on top (the written particle time nearest to the field time; coloured by
   ``--particle-property NAME``, else black);
+- the viscosity per cell on a logarithmic scale, where the run wrote one that varies;
 - the temperature with the mesh edges (skipped, with a message, where it is constant, e.g. Ra = 0).
+
+A run in physical units (``fields_units.json``) gets its times, units and colour-bar titles in
+those units.
 
 2D meshes are seen from +z. 3D meshes are cut by the vertical plane y = (centre of the domain): the
 picture is that x-z section seen from -y, with the particles within one typical cell size of the
@@ -579,6 +584,8 @@ def plot_snapshots(
         else:
             written.append(_composition_picture(section, view, plane, name, t, particles, particle_property,
                                                 cell_size, out_dir / f"{name}_{stem}.png", labels=labels))
+        if "viscosity" in data.cell_data.keys() and np.ptp(np.log10(_positive(_values(data, "viscosity")))) > 1e-12:
+            written.append(_viscosity_picture(section, view, plane, t, out_dir / f"viscosity_{stem}.png", labels))
         radii = _shell_radii(data)
         if radii is not None and "temperature" in data.point_data.keys():
             written.append(_shell_picture(data, radii, t, particles, particle_property, out_dir / f"shell_{stem}.png",
@@ -627,6 +634,26 @@ def _composition_picture(data: pv.DataSet, view: _View, plane: float | None, nam
             else:
                 picture.plotter.add_points(shown, color="black", point_size=size, lighting=False)
     return picture.save(title, path)
+
+
+def _positive(values: np.ndarray) -> np.ndarray:
+    """The values, with non-positive or non-finite ones raised to the smallest positive one (a
+    logarithmic colour scale)."""
+    good = np.isfinite(values) & (values > 0.0)
+    floor = float(values[good].min()) if good.any() else 1.0
+    return np.where(good, values, floor)
+
+
+def _viscosity_picture(data: pv.DataSet, view: _View, plane: float | None, t: float, path: Path,
+                       labels: _Labels) -> Path:
+    """The viscosity per cell on a logarithmic colour scale (the runs whose viscosity varies)."""
+    picture = _Picture(data, view, bars=1)
+    shown = data.copy(deep=False)
+    shown.cell_data["_log10_viscosity"] = np.log10(_positive(_values(data, "viscosity")))
+    picture.plotter.add_mesh(shown, scalars="_log10_viscosity", cmap="magma",
+                             clim=_clim(shown.cell_data["_log10_viscosity"]), lighting=False,
+                             scalar_bar_args=picture.bar(f"log10 {labels.of('viscosity')}", 0))
+    return picture.save(f"viscosity at t = {labels.time(t)}{_plane_label(plane)}", path)
 
 
 def _add_coloured_points(picture: _Picture, shown: pv.PolyData, name: str, *, cmap: str, size: float) -> None:

@@ -14,7 +14,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.io.fields import FieldOutput
-from convection.io.pictures import main, plot_snapshots, snapshot_times
+from convection.io.pictures import _Labels, field_units, main, plot_snapshots, snapshot_times
 from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from particles import Swarm
 from particles.generation import generate
@@ -219,3 +219,32 @@ def test_spherical_shell_view_with_particles_coloured_by_displacement(tmp_path):
     assert near.sum() > 300  # particles
     with pytest.raises(ValueError, match="properties: id, rank, displacement"):
         plot_snapshots(tmp_path, particle_property="density", log=None)
+
+
+def test_viscosity_on_a_log_scale_and_titles_in_units(tmp_path):
+    """A run that wrote a varying viscosity (1e19 above z = 1/2, 1e23 below) gets a viscosity picture
+    on a logarithmic scale (magma: the low viscosity dark, the high light); a run in physical units
+    (fields_units.json) has its units in the titles and colour bars."""
+    import json
+
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 6, 6)
+    functions = _functions(mesh, "z")
+    viscosity = dolfinx.fem.Function(function_space(mesh, "DG", 0))
+    viscosity.interpolate(lambda x: np.where(x[1] > 0.5, 1e19, 1e23))
+    out = FieldOutput(tmp_path)
+    out.write({**functions, "viscosity": viscosity}, 2.5)
+    out.close()
+    (tmp_path / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km", "fields": {}}))
+    written = plot_snapshots(tmp_path, log=None)
+    names = sorted(p.name for p in written)
+    assert names == ["material_0000_t2.5.png", "temperature_0000_t2.5.png", "viscosity_0000_t2.5.png"]
+    image = imread(tmp_path / "snapshots" / "viscosity_0000_t2.5.png")
+    top, bottom = _patch(image, 0.27, 0.5), _patch(image, 0.67, 0.5)
+    assert np.allclose(top, colormaps["magma"](0.0)[:3], atol=0.03)  # 1e19: the low end
+    assert np.allclose(bottom, colormaps["magma"](1.0)[:3], atol=0.03)  # 1e23: the high end
+    (tmp_path / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km",
+                                                             "fields": {"viscosity": "Pa*s", "material": "1"}}))
+    labels = _Labels(field_units(tmp_path))
+    assert (labels.time(2.5), labels.of("viscosity"), labels.of("material")) == ("2.5 Myr", "viscosity [Pa*s]",
+                                                                              "material")
+    assert _Labels().time(2.5) == "2.5" and field_units(tmp_path / "nowhere") is None

@@ -6,8 +6,8 @@ converted, so that ParaView shows kilometres, centimetres per year, pascal secon
 
 - coordinates and particle positions: ``x = L x'`` in ``units.length``;
 - times: ``t = t0 t'`` (``t0 = L^2 / kappa``) in ``units.time``;
-- each field by its kind (:data:`FIELD_KINDS`): the velocity in ``units.velocity``, the pressure
-  and ``stress_II`` in ``units.stress``, the viscosity in ``units.viscosity``, ``strain_rate_II``
+- each field by its kind (:data:`convection.physics.scaling.FIELD_KINDS`): the velocity in
+  ``units.velocity``, the pressure and ``stress_II`` in ``units.stress``, the viscosity in ``units.viscosity``, ``strain_rate_II``
   and the rates in ``units.strain_rate``, the temperature as a value ``T0 + dT T'`` in
   ``units.temperature``;
 - the density, ``rho = rho0 + rho' eta0 kappa / (g L^3)`` in ``units.density``, where ``rho' =
@@ -29,20 +29,10 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from convection.physics.scaling import Scaling, registry
+from convection.physics.scaling import FIELD_KINDS, Scaling
 from fembase.files import atomic_write_text
 
-__all__ = ["FIELD_KINDS", "Conversion", "OutputUnits", "output_units"]
-
-FIELD_KINDS: dict[str, str] = {
-    "temperature": "temperature", "velocity": "velocity", "pressure": "stress", "stress_II": "stress",
-    "viscosity": "viscosity", "strain_rate_II": "strain_rate", "plastic_strain_rate": "strain_rate",
-    "strain_rate": "strain_rate", "density": "density", "initial_position": "length", "displacement": "length",
-    "time_since_creation": "time",
-}
-"""The unit kind (:data:`convection.physics.scaling.UNIT_KINDS`) of each field or particle
-property by name; a name not here is dimensionless."""
-
+__all__ = ["Conversion", "OutputUnits", "output_units"]
 
 @dataclass(frozen=True)
 class Conversion:
@@ -85,27 +75,16 @@ class OutputUnits:
                                            indent=1) + "\n")
 
 
-def _density(scaling: Scaling) -> Conversion | None:
-    if scaling.gravity is None or scaling.density is None:
-        return None
-    per_kg = float(registry().Quantity(1.0, "kg/m^3").to(scaling.unit_label("density")).magnitude)
-    return Conversion(per_kg / scaling.buoyancy_number(1.0), scaling.density * per_kg, scaling.unit_label("density"))
-
-
 def output_units(scaling: Scaling, /) -> OutputUnits:
     """The conversions of a scaled model's output (module docstring)."""
     fields: dict[str, Conversion] = {}
     for name, kind in FIELD_KINDS.items():
-        if kind == "density":
-            conversion = _density(scaling)
-        elif kind == "temperature":
-            if scaling.temperature_difference is None:
-                continue
-            offset = scaling.dimensional("temperature", 0.0)
-            conversion = Conversion(scaling.dimensional("temperature", 1.0) - offset, offset, scaling.unit_label(kind))
+        if not scaling.converts(kind):
+            continue
+        if kind in ("temperature", "density_anomaly"):  # affine: value = factor value' + offset
+            offset = scaling.dimensional(kind, 0.0)
+            fields[name] = Conversion(scaling.dimensional(kind, 1.0) - offset, offset, scaling.unit_label(kind))
         else:
-            conversion = Conversion(scaling.factor(kind), 0.0, scaling.unit_label(kind))
-        if conversion is not None:
-            fields[name] = conversion
+            fields[name] = Conversion(scaling.factor(kind), 0.0, scaling.unit_label(kind))
     return OutputUnits(length=Conversion(scaling.factor("length"), 0.0, scaling.unit_label("length")),
                        time=Conversion(scaling.factor("time"), 0.0, scaling.unit_label("time")), fields=fields)

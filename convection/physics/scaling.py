@@ -42,7 +42,7 @@ from typing import Any, Mapping
 
 from convection.schema import ConfigError, param, short_repr, subsection
 
-__all__ = ["UNIT_KINDS", "ColumnUnits", "OutputUnits", "Quantity", "Scaling", "ScalingSettings", "parse_quantity",
+__all__ = ["FIELD_KINDS", "UNIT_KINDS", "ColumnUnits", "OutputUnits", "Quantity", "Scaling", "ScalingSettings", "parse_quantity",
            "registry"]
 
 _NUMBER = re.compile(r"^\s*([-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)?)\s*(.*?)\s*$")
@@ -105,6 +105,17 @@ UNIT_KINDS: dict[str, str] = {"length": "[length]", "time": "[time]", "velocity"
                               "stress": "[mass] / [length] / [time] ** 2", "density": "[mass] / [length] ** 3",
                               "strain_rate": "1 / [time]", "area": "[length] ** 2", "volume": "[length] ** 3"}
 """The kinds of :class:`OutputUnits` and their dimensions."""
+
+FIELD_KINDS: dict[str, str] = {
+    "temperature": "temperature", "velocity": "velocity", "pressure": "stress", "stress_II": "stress",
+    "viscosity": "viscosity", "strain_rate_II": "strain_rate", "plastic_strain_rate": "strain_rate",
+    "strain_rate": "strain_rate", "density": "density_anomaly", "initial_position": "length",
+    "displacement": "length", "time_since_creation": "time",
+}
+"""The unit kind of each output field or particle property by name (a name not here is
+dimensionless): a kind of :data:`UNIT_KINDS`, or ``density_anomaly`` for the ``density`` field
+(``rho' = sum_i Rb_i C_i - Ra T``, written as ``rho0 + rho' eta0 kappa / (g L^3)`` in the density
+unit; :meth:`Scaling.dimensional`)."""
 
 
 @dataclass(frozen=True)
@@ -310,7 +321,11 @@ class Scaling:
         return self.scale(dict(one.dimensionality)) / float(one.magnitude)
 
     def dimensional(self, kind: str, value: float) -> float:
-        """A nondimensional value of ``kind`` in its output unit (a temperature as a value: ``T0 + dT T'``)."""
+        """A nondimensional value of ``kind`` in its output unit (a temperature as a value: ``T0 + dT T'``;
+        a ``density_anomaly`` as the density ``rho0 + rho' eta0 kappa / (g L^3)``)."""
+        if kind == "density_anomaly":
+            kg = self.needed("density") + value / self.buoyancy_number(1.0)
+            return float(registry().Quantity(kg, "kg/m^3").to(self.units["density"]).magnitude)
         if kind == "temperature":
             kelvin = self.reference_temperature + value * self.scale({"[temperature]": 1})
             return float(registry().Quantity(kelvin, "K").to(self.units["temperature"]).magnitude)
@@ -318,7 +333,16 @@ class Scaling:
 
     def unit_label(self, kind: str) -> str:
         """The short text of the output unit of ``kind`` (as the user wrote it)."""
-        return self.units[kind]
+        return self.units["density" if kind == "density_anomaly" else kind]
+
+    def converts(self, kind: str) -> bool:
+        """Whether values of ``kind`` can be written in units (a temperature needs
+        ``temperature_difference``; a density anomaly ``density`` and ``gravity``)."""
+        if kind == "temperature":
+            return self.temperature_difference is not None
+        if kind == "density_anomaly":
+            return self.density is not None and self.gravity is not None
+        return kind in UNIT_KINDS
 
     def expression_constants(self) -> dict[str, float]:
         """Unit constants for config expressions: the nondimensional value of one of each unit
@@ -347,6 +371,10 @@ _WHY = {"gravity": "densities give buoyancy", "density": "the thermal buoyancy r
         "temperature_difference": "temperatures are measured in it", "heat_capacity": "internal heating in W/kg"}
 
 
+_AFFINE = ("temperature", "density_anomaly")
+"""Kinds converted with an offset (:meth:`Scaling.dimensional`), not by a factor alone."""
+
+
 class ColumnUnits:
     """Statistics columns in the output units: the header (``vrms [cm/yr]``) and each row
     converted; a column without a kind (counts, Nusselt numbers, ratios) is kept as it is.
@@ -360,10 +388,9 @@ class ColumnUnits:
     def __init__(self, scaling: Scaling, columns: list[str], kinds: Mapping[str, str]) -> None:
         self.scaling = scaling
         self.columns = list(columns)
-        convertible = {k for k in UNIT_KINDS if k != "temperature" or scaling.temperature_difference is not None}
-        self.kinds = {c: kinds[c] for c in columns if kinds.get(c) in convertible}
+        self.kinds = {c: kinds[c] for c in columns if c in kinds and scaling.converts(kinds[c])}
         self.header = [f"{c} [{scaling.unit_label(self.kinds[c])}]" if c in self.kinds else c for c in columns]
-        self._factors = {c: scaling.factor(k) for c, k in self.kinds.items() if k != "temperature"}
+        self._factors = {c: scaling.factor(k) for c, k in self.kinds.items() if k not in _AFFINE}
 
     def convert(self, row: Mapping[str, Any]) -> dict[str, Any]:
         """The row keyed by :attr:`header`, values in the output units."""
@@ -371,8 +398,8 @@ class ColumnUnits:
         for column, name in zip(self.columns, self.header):
             value = row[column]
             kind = self.kinds.get(column)
-            if kind == "temperature":
-                value = self.scaling.dimensional("temperature", float(value))
+            if kind in _AFFINE:
+                value = self.scaling.dimensional(kind, float(value))
             elif kind is not None:
                 value = float(value) * self._factors[column]
             out[name] = value

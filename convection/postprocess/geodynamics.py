@@ -45,6 +45,7 @@ import dolfinx.fem
 import dolfinx.fem.petsc
 
 from convection.model.model import Model
+from convection.physics.scaling import FIELD_KINDS
 from convection.postprocess.base import DiagnosticsSettings, Forms, ModelFeatures, integral
 from convection.schema import ConfigError
 from fembase.dolfinx_compat import function_space, value_size
@@ -54,8 +55,6 @@ from fembase.state import State
 __all__ = ["MaterialStatistics", "PointValues", "Topography"]
 
 _AXES = ("x", "y", "z")
-FIELD_KINDS = {"temperature": "temperature", "velocity": "velocity", "pressure": "stress", "viscosity": "viscosity"}
-"""The unit kind (:data:`convection.physics.scaling.UNIT_KINDS`) of the fields that have one."""
 
 
 class _Stateless:

@@ -119,6 +119,10 @@ def test_fields_in_units(tmp_path):
     assert {k: units["fields"][k] for k in ("velocity", "pressure", "viscosity", "density", "block")} == {
         "velocity": "cm/yr", "pressure": "MPa", "viscosity": "Pa*s", "density": "kg/m^3", "block": "1"}
     times = {r["step"]: float(r["time [Myr]"]) for r in _physical(out)}
+    first = _physical(out)[0]  # the points statistic in the same units: the block's centre is 3208 kg/m^3
+    assert float(first["density_centre [kg/m^3]"]) == pytest.approx(3208.0, rel=1e-12)
+    assert float(first["viscosity_centre [Pa*s]"]) == pytest.approx(1e23, rel=1e-9)
+    assert "stress_II_centre [MPa]" in first and "strain_rate_II_centre [1/s]" in first
     with h5py.File(out / "fields_000.h5", "r") as h5:
         x = h5["Mesh/mesh/geometry"][...]
         assert x.min() == pytest.approx(0.0, abs=1e-9) and x.max() == pytest.approx(512.0, rel=1e-12)

@@ -158,8 +158,8 @@ def _picture(png: Path, ours: dict[str, tuple], published: dict[str, tuple]) -> 
         style = dict(lw=1.2, ls="--") if name.endswith(GEOMETRIC) else dict(lw=0.7, ls=":", color="0.6")
         ax.plot(t, z, label=name if name.endswith(GEOMETRIC) else None, **style)
     ax.plot([], [], ls=":", color="0.6", label="other mixing (arith/harm), LAPEX2D")
-    for name, (t, z) in ours.items():
-        ax.plot(t, z, lw=2.0, color="k" if len(ours) == 1 else None, label=name)
+    for i, (name, (t, z)) in enumerate(ours.items()):
+        ax.plot(t, z, lw=2.0, color=("k", "0.45", "0.7")[i % 3], ls=("-", "-", "--")[i % 3], label=name)
     ax.set_xlim(0, 65)
     ax.set_ylim(720, 150)
     ax.set_xlabel("time [Myr]")

@@ -1,0 +1,151 @@
+"""Geometric multigrid on the Stokes velocity block: iterations and time against the mesh size.
+
+The operator is the velocity block of this project's Stokes problem, ``2 eta eps(u) : eps(v)``
+with P2 vectors on the unit square / cube (u = 0 on the boundary), the viscosity constant or
+``eta = 10^(k z)`` (a contrast of 10^k over the height). The right-hand side is a vertical force
+``sin(3 x)``. CG to a relative residual 1e-8 with:
+
+- ``gmg``: PETSc's PCMG on the nested meshes of uniform refinement from a coarse mesh, with
+  :func:`fembase.multigrid.prolongation` between the levels, Galerkin coarse operators, two
+  Chebyshev/Jacobi smoothing steps per level and a direct solve (redundant LU) on the coarsest;
+- ``hypre``: BoomerAMG with PETSc's defaults (what the velocity block uses today in 3D,
+  :mod:`convection.solvers.stokes.solver`);
+- ``gamg``: PETSc's smoothed aggregation with defaults (no near-null space).
+
+Usage (under mpirun for several ranks; the machine should be otherwise idle)::
+
+    mpirun -n 2 python benchmarks/scaling/gmg_velocity_block.py --dim 3 --base 2 --levels 1 2 3 4 \\
+        --contrast 0 4 6 --methods gmg hypre [--out benchmarks/scaling/gmg_velocity_block.md]
+
+Writes a markdown table (one row per mesh, contrast and method: unknowns, iterations, setup and
+solve seconds, the load average before the sitting) and prints it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parents[1]))
+
+import numpy as np  # noqa: E402
+import ufl  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+from petsc4py import PETSc  # noqa: E402
+
+import dolfinx.fem  # noqa: E402
+import dolfinx.fem.petsc  # noqa: E402
+import dolfinx.mesh  # noqa: E402
+
+from fembase.dolfinx_compat import function_space, refine_keeping_partition  # noqa: E402
+from fembase.multigrid import prolongation  # noqa: E402
+
+_MG_OPTIONS = {"pc_mg_galerkin": "both", "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
+               "mg_levels_ksp_max_it": 2, "mg_coarse_ksp_type": "preonly", "mg_coarse_pc_type": "redundant"}
+
+
+def _meshes(comm: MPI.Comm, dim: int, base: int, levels: int) -> list[dolfinx.mesh.Mesh]:
+    coarse = dolfinx.mesh.create_unit_square(comm, base, base) if dim == 2 else \
+        dolfinx.mesh.create_unit_cube(comm, base, base, base)
+    meshes = [coarse]
+    for _ in range(levels):
+        meshes.append(refine_keeping_partition(meshes[-1]))
+    return meshes
+
+
+def _system(V: dolfinx.fem.FunctionSpace, contrast: float) -> tuple[PETSc.Mat, PETSc.Vec]:
+    mesh = V.mesh
+    dim = mesh.geometry.dim
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    x = ufl.SpatialCoordinate(mesh)
+    eta = 1.0 if contrast == 0.0 else ufl.exp(contrast * np.log(10.0) * x[dim - 1])
+    a = dolfinx.fem.form(2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * ufl.dx)
+    force = ufl.as_vector([0.0] * (dim - 1) + [ufl.sin(3.0 * x[0])])
+    L = dolfinx.fem.form(ufl.inner(force, v) * ufl.dx)
+    facets = dolfinx.mesh.locate_entities_boundary(mesh, dim - 1, lambda X: np.full(X.shape[1], True))
+    bc = dolfinx.fem.dirichletbc(np.zeros(dim), dolfinx.fem.locate_dofs_topological(V, dim - 1, facets), V)
+    A = dolfinx.fem.petsc.assemble_matrix(a, bcs=[bc])
+    A.assemble()
+    b = dolfinx.fem.petsc.assemble_vector(L)
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    dolfinx.fem.petsc.set_bc(b, [bc])
+    return A, b
+
+
+def measure(comm: MPI.Comm, dim: int, base: int, levels: int, contrast: float, method: str) -> dict[str, float]:
+    """One solve; returns unknowns, iterations and seconds (prolongations, setup, solve; max over ranks)."""
+    meshes = _meshes(comm, dim, base, levels)
+    spaces = [function_space(m, "Lagrange", 2, shape=(dim,)) for m in meshes]
+    A, b = _system(spaces[-1], contrast)
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOperators(A)
+    ksp.setType("cg")
+    ksp.setTolerances(rtol=1e-8, max_it=1000)
+    prefix = f"gmgbench_{method}_{levels}_{contrast:g}_"
+    ksp.setOptionsPrefix(prefix)
+    options = PETSc.Options()
+    pc = ksp.getPC()
+    t0 = time.perf_counter()
+    if method == "gmg":
+        pc.setType("mg")
+        pc.setMGLevels(levels + 1)
+        for level in range(1, levels + 1):
+            pc.setMGInterpolation(level, prolongation(spaces[level - 1], spaces[level]))
+        for key, value in _MG_OPTIONS.items():
+            options[prefix + key] = value
+    else:
+        pc.setType(method)
+    ksp.setFromOptions()
+    t1 = time.perf_counter()
+    ksp.setUp()
+    t2 = time.perf_counter()
+    x = A.createVecRight()
+    ksp.solve(b, x)
+    t3 = time.perf_counter()
+    if ksp.getConvergedReason() <= 0:
+        raise RuntimeError(f"{method} did not converge ({ksp.getConvergedReason()})")
+    seconds = comm.allreduce(np.array([t1 - t0, t2 - t1, t3 - t2]), op=MPI.MAX)
+    row = {"cells": base * 2**levels, "unknowns": A.getSize()[0], "iterations": ksp.getIterationNumber(),
+           "prolongation": seconds[0], "setup": seconds[1], "solve": seconds[2]}
+    ksp.destroy()
+    A.destroy()
+    b.destroy()
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--dim", type=int, default=3)
+    parser.add_argument("--base", type=int, default=2, help="cells per side of the coarsest mesh")
+    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--contrast", type=float, nargs="+", default=[0.0, 4.0, 6.0],
+                        help="log10 of the viscosity contrast over the height")
+    parser.add_argument("--methods", nargs="+", default=["gmg", "hypre"])
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args(argv)
+    comm = MPI.COMM_WORLD
+    load = os.getloadavg()[0]
+    lines = [f"# P2 velocity block, {args.dim}D: CG iterations to 1e-8 and seconds (max over {comm.size} ranks)", "",
+             f"Generated by `benchmarks/scaling/gmg_velocity_block.py` on {comm.size} rank(s); load average before "
+             f"the sitting {load:.2f} on {os.cpu_count()} cores.", "",
+             "| cells per side | unknowns | viscosity contrast | method | iterations | prolongations [s] | setup [s] | "
+             "solve [s] |", "|---|---|---|---|---|---|---|---|"]
+    for levels in args.levels:
+        for contrast in args.contrast:
+            for method in args.methods:
+                r = measure(comm, args.dim, args.base, levels, contrast, method)
+                lines.append(f"| {r['cells']} | {r['unknowns']} | 1e{contrast:g} | {method} | {r['iterations']} | "
+                             f"{r['prolongation']:.2f} | {r['setup']:.2f} | {r['solve']:.2f} |")
+                if comm.rank == 0:
+                    print(lines[-1], flush=True)
+    if comm.rank == 0 and args.out is not None:
+        args.out.write_text("\n".join(lines) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

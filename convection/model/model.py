@@ -103,6 +103,8 @@ class Model:
         self.time = 0.0
         self.timestep = 0
         self.dt_previous = 0.0
+        self.stokes_assemblies = 0
+        """How many times the Stokes operator was assembled anew since this model was built."""
         self.u_previous: dolfinx.fem.Function | None = None
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
@@ -232,6 +234,7 @@ class Model:
             with self.timers("plastic_strain_rate"):
                 self.rheology.update_rates(flow)
         self.timers.add("stokes_assembly", result.assembly_seconds)
+        self.stokes_assemblies += result.assemblies
         self.timers.add("stokes_solve", result.solve_seconds)
         self.flow_result = result
         return result

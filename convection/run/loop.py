@@ -99,6 +99,8 @@ class RunSummary:
     wall_time: float
     reason: str
     timings: dict[str, dict[str, float]]
+    stokes_assemblies: int = 0
+    """How many times the Stokes operator was assembled (since the run or resume started)."""
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -567,7 +569,7 @@ class _RunLoop:
         vrms = now.vrms if now is not None else np.nan
         nusselt = now.nusselt if now is not None and now.nusselt is not None else np.nan
         summary = RunSummary(model.timestep, model.time, float(vrms), float(nusselt), model.num_cells, wall, reason,
-                             timings)
+                             timings, model.stokes_assemblies)
         if model.comm.rank == 0:
             (Path(self.settings.output.directory) / "summary.json").write_text(
                 json.dumps(summary.as_dict(), indent=2) + "\n")
@@ -576,7 +578,9 @@ class _RunLoop:
             progress.message(f"finished ({reason}): step {summary.steps}, t={progress.time_text(summary.time)}, "
                              f"vrms={progress.velocity_text(summary.vrms)}, {nusselt}{summary.cells} cells, "
                              f"{summary.wall_time:.1f} s")
-            self.out.progress.message("time per phase (max over ranks):\n" + model.timers.table(timings))
+            times = "time" if summary.stokes_assemblies == 1 else "times"
+            self.out.progress.message(f"Stokes operator assembled {summary.stokes_assemblies} {times}; time per phase "
+                                      "(max over ranks):\n" + model.timers.table(timings))
         return summary
 
 

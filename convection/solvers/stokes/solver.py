@@ -257,6 +257,9 @@ class StokesResult(NamedTuple):
             variable viscosity, once otherwise.
         nonlinear: The nonlinear iteration's outcome (a viscosity that depends on the flow), or
             None (a linear solve).
+        assemblies: How many times this solve assembled the operator anew: 1 or 0 for a linear
+            solve (0: the viscosity and the mesh did not change, the last operator was kept; the
+            semi-implicit buoyancy's term is added to it), the nonlinear iterations otherwise.
     """
 
     iterations: int
@@ -265,6 +268,7 @@ class StokesResult(NamedTuple):
     solve_seconds: float = 0.0
     setup_seconds: float = 0.0
     nonlinear: NonlinearResult | None = None
+    assemblies: int = 0
 
 
 class StokesSolver(PetscSolver):
@@ -407,11 +411,12 @@ class StokesSolver(PetscSolver):
                 self._rotations.remove(self.u)
             self._operator_current = False
             seconds = time.perf_counter() - t0
-            return StokesResult(result.linear_iterations, result.residual, 0.0, seconds, 0.0, result)
+            return StokesResult(result.linear_iterations, result.residual, 0.0, seconds, 0.0, result,
+                                assemblies=result.iterations)
         if self._semi_implicit is not None:
             self._semi_implicit.update(dt)
-        self.linear_system.assemble_operator(
-            forms, refresh=not self._operator_current or self.approximation.is_variable_viscosity)
+        refresh = not self._operator_current or self.approximation.is_variable_viscosity
+        self.linear_system.assemble_operator(forms, refresh=refresh)
         self._operator_current = True
         self.linear_system.assemble_rhs(forms)
 
@@ -422,7 +427,7 @@ class StokesSolver(PetscSolver):
             self._rotations.remove(self.u)
         norm = self.linear_system.residual_norm()
         return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
-                            setup_seconds)
+                            setup_seconds, assemblies=int(refresh))
 
     def _normalise_pressure(self) -> None:
         """Shift the pressure to zero mean where the constant pressure is free (collective)."""

@@ -15,7 +15,7 @@ from typing import Mapping
 import numpy as np
 from mpi4py import MPI
 
-from convection.physics.scaling import Scaling
+from convection.physics.scaling import ColumnUnits, Scaling
 from fembase.files import atomic_write_text
 
 __all__ = ["ProfileFile"]
@@ -43,36 +43,28 @@ class ProfileFile:
         self.header: list[str] | None = None
         self._resume_after = resume_after
 
-    def _label(self, column: str) -> str:
-        kind = self.kinds.get(column)
-        return column if self.scaling is None or kind is None else f"{column} [{self.scaling.unit_label(kind)}]"
-
-    def _factor(self, column: str) -> float:
-        kind = self.kinds.get(column)
-        return 1.0 if self.scaling is None or kind is None else self.scaling.factor(kind)
-
     def write(self, t: float, profile: Mapping[str, np.ndarray], /) -> None:
         """Append the profile at time ``t`` (nondimensional; converted here)."""
         if self.comm.rank != 0:
             return
         columns = ["time", *profile]
-        header = [self._label(c) for c in columns]
+        units = ColumnUnits(self.scaling, columns, self.kinds) if self.scaling is not None else None
         if self.header is None:
-            self._start(header)
+            self._start(units.header if units is not None else columns)
         n = len(next(iter(profile.values())))
-        table = np.empty((n, len(columns)))
-        table[:, 0] = t * self._factor("time")
-        for j, column in enumerate(columns[1:], start=1):
-            table[:, j] = np.asarray(profile[column]) * self._factor(column)
+        rows = [{"time": t, **{c: float(profile[c][i]) for c in columns[1:]}} for i in range(n)]
+        if units is not None:
+            rows = [units.convert(row) for row in rows]
         with open(self.path, "a", newline="") as f:
-            csv.writer(f).writerows([[repr(float(v)) for v in row] for row in table])
+            csv.writer(f).writerows([[repr(float(v)) for v in row.values()] for row in rows])
 
     def _start(self, header: list[str]) -> None:
         kept: list[list[str]] = []
         if self._resume_after is not None and self.path.exists():
             with open(self.path, newline="") as f:
                 rows = list(csv.reader(f))
-            limit = self._resume_after * self._factor("time") * (1.0 + 1e-12)
+            factor = self.scaling.factor("time") if self.scaling is not None else 1.0
+            limit = self._resume_after * factor * (1.0 + 1e-12)
             if rows and rows[0] == header:
                 kept = [r for r in rows[1:] if r and float(r[0]) <= limit]
         text = ",".join(header) + "\n" + "".join(",".join(r) + "\n" for r in kept)

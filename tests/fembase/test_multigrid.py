@@ -15,7 +15,7 @@ import dolfinx.fem
 import dolfinx.fem.petsc
 import dolfinx.mesh
 
-from fembase.dolfinx_compat import function_space, refine_keeping_partition
+from fembase.dolfinx_compat import function_space, petsc_vector, refine_keeping_partition
 from fembase.multigrid import prolongation
 
 
@@ -52,8 +52,8 @@ def test_prolongation_is_exact_on_the_coarse_space(world, dim, degree, vector):
     uc.interpolate(q)
     uf.interpolate(q)
     y = P.createVecLeft()
-    P.mult(uc.vector, y)
-    error = comm.allreduce(float(np.max(np.abs(y.array - uf.vector.array), initial=0.0)), op=MPI.MAX)
+    P.mult(petsc_vector(uc), y)
+    error = comm.allreduce(float(np.max(np.abs(y.array - petsc_vector(uf).array), initial=0.0)), op=MPI.MAX)
     assert error < 1e-12
     # every row is a partition of unity (the constants are in the coarse space)
     ones = P.createVecRight()

@@ -26,7 +26,7 @@ cells get owners from a partition method (or the owners a checkpoint saved,
 from __future__ import annotations
 
 import hashlib
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, NamedTuple, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -39,10 +39,11 @@ import ufl
 
 from fembase import dolfinx_compat as compat
 from fembase.dolfinx_compat import adjacency_list, cell_partitioner, geometry_dofmap
+from fembase.geometry import locate
 from fembase.partition import PARTITIONERS, partition
 
 __all__ = ["GHOST_LAYERS", "CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "cell_owners_by_input",
-           "create_mesh_from_piece", "create_partitioned_mesh", "create_reproducible_mesh", "duplicate_cells",
+           "create_mesh_from_piece", "create_nested_meshes", "create_partitioned_mesh", "create_reproducible_mesh", "duplicate_cells",
            "gather_cell_layout", "mesh_fingerprint", "mesh_piece", "owner_partitioner", "pull", "redistribute",
            "redistribution", "refine_on_ranks"]
 
@@ -374,35 +375,101 @@ def create_reproducible_mesh(comm: MPI.Comm, build: Callable[[MPI.Comm], dolfinx
     Returns:
         The distributed mesh (facet ghost layer).
     """
+    return create_nested_meshes(comm, [build], owners=owners, method=method)[0]
+
+
+def create_nested_meshes(comm: MPI.Comm, builds: Sequence[Callable[[MPI.Comm], dolfinx.mesh.Mesh]], /, *,
+                         owners: npt.NDArray[np.int32] | None = None, method: str = "rcb"
+                         ) -> list[dolfinx.mesh.Mesh]:
+    """Meshes from coarse to fine, each cell of a finer mesh inside one cell of the mesh before it
+    (nested, e.g. boxes of n, 2n, 4n cells per side), distributed so that every cell sits on the rank
+    of the coarser cell it lies in, on a partition that is the same in every run (collective).
+
+    That is what geometric multigrid needs (:func:`fembase.multigrid.prolongation` finds the nodes of
+    a rank's fine dofs among its own coarse cells). Rank 0 builds every mesh alone, as
+    :func:`create_reproducible_mesh` does; the coarsest mesh is partitioned by ``method`` and each
+    finer cell goes to the owner of the coarser cell that contains its midpoint, or, with
+    ``owners`` of the finest mesh (a checkpoint's), each coarser cell goes to the owner of the finer
+    cell that contains its midpoint (all the finer cells inside one coarser cell share an owner).
+
+    Args:
+        comm: Communicator of the meshes.
+        builds: Make the meshes, coarse to fine, on the communicator they are given.
+        owners: Owner rank of every cell of the finest mesh by its input index (rank 0), or None.
+        method: Partition method of the coarsest mesh when ``owners`` is None.
+
+    Returns:
+        The distributed meshes (facet ghost layer), coarse to fine.
+
+    Raises:
+        RuntimeError: A build failed on rank 0, or the meshes are not nested (on every rank).
+    """
     if comm.size == 1:
-        mesh = build(comm)
+        meshes = [build(comm) for build in builds]
         if owners is not None:
-            _check_owners(owners, mesh.topology.index_map(mesh.topology.dim).size_local, 1)
-        return mesh
-    piece, element, failure = None, None, None
+            _check_owners(owners, meshes[-1].topology.index_map(meshes[-1].topology.dim).size_local, 1)
+        return meshes
+    pieces: list[MeshPiece] = []
+    element, failure, shape = None, None, None
     if comm.rank == 0:
         try:
-            serial = build(MPI.COMM_SELF)
-            element = compat.coordinate_element_description(serial)
-            tdim = serial.topology.dim
-            num_cells = serial.topology.index_map(tdim).size_local
-            whole = mesh_piece(serial, np.zeros(num_cells, dtype=np.int32))
-            order = np.argsort(np.asarray(serial.topology.original_cell_index, dtype=np.int64), kind="stable")
-            if owners is None:
-                midpoints = dolfinx.mesh.compute_midpoints(serial, tdim, order.astype(np.int32))[:, :serial.geometry.dim]
-                owners = partition(method, midpoints, np.ones(num_cells), np.zeros(num_cells), comm.size,
-                                   particle_weight=0.0)
-            piece = MeshPiece(whole.cells[order], whole.x, _check_owners(owners, num_cells, comm.size))
+            serial = [build(MPI.COMM_SELF) for build in builds]
+            element = compat.coordinate_element_description(serial[-1])
+            orders = [np.argsort(np.asarray(m.topology.original_cell_index, dtype=np.int64), kind="stable")
+                      for m in serial]
+            for mesh, order, level_owners in zip(serial, orders, _nested_owners(serial, orders, owners, comm.size,
+                                                                               method)):
+                whole = mesh_piece(mesh, np.zeros(order.size, dtype=np.int32))
+                pieces.append(MeshPiece(whole.cells[order], whole.x, level_owners))
+            shape = (pieces[-1].cells.shape[1], pieces[-1].x.shape[1])
         except Exception as err:  # noqa: BLE001 - told to every rank below, raised on every rank
             failure = f"{type(err).__name__}: {err}"
-    failure, element, shape = comm.bcast((failure, element, None if piece is None else
-                                          (piece.cells.shape[1], piece.x.shape[1])), root=0)
+    failure, element, shape = comm.bcast((failure, element, shape), root=0)
     if failure is not None:
         raise RuntimeError(f"creating the mesh on rank 0 failed: {failure}")
     if comm.rank != 0:
-        piece = MeshPiece(np.zeros((0, shape[0]), dtype=np.int64), np.zeros((0, shape[1])),
-                          np.zeros(0, dtype=np.int32))
-    return create_mesh_from_piece(comm, piece, ufl.Mesh(compat.coordinate_element_from(element))).mesh
+        pieces = [MeshPiece(np.zeros((0, shape[0]), dtype=np.int64), np.zeros((0, shape[1])),
+                            np.zeros(0, dtype=np.int32)) for _ in builds]
+    domain = ufl.Mesh(compat.coordinate_element_from(element))
+    return [create_mesh_from_piece(comm, piece, domain).mesh for piece in pieces]
+
+
+def _input_midpoints(mesh: dolfinx.mesh.Mesh, order: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+    """Midpoints of a serial mesh's cells in input order, shape=(num_cells, gdim)."""
+    tdim = mesh.topology.dim
+    return dolfinx.mesh.compute_midpoints(mesh, tdim, order.astype(np.int32))[:, :mesh.geometry.dim]
+
+
+def _owners_through(points_of: dolfinx.mesh.Mesh, order: npt.NDArray[np.int64], other: dolfinx.mesh.Mesh,
+                    other_owners: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
+    """Owner of every cell of the serial mesh ``points_of`` (input order): the owner (by input
+    index, ``other_owners``) of the cell of the serial mesh ``other`` that holds its midpoint."""
+    cells = locate(other, _input_midpoints(points_of, order)).cells
+    if np.any(cells < 0):
+        raise ValueError(f"{int(np.count_nonzero(cells < 0))} cell midpoints lie in no cell of the other mesh: "
+                         "the meshes are not nested")
+    return other_owners[np.asarray(other.topology.original_cell_index, dtype=np.int64)[cells]]
+
+
+def _nested_owners(serial: list[dolfinx.mesh.Mesh], orders: list[npt.NDArray[np.int64]],
+                   owners: npt.NDArray[np.int32] | None, size: int, method: str) -> list[npt.NDArray[np.int32]]:
+    """Owners by input index of every level of :func:`create_nested_meshes` (rank 0 only)."""
+    counts = [order.size for order in orders]
+    levels: list[npt.NDArray[np.int32]] = [np.empty(0, dtype=np.int32)] * len(serial)
+    if owners is None:
+        levels[0] = _check_owners(partition(method, _input_midpoints(serial[0], orders[0]), np.ones(counts[0]),
+                                            np.zeros(counts[0]), size, particle_weight=0.0), counts[0], size)
+        for k in range(1, len(serial)):
+            levels[k] = _owners_through(serial[k], orders[k], serial[k - 1], levels[k - 1])
+    else:
+        levels[-1] = _check_owners(owners, counts[-1], size)
+        for k in range(len(serial) - 2, -1, -1):
+            levels[k] = _owners_through(serial[k], orders[k], serial[k + 1], levels[k + 1])
+    empty = size - np.unique(levels[0]).size
+    if empty:
+        raise ValueError(f"the coarsest mesh ({counts[0]} cells) leaves {empty} of {size} ranks without a cell: "
+                         "use fewer levels or ranks")
+    return levels
 
 
 def _check_owners(owners: npt.ArrayLike, num_cells: int, size: int) -> npt.NDArray[np.int32]:

@@ -140,6 +140,8 @@ def geometry_dofmap(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
     dofmap = mesh.geometry.dofmap
     if _NEW:
         return dofmap
+    if dofmap.num_nodes == 0:  # a rank without cells (a coarse mesh on many ranks)
+        return np.zeros((0, mesh.geometry.cmap.create_dof_layout().num_dofs), dtype=np.int32)
     return dofmap.array.reshape(dofmap.num_nodes, -1)
 
 

@@ -145,7 +145,8 @@ def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bc
 
 class _Meshes(NamedTuple):
     """The mesh of a run and what changes it: the hierarchy it is refined from (with the domain's
-    manifold), adaptivity and balancing; ``exact``: a restored mesh is the saved one."""
+    manifold), adaptivity and balancing; ``exact``: a restored mesh is the saved one; ``coarse``: the
+    meshes it is nested in, coarse to fine (``stokes.solver: multigrid``), else empty."""
 
     mesh: dolfinx.mesh.Mesh
     hierarchy: MeshHierarchy | None
@@ -153,6 +154,7 @@ class _Meshes(NamedTuple):
     adaptivity: Adaptivity | None
     balancer: Balancer | None
     exact: bool
+    coarse: tuple[dolfinx.mesh.Mesh, ...] = ()
 
 
 def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temperature_bcs: dict[str, TemperatureBC],
@@ -164,14 +166,25 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     manifold = domain.manifold() if hierarchical else None
     straight = manifold is not None
     exact = True
+    scfg = config["stokes"]
+    levels = domain.mesh_levels(scfg["multigrid"]["levels"]) if scfg["solver"] == "multigrid" else 1
+    coarse: list[dolfinx.mesh.Mesh] = []
+
+    def make_base(owners: Any) -> dolfinx.mesh.Mesh:
+        """The base mesh; with multigrid (a fixed mesh) also the meshes nested below it, kept in ``coarse``."""
+        if levels == 1:
+            return domain.create_mesh(comm, owners=owners, straight=straight)
+        meshes = domain.create_mesh_levels(comm, levels, owners=owners)
+        coarse[:] = meshes[:-1]
+        return meshes[-1]
+
     if restore is not None:
-        restored = restore_mesh(restore, comm, lambda owners: domain.create_mesh(comm, owners=owners, straight=straight),
-                                hierarchical=hierarchical, manifold=manifold)
+        restored = restore_mesh(restore, comm, make_base, hierarchical=hierarchical, manifold=manifold)
         mesh, hierarchy, exact = restored.mesh, restored.hierarchy, restored.exact
         if restored.note is not None and comm.rank == 0:
             print(f"note: {restored.note}", file=sys.stderr, flush=True)
     else:
-        mesh = domain.create_mesh(comm, straight=straight)
+        mesh = make_base(None)
         hierarchy = MeshHierarchy(mesh, manifold=manifold) if hierarchical else None
         if manifold is not None:
             mesh = hierarchy.uniform(0)
@@ -186,7 +199,7 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])
     balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if bcfg["strategy"] != "none" else None
-    return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact)
+    return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact, tuple(coarse))
 
 
 def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, materials: Materials, stokes: StokesSolver,
@@ -244,7 +257,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], domain)
     meshes = _meshes(config, domain, materials, temperature_bcs, comm, restore)
     mesh = meshes.mesh
-    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain,
+    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, coarse_meshes=meshes.coarse,
                           **vars(settings_from(StokesSettings, config["stokes"])))
     energy = settings_from(EnergySettings, config["energy"])
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,

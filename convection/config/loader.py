@@ -247,8 +247,33 @@ def _check_mesh(config: dict[str, Any], document: dict[str, Any]) -> None:
     cls.check_config(config)
 
 
+def _check_multigrid(config: dict[str, Any]) -> None:
+    """``stokes.solver: multigrid`` needs coarser meshes nested in the run's mesh (a box whose cells
+    halve) and, for now, a fixed mesh; ``stokes.multigrid.levels`` only means something with it."""
+    stokes = config["stokes"]
+    levels = stokes["multigrid"]["levels"]
+    if stokes["solver"] != "multigrid":
+        if levels != 0:
+            raise ConfigError("config key 'stokes.multigrid.levels': only with stokes.solver: multigrid")
+        return
+    for key, enabled in (("adaptivity.enabled", config["adaptivity"]["enabled"]),
+                         ("balance.strategy", config["balance"]["strategy"] != "none")):
+        if enabled:
+            raise ConfigError(f"config key '{key}': stokes.solver multigrid runs on a fixed mesh for now "
+                              "(use iterative with an adaptive or repartitioned mesh)")
+    domain = config_domain(config)
+    try:
+        count = domain.mesh_levels(levels)
+    except ValueError as err:
+        raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
+    if count < 2:
+        raise ConfigError(f"config key 'stokes.solver': multigrid needs coarser meshes nested in the mesh: a box whose "
+                          f"cells per side are even (e.g. 16, 20, 32), not mesh.geometry {domain.name} with this mesh")
+
+
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:
     _check_mesh(config, document)
+    _check_multigrid(config)
     adapt = config["adaptivity"]
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")

@@ -10,6 +10,7 @@ condition on the velocity component normal to it; the pressure is pinned at the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -25,7 +26,7 @@ from convection.geometry.domain import Columns, Domain, safe_product
 from convection.geometry.gravity import VerticalGravity
 from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
 from convection.schema import ConfigError, param
-from fembase.distribute import create_reproducible_mesh
+from fembase.distribute import create_nested_meshes, create_reproducible_mesh
 from fembase.dolfinx_compat import DirichletBC
 
 __all__ = ["SIDES_2D", "SIDES_3D", "BoxBounds", "BoxDomain", "BoxSpec", "box_bounds", "create_box_mesh",
@@ -299,6 +300,36 @@ class BoxDomain(Domain):
     def create_mesh(self, comm: MPI.Comm, /, *, owners: npt.NDArray[np.int32] | None = None,
                     straight: bool = False) -> dolfinx.mesh.Mesh:
         return create_box_mesh(comm, self._spec(), owners=owners)
+
+    def mesh_levels(self, wanted: int = 0, /) -> int:
+        """Boxes of ``cells / 2^k`` cells per side nest in the box of ``cells`` (a cell of the finer
+        box lies in one cell of the coarser: DOLFINx splits every cube into the same six
+        tetrahedra around its main diagonal and every square along the same diagonal, patterns that
+        halving the cell size refines). With ``wanted`` 0, halve while every count is even and
+        stays at least 2. 2D simplices split ``left/right`` or ``right/left`` alternate, and do not nest."""
+        spec = self._spec()
+        if spec.gdim == 2 and spec.cell_type == "simplex" and "/" in spec.diagonal:
+            if wanted > 1:
+                raise ValueError(f"mesh.diagonal {spec.diagonal} alternates from square to square: the boxes of "
+                                 "half as many cells are not nested in it (use right, left or crossed)")
+            return 1
+        if wanted == 0:
+            halvings = 0
+            while all(n % 2 ** (halvings + 1) == 0 and n // 2 ** (halvings + 1) >= 2 for n in spec.cells):
+                halvings += 1
+            return halvings + 1
+        if any(n % 2 ** (wanted - 1) for n in spec.cells):
+            raise ValueError(f"{wanted} mesh levels need mesh.cells divisible by 2^{wanted - 1} = {2 ** (wanted - 1)} "
+                             f"(got {list(spec.cells)}): each coarser box has half the cells per side")
+        return wanted
+
+    def create_mesh_levels(self, comm: MPI.Comm, levels: int, /, *, owners: npt.NDArray[np.int32] | None = None
+                           ) -> list[dolfinx.mesh.Mesh]:
+        spec = self._spec()
+        self.mesh_levels(levels)
+        specs = [dataclasses.replace(spec, cells=tuple(n // 2 ** k for n in spec.cells))
+                 for k in range(levels - 1, -1, -1)]
+        return create_nested_meshes(comm, [lambda c, s=s: _box(c, s) for s in specs], owners=owners)
 
     def estimated_cells(self) -> float:
         """Cells of the base mesh."""

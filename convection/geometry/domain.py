@@ -183,6 +183,29 @@ class Domain(ABC):
         impose (owner rank per cell by input index, on rank 0); ``straight``: straight-sided cells
         even where the domain is curved (what a mesh hierarchy refines)."""
 
+    def mesh_levels(self, wanted: int = 0, /) -> int:
+        """How many nested meshes, coarse to fine and the base mesh the finest, this domain can make
+        for geometric multigrid (:meth:`create_mesh_levels`): ``wanted`` if it can, or, with 0, as
+        many as it can. 1: no coarser mesh.
+
+        Raises:
+            ValueError: ``wanted`` levels cannot be made (one line, saying why)."""
+        if wanted > 1:
+            raise ValueError(f"the {self.name} domain cannot make meshes coarser than its mesh "
+                             "(geometric multigrid: a box whose cells halve)")
+        return 1
+
+    def create_mesh_levels(self, comm: MPI.Comm, levels: int, /, *, owners: npt.NDArray[np.int32] | None = None
+                           ) -> list[dolfinx.mesh.Mesh]:
+        """``levels`` nested meshes, coarse to fine, the finest the base mesh (:meth:`create_mesh`),
+        every cell on the rank of the coarser cell it lies in (collective); ``owners``: the finest
+        mesh's partition to impose (owner rank per cell by input index, on rank 0).
+
+        Raises:
+            ValueError: The domain cannot make them (:meth:`mesh_levels`)."""
+        self.mesh_levels(levels)
+        return [self.create_mesh(comm, owners=owners)]
+
     @abstractmethod
     def estimated_cells(self) -> float:
         """Cells of the base mesh (an estimate where a mesh generator decides)."""

@@ -36,6 +36,7 @@ from convection.geometry.domain import Domain
 from convection.solvers.stokes.nullspace import constant_pressure_null_space, rigid_body_modes
 from convection.solvers.petsc_options import destroy_petsc_objects
 from convection.solvers.stokes.forms import StokesForms
+from convection.solvers.stokes.multigrid import VelocityMultigrid
 from fembase.dolfinx_compat import (DirichletBC, assemble_block_matrix, assemble_block_vector, assemble_matrix_into,
                                     create_block_matrix, create_block_vector)
 
@@ -97,17 +98,23 @@ class StokesLinearSystem:
         iterative: True for a Krylov solver with the fieldsplit preconditioner, False for a
             direct solver.
         pressure_null_space: whether the constant pressure solves the homogeneous problem.
+        multigrid: the prolongations of a geometric multigrid on the velocity block (the options
+            must make the velocity block's PC ``mg``), handed to it at the first solve; or None.
 
     Attributes:
         pinned: True when a pressure dof is pinned (direct solver with a pressure null space); the
             forms then need a pressure-pressure block.
     """
 
-    PETSC_OBJECTS = ("_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local")
+    PETSC_OBJECTS = ("_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local",
+                     "multigrid")
 
     def __init__(self, u: dolfinx.fem.Function, p: dolfinx.fem.Function, ksp: PETSc.KSP, /, *,
-                 dirichlet: list, domain: Domain, iterative: bool, pressure_null_space: bool) -> None:
+                 dirichlet: list, domain: Domain, iterative: bool, pressure_null_space: bool,
+                 multigrid: VelocityMultigrid | None = None) -> None:
         self.u, self.p, self.ksp = u, p, ksp
+        self.multigrid = multigrid
+        self._multigrid_configured = False
         self.V, self.Q = u.function_space, p.function_space
         self.iterative = iterative
         self.pressure_null_space = pressure_null_space
@@ -299,6 +306,13 @@ class StokesLinearSystem:
         """
         t1 = time.perf_counter()
         pack_solution(self.u, self.p, self._x)
+        if self.multigrid is not None and not self._multigrid_configured:
+            # Fieldsplit makes the velocity block's KSP when it is set up (the matrices assembled);
+            # PCMG sets itself up at its first use, after it has the prolongations.
+            pc = self.ksp.getPC()
+            pc.setUp()
+            self.multigrid.configure(pc.getFieldSplitSubKSP()[0].getPC())
+            self._multigrid_configured = True
         self.ksp.setUp()  # a no-op unless the operator changed
         setup_seconds = time.perf_counter() - t1
         self.ksp.solve(self._b, self._x)

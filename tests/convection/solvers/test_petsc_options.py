@@ -28,7 +28,7 @@ def test_linear_solvers_share_the_direct_setup_and_merge_overrides():
     from convection.solvers.stokes.solver import STOKES_SOLVERS
     from convection.solvers.transport import TRANSPORT_SOLVERS
 
-    assert sorted(STOKES_SOLVERS) == ["direct", "iterative", "iterative_gamg"]
+    assert sorted(STOKES_SOLVERS) == ["direct", "iterative", "iterative_gamg", "multigrid"]
     assert sorted(TRANSPORT_SOLVERS) == ["direct", "iterative"]
     for registry in (STOKES_SOLVERS, TRANSPORT_SOLVERS):
         assert dict(registry["direct"].options) == dict(MUMPS_LU)

@@ -177,4 +177,4 @@ def test_auto_is_iterative_in_3d_and_direct_in_2d():
     assert stokes.on_mesh(mesh).solver == "direct"
     with pytest.raises(ValueError, match="valid names: .*'auto'"):
         resolve_solver("amg", 3)
-    assert set(STOKES_SOLVER_NAMES) == {"auto", "direct", "iterative", "iterative_gamg"}
+    assert set(STOKES_SOLVER_NAMES) == {"auto", "direct", "iterative", "iterative_gamg", "multigrid"}

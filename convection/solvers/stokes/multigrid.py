@@ -1,0 +1,116 @@
+"""Geometric multigrid on the Stokes velocity block (``stokes.solver: multigrid``).
+
+The block preconditioner of the iterative Stokes solvers (:func:`convection.solvers.stokes.solver.block_schur_options`)
+needs one approximate solve with the velocity block ``A`` (``2 eta eps(u) : eps(v)`` on vector
+P2) per outer iteration. Algebraic multigrid (BoomerAMG) on P2 elasticity-type operators needs
+more outer iterations the finer the mesh (38 per time step at 16³ on the 3D thick layer, issue 34).
+Geometric multigrid uses the meshes the run's mesh was refined from: a box of ``n`` cells per side
+nests in the box of ``2 n`` (:meth:`convection.geometry.box.BoxDomain.create_mesh_levels`), so the
+coarse velocity spaces ``V_0 ⊂ V_1 ⊂ ... ⊂ V_L = V`` (the same element on each mesh) are nested and
+the prolongation from level ``l - 1`` to ``l`` is exact interpolation
+(:func:`fembase.multigrid.prolongation`: ``P[i, j] = phi_j(x_i)``).
+
+One V-cycle of PETSc's PCMG replaces the AMG cycle:
+
+- coarse operators by Galerkin products, ``A_{l-1} = P_l^T A_l P_l`` (PETSc's ``pc_mg_galerkin``),
+  so they carry the viscosity (and a varying one's contrasts) of the fine operator exactly, and the
+  strong conditions' unit rows with it; they are formed again only when ``A`` changes;
+- two Chebyshev steps with point-Jacobi preconditioning before and after the coarse correction on
+  every level (the eigenvalue bounds estimated once per setup, the Chebyshev interval
+  ``[0.1, 1.1] lambda_max``, PETSc's defaults);
+- an exact solve on the coarsest level (``redundant``: every rank factorises the small coarsest
+  operator, LU), the same on any rank count.
+
+PETSc options under ``fieldsplit_u_`` (``stokes.petsc_options``) change any of this, e.g.
+``fieldsplit_u_mg_levels_ksp_max_it: 3``.
+
+The prolongations are built once for the mesh; the coarse spaces are dropped after that. PETSc's
+fieldsplit creates the velocity block's PC when the block preconditioner is first set up, so
+:class:`VelocityMultigrid` hands the prolongations to it then
+(:meth:`convection.solvers.stokes.linear.StokesLinearSystem.solve`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import dolfinx
+from petsc4py import PETSc
+
+from convection.schema import param
+from fembase.dolfinx_compat import function_space
+from fembase.multigrid import prolongation
+
+__all__ = ["GEOMETRIC_MULTIGRID", "MultigridSettings", "VelocityMultigrid"]
+
+MAX_LEVELS = 12
+"""Most multigrid levels a config may ask for (4096 times fewer cells per side on the coarsest)."""
+
+
+@dataclass(frozen=True)
+class MultigridSettings:
+    """The ``stokes.multigrid`` config section (``stokes.solver: multigrid``)."""
+
+    levels: int = param(0, minimum=0, maximum=MAX_LEVELS,
+                        help="meshes in the hierarchy, the run's mesh included (box: each coarser has half the cells "
+                             "per side); 0: halve while every count is even and stays >= 2 (16 -> 8 -> 4 -> 2: 4)")
+
+GEOMETRIC_MULTIGRID: dict[str, Any] = {
+    "pc_type": "mg",
+    "pc_mg_galerkin": "both",
+    "mg_levels_ksp_type": "chebyshev",
+    "mg_levels_ksp_max_it": 2,
+    "mg_levels_pc_type": "jacobi",
+    "mg_coarse_ksp_type": "preonly",
+    "mg_coarse_pc_type": "redundant",
+    "mg_coarse_redundant_pc_type": "lu",
+}
+"""PCMG options of the velocity block (without the ``fieldsplit_u_`` prefix): see the module
+docstring. ``pc_mg_levels`` is added by the solver from the number of meshes."""
+
+
+class VelocityMultigrid:
+    """The prolongations between the velocity spaces of nested meshes, handed to a PCMG.
+
+    Args:
+        V: The velocity space (vector Lagrange) on the finest mesh.
+        coarse_meshes: The coarser meshes, coarse to fine, each nested in the next and the last in
+            ``V``'s mesh, every cell on the rank of the coarser cell it lies in
+            (:meth:`convection.geometry.domain.Domain.create_mesh_levels` without its last mesh).
+            Collective.
+
+    Raises:
+        ValueError: No coarse mesh, or the meshes are not nested on this partition (every rank).
+    """
+
+    def __init__(self, V: dolfinx.fem.FunctionSpace, coarse_meshes: Sequence[dolfinx.mesh.Mesh], /) -> None:
+        if not coarse_meshes:
+            raise ValueError("geometric multigrid needs at least one coarser mesh")
+        element = V.ufl_element()
+        degree = element.degree()
+        shape = (V.mesh.geometry.dim,)
+        spaces = [function_space(mesh, "Lagrange", degree, shape=shape) for mesh in coarse_meshes] + [V]
+        self.interpolations: list[PETSc.Mat] = [prolongation(coarse, fine) for coarse, fine in zip(spaces, spaces[1:])]
+        self.unknowns = [space.dofmap.index_map.size_global * space.dofmap.index_map_bs for space in spaces]
+
+    @property
+    def levels(self) -> int:
+        """The number of levels, the finest included."""
+        return len(self.interpolations) + 1
+
+    def configure(self, pc: PETSc.PC, /) -> None:
+        """Give the velocity block's PC (of type mg, with :attr:`levels` levels from the options) the
+        prolongations. Not collective by itself (PETSc's calls are)."""
+        if pc.getType() != "mg" or pc.getMGLevels() != self.levels:
+            raise ValueError(f"the velocity preconditioner is {pc.getType()!r} with {pc.getMGLevels()} levels, "
+                             f"not mg with {self.levels}: stokes.petsc_options changed fieldsplit_u_pc_type")
+        for level, P in enumerate(self.interpolations, start=1):
+            pc.setMGInterpolation(level, P)
+
+    def destroy(self) -> None:
+        """Free the prolongation matrices (collective)."""
+        for P in self.interpolations:
+            P.destroy()
+        self.interpolations = []

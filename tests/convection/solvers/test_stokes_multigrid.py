@@ -1,0 +1,155 @@
+"""The geometric-multigrid Stokes solver (``stokes.solver: multigrid``): the solution of MUMPS to
+the solver tolerance (smooth and sharp 1e3 viscosity contrasts, 2D and 3D, 1/2/3 ranks),
+iterations that do not grow with the mesh (also with a 1e4 contrast), the operator and the
+multigrid hierarchy set up once while the viscosity is constant, and the config's rules."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import ufl
+import dolfinx
+from mpi4py import MPI
+
+from convection.config.loader import ConfigError, load_config
+from convection.geometry.boundary import VelocityBC
+from convection.geometry.box import SIDES_2D, SIDES_3D, BoxDomain, BoxSpec
+from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.solvers.stokes.solver import StokesSolver
+from fembase.dolfinx_compat import function_space
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "benchmarks" / "performance"))
+import stokes3d  # noqa: E402  (the 3D problem of the iterative solvers' tests)
+
+ROOT = Path(__file__).resolve().parents[3]
+FREE_SLIP_3D = {side: VelocityBC("free_slip") for side in SIDES_3D}
+FREE_SLIP_2D = {side: VelocityBC("free_slip") for side in SIDES_2D}
+
+
+def _norm(comm, f) -> float:
+    return float(np.sqrt(comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(ufl.inner(f, f) * ufl.dx)),
+                                        op=MPI.SUM)))
+
+
+def _cube(comm, n: int, levels: int, viscosity: str):
+    """The unit cube of n^3 cubes and the meshes nested in it; stokes3d's fields and viscosity."""
+    meshes = BoxDomain.from_spec(BoxSpec((n, n, n), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0))).create_mesh_levels(comm, levels)
+    T, C, approximation = stokes3d.problem(meshes[-1], viscosity)
+    return meshes, T, C, approximation
+
+
+def _square(comm, n: int, contrast: float):
+    """The unit square of n x n squares (3 levels more coarsely), Ra = 1e5, T = 1 - y + 0.1 cos(pi x) sin(pi y),
+    eta = contrast^(-T) (Frank-Kamenetskii; 1: constant)."""
+    domain = BoxDomain.from_spec(BoxSpec((n, n), (0.0, 0.0), (1.0, 1.0)))
+    meshes = domain.create_mesh_levels(comm, domain.mesh_levels())
+    T = dolfinx.fem.Function(function_space(meshes[-1], "Lagrange", 2))
+    T.interpolate(lambda x: 1.0 - x[1] + 0.1 * np.cos(np.pi * x[0]) * np.sin(np.pi * x[1]))
+    law = ViscosityLaw(temperature_law="frank_kamenetskii", gamma=np.log(contrast)) if contrast != 1.0 else ViscosityLaw()
+    return meshes, T, BoussinesqApproximation(Ra=1e5, viscosity=law)
+
+
+def _check_matches(comm, meshes, T, C, approximation, bcs, rtol: float, factor: float) -> int:
+    """Multigrid at ``rtol`` against MUMPS (serial) or iterative_gamg at 1e-11 (parallel, where
+    MUMPS without iterative refinement is only 4e-6 to 6e-5 accurate); returns the iterations."""
+    reference = "direct" if comm.size == 1 else "iterative_gamg"
+    options = {"ksp_rtol": 1e-11} if reference != "direct" else None
+    exact = StokesSolver(meshes[-1], approximation, bcs=bcs, solver=reference, petsc_options=options)
+    exact.solve(T, C)
+    stokes = StokesSolver(meshes[-1], approximation, bcs=bcs, solver="multigrid", coarse_meshes=meshes[:-1],
+                          petsc_options={"ksp_rtol": rtol})
+    result = stokes.solve(T, C)
+    assert _norm(comm, stokes.u - exact.u) < factor * rtol * _norm(comm, exact.u)
+    assert _norm(comm, stokes.p - exact.p) < factor * rtol * _norm(comm, exact.p)
+    for solver in (exact, stokes):
+        solver.destroy()
+    return result.iterations
+
+
+@pytest.mark.parametrize("rtol", [1e-5, 1e-9])
+@pytest.mark.parametrize("viscosity", ["temperature", "layer"])
+def test_matches_the_exact_solution_to_the_solver_tolerance_3d(world, viscosity, rtol):
+    """Collective: 4^3 cubes over 2^3; the sharp layer's contrast makes the residual a looser bound
+    on the error (as for the AMG solvers, test_stokes_iterative.py)."""
+    meshes, T, C, approximation = _cube(world, 4, 2, viscosity)
+    iterations = _check_matches(world, meshes, T, C, approximation, FREE_SLIP_3D, rtol,
+                                300 if viscosity == "layer" else 30)
+    assert iterations < 100
+
+
+def test_matches_the_exact_solution_2d(world):
+    """Collective: a 1e4 contrast on 32 x 32 squares over 4 x 4."""
+    meshes, T, approximation = _square(world, 32, 1e4)
+    _check_matches(world, meshes, T, None, approximation, FREE_SLIP_2D, 1e-8, 100)
+
+
+def _iterations(solver: StokesSolver, T, C=None) -> int:
+    iterations = solver.solve(T, C).iterations
+    solver.destroy()
+    return iterations
+
+
+def test_iterations_do_not_grow_with_the_mesh_2d(world):
+    """Collective: 16^2 to 128^2 squares (coarsest 2 x 2), constant viscosity and a 1e4 contrast: the
+    count stays within a few iterations (measured on 2 ranks: 18 18 19 19 and 39 39 39 39; the
+    contrast's count is the Schur complement's, approximated by the pressure mass matrix / eta)."""
+    for contrast in (1.0, 1e4):
+        counts = []
+        for n in (16, 32, 64, 128):
+            meshes, T, approximation = _square(world, n, contrast)
+            counts.append(_iterations(StokesSolver(meshes[-1], approximation, bcs=FREE_SLIP_2D, solver="multigrid",
+                                                   coarse_meshes=meshes[:-1]), T))
+        assert max(counts) <= 50 and max(counts) - min(counts) <= 6, (contrast, counts)
+
+
+def test_iterations_do_not_grow_with_the_mesh_3d(world):
+    """Collective: 4^3, 8^3 and 16^3 cubes, each down to 2^3, constant viscosity (measured on 2 ranks:
+    19 20 20)."""
+    counts = []
+    for n, levels in ((4, 2), (8, 3), (16, 4)):
+        meshes, T, C, approximation = _cube(world, n, levels, "constant")
+        counts.append(_iterations(StokesSolver(meshes[-1], approximation, bcs=FREE_SLIP_3D, solver="multigrid",
+                                               coarse_meshes=meshes[:-1]), T, C))
+    assert max(counts) <= 30 and max(counts) - min(counts) <= 4, counts
+
+
+def test_constant_viscosity_sets_up_once(world):
+    """Collective: three solves with moving buoyancy and a constant viscosity assemble the operator
+    once and set the preconditioner up once (the later solves' setup takes no time)."""
+    meshes, T, C, approximation = _cube(world, 4, 2, "constant")
+    stokes = StokesSolver(meshes[-1], approximation, bcs=FREE_SLIP_3D, solver="multigrid", coarse_meshes=meshes[:-1])
+    results = []
+    for shift in (0.0, 0.01, 0.02):
+        T.interpolate(stokes3d.temperature("constant", shift))
+        results.append(stokes.solve(T, C))
+    assert [r.assemblies for r in results] == [1, 0, 0]
+    assert all(r.setup_seconds < 0.05 * results[0].setup_seconds for r in results[1:]), results
+    velocity_pc = stokes.ksp.getPC().getFieldSplitSubKSP()[0].getPC()
+    assert velocity_pc.getType() == "mg" and velocity_pc.getMGLevels() == 2
+    stokes.destroy()
+
+
+def test_multigrid_needs_the_coarse_meshes():
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
+    with pytest.raises(ValueError, match="coarser meshes"):
+        StokesSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=FREE_SLIP_2D, solver="multigrid")
+
+
+@pytest.mark.parametrize("sets, message", [
+    (["stokes.multigrid.levels=3"], "'stokes.multigrid.levels': only with stokes.solver: multigrid"),
+    (["stokes.solver=multigrid", "mesh.cells=[25,25,25]"], "'stokes.solver': multigrid needs coarser meshes"),
+    (["stokes.solver=multigrid", "stokes.multigrid.levels=4", "mesh.cells=[20,20,20]"],
+     "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
+    (["stokes.solver=multigrid", "balance.strategy=every"], "'balance.strategy': stokes.solver multigrid runs on a fixed"),
+])
+def test_config_rules(sets, message):
+    with pytest.raises(ConfigError, match=message):
+        load_config(ROOT / "configs" / "thick_layer_3d.yaml", sets)
+
+
+def test_config_rules_shell():
+    with pytest.raises(ConfigError, match="not mesh.geometry spherical_shell"):
+        load_config(ROOT / "configs" / "shell_plates.yaml", ["stokes.solver=multigrid"])

@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# Side by side with ASPECT on the 3D thick layer (configs/thick_layer_3d.yaml at 16^3 to t = 0.002,
+# 2 ranks, 245 760 particles): ASPECT 2.5 with block AMG and with block GMG
+# (../shared/bench/aspect/thick_layer_3d.prm; for GMG the box is one coarse cell refined 4 times),
+# this project with `stokes.solver: iterative` (what `auto` picks in 3D) and `multigrid`.
+# Every run REPEAT times in turn (round robin, so a change of the machine's load hits all alike);
+# the table keeps each one's fastest run.
+#
+# Usage: bash benchmarks/scaling/aspect_thick_layer_sitting.sh ASPECT_BINARY [REPEAT] [OUT_MD]
+#   ASPECT_BINARY: built by ../shared/bench/aspect/build.sh
+# Writes the raw logs under benchmarks/scaling/log/aspect_thick_layer/ and the table to OUT_MD
+# (default benchmarks/scaling/aspect_thick_layer.md).
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+aspect=$(readlink -f "${1:?path to the aspect binary}")
+repeat="${2:-3}"
+out_md="${3:-$here/benchmarks/scaling/aspect_thick_layer.md}"
+prm="$here/../shared/bench/aspect/thick_layer_3d.prm"
+logs="$here/benchmarks/scaling/log/aspect_thick_layer"
+work="$(mktemp -d "${TMPDIR:-/tmp}/aspect_sitting.XXXXXX")"
+mkdir -p "$logs"
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+python="$here/.venv/bin/python"
+
+# The GMG variant: ASPECT's GMG needs a mesh hierarchy (one coarse cell refined 4 times = 16^3).
+sed -e 's/set Stokes solver type = block AMG/set Stokes solver type = block GMG/' \
+    -e 's/set \([XYZ]\) repetitions = 16/set \1 repetitions = 1/' \
+    -e 's/set Initial global refinement = 0/set Initial global refinement = 4/' "$prm" > "$work/gmg.prm"
+sed -e "s|set Output directory .*|set Output directory = $work/out-amg|" "$prm" > "$work/amg.prm"
+sed -i -e "s|set Output directory .*|set Output directory = $work/out-gmg|" "$work/gmg.prm"
+
+load=$(cut -d' ' -f1-3 /proc/loadavg)
+echo "load average before the sitting: $load" | tee "$logs/sitting.txt"
+for round in $(seq 1 "$repeat"); do
+  for run in aspect_amg aspect_gmg iterative multigrid; do
+    log="$logs/${run}_$round.log"
+    start=$(date +%s.%N)
+    case $run in
+      aspect_amg) mpirun -n 2 "$aspect" "$work/amg.prm" > "$log" 2>&1 ;;
+      aspect_gmg) mpirun -n 2 "$aspect" "$work/gmg.prm" > "$log" 2>&1 ;;
+      *) mpirun -n 2 env PYTHONPATH="$here" "$python" -m convection run "$here/configs/thick_layer_3d.yaml" \
+           --set "mesh.cells=[16,16,16]" --set time.end=0.002 --set stokes.solver=$run \
+           --output "$work/out-$run" > "$log" 2>&1
+         cp "$work/out-$run/summary.json" "$logs/${run}_$round.summary.json"
+         cp "$work/out-$run/statistics.csv" "$logs/${run}_$round.statistics.csv" ;;
+    esac
+    wall=$(echo "$(date +%s.%N) - $start" | bc)
+    echo "$run round $round: $wall s" | tee -a "$logs/sitting.txt"
+  done
+done
+echo "load average after the sitting: $(cut -d' ' -f1-3 /proc/loadavg)" | tee -a "$logs/sitting.txt"
+"$python" "$here/benchmarks/scaling/aspect_thick_layer_table.py" "$logs" > "$out_md"
+cat "$out_md"
+rm -rf "$work"

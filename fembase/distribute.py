@@ -388,9 +388,11 @@ def create_nested_meshes(comm: MPI.Comm, builds: Sequence[Callable[[MPI.Comm], d
     That is what geometric multigrid needs (:func:`fembase.multigrid.prolongation` finds the nodes of
     a rank's fine dofs among its own coarse cells). Rank 0 builds every mesh alone, as
     :func:`create_reproducible_mesh` does; the coarsest mesh is partitioned by ``method`` and each
-    finer cell goes to the owner of the coarser cell that contains its midpoint, or, with
-    ``owners`` of the finest mesh (a checkpoint's), each coarser cell goes to the owner of the finer
-    cell that contains its midpoint (all the finer cells inside one coarser cell share an owner).
+    finer cell goes to the owner of the coarser cell that contains its midpoint. With ``owners`` of
+    the finest mesh (a checkpoint's) each coarser cell first goes to the owner of the finer cell
+    that contains its midpoint, and the finer cells then follow their coarser ones: a partition that
+    keeps nested cells together comes back as given, another one is changed so that it does (or,
+    where that would leave a rank without a coarsest cell, partitioned afresh).
 
     Args:
         comm: Communicator of the meshes.
@@ -456,15 +458,22 @@ def _nested_owners(serial: list[dolfinx.mesh.Mesh], orders: list[npt.NDArray[np.
     """Owners by input index of every level of :func:`create_nested_meshes` (rank 0 only)."""
     counts = [order.size for order in orders]
     levels: list[npt.NDArray[np.int32]] = [np.empty(0, dtype=np.int32)] * len(serial)
-    if owners is None:
-        levels[0] = _check_owners(partition(method, _input_midpoints(serial[0], orders[0]), np.ones(counts[0]),
-                                            np.zeros(counts[0]), size, particle_weight=0.0), counts[0], size)
-        for k in range(1, len(serial)):
-            levels[k] = _owners_through(serial[k], orders[k], serial[k - 1], levels[k - 1])
-    else:
+    if owners is not None:
+        # Up from the saved partition of the finest mesh, then down again: a partition that keeps
+        # nested cells together (one written by a run with these levels) comes back unchanged;
+        # another one is made to, or, if that would leave a rank without cells, replaced by a fresh
+        # one (either way the mesh differs from the saved one, which a checkpoint's fingerprint
+        # check notices).
         levels[-1] = _check_owners(owners, counts[-1], size)
         for k in range(len(serial) - 2, -1, -1):
             levels[k] = _owners_through(serial[k], orders[k], serial[k + 1], levels[k + 1])
+        if np.unique(levels[0]).size < size:
+            owners = None
+    if owners is None:
+        levels[0] = _check_owners(partition(method, _input_midpoints(serial[0], orders[0]), np.ones(counts[0]),
+                                            np.zeros(counts[0]), size, particle_weight=0.0), counts[0], size)
+    for k in range(1, len(serial)):
+        levels[k] = _owners_through(serial[k], orders[k], serial[k - 1], levels[k - 1])
     empty = size - np.unique(levels[0]).size
     if empty:
         raise ValueError(f"the coarsest mesh ({counts[0]} cells) leaves {empty} of {size} ranks without a cell: "

@@ -49,7 +49,7 @@ from convection.model.composition import (
 from convection.config.units import scaling_of
 from convection.io.output_units import output_units
 from convection.config.loader import (
-    config_gdim, dump_config, expression_constants, material_table, particles_enabled, point_function,
+    config_gdim, dump_config, expression_constants, material_table, multigrid_levels, particles_enabled, point_function,
     viscosity_laws,
 )
 from convection.geometry.registry import domain_from_config
@@ -166,8 +166,7 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     manifold = domain.manifold() if hierarchical else None
     straight = manifold is not None
     exact = True
-    scfg = config["stokes"]
-    levels = domain.mesh_levels(scfg["multigrid"]["levels"]) if scfg["solver"] == "multigrid" else 1
+    levels = multigrid_levels(config, domain)
     coarse: list[dolfinx.mesh.Mesh] = []
 
     def make_base(owners: Any) -> dolfinx.mesh.Mesh:
@@ -257,8 +256,11 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], domain)
     meshes = _meshes(config, domain, materials, temperature_bcs, comm, restore)
     mesh = meshes.mesh
+    stokes_settings = settings_from(StokesSettings, config["stokes"])
+    if meshes.coarse:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
+        stokes_settings = dataclasses.replace(stokes_settings, solver="multigrid")
     stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, coarse_meshes=meshes.coarse,
-                          **vars(settings_from(StokesSettings, config["stokes"])))
+                          **vars(stokes_settings))
     energy = settings_from(EnergySettings, config["energy"])
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,
                                   stabilisation=energy.stabilisation, velocity_extrapolation=False)

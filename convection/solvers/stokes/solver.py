@@ -32,6 +32,9 @@ from the registry below, rebuilds the forms when the fields change and normalise
 Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
     ``"auto"`` (the default): ``"iterative"`` in 3D (``"iterative_gamg"`` for a shell with free
         slip on both surfaces: its rigid rotations, see :func:`resolve_solver`), ``"direct"`` in 2D.
+        A run of a config goes further: on a fixed 3D box whose cells halve at least twice it makes
+        the coarser boxes and uses ``"multigrid"``
+        (:func:`convection.config.loader.multigrid_levels`).
     ``"direct"``: MUMPS LU of the monolithic (block) system; the factorisation is reused while the
         viscosity is constant.
     ``"iterative"``: FGMRES, right-preconditioned by the upper block-triangular Schur
@@ -164,7 +167,8 @@ STOKES_SOLVER_NAMES: tuple[str, ...] = (AUTO, *STOKES_SOLVERS)
 """Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
 
 STOKES_SOLVER_CHOICES: dict[str, str] = {
-    AUTO: "iterative in 3D (iterative_gamg for a shell with free slip on both surfaces), direct in 2D",
+    AUTO: "multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D (iterative_gamg "
+          "for a shell with free slip on both surfaces), direct in 2D",
     **{name: solver.description for name, solver in STOKES_SOLVERS.items()},
 }
 """One line on each of :data:`STOKES_SOLVER_NAMES` (the config reference lists them)."""
@@ -177,8 +181,9 @@ class StokesSettings:
 
     degree: int = param(2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)")
     solver: str = param(AUTO, choices=Names(STOKES_SOLVER_CHOICES),
-                        help="auto: iterative (FGMRES + block preconditioner, AMG) in 3D (iterative_gamg for a shell "
-                             "free slip on both surfaces), direct (MUMPS) in 2D")
+                        help="auto: multigrid (FGMRES + block preconditioner, geometric multigrid) on a fixed 3D box "
+                             "whose cells halve twice, else iterative (AMG) in 3D (iterative_gamg for a shell free slip "
+                             "on both surfaces), direct (MUMPS) in 2D")
     petsc_options: Mapping[str, Any] = param({}, check=check_petsc_options, max_items=MAX_ENTRIES,
                                              help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); "
                                                   "viewers may only print")

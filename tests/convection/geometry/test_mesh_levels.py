@@ -98,3 +98,20 @@ def test_a_coarsest_mesh_without_cells_for_every_rank_is_refused(world):
         return
     with pytest.raises(RuntimeError, match="leaves 1 of 2 ranks without a cell|leaves 2 of 3 ranks without a cell"):
         domain.create_mesh_levels(world, 3)
+
+
+def test_a_saved_partition_that_does_not_nest_is_made_to(world):
+    """Collective: a partition of the fine cells alone (here round robin, the worst case; e.g. a
+    checkpoint written by a run without multigrid) splits coarse cells between ranks; the levels
+    made from it keep every fine cell on its coarse parent's rank (the fine cells follow their coarse
+    parents, or, on 3 ranks here, where that leaves a rank without a coarsest cell, a fresh
+    partition) and every rank has cells."""
+    domain = BoxDomain.from_spec(_BOXES["3d_tet"])
+    cells = 6 * 4 * 4 * 8
+    owners = (np.arange(cells) % world.size).astype(np.int32) if world.rank == 0 else None
+    meshes = domain.create_mesh_levels(world, 3, owners=owners)
+    spaces = [function_space(m, "Lagrange", 2, shape=(3,)) for m in meshes]
+    for coarse, fine in zip(spaces, spaces[1:]):
+        prolongation(coarse, fine).destroy()
+    for mesh in meshes:
+        assert mesh.topology.index_map(3).size_local > 0

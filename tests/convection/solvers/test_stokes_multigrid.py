@@ -139,7 +139,8 @@ def test_multigrid_needs_the_coarse_meshes():
 
 
 @pytest.mark.parametrize("sets, message", [
-    (["stokes.multigrid.levels=3"], "'stokes.multigrid.levels': only with stokes.solver: multigrid"),
+    (["stokes.solver=iterative", "stokes.multigrid.levels=3"], "'stokes.multigrid.levels': only with stokes.solver: multigrid"),
+    (["stokes.multigrid.levels=4"], "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
     (["stokes.solver=multigrid", "mesh.cells=[25,25,25]"], "'stokes.solver': multigrid needs coarser meshes"),
     (["stokes.solver=multigrid", "stokes.multigrid.levels=4", "mesh.cells=[20,20,20]"],
      "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
@@ -153,3 +154,33 @@ def test_config_rules(sets, message):
 def test_config_rules_shell():
     with pytest.raises(ConfigError, match="not mesh.geometry spherical_shell"):
         load_config(ROOT / "configs" / "shell_plates.yaml", ["stokes.solver=multigrid"])
+
+
+@pytest.mark.parametrize("sets, levels", [
+    ([], 3),  # 20^3 -> 10^3 -> 5^3
+    (["mesh.cells=[16,16,16]"], 4),
+    (["mesh.cells=[12,12,12]"], 3),
+    (["mesh.cells=[10,10,10]"], 1),  # 10 -> 5: two levels, too few for auto
+    (["mesh.cells=[9,9,9]"], 1),
+    (["stokes.solver=iterative"], 1),
+    (["stokes.solver=multigrid", "mesh.cells=[10,10,10]"], 2),
+    (["adaptivity.enabled=true", "adaptivity.max_level=1"], 1),
+])
+def test_auto_picks_the_multigrid_on_fixed_boxes_that_nest(sets, levels):
+    """``auto`` on the 3D thick layer: the multigrid where the box nests in three levels or more and
+    the mesh is fixed."""
+    from convection.config.loader import multigrid_levels
+
+    assert multigrid_levels(load_config(ROOT / "configs" / "thick_layer_3d.yaml", sets)) == levels
+
+
+def test_a_run_of_auto_uses_the_multigrid(tmp_path):
+    from convection.app.factory import build_model
+
+    config = load_config(ROOT / "configs" / "thick_layer_3d.yaml",
+                         ["mesh.cells=[8,8,8]", "particles.generator.particles_per_cell=1",
+                          f"output.directory={tmp_path}"])
+    model = build_model(config, comm=MPI.COMM_SELF)
+    assert model.stokes.solver == "multigrid"
+    assert model.stokes.linear_system.multigrid.levels == 3
+    model.stokes.destroy()

@@ -40,7 +40,7 @@ import dolfinx
 from petsc4py import PETSc
 
 from convection.schema import param
-from fembase.dolfinx_compat import function_space
+from fembase.dolfinx_compat import element_degree, function_space
 from fembase.multigrid import prolongation
 
 __all__ = ["GEOMETRIC_MULTIGRID", "MultigridSettings", "VelocityMultigrid"]
@@ -88,8 +88,7 @@ class VelocityMultigrid:
     def __init__(self, V: dolfinx.fem.FunctionSpace, coarse_meshes: Sequence[dolfinx.mesh.Mesh], /) -> None:
         if not coarse_meshes:
             raise ValueError("geometric multigrid needs at least one coarser mesh")
-        element = V.ufl_element()
-        degree = element.degree()
+        degree = element_degree(V)
         shape = (V.mesh.geometry.dim,)
         spaces = [function_space(mesh, "Lagrange", degree, shape=shape) for mesh in coarse_meshes] + [V]
         self.interpolations: list[PETSc.Mat] = [prolongation(coarse, fine) for coarse, fine in zip(spaces, spaces[1:])]

@@ -26,7 +26,7 @@ import dolfinx.fem
 from fembase.dolfinx_compat import cell_dofmap
 from fembase.geometry import locate
 
-__all__ = ["prolongation"]
+__all__ = ["apply", "prolongation"]
 
 _DROP = 1e-14
 """Basis values smaller than this are left out of ``P`` (exact zeros up to rounding)."""
@@ -83,3 +83,18 @@ def prolongation(coarse: dolfinx.fem.FunctionSpace, fine: dolfinx.fem.FunctionSp
                               csr=(indptr, indices, data), comm=comm)
     P.assemble()
     return P
+
+
+def apply(P: PETSc.Mat, coarse: npt.ArrayLike, /) -> npt.NDArray[np.float64]:
+    """``P`` times a coarse coefficient vector: this rank's owned coarse values in, its owned fine
+    values out (blocked: ``dof * bs + component``). Collective. The PETSc vectors are destroyed at
+    once, on every rank together: left to the garbage collector, which runs at different times on
+    different ranks, a parallel vector's destruction can deadlock a later collective call."""
+    x, y = P.createVecRight(), P.createVecLeft()
+    try:
+        x.array[:] = np.asarray(coarse, dtype=np.float64)[: x.getLocalSize()]
+        P.mult(x, y)
+        return y.array.copy()
+    finally:
+        x.destroy()
+        y.destroy()

@@ -166,7 +166,7 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     manifold = domain.manifold() if hierarchical else None
     straight = manifold is not None
     exact = True
-    levels = multigrid_levels(config, domain)
+    levels = multigrid_levels(config, domain, ranks=comm.size)
     coarse: list[dolfinx.mesh.Mesh] = []
 
     def make_base(owners: Any) -> dolfinx.mesh.Mesh:

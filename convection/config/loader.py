@@ -252,13 +252,14 @@ AUTO_MULTIGRID_LEVELS = 3
 (16^3 and 20^3 cubes do: 16 -> 8 -> 4 -> 2, 20 -> 10 -> 5)."""
 
 
-def multigrid_levels(config: dict[str, Any], domain: Domain | None = None) -> int:
+def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ranks: int = 1) -> int:
     """The number of nested meshes the Stokes solver of a checked config uses, the run's mesh
     included; 1: no multigrid.
 
     ``stokes.solver: multigrid`` uses the domain's levels for ``stokes.multigrid.levels``.
     ``auto`` picks the multigrid on a fixed 3D mesh that nests in at least
-    :data:`AUTO_MULTIGRID_LEVELS` levels (a box whose cells halve): on the 3D thick layer at 16^3
+    :data:`AUTO_MULTIGRID_LEVELS` levels (a box whose cells halve) with a coarsest box of at least
+    ``ranks`` cells (every rank needs one): on the 3D thick layer at 16^3
     it ran 1.45 times as fast as the AMG solver and 1.47 times as fast as ASPECT's GMG
     (benchmarks/scaling/aspect_thick_layer.md); elsewhere ``auto`` is what
     :func:`convection.solvers.stokes.solver.resolve_solver` says."""
@@ -270,7 +271,8 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None) -> in
     fixed = not config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "none"
     if stokes["solver"] == AUTO and fixed and config_gdim(config) == 3:
         levels = domain.mesh_levels(wanted)
-        return levels if levels >= AUTO_MULTIGRID_LEVELS else 1
+        coarsest = domain.estimated_cells() / 8 ** (levels - 1)
+        return levels if levels >= AUTO_MULTIGRID_LEVELS and coarsest >= ranks else 1
     return 1
 
 

@@ -174,6 +174,15 @@ def test_auto_picks_the_multigrid_on_fixed_boxes_that_nest(sets, levels):
     assert multigrid_levels(load_config(ROOT / "configs" / "thick_layer_3d.yaml", sets)) == levels
 
 
+def test_auto_leaves_no_rank_without_a_coarsest_cell():
+    """16^3 nests down to 2^3 cubes (48 tetrahedra): auto keeps the AMG solver on more ranks."""
+    from convection.config.loader import multigrid_levels
+
+    config = load_config(ROOT / "configs" / "thick_layer_3d.yaml", ["mesh.cells=[16,16,16]"])
+    assert multigrid_levels(config, ranks=48) == 4
+    assert multigrid_levels(config, ranks=49) == 1
+
+
 def test_a_run_of_auto_uses_the_multigrid(tmp_path):
     from convection.app.factory import build_model
 

@@ -579,7 +579,8 @@ class _RunLoop:
                              f"vrms={progress.velocity_text(summary.vrms)}, {nusselt}{summary.cells} cells, "
                              f"{summary.wall_time:.1f} s")
             times = "time" if summary.stokes_assemblies == 1 else "times"
-            self.out.progress.message(f"Stokes operator assembled {summary.stokes_assemblies} {times}; time per phase "
+            self.out.progress.message(f"Stokes solver {model.stokes.description}, operator assembled "
+                                      f"{summary.stokes_assemblies} {times}; time per phase "
                                       "(max over ranks):\n" + model.timers.table(timings))
         return summary
 

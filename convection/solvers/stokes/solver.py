@@ -395,6 +395,13 @@ class StokesSolver(PetscSolver):
         self._nonlinear = (NonlinearStokes(self.discretisation, self.linear_system, self.nonlinear_settings,
                                            normalise=self._normalise_pressure) if self.is_nonlinear else None)
 
+    @property
+    def description(self) -> str:
+        """The linear solver in use, for the run's closing lines: ``"multigrid (3 levels)"``,
+        ``"iterative"``, ...; ``"auto"`` resolved."""
+        multigrid = self.linear_system.multigrid if self.linear_system is not None else None
+        return self.solver if multigrid is None else f"{self.solver} ({multigrid.levels} levels)"
+
     def settings(self) -> dict[str, Any]:
         return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,

@@ -192,4 +192,5 @@ def test_a_run_of_auto_uses_the_multigrid(tmp_path):
     model = build_model(config, comm=MPI.COMM_SELF)
     assert model.stokes.solver == "multigrid"
     assert model.stokes.linear_system.multigrid.levels == 3
+    assert model.stokes.description == "multigrid (3 levels)"  # the run's closing line names it
     model.stokes.destroy()

@@ -52,8 +52,9 @@ def _peak_bytes(comm: MPI.Comm) -> float:
     return comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0, op=MPI.MAX)
 
 
-def measure(comm: MPI.Comm, dim: int, n: int, contrast: float, solver: str) -> dict[str, float]:
-    """One cold solve; seconds are the slowest rank's."""
+def measure(comm: MPI.Comm, dim: int, n: int, contrast: float, solver: str,
+            petsc_options: dict[str, str] | None = None) -> dict[str, float]:
+    """One cold solve; seconds are the slowest rank's. ``petsc_options`` go on top of the solver's."""
     before = _peak_bytes(comm)
     domain = BoxDomain.from_spec(BoxSpec((n,) * dim, (0.0,) * dim, (1.0,) * dim))
     levels = domain.mesh_levels() if solver == "multigrid" else 1
@@ -68,7 +69,7 @@ def measure(comm: MPI.Comm, dim: int, n: int, contrast: float, solver: str) -> d
     sides = SIDES_3D if dim == 3 else SIDES_2D
     stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=1e6, viscosity=law),
                           bcs={side: VelocityBC("free_slip") for side in sides}, solver=solver,
-                          coarse_meshes=meshes[:-1])
+                          coarse_meshes=meshes[:-1], petsc_options=petsc_options or None)
     comm.barrier()
     result = stokes.solve(T)
     unknowns = (stokes.V.dofmap.index_map.size_global * stokes.V.dofmap.index_map_bs
@@ -91,14 +92,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--contrast", type=float, nargs="+", default=[1.0, 1e4])
     parser.add_argument("--solvers", nargs="+", default=["multigrid", "iterative"])
     parser.add_argument("--header", action="store_true", help="print the table header first")
+    parser.add_argument("--petsc", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="PETSc options on top of the solver's (e.g. fieldsplit_u_mg_levels_ksp_max_it=3)")
     args = parser.parse_args(argv)
+    petsc_options = dict(item.split("=", 1) for item in args.petsc)
     comm = MPI.COMM_WORLD
     if comm.rank == 0 and args.header:
         print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores, {comm.size} ranks\n\n{HEADER}", flush=True)
     for n in args.sizes:
         for contrast in args.contrast:
             for solver in args.solvers:
-                r = measure(comm, args.dim, n, contrast, solver)
+                r = measure(comm, args.dim, n, contrast, solver, petsc_options)
                 if comm.rank == 0:
                     print(f"| {args.dim} | {n} | {r['unknowns']} | {contrast:g} | {solver} | {r['levels']} | "
                           f"{r['iterations']} | {r['solve']:.2f} | {r['assembly']:.2f} | {r['memory']:.0f} |", flush=True)

@@ -114,7 +114,6 @@ class StokesLinearSystem:
                  multigrid: VelocityMultigrid | None = None) -> None:
         self.u, self.p, self.ksp = u, p, ksp
         self.multigrid = multigrid
-        self._multigrid_configured = False
         self.V, self.Q = u.function_space, p.function_space
         self.iterative = iterative
         self.pressure_null_space = pressure_null_space
@@ -295,6 +294,24 @@ class StokesLinearSystem:
             self._P.assemble()
 
     # ------------------------------------------------------------------ solve
+    def prepare_preconditioner(self) -> None:
+        """Before a solve with the current ``P`` (linear, or a Newton step's): give the geometric
+        multigrid its prolongations, on the velocity block fieldsplit holds now. Collective;
+        nothing without a multigrid.
+
+        Fieldsplit extracts the velocity block when the block preconditioner is set up, and PCMG
+        sets itself up at its first use, after it has the prolongations. Fieldsplit may make the
+        block anew (another matrix: seen at the first Newton step of a viscoplastic run); PCMG
+        would keep smoothing, and forming residuals, with the old one, so the multigrid is then
+        made again on the new block (:meth:`VelocityMultigrid.attach`). Setting the outer PC up
+        here is a no-op when ``P`` did not change and otherwise work the solve would do anyway.
+        """
+        if self.multigrid is None:
+            return
+        pc = self.ksp.getPC()
+        pc.setUp()
+        self.multigrid.attach(pc.getFieldSplitSubKSP()[0])
+
     def solve(self) -> float:
         """Solve ``K x = b`` from ``x = (u, p)`` and write ``x`` back to ``u``, ``p``. Collective.
 
@@ -306,13 +323,7 @@ class StokesLinearSystem:
         """
         t1 = time.perf_counter()
         pack_solution(self.u, self.p, self._x)
-        if self.multigrid is not None and not self._multigrid_configured:
-            # Fieldsplit makes the velocity block's KSP when it is set up (the matrices assembled);
-            # PCMG sets itself up at its first use, after it has the prolongations.
-            pc = self.ksp.getPC()
-            pc.setUp()
-            self.multigrid.configure(pc.getFieldSplitSubKSP()[0].getPC())
-            self._multigrid_configured = True
+        self.prepare_preconditioner()
         self.ksp.setUp()  # a no-op unless the operator changed
         setup_seconds = time.perf_counter() - t1
         self.ksp.solve(self._b, self._x)

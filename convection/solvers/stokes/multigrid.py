@@ -93,6 +93,7 @@ class VelocityMultigrid:
         spaces = [function_space(mesh, "Lagrange", degree, shape=shape) for mesh in coarse_meshes] + [V]
         self.interpolations: list[PETSc.Mat] = [prolongation(coarse, fine) for coarse, fine in zip(spaces, spaces[1:])]
         self.unknowns = [space.dofmap.index_map.size_global * space.dofmap.index_map_bs for space in spaces]
+        self._block: int | None = None  # the handle of the velocity block the PCMG is set up for
 
     @property
     def levels(self) -> int:
@@ -107,6 +108,30 @@ class VelocityMultigrid:
                              f"not mg with {self.levels}: stokes.petsc_options changed fieldsplit_u_pc_type")
         for level, P in enumerate(self.interpolations, start=1):
             pc.setMGInterpolation(level, P)
+
+    def attach(self, ksp: PETSc.KSP, /) -> None:
+        """Keep the velocity block's KSP (from fieldsplit, after its PC was set up) on a PCMG with
+        these prolongations over its current matrix. Collective.
+
+        The first call hands the prolongations to the PC fieldsplit made (:meth:`configure`). PCMG
+        keeps the finest operator (and the matrix of its residuals) it first set up with unless
+        the KSP's is that same matrix; when fieldsplit has made the velocity block anew, the PC is
+        replaced by a new one from the same options, so that nothing of the old block is used.
+        """
+        A, P = ksp.getOperators()
+        if self._block == P.handle:
+            return
+        if self._block is not None:
+            old = ksp.getPC()
+            pc = PETSc.PC().create(old.getComm())
+            pc.setOptionsPrefix(old.getOptionsPrefix())
+            ksp.setPC(pc)  # the KSP holds it (and drops the old PC)
+            pc.destroy()
+            ksp.setOperators(A, P)
+            pc = ksp.getPC()
+            pc.setFromOptions()
+        self.configure(ksp.getPC())
+        self._block = P.handle
 
     def destroy(self) -> None:
         """Free the prolongation matrices (collective)."""

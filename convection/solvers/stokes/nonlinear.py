@@ -234,6 +234,9 @@ class NonlinearStokes:
         def jacobian(snes: PETSc.SNES, x: PETSc.Vec, J: PETSc.Mat, P: PETSc.Mat) -> None:
             system.unpack(x)
             system.assemble_jacobian(J_forms, forms.a_pc)
+            # SNES sets these operators next; the multigrid must be on the velocity block of this P.
+            system.ksp.setOperators(J, P)
+            system.prepare_preconditioner()
 
         def monitor(snes: PETSc.SNES, its: int, norm: float) -> None:
             if its > 0:

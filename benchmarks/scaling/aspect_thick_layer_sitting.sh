@@ -31,14 +31,18 @@ sed -i -e "s|set Output directory .*|set Output directory = $work/out-gmg|" "$wo
 
 load=$(cut -d' ' -f1-3 /proc/loadavg)
 echo "load average before the sitting: $load" | tee "$logs/sitting.txt"
+# RUNS="aspect_gmg multigrid" limits the sitting to some of the four. Each run's peak resident size
+# (the largest rank's, from GNU time on mpirun) goes to <run>_<round>.rss.
+runs="${RUNS:-aspect_amg aspect_gmg iterative multigrid}"
 for round in $(seq 1 "$repeat"); do
-  for run in aspect_amg aspect_gmg iterative multigrid; do
+  for run in $runs; do
     log="$logs/${run}_$round.log"
+    rss=(/usr/bin/time -f "maxrss_kb %M" -o "$logs/${run}_$round.rss")
     start=$(date +%s.%N)
     case $run in
-      aspect_amg) mpirun -n 2 "$aspect" "$work/amg.prm" > "$log" 2>&1 ;;
-      aspect_gmg) mpirun -n 2 "$aspect" "$work/gmg.prm" > "$log" 2>&1 ;;
-      *) mpirun -n 2 env PYTHONPATH="$here" "$python" -m convection run "$here/configs/thick_layer_3d.yaml" \
+      aspect_amg) "${rss[@]}" mpirun -n 2 "$aspect" "$work/amg.prm" > "$log" 2>&1 ;;
+      aspect_gmg) "${rss[@]}" mpirun -n 2 "$aspect" "$work/gmg.prm" > "$log" 2>&1 ;;
+      *) "${rss[@]}" mpirun -n 2 env PYTHONPATH="$here" "$python" -m convection run "$here/configs/thick_layer_3d.yaml" \
            --set "mesh.cells=[16,16,16]" --set time.end=0.002 --set stokes.solver=$run \
            --output "$work/out-$run" > "$log" 2>&1
          cp "$work/out-$run/summary.json" "$logs/${run}_$round.summary.json"

@@ -47,6 +47,9 @@ class Gravity(Protocol):
     def up_at(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
         """Unit up vectors at points ``x`` (shape=(n, gdim)), shape=(n, gdim)."""
 
+    def up_axis(self, gdim: int, /) -> int | None:
+        """The coordinate axis that ``e_up`` is everywhere, or None (it turns)."""
+
 
 @dataclass(frozen=True)
 class VerticalGravity:
@@ -72,6 +75,9 @@ class VerticalGravity:
         out[:, -1] = 1.0
         return out
 
+    def up_axis(self, gdim: int, /) -> int | None:
+        return gdim - 1
+
 
 @dataclass(frozen=True)
 class RadialGravity:
@@ -95,3 +101,6 @@ class RadialGravity:
     def up_at(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
         x = np.asarray(x, dtype=np.float64)
         return x / np.linalg.norm(x, axis=1)[:, None]
+
+    def up_axis(self, gdim: int, /) -> int | None:
+        return None

@@ -143,7 +143,22 @@ class SemiImplicitBuoyancy:
         rho = self.approximation.density(T, C_continuous)
         e_up = self.approximation.up(ufl.SpatialCoordinate(self.mesh))
         stable = ufl.max_value(ufl.dot(ufl.grad(rho), e_up), 0.0)
-        return self.theta * self.dt * stable * ufl.dot(u, e_up) * ufl.dot(v, e_up) * dx
+        self._coefficient = self.theta * self.dt * stable
+        return self._coefficient * ufl.dot(u, e_up) * ufl.dot(v, e_up) * dx
+
+    @property
+    def axis(self) -> int | None:
+        """The coordinate axis ``k`` with ``e_up = e_k`` everywhere (boxes: the last), or None
+        (shells: ``e_up`` turns)."""
+        return self.approximation.gravity.up_axis(self.mesh.geometry.dim)
+
+    def component_form(self, u: Any, v: Any, dx: Any) -> Any:
+        """The term on the component ``k = axis`` alone: ``theta dt max(d rho / d up, 0) u_k v_k``
+        for scalar trial and test functions ``u``, ``v`` (the coefficient of the last :meth:`form`,
+        so the two forms' element matrices agree entry by entry)."""
+        if self.axis is None or getattr(self, "_coefficient", None) is None:
+            raise ValueError("the semi-implicit term has a single component only on a box, after form()")
+        return self._coefficient * u * v * dx
 
     def update(self, dt: float) -> None:
         """Set the step and refresh the projected fractions. Collective."""

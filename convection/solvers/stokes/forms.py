@@ -56,6 +56,10 @@ class StokesForms(NamedTuple):
             a semi-implicit buoyancy.
         a_pc: the preconditioning matrix ``[[A, 0], [0, -M_p / eta]]``, or None.
         a_si: the semi-implicit buoyancy term (a velocity-velocity form), or None.
+        a_si_component: where the term has one velocity component only (a box: ``e_up = e_k``),
+            ``(k, W, W_to_V, form)``: the component's space ``V.sub(k).collapse()``, its map into
+            ``V``'s unrolled dofs and the term as a scalar form on it
+            (:class:`convection.solvers.stokes.axis_block.AxisBlock`); None otherwise.
     """
 
     a: Any
@@ -63,6 +67,7 @@ class StokesForms(NamedTuple):
     a_lift: Any
     a_pc: Any = None
     a_si: Any = None
+    a_si_component: Any = None
 
 
 class StokesDiscretisation:
@@ -105,6 +110,15 @@ class StokesDiscretisation:
         # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
         metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
         return ufl.dx(domain=self.mesh, metadata=metadata), metadata
+
+    def component_space(self, axis: int, /) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
+        """``V.sub(axis).collapse()`` (made once): the scalar space and its map into ``V``'s
+        unrolled local dofs, shape=(owned + ghosts,). Collective."""
+        cache = self.__dict__.setdefault("_component_spaces", {})
+        if axis not in cache:
+            W, W_to_V = self.V.sub(axis).collapse()
+            cache[axis] = (W, np.asarray(W_to_V, dtype=np.int64))
+        return cache[axis]
 
     def nonlinear_forms(self, T: Any, C: Any, u: dolfinx.fem.Function, p: dolfinx.fem.Function, /, *,
                         fields: dict[str, Any] | None, pressure_block: bool) -> tuple[Any, Any]:
@@ -171,11 +185,17 @@ class StokesDiscretisation:
         a_form = dolfinx.fem.form(a)
         a_lift = a_form
         a_si = None
+        a_si_component = None
         if semi_implicit is not None:
             # Assembled on its own into a copy of the fixed operator every solve; the lifting of
             # the boundary values uses the whole operator.
             term = semi_implicit.form(T, C, u, v, dx)
             a_si = dolfinx.fem.form(term)
+            axis = semi_implicit.axis
+            if axis is not None:
+                W, W_to_V = self.component_space(axis)
+                scalar = semi_implicit.component_form(ufl.TrialFunction(W), ufl.TestFunction(W), dx)
+                a_si_component = (axis, W, W_to_V, dolfinx.fem.form(scalar))
             a_lift = dolfinx.fem.form([[a[0][0] + term, a[0][1]], [a[1][0], a[1][1]]])
         # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
         zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
@@ -188,4 +208,4 @@ class StokesDiscretisation:
             a_pc = dolfinx.fem.form(
                 [[a[0][0], None], [None, -ufl.inner(p, q) / eta * dx]]
             )
-        return StokesForms(a_form, L, a_lift, a_pc, a_si)
+        return StokesForms(a_form, L, a_lift, a_pc, a_si, a_si_component)

@@ -30,16 +30,13 @@ row() {  # row DIM N CONTRAST SOLVER
   mpirun -n 2 "$python" "$script" --dim "$1" --sizes "$2" --contrast "$3" --solvers "$4" 2>>"$logs/stderr.log" \
     | grep '^| ' | tee -a "$rows"
 }
-for n in $sizes_3d; do
-  for contrast in 1 1e4 1e6; do
-    row 3 "$n" "$contrast" multigrid
-    [ "$n" -le "$amg_max_3d" ] && row 3 "$n" "$contrast" iterative
-  done
-done
-for n in $sizes_2d; do
-  for contrast in 1 1e4 1e6; do
-    row 2 "$n" "$contrast" multigrid
-    [ "$n" -le "$amg_max_2d" ] && row 2 "$n" "$contrast" iterative
+for dim in 3 2; do
+  if [ "$dim" = 3 ]; then sizes="$sizes_3d" amg_max="$amg_max_3d"; else sizes="$sizes_2d" amg_max="$amg_max_2d"; fi
+  for n in $sizes; do
+    for contrast in 1 1e4 1e6; do
+      row "$dim" "$n" "$contrast" multigrid
+      [ "$n" -le "$amg_max" ] && row "$dim" "$n" "$contrast" iterative
+    done
   done
 done
 load_after=$(cut -d' ' -f1-3 /proc/loadavg)

@@ -1,5 +1,6 @@
-"""A velocity-velocity term that couples one velocity component only, added to the Stokes matrix
-through its scalar form.
+"""The Stokes operator with the semi-implicit buoyancy's term (:class:`SemiImplicitOperator`), and a
+velocity-velocity term that couples one velocity component only, added to the Stokes matrix
+through its scalar form (:class:`AxisBlock`).
 
 The semi-implicit buoyancy (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`) adds
 ``c (u . e_up)(v . e_up)`` to the velocity block every solve. On a box ``e_up = e_k`` (the last
@@ -33,9 +34,11 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fembase.dolfinx_compat import assemble_matrix_into
+import dolfinx.cpp as _cpp
 
-__all__ = ["AxisBlock"]
+from fembase.dolfinx_compat import assemble_block_matrix, assemble_matrix_into
+
+__all__ = ["AxisBlock", "SemiImplicitOperator"]
 
 
 class AxisBlock:
@@ -112,6 +115,81 @@ class AxisBlock:
 
     def destroy(self) -> None:
         self.M.destroy()
+
+
+class SemiImplicitOperator:
+    """The Stokes operator with the semi-implicit buoyancy's term, ``A = A0 + term``
+    (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`), kept up to date each solve.
+
+    Args:
+        A: The operator to hold ``A0 + term`` (:func:`fembase.dolfinx_compat.create_block_matrix`).
+        A0: The fixed operator (assembled by the caller whenever its forms or viscosity change).
+        V, Q: The velocity and pressure spaces.
+        velocity_bcs: The strong velocity conditions (skipped rows and columns of the term).
+        bcs: All strong conditions of ``A`` (for its first assembly: its nonzero pattern).
+
+    On a box the term has the vertical component only and goes through its scalar form
+    (:class:`AxisBlock`); otherwise its vector form is added to a copy of ``A0``, cell by cell.
+    """
+
+    def __init__(self, A: PETSc.Mat, A0: PETSc.Mat, V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace,
+                 velocity_bcs: list[Any], bcs: list[Any], /) -> None:
+        self.A, self.A0, self.V, self.Q = A, A0, V, Q
+        self._velocity_bcs, self._bcs = list(velocity_bcs), list(bcs)
+        self._rows: PETSc.IS | None = None
+        self.block: AxisBlock | None = None
+        self._fixed_taken = False  # whether the block holds A0's current entries
+
+    def update(self, forms: Any, /, *, refresh: bool) -> None:
+        """``A := A0 + forms.a_si`` (``refresh``: ``A0`` changed since the last call); finalises
+        ``A``. Collective."""
+        A, A0 = self.A, self.A0
+        if not A.isAssembled():  # once: A gets A0's nonzero pattern
+            assemble_block_matrix(A, forms.a, bcs=self._bcs)
+            A.assemble()
+        if forms.a_si_component is not None:
+            # One velocity component (a box): the scalar form's block replaces A's (k, k) entries;
+            # A's other entries stay A0's (copied when A0 changed).
+            block = self._component_block(forms.a_si_component)
+            if refresh or not self._fixed_taken:
+                A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+                block.take_fixed(A0)
+                self._fixed_taken = True
+            block.add(A, forms.a_si_component[3])
+            return
+        A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        # Into A's (0, 0) block, skipping the Dirichlet rows and columns (their unit diagonal is in A).
+        rows = self._velocity_rows()
+        sub = A.getLocalSubMatrix(rows, rows)
+        assemble_matrix_into(sub, forms.a_si, self._bcs)
+        A.restoreLocalSubMatrix(rows, rows, sub)
+        A.assemble()
+
+    def _velocity_rows(self) -> PETSc.IS:
+        """The velocity dofs' rows in A's local (unrolled) numbering, owned then ghosts."""
+        if self._rows is None:
+            spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
+            self._rows = _cpp.la.petsc.create_index_sets(spaces)[0]
+        return self._rows
+
+    def _component_block(self, component: tuple[int, Any, np.ndarray, Any]) -> AxisBlock:
+        axis, W, W_to_V, form = component
+        block = self.block
+        if block is None or block.axis != axis or block.W is not W:
+            if block is not None:
+                block.destroy()
+            block = AxisBlock(self.A, self.V, self._velocity_rows().getIndices(), axis, W, W_to_V, form,
+                              self._velocity_bcs)
+            self.block = block
+            self._fixed_taken = False
+        return block
+
+    def destroy(self) -> None:
+        """Free the component block and the index set (collective)."""
+        for obj in (self.block, self._rows):
+            if obj is not None:
+                obj.destroy()
+        self.block, self._rows = None, None
 
 
 def _component_conditions(V: dolfinx.fem.FunctionSpace, bcs: list[Any], axis: int,

@@ -28,7 +28,6 @@ from __future__ import annotations
 import time
 
 import dolfinx
-import dolfinx.cpp as _cpp
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -36,9 +35,9 @@ from convection.geometry.domain import Domain
 from convection.solvers.stokes.nullspace import constant_pressure_null_space, rigid_body_modes
 from convection.solvers.petsc_options import destroy_petsc_objects
 from convection.solvers.stokes.forms import StokesForms
-from convection.solvers.stokes.axis_block import AxisBlock
+from convection.solvers.stokes.axis_block import SemiImplicitOperator
 from convection.solvers.stokes.multigrid import VelocityMultigrid
-from fembase.dolfinx_compat import (DirichletBC, assemble_block_matrix, assemble_block_vector, assemble_matrix_into,
+from fembase.dolfinx_compat import (DirichletBC, assemble_block_matrix, assemble_block_vector,
                                     create_block_matrix, create_block_vector)
 
 __all__ = ["StokesLinearSystem", "consistent_continuity", "owned_sizes", "pack_solution", "unpack_solution"]
@@ -107,8 +106,7 @@ class StokesLinearSystem:
             forms then need a pressure-pressure block.
     """
 
-    PETSC_OBJECTS = ("_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "_is_velocity_local",
-                     "multigrid", "_axis_block")
+    PETSC_OBJECTS = ("_A", "_A0", "_P", "_b", "_x", "_null_space", "_near_null_space", "multigrid", "_term")
 
     def __init__(self, u: dolfinx.fem.Function, p: dolfinx.fem.Function, ksp: PETSc.KSP, /, *,
                  dirichlet: list, domain: Domain, iterative: bool, pressure_null_space: bool,
@@ -123,9 +121,7 @@ class StokesLinearSystem:
         self._bcs = self._lifted + ([domain.pressure_pin(self.Q)] if self.pinned else [])
         self._A: PETSc.Mat | None = None
         self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
-        self._is_velocity_local: PETSc.IS | None = None
-        self._axis_block: AxisBlock | None = None  # the semi-implicit term's component block (a box)
-        self._component_fixed = False  # whether it holds A0's current entries
+        self._term: SemiImplicitOperator | None = None  # A = A0 + the semi-implicit buoyancy's term
         self._P: PETSc.Mat | None = None
         self._b: PETSc.Vec | None = None
         self._x: PETSc.Vec | None = None
@@ -208,21 +204,9 @@ class StokesLinearSystem:
             # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
             # preconditioning matrix P (without the term), hence the preconditioner, stays while the
             # viscosity is constant.
-            if not self._A.isAssembled():  # once: A gets A0's nonzero pattern
-                assemble_block_matrix(self._A, forms.a, bcs=self._bcs)
-                self._A.assemble()
-            if forms.a_si_component is not None:
-                # One velocity component (a box): the scalar form's block replaces A's (k, k)
-                # entries; A's other entries stay A0's (copied when A0 changed).
-                block = self._component_block(forms)
-                if refresh or not self._component_fixed:
-                    self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-                    block.take_fixed(self._A0)
-                    self._component_fixed = True
-                block.add(self._A, forms.a_si_component[3])
-            else:
-                self._A0.copy(self._A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-                self._add_velocity_block(forms.a_si)
+            if self._term is None:
+                self._term = SemiImplicitOperator(self._A, self._A0, self.V, self.Q, self._lifted, self._bcs)
+            self._term.update(forms, refresh=refresh)
         if refresh or forms.a_si is not None:
             if self._null_space is not None:
                 self._A.setNullSpace(self._null_space)
@@ -242,35 +226,6 @@ class StokesLinearSystem:
             self._null_space.remove(self._b)
         elif self.pinned:
             consistent_continuity(self._b, self.V, self.Q, self._bcs[-1])
-
-    def _velocity_rows(self) -> PETSc.IS:
-        """The velocity dofs' rows in A's local (unrolled) numbering, owned then ghosts."""
-        if self._is_velocity_local is None:
-            spaces = [(self.V.dofmap.index_map, self.V.dofmap.index_map_bs), (self.Q.dofmap.index_map, 1)]
-            self._is_velocity_local = _cpp.la.petsc.create_index_sets(spaces)[0]
-        return self._is_velocity_local
-
-    def _component_block(self, forms: StokesForms) -> AxisBlock:
-        """The :class:`AxisBlock` of the semi-implicit term's component (made at the first use)."""
-        axis, W, W_to_V, form = forms.a_si_component
-        block = self._axis_block
-        if block is None or block.axis != axis or block.W is not W:
-            if block is not None:
-                block.destroy()
-            block = AxisBlock(self._A, self.V, self._velocity_rows().getIndices(), axis, W, W_to_V, form,
-                              self._lifted)
-            self._axis_block = block
-            self._component_fixed = False
-        return block
-
-    def _add_velocity_block(self, form: dolfinx.fem.FormMetaClass) -> None:
-        """Add a velocity-velocity form to A's (0, 0) block, skipping the Dirichlet rows and columns
-        (their unit diagonal is already in A). Collective."""
-        rows = self._velocity_rows()
-        block = self._A.getLocalSubMatrix(rows, rows)
-        assemble_matrix_into(block, form, self._bcs)
-        self._A.restoreLocalSubMatrix(rows, rows, block)
-        self._A.assemble()
 
     # ------------------------------------------------------------------ nonlinear solves
     @property

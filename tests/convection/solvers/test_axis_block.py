@@ -43,7 +43,7 @@ def _matrices(mesh, bcs, viscosity, solver, component: bool, monkeypatch) -> lis
             stokes.solve(T, C, dt=dt)
             indptr, columns, values = stokes.linear_system.A.getValuesCSR()
             out.append((indptr.copy(), columns.copy(), values.copy()))
-        assert (stokes.linear_system._axis_block is not None) == component
+        assert (stokes.linear_system._term.block is not None) == component
         stokes.destroy()
     return out
 

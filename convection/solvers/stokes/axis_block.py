@@ -99,9 +99,11 @@ class AxisBlock:
             raise RuntimeError("the component block's pattern is not within the Stokes matrix's")
         self._a0_values = values[at].copy()
 
-    def add(self, A: PETSc.Mat, form: Any, /) -> None:
+    def add(self, A: PETSc.Mat, form: Any, /, *also: PETSc.Mat) -> None:
         """``A``'s ``(k, k)`` entries := ``A0``'s plus the scalar ``form`` on ``W``
-        (:meth:`take_fixed` first); finalises ``A``. Collective."""
+        (:meth:`take_fixed` first); finalises ``A``. The matrices ``also`` (the same rows and
+        columns, the same ``(k, k)`` block in their pattern and ``A0``'s values in it, e.g. the
+        preconditioning matrix) get the same entries. Collective."""
         if self._a0_values is None:
             raise RuntimeError("AxisBlock.add before take_fixed")
         M = self.M
@@ -110,8 +112,10 @@ class AxisBlock:
         assemble_matrix_into(M, form, self._bcs)
         M.assemble()
         _, _, values = M.getValuesCSR()
-        A.setValuesIJV(self._indptr, self._columns_a, values, addv=PETSc.InsertMode.INSERT_VALUES, rowmap=self._rows_a)
-        A.assemble()
+        for target in (A, *also):
+            target.setValuesIJV(self._indptr, self._columns_a, values, addv=PETSc.InsertMode.INSERT_VALUES,
+                                rowmap=self._rows_a)
+            target.assemble()
 
     def destroy(self) -> None:
         self.M.destroy()
@@ -140,9 +144,17 @@ class SemiImplicitOperator:
         self.block: AxisBlock | None = None
         self._fixed_taken = False  # whether the block holds A0's current entries
 
-    def update(self, forms: Any, /, *, refresh: bool) -> None:
+    def update(self, forms: Any, /, *, refresh: bool, preconditioner: PETSc.Mat | None = None) -> bool:
         """``A := A0 + forms.a_si`` (``refresh``: ``A0`` changed since the last call); finalises
-        ``A``. Collective."""
+        ``A``. Collective.
+
+        Args:
+            preconditioner: A preconditioning matrix whose velocity block is ``A0``'s (assembled
+                when ``A0`` was): on a box its ``(k, k)`` entries get the term too.
+
+        Returns:
+            Whether ``preconditioner`` got the term (on a box; the vector form is not added to it).
+        """
         A, A0 = self.A, self.A0
         if not A.isAssembled():  # once: A gets A0's nonzero pattern
             assemble_block_matrix(A, forms.a, bcs=self._bcs)
@@ -155,8 +167,9 @@ class SemiImplicitOperator:
                 A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
                 block.take_fixed(A0)
                 self._fixed_taken = True
-            block.add(A, forms.a_si_component[3])
-            return
+            others = () if preconditioner is None else (preconditioner,)
+            block.add(A, forms.a_si_component[3], *others)
+            return preconditioner is not None
         A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         # Into A's (0, 0) block, skipping the Dirichlet rows and columns (their unit diagonal is in A).
         rows = self._velocity_rows()
@@ -164,6 +177,7 @@ class SemiImplicitOperator:
         assemble_matrix_into(sub, forms.a_si, self._bcs)
         A.restoreLocalSubMatrix(rows, rows, sub)
         A.assemble()
+        return False
 
     def _velocity_rows(self) -> PETSc.IS:
         """The velocity dofs' rows in A's local (unrolled) numbering, owned then ghosts."""

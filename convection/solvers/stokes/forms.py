@@ -19,9 +19,11 @@ builds what a linear solver asks for:
 
 - a zero pressure-pressure block (``pressure_block=True``), to hold the diagonal of a pinned
   pressure dof;
-- the preconditioning matrix ``[[A, 0], [0, -M_p / eta]]`` (``preconditioner=True``): the
+- the preconditioning matrix ``[[A, B^T], [B, -M_p / eta]]`` (``preconditioner=True``): the
   viscosity-scaled pressure mass matrix approximates the Schur complement ``S = -B A^-1 B^T``
-  (PETSc's sign);
+  (PETSc's sign); PETSc's fieldsplit takes the factorisation's ``B`` and ``B^T`` from this
+  matrix, so it holds the operator's (without them the block-triangular preconditioner is
+  block diagonal: 20 instead of 13 multigrid iterations at 16^3, 54 instead of 40 with AMG);
 - with a semi-implicit buoyancy (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`), its
   velocity-velocity term on its own (added to ``A`` every solve) and the whole operator
   ``K + term`` that lifts the boundary values into the right-hand side.
@@ -54,7 +56,7 @@ class StokesForms(NamedTuple):
         L: the right-hand side, a block form (momentum, continuity).
         a_lift: the operator that lifts the boundary values into ``L``: ``a``, or ``K + term`` with
             a semi-implicit buoyancy.
-        a_pc: the preconditioning matrix ``[[A, 0], [0, -M_p / eta]]``, or None.
+        a_pc: the preconditioning matrix ``[[A, B^T], [B, -M_p / eta]]``, or None.
         a_si: the semi-implicit buoyancy term (a velocity-velocity form), or None.
         a_si_component: where the term has one velocity component only (a box: ``e_up = e_k``),
             ``(k, W, W_to_V, form)``: the component's space ``V.sub(k).collapse()``, its map into
@@ -206,6 +208,6 @@ class StokesDiscretisation:
         if preconditioner:
             # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
             a_pc = dolfinx.fem.form(
-                [[a[0][0], None], [None, -ufl.inner(p, q) / eta * dx]]
+                [[a[0][0], a[0][1]], [a[1][0], -ufl.inner(p, q) / eta * dx]]
             )
         return StokesForms(a_form, L, a_lift, a_pc, a_si, a_si_component)

@@ -10,9 +10,10 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
   semi-implicit buoyancy the operator is ``K = K_0 + term``: ``K_0`` is kept, copied into ``K``
   every solve and the term (which changes with the fields and ``dt``) added to the velocity
   block, skipping the Dirichlet rows and columns.
-- **Preconditioner** (iterative solvers): the matrix ``P = [[A, 0], [0, -M_p / eta]]`` (assembled
-  with ``K_0``, without the semi-implicit term), PETSc fieldsplit on the velocity and pressure
-  index sets; the velocity set carries the block size gdim (AMG nodes) and the rigid-body modes as
+- **Preconditioner** (iterative solvers): the matrix ``P = [[A, B^T], [B, -M_p / eta]]``
+  (assembled with ``K_0``; the semi-implicit term goes into its velocity block too where
+  ``term_in_preconditioner``, on a box), PETSc fieldsplit on the velocity and pressure index sets
+  (it takes the Schur factorisation's off-diagonal blocks from ``P``); the velocity set carries the block size gdim (AMG nodes) and the rigid-body modes as
   near-null space (:func:`convection.solvers.stokes.nullspace.rigid_body_modes`).
 - **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
   ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
@@ -100,6 +101,8 @@ class StokesLinearSystem:
         pressure_null_space: whether the constant pressure solves the homogeneous problem.
         multigrid: the prolongations of a geometric multigrid on the velocity block (the options
             must make the velocity block's PC ``mg``), handed to it at the first solve; or None.
+        term_in_preconditioner: whether the semi-implicit buoyancy's term goes into ``P`` too, on
+            a box (the preconditioner is then set up every solve; worth it for the multigrid).
 
     Attributes:
         pinned: True when a pressure dof is pinned (direct solver with a pressure null space); the
@@ -110,8 +113,9 @@ class StokesLinearSystem:
 
     def __init__(self, u: dolfinx.fem.Function, p: dolfinx.fem.Function, ksp: PETSc.KSP, /, *,
                  dirichlet: list, domain: Domain, iterative: bool, pressure_null_space: bool,
-                 multigrid: VelocityMultigrid | None = None) -> None:
+                 multigrid: VelocityMultigrid | None = None, term_in_preconditioner: bool = False) -> None:
         self.u, self.p, self.ksp = u, p, ksp
+        self.term_in_preconditioner = term_in_preconditioner
         self.multigrid = multigrid
         self.V, self.Q = u.function_space, p.function_space
         self.iterative = iterative
@@ -123,6 +127,7 @@ class StokesLinearSystem:
         self._A0: PETSc.Mat | None = None  # the operator without the semi-implicit term
         self._term: SemiImplicitOperator | None = None  # A = A0 + the semi-implicit buoyancy's term
         self._P: PETSc.Mat | None = None
+        self._preconditioner_changed = False  # P's values changed since the last solve
         self._b: PETSc.Vec | None = None
         self._x: PETSc.Vec | None = None
         self._null_space: PETSc.NullSpace | None = None
@@ -200,20 +205,20 @@ class StokesLinearSystem:
             fixed.zeroEntries()
             assemble_block_matrix(fixed, forms.a, bcs=self._bcs)
             fixed.assemble()
+            self._assemble_preconditioning(forms.a_pc)
         if forms.a_si is not None:
             # The semi-implicit term changes A with the fields and dt: A = A0 + term. The
-            # preconditioning matrix P (without the term), hence the preconditioner, stays while the
+            # preconditioning matrix P gets it too where term_in_preconditioner (the preconditioner
+            # is then set up every solve); otherwise P, hence the preconditioner, stays while the
             # viscosity is constant.
             if self._term is None:
                 self._term = SemiImplicitOperator(self._A, self._A0, self.V, self.Q, self._lifted, self._bcs)
-            self._term.update(forms, refresh=refresh)
+            with_term = self._P if self.term_in_preconditioner else None
+            if self._term.update(forms, refresh=refresh, preconditioner=with_term):
+                self._preconditioner_changed = True
         if refresh or forms.a_si is not None:
             if self._null_space is not None:
                 self._A.setNullSpace(self._null_space)
-        if refresh and self._P is not None:
-            self._P.zeroEntries()
-            assemble_block_matrix(self._P, forms.a_pc, bcs=self._bcs)
-            self._P.assemble()
 
     def assemble_rhs(self, forms: StokesForms, /) -> None:
         """Assemble ``b`` (boundary values lifted with ``forms.a_lift``), consistent with the
@@ -273,29 +278,30 @@ class StokesLinearSystem:
         self._A.assemble()
         if self._null_space is not None:
             self._A.setNullSpace(self._null_space)
-        if self._P is not None and a_pc is not None:
+        if a_pc is not None:
+            self._assemble_preconditioning(a_pc)
+
+    def _assemble_preconditioning(self, a_pc: list) -> None:
+        if self._P is not None:
             self._P.zeroEntries()
             assemble_block_matrix(self._P, a_pc, bcs=self._bcs)
             self._P.assemble()
+            self._preconditioner_changed = True
 
     # ------------------------------------------------------------------ solve
     def prepare_preconditioner(self) -> None:
         """Before a solve with the current ``P`` (linear, or a Newton step's): give the geometric
-        multigrid its prolongations, on the velocity block fieldsplit holds now. Collective;
-        nothing without a multigrid.
-
-        Fieldsplit extracts the velocity block when the block preconditioner is set up, and PCMG
-        sets itself up at its first use, after it has the prolongations. Fieldsplit may make the
-        block anew (another matrix: seen at the first Newton step of a viscoplastic run); PCMG
-        would keep smoothing, and forming residuals, with the old one, so the multigrid is then
-        made again on the new block (:meth:`VelocityMultigrid.attach`). Setting the outer PC up
-        here is a no-op when ``P`` did not change and otherwise work the solve would do anyway.
-        """
+        multigrid its prolongations, on the velocity block fieldsplit holds now, and tell it
+        whether ``P`` changed (:meth:`VelocityMultigrid.attach`). Collective; nothing without a
+        multigrid. Fieldsplit extracts the block at the outer PC's set-up (a no-op when ``P`` did
+        not change, else work the solve would do), and may make it anew (a Newton step's); PCMG
+        sets itself up at its first use, after it has the prolongations."""
         if self.multigrid is None:
             return
         pc = self.ksp.getPC()
         pc.setUp()
-        self.multigrid.attach(pc.getFieldSplitSubKSP()[0])
+        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed)
+        self._preconditioner_changed = False
 
     def solve(self) -> float:
         """Solve ``K x = b`` from ``x = (u, p)`` and write ``x`` back to ``u``, ``p``. Collective.

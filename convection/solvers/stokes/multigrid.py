@@ -109,7 +109,7 @@ class VelocityMultigrid:
         for level, P in enumerate(self.interpolations, start=1):
             pc.setMGInterpolation(level, P)
 
-    def attach(self, ksp: PETSc.KSP, /) -> None:
+    def attach(self, ksp: PETSc.KSP, /, *, changed: bool = False) -> None:
         """Keep the velocity block's KSP (from fieldsplit, after its PC was set up) on a PCMG with
         these prolongations over its current matrix. Collective.
 
@@ -117,9 +117,21 @@ class VelocityMultigrid:
         keeps the finest operator (and the matrix of its residuals) it first set up with unless
         the KSP's is that same matrix; when fieldsplit has made the velocity block anew, the PC is
         replaced by a new one from the same options, so that nothing of the old block is used.
+
+        ``changed``: the block's values changed since the last solve. PCMG then updates its
+        coarser (Galerkin) operators in place but hands them to their smoothers only the first
+        time, so Chebyshev would keep the eigenvalue bounds of its first set-up on those levels
+        (the finest level's smoother gets its operator every time): the preconditioner would
+        depend on the run's history, and a resumed run would part from one that went on. Their
+        operators are handed again, which makes each estimate its bounds anew at the set-up.
         """
         A, P = ksp.getOperators()
         if self._block == P.handle:
+            if changed:
+                pc = ksp.getPC()
+                for level in range(1, pc.getMGLevels() - 1):
+                    smoother = pc.getMGSmoother(level)
+                    smoother.setOperators(*smoother.getOperators())
             return
         if self._block is not None:
             old = ksp.getPC()

@@ -6,17 +6,24 @@
 # Every run REPEAT times in turn (round robin, so a change of the machine's load hits all alike);
 # the table keeps each one's fastest run.
 #
-# Usage: bash benchmarks/scaling/aspect_thick_layer_sitting.sh ASPECT_BINARY [REPEAT] [OUT_MD]
+# Usage: [CELLS=32] [RUNS="..."] bash benchmarks/scaling/aspect_thick_layer_sitting.sh ASPECT_BINARY [REPEAT] [OUT_MD]
 #   ASPECT_BINARY: built by ../shared/bench/aspect/build.sh
-# Writes the raw logs under benchmarks/scaling/log/aspect_thick_layer/ and the table to OUT_MD
-# (default benchmarks/scaling/aspect_thick_layer.md).
+#   CELLS: cells per side, a power of 2 (default 16; ASPECT's GMG box is one cell refined log2(CELLS) times)
+#   END: the end time (default 0.002)
+# Writes the raw logs under benchmarks/scaling/log/aspect_thick_layer/ (CELLS=32:
+# .../aspect_thick_layer_32/) and the table to OUT_MD (default benchmarks/scaling/aspect_thick_layer.md,
+# CELLS=32: aspect_thick_layer_32.md).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 aspect=$(readlink -f "${1:?path to the aspect binary}")
 repeat="${2:-3}"
-out_md="${3:-$here/benchmarks/scaling/aspect_thick_layer.md}"
+cells="${CELLS:-16}"
+end="${END:-0.002}"
+suffix=$([ "$cells" = 16 ] && echo "" || echo "_$cells")
+refine=$(python3 -c "import math, sys; n = int(sys.argv[1]); k = round(math.log2(n)); assert 2**k == n; print(k)" "$cells")
+out_md="${3:-$here/benchmarks/scaling/aspect_thick_layer$suffix.md}"
 prm="$here/../shared/bench/aspect/thick_layer_3d.prm"
-logs="$here/benchmarks/scaling/log/aspect_thick_layer"
+logs="$here/benchmarks/scaling/log/aspect_thick_layer$suffix"
 work="$(mktemp -d "${TMPDIR:-/tmp}/aspect_sitting.XXXXXX")"
 mkdir -p "$logs"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
@@ -25,12 +32,17 @@ python="$here/.venv/bin/python"
 # The GMG variant: ASPECT's GMG needs a mesh hierarchy (one coarse cell refined 4 times = 16^3).
 sed -e 's/set Stokes solver type = block AMG/set Stokes solver type = block GMG/' \
     -e 's/set \([XYZ]\) repetitions = 16/set \1 repetitions = 1/' \
-    -e 's/set Initial global refinement = 0/set Initial global refinement = 4/' "$prm" > "$work/gmg.prm"
-sed -e "s|set Output directory .*|set Output directory = $work/out-amg|" "$prm" > "$work/amg.prm"
+    -e "s/set Initial global refinement = 0/set Initial global refinement = $refine/" \
+    -e "s/set End time .*/set End time                               = $end/" "$prm" > "$work/gmg.prm"
+sed -e "s|set Output directory .*|set Output directory = $work/out-amg|" \
+    -e "s/set \([XYZ]\) repetitions = 16/set \1 repetitions = $cells/" \
+    -e "s/set End time .*/set End time                               = $end/" "$prm" > "$work/amg.prm"
 sed -i -e "s|set Output directory .*|set Output directory = $work/out-gmg|" "$work/gmg.prm"
 
 load=$(cut -d' ' -f1-3 /proc/loadavg)
 echo "load average before the sitting: $load" | tee "$logs/sitting.txt"
+echo "cells: $cells" | tee -a "$logs/sitting.txt"
+echo "end: $end" | tee -a "$logs/sitting.txt"
 # RUNS="aspect_gmg multigrid" limits the sitting to some of the four. Each run's peak resident size
 # (the largest rank's, from GNU time on mpirun) goes to <run>_<round>.rss.
 runs="${RUNS:-aspect_amg aspect_gmg iterative multigrid}"
@@ -43,7 +55,7 @@ for round in $(seq 1 "$repeat"); do
       aspect_amg) "${rss[@]}" mpirun -n 2 "$aspect" "$work/amg.prm" > "$log" 2>&1 ;;
       aspect_gmg) "${rss[@]}" mpirun -n 2 "$aspect" "$work/gmg.prm" > "$log" 2>&1 ;;
       *) "${rss[@]}" mpirun -n 2 env PYTHONPATH="$here" "$python" -m convection run "$here/configs/thick_layer_3d.yaml" \
-           --set "mesh.cells=[16,16,16]" --set time.end=0.002 --set stokes.solver=$run \
+           --set "mesh.cells=[$cells,$cells,$cells]" --set time.end=$end --set stokes.solver=$run \
            --output "$work/out-$run" > "$log" 2>&1
          cp "$work/out-$run/summary.json" "$logs/${run}_$round.summary.json"
          cp "$work/out-$run/statistics.csv" "$logs/${run}_$round.statistics.csv" ;;

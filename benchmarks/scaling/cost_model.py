@@ -5,6 +5,7 @@ from constants measured on this machine (see ``cost_model.md`` for each constant
     python benchmarks/scaling/cost_model.py                  # tables (markdown) + cost_model.png
     python benchmarks/scaling/cost_model.py --alpha 5e-6     # another network latency assumption
     python benchmarks/scaling/cost_model.py --strong-cells 3145728 --ppc 40 --weak-cells 24576
+    python benchmarks/scaling/cost_model.py --thick-layer    # the 3D thick layer with the multigrid Stokes solver
 
 Nothing here runs MPI: it evaluates formulas. Two designs are projected side by side:
 ``today`` (the code as of this commit) and ``fixed`` (the same code with the O(P) paths replaced by
@@ -209,8 +210,59 @@ def gb(nbytes: float) -> str:
     return f"{nbytes / 1e3:.1f} kB"
 
 
+@dataclass
+class ThickLayer:
+    """The seed's 3D thick layer (configs/thick_layer_3d.yaml) with ``stokes.solver: multigrid``:
+    measured constants (benchmarks/scaling/aspect_thick_layer*.md, 2026-12-04 third sitting, 2 ranks)."""
+
+    seconds_per_step_16: float = 124.0 / 95   # 16^3 to t = 0.002, best of 3 (start-up included)
+    seconds_per_step_32: float = 274.0 / 23   # 32^3 to t = 0.0005, one run (start-up included)
+    rss_per_rank_32_bytes: float = 4482e6     # max RSS per rank at 32^3 on 2 ranks
+    steps_to_end_20: int = 890                # 20^3 to t = 0.02 at CFL 1 (benchmarks/tackley_king, 2026-12-01)
+    end_time: float = 0.02                    # this project's end time (no end time is published with the seed's e)
+    efficiency: float = 1.0                   # ASSUMED strong-scaling efficiency of the whole step ...
+    min_unknowns_per_rank: int = 20_000       # ... down to this many Stokes unknowns per rank (ASSUMED; below: not projected)
+
+
+def stokes_unknowns(n: int) -> int:
+    """P2/P1 on n^3 cubes of 6 tetrahedra (= Q2/Q1 on n^3 hexahedra)."""
+    return 3 * (2 * n + 1) ** 3 + (n + 1) ** 3
+
+
+def thick_layer_table(t: ThickLayer, sizes: tuple[int, ...] = (32, 64, 128),
+                      ranks: tuple[int, ...] = (2, 48, 192, 768, 3072)) -> str:
+    """Hours to ``t.end_time`` and memory per rank of the thick layer at ``sizes`` on ``ranks`` ranks.
+
+    Derived: the time per step on 2 ranks grows as unknowns^q with q fitted to 16^3 and 32^3; the
+    steps to the end time grow as n (CFL: dt ~ h at the same velocities) from the 20^3 run; the
+    time on N ranks is the 2-rank time times 2 / (N efficiency); memory per unknown as at 32^3."""
+    u16, u32 = stokes_unknowns(16), stokes_unknowns(32)
+    q = math.log(t.seconds_per_step_32 / t.seconds_per_step_16) / math.log(u32 / u16)
+    lines = [f"Time per step on 2 ranks ~ unknowns^{q:.2f} (fitted to 16³ and 32³); steps to t = {t.end_time:g} "
+             f"~ n ({t.steps_to_end_20} at 20³); parallel efficiency {t.efficiency:g} down to "
+             f"{t.min_unknowns_per_rank:,} unknowns per rank (ASSUMED; '-': fewer).\n",
+             "| mesh | Stokes unknowns | steps to t_end | s/step on 2 ranks | " + " | ".join(f"{p} ranks [h]" for p in ranks)
+             + " | memory per rank on the fewest ranks that fit 4 GB |",
+             "|---|---|---|---|" + "---|" * len(ranks) + "---|"]
+    for n in sizes:
+        u = stokes_unknowns(n)
+        per_step = t.seconds_per_step_32 * (u / u32) ** q
+        steps = round(t.steps_to_end_20 * n / 20)
+        hours = [steps * per_step * 2 / (p * t.efficiency) / 3600 if u / p >= t.min_unknowns_per_rank else None
+                 for p in ranks]
+        total_bytes = 2 * t.rss_per_rank_32_bytes * u / u32
+        fits = next((p for p in ranks if total_bytes / p <= 4e9), None)
+        memory = f"{total_bytes / fits / 1e9:.1f} GB on {fits}" if fits else f"{total_bytes / 1e9:.0f} GB in all"
+        lines.append(f"| {n}³ | {u:,} | {steps} | {per_step:.1f} | "
+                     + " | ".join("-" if h is None else f"{h:.2f}" for h in hours)
+                     + f" | {memory} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--thick-layer", action="store_true",
+                    help="only the projection of the 3D thick layer with the multigrid Stokes solver")
     ap.add_argument("--strong-cells", type=float, default=3 * 2 ** 20, help="ASSUMED strong-scaling cells")
     ap.add_argument("--weak-cells", type=float, default=24576, help="ASSUMED weak-scaling cells per rank")
     ap.add_argument("--ppc", type=float, default=40, help="ASSUMED particles per cell")
@@ -218,6 +270,9 @@ def main() -> None:
     ap.add_argument("--beta", type=float, default=2e9, help="per-rank bandwidth, bytes/s")
     ap.add_argument("--png", type=Path, default=Path(__file__).with_name("cost_model.png"))
     args = ap.parse_args()
+    if args.thick_layer:
+        print(thick_layer_table(ThickLayer()))
+        return
     c = Constants(alpha_s=args.alpha, beta_Bps=args.beta)
     strong = Scenario("strong", [args.strong_cells] * len(RANKS), [args.strong_cells * args.ppc] * len(RANKS))
     weak = Scenario("weak", [args.weak_cells * p for p in RANKS], [args.weak_cells * args.ppc * p for p in RANKS])

@@ -41,9 +41,10 @@ def test_multigrid_run_equals_the_amg_run(tmp_path, ranks):
             assert a[key] == b[key], key
         for key in ("time", "vrms", "nusselt", "entrainment"):
             assert float(a[key]) == pytest.approx(float(b[key]), rel=1e-5, abs=1e-9), (key, a["step"])
-        # Both grow over these steps with the step size, through the semi-implicit buoyancy term
-        # that the preconditioner leaves out (measured on 1 rank: 20 ... 47 and 37 ... 53).
-        assert 0 < int(a["stokes_iterations"]) <= int(b["stokes_iterations"]) + 5
+        # Both grow over these steps with the step size: the AMG's preconditioner leaves the
+        # semi-implicit buoyancy term out, the multigrid's has it (measured on 1 rank: 13 ... 17
+        # and 27 ... 44; 20 ... 47 and 37 ... 53 while the block preconditioner lacked B^T).
+        assert 0 < int(a["stokes_iterations"]) <= int(b["stokes_iterations"])
 
 
 def test_killed_multigrid_run_resumes_bit_for_bit(tmp_path):

@@ -123,6 +123,7 @@ class SemiImplicitBuoyancy:
         self.theta = float(theta)
         self.dt = dolfinx.fem.Constant(mesh, PETSc.ScalarType(0.0))
         self._projections: list[LumpedProjection] = []
+        self._coefficient: Any = None  # theta dt max(d rho / d up, 0) of the last form()
 
     def form(self, T: Any, C: Any, u: Any, v: Any, dx: Any) -> Any:
         """The bilinear term (UFL) for temperature ``T`` and fractions ``C`` (see
@@ -156,7 +157,7 @@ class SemiImplicitBuoyancy:
         """The term on the component ``k = axis`` alone: ``theta dt max(d rho / d up, 0) u_k v_k``
         for scalar trial and test functions ``u``, ``v`` (the coefficient of the last :meth:`form`,
         so the two forms' element matrices agree entry by entry)."""
-        if self.axis is None or getattr(self, "_coefficient", None) is None:
+        if self.axis is None or self._coefficient is None:
             raise ValueError("the semi-implicit term has a single component only on a box, after form()")
         return self._coefficient * u * v * dx
 

@@ -13,8 +13,9 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
 - **Preconditioner** (iterative solvers): the matrix ``P = [[A, B^T], [B, -M_p / eta]]``
   (assembled with ``K_0``; the semi-implicit term goes into its velocity block too where
   ``term_in_preconditioner``, on a box), PETSc fieldsplit on the velocity and pressure index sets
-  (it takes the Schur factorisation's off-diagonal blocks from ``P``); the velocity set carries the block size gdim (AMG nodes) and the rigid-body modes as
-  near-null space (:func:`convection.solvers.stokes.nullspace.rigid_body_modes`).
+  (it takes the Schur factorisation's off-diagonal blocks from ``P``); the velocity set carries
+  the block size gdim (AMG nodes) and the rigid-body modes as near-null space
+  (:func:`convection.solvers.stokes.nullspace.rigid_body_modes`).
 - **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
   ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
   dof (:meth:`convection.geometry.domain.Domain.pressure_pin`, a zero pressure block holds its

@@ -55,8 +55,12 @@ def _iterations_by_size(viscosity: str, sizes=(4, 6, 8), solver: str = "iterativ
     return counts
 
 
-def _check_flat(counts: list[int], *, growth: float = 1.3, last_step: int = 6) -> None:
-    # Halving h (4^3 -> 8^3) adds less than 30 %; a preconditioner without multigrid doubles the count.
+def _check_flat(counts: list[int], *, growth: float = 1.4, last_step: int = 6) -> None:
+    # Halving h (4^3 -> 8^3) adds less than 40 %; a preconditioner without multigrid doubles the count.
+    # Measured serially with a constant viscosity: 22 26 27 (Debian 12), 21 26 28 (Debian 13's
+    # hypre); with the smooth contrast 34 34 37 (Debian 12). Since the preconditioning matrix holds
+    # B^T the counts are lower, so the mesh-dependent part of BoomerAMG's weighs more (the bound was
+    # 30 % when the counts were ~10 higher).
     assert max(counts) <= growth * min(counts), counts
     assert counts[-1] - counts[-2] <= last_step, counts
 

@@ -14,6 +14,7 @@ from mpi4py import MPI
 
 from convection.geometry.domain import Domain
 from convection.solvers.transport import TransportSolver
+from fembase.dolfinx_compat import cell_dofmap
 
 class TemperatureStats(NamedTuple):
     """Global temperature statistics.
@@ -61,6 +62,31 @@ def temperature_stats(T: dolfinx.fem.Function) -> TemperatureStats:
     )
 
 
+SUPPORT = 1
+"""The tag of the cells :func:`on_support` integrates over."""
+
+
+def on_support(form: ufl.Form, w: dolfinx.fem.Function, /) -> ufl.Form:
+    """``form`` with its cell integrals over the owned cells where ``w`` has a nonzero dof only
+    (every other cell adds an exact zero when each term has ``w`` or its derivative as a factor:
+    the value is the same to the last digit, for a fraction of the cells). Collective.
+
+    The boundary flux's test function is nonzero on one side's dofs: at 32^3 its residual over
+    the whole mesh cost 0.2 s a call, the layer of cells along the side 1/32 of that."""
+    V = w.function_space
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    owned = mesh.topology.index_map(tdim).size_local
+    dofs = cell_dofmap(V)[:owned]
+    values = w.x.array.reshape(-1, V.dofmap.index_map_bs)
+    cells = np.flatnonzero((values[dofs] != 0.0).any(axis=(1, 2))).astype(np.int32)
+    tags = dolfinx.mesh.meshtags(mesh, tdim, cells, np.full(cells.size, SUPPORT, dtype=np.int32))
+    integrals = [integral.reconstruct(subdomain_id=SUPPORT, subdomain_data=tags)
+                 if integral.integral_type() == "cell" and integral.subdomain_id() == "everywhere" else integral
+                 for integral in form.integrals()]
+    return ufl.Form(integrals)
+
+
 def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /) -> float:
     """Consistent boundary flux ``int_side grad T . n ds`` (``n`` the outward normal) through the
     boundary ``side`` of ``domain`` (default: the solver's). Collective.
@@ -76,7 +102,8 @@ def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, d
     if key not in solver.forms or solver.forms[key][1] is not u:
         w = dolfinx.fem.Function(solver.V)
         w.x.array[domain.locate_dofs(solver.V, side)] = 1.0
-        solver.forms[key] = (dolfinx.fem.form(solver.last_step_residual(u, w)), u, w)
+        residual = on_support(solver.last_step_residual(u, w), w)
+        solver.forms[key] = (dolfinx.fem.form(residual), u, w)
     form = solver.forms[key][0]
     return float(solver.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM))
 

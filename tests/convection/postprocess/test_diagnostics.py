@@ -13,7 +13,7 @@ from mpi4py import MPI
 
 from convection.physics.approximation import BoussinesqApproximation
 from convection.geometry.boundary import TemperatureBC
-from convection.postprocess.diagnostics import nusselt, temperature_stats, vrms
+from convection.postprocess.diagnostics import SUPPORT, nusselt, on_support, temperature_stats, vrms
 from convection.solvers.timestep import cfl_timestep
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
@@ -103,6 +103,26 @@ def test_nusselt_top_equals_bottom_at_steady_state():
     nu_top, nu_bottom = nusselt(energy, u, "top"), nusselt(energy, u, "bottom")
     assert nu_top > 2.0
     assert abs(nu_top - nu_bottom) < 1e-3 * nu_top
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("side", ["top", "bottom"])
+def test_flux_on_support_is_the_whole_mesh_value(side):
+    """The consistent flux integrated over the cells where its test function lives equals, to the
+    last digit, the one over every cell (the others add exact zeros), on a fraction of the cells."""
+    energy, u = _cellular_steady_state(MPI.COMM_WORLD)
+    w = dolfinx.fem.Function(energy.V)
+    w.x.array[energy.domain.locate_dofs(energy.V, side)] = 1.0
+    full = energy.last_step_residual(u, w)
+    restricted = on_support(full, w)
+    values = [energy.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(f)), op=MPI.SUM)
+              for f in (full, restricted)]
+    assert values[0] == values[1] and values[0] != 0.0
+    tags = [i.subdomain_data() for i in restricted.integrals() if i.integral_type() == "cell"]
+    assert tags and all(i.subdomain_id() == SUPPORT for i in restricted.integrals() if i.integral_type() == "cell")
+    tagged = energy.mesh.comm.allreduce(tags[0].indices.size, op=MPI.SUM)
+    cells = energy.mesh.topology.index_map(2).size_global
+    assert 0 < tagged <= cells // 4  # the cells along one side of 12 x 12
 
 
 def test_cfl_timestep():

@@ -394,7 +394,8 @@ class StokesSolver(PetscSolver):
         self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
             self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, domain=self.domain,
             iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space, multigrid=hierarchy,
-            term_in_preconditioner=self.solver == "multigrid")
+            term_in_preconditioner=self.solver == "multigrid",
+            operator_preconditions=self.solver == "multigrid" and not self.is_nonlinear)
 
         self.forms: StokesForms | None = None
         self._forms_key: tuple[Any, Any] | None = None

@@ -16,8 +16,11 @@ One V-cycle of PETSc's PCMG replaces the AMG cycle:
   so they carry the viscosity (and a varying one's contrasts) of the fine operator exactly, and the
   strong conditions' unit rows with it; they are formed again only when ``A`` changes;
 - two Chebyshev steps with point-Jacobi preconditioning before and after the coarse correction on
-  every level (the eigenvalue bounds estimated once per setup, the Chebyshev interval
-  ``[0.1, 1.1] lambda_max``, PETSc's defaults);
+  every level (the Chebyshev interval ``[0.1, 1.1] lambda_max``, PETSc's default, with
+  ``lambda_max`` estimated at each set-up by 4 GMRES steps, not PETSc's 10: the same iterations
+  from 8^3 to 16^3 with a constant viscosity and contrasts of 1e4 and 1e6 (13 14 / 32 32 / 47 47
+  against 13 14 / 32 32 / 48 48; 2D 64^2 and 256^2 within one), for half the estimate's cost, 4 %
+  of a 16^3 thick-layer step, where the semi-implicit term makes every solve set up anew);
 - an exact solve on the coarsest level (``redundant``: every rank factorises the small coarsest
   operator, LU), the same on any rank count.
 
@@ -62,6 +65,7 @@ GEOMETRIC_MULTIGRID: dict[str, Any] = {
     "pc_mg_galerkin": "both",
     "mg_levels_ksp_type": "chebyshev",
     "mg_levels_ksp_max_it": 2,
+    "mg_levels_ksp_chebyshev_esteig_steps": 4,
     "mg_levels_pc_type": "jacobi",
     "mg_coarse_ksp_type": "preonly",
     "mg_coarse_pc_type": "redundant",

@@ -127,7 +127,9 @@ class SemiImplicitOperator:
 
     Args:
         A: The operator to hold ``A0 + term`` (:func:`fembase.dolfinx_compat.create_block_matrix`).
-        A0: The fixed operator (assembled by the caller whenever its forms or viscosity change).
+        A0: The fixed operator (assembled by the caller whenever its forms or viscosity change);
+            None on a box: the caller assembles it into ``A`` itself, whose entries outside the
+            vertical component's block are never changed, and the block keeps its fixed values.
         V, Q: The velocity and pressure spaces.
         velocity_bcs: The strong velocity conditions (skipped rows and columns of the term).
         bcs: All strong conditions of ``A`` (for its first assembly: its nonzero pattern).
@@ -136,7 +138,7 @@ class SemiImplicitOperator:
     (:class:`AxisBlock`); otherwise its vector form is added to a copy of ``A0``, cell by cell.
     """
 
-    def __init__(self, A: PETSc.Mat, A0: PETSc.Mat, V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace,
+    def __init__(self, A: PETSc.Mat, A0: PETSc.Mat | None, V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace,
                  velocity_bcs: list[Any], bcs: list[Any], /) -> None:
         self.A, self.A0, self.V, self.Q = A, A0, V, Q
         self._velocity_bcs, self._bcs = list(velocity_bcs), list(bcs)
@@ -164,8 +166,11 @@ class SemiImplicitOperator:
             # A's other entries stay A0's (copied when A0 changed).
             block = self._component_block(forms.a_si_component)
             if refresh or not self._fixed_taken:
-                A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-                block.take_fixed(A0)
+                if A0 is not None:
+                    A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+                elif not refresh:  # A's block holds the last term, not the fixed values
+                    raise RuntimeError("the semi-implicit term's block changed without the operator's refresh")
+                block.take_fixed(A)
                 self._fixed_taken = True
             others = () if preconditioner is None else (preconditioner,)
             block.add(A, forms.a_si_component[3], *others)

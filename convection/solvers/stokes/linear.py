@@ -9,7 +9,9 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
   preconditioner (AMG hierarchy, LU factorisation) is then set up again, otherwise reused. With a
   semi-implicit buoyancy the operator is ``K = K_0 + term``: ``K_0`` is kept, copied into ``K``
   every solve and the term (which changes with the fields and ``dt``) added to the velocity
-  block, skipping the Dirichlet rows and columns.
+  block, skipping the Dirichlet rows and columns; on a box, where the term lives in the vertical
+  component's block, ``K_0`` is assembled into ``K`` and only that block's fixed entries are kept
+  (:class:`convection.solvers.stokes.axis_block.AxisBlock`).
 - **Preconditioner** (iterative solvers): the matrix ``P = [[A, B^T], [B, -M_p / eta]]``
   (assembled with ``K_0``; the semi-implicit term goes into its velocity block too where
   ``term_in_preconditioner``, on a box), PETSc fieldsplit on the velocity and pressure index sets
@@ -190,7 +192,7 @@ class StokesLinearSystem:
 
         The matrices serve any later forms on the same spaces (same sparsity)."""
         self._A = create_block_matrix(forms.a)
-        if forms.a_si is not None:
+        if forms.a_si is not None and forms.a_si_component is None:  # on a box A's other entries are A0's
             self._A0 = create_block_matrix(forms.a)
         self._b = create_block_vector(forms.L)
         self._x = self._b.duplicate()
@@ -226,7 +228,7 @@ class StokesLinearSystem:
     def assemble_operator(self, forms: StokesForms, /, *, refresh: bool) -> None:
         """Assemble ``K`` (and ``P``): the fixed part only when ``refresh`` (the forms or their
         viscosity changed), the semi-implicit term always. Collective."""
-        fixed = self._A if forms.a_si is None else self._A0
+        fixed = self._A if self._A0 is None else self._A0
         if refresh:
             fixed.zeroEntries()
             assemble_block_matrix(fixed, forms.a, bcs=self._bcs)

@@ -30,12 +30,17 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 python="$here/.venv/bin/python"
 
 # The GMG variant: ASPECT's GMG needs a mesh hierarchy (one coarse cell refined 4 times = 16^3).
+# ASPECT's parameter file has 16^3's particle count (60 per cube, as this project's 10 per
+# tetrahedron): scaled with the cells (before 2026-12-04 the 32^3 sittings gave ASPECT 8x fewer).
+particles=$((60 * cells * cells * cells))
 sed -e 's/set Stokes solver type = block AMG/set Stokes solver type = block GMG/' \
     -e 's/set \([XYZ]\) repetitions = 16/set \1 repetitions = 1/' \
     -e "s/set Initial global refinement = 0/set Initial global refinement = $refine/" \
+    -e "s/set Number of particles = .*/set Number of particles = $particles/" \
     -e "s/set End time .*/set End time                               = $end/" "$prm" > "$work/gmg.prm"
 sed -e "s|set Output directory .*|set Output directory = $work/out-amg|" \
     -e "s/set \([XYZ]\) repetitions = 16/set \1 repetitions = $cells/" \
+    -e "s/set Number of particles = .*/set Number of particles = $particles/" \
     -e "s/set End time .*/set End time                               = $end/" "$prm" > "$work/amg.prm"
 sed -i -e "s|set Output directory .*|set Output directory = $work/out-gmg|" "$work/gmg.prm"
 

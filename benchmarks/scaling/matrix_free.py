@@ -64,21 +64,14 @@ def _apply_on_the_fly(x: np.ndarray, y: np.ndarray, nodes: np.ndarray, inverse_j
     ye = np.empty((n_basis, 3))
     grad = np.empty((n_basis, 3))
     for c in range(nodes.shape[0]):
-        for i in range(n_basis):
-            node = nodes[c, i]
-            for k in range(3):
-                ue[i, k] = x[3 * node + k]
-                ye[i, k] = 0.0
+        _gather(x, nodes[c], ue, ye)
         for q in range(n_points):
             for i in range(n_basis):
                 for d in range(3):
                     grad[i, d] = (dphi[q, i, 0] * inverse_jacobian[c, 0, d] + dphi[q, i, 1] * inverse_jacobian[c, 1, d]
                                   + dphi[q, i, 2] * inverse_jacobian[c, 2, d])
             _strain_action(ue, ye, grad, scale[c, q])
-        for i in range(n_basis):
-            node = nodes[c, i]
-            for k in range(3):
-                y[3 * node + k] += ye[i, k]
+        _scatter(y, nodes[c], ye)
 
 
 @numba.njit(cache=True)
@@ -89,17 +82,27 @@ def _apply_stored(x: np.ndarray, y: np.ndarray, nodes: np.ndarray, gradients: np
     ue = np.empty((n_basis, 3))
     ye = np.empty((n_basis, 3))
     for c in range(nodes.shape[0]):
-        for i in range(n_basis):
-            node = nodes[c, i]
-            for k in range(3):
-                ue[i, k] = x[3 * node + k]
-                ye[i, k] = 0.0
+        _gather(x, nodes[c], ue, ye)
         for q in range(n_points):
             _strain_action(ue, ye, gradients[c, q], scale[c, q])
-        for i in range(n_basis):
-            node = nodes[c, i]
-            for k in range(3):
-                y[3 * node + k] += ye[i, k]
+        _scatter(y, nodes[c], ye)
+
+
+@numba.njit(cache=True, inline="always")
+def _gather(x: np.ndarray, cell_nodes: np.ndarray, ue: np.ndarray, ye: np.ndarray) -> None:  # pragma: no cover
+    """ue[i, k] = x at the cell's node i, component k; ye = 0."""
+    for i in range(cell_nodes.shape[0]):
+        for k in range(3):
+            ue[i, k] = x[3 * cell_nodes[i] + k]
+            ye[i, k] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _scatter(y: np.ndarray, cell_nodes: np.ndarray, ye: np.ndarray) -> None:  # pragma: no cover
+    """y at the cell's node i, component k += ye[i, k]."""
+    for i in range(cell_nodes.shape[0]):
+        for k in range(3):
+            y[3 * cell_nodes[i] + k] += ye[i, k]
 
 
 @numba.njit(cache=True, inline="always")

@@ -259,9 +259,9 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
     ``stokes.solver: multigrid`` uses the domain's levels for ``stokes.multigrid.levels``.
     ``auto`` picks the multigrid on a fixed 3D mesh that nests in at least
     :data:`AUTO_MULTIGRID_LEVELS` levels (a box whose cells halve) with a coarsest box of at least
-    ``ranks`` cells (every rank needs one): on the 3D thick layer at 16^3
-    it ran 1.45 times as fast as the AMG solver and 1.47 times as fast as ASPECT's GMG
-    (benchmarks/scaling/aspect_thick_layer.md); elsewhere ``auto`` is what
+    ``ranks`` cells (every rank needs one): on the 3D thick layer to t = 0.002 it ran 1.87 (16^3)
+    and 2.03 (32^3) times as fast as ASPECT's GMG (benchmarks/scaling/aspect_thick_layer.md,
+    aspect_thick_layer_32.md); elsewhere ``auto`` is what
     :func:`convection.solvers.stokes.solver.resolve_solver` says."""
     stokes = config["stokes"]
     domain = domain if domain is not None else config_domain(config)

@@ -53,6 +53,7 @@ import dolfinx
 import dolfinx.fem.petsc
 import numpy as np
 import ufl
+import ufl.algorithms
 from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation, fractions
@@ -160,6 +161,13 @@ class SemiImplicitBuoyancy:
         if self.axis is None or self._coefficient is None:
             raise ValueError("the semi-implicit term has a single component only on a box, after form()")
         return self._coefficient * u * v * dx
+
+    def coefficients(self) -> list[Any]:
+        """The coefficients (Functions: temperature, projected fractions) of the term of the last
+        :meth:`form`, in UFL's order; empty before."""
+        if self._coefficient is None:
+            return []
+        return list(ufl.algorithms.extract_coefficients(self._coefficient))
 
     def update(self, dt: float) -> None:
         """Set the step and refresh the projected fractions. Collective."""

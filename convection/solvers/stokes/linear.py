@@ -119,6 +119,26 @@ def schur_preconditioning_matrix(pc: PETSc.PC, S: PETSc.Mat, /) -> None:
         pc.setFieldSplitSchurPreType(PETSc.PC.SchurPreType.USER, S)
 
 
+def velocity_pressure_sets(K: PETSc.Mat, V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace, /
+                           ) -> tuple[PETSc.IS, PETSc.IS]:
+    """The velocity and pressure rows of the block matrix ``K`` (global numbering, owned rows). Collective."""
+    n_u, n_p = owned_sizes(V, Q)
+    start = K.getOwnershipRange()[0]
+    comm = V.mesh.comm
+    return (PETSc.IS().createStride(n_u, start, 1, comm=comm),
+            PETSc.IS().createStride(n_p, start + n_u, 1, comm=comm))
+
+
+def true_residual_norm(K: PETSc.Mat, x: PETSc.Vec, b: PETSc.Vec, /) -> float:
+    """Euclidean norm of the true residual ``b - K x``. Collective."""
+    residual = b.duplicate()
+    K.mult(x, residual)
+    residual.aypx(-1.0, b)
+    norm = float(residual.norm())
+    residual.destroy()
+    return norm
+
+
 class StokesLinearSystem:
     """Block matrices and vectors of the Stokes system and the KSP that solves it (module docstring).
 
@@ -217,12 +237,8 @@ class StokesLinearSystem:
             schur_preconditioning_matrix(self.ksp.getPC(), self._S)
 
     def index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
-        """The velocity and pressure rows of ``K`` (global numbering, owned rows). Collective."""
-        n_u, n_p = owned_sizes(self.V, self.Q)
-        start = self._A.getOwnershipRange()[0]
-        comm = self.V.mesh.comm
-        return (PETSc.IS().createStride(n_u, start, 1, comm=comm),
-                PETSc.IS().createStride(n_p, start + n_u, 1, comm=comm))
+        """:func:`velocity_pressure_sets` of ``K``. Collective."""
+        return velocity_pressure_sets(self._A, self.V, self.Q)
 
     # ------------------------------------------------------------------ assembly
     def assemble_operator(self, forms: StokesForms, /, *, refresh: bool) -> None:
@@ -336,19 +352,18 @@ class StokesLinearSystem:
         self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed)
         self._preconditioner_changed = False
 
-    def solve(self) -> float:
+    def solve(self, *, reuse_preconditioner: bool = False) -> float:
         """Solve ``K x = b`` from ``x = (u, p)`` and write ``x`` back to ``u``, ``p``. Collective.
 
-        Returns:
-            The seconds spent setting up the preconditioner (nothing unless the operator changed).
+        ``reuse_preconditioner``: keep the last set-up although ``P`` changed
+        (:mod:`convection.solvers.stokes.lagged`). Returns the seconds of the preconditioner's set-up.
 
         Raises:
             RuntimeError: the KSP diverged.
         """
         t1 = time.perf_counter()
         pack_solution(self.u, self.p, self._x)
-        self.prepare_preconditioner()
-        self.ksp.setUp()  # a no-op unless the operator changed
+        self.set_up_preconditioner(reuse=reuse_preconditioner)
         setup_seconds = time.perf_counter() - t1
         self.ksp.solve(self._b, self._x)
         reason = self.ksp.getConvergedReason()
@@ -357,14 +372,17 @@ class StokesLinearSystem:
         unpack_solution(self._x, self.u, self.p)
         return setup_seconds
 
+    def set_up_preconditioner(self, *, reuse: bool = False) -> None:
+        """Set the preconditioner up for the current ``P`` (a no-op unless ``P`` changed), or keep
+        the last one (``reuse``: the solves use it until a call without). Collective."""
+        self.ksp.getPC().setReusePreconditioner(reuse)
+        if not reuse:
+            self.prepare_preconditioner()
+            self.ksp.setUp()
+
     def residual_norm(self) -> float:
-        """Euclidean norm of the true residual ``b - K x`` of the last solve. Collective."""
-        residual = self._b.duplicate()
-        self._A.mult(self._x, residual)
-        residual.aypx(-1.0, self._b)
-        norm = float(residual.norm())
-        residual.destroy()
-        return norm
+        """:func:`true_residual_norm` of the last solve. Collective."""
+        return true_residual_norm(self._A, self._x, self._b)
 
     def destroy(self) -> None:
         """Free the matrices, vectors and null spaces now (collective; not the KSP, which the caller owns)."""

@@ -20,7 +20,8 @@ One V-cycle of PETSc's PCMG replaces the AMG cycle:
   ``lambda_max`` estimated at each set-up by 4 GMRES steps, not PETSc's 10: the same iterations
   from 8^3 to 16^3 with a constant viscosity and contrasts of 1e4 and 1e6 (13 14 / 32 32 / 47 47
   against 13 14 / 32 32 / 48 48; 2D 64^2 and 256^2 within one), for half the estimate's cost, 4 %
-  of a 16^3 thick-layer step, where the semi-implicit term makes every solve set up anew);
+  of a 16^3 thick-layer step, where the semi-implicit term changes the operator every solve: a
+  set-up then serves several solves, :mod:`convection.solvers.stokes.lagged`);
 - an exact solve on the coarsest level (``redundant``: every rank factorises the small coarsest
   operator, LU), the same on any rank count.
 
@@ -59,6 +60,13 @@ class MultigridSettings:
     levels: int = param(0, minimum=0, maximum=MAX_LEVELS,
                         help="meshes in the hierarchy, the run's mesh included (box: each coarser has half the cells "
                              "per side); 0: halve while every count is even and stays >= 2 (16 -> 8 -> 4 -> 2: 4)")
+    rebuild_steps: int = param(10, minimum=1,
+                               help="solves a preconditioner serves at most while only the semi-implicit buoyancy's term "
+                                    "changes (a linear solve, constant viscosity); 1: set up at every solve "
+                                    "(convection/solvers/stokes/lagged.py)")
+    rebuild_dt_change: float = param(0.25, minimum=0.0,
+                                     help="the kept preconditioner is set up again when the step changed by more than "
+                                          "this fraction since its set-up")
 
 GEOMETRIC_MULTIGRID: dict[str, Any] = {
     "pc_type": "mg",

@@ -81,6 +81,7 @@ from convection.solvers.petsc_options import (
 )
 from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
 from convection.solvers.stokes.linear import StokesLinearSystem
+from convection.solvers.stokes.lagged import LaggedPreconditioner, assemble_operator
 from convection.solvers.stokes.multigrid import GEOMETRIC_MULTIGRID, MultigridSettings, VelocityMultigrid
 from convection.solvers.stokes.nonlinear import NonlinearResult, NonlinearSettings, NonlinearStokes
 from fembase.state import State
@@ -397,6 +398,9 @@ class StokesSolver(PetscSolver):
             term_in_preconditioner=self.solver == "multigrid",
             operator_preconditions=self.solver == "multigrid" and not self.is_nonlinear)
 
+        lags = (self.solver == "multigrid" and not self.is_nonlinear and self._semi_implicit is not None
+                and not approximation.is_variable_viscosity and multigrid.rebuild_steps > 1)
+        self._lag = LaggedPreconditioner(mesh, multigrid.rebuild_steps, multigrid.rebuild_dt_change) if lags else None
         self.forms: StokesForms | None = None
         self._forms_key: tuple[Any, Any] | None = None
         self._operator_current = False
@@ -427,6 +431,8 @@ class StokesSolver(PetscSolver):
             self.forms = self.discretisation.forms(T, C, pressure_block=self.linear_system.pinned,
                                                    preconditioner=self.is_iterative,
                                                    semi_implicit=self._semi_implicit, flow=flow)
+            if self._forms_key is not None and self._lag is not None:
+                self._lag.dt = None  # new forms: set the preconditioner up at the next solve
             self._forms_key = key
             self._operator_current = False
             if not self.linear_system.is_set_up:
@@ -464,18 +470,33 @@ class StokesSolver(PetscSolver):
         if self._semi_implicit is not None:
             self._semi_implicit.update(dt)
         refresh = not self._operator_current or self.approximation.is_variable_viscosity
-        self.linear_system.assemble_operator(forms, refresh=refresh)
+        lag = self._lagged()
+        reuse = lag is not None and not lag.due(dt)
+        restart_setup = assemble_operator(self.linear_system, forms, self._semi_implicit, refresh=refresh,
+                                          lag=lag if reuse else None)
         self._operator_current = True
         self.linear_system.assemble_rhs(forms)
 
         t1 = time.perf_counter()
-        setup_seconds = self.linear_system.solve()
+        setup_seconds = self.linear_system.solve(reuse_preconditioner=reuse) + restart_setup
+        if lag is not None:
+            if reuse:
+                lag.kept()
+            else:
+                lag.set_up(dt, self._semi_implicit.coefficients())
         self._normalise_pressure()
         if self._rotations is not None:
             self._rotations.remove(self.u)
         norm = self.linear_system.residual_norm()
         return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
                             setup_seconds, assemblies=int(refresh))
+
+    def _lagged(self) -> LaggedPreconditioner | None:
+        """The lag of the preconditioner, None where it is set up at every operator change (also
+        where a checkpoint could not keep the term's coefficients)."""
+        if self._lag is not None and not LaggedPreconditioner.supports(self._semi_implicit.coefficients()):
+            self._lag = None
+        return self._lag
 
     def _normalise_pressure(self) -> None:
         """Shift the pressure to zero mean where the constant pressure is free (collective)."""
@@ -484,12 +505,21 @@ class StokesSolver(PetscSolver):
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> State:
-        """The solution (the next iterative solve's initial guess); no scalars."""
-        return State(fields={"u": self.u, "p": self.p})
+        """The solution (the next iterative solve's initial guess) and, where the preconditioner
+        lags, what it was set up from (:meth:`LaggedPreconditioner.state`, under ``preconditioner``)."""
+        out = State(fields={"u": self.u, "p": self.p})
+        if self._lag is not None:
+            lagged = self._lag.state()
+            out.fields.update({f"preconditioner/{name}": f for name, f in lagged.fields.items()})
+            out.scalars["preconditioner"] = lagged.scalars
+        return out
 
     def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
-        """The Functions a checkpoint fills: ``u`` and ``p``."""
-        return self.state().fields
+        """The Functions a checkpoint fills: ``u``, ``p`` and the lagged preconditioner's."""
+        out = {"u": self.u, "p": self.p}
+        if self._lag is not None and "preconditioner" in scalars:
+            out.update({f"preconditioner/{name}": f for name, f in self._lag.restore(scalars["preconditioner"]).items()})
+        return out
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(

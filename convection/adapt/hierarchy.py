@@ -47,7 +47,7 @@ from fembase.geometry import Candidates
 from fembase.manifold import ShellManifold
 from fembase.partition import PARTITIONERS, partition
 
-__all__ = ["CurvedMeshes", "MeshHierarchy", "MeshRecipe"]
+__all__ = ["CurvedMeshes", "MeshHierarchy", "MeshRecipe", "RefinementChain"]
 
 
 @dataclass
@@ -69,6 +69,33 @@ class MeshRecipe:
     base: MeshPiece | None = None
     rounds: list[npt.NDArray[np.int32] | None] = field(default_factory=list)
     mesh: MeshPiece | None = None
+
+
+class RefinementChain:
+    """The meshes a :class:`MeshHierarchy` refined in turn, from its base, at its last rebuild,
+    replay or uniform refinement: each nested in the next, every cell on the rank of the coarser cell
+    it lies in (:func:`fembase.distribute.refine_on_ranks`), so a geometric multigrid on an adaptive
+    mesh takes them as its levels (:class:`convection.adapt.levels.MeshLevels`)."""
+
+    def __init__(self) -> None:
+        self.meshes: list[dolfinx.mesh.Mesh] = []
+
+    def add(self, coarse: dolfinx.mesh.Mesh, fine: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.Mesh:
+        """Record that ``fine`` was refined from ``coarse`` (a new chain unless ``coarse`` ends
+        this one); returns ``fine``."""
+        if not self.meshes or self.meshes[-1] is not coarse:
+            self.meshes = [coarse]
+        self.meshes.append(fine)
+        return fine
+
+    def below(self, mesh: dolfinx.mesh.Mesh, base: dolfinx.mesh.Mesh, /) -> tuple[dolfinx.mesh.Mesh, ...] | None:
+        """The meshes ``mesh`` was refined from, coarse to fine, ``base`` first (empty: ``mesh`` is
+        ``base``), or None: the chain from ``base`` did not make ``mesh`` (e.g. a repartition did)."""
+        if mesh is base:
+            return ()
+        if len(self.meshes) >= 2 and self.meshes[-1] is mesh and self.meshes[0] is base:
+            return tuple(self.meshes[:-1])
+        return None
 
 
 def _vertex_coordinates(mesh: dolfinx.mesh.Mesh, num_cells: int, manifold: ShellManifold | None = None
@@ -273,6 +300,7 @@ class MeshHierarchy:
         self._midpoints: npt.NDArray[np.float64] | None = None
         self._have_midpoints = False
         self.recipe = MeshRecipe()
+        self.chain = RefinementChain()
         self._element = base.ufl_domain().ufl_coordinate_element()
         # (base, mesh, local base cell of each owned cell) for the last meshes asked about: an
         # adaptation asks about the old mesh, each refinement round's mesh and the new one.
@@ -425,7 +453,7 @@ class MeshHierarchy:
         """One refinement round: the marked local cells (None: every cell), each new cell on the
         rank of its parent, with a facet ghost layer (collective;
         :func:`fembase.distribute.refine_on_ranks`)."""
-        return refine_on_ranks(mesh, marked)
+        return self.chain.add(mesh, refine_on_ranks(mesh, marked))
 
     def levels(self, mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.int32]:
         """Refinement level of each owned cell, shape=(num_owned_cells,), int32."""

@@ -38,6 +38,7 @@ from mpi4py import MPI
 from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, AdaptivitySettings, LevelBounds
 
 from convection.adapt.hierarchy import MeshHierarchy
+from convection.adapt.levels import MeshLevels
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
 from convection.io.checkpoint import (
@@ -146,7 +147,7 @@ def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bc
 class _Meshes(NamedTuple):
     """The mesh of a run and what changes it: the hierarchy it is refined from (with the domain's
     manifold), adaptivity and balancing; ``exact``: a restored mesh is the saved one; ``coarse``: the
-    meshes it is nested in, coarse to fine (``stokes.solver: multigrid``), else empty."""
+    meshes a mesh of the run is nested in (``stokes.solver: multigrid``), else None."""
 
     mesh: dolfinx.mesh.Mesh
     hierarchy: MeshHierarchy | None
@@ -154,7 +155,7 @@ class _Meshes(NamedTuple):
     adaptivity: Adaptivity | None
     balancer: Balancer | None
     exact: bool
-    coarse: tuple[dolfinx.mesh.Mesh, ...] = ()
+    coarse: MeshLevels | None = None
 
 
 def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temperature_bcs: dict[str, TemperatureBC],
@@ -170,7 +171,7 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     coarse: list[dolfinx.mesh.Mesh] = []
 
     def make_base(owners: Any) -> dolfinx.mesh.Mesh:
-        """The base mesh; with multigrid (a fixed mesh) also the meshes nested below it, kept in ``coarse``."""
+        """The base mesh; with multigrid also the meshes nested below it, kept in ``coarse``."""
         if levels == 1:
             return domain.create_mesh(comm, owners=owners, straight=straight)
         meshes = domain.create_mesh_levels(comm, levels, owners=owners)
@@ -198,7 +199,10 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])
     balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if bcfg["strategy"] != "none" else None
-    return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact, tuple(coarse))
+    levels = None
+    if coarse:
+        levels = MeshLevels(coarse, hierarchy.base if hierarchy is not None else mesh, hierarchy)
+    return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact, levels)
 
 
 def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, materials: Materials, stokes: StokesSolver,
@@ -257,9 +261,9 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     meshes = _meshes(config, domain, materials, temperature_bcs, comm, restore)
     mesh = meshes.mesh
     stokes_settings = settings_from(StokesSettings, config["stokes"])
-    if meshes.coarse:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
+    if meshes.coarse is not None:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
         stokes_settings = dataclasses.replace(stokes_settings, solver="multigrid")
-    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, coarse_meshes=meshes.coarse,
+    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, coarse_meshes=meshes.coarse or (),
                           **vars(stokes_settings))
     energy = settings_from(EnergySettings, config["energy"])
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,

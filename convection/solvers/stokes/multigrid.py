@@ -59,7 +59,8 @@ class MultigridSettings:
 
     levels: int = param(0, minimum=0, maximum=MAX_LEVELS,
                         help="meshes in the hierarchy, the run's mesh included (box: each coarser has half the cells "
-                             "per side); 0: halve while every count is even and stays >= 2 (16 -> 8 -> 4 -> 2: 4)")
+                             "per side); 0: halve while every count is even and stays >= 2 (16 -> 8 -> 4 -> 2: 4); "
+                             "an adaptive mesh adds its refinement rounds above the base (convection/adapt/levels.py)")
     rebuild_steps: int = param(10, minimum=1,
                                help="solves a preconditioner serves at most while only the semi-implicit buoyancy's term "
                                     "changes (a linear solve, constant viscosity); 1: set up at every solve "

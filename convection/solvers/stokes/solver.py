@@ -330,8 +330,9 @@ class StokesSolver(PetscSolver):
             viscosity depends on the flow (default: :class:`NonlinearSettings`'s defaults).
         multigrid: The ``stokes.multigrid`` settings (how many levels the caller makes).
         coarse_meshes: The meshes ``mesh`` is nested in, coarse to fine
-            (:meth:`convection.geometry.domain.Domain.create_mesh_levels`): required by ``solver="multigrid"``,
-            ignored otherwise.
+            (:meth:`convection.geometry.domain.Domain.create_mesh_levels`), or what gives them for a
+            mesh (:class:`convection.adapt.levels.MeshLevels`: also for the meshes of an adaptive
+            run, :meth:`on_mesh`): required by ``solver="multigrid"``, ignored otherwise.
 
     Attributes:
         u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
@@ -353,7 +354,8 @@ class StokesSolver(PetscSolver):
                  solver: str = _DEFAULTS.solver, petsc_options: Mapping[str, Any] | None = None,
                  nitsche_penalty: float | None = None, buoyancy_theta: float = _DEFAULTS.buoyancy_theta,
                  nonlinear: NonlinearSettings = _DEFAULTS.nonlinear, multigrid: MultigridSettings = _DEFAULTS.multigrid,
-                 coarse_meshes: Sequence[dolfinx.mesh.Mesh] = ()) -> None:
+                 coarse_meshes: Sequence[dolfinx.mesh.Mesh] | Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.mesh.Mesh]] = ()
+                 ) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.prepare_process()
@@ -369,6 +371,7 @@ class StokesSolver(PetscSolver):
         self.nonlinear_settings = nonlinear
         self.multigrid_settings = multigrid
         self.is_nonlinear = approximation.is_nonlinear
+        self._coarse_meshes = coarse_meshes
         check_viscosity_rules(approximation.viscosity_law.depends_on, buoyancy_theta=self.buoyancy_theta,
                               method=nonlinear.method, pressure_level_free=all(s in self.bcs for s in self.domain.boundaries))
         self._semi_implicit = (SemiImplicitBuoyancy(mesh, approximation, self.buoyancy_theta)
@@ -381,10 +384,11 @@ class StokesSolver(PetscSolver):
         self.V, self.Q = self.discretisation.V, self.discretisation.Q
         hierarchy = None
         if self.solver == "multigrid":
-            if not coarse_meshes:
+            coarse = coarse_meshes(mesh) if callable(coarse_meshes) else coarse_meshes
+            if not coarse:
                 raise ValueError("the multigrid Stokes solver needs the coarser meshes the mesh is nested in "
                                  "(coarse_meshes=, Domain.create_mesh_levels)")
-            hierarchy = VelocityMultigrid(self.V, coarse_meshes)
+            hierarchy = VelocityMultigrid(self.V, coarse)
             self._petsc_options = {**self._petsc_options, "fieldsplit_u_pc_mg_levels": hierarchy.levels}
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
@@ -417,7 +421,8 @@ class StokesSolver(PetscSolver):
     def settings(self) -> dict[str, Any]:
         return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
-                "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings}
+                "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings,
+                "coarse_meshes": self._coarse_meshes}
 
     def prepare(self, T: Any, C: Any = None, /, *, fields: dict[str, Any] | None = None) -> StokesForms:
         """The forms for ``T`` and ``C`` (arguments as in :meth:`solve`): built again unless these

@@ -210,7 +210,7 @@ def test_multigrid_needs_the_coarse_meshes():
     (["stokes.solver=multigrid", "mesh.cells=[25,25,25]"], "'stokes.solver': multigrid needs coarser meshes"),
     (["stokes.solver=multigrid", "stokes.multigrid.levels=4", "mesh.cells=[20,20,20]"],
      "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
-    (["stokes.solver=multigrid", "balance.strategy=every"], "'balance.strategy': stokes.solver multigrid runs on a fixed"),
+    (["stokes.solver=multigrid", "balance.strategy=every"], "'balance.strategy': stokes.solver multigrid runs without repartitioning"),
 ])
 def test_config_rules(sets, message):
     with pytest.raises(ConfigError, match=message):

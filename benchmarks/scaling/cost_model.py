@@ -213,12 +213,15 @@ def gb(nbytes: float) -> str:
 @dataclass
 class ThickLayer:
     """The seed's 3D thick layer (configs/thick_layer_3d.yaml) with ``stokes.solver: multigrid``:
-    measured constants (benchmarks/scaling/aspect_thick_layer*.md, 2026-12-04 third sitting, 2 ranks)."""
+    measured constants on 2 ranks (benchmarks/scaling/aspect_thick_layer*.md: the fifth sitting for
+    16^3, the fourth for 32^3, both 2026-12-04; benchmarks/tackley_king for the steps)."""
 
-    seconds_per_step_16: float = 124.0 / 95   # 16^3 to t = 0.002, best of 3 (start-up included)
-    seconds_per_step_32: float = 274.0 / 23   # 32^3 to t = 0.0005, one run (start-up included)
-    rss_per_rank_32_bytes: float = 4482e6     # max RSS per rank at 32^3 on 2 ranks
-    steps_to_end_20: int = 890                # 20^3 to t = 0.02 at CFL 1 (benchmarks/tackley_king, 2026-12-01)
+    seconds_per_step_16: float = 77.0 / 95    # 16^3 to t = 0.002, best of 3, start-up included (fifth sitting)
+    seconds_per_step_32: float = 1275.0 / 183  # 32^3 to t = 0.002, one run, start-up included (fourth sitting:
+                                               # preconditioner set up every step, so an upper bound)
+    rss_per_rank_32_bytes: float = 3082e6     # max RSS per rank at 32^3 on 2 ranks (fourth sitting)
+    steps_to_end_n: int = 1081                # steps to t = 0.02 at CFL 1 on n^3 ...
+    steps_n: int = 24                         # ... n (benchmarks/tackley_king, 2026-12-04)
     end_time: float = 0.02                    # this project's end time (no end time is published with the seed's e)
     efficiency: float = 1.0                   # ASSUMED strong-scaling efficiency of the whole step ...
     min_unknowns_per_rank: int = 20_000       # ... down to this many Stokes unknowns per rank (ASSUMED; below: not projected)
@@ -234,12 +237,12 @@ def thick_layer_table(t: ThickLayer, sizes: tuple[int, ...] = (32, 64, 128),
     """Hours to ``t.end_time`` and memory per rank of the thick layer at ``sizes`` on ``ranks`` ranks.
 
     Derived: the time per step on 2 ranks grows as unknowns^q with q fitted to 16^3 and 32^3; the
-    steps to the end time grow as n (CFL: dt ~ h at the same velocities) from the 20^3 run; the
+    steps to the end time grow as n (CFL: dt ~ h at the same velocities) from the 24^3 run; the
     time on N ranks is the 2-rank time times 2 / (N efficiency); memory per unknown as at 32^3."""
     u16, u32 = stokes_unknowns(16), stokes_unknowns(32)
     q = math.log(t.seconds_per_step_32 / t.seconds_per_step_16) / math.log(u32 / u16)
     lines = [f"Time per step on 2 ranks ~ unknowns^{q:.2f} (fitted to 16³ and 32³); steps to t = {t.end_time:g} "
-             f"~ n ({t.steps_to_end_20} at 20³); parallel efficiency {t.efficiency:g} down to "
+             f"~ n ({t.steps_to_end_n} at {t.steps_n}³); parallel efficiency {t.efficiency:g} down to "
              f"{t.min_unknowns_per_rank:,} unknowns per rank (ASSUMED; '-': fewer).\n",
              "| mesh | Stokes unknowns | steps to t_end | s/step on 2 ranks | " + " | ".join(f"{p} ranks [h]" for p in ranks)
              + " | memory per rank on the fewest ranks that fit 4 GB |",
@@ -247,7 +250,7 @@ def thick_layer_table(t: ThickLayer, sizes: tuple[int, ...] = (32, 64, 128),
     for n in sizes:
         u = stokes_unknowns(n)
         per_step = t.seconds_per_step_32 * (u / u32) ** q
-        steps = round(t.steps_to_end_20 * n / 20)
+        steps = round(t.steps_to_end_n * n / t.steps_n)
         hours = [steps * per_step * 2 / (p * t.efficiency) / 3600 if u / p >= t.min_unknowns_per_rank else None
                  for p in ranks]
         total_bytes = 2 * t.rss_per_rank_32_bytes * u / u32

@@ -14,6 +14,11 @@ that costs a smoothing sweep over nearly the whole mesh and corrects little. Suc
 skipped: going from the finest mesh down, a mesh becomes the next level only when it has at most
 :data:`MAX_RATIO` times the cells of the last level kept (the meshes stay nested: a mesh nests in
 every coarser one of its chain). Uniform refinement coarsens by 1/8 (3D) and 1/4 (2D) a level.
+Measured on the 3D thick layer (8^3 base, adaptivity.max_level 2, adapted every 2 steps, 2 ranks):
+after the adaptation to 39 543 cells the chain was 3072 -> 9226 -> 33 786 -> 39 543 cells; with
+the 33 786-cell round skipped 21, 21, 15 iterations a step, with every round a level 22, 21, 14,
+at 1.6 times the solve time (17 against 28 s over the 5 steps, one run each, both beside a
+long run on the same cores; BoomerAMG: 32, 30, 31).
 """
 
 from __future__ import annotations

@@ -73,16 +73,23 @@ class MeshLevels:
     def __call__(self, mesh: dolfinx.mesh.Mesh, /) -> tuple[dolfinx.mesh.Mesh, ...]:
         """The levels below ``mesh``, coarse to fine (collective: cell counts).
 
+        A mesh the hierarchy's last rebuild did not make (a checkpoint's, made again on another
+        rank count) has the base as its next level until the next adaptation.
+
         Raises:
-            ValueError: ``mesh`` is neither the base nor made from it by the hierarchy's last
-                rebuild (e.g. a repartition made it).
+            ValueError: No hierarchy and ``mesh`` is not the base.
         """
         if mesh is self.base:
             return coarsening_levels((*self.below, mesh))[:-1]
-        rounds = None
-        if self.hierarchy is not None and self.hierarchy.base is self.base:
-            rounds = self.hierarchy.chain.below(mesh, self.base)
+        hierarchy = self.hierarchy
+        if hierarchy is None:
+            raise ValueError("the multigrid's levels: the mesh was not refined from the base mesh")
+        # A repartition moved the base: the boxes below it no longer nest in it rank by rank.
+        below = self.below if hierarchy.base is self.base else ()
+        rounds = hierarchy.chain.below(mesh, hierarchy.base)
         if rounds is None:
-            raise ValueError("the multigrid's levels: the mesh was not refined from the base mesh by the last "
-                             "adaptation (a repartition moves it; stokes.solver multigrid runs without balancing)")
-        return coarsening_levels((*self.below, *rounds, mesh))[:-1]
+            # Not refined by the hierarchy's last rebuild: a checkpoint's mesh made again on another
+            # rank count (or a repartition's). It is still refined from the base, each cell on its
+            # base cell's rank: the base is its next level until the next adaptation.
+            rounds = (hierarchy.base,)
+        return coarsening_levels((*below, *rounds, mesh))[:-1]

@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+import shutil
+
 import pytest
 
 from _runs import CONFIGS, assert_same_statistics, kill_run, rows, rows_written, run_cli, sets
@@ -103,6 +105,26 @@ def test_killed_adaptive_multigrid_run_resumes_bit_for_bit(tmp_path):
     the multigrid its levels."""
     _kill_and_resume(tmp_path, [*SMALL, "time.max_steps=9", "stokes.solver=multigrid",
                                 "output.checkpoint.every_steps=2", *ADAPTIVE], 5)
+
+
+def test_adaptive_multigrid_run_resumes_on_another_rank_count(tmp_path):
+    """A 2-rank checkpoint of the adaptive run (step 4, after the adaptation of step 3) resumed on
+    1 rank: the mesh is made again from the saved cells, not by the refinement rounds, so the base
+    is its next level until the adaptation of step 6; the same cells, vrms to 1e-5."""
+    extra = [*SMALL, "stokes.solver=multigrid", "output.checkpoint.every_steps=2", "output.checkpoint.keep=5",
+             *ADAPTIVE]
+    reference = tmp_path / "reference"
+    proc = run_cli(["run", str(CONFIG), "--output", str(reference), *sets(extra)], 2)
+    assert proc.returncode == 0, proc.stderr
+    resumed = tmp_path / "resumed"
+    shutil.copytree(reference, resumed)
+    proc = run_cli(["resume", str(resumed), "--checkpoint", str(resumed / "checkpoints" / "checkpoint_000004")], 1)
+    assert proc.returncode == 0, proc.stderr
+    a, b = rows(reference), rows(resumed)
+    assert len(a) == len(b) == 7
+    for x, y in zip(a, b):
+        assert x["cells"] == y["cells"], x["step"]
+        assert float(x["vrms"]) == pytest.approx(float(y["vrms"]), rel=1e-5), x["step"]
 
 
 TOSI = CONFIGS / "tosi.yaml"

@@ -426,6 +426,10 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArr
             return restored
         note = (f"checkpoint {saved.path}: {restored}, so the continuation is the same run to round-off, "
                 f"not bit for bit (fields matched by coordinates, particles located again)")
+    else:
+        note = (f"checkpoint {saved.path}: written on {saved.num_ranks} ranks, resumed on {comm.size}: the "
+                f"continuation is the same run to round-off, not bit for bit (fields matched by coordinates, "
+                f"particles located again)")
     base = make_base(None)
     hierarchy = MeshHierarchy(base, manifold=manifold) if hierarchical else None
     if hierarchy is None:

@@ -120,6 +120,8 @@ def test_adaptive_multigrid_run_resumes_on_another_rank_count(tmp_path):
     shutil.copytree(reference, resumed)
     proc = run_cli(["resume", str(resumed), "--checkpoint", str(resumed / "checkpoints" / "checkpoint_000004")], 1)
     assert proc.returncode == 0, proc.stderr
+    notes = [line for line in proc.stderr.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and "written on 2 ranks, resumed on 1" in notes[0], proc.stderr
     a, b = rows(reference), rows(resumed)
     assert len(a) == len(b) == 7
     for x, y in zip(a, b):

@@ -25,26 +25,32 @@ import dolfinx.fem
 
 from fembase.dolfinx_compat import cell_dofmap
 from fembase.geometry import locate
+from fembase.location import Located
 
-__all__ = ["apply", "prolongation"]
+__all__ = ["apply", "owned_nodes", "prolongation"]
 
 _DROP = 1e-14
 """Basis values smaller than this are left out of ``P`` (exact zeros up to rounding)."""
 
 
-def _owned_nodes(V: dolfinx.fem.FunctionSpace) -> npt.NDArray[np.float64]:
+def owned_nodes(V: dolfinx.fem.FunctionSpace) -> npt.NDArray[np.float64]:
     """The nodes of ``V``'s owned dofs (blocks), shape=(n_owned, gdim)."""
     gdim = V.mesh.geometry.dim
     n = V.dofmap.index_map.size_local
     return np.ascontiguousarray(V.tabulate_dof_coordinates()[:n, :gdim])
 
 
-def prolongation(coarse: dolfinx.fem.FunctionSpace, fine: dolfinx.fem.FunctionSpace, /) -> PETSc.Mat:
+def prolongation(coarse: dolfinx.fem.FunctionSpace, fine: dolfinx.fem.FunctionSpace, /, *,
+                 located: Located | None = None) -> PETSc.Mat:
     """The prolongation matrix from ``coarse`` to ``fine`` (module docstring; collective).
 
     Args:
         coarse: A Lagrange space (scalar or blocked vector) on the coarse mesh.
         fine: The same element on a mesh refined from it, each fine cell on its coarse parent's rank.
+        located: The coarse cell and reference point of each owned fine node
+            (:func:`owned_nodes`), found by the caller, e.g. through the straight cells behind
+            curved meshes (:class:`convection.adapt.levels.MeshLevels`); None: the nodes are
+            looked for in ``coarse``'s cells.
 
     Returns:
         An assembled AIJ matrix of global shape (dim fine, dim coarse), rows and columns in the
@@ -58,8 +64,8 @@ def prolongation(coarse: dolfinx.fem.FunctionSpace, fine: dolfinx.fem.FunctionSp
         raise ValueError(f"prolongation between different elements: {coarse.ufl_element()} and {fine.ufl_element()}")
     comm = fine.mesh.comm
     bs = fine.dofmap.index_map_bs
-    nodes = _owned_nodes(fine)
-    located = locate(coarse.mesh, nodes)
+    if located is None:
+        located = locate(coarse.mesh, owned_nodes(fine))
     missing = int(np.count_nonzero(located.cells < 0))
     if comm.allreduce(missing) > 0:
         raise ValueError(f"{comm.allreduce(missing)} fine nodes lie in no coarse cell of their rank: the meshes "

@@ -29,6 +29,7 @@ and a cell only bisected for conformity stays at its level.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,11 +65,15 @@ class MeshRecipe:
             cells (None: a uniform round). Used when ``mesh`` is None.
         mesh: This rank's piece of the latest mesh handed to ``create_mesh`` at a repartition, or
             None.
+        levels: With ``mesh``: this rank's pieces of the meshes of the refinement chain between the
+            base and the mesh (coarse to fine) handed to ``create_mesh`` at that repartition
+            (:attr:`MeshHierarchy.keep_levels`); empty otherwise.
     """
 
     base: MeshPiece | None = None
     rounds: list[npt.NDArray[np.int32] | None] = field(default_factory=list)
     mesh: MeshPiece | None = None
+    levels: list[MeshPiece] = field(default_factory=list)
 
 
 class RefinementChain:
@@ -87,6 +92,17 @@ class RefinementChain:
             self.meshes = [coarse]
         self.meshes.append(fine)
         return fine
+
+    def create(self, comm: MPI.Comm, recipe: MeshRecipe, base: dolfinx.mesh.Mesh, level_domain: Callable[[], ufl.Mesh],
+               mesh_domain: ufl.Mesh, /, *, nested: bool) -> dolfinx.mesh.Mesh:
+        """The mesh of a repartition's ``recipe`` (its ``mesh`` piece), made with the meshes of its
+        ``levels`` (each with a new ``level_domain()``); ``nested`` (every cell went with its base
+        cell, straight meshes): the chain starts anew with ``base``, those and the mesh (collective)."""
+        meshes = [base, *(create_mesh_from_piece(comm, piece, level_domain()).mesh for piece in recipe.levels)]
+        mesh = create_mesh_from_piece(comm, recipe.mesh, mesh_domain).mesh
+        if nested:
+            self.meshes = [*meshes, mesh]
+        return mesh
 
     def below(self, mesh: dolfinx.mesh.Mesh, base: dolfinx.mesh.Mesh, /) -> tuple[dolfinx.mesh.Mesh, ...] | None:
         """The meshes ``mesh`` was refined from, coarse to fine, ``base`` first (empty: ``mesh`` is
@@ -301,6 +317,7 @@ class MeshHierarchy:
         self._have_midpoints = False
         self.recipe = MeshRecipe()
         self.chain = RefinementChain()
+        self.keep_levels = False  # a repartition moves the chain's meshes too (multigrid levels)
         self._element = base.ufl_domain().ufl_coordinate_element()
         # (base, mesh, local base cell of each owned cell) for the last meshes asked about: an
         # adaptation asks about the old mesh, each refinement round's mesh and the new one.
@@ -385,15 +402,12 @@ class MeshHierarchy:
                     particle_weight: float = 0.01, method: str = "rcb") -> dolfinx.mesh.Mesh:
         """Redistribute the base mesh and ``mesh`` so ranks get equal loads ``cells + W particles``.
 
-        Collective. Each base cell carries its descendants in ``mesh`` and their particles; the
-        base cells are partitioned by ``method`` (:data:`fembase.partition.PARTITIONERS`) and
-        every cell of ``mesh`` goes with its base cell, so later rebuilds (:meth:`rebuild`) keep
-        each region on its rank.
-
-        The partition decision runs on rank 0 with the base cells' midpoints, cell and particle
-        counts (O(base cells), the coarse mesh) and the owner of every base cell is broadcast. The
-        meshes are not gathered: every rank hands its own base cells and its own cells of ``mesh``
-        to ``create_mesh`` (:func:`fembase.distribute.create_mesh_from_piece`).
+        Collective. The base cells, each with its descendants in ``mesh`` and their particles, are
+        partitioned by ``method`` (:data:`fembase.partition.PARTITIONERS`) on rank 0 from their
+        midpoints and counts (O(base cells)); every cell of ``mesh`` goes with its base cell, so
+        later rebuilds (:meth:`rebuild`) keep each region on its rank. Meshes are not gathered:
+        every rank hands its own cells to ``create_mesh`` (:func:`fembase.distribute.create_mesh_from_piece`).
+        With :attr:`keep_levels` the chain's meshes between the base and ``mesh`` move too.
 
         Args:
             mesh: The current mesh, refined from the current base.
@@ -414,6 +428,8 @@ class MeshHierarchy:
         base_of = self.base_cells(mesh)
         owners = _base_owners(comm, self._midpoints, base_of, particles, self.num_base_cells, method=method,
                               particle_weight=particle_weight)
+        rounds = self.chain.below(mesh, self.base) if self.keep_levels and self.curved is None else None
+        levels = [mesh_piece(level, owners[self.base_cells(level)]) for level in (rounds or ())[1:]]  # nested
         canonical = self.base_canonical[:num_base_owned]
         base_piece = mesh_piece(self.base, owners[canonical], canonical)
         created = create_mesh_from_piece(comm, base_piece, self.new_domain())
@@ -424,9 +440,9 @@ class MeshHierarchy:
         # refinement of a repartitioned base with marks computed on another partition gave
         # inconsistent facet ownership (interior facets lost between ranks) in our tests.
         piece = mesh_piece(mesh, owners[base_of])
-        self.recipe = MeshRecipe(base_piece, [], piece)
-        # Not ``comm``: the old base mesh is gone, and with it its communicator.
-        return create_mesh_from_piece(mesh.comm, piece, self.mesh_domain()).mesh
+        self.recipe = MeshRecipe(base_piece, [], piece, levels)
+        return self.chain.create(mesh.comm,  # not ``comm``: the old base is gone, and its communicator
+                                 self.recipe, self.base, self.new_domain, self.mesh_domain(), nested=self.curved is None)
 
     def new_domain(self) -> ufl.Mesh:
         """A new UFL domain for a mesh to create (DOLFINx ties each domain object to one mesh)."""
@@ -443,7 +459,8 @@ class MeshHierarchy:
                 self.manifold.fit(self.base)
         self.recipe = recipe
         if recipe.mesh is not None:
-            return create_mesh_from_piece(self.base.comm, recipe.mesh, self.mesh_domain()).mesh
+            return self.chain.create(self.base.comm, recipe, self.base, self.new_domain, self.mesh_domain(),
+                                     nested=self.curved is None)
         mesh = self.base
         for marked in recipe.rounds:
             mesh = self._refine(mesh, marked)

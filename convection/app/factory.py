@@ -168,14 +168,15 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     straight = manifold is not None
     exact = True
     levels = multigrid_levels(config, domain, ranks=comm.size)
-    coarse: list[dolfinx.mesh.Mesh] = []
+    coarse: list[dolfinx.mesh.Mesh] = []  # the boxes below the base, then the base they nest in
 
     def make_base(owners: Any) -> dolfinx.mesh.Mesh:
-        """The base mesh; with multigrid also the meshes nested below it, kept in ``coarse``."""
+        """The base mesh; with multigrid also the meshes nested below it, kept in ``coarse`` (with
+        the base: a checkpoint's repartitioned base replaces it, and they do not nest in that)."""
         if levels == 1:
             return domain.create_mesh(comm, owners=owners, straight=straight)
         meshes = domain.create_mesh_levels(comm, levels, owners=owners)
-        coarse[:] = meshes[:-1]
+        coarse[:] = meshes
         return meshes[-1]
 
     if restore is not None:
@@ -201,7 +202,14 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if bcfg["strategy"] != "none" else None
     levels = None
     if coarse:
-        levels = MeshLevels(coarse, hierarchy.base if hierarchy is not None else mesh, hierarchy)
+        levels = MeshLevels(coarse[:-1], coarse[-1], hierarchy)
+        if hierarchy is not None:
+            hierarchy.keep_levels = True  # a repartition moves the refinement rounds' meshes too
+    elif adaptivity is not None and config["stokes"]["solver"] == "multigrid":
+        # No box nests below the base (a shell; a box whose cells do not halve): the levels are
+        # the refinement rounds (curved on a shell).
+        levels = MeshLevels((), hierarchy.base, hierarchy)
+        hierarchy.keep_levels = True
     return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact, levels)
 
 

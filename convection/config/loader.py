@@ -278,8 +278,8 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
 
 def _check_multigrid(config: dict[str, Any]) -> None:
     """``stokes.solver: multigrid`` needs coarser meshes nested in the run's base mesh (a box whose
-    cells halve; an adaptive mesh adds the meshes of its refinement rounds:
-    :mod:`convection.adapt.levels`) and, for now, no repartitioning; ``stokes.multigrid.levels``
+    cells halve) or an adaptive mesh (the meshes of its refinement rounds, curved on a shell:
+    :mod:`convection.adapt.levels`), repartitioned only if adaptive; ``stokes.multigrid.levels``
     only means something with it (or with ``auto`` where that picks it)."""
     stokes = config["stokes"]
     levels = stokes["multigrid"]["levels"]
@@ -293,17 +293,19 @@ def _check_multigrid(config: dict[str, Any]) -> None:
                 raise ConfigError("config key 'stokes.multigrid.levels': only with stokes.solver: multigrid (or auto "
                                   "on a fixed 3D box whose cells halve)")
         return
-    if config["balance"]["strategy"] != "none":
-        raise ConfigError("config key 'balance.strategy': stokes.solver multigrid runs without repartitioning for now "
-                          "(use iterative with a repartitioned mesh)")
+    if config["balance"]["strategy"] != "none" and not config["adaptivity"]["enabled"]:
+        raise ConfigError("config key 'balance.strategy': stokes.solver multigrid repartitions adaptive meshes only: "
+                          "a repartitioned fixed mesh is nested rank by rank in no coarser mesh (use iterative, or "
+                          "balance.strategy: none)")
     domain = config_domain(config)
     try:
         count = domain.mesh_levels(levels)
     except ValueError as err:
         raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
-    if count < 2:
-        raise ConfigError(f"config key 'stokes.solver': multigrid needs coarser meshes nested in the mesh: a box whose "
-                          f"cells per side are even (e.g. 16, 20, 32), not mesh.geometry {domain.name} with this mesh")
+    if count < 2 and not config["adaptivity"]["enabled"]:  # adaptive: the refinement rounds are levels
+        raise ConfigError(f"config key 'stokes.solver': multigrid needs coarser meshes nested in the mesh (a box whose "
+                          f"cells per side are even, e.g. 16, 20, 32) or an adaptive mesh, not a fixed mesh.geometry "
+                          f"{domain.name} with this mesh")
 
 
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:

@@ -194,6 +194,8 @@ def _write_piece(sink: H5Sink, name: str, piece: MeshPiece | None) -> None:
 def _write_recipe(sink: H5Sink, recipe: MeshRecipe) -> list[str]:
     _write_piece(sink, "recipe/base", recipe.base)
     _write_piece(sink, "recipe/mesh", recipe.mesh)
+    for i, piece in enumerate(recipe.levels):
+        _write_piece(sink, f"recipe/level_{i}", piece)
     rounds = []
     for i, marked in enumerate(recipe.rounds):
         kind = "uniform" if marked is None else "marked"
@@ -463,6 +465,9 @@ def _replay(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np
         if comm.rank == 0 and "mesh/created_owners" in f:
             owners = f["mesh/created_owners"][...].astype(np.int32)
         pieces = {name: _read_piece(f, f"recipe/{name}", comm) if f"recipe/{name}" in f else None for name in ("base", "mesh")}
+        levels = []  # the meshes between the base and the mesh a repartition moved (multigrid levels)
+        while f"recipe/level_{len(levels)}" in f:
+            levels.append(_read_piece(f, f"recipe/level_{len(levels)}", comm))
         rounds = []
         for i, kind in enumerate(saved.state["recipe_rounds"] or []):
             counts = f[f"recipe/round_{i}_counts"][...] if kind == "marked" else None
@@ -475,7 +480,7 @@ def _replay(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np
     created = base if hierarchy is None else hierarchy.base
     if not comm.allreduce(mesh_fingerprint(created) == expected["base"], op=MPI.LAND):
         return f"its base mesh could not be made again on {comm.size} ranks as it was saved"
-    mesh = base if hierarchy is None else hierarchy.replay(MeshRecipe(pieces["base"], rounds, pieces["mesh"]),
+    mesh = base if hierarchy is None else hierarchy.replay(MeshRecipe(pieces["base"], rounds, pieces["mesh"], levels),
                                                            base=False)
     if not comm.allreduce(mesh_fingerprint(mesh) == expected["mesh"], op=MPI.LAND):
         return f"its mesh could not be made again on {comm.size} ranks as it was saved"

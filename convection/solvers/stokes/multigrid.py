@@ -36,7 +36,7 @@ fieldsplit creates the velocity block's PC when the block preconditioner is firs
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,6 +45,7 @@ from petsc4py import PETSc
 
 from convection.schema import param
 from fembase.dolfinx_compat import element_degree, function_space
+from fembase.location import Located
 from fembase.multigrid import prolongation
 
 __all__ = ["GEOMETRIC_MULTIGRID", "MultigridSettings", "VelocityMultigrid"]
@@ -93,18 +94,25 @@ class VelocityMultigrid:
             ``V``'s mesh, every cell on the rank of the coarser cell it lies in
             (:meth:`convection.geometry.domain.Domain.create_mesh_levels` without its last mesh).
             Collective.
+        locate: Where the owned nodes of a finer space lie in a coarser mesh (cells and reference
+            points; None: looked for in its cells), for curved levels whose cells are nested
+            through their straight cells only (:meth:`convection.adapt.levels.MeshLevels.locate`).
 
     Raises:
         ValueError: No coarse mesh, or the meshes are not nested on this partition (every rank).
     """
 
-    def __init__(self, V: dolfinx.fem.FunctionSpace, coarse_meshes: Sequence[dolfinx.mesh.Mesh], /) -> None:
+    def __init__(self, V: dolfinx.fem.FunctionSpace, coarse_meshes: Sequence[dolfinx.mesh.Mesh], /, *,
+                 locate: Callable[[dolfinx.mesh.Mesh, dolfinx.fem.FunctionSpace], Located | None] | None = None
+                 ) -> None:
         if not coarse_meshes:
             raise ValueError("geometric multigrid needs at least one coarser mesh")
         degree = element_degree(V)
         shape = (V.mesh.geometry.dim,)
         spaces = [function_space(mesh, "Lagrange", degree, shape=shape) for mesh in coarse_meshes] + [V]
-        self.interpolations: list[PETSc.Mat] = [prolongation(coarse, fine) for coarse, fine in zip(spaces, spaces[1:])]
+        self.interpolations: list[PETSc.Mat] = [
+            prolongation(coarse, fine, located=locate(coarse.mesh, fine) if locate is not None else None)
+            for coarse, fine in zip(spaces, spaces[1:])]
         self.unknowns = [space.dofmap.index_map.size_global * space.dofmap.index_map_bs for space in spaces]
         self._block: int | None = None  # the handle of the velocity block the PCMG is set up for
 

@@ -233,6 +233,29 @@ def check_viscosity_rules(depends_on: Collection[str], /, *, buoyancy_theta: flo
                           "use picard")
 
 
+def _levels_of(mesh: dolfinx.mesh.Mesh, solver: str, coarse_meshes: Sequence[dolfinx.mesh.Mesh]
+               | Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.mesh.Mesh]], /) -> tuple[str, tuple[dolfinx.mesh.Mesh, ...]]:
+    """The solver for ``mesh`` and, for the multigrid, the coarser meshes it is nested in
+    (collective with a callable ``coarse_meshes``).
+
+    An adaptive mesh that has none (a repartition left it unrefined: the boxes below its base no
+    longer nest in it rank by rank, :class:`convection.adapt.levels.MeshLevels`) is solved with
+    the AMG block preconditioner until a mesh has levels again.
+
+    Raises:
+        ValueError: The multigrid without coarser meshes for a fixed mesh.
+    """
+    if solver != "multigrid":
+        return solver, ()
+    coarse = tuple(coarse_meshes(mesh) if callable(coarse_meshes) else coarse_meshes)
+    if coarse:
+        return solver, coarse
+    if callable(coarse_meshes):
+        return ("iterative" if HAS_HYPRE else "iterative_gamg"), ()
+    raise ValueError("the multigrid Stokes solver needs the coarser meshes the mesh is nested in "
+                     "(coarse_meshes=, Domain.create_mesh_levels)")
+
+
 def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
     """The registry name behind ``name``: ``"auto"`` is ``"iterative"`` in 3D (``"iterative_gamg"``
     when ``rotations``, i.e. both shell surfaces are free slip) and ``"direct"`` in 2D, any other
@@ -332,7 +355,8 @@ class StokesSolver(PetscSolver):
         coarse_meshes: The meshes ``mesh`` is nested in, coarse to fine
             (:meth:`convection.geometry.domain.Domain.create_mesh_levels`), or what gives them for a
             mesh (:class:`convection.adapt.levels.MeshLevels`: also for the meshes of an adaptive
-            run, :meth:`on_mesh`): required by ``solver="multigrid"``, ignored otherwise.
+            run, :meth:`on_mesh`; its ``locate``, if it has one, finds the nodes of a finer level in
+            a coarser one: curved levels): required by ``solver="multigrid"``, ignored otherwise.
 
     Attributes:
         u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
@@ -376,19 +400,17 @@ class StokesSolver(PetscSolver):
                               method=nonlinear.method, pressure_level_free=all(s in self.bcs for s in self.domain.boundaries))
         self._semi_implicit = (SemiImplicitBuoyancy(mesh, approximation, self.buoyancy_theta)
                                if self.buoyancy_theta != 0.0 else None)
-        self._petsc_options = self._create_ksp(
-            mesh.comm, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space), petsc_options)
+        self._asked_solver = solver
+        name, coarse = _levels_of(mesh, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space),
+                                  coarse_meshes)
+        self._petsc_options = self._create_ksp(mesh.comm, name, petsc_options)
         self.is_iterative = self.solver != "direct"
         self.discretisation = StokesDiscretisation(mesh, approximation, domain=self.domain, bcs=self.bcs, degree=degree,
                                                    nitsche_penalty=self.nitsche_penalty)
         self.V, self.Q = self.discretisation.V, self.discretisation.Q
         hierarchy = None
         if self.solver == "multigrid":
-            coarse = coarse_meshes(mesh) if callable(coarse_meshes) else coarse_meshes
-            if not coarse:
-                raise ValueError("the multigrid Stokes solver needs the coarser meshes the mesh is nested in "
-                                 "(coarse_meshes=, Domain.create_mesh_levels)")
-            hierarchy = VelocityMultigrid(self.V, coarse)
+            hierarchy = VelocityMultigrid(self.V, coarse, locate=getattr(coarse_meshes, "locate", None))
             self._petsc_options = {**self._petsc_options, "fieldsplit_u_pc_mg_levels": hierarchy.levels}
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
@@ -419,7 +441,8 @@ class StokesSolver(PetscSolver):
         return self.solver if multigrid is None else f"{self.solver} ({multigrid.levels} levels)"
 
     def settings(self) -> dict[str, Any]:
-        return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self.solver, "petsc_options": self._user_options,
+        return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self._asked_solver,
+                "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
                 "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings,
                 "coarse_meshes": self._coarse_meshes}

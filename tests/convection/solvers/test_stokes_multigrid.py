@@ -204,13 +204,33 @@ def test_multigrid_needs_the_coarse_meshes():
         StokesSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=FREE_SLIP_2D, solver="multigrid")
 
 
+def test_an_adaptive_mesh_without_levels_is_solved_with_the_amg():
+    """A mesh whose levels (a callable: an adaptive run's) are none, as after a repartition of an
+    unrefined mesh: the AMG block preconditioner for this mesh; on_mesh asks for levels again."""
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
+    stokes = StokesSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs=FREE_SLIP_2D, solver="multigrid",
+                          coarse_meshes=lambda m: ())
+    assert stokes.solver in ("iterative", "iterative_gamg") and stokes.settings()["solver"] == "multigrid"
+    assert stokes.linear_system.multigrid is None
+    stokes.destroy()
+
+
+def test_balanced_adaptive_and_shell_multigrid_are_accepted():
+    config = load_config(ROOT / "configs" / "thick_layer_3d.yaml",
+                         ["stokes.solver=multigrid", "balance.strategy=every", "adaptivity.enabled=true",
+                          "adaptivity.max_level=1"])
+    assert config["balance"]["strategy"] == "every"
+    shell = load_config(ROOT / "configs" / "shell_adaptive.yaml", ["stokes.solver=multigrid"])  # curved levels
+    assert shell["stokes"]["solver"] == "multigrid"
+
+
 @pytest.mark.parametrize("sets, message", [
     (["stokes.solver=iterative", "stokes.multigrid.levels=3"], "'stokes.multigrid.levels': only with stokes.solver: multigrid"),
     (["stokes.multigrid.levels=4"], "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
     (["stokes.solver=multigrid", "mesh.cells=[25,25,25]"], "'stokes.solver': multigrid needs coarser meshes"),
     (["stokes.solver=multigrid", "stokes.multigrid.levels=4", "mesh.cells=[20,20,20]"],
      "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
-    (["stokes.solver=multigrid", "balance.strategy=every"], "'balance.strategy': stokes.solver multigrid runs without repartitioning"),
+    (["stokes.solver=multigrid", "balance.strategy=every"], "'balance.strategy': stokes.solver multigrid repartitions adaptive meshes only"),
 ])
 def test_config_rules(sets, message):
     with pytest.raises(ConfigError, match=message):
@@ -218,7 +238,7 @@ def test_config_rules(sets, message):
 
 
 def test_config_rules_shell():
-    with pytest.raises(ConfigError, match="not mesh.geometry spherical_shell"):
+    with pytest.raises(ConfigError, match="not a fixed mesh.geometry spherical_shell"):
         load_config(ROOT / "configs" / "shell_plates.yaml", ["stokes.solver=multigrid"])
 
 

@@ -220,8 +220,8 @@ class ThickLayer:
     seconds_per_step_32: float = 1275.0 / 183  # 32^3 to t = 0.002, one run, start-up included (fourth sitting:
                                                # preconditioner set up every step, so an upper bound)
     rss_per_rank_32_bytes: float = 3082e6     # max RSS per rank at 32^3 on 2 ranks (fourth sitting)
-    steps_to_end_n: int = 1081                # steps to t = 0.02 at CFL 1 on n^3 ...
-    steps_n: int = 24                         # ... n (benchmarks/tackley_king, 2026-12-04)
+    steps_to_end_n: int = 1422                # steps to t = 0.02 at CFL 1 on n^3 ...
+    steps_n: int = 32                         # ... n (benchmarks/tackley_king, 32^3, 2026-12-05)
     end_time: float = 0.02                    # this project's end time (no end time is published with the seed's e)
     efficiency: float = 1.0                   # ASSUMED strong-scaling efficiency of the whole step ...
     min_unknowns_per_rank: int = 20_000       # ... down to this many Stokes unknowns per rank (ASSUMED; below: not projected)
@@ -237,7 +237,7 @@ def thick_layer_table(t: ThickLayer, sizes: tuple[int, ...] = (32, 64, 128),
     """Hours to ``t.end_time`` and memory per rank of the thick layer at ``sizes`` on ``ranks`` ranks.
 
     Derived: the time per step on 2 ranks grows as unknowns^q with q fitted to 16^3 and 32^3; the
-    steps to the end time grow as n (CFL: dt ~ h at the same velocities) from the 24^3 run; the
+    steps to the end time grow as n (CFL: dt ~ h at the same velocities) from the 32^3 run; the
     time on N ranks is the 2-rank time times 2 / (N efficiency); memory per unknown as at 32^3."""
     u16, u32 = stokes_unknowns(16), stokes_unknowns(32)
     q = math.log(t.seconds_per_step_32 / t.seconds_per_step_16) / math.log(u32 / u16)

@@ -52,6 +52,7 @@ from convection.schema import (
     settings_from, short_repr, validate,
 )
 from convection.physics.approximation import PhysicsSettings
+from fembase.dolfinx_compat import DOLFINX_VERSION
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.stokes.solver import AUTO, StokesSettings, check_viscosity_rules
@@ -302,6 +303,10 @@ def _check_multigrid(config: dict[str, Any]) -> None:
         count = domain.mesh_levels(levels)
     except ValueError as err:
         raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
+    if config["balance"]["strategy"] != "none" and domain.manifold() is not None and DOLFINX_VERSION >= (0, 7):
+        raise ConfigError("config key 'balance.strategy': stokes.solver multigrid on a repartitioned curved mesh needs "
+                          "DOLFINx 0.5 for now (on 0.9 a node of the repartitioned shell lay in no coarser cell of "
+                          "its rank); use balance.strategy: none, or stokes.solver: iterative")
     if count < 2 and not config["adaptivity"]["enabled"]:  # adaptive: the refinement rounds are levels
         raise ConfigError(f"config key 'stokes.solver': multigrid needs coarser meshes nested in the mesh (a box whose "
                           f"cells per side are even, e.g. 16, 20, 32) or an adaptive mesh, not a fixed mesh.geometry "

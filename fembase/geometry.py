@@ -93,14 +93,27 @@ class CellGeometry:
         if self.degree > 2:
             raise NotImplementedError("geometry of degree > 2 is not supported")
         self.nodes = np.ascontiguousarray(geometry_dofmap(mesh)[: self.num_local_cells], dtype=np.int32)
-        self.coords = np.ascontiguousarray(mesh.geometry.x[:, : self.gdim], dtype=np.float64)
         self.num_vertices: int = basix.geometry(self.basix_cell).shape[0]
         self.coordinate_element = basix.create_element(
             basix.ElementFamily.P, self.basix_cell, self.degree, basix.LagrangeVariant.gll_warped
         )
+        self.affine = self.simplex and self.degree == 1
+        self._set_coordinates()
+        self.adjacency = CellAdjacency(self.nodes[:, : self.num_vertices], self.coords.shape[0])
+        self.v2c_offsets, self.v2c_cells = self.adjacency.v2c_offsets, self.adjacency.v2c_cells
+        self.max_valence = self.adjacency.max_valence
+
+    def moved(self) -> None:
+        """Take the mesh's node coordinates again after they moved (a deforming mesh: the same
+        cells and nodes, other positions): the cell maps, centres and bounding-box tree are made
+        anew, the adjacency is kept. Local (not collective)."""
+        self._set_coordinates()
+
+    def _set_coordinates(self) -> None:
+        """Everything that depends on the node positions."""
+        self.coords = np.ascontiguousarray(self.mesh.geometry.x[:, : self.gdim], dtype=np.float64)
         vertices = self.coords[self.nodes[:, : self.num_vertices]]
         self.centres = vertices.mean(axis=1)
-        self.affine = self.simplex and self.degree == 1
         self.origin = np.ascontiguousarray(vertices[:, 0, :])
         if self.affine:
             self.J = np.ascontiguousarray(np.transpose(vertices[:, 1:, :] - vertices[:, :1, :], (0, 2, 1)))
@@ -111,9 +124,6 @@ class CellGeometry:
         self.K = np.ascontiguousarray(np.linalg.inv(self.J) if self.gdim == self.tdim and self.num_local_cells
                                       else np.linalg.pinv(self.J))
         self.curvature_padding: float = self._curvature_padding()
-        self.adjacency = CellAdjacency(self.nodes[:, : self.num_vertices], self.coords.shape[0])
-        self.v2c_offsets, self.v2c_cells = self.adjacency.v2c_offsets, self.adjacency.v2c_cells
-        self.max_valence = self.adjacency.max_valence
         self._tree: Any | None = None
 
     def _curvature_padding(self) -> float:

@@ -47,6 +47,7 @@ from particles._stages import IntegratedState, StagePlan
 from particles._velocity import EvaluatorCache, LinearVelocity
 from particles.kernels import stage_combination
 from particles.migration import migrate
+from particles.moving_mesh import pull_in
 from particles.swarm import Swarm
 from particles.transport import TransportStats, relocate
 
@@ -134,6 +135,8 @@ class AdvectionStats:
         evaluation_seconds: Velocity evaluation and position updates.
         relocation_seconds: Transport between cells, including the sort.
         communication_seconds: Migration.
+        pulled_in: Particles (this rank, summed over stages) a moving boundary had passed, moved
+            back in (:func:`particles.moving_mesh.pull_in`).
     """
 
     transport: TransportStats
@@ -144,6 +147,7 @@ class AdvectionStats:
     evaluation_seconds: float
     relocation_seconds: float
     communication_seconds: float
+    pulled_in: int = 0
 
 
 class _StepRecord:
@@ -160,6 +164,7 @@ class _StepRecord:
         self.evaluation = self.relocation = self.communication = 0.0
         self.transport = TransportStats(0, 0, 0, 0)
         self.moved = [0, 0, 0, 0]  # sent, received, lost, global lost
+        self.pulled_in = 0
 
     def move(self, *, last: bool) -> None:
         """Confine (if set), relocate after positions changed and migrate.
@@ -171,7 +176,10 @@ class _StepRecord:
         t0 = time.perf_counter()
         if self.confine is not None:
             self.confine(self.swarm.x)
+        old_cells = self.swarm.cells.copy() if self.swarm.inward is not None else None
         stats = relocate(self.swarm, sort=False)
+        if old_cells is not None:  # a moving boundary may have passed them
+            self.pulled_in += pull_in(self.swarm, old_cells)
         t1 = time.perf_counter()
         mig = _migrate(self.swarm)
         t2 = time.perf_counter()
@@ -184,7 +192,8 @@ class _StepRecord:
         self.transport = self.transport + stats
 
     def stats(self) -> AdvectionStats:
-        return AdvectionStats(self.transport, *self.moved, self.evaluation, self.relocation, self.communication)
+        return AdvectionStats(self.transport, *self.moved, self.evaluation, self.relocation, self.communication,
+                              self.pulled_in)
 
 
 class Advector:

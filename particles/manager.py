@@ -59,6 +59,7 @@ from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
 from particles.interpolation import CellAverage, Interpolator, get_interpolator
 from particles.migration import migrate
+from particles.moving_mesh import FollowStats, follow_mesh
 from particles.output import PARTICLE_WRITERS, OutputRecord, OutputUnits, ParticleWriter
 from particles.population import PopulationControl, PopulationStats, copy_nearest
 from particles.settings import ParticleSettings, particle_settings
@@ -89,7 +90,8 @@ Confine = Callable[[npt.NDArray[np.float64]], None]
 _FUNCTION_PARAMETERS = ("function", "source", "density")
 
 TIMING_PHASES: tuple[str, ...] = (
-    "particle_advection", "particle_sort", "particle_migration", "particle_mesh_change", "particle_population",
+    "particle_advection", "particle_sort", "particle_migration", "particle_mesh_change", "particle_mesh_motion",
+    "particle_population",
     "particle_properties", "particle_interpolation", "particle_output",
 )
 """Phases of :attr:`ParticleManager.timings` (seconds, summed over calls on this rank)."""
@@ -366,7 +368,7 @@ class ParticleManager:
         self.writer = writer
         self.output = output
         self.timings: dict[str, float] = dict.fromkeys(TIMING_PHASES, 0.0)
-        self.lost = self.added = self.removed = 0
+        self.lost = self.added = self.removed = self.pulled_in = 0
         self._fields = TrackedFields(interpolator or CellAverage(), field_degree, self.timings)
         self._clock = _OutputClock()
         self.swarm = Swarm(mesh)
@@ -388,24 +390,15 @@ class ParticleManager:
                     generate_particles: bool = True, output_units: OutputUnits | None = None) -> ParticleManager:
         """One manager from one config section (collective).
 
-        ``section`` is a :class:`~particles.settings.ParticleSettings` or its config section:
-        ``generator`` ({name, parameters; particles_per_cell allowed}), ``integrator`` (name),
-        ``interpolator`` ({name, parameters}), ``properties`` (list of names or {name,
-        parameters}), ``population`` ({min_per_cell, max_per_cell, seed} or None) and ``output``
-        ({every_steps, every_time, properties, every_nth, format} or None); missing keys take the
-        defaults of :class:`~particles.settings.ParticleSettings`. Text values of callable parameters (``function``,
+        ``section`` is a :class:`~particles.settings.ParticleSettings` or its config section (its
+        keys: generator, integrator, interpolator, properties, population, output; missing keys
+        take the settings' defaults). Text values of callable parameters (``function``,
         ``source``, ``density``) are turned into functions by ``make_function``.
 
-        Args:
-            section: The section.
-            mesh: The mesh.
-            directory: Where the particle output goes (needed if the section asks for output).
-            extra_properties: Properties the caller needs besides the section's (e.g. one
-                composition per material), carried first.
-            make_function: Text -> function of the position.
-            field_degree, context, confine, generate_particles: As for the class.
-            output_units: The particle output's conversion to physical units (None: as they are).
-        """
+        ``directory``: where the particle output goes (needed for output); ``extra_properties``:
+        properties the caller needs besides the section's (e.g. one composition per material),
+        carried first; ``output_units``: the output's conversion to physical units (None: as they
+        are); the others as for the class."""
         return cls(mesh, **_config_arguments(section, mesh, directory, extra_properties, make_function, output_units),
                    field_degree=field_degree, context=context, generate_particles=generate_particles,
                    confine=confine)
@@ -481,22 +474,26 @@ class ParticleManager:
         self.timings["particle_sort"] += stats.relocation_seconds
         self.timings["particle_migration"] += stats.communication_seconds
         self.lost += stats.global_lost
-        sent = self.swarm.comm.allreduce(int(stats.sent), op=MPI.SUM)
+        sent, pulled = self.swarm.comm.allreduce(np.array([stats.sent, stats.pulled_in], dtype=np.int64), op=MPI.SUM)
+        self.pulled_in += int(pulled)
         population = self._bound(step=step, salt=0)
         self.update_fields()
         return AdvanceReport(int(stats.global_lost), int(sent), population)
 
+    def follow_mesh(self) -> FollowStats:
+        """Find every particle again after the mesh's nodes moved (:func:`particles.moving_mesh.follow_mesh`),
+        then re-interpolate the tracked fields (collective)."""
+        stats = follow_mesh(self.swarm)
+        self.timings["particle_mesh_motion"] += stats.seconds
+        self.lost += stats.lost
+        self.pulled_in += stats.pulled_in
+        self.update_fields()
+        return stats
+
     def update(self, context: PropertyContext, /, *, step: int, final: bool = False) -> OutputRecord | None:
-        """Refresh the properties whose policy says so and write the particles when due (collective).
-
-        Args:
-            context: Fields and time at the end of the step just taken (``context.time``).
-            step: The step number reached.
-            final: Write regardless of the schedule (end of a run) unless this step was written.
-
-        Returns:
-            The output record if the particles were written.
-        """
+        """Refresh the properties whose policy says so and write the particles when due, or with
+        ``final`` unless this step was written (collective). ``context``: fields and time at the end
+        of the step just taken; ``step``: the step reached. Returns the output record if written."""
         due = self.writer is not None and self._clock.due(self.output, step, context.time, final)
         with _timed(self.timings, "particle_properties"):
             self.properties.update(context, at_output=due)
@@ -516,12 +513,13 @@ class ParticleManager:
         """What a checkpoint needs besides the swarm (:mod:`fembase.state`; JSON-able scalars):
         counters, output schedule, timings. The swarm is a checkpoint part of its own
         (:mod:`particles.checkpoint`), given back by :meth:`adopt`."""
-        return State(scalars={"lost": self.lost, "added": self.added, "removed": self.removed,
+        return State(scalars={"lost": self.lost, "added": self.added, "removed": self.removed, "pulled_in": self.pulled_in,
                               **self._clock.state(), "timings": dict(self.timings)})
 
     def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
         """Take the saved :meth:`state` scalars back (after :meth:`adopt`); no fields to fill."""
         self.lost, self.added, self.removed = int(scalars["lost"]), int(scalars["added"]), int(scalars["removed"])
+        self.pulled_in = int(scalars.get("pulled_in", 0))
         self._clock.restore(scalars)
         self.timings.update(scalars["timings"])
         return {}

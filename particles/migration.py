@@ -131,6 +131,10 @@ class Migrator:
         self._ghost_slots = self._slot_of_rank[self.ghost_owners]
         self._ghost_hints = np.ascontiguousarray(self.ghost_globals, dtype=np.int64).view(np.float64)
 
+    def moved(self) -> None:
+        """Gather the ranks' bounding boxes again after the mesh's nodes moved (collective)."""
+        self.owned_boxes = self._gather_boxes(self.mesh.geometry.dim)
+
     def _gather_boxes(self, gdim: int) -> npt.NDArray[np.float64]:
         box = owned_box(self.mesh)
         boxes = np.empty((self.comm.size, 2, gdim))

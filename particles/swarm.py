@@ -25,6 +25,8 @@ the named column ranges of the property table (:mod:`particles._property_layout`
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -71,6 +73,12 @@ class Swarm:
 
     Args:
         mesh: The DOLFINx mesh (any cell type DOLFINx supports with an affine or non-affine map).
+
+    Attributes:
+        inward: ``inward(x)``, unit directions into the domain at points shape=(n, gdim) ->
+            shape=(n, gdim), where a moving boundary (a free surface) may pass particles: a
+            particle found in no cell after a relocation is moved back in along it
+            (:func:`particles.moving_mesh.pull_in`); None (the default): such particles are lost.
     """
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
@@ -86,6 +94,7 @@ class Swarm:
         self._order = CellOrder(self.num_owned_cells)
         self._layout = PropertyLayouts()
         self._geometry: CellGeometry | None = None
+        self.inward: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]] | None = None
 
     @property
     def geometry(self) -> CellGeometry:
@@ -94,6 +103,13 @@ class Swarm:
         if self._geometry is None:
             self._geometry = CellGeometry(self.mesh)
         return self._geometry
+
+    def mesh_moved(self) -> None:
+        """The mesh's nodes moved: take their new positions into the cell geometry (cell maps,
+        bounding boxes). ``cells`` and ``xref`` are those of the old positions until
+        :func:`particles.moving_mesh.follow_mesh` finds the particles again. Local."""
+        if self._geometry is not None:
+            self._geometry.moved()
 
     # ------------------------------------------------------------------ per-particle arrays
     ids = _column("ids", np.int64, None, "Global ids, shape=(n,), int64.")

@@ -41,8 +41,10 @@ from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.levels import MeshLevels
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
+from convection.deform.motion import FreeSurface
+from convection.deform.surface import FreeSurfaceSettings, surface_terms
 from convection.io.checkpoint import (
-    Checkpointer, SavedRun, restore_mesh, restore_particles, restore_state,
+    CheckpointError, Checkpointer, SavedRun, fill_functions, restore_mesh, restore_particles, restore_state,
 )
 from convection.model.composition import (
     COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
@@ -213,6 +215,29 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact, levels)
 
 
+def _free_surface(config: dict[str, Any], domain: Domain, mesh: dolfinx.mesh.Mesh, bcs: dict[str, VelocityBC],
+                  restore: SavedRun | None, *, exact: bool) -> FreeSurface | None:
+    """The free surfaces (None without): made on the undeformed mesh, then the mesh takes the
+    initial topography, or a checkpoint's coordinates, before anything else is built on it."""
+    names = tuple(name for name, bc in bcs.items() if bc.kind == "free_surface")
+    if not names:
+        return None
+    settings = settings_from(FreeSurfaceSettings, config["free_surface"])
+    surface = FreeSurface(mesh, domain, surface_terms(names, settings))
+    if restore is not None:
+        if not exact:
+            raise CheckpointError(f"checkpoint {restore.path}: a run with a free surface resumes on the number of "
+                                  f"ranks it was written on ({restore.num_ranks}), not {mesh.comm.size}")
+        fill_functions(restore, {f"free_surface/{name}": f
+                                 for name, f in surface.restore(restore.components["free_surface"]).items()},
+                       exact=True)
+        surface.restored()
+    elif settings.initial_topography is not None:
+        surface.raise_surface(Expression(settings.initial_topography, constants=expression_constants(config),
+                                         gdim=domain.gdim))
+    return surface
+
+
 def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, materials: Materials, stokes: StokesSolver,
                temperature: TransportSolver, restore: SavedRun | None) -> ParticleManager | None:
     """The run's particles (None without), generated or the checkpoint's swarm."""
@@ -268,11 +293,13 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     temperature_bcs = temperature_bcs_from_config(config["boundary"]["temperature"], domain)
     meshes = _meshes(config, domain, materials, temperature_bcs, comm, restore)
     mesh = meshes.mesh
+    free_surface = _free_surface(config, domain, mesh, velocity_bcs, restore, exact=meshes.exact)
     stokes_settings = settings_from(StokesSettings, config["stokes"])
     if meshes.coarse is not None:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
         stokes_settings = dataclasses.replace(stokes_settings, solver="multigrid")
-    stokes = StokesSolver(mesh, approximation, bcs=velocity_bcs, domain=domain, coarse_meshes=meshes.coarse or (),
-                          **vars(stokes_settings))
+    stokes = StokesSolver(mesh, approximation, bcs={n: bc for n, bc in velocity_bcs.items() if bc.kind != "free_surface"},
+                          domain=domain, coarse_meshes=meshes.coarse or (),
+                          surface=free_surface.terms if free_surface is not None else None, **vars(stokes_settings))
     energy = settings_from(EnergySettings, config["energy"])
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,
                                   stabilisation=energy.stabilisation, velocity_extrapolation=False)
@@ -286,7 +313,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         for name in approximation.viscosity_law.field_names:
             particles.track(name)
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
-                  particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer)
+                  particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer, free_surface=free_surface)
     if restore is not None:
         restore_state(model, restore, exact=meshes.exact)
     return model

@@ -44,6 +44,7 @@ from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
 from convection.adapt.adaptivity import AdaptivitySettings
 from convection.adapt.rebalance import BalanceSettings
+from convection.deform.surface import FreeSurfaceSettings, check_free_surface, free_surface_boundaries
 from convection.model.composition import CompositionSettings
 from convection.postprocess.postprocessors import DiagnosticsSettings, ModelFeatures, check_statistics
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
@@ -66,7 +67,7 @@ MAX_PARTICLES = 1e8
 """Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
 MAX_STEPS = 1e9
 """Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
-VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates")
+VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates", "free_surface")
 
 
 def _finite_number(value: Any) -> float | None:
@@ -181,6 +182,7 @@ SCHEMA: dict[str, Any] = {
     "time": section_schema(TimeSettings),
     "adaptivity": section_schema(AdaptivitySettings),
     "balance": section_schema(BalanceSettings),
+    "free_surface": section_schema(FreeSurfaceSettings),
     "blowup": section_schema(BlowUp),
     "diagnostics": section_schema(DiagnosticsSettings),
     "output": section_schema(OutputSettings),
@@ -269,7 +271,8 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
     wanted = stokes["multigrid"]["levels"]
     if stokes["solver"] == "multigrid":
         return domain.mesh_levels(wanted)
-    fixed = not config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "none"
+    fixed = (not config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "none"
+             and not free_surface_boundaries(config))
     if stokes["solver"] == AUTO and fixed and config_gdim(config) == 3:
         levels = domain.mesh_levels(wanted)
         coarsest = domain.estimated_cells() / 8 ** (levels - 1)
@@ -316,6 +319,9 @@ def _check_multigrid(config: dict[str, Any]) -> None:
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:
     _check_mesh(config, document)
     _check_multigrid(config)
+    check_free_surface(config, document, domain_class(config))
+    if config["free_surface"]["initial_topography"] is not None:
+        _check_expression(config, "free_surface.initial_topography", config["free_surface"]["initial_topography"])
     adapt = config["adaptivity"]
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
@@ -357,7 +363,8 @@ def _check_statistics(config: dict[str, Any]) -> None:
                              entrainment_material=config["diagnostics"]["entrainment_material"],
                              Ra=config["physics"]["Ra"], points=bool(config["diagnostics"]["points"]),
                              topography_material=config["diagnostics"]["topography_material"],
-                             columns=config_domain(config).columns(1, 1) is not None)
+                             columns=config_domain(config).columns(1, 1) is not None,
+                             free_surface=bool(free_surface_boundaries(config)))
     material = config["diagnostics"]["topography_material"]
     if material is not None and material not in features.materials:
         raise ConfigError(f"config key 'diagnostics.topography_material': {material!r} is not one of the materials "

@@ -126,6 +126,18 @@ def _densities(document: dict[str, Any], scaling: Scaling) -> None:
         del spec["density"]
 
 
+def _free_surface(document: dict[str, Any], scaling: Scaling) -> None:
+    """free_surface.buoyancy, the weight of the reference density in the surface's load, from
+    ``rho0 g L^3 / (eta0 kappa)`` where a boundary is a free surface and it is not given (in place)."""
+    velocity = (document.get("boundary") or {}).get("velocity") if isinstance(document.get("boundary"), dict) else None
+    if not isinstance(velocity, dict) or "free_surface" not in velocity.values():
+        return
+    section = document.setdefault("free_surface", {})
+    if isinstance(section, dict) and section.get("buoyancy") is None and scaling.density is not None \
+            and scaling.gravity is not None:
+        section["buoyancy"] = scaling.buoyancy_number(scaling.needed("density"))
+
+
 def _physics(document: dict[str, Any], scaling: Scaling) -> None:
     """physics.Ra from the scaling; physics.H in W/kg (in place)."""
     physics = document.get("physics")
@@ -167,6 +179,7 @@ def apply_scaling(document: dict[str, Any]) -> dict[str, Any]:
     result = copy.deepcopy(document)
     _densities(result, scaling)
     _physics(result, scaling)
+    _free_surface(result, scaling)
     converted = {name: value if name == "scaling" else _convert(value, scaling, (key_text(name),))
                  for name, value in result.items()}
     return converted

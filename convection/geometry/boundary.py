@@ -32,6 +32,7 @@ VELOCITY_BC_KINDS: dict[str, str] = {
     "free_slip": "zero normal velocity, zero tangential traction",
     "no_slip": "zero velocity",
     "prescribed": "velocity equal to `value`: a constant vector, or expressions in x, y, z, r, ... per component",
+    "free_surface": "zero traction; the surface moves with the flow and the mesh deforms (the free_surface section)",
 }
 """Registry of velocity boundary condition kinds (name -> one-line description)."""
 
@@ -47,7 +48,8 @@ class VelocityBC:
     """Velocity boundary condition on one side.
 
     Attributes:
-        kind: ``"free_slip"`` | ``"no_slip"`` | ``"prescribed"``.
+        kind: ``"free_slip"`` | ``"no_slip"`` | ``"prescribed"`` | ``"free_surface"`` (a natural
+            condition here; :mod:`convection.deform` moves the mesh).
         value: for ``"prescribed"``, the velocity (length ``gdim``): numbers (a constant vector)
             or expression texts (:mod:`convection.expressions`, e.g. ``("-y", "x")``, a rigid
             rotation) per component; or a callable ``f(x)`` from points shape=(3, n) to
@@ -105,7 +107,7 @@ def velocity_dirichlet_bcs(V: dolfinx.fem.FunctionSpace, bcs: dict[str, Velocity
     out = []
     for name in domain.boundaries:
         bc = bcs.get(name)
-        if bc is None:
+        if bc is None or bc.kind == "free_surface":
             continue
         axis = domain.normal_axis(name)
         if bc.kind == "free_slip" and axis is None:

@@ -22,7 +22,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from convection.geometry.domain import Columns, Domain, safe_product
+from convection.geometry.domain import Columns, Domain, kept_facets, safe_product
 from convection.geometry.gravity import VerticalGravity
 from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
 from convection.schema import ConfigError, param
@@ -183,6 +183,7 @@ class BoxDomain(Domain):
         "left": "x = lower", "right": "x = upper", "bottom": "lowest y (2D) or z (3D)",
         "top": "highest y (2D) or z (3D)", "front": "y = lower (3D)", "back": "y = upper (3D)"}
     top: ClassVar[str] = "top"
+    free_surfaces: ClassVar[tuple[str, ...]] = ("top",)
     bottom: ClassVar[str] = "bottom"
 
     def __init__(self, lower: Sequence[float], upper: Sequence[float], /, *, spec: BoxSpec | None = None) -> None:
@@ -339,6 +340,8 @@ class BoxDomain(Domain):
     # ------------------------------------------------------------------ boundaries
     def locate_facets(self, mesh: dolfinx.mesh.Mesh, name: str, /, *,
                       bounds: BoxBounds | None = None) -> npt.NDArray[np.int32]:
+        if (kept := kept_facets(mesh, name)) is not None:
+            return kept
         fdim = mesh.topology.dim - 1
         mesh.topology.create_connectivity(fdim, mesh.topology.dim)
         marker = _side_marker(mesh, name, box_bounds(mesh) if bounds is None else bounds)

@@ -31,7 +31,23 @@ from petsc4py import PETSc
 from convection.geometry.gravity import Gravity
 from fembase.dolfinx_compat import DirichletBC
 
-__all__ = ["Columns", "Domain", "safe_product"]
+__all__ = ["Columns", "Domain", "keep_boundary_facets", "kept_facets", "safe_product"]
+
+_KEPT_FACETS = "_convection_kept_facets"
+
+
+def keep_boundary_facets(domain: "Domain", mesh: dolfinx.mesh.Mesh, /) -> None:
+    """Find the facets of every boundary of ``mesh`` now and keep them with the mesh: a mesh whose
+    nodes move (a free surface) keeps its boundaries where they were found on the undeformed mesh
+    (the domains find them by their coordinates, which the motion changes). Collective."""
+    kept = {name: domain.locate_facets(mesh, name) for name in domain.boundaries}
+    setattr(mesh, _KEPT_FACETS, kept)
+
+
+def kept_facets(mesh: dolfinx.mesh.Mesh, name: str, /) -> npt.NDArray[np.int32] | None:
+    """The facets of boundary ``name`` kept by :func:`keep_boundary_facets`, or None."""
+    kept = getattr(mesh, _KEPT_FACETS, None)
+    return None if kept is None else kept[name]
 
 
 def safe_product(*factors: float) -> float:
@@ -76,6 +92,8 @@ class Domain(ABC):
         boundary_descriptions: Where each of ``config_boundaries`` is (config reference).
         top, bottom: The boundary names of the top and bottom surfaces.
         refinable: Whether runs on it may adapt and repartition (refine a base mesh).
+        free_surfaces: The boundaries that may be a free surface (:mod:`convection.deform`; the
+            mesh moves along ``up`` there).
 
     Attributes:
         gdim: Geometric dimension.
@@ -92,6 +110,7 @@ class Domain(ABC):
     top: ClassVar[str]
     bottom: ClassVar[str]
     refinable: ClassVar[bool] = True
+    free_surfaces: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from convection.geometry.domain import Domain
+from convection.geometry.domain import Domain, kept_facets
 from convection.geometry.gravity import RadialGravity
 from convection.geometry.probes import MAX_PROBES, bounded
 from convection.schema import ConfigError, param
@@ -217,6 +217,8 @@ class RadialDomain(Domain):
     def locate_facets(self, mesh: dolfinx.mesh.Mesh, name: str, /, *,
                       radii: tuple[float, float] | None = None) -> npt.NDArray[np.int32]:
         """The facets of ``inner`` or ``outer`` (``radii``: the mesh's, if known)."""
+        if (kept := kept_facets(mesh, name)) is not None:
+            return kept
         self.check_boundary_names([name])
         inner, outer = shell_radii(mesh) if radii is None else radii
         return self._facets(mesh, radius_marker(mesh.geometry.dim, inner if name == "inner" else outer,

@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from convection.geometry.domain import safe_product
+from convection.geometry.domain import kept_facets, safe_product
 from convection.geometry.mesh import gmsh_mesh, mesh_uniformly
 from convection.geometry.radial import RadialDomain, RadialMeshSettings, check_radial_section, shell_radii
 from convection.schema import ConfigError, param
@@ -181,6 +181,8 @@ class Sector(RadialDomain):
 
     def locate_facets(self, mesh: dolfinx.mesh.Mesh, name: str, /, *,
                       radii: tuple[float, float] | None = None) -> npt.NDArray[np.int32]:
+        if (kept := kept_facets(mesh, name)) is not None:
+            return kept
         if name not in ("west", "east"):
             return super().locate_facets(mesh, name, radii=radii)
         west, east = self.spec.radians

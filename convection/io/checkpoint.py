@@ -38,6 +38,8 @@ round-off (on the same rank count the run says so in one line).
 
 from __future__ import annotations
 
+import contextlib
+
 import json
 import os
 import re
@@ -46,7 +48,7 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import h5py
 import numpy as np
@@ -71,7 +73,7 @@ from particles.manager import ParticleManager
 from particles.properties import PropertyContext
 
 __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpointer", "SavedRun", "latest_checkpoint",
-           "list_checkpoints", "read_checkpoint", "restore_mesh", "restore_particles", "restore_state",
+           "fill_functions", "list_checkpoints", "read_checkpoint", "restore_mesh", "restore_particles", "restore_state",
            "write_checkpoint"]
 
 FORMAT = "convection-checkpoint"
@@ -248,7 +250,9 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
         sink.distributed("mesh/x", cells.x)
         sink.distributed("mesh/base_cells", hierarchy.base_cells(mesh) if hierarchy is not None
                          else np.zeros(n, dtype=np.int64))
-        _write_partition(sink, mesh, hierarchy)
+        # A free surface's mesh is made again undeformed, then takes the saved coordinates.
+        with model.free_surface.undeformed() if model.free_surface is not None else contextlib.nullcontext():
+            _write_partition(sink, mesh, hierarchy)
         functions = {f"{component}/{name}": f for component, s in states.items() for name, f in s.fields.items()}
         for name, f in functions.items():
             values, coords = _owned(f)
@@ -501,9 +505,9 @@ def _base_owners(hierarchy: MeshHierarchy) -> npt.NDArray[np.int32]:
 def restore_state(model: Model, saved: SavedRun, /, *, exact: bool) -> None:
     """Give every stateful component of ``model`` (built on the restored mesh from the checkpoint's
     config) its saved scalars, then fill the Functions it hands back with the saved values: copied
-    when ``exact`` (the same mesh, partition and numbering), else matched by coordinates. The
-    particle swarm is restored before (:func:`restore_particles`). Collective."""
-    comm = model.comm
+    when ``exact`` (the same mesh, partition and numbering), else matched by coordinates; then
+    call the ``restored()`` of the components that have one. The particle swarm is restored
+    before (:func:`restore_particles`). Collective."""
     saved_scalars = saved.components
     functions: dict[str, dolfinx.fem.Function] = {}
     for component, stateful in model.components().items():
@@ -511,6 +515,18 @@ def restore_state(model: Model, saved: SavedRun, /, *, exact: bool) -> None:
             raise CheckpointError(f"checkpoint {saved.path}: no saved state of the {component}")
         for name, target in stateful.restore(saved_scalars[component]).items():
             functions[f"{component}/{name}"] = target
+    fill_functions(saved, functions, exact=exact)
+    for stateful in model.components().values():
+        if hasattr(stateful, "restored"):
+            stateful.restored()
+
+
+def fill_functions(saved: SavedRun, functions: Mapping[str, dolfinx.fem.Function], /, *, exact: bool) -> None:
+    """Fill each Function from the checkpoint's saved values of the same name
+    (``<component>/<name>``): copied when ``exact``, else matched by coordinates. Collective."""
+    if not functions:
+        return
+    comm = next(iter(functions.values())).function_space.mesh.comm
     with h5py.File(saved.path / "state.h5", "r") as f:
         nested: dict[str, h5py.Group] = {}
         _collect(f["functions"], "", nested)

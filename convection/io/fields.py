@@ -28,6 +28,8 @@ from typing import ClassVar, Mapping, Protocol
 import dolfinx.fem
 import dolfinx.io
 import dolfinx.mesh
+import numpy as np
+from mpi4py import MPI
 
 from convection.io.output_units import OutputUnits
 from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
@@ -115,8 +117,14 @@ class FieldOutput:
             finally:
                 x[:] = saved
         self._mesh = mesh
+        self._written_x = mesh.geometry.x.copy()
         self._out = {}
         self.files.append(path)
+
+    def _moved(self, mesh: dolfinx.mesh.Mesh) -> bool:
+        """Whether the mesh's nodes moved since its file was opened (a free surface: a new file
+        holds the deformed mesh). Collective."""
+        return bool(mesh.comm.allreduce(not np.array_equal(mesh.geometry.x, self._written_x), op=MPI.LOR))
 
     def _output_function(self, name: str, f: dolfinx.fem.Function) -> dolfinx.fem.Function:
         out = self._out.get(name)
@@ -143,8 +151,8 @@ class FieldOutput:
     def write(self, functions: Mapping[str, dolfinx.fem.Function], t: float) -> None:
         """Write every Function (all on one mesh) at time ``t`` (collective).
 
-        Adds ``t`` to the current mesh's file (a new file if the mesh changed since the last
-        write), closes that file, then adds a grid for ``t`` to the series ``{prefix}.xdmf``.
+        Adds ``t`` to the current mesh's file (a new file if the mesh changed or its nodes moved
+        since the last write), closes that file, then adds a grid for ``t`` to the series ``{prefix}.xdmf``.
         Writing a time that is already in the series replaces its grid there.
 
         Args:
@@ -158,7 +166,7 @@ class FieldOutput:
         if not functions:
             raise ValueError("FieldOutput.write needs at least one Function")
         mesh = next(iter(functions.values())).function_space.mesh
-        if mesh is not self._mesh:
+        if mesh is not self._mesh or self._moved(mesh):
             self._open(mesh)
         elif self._file is None:
             self._file = dolfinx.io.XDMFFile(mesh.comm, str(self.files[-1]), "a")

@@ -53,6 +53,32 @@ class MeshChanges:
             self._point_evaluator = PointEvaluator(mesh, geometry=geometry)
         return self._point_evaluator
 
+    def moving_frame(self, u: dolfinx.fem.Function, /) -> Callable[[dolfinx.fem.Function], dolfinx.fem.Function]:
+        """What a velocity becomes in the mesh's frame for this step: with a free surface, the
+        velocity minus the mesh velocity of the flow ``u`` (made here); otherwise itself."""
+        model = self.model
+        surface = model.free_surface
+        if surface is None:
+            return lambda v: v
+        if model.particles is not None:  # particles the moving surface passes are moved back in, downwards
+            model.particles.swarm.inward = lambda x: -model.domain.up(x)
+        with model.timers("mesh_motion"):
+            surface.velocity(u)
+        return surface.relative
+
+    def move(self, dt: float, /) -> None:
+        """Move the mesh's nodes by ``dt`` times the free surface's mesh velocity and find the
+        particles again in the moved cells (those the sinking surface left outside are moved
+        down inside: :mod:`particles.moving_mesh`)."""
+        model = self.model
+        with model.timers("mesh_motion"):
+            model.free_surface.move(dt)
+        model.stokes.mesh_moved()
+        model.mesh_version += 1
+        self._point_evaluator = None
+        if model.particles is not None:
+            model.particles.follow_mesh()
+
     def adapt(self) -> tuple[int, int]:
         """Adapt the mesh once (needs the model's ``adaptivity``) and carry the model to it.
         Returns the global cell counts before and after."""

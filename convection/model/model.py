@@ -9,7 +9,9 @@ The model holds the mesh's solvers and the components that act on them, each wit
   material fractions;
 - ``particles`` (:class:`particles.manager.ParticleManager`, or None);
 - ``adaptivity`` (:class:`convection.adapt.adaptivity.Adaptivity`) and ``balancer``
-  (:class:`convection.adapt.rebalance.Balancer`), each with its own schedule.
+  (:class:`convection.adapt.rebalance.Balancer`), each with its own schedule;
+- ``free_surface`` (:class:`convection.deform.motion.FreeSurface`, or None): the mesh moves with
+  the surface.
 
 One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
 
@@ -22,6 +24,9 @@ One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
    predicted buoyancy (``stokes.buoyancy_theta > 0``) ``u^n`` is the flow at ``t^n + theta dt`` and
    the material (particles, advected fractions) moves in ``u^n`` over the whole step: the pairing
    that keeps a dense interface stable at any step (:mod:`convection.physics.buoyancy`);
+   with a free surface the temperature and the advected fields move with ``u - u_mesh`` (the mesh
+   velocity of ``u^n``), then the mesh moves by ``dt u_mesh`` and the particles are found again
+   in its cells (:mod:`convection.deform.motion`);
 4. ``t += dt``; the mesh is adapted and/or repartitioned if due (every field, the velocity history
    and the particles follow);
 5. Stokes is solved for ``u^{n+1}, p^{n+1}``; the particles' properties are refreshed from the new
@@ -40,6 +45,7 @@ import dolfinx.mesh
 import numpy as np
 
 from convection.adapt.adaptivity import Adaptivity
+from convection.deform.motion import FreeSurface
 from convection.geometry.domain import Domain
 from convection.model.composition import CompositionSource
 from convection.model.mesh_changes import MeshChanges
@@ -88,7 +94,7 @@ class Model:
     def __init__(self, stokes: StokesSolver, /, *, temperature: TransportSolver | None = None,
                  solve_temperature: bool = True, composition: CompositionSource | None = None,
                  particles: ParticleManager | None = None, adaptivity: Adaptivity | None = None,
-                 balancer: Balancer | None = None) -> None:
+                 balancer: Balancer | None = None, free_surface: FreeSurface | None = None) -> None:
         if temperature is not None and temperature.velocity_extrapolation:
             raise ValueError("the model extrapolates the velocity itself: build the temperature solver with "
                              "velocity_extrapolation=False")
@@ -99,6 +105,7 @@ class Model:
         self.particles = particles
         self.adaptivity = adaptivity
         self.balancer = balancer
+        self.free_surface = free_surface
         self.timers = Timers()
         self.time = 0.0
         self.timestep = 0
@@ -199,6 +206,8 @@ class Model:
             out["composition"] = self.composition
         if self.particles is not None:
             out["particles"] = self.particles
+        if self.free_surface is not None:
+            out["free_surface"] = self.free_surface
         return out
 
     def state(self) -> State:
@@ -258,14 +267,17 @@ class Model:
         u = self.stokes.u
         u_end = self._velocity_at_step_end(dt)
         u_materials = u if self.stokes.buoyancy_theta > 0.0 else u_end
+        frame = self._mesh_changes.moving_frame(u)  # u - u_mesh with a free surface
         if self.solve_temperature:
             with self.timers("temperature"):
-                self.temperature.step(u_end, dt)
+                self.temperature.step(frame(u_end), dt)
         if self.composition is not None:
             with self.timers("composition"):
-                self.composition.advance(u_materials, dt)
+                self.composition.advance(frame(u_materials), dt)
         if self.particles is not None:
             self.particles.advance(u, u_materials, dt, step=self.timestep, fields=self.particle_fields())
+        if self.free_surface is not None:
+            self._mesh_changes.move(dt)
         self.time += dt
         self.timestep += 1
         self.dt_previous = dt
@@ -310,6 +322,6 @@ class Model:
 
     def destroy(self) -> None:
         """Free the solvers' PETSc objects now, on every rank together."""
-        for solver in (self.stokes, self.temperature, self.composition):
+        for solver in (self.stokes, self.temperature, self.composition, self.free_surface):
             if solver is not None:
                 solver.destroy()

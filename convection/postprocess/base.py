@@ -83,6 +83,7 @@ class ModelFeatures:
         points: ``diagnostics.points`` names points.
         topography_material: ``diagnostics.topography_material``.
         columns: The geometry has lines along ``up`` through it (a box).
+        free_surface: A boundary is a free surface (:mod:`convection.deform`).
     """
 
     energy: bool
@@ -93,6 +94,7 @@ class ModelFeatures:
     points: bool = False
     topography_material: str | None = None
     columns: bool = True
+    free_surface: bool = False
 
     @classmethod
     def of_model(cls, model: Model, diagnostics: DiagnosticsSettings | None = None) -> ModelFeatures:
@@ -101,7 +103,7 @@ class ModelFeatures:
                    materials=tuple(f.name for f in model.fractions),
                    entrainment_material=diagnostics.entrainment_material, Ra=model.stokes.approximation.Ra,
                    points=bool(diagnostics.points), topography_material=diagnostics.topography_material,
-                   columns=model.domain.columns(1, 1) is not None)
+                   columns=model.domain.columns(1, 1) is not None, free_surface=model.free_surface is not None)
 
 
 class Column:

@@ -22,7 +22,10 @@ the point (the lowest rank's where several do). A cell field (the viscosity, ``s
 jumps across the cells' faces: at a point on a face it takes one of the cells' values, which may
 differ between rank counts -- keep such points off the faces.
 
-``topography``: the height of the surface under the material ``diagnostics.topography_material``
+``topography``: with a free surface (:mod:`convection.deform`), the height ``h`` of the surface's
+nodes above the box's top (the reference level): ``topography_max``, ``topography_min`` and
+``topography_rms`` of ``h`` itself, and the profile ``h`` at every node (x, y). Without one, the
+height of the surface under the material ``diagnostics.topography_material``
 (sticky air) that fills the top of a box: along vertical lines at ``x_j``,
 
     h(x_j) = z_top - int C dz          (midpoint samples, 8 per cell height),
@@ -52,7 +55,7 @@ from fembase.dolfinx_compat import function_space, value_size
 from fembase.geometry import locate_owned
 from fembase.state import State
 
-__all__ = ["MaterialStatistics", "PointValues", "Topography"]
+__all__ = ["FreeSurfaceStatistics", "FreeSurfaceTopography", "MaterialStatistics", "PointValues", "Topography"]
 
 _AXES = ("x", "y", "z")
 
@@ -250,10 +253,12 @@ class Topography(_Stateless):
 
     @classmethod
     def missing(cls, features: ModelFeatures) -> str | None:
+        if features.free_surface:
+            return None
         if not features.columns:
             return "needs vertical columns through the domain (a box)"
         return None if features.topography_material is not None else \
-            "needs diagnostics.topography_material (the material above the surface, e.g. sticky air)"
+            "needs a free surface, or diagnostics.topography_material (the material above the surface, e.g. sticky air)"
 
     @classmethod
     def by_default(cls, model: Model) -> bool:
@@ -261,6 +266,8 @@ class Topography(_Stateless):
 
     @classmethod
     def create(cls, model: Model, options: Mapping[str, Any]) -> Topography | None:
+        if model.free_surface is not None:
+            return FreeSurfaceTopography(0)
         settings = options.get("diagnostics") or DiagnosticsSettings()
         names = [f.name for f in model.fractions]
         if settings.topography_material not in names or model.domain.columns(1, 1) is None:
@@ -305,3 +312,55 @@ class Topography(_Stateless):
         relative = h - h.mean()
         return {"topography_max": float(relative.max()), "topography_min": float(relative.min()),
                 "topography_rms": float(np.sqrt(np.mean(relative**2)))}
+
+
+class FreeSurfaceTopography(Topography):
+    """The free surface's nodes' heights above the reference level (module docstring)."""
+
+    def _surface(self, model: Model) -> tuple[np.ndarray, np.ndarray]:
+        """Every rank's owned surface nodes, gathered in the order of their positions: positions
+        across the surface, shape=(n, gdim - 1), and heights, shape=(n,) (collective)."""
+        x, h = model.free_surface.heights()
+        gathered = model.comm.allgather((x[:, :-1], h))
+        across = np.concatenate([g[0] for g in gathered])
+        heights = np.concatenate([g[1] for g in gathered])
+        order = np.lexsort(across.T[::-1]) if across.size else np.zeros(0, dtype=np.int64)
+        return across[order], heights[order]
+
+    def heights(self, model: Model) -> np.ndarray:
+        return self._surface(model)[1]
+
+    def profile(self, model: Model, /) -> dict[str, np.ndarray]:
+        across, h = self._surface(model)
+        out = {axis: across[:, i].copy() for i, axis in enumerate(_AXES[: across.shape[1]])}
+        return {**out, "topography": h}
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        h = self.heights(model)
+        return {"topography_max": float(h.max()), "topography_min": float(h.min()),
+                "topography_rms": float(np.sqrt(np.mean(h**2)))}
+
+
+class FreeSurfaceStatistics(_Stateless):
+    """The mesh of a free surface: its worst cell, and the particles the sinking surface passed."""
+
+    name: ClassVar[str] = "free_surface"
+    description: ClassVar[str] = ("mesh_quality_min (the worst cell's shape, 1: equilateral) and particles_pulled_in "
+                                  "(particles moved back under the surface, so far)")
+    columns = ("mesh_quality_min", "particles_pulled_in")
+
+    @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        return None if features.free_surface else "needs a free surface (boundary.velocity.top: free_surface)"
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return model.free_surface is not None
+
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> FreeSurfaceStatistics | None:
+        return cls() if model.free_surface is not None else None
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        pulled = model.particles.pulled_in if model.particles is not None else 0
+        return {"mesh_quality_min": model.free_surface.quality_min, "particles_pulled_in": pulled}

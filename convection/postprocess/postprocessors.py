@@ -31,8 +31,11 @@ name            columns
                 (:mod:`convection.postprocess.geodynamics`)
 ``points``      every output field at the named points of ``diagnostics.points``: T_<p>,
                 vx_<p>, vy_<p> (, vz_<p>), p_<p>, <material>_<p>, ...
-``topography``  topography_max, topography_min, topography_rms: the surface under the material
+``topography``  topography_max, topography_min, topography_rms: the free surface's height above the
+                box's top; without one, the surface under the material
                 ``diagnostics.topography_material`` (sticky air), about its mean level
+``free_surface`` mesh_quality_min, particles_pulled_in: the deforming mesh's worst cell and the
+                particles the sinking surface passed (:mod:`convection.deform`)
 =============== =======================================================================
 
 ``nonlinear``, ``rheology``, ``energy`` and ``surface`` apply by default to a model whose viscosity
@@ -66,7 +69,7 @@ from convection.model.rheology_fields import flow_viscosity
 from convection.postprocess.base import (
     NEEDS_ENERGY, Column, DiagnosticsSettings, Forms, ModelFeatures, Postprocessor, integral,
 )
-from convection.postprocess.geodynamics import MaterialStatistics, PointValues, Topography
+from convection.postprocess.geodynamics import FreeSurfaceStatistics, MaterialStatistics, PointValues, Topography
 from fembase.registry import Registry
 from fembase.state import State
 
@@ -411,7 +414,7 @@ def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelF
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
     LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance, SurfaceVelocity,
-    MaterialStatistics, PointValues, Topography))
+    MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

@@ -24,6 +24,8 @@ builds what a linear solver asks for:
   (PETSc's sign); PETSc's fieldsplit takes the factorisation's ``B`` and ``B^T`` from this
   matrix, so it holds the operator's (without them the block-triangular preconditioner is
   block diagonal: 20 instead of 13 multigrid iterations at 16^3, 54 instead of 40 with AMG);
+- with a free surface (:mod:`convection.deform.surface`), its load ``-(B h n, v)`` on the right-hand
+  side and its stabilisation ``theta dt B (u . n, v . e_up)`` in ``A``;
 - with a semi-implicit buoyancy (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`), its
   velocity-velocity term on its own (added to ``A`` every solve) and the whole operator
   ``K + term`` that lifts the boundary values into the right-hand side.
@@ -42,6 +44,7 @@ from convection.physics.approximation import BoussinesqApproximation
 from convection.geometry.boundary import VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
+from convection.deform.surface import SurfaceTerms
 from fembase.dolfinx_compat import function_space
 
 __all__ = ["StokesDiscretisation", "StokesForms"]
@@ -90,7 +93,8 @@ class StokesDiscretisation:
     """
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, /, *,
-                 domain: Domain, bcs: dict[str, VelocityBC], degree: int, nitsche_penalty: float) -> None:
+                 domain: Domain, bcs: dict[str, VelocityBC], degree: int, nitsche_penalty: float,
+                 surface: SurfaceTerms | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.mesh = mesh
@@ -102,6 +106,8 @@ class StokesDiscretisation:
         self.V = function_space(mesh, "Lagrange", degree, shape=(mesh.geometry.dim,))
         self.Q = function_space(mesh, "Lagrange", degree - 1)
         self.dirichlet = velocity_dirichlet_bcs(self.V, bcs, domain)
+        self.surface = surface
+        self.surface_dt = SurfaceTerms.step_constant(mesh) if surface is not None else None
 
     def viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
         """The viscosity (UFL) for ``T``, ``C`` and, for :mod:`convection.physics.rheology` laws, the flow:
@@ -144,6 +150,11 @@ class StokesDiscretisation:
                                         metadata=metadata)
             F_u = F_u + nitsche.a_uu + nitsche.a_up
             F_p = F_p + nitsche.a_pu
+        if self.surface is not None:
+            F_u = F_u - self.surface.rhs(self.mesh, self.domain, v, metadata=metadata)
+            stabilisation = self.surface.lhs(self.mesh, self.domain, u, v, self.surface_dt, metadata=metadata)
+            if stabilisation is not None:
+                F_u = F_u + stabilisation
         J = [[ufl.derivative(F_u, u, du), ufl.derivative(F_u, p, dp)],
              [ufl.derivative(F_p, u, du), None]]
         if pressure_block:
@@ -182,6 +193,10 @@ class StokesDiscretisation:
             a[0][0] += nitsche.a_uu
             a[0][1] += nitsche.a_up
             a[1][0] += nitsche.a_pu
+        if self.surface is not None:
+            stabilisation = self.surface.lhs(self.mesh, self.domain, u, v, self.surface_dt, metadata=metadata)
+            if stabilisation is not None:
+                a[0][0] += stabilisation
         if pressure_block:
             a[1][1] = zero * ufl.inner(p, q) * dx  # a zero block to hold the pinned dof's diagonal
         a_form = dolfinx.fem.form(a)
@@ -201,9 +216,10 @@ class StokesDiscretisation:
             a_lift = dolfinx.fem.form([[a[0][0] + term, a[0][1]], [a[1][0], a[1][1]]])
         # The zero-Constant term keeps the form non-empty when the buoyancy simplifies to 0.
         zero_vec = dolfinx.fem.Constant(self.mesh, np.zeros(self.mesh.geometry.dim))
-        L = dolfinx.fem.form(
-            [ufl.inner(f, v) * dx + ufl.inner(zero_vec, v) * dx, ufl.inner(zero, q) * dx]
-        )
+        L_u = ufl.inner(f, v) * dx + ufl.inner(zero_vec, v) * dx
+        if self.surface is not None:
+            L_u = L_u + self.surface.rhs(self.mesh, self.domain, v, metadata=metadata)
+        L = dolfinx.fem.form([L_u, ufl.inner(zero, q) * dx])
         a_pc = None
         if preconditioner:
             # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).

@@ -69,6 +69,7 @@ from typing import Any, NamedTuple
 import dolfinx
 
 from convection.physics.approximation import BoussinesqApproximation
+from convection.deform.surface import SurfaceTerms
 from convection.geometry.boundary import VelocityBC, has_rotation_null_space
 from convection.geometry.box import BoxDomain
 from convection.geometry.domain import Domain
@@ -328,8 +329,8 @@ class StokesSolver(PetscSolver):
     strong conditions, forms), :class:`~convection.solvers.stokes.linear.StokesLinearSystem` (matrices,
     null spaces, the KSP) and, with ``buoyancy_theta > 0``,
     :class:`~convection.physics.buoyancy.SemiImplicitBuoyancy` (the predicted buoyancy's operator term).
-    This class chooses the linear solver, rebuilds the forms when the fields change, and
-    normalises the solution (zero-mean pressure, no rigid rotation).
+    This class chooses the linear solver, rebuilds the forms when the fields change, and normalises
+    the solution (zero-mean pressure, no rigid rotation).
 
     Args:
         mesh: box mesh (2D or 3D).
@@ -352,6 +353,8 @@ class StokesSolver(PetscSolver):
         nonlinear: Picard or Newton settings (:mod:`convection.solvers.stokes.nonlinear`), used when the
             viscosity depends on the flow (default: :class:`NonlinearSettings`'s defaults).
         multigrid: The ``stokes.multigrid`` settings (how many levels the caller makes).
+        surface: The free surfaces' terms (:mod:`convection.deform.surface`; their boundaries are
+            left out of ``bcs``), or None.
         coarse_meshes: The meshes ``mesh`` is nested in, coarse to fine
             (:meth:`convection.geometry.domain.Domain.create_mesh_levels`), or what gives them for a
             mesh (:class:`convection.adapt.levels.MeshLevels`: also for the meshes of an adaptive
@@ -378,8 +381,8 @@ class StokesSolver(PetscSolver):
                  solver: str = _DEFAULTS.solver, petsc_options: Mapping[str, Any] | None = None,
                  nitsche_penalty: float | None = None, buoyancy_theta: float = _DEFAULTS.buoyancy_theta,
                  nonlinear: NonlinearSettings = _DEFAULTS.nonlinear, multigrid: MultigridSettings = _DEFAULTS.multigrid,
-                 coarse_meshes: Sequence[dolfinx.mesh.Mesh] | Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.mesh.Mesh]] = ()
-                 ) -> None:
+                 coarse_meshes: Sequence[dolfinx.mesh.Mesh] | Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.mesh.Mesh]] = (),
+                 surface: SurfaceTerms | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
         self.prepare_process()
@@ -405,8 +408,9 @@ class StokesSolver(PetscSolver):
                                   coarse_meshes)
         self._petsc_options = self._create_ksp(mesh.comm, name, petsc_options)
         self.is_iterative = self.solver != "direct"
+        self.surface = surface
         self.discretisation = StokesDiscretisation(mesh, approximation, domain=self.domain, bcs=self.bcs, degree=degree,
-                                                   nitsche_penalty=self.nitsche_penalty)
+                                                   nitsche_penalty=self.nitsche_penalty, surface=surface)
         self.V, self.Q = self.discretisation.V, self.discretisation.Q
         hierarchy = None
         if self.solver == "multigrid":
@@ -445,7 +449,7 @@ class StokesSolver(PetscSolver):
                 "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
                 "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings,
-                "coarse_meshes": self._coarse_meshes}
+                "coarse_meshes": self._coarse_meshes, "surface": self.surface}
 
     def prepare(self, T: Any, C: Any = None, /, *, fields: dict[str, Any] | None = None) -> StokesForms:
         """The forms for ``T`` and ``C`` (arguments as in :meth:`solve`): built again unless these
@@ -497,6 +501,8 @@ class StokesSolver(PetscSolver):
                                 assemblies=result.iterations)
         if self._semi_implicit is not None:
             self._semi_implicit.update(dt)
+        if self.surface is not None and self.discretisation.surface_dt.value != dt:  # the stabilisation's dt
+            self.discretisation.surface_dt.value, self._operator_current = dt, False
         refresh = not self._operator_current or self.approximation.is_variable_viscosity
         lag = self._lagged()
         reuse = lag is not None and not lag.due(dt)
@@ -518,6 +524,10 @@ class StokesSolver(PetscSolver):
         norm = self.linear_system.residual_norm()
         return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
                             setup_seconds, assemblies=int(refresh))
+
+    def mesh_moved(self) -> None:
+        """The mesh's nodes moved (a free surface): the next solve assembles the operator anew."""
+        self._operator_current = False
 
     def _lagged(self) -> LaggedPreconditioner | None:
         """The lag of the preconditioner, None where it is set up at every operator change (also
@@ -555,13 +565,9 @@ class StokesSolver(PetscSolver):
         old: "StokesSolver",
         transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
     ) -> None:
-        """Copy ``u`` and ``p`` (used as the initial guess) from a solver on the previous mesh.
-
-        Args:
-            old: solver on the old mesh.
-            transfer: ``transfer(src_on_old_mesh, dst_on_new_mesh)`` fills ``dst``; supplied by
-                the caller (e.g. interpolation between non-matching meshes). Collective.
-        """
+        """Copy ``u`` and ``p`` (the initial guess) from ``old``, a solver on the previous mesh, by
+        ``transfer(src_on_old_mesh, dst_on_new_mesh)`` (e.g. interpolation between non-matching
+        meshes). Collective."""
         transfer(old.u, self.u)
         transfer(old.p, self.p)
         self.u.x.scatter_forward()

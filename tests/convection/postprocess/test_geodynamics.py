@@ -158,7 +158,7 @@ def test_topography_same_on_every_rank_count(tmp_path):
 def test_topography_needs_a_material_above(tmp_path):
     base = {"mesh": {"cells": [4, 4]}, "physics": {"Ra": 1.0}, "time": {"end": 1.0},
             "materials": {"air": {"initial": "z > 0.9"}}, "output": {"directory": "o", "statistics": ["topography"]}}
-    with pytest.raises(ConfigError, match="'topography' needs diagnostics.topography_material"):
+    with pytest.raises(ConfigError, match="'topography' needs a free surface, or diagnostics.topography_material"):
         load_config(None, document=base)
     with pytest.raises(ConfigError, match="'diagnostics.topography_material': 'rock' is not one of the materials"):
         load_config(None, document={**base, "diagnostics": {"topography_material": "rock"}})

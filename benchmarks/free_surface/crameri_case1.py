@@ -54,6 +54,7 @@ def _sticky_air_script() -> Any:
 
 
 STICKY = _sticky_air_script()
+_TRAPEZOID = getattr(np, "trapezoid", None) or np.trapz  # numpy 2 renamed it
 RATE, AMPLITUDE, KYR = STICKY.RATE, STICKY.AMPLITUDE, STICKY.KYR
 
 
@@ -73,7 +74,8 @@ class CosineSurface(FreeSurfaceTopography):
         x, h = self._surface(model)
         x = x[:, 0]
         width = float(x[-1] - x[0])
-        return {"topography_cos1": float(2.0 / width * np.trapz(h * np.cos(2.0 * np.pi * (x - x[0]) / width), x))}
+        integral = _TRAPEZOID(h * np.cos(2.0 * np.pi * (x - x[0]) / width), x)
+        return {"topography_cos1": float(2.0 / width * integral)}
 
 
 def register() -> None:
@@ -148,7 +150,8 @@ def write(out: Path, results: list[dict[str, Any]], fit: float) -> None:
              "lid). A: the amplitude of the surface's box-width cosine mode; the rate is the slope of -ln A over "
              f"t <= {fit:g} kyr, against Crameri et al.'s 2.139e-12 1/s. The free-surface box is 700 km deep; the "
              "sticky-air box adds 100 km of air (its cells count the air's rows). 'motion' is the mesh velocity and "
-             "motion, 'relocation' finding the particles in the moved cells.", "",
+             "motion, 'relocation' finding the particles in the moved cells; with --repeat the wall time is the best "
+             "of the runs (all: crameri_case1.json).", "",
              "| setup | cells | cell size | dt [kyr] | theta | fitted rate [1/s] | error | steps | wall [s] | s/step | "
              "motion | relocation | lost | pulled in | worst cell |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -188,6 +191,14 @@ def _picture(path: Path, results: list[dict[str, Any]]) -> None:
                   title="Crameri case 1: free surface and sticky air")
 
 
+def _best(make: Any, repeat: int) -> dict[str, Any]:
+    """The fastest of ``repeat`` runs (the same run: only the wall time differs), with every wall time."""
+    runs = [make() for _ in range(max(repeat, 1))]
+    best = min(runs, key=lambda r: r["wall"])
+    best["walls"] = [r["wall"] for r in runs]
+    return best
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--cells", nargs="+", default=["112x28", "224x56"])
@@ -197,6 +208,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--air", type=float, default=1e18, help="the sticky air's viscosity [Pa s]")
     parser.add_argument("--fixed", nargs="*", default=["224x56"], help="fixed flat-top runs beside (cells; none: skip)")
     parser.add_argument("--fit", type=float, default=30.0, help="fit the rate over t <= this [kyr]")
+    parser.add_argument("--repeat", type=int, default=1, help="run each free-surface and fixed run this often; the "
+                                                                  "table keeps the fastest (best of N)")
     parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
     out = Path(args.out)
@@ -205,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
     for text in args.cells:
         cells = tuple(int(c) for c in text.split("x"))
         for dt in args.dt:
-            r = run(cells, dt, args.theta, args.fit, out / "runs" / f"free_{text}_dt{dt:g}")
+            r = _best(lambda: run(cells, dt, args.theta, args.fit, out / "runs" / f"free_{text}_dt{dt:g}"), args.repeat)
             results.append(r)
             if comm.rank == 0:
                 rate = STICKY.fitted_rate(np.asarray(r["t"]), np.asarray(r["A"]), args.fit)
@@ -213,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"{r['wall']:.0f} s, lost {r['lost']}", flush=True)
     for text in args.fixed:
         cells = tuple(int(c) for c in text.split("x"))
-        r = run_fixed(cells, args.dt[0], args.fit, out / "runs" / f"fixed_{text}")
+        r = _best(lambda: run_fixed(cells, args.dt[0], args.fit, out / "runs" / f"fixed_{text}"), args.repeat)
         results.append(r)
         if comm.rank == 0:
             print(f"fixed top {text}: {r['wall']:.0f} s, {r['wall'] / max(r['steps'], 1):.3f} s a step", flush=True)

@@ -2,7 +2,8 @@
 surface's cosine amplitude starts at 7 km and relaxes at Crameri et al.'s rate (through
 benchmarks/free_surface/crameri_case1.py; the full-size runs: benchmarks/free_surface/README.md);
 no particle lost on 1, 2 and 3 ranks, the same run on each to the solver's tolerance; resumed
-from a middle checkpoint on 2 ranks, bit for bit (the deformed mesh from the checkpoint)."""
+from a middle checkpoint on 2 ranks, and killed and resumed on 2 ranks, bit for bit (the deformed
+mesh from the checkpoint)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,9 @@ import shutil
 import numpy as np
 import pytest
 
-from _runs import CONFIGS, assert_same_statistics, rows, run_cli, sets
+from _runs import CONFIGS, assert_same_statistics, kill_run, rows, rows_written, run_cli, sets
+
+from convection.io.checkpoint import latest_checkpoint
 
 CONFIG = CONFIGS / "crameri_case1_free_surface.yaml"
 SMALL = ["mesh.cells=[56,14]", "time.dt_max=1 kyr", "time.max_steps=8", "output.progress=none",
@@ -81,3 +84,21 @@ def test_resumed_from_a_middle_checkpoint_bit_for_bit(tmp_path):
     assert "note:" not in proc.stderr, proc.stderr
     assert_same_statistics(reference, resumed)
     assert len(sorted(reference.glob("fields_*.xdmf"))) == 3  # steps 0, 4, 8: the mesh moved in between
+
+
+def test_killed_run_resumes_bit_for_bit(tmp_path):
+    """On 2 ranks, SIGKILLed after 12 statistics rows (checkpoints every 4 steps), resumed from its
+    newest checkpoint: the statistics of the uninterrupted run to the last digit."""
+    extra = [*SMALL, "mesh.cells=[112,28]", "time.max_steps=40", "output.fields_every=0",
+             "output.checkpoint.every_steps=4"]
+    reference = tmp_path / "reference"
+    proc = run_cli(["run", str(CONFIG), "--output", str(reference), *sets(extra)], 2)
+    assert proc.returncode == 0, proc.stderr
+    killed = tmp_path / "killed"
+    code = kill_run(CONFIG, killed, 2, extra, when=lambda d: rows_written(d, 12))
+    assert code != 0, "the run ended before it was killed"
+    assert latest_checkpoint(killed) is not None
+    proc = run_cli(["resume", str(killed)], 2)
+    assert proc.returncode == 0, proc.stderr
+    assert "note:" not in proc.stderr, proc.stderr
+    assert_same_statistics(reference, killed)

@@ -102,3 +102,22 @@ def test_killed_run_resumes_bit_for_bit(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "note:" not in proc.stderr, proc.stderr
     assert_same_statistics(reference, killed)
+
+
+def test_a_3d_box_with_a_free_surface_relaxes_like_the_2d_one(tmp_path):
+    """The same case in a thin 3D slab (16 x 2 x 8 tetrahedral boxes, the cosine along x) on 2
+    ranks: no particle lost, and the surface's highest point after 5 kyr within 3 % of the 2D run's
+    at the same cell size (measured: 5.06 against 4.96 km on 1 rank)."""
+    runs = {}
+    for name, extra, ranks in (("2d", ["mesh.cells=[16,8]"], 1),
+                               ("3d", ["mesh.cells=[16,2,8]", "mesh.upper=[2800 km, 175 km, 700 km]"], 2)):
+        out = tmp_path / name
+        items = [*SMALL, *extra, "time.max_steps=5", "output.fields_every=0", "particles.generator.particles_per_cell=4",
+                 "particles.population.min_per_cell=2", "particles.population.max_per_cell=8"]
+        proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets(items)], ranks)
+        assert proc.returncode == 0, proc.stderr
+        runs[name] = rows(out)
+    assert all(r["n_lost"] == "0" for r in runs["3d"])
+    heights = [float(r["topography_max"]) for r in runs["3d"]]
+    assert np.all(np.diff(heights) < 0.0)
+    assert heights[-1] == pytest.approx(float(runs["2d"][-1]["topography_max"]), rel=0.03)

@@ -45,6 +45,7 @@ from convection.deform.motion import FreeSurface
 from convection.deform.surface import FreeSurfaceSettings, surface_terms
 from convection.io.checkpoint import (
     CheckpointError, Checkpointer, SavedRun, fill_functions, restore_mesh, restore_particles, restore_state,
+    saved_values,
 )
 from convection.model.composition import (
     COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
@@ -224,14 +225,17 @@ def _free_surface(config: dict[str, Any], domain: Domain, mesh: dolfinx.mesh.Mes
         return None
     settings = settings_from(FreeSurfaceSettings, config["free_surface"])
     surface = FreeSurface(mesh, domain, surface_terms(names, settings))
-    if restore is not None:
-        if not exact:
-            raise CheckpointError(f"checkpoint {restore.path}: a run with a free surface resumes on the number of "
-                                  f"ranks it was written on ({restore.num_ranks}), not {mesh.comm.size}")
+    if restore is not None and exact:
         fill_functions(restore, {f"free_surface/{name}": f
                                  for name, f in surface.restore(restore.components["free_surface"]).items()},
                        exact=True)
         surface.restored()
+    elif restore is not None:  # another partition: each node goes where the saved node of its undeformed place went
+        try:
+            surface.move_nodes_as_saved(saved_values(restore, "free_surface/reference"),
+                                        saved_values(restore, "free_surface/coordinates"))
+        except ValueError as err:
+            raise CheckpointError(f"checkpoint {restore.path}: the free surface's nodes: {err}") from None
     elif settings.initial_topography is not None:
         surface.raise_surface(Expression(settings.initial_topography, constants=expression_constants(config),
                                          gdim=domain.gdim))

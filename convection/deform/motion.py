@@ -35,6 +35,7 @@ import numpy.typing as npt
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
+from scipy.spatial import cKDTree
 
 from convection.deform.surface import SurfaceTerms
 from convection.geometry.domain import Domain, keep_boundary_facets
@@ -195,14 +196,14 @@ class FreeSurface:
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> State:
         """The nodes' coordinates (a vector field of the geometry's degree) and the counters."""
-        return State(fields={"coordinates": self._coordinates()},
+        return State(fields={"coordinates": self._coordinates(), "reference": self._coordinates(self._reference_x)},
                      scalars={"moves": self.moves, "quality_min": self.quality_min})
 
     def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
         """The counters; the coordinates to fill (:meth:`restored` puts them into the mesh)."""
         self.moves, self.quality_min = int(scalars["moves"]), float(scalars["quality_min"])
         self._restored = dolfinx.fem.Function(self._vector_space(), name="coordinates")
-        return {"coordinates": self._restored}
+        return {"coordinates": self._restored, "reference": dolfinx.fem.Function(self._vector_space())}
 
     def restored(self) -> None:
         """Put the filled coordinates into the mesh (the factory does it before anything else is
@@ -224,11 +225,30 @@ class FreeSurface:
     def _vector_space(self) -> dolfinx.fem.FunctionSpace:
         return function_space(self.mesh, "Lagrange", coordinate_map(self.mesh).degree, shape=(self.mesh.geometry.dim,))
 
-    def _coordinates(self) -> dolfinx.fem.Function:
+    def _coordinates(self, x: npt.NDArray[np.float64] | None = None) -> dolfinx.fem.Function:
+        """The nodes' positions (``x``: these instead of the mesh's) as a vector field."""
         f = dolfinx.fem.Function(self._vector_space(), name="coordinates")
         gdim = self.mesh.geometry.dim
-        f.x.array[:] = self.mesh.geometry.x[self._node, :gdim].reshape(-1)
+        f.x.array[:] = (self.mesh.geometry.x if x is None else x)[self._node, :gdim].reshape(-1)
         return f
+
+    def move_nodes_as_saved(self, reference: npt.NDArray[np.float64], moved: npt.NDArray[np.float64], /) -> None:
+        """Move every node to the saved position ``moved[i]`` of the saved node whose undeformed
+        position ``reference[i]`` is this node's (both shape=(n, gdim), all the saved nodes): a
+        checkpoint written on another number of ranks. Collective.
+
+        Raises:
+            ValueError: A node has no saved node at its undeformed position (on every rank).
+        """
+        gdim = self.mesh.geometry.dim
+        x = self.mesh.geometry.x
+        distance, index = cKDTree(reference).query(x[:, :gdim])
+        scale = max(1.0, float(np.abs(reference).max(initial=0.0)))
+        worst = self.mesh.comm.allreduce(float(distance.max(initial=0.0)), op=MPI.MAX)
+        if worst > 1e-9 * scale:
+            raise ValueError(f"a node of the mesh is {worst:.3g} away from every saved node")
+        x[:, :gdim] = moved[index]
+        self.quality_min = self._quality()
 
     def destroy(self) -> None:
         """Free the PETSc objects."""

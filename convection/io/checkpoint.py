@@ -73,7 +73,7 @@ from particles.manager import ParticleManager
 from particles.properties import PropertyContext
 
 __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpointer", "SavedRun", "latest_checkpoint",
-           "fill_functions", "list_checkpoints", "read_checkpoint", "restore_mesh", "restore_particles", "restore_state",
+           "fill_functions", "list_checkpoints", "saved_values", "read_checkpoint", "restore_mesh", "restore_particles", "restore_state",
            "write_checkpoint"]
 
 FORMAT = "convection-checkpoint"
@@ -545,6 +545,15 @@ def fill_functions(saved: SavedRun, functions: Mapping[str, dolfinx.fem.Function
             else:
                 _match_by_coordinates(target, group["coords"][...], group["values"][...])
             target.x.scatter_forward()
+
+
+def saved_values(saved: SavedRun, name: str, /) -> npt.NDArray[np.float64]:
+    """Every rank's saved values of the Function ``name`` (``<component>/<name>``), concatenated
+    in rank order, shape=(n, block size). Every rank reads the whole dataset."""
+    with h5py.File(saved.path / "state.h5", "r") as f:
+        if f"functions/{name}/values" not in f:
+            raise CheckpointError(f"checkpoint {saved.path}: no saved values for {name}")
+        return f[f"functions/{name}/values"][...]
 
 
 def restore_particles(saved: SavedRun, manager: ParticleManager, context: PropertyContext, /) -> bool:

@@ -69,18 +69,25 @@ def test_ranks_agree_and_no_particle_is_lost(tmp_path):
                 assert float(b[key]) == pytest.approx(float(a[key]), rel=1e-8), (ranks, key, a["step"])
 
 
-def test_resumed_from_a_middle_checkpoint_bit_for_bit(tmp_path):
-    """On 2 ranks, from the checkpoint of step 4 (the mesh deformed, particles pulled in): the
-    statistics are those of the uninterrupted run to the last digit; the field files hold the
-    deformed mesh (a new file for every output)."""
-    extra = [*SMALL, "output.checkpoint.every_steps=2", "output.checkpoint.keep=10"]
+def _resume_from_step_4(tmp_path, extra: list[str], ranks: int):
+    """The run with ``extra`` on 2 ranks, and a copy of it resumed on ``ranks`` from the checkpoint
+    of step 4: (reference folder, resumed folder, the resume's finished process)."""
     reference = tmp_path / "reference"
     proc = run_cli(["run", str(CONFIG), "--output", str(reference), *sets(extra)], 2)
     assert proc.returncode == 0, proc.stderr
     resumed = tmp_path / "resumed"
     shutil.copytree(reference, resumed)
-    proc = run_cli(["resume", str(resumed), "--checkpoint", str(resumed / "checkpoints" / "checkpoint_000004")], 2)
+    proc = run_cli(["resume", str(resumed), "--checkpoint", str(resumed / "checkpoints" / "checkpoint_000004")], ranks)
     assert proc.returncode == 0, proc.stderr
+    return reference, resumed, proc
+
+
+def test_resumed_from_a_middle_checkpoint_bit_for_bit(tmp_path):
+    """On 2 ranks, from the checkpoint of step 4 (the mesh deformed, particles pulled in): the
+    statistics are those of the uninterrupted run to the last digit; the field files hold the
+    deformed mesh (a new file for every output)."""
+    reference, resumed, proc = _resume_from_step_4(tmp_path, [*SMALL, "output.checkpoint.every_steps=2",
+                                                              "output.checkpoint.keep=10"], 2)
     assert "note:" not in proc.stderr, proc.stderr
     assert_same_statistics(reference, resumed)
     assert len(sorted(reference.glob("fields_*.xdmf"))) == 3  # steps 0, 4, 8: the mesh moved in between
@@ -126,14 +133,8 @@ def test_a_3d_box_with_a_free_surface_relaxes_like_the_2d_one(tmp_path):
 def test_resumed_on_another_rank_count(tmp_path):
     """A 2-rank checkpoint (step 4) resumed on 1 rank: every node goes where the saved node of its
     undeformed place went; the same run to round-off (vrms and topography to 1e-6), no particle lost."""
-    extra = [*SMALL, "output.checkpoint.every_steps=2", "output.checkpoint.keep=10", "output.fields_every=0"]
-    reference = tmp_path / "reference"
-    proc = run_cli(["run", str(CONFIG), "--output", str(reference), *sets(extra)], 2)
-    assert proc.returncode == 0, proc.stderr
-    resumed = tmp_path / "resumed"
-    shutil.copytree(reference, resumed)
-    proc = run_cli(["resume", str(resumed), "--checkpoint", str(resumed / "checkpoints" / "checkpoint_000004")], 1)
-    assert proc.returncode == 0, proc.stderr
+    reference, resumed, proc = _resume_from_step_4(tmp_path, [*SMALL, "output.checkpoint.every_steps=2",
+                                                              "output.checkpoint.keep=10", "output.fields_every=0"], 1)
     assert "written on 2 ranks, resumed on 1" in proc.stderr, proc.stderr
     a, b = rows(reference), rows(resumed)
     assert len(a) == len(b) == 9

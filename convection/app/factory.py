@@ -68,7 +68,7 @@ from convection.io.run_folder import RunFolderLock
 from convection.solvers.stokes.solver import StokesSettings, StokesSolver
 from convection.solvers.petsc_options import PetscSolver
 from convection.solvers.transport import EnergySettings, TransportSolver
-from convection.schema import settings_from
+from convection.schema import ConfigError, settings_from
 from fembase.dolfinx_compat import function_space, petsc_vector
 from particles.manager import ParticleManager
 from particles.properties import PropertyContext
@@ -239,6 +239,9 @@ def _free_surface(config: dict[str, Any], domain: Domain, mesh: dolfinx.mesh.Mes
     elif settings.initial_topography is not None:
         surface.raise_surface(Expression(settings.initial_topography, constants=expression_constants(config),
                                          gdim=domain.gdim))
+        if surface.quality_min <= 0.0:  # the same on every rank
+            raise ConfigError(f"config key 'free_surface.initial_topography': it folds the mesh (a cell turned inside "
+                              f"out, quality {surface.quality_min:.3g}): the surface must stay above the box's bottom")
     return surface
 
 

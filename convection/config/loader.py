@@ -34,6 +34,7 @@ import math
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
+import numpy as np
 import yaml
 
 from convection.expressions import Expression, ExpressionError
@@ -321,7 +322,7 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     _check_multigrid(config)
     check_free_surface(config, document, domain_class(config))
     if config["free_surface"]["initial_topography"] is not None:
-        _check_expression(config, "free_surface.initial_topography", config["free_surface"]["initial_topography"])
+        _check_initial_topography(config)
     adapt = config["adaptivity"]
     if adapt["min_level"] > adapt["max_level"]:
         raise ConfigError("config key 'adaptivity.min_level': must not exceed adaptivity.max_level")
@@ -404,6 +405,20 @@ def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: 
     except ExpressionError as err:
         raise ConfigError(f"config key '{key}': {err}") from None
     return expression
+
+
+def _check_initial_topography(config: dict[str, Any]) -> None:
+    """free_surface.initial_topography: finite in the domain, and the surface above the box's bottom
+    at the top's probe points (lower, the mesh would fold: the run refuses it too)."""
+    key, text = "free_surface.initial_topography", config["free_surface"]["initial_topography"]
+    expression = _check_expression(config, key, text)
+    domain = config_domain(config)
+    points = boundary_probes(domain, domain.top, probe_level(config))
+    depth = float(domain.gravity.top) - float(domain.lower[-1])
+    lowest = float(np.min(expression(points)))
+    if lowest <= -depth:
+        raise ConfigError(f"config key '{key}': {text!r} is {lowest:.6g} on the top: the surface must stay above the "
+                          f"box's bottom ({depth:.6g} below the top)")
 
 
 def _check_velocity_values(config: dict[str, Any], gdim: int) -> None:

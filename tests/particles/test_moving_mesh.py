@@ -19,11 +19,12 @@ from particles.moving_mesh import follow_mesh
 def _swarm(comm, n_per_rank: int = 3000) -> Swarm:
     mesh = dolfinx.mesh.create_unit_square(comm, 16, 16)
     swarm = Swarm(mesh)
-    rng = np.random.default_rng(11 + comm.rank)
-    pts = rng.random((n_per_rank, 2))
+    # The same points on every rank, each kept where its cell is owned: the particle set does not
+    # depend on the partition (two meshes made in turn may be partitioned differently).
+    pts = np.random.default_rng(11).random((n_per_rank * comm.size, 2))
     found = locate(mesh, pts, geometry=swarm.geometry)
     ok = (found.cells >= 0) & (found.cells < swarm.num_owned_cells)
-    ids = comm.rank * n_per_rank + np.flatnonzero(ok)
+    ids = np.flatnonzero(ok)
     swarm.add(ids, pts[ok], found.xref[ok], found.cells[ok])
     return swarm
 

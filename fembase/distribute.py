@@ -539,11 +539,12 @@ def refine_on_ranks(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32] | None
     its parent, with the facet ghost layer (collective).
 
     DOLFINx 0.9 refines without ghost cells when the partition is kept; DOLFINx 0.5 keeps them but
-    can give a rank the same ghost cell twice where three or more ranks meet (seen on 3 ranks: 2-20
-    duplicates per 8 x 8 mesh, none on 2), and a facet then has three cells and is no interior
-    facet any more (jump terms such as the refinement indicator miss it). In both cases the refined
-    mesh is made again from its owned cells on the same partition (:func:`redistribute` with every
-    cell kept on its rank), which builds a clean ghost layer."""
+    can give a rank the same ghost cell twice (seen on 3 ranks: 2-20
+    duplicates per 8 x 8 mesh; on 2 ranks too, after repeated local refinement: 11 in an adapted
+    28 x 7 box), and a facet then has three cells and is no interior facet any more (jump terms such
+    as the refinement indicator miss it, so the adapted mesh depended on the partition). In both
+    cases the refined mesh is made again from its owned cells on the same partition
+    (:func:`redistribute` with every cell kept on its rank), which builds a clean ghost layer."""
     edges = None
     if cells is not None:
         mesh.topology.create_entities(1)
@@ -552,7 +553,7 @@ def refine_on_ranks(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32] | None
     comm = refined.comm
     if comm.size == 1:
         return refined
-    if compat.REFINE_KEEPS_GHOSTS and not (comm.size > 2 and comm.allreduce(duplicate_cells(refined), op=MPI.SUM)):
+    if compat.REFINE_KEEPS_GHOSTS and not comm.allreduce(duplicate_cells(refined), op=MPI.SUM):
         return refined
     num_owned = refined.topology.index_map(refined.topology.dim).size_local
     return redistribute(refined, np.full(num_owned, comm.rank, dtype=np.int32))

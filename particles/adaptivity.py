@@ -15,11 +15,15 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from scipy.spatial import cKDTree
 
 import dolfinx.mesh
 
 from fembase.geometry import Candidates
 from particles.migration import migrate
+from particles.moving_mesh import pull_in
 from particles.swarm import Swarm
 
 __all__ = ["MeshChangeStats", "move_to_mesh"]
@@ -32,11 +36,14 @@ class MeshChangeStats(NamedTuple):
         found_locally: Particles located in an owned cell of the new mesh on their rank.
         migrated: Particles that had to change rank.
         lost: Particles found on no rank (must be 0 when both meshes cover the same domain).
+        pulled_in: Particles outside the new mesh moved inside along the swarm's ``inward``
+            (a free surface: coarsened cells' surface is the chord of the finer one's).
     """
 
     found_locally: int
     migrated: int
     lost: int
+    pulled_in: int = 0
 
 
 def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /, *,
@@ -61,6 +68,22 @@ def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /, *,
     cells = located.cells
     local = (cells >= 0) & (cells < new.num_owned_cells)
     new.add(swarm.ids, swarm.x, located.xref, cells, swarm.properties)
+    pulled = 0
+    if swarm.inward is not None:  # the same on every rank
+        new.inward = swarm.inward
+        pulled = pull_in(new, _nearest_owned_cells(new))
     stats = migrate(new)
-    found = mesh.comm.allreduce(int(np.count_nonzero(local)))
-    return new, MeshChangeStats(found, int(stats.global_sent + stats.global_fallback_sent), int(stats.global_lost))
+    found, pulled = mesh.comm.allreduce(np.array([np.count_nonzero(local), pulled], dtype=np.int64), op=MPI.SUM)
+    return new, MeshChangeStats(int(found), int(stats.global_sent + stats.global_fallback_sent), int(stats.global_lost),
+                                int(pulled))
+
+
+def _nearest_owned_cells(swarm: Swarm, /) -> npt.NDArray[np.int32]:
+    """Per particle, its cell, or for one in no local cell the owned cell with the nearest centre
+    (where :func:`particles.moving_mesh.pull_in` starts looking along ``inward``), shape=(n,)."""
+    cells = swarm.cells.copy()
+    missing = np.flatnonzero(cells < 0)
+    if missing.size and swarm.num_owned_cells:
+        owned = swarm.geometry.centres[: swarm.num_owned_cells]
+        cells[missing] = cKDTree(owned).query(swarm.x[missing])[1]
+    return cells

@@ -532,9 +532,10 @@ class ParticleManager:
 
     # ------------------------------------------------------------------ mesh changes
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, /, *, context: PropertyContext | None = None, step: int = 0,
-                candidates: Candidates | None = None) -> int:
+                candidates: Candidates | None = None, bound: bool = True) -> int:
         """Carry the particles to ``mesh`` (after adaptation or repartitioning), apply the population
-        bounds there and rebuild the tracked fields (collective).
+        bounds there (``bound``: new cells; a repartition, the same cells, passes False, so it
+        changes where particles are, not which) and rebuild the tracked fields (collective).
 
         Args:
             mesh: The new mesh, covering the same domain.
@@ -549,8 +550,10 @@ class ParticleManager:
         with _timed(self.timings, "particle_mesh_change"):
             swarm, stats = move_to_mesh(self.swarm, mesh, candidates=candidates)
         self.lost += stats.lost
+        self.pulled_in += stats.pulled_in
         self._attach(swarm, context=context)
-        self._bound(step=step, salt=1)
+        if bound:
+            self._bound(step=step, salt=1)
         self._fields.rebuild(self.swarm, new_space=False)
         return int(stats.lost)
 

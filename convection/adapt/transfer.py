@@ -31,11 +31,16 @@ from fembase.dolfinx_compat import (bounding_box_tree, cell_dofmap, compute_coll
 from fembase.evaluation import Evaluator
 from fembase.geometry import Candidates, CellGeometry, Located
 
-__all__ = ["NEAR_REACH", "PointEvaluator", "transfer_function"]
+__all__ = ["NEAR_REACH", "SNAP", "PointEvaluator", "transfer_function"]
 
 NEAR_REACH = 0.05
 """How far outside every cell (reference coordinates) a point may lie and still be evaluated, by
 the nearest cell's polynomial."""
+
+
+SNAP = 1e-10
+"""How close (reference coordinates) to a multiple of ``2^-20`` a snapping :class:`PointEvaluator`
+puts a point onto it."""
 
 
 class PointEvaluator:
@@ -50,10 +55,15 @@ class PointEvaluator:
     Args:
         mesh: The mesh the source Functions live on.
         geometry: Its :class:`CellGeometry`, if one exists already (e.g. the particles' swarm's).
+        snap: Put reference coordinates within :data:`SNAP` of a multiple of ``2^-20`` onto it: a
+            vertex or an edge's midpoint of the source mesh then has exactly the barycentric
+            coordinates 0, 1/2 or 1, whichever cell holds it, so a P1 field's value there is the
+            same on any partition (without: the pull-back's round-off depends on the cell found).
     """
 
-    def __init__(self, mesh: dolfinx.mesh.Mesh, /, *, geometry: CellGeometry | None = None) -> None:
+    def __init__(self, mesh: dolfinx.mesh.Mesh, /, *, geometry: CellGeometry | None = None, snap: bool = False) -> None:
         self.mesh = mesh
+        self.snap = snap
         self.geometry = geometry if geometry is not None else CellGeometry(mesh)
         if self.geometry.mesh is not mesh:
             raise ValueError("the geometry belongs to another mesh")
@@ -83,6 +93,8 @@ class PointEvaluator:
         if found is None:
             found = self.geometry.locate(points[:, : self.geometry.gdim],
                                          candidates=None if candidates is None else candidates())
+            if self.snap:
+                found = Located(found.cells, _snapped(found.xref))
             if len(self._located) >= 4:
                 self._located.pop(next(iter(self._located)))
             self._located[key] = found
@@ -228,6 +240,12 @@ class PointEvaluator:
         start = sum(p.shape[0] for p in all_points[: comm.rank])
         values[missing] = total[start: start + missing.size]
         return values
+
+
+def _snapped(xref: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """``xref`` with the coordinates within :data:`SNAP` of a multiple of ``2^-20`` put onto it."""
+    grid = np.round(xref * 2.0**20) * 2.0**-20
+    return np.where(np.abs(xref - grid) < SNAP, grid, xref)
 
 
 def _node_cells(V: dolfinx.fem.FunctionSpace) -> npt.NDArray[np.int32]:

@@ -43,6 +43,7 @@ from fembase.dolfinx_compat import (
     cell_dofmap, coordinate_map, create_vector, function_space, geometry_dofmap, interpolation_points, petsc_vector,
 )
 from fembase.state import State
+from particles.generation.maps import key_cells_by
 
 __all__ = ["FreeSurface", "cell_quality"]
 
@@ -94,6 +95,7 @@ class FreeSurface:
         keep_boundary_facets(domain, mesh)
         self.mesh, self.domain, self.terms = mesh, domain, terms
         self._reference_x = mesh.geometry.x.copy()  # the undeformed nodes (what a restore makes again)
+        key_cells_by(mesh, self._reference_x)  # the particles' random draws: the same on every partition
         self.W = function_space(mesh, "Lagrange", coordinate_map(mesh).degree)
         self.w = dolfinx.fem.Function(self.W, name="mesh_velocity")
         self._node = _node_of_dof(self.W)
@@ -221,6 +223,46 @@ class FreeSurface:
             yield
         finally:
             self.mesh.geometry.x[:] = deformed
+
+    # ------------------------------------------------------------------ a new mesh
+    def positions(self) -> dolfinx.fem.Function:
+        """The nodes' deformed positions as a vector field of the geometry's degree (what a new
+        mesh takes: :meth:`to_mesh`)."""
+        return self._coordinates()
+
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, positions: dolfinx.fem.Function,
+                transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None], /) -> "FreeSurface":
+        """This free surface on ``mesh``, a mesh made from the undeformed one (an adaptation, a
+        repartition), in the reference configuration: ``mesh`` is undeformed and this one's mesh
+        too (inside :meth:`undeformed`); the deformed ``positions`` (:meth:`positions`), a field
+        over the undeformed mesh, are carried over by ``transfer`` (nodal interpolation) and wait
+        for :meth:`displace`. Collective.
+
+        A node of both meshes keeps its position (to the bit, with a snapping transfer); a refined
+        cell's new nodes go to the middle of the deformed cell's edges, so the surface keeps its
+        shape exactly; the nodes of a coarsened cell keep theirs, so the coarser cells' surface is
+        the chord of the finer one's.
+        """
+        new = FreeSurface(mesh, self.domain, self.terms)
+        new._positions = dolfinx.fem.Function(new._vector_space(), name="positions")
+        transfer(positions, new._positions)
+        new.moves = self.moves
+        return new
+
+    def release(self) -> None:
+        """Put the mesh's nodes back undeformed for good: the run left this mesh for a new one
+        (:meth:`to_mesh`), and it may be the mesh hierarchy's base, which the next adaptation
+        refines again."""
+        self.mesh.geometry.x[:] = self._reference_x
+
+    def displace(self) -> None:
+        """Move the nodes to the positions :meth:`to_mesh` carried over (outside
+        :meth:`undeformed`). Collective."""
+        gdim = self.mesh.geometry.dim
+        self.mesh.geometry.x[self._node, :gdim] = self._positions.x.array.reshape(-1, gdim)
+        self.quality_min = self._quality()
+        if self.quality_min <= 0.0:
+            raise RuntimeError(f"the free surface's deformation folds the new mesh (quality {self.quality_min:.3g})")
 
     def _vector_space(self) -> dolfinx.fem.FunctionSpace:
         return function_space(self.mesh, "Lagrange", coordinate_map(self.mesh).degree, shape=(self.mesh.geometry.dim,))

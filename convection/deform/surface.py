@@ -123,7 +123,7 @@ def free_surface_boundaries(config: dict[str, Any], /) -> tuple[str, ...]:
 
 def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain: type[Domain], /) -> None:
     """The cross-key checks of a free surface (ConfigError naming the key): the top of a box; not
-    yet with adaptivity, balancing or the multigrid; ``buoyancy`` known."""
+    yet with the multigrid; ``buoyancy`` known."""
     names = free_surface_boundaries(config)
     if not names:
         if config["free_surface"] != dataclasses.asdict(FreeSurfaceSettings()):  # set, but for nothing
@@ -134,12 +134,9 @@ def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain:
         if name not in domain.free_surfaces:
             raise ConfigError(f"config key 'boundary.velocity.{name}': a free surface is the top of a box for now "
                               f"(mesh.geometry box, boundary.velocity.top)")
-    for key, on in (("adaptivity.enabled", config["adaptivity"]["enabled"]),
-                    ("balance.strategy", config["balance"]["strategy"] != "none"),
-                    ("stokes.solver", config["stokes"]["solver"] == "multigrid")):
-        if on:
-            raise ConfigError(f"config key '{key}': not with a free surface yet (its mesh moves; the refined, "
-                              "repartitioned and coarser meshes do not follow it)")
+    if config["stokes"]["solver"] == "multigrid":
+        raise ConfigError("config key 'stokes.solver': the multigrid is not with a free surface yet (its mesh moves; "
+                          "the coarser levels do not follow it)")
     if config["free_surface"]["buoyancy"] is None:
         raise ConfigError("config key 'free_surface.buoyancy': required with a free surface in a model without units "
                           "(B = rho0 g L^3 / (eta0 kappa), the reference density's weight; in a model with units it "

@@ -245,13 +245,13 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
             state["recipe_rounds"] = _write_recipe(sink, hierarchy.recipe)
         mesh = model.mesh
         n = mesh.topology.index_map(mesh.topology.dim).size_local
-        cells = mesh_piece(mesh, np.zeros(n, dtype=np.int32))  # the owners are chosen on restore
-        sink.distributed("mesh/cells", cells.cells)
-        sink.distributed("mesh/x", cells.x)
-        sink.distributed("mesh/base_cells", hierarchy.base_cells(mesh) if hierarchy is not None
-                         else np.zeros(n, dtype=np.int64))
         # A free surface's mesh is made again undeformed, then takes the saved coordinates.
         with model.free_surface.undeformed() if model.free_surface is not None else contextlib.nullcontext():
+            cells = mesh_piece(mesh, np.zeros(n, dtype=np.int32))  # the owners are chosen on restore
+            sink.distributed("mesh/cells", cells.cells)
+            sink.distributed("mesh/x", cells.x)
+            sink.distributed("mesh/base_cells", hierarchy.base_cells(mesh) if hierarchy is not None
+                             else np.zeros(n, dtype=np.int64))
             _write_partition(sink, mesh, hierarchy)
         functions = {f"{component}/{name}": f for component, s in states.items() for name, f in s.fields.items()}
         for name, f in functions.items():

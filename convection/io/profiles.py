@@ -27,7 +27,8 @@ class ProfileFile:
 
     Args:
         path: The file.
-        comm: The run's communicator.
+        comm: The run's communicator (its rank is kept: a mesh's communicator is freed with the
+            mesh, which adaptivity and balancing replace).
         kinds: Column -> unit kind (:data:`convection.physics.scaling.UNIT_KINDS`) of the profile's
             columns (coordinates and values); the time column is added.
         scaling: The model's scaling (None: nondimensional).
@@ -37,7 +38,7 @@ class ProfileFile:
     def __init__(self, path: Path, comm: MPI.Comm, kinds: Mapping[str, str], /, *, scaling: Scaling | None = None,
                  resume_after: float | None = None) -> None:
         self.path = Path(path)
-        self.comm = comm
+        self.rank = comm.rank
         self.scaling = scaling
         self.kinds = {"time": "time", **kinds}
         self.header: list[str] | None = None
@@ -45,7 +46,7 @@ class ProfileFile:
 
     def write(self, t: float, profile: Mapping[str, np.ndarray], /) -> None:
         """Append the profile at time ``t`` (nondimensional; converted here)."""
-        if self.comm.rank != 0:
+        if self.rank != 0:
             return
         columns = ["time", *profile]
         units = ColumnUnits(self.scaling, columns, self.kinds) if self.scaling is not None else None

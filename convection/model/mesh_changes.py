@@ -5,11 +5,24 @@ fields are carried over (:func:`convection.adapt.transfer.transfer_function`), t
 velocity and the material fractions too; the particles move with the particle manager. When both
 meshes are refined from the adaptivity's base mesh (an adaptation), each field node and each
 particle is looked for first among the new cells of its old cell's base cell.
+
+With a free surface the mesh's nodes are displaced from where the hierarchy made them. A mesh
+change then works in the reference configuration (arbitrary Lagrangian-Eulerian): the old mesh is
+put back undeformed, and the hierarchy's levels and base cells, the refinement indicator, the level
+bounds (``min_level_where``, ...: positions in the undeformed box) and the fields' transfer all see
+the undeformed meshes, where the new mesh nests in the base exactly; the nodes' deformed positions
+are carried to the new mesh like a field over the undeformed one, and the new mesh takes them
+before the particles are found in it (:meth:`convection.deform.motion.FreeSurface.to_mesh`). Each cell is mapped affinely
+in both configurations, so a field's nodal values mean the same in either. Particles keep their
+positions; where coarser cells' surface (the chord of the finer one's) passes below a particle, it
+is moved down onto it (:func:`particles.moving_mesh.pull_in`, counted as pulled in).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable
+import contextlib
+from functools import partial
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import dolfinx.fem
 import dolfinx.mesh
@@ -86,12 +99,12 @@ class MeshChanges:
         adaptivity = model.adaptivity
         assert adaptivity is not None
         before = model.num_cells
-        with model.timers("adaptation"):
+        with model.timers("adaptation"), self._reference_frame() as locator:
             indicator_fields = {"temperature": lambda: [model.T] if model.T is not None else [],
                                 "composition": lambda: list(model.fractions)}
             fields = [f for name in INDICATOR_FIELDS if name in adaptivity.fields for f in indicator_fields[name]()]
             fallback = model.T if model.T is not None else model.stokes.u
-            mesh = adaptivity.new_mesh(model.mesh, fields or [fallback], locator=self.locator(), time=model.time)
+            mesh = adaptivity.new_mesh(model.mesh, fields or [fallback], locator=locator, time=model.time)
             # Both meshes are refined from one base: each particle is looked for first among the
             # new cells of its old cell's base cell, not with a bounding-box search of the new mesh.
             swarm = self._swarm()
@@ -105,7 +118,7 @@ class MeshChanges:
         model = self.model
         balancer = model.balancer
         assert balancer is not None
-        with model.timers("balancing"):
+        with model.timers("balancing"), self._reference_frame():
             before = balancer.loads(model.mesh, self._swarm())
             mesh = balancer.new_mesh(model.mesh, self._swarm())
         self.move_to(mesh)
@@ -125,23 +138,51 @@ class MeshChanges:
             def nodes_in(cells: npt.NDArray[np.int32]) -> Candidates | None:
                 return hierarchy.candidates(old_mesh, mesh, cells)
 
-        with model.timers("field_transfer"):
-            old = self._transfer_fields(mesh, nodes_in)
+        surface = model.free_surface
+        positions = surface.positions() if surface is not None else None
+        with model.timers("field_transfer"), self._reference_frame() as locator:
+            if surface is not None:  # first: it keeps the new mesh's boundary facets for the solvers
+                model.free_surface = surface.to_mesh(mesh, positions, partial(
+                    transfer_function, evaluator=locator, candidates=nodes_in))
+            old = self._transfer_fields(mesh, nodes_in, locator)
+        if surface is not None:
+            surface.release()  # the old mesh may be the hierarchy's base
+            model.free_surface.displace()
+            old.append(surface)
         if model.particles is not None:  # the manager times its own move
+            # A repartition (not nested) keeps the cells: no population bounds (after a free
+            # surface's move the counts are out of them until the next step; on one rank, which
+            # never repartitions, they would stay so).
             model.particles.to_mesh(mesh, context=model.property_context(), step=model.timestep,
-                                    candidates=candidates)
+                                    candidates=candidates, bound=nested)
         for solver in old:
             if solver is not None:
                 solver.destroy()
         self._point_evaluator = None  # it holds the old mesh
         model.mesh_version += 1
 
+    @contextlib.contextmanager
+    def _reference_frame(self) -> Iterator[PointEvaluator]:
+        """The mesh in the configuration a mesh change works in, with a point locator of it there:
+        with a free surface the undeformed one (the hierarchy's levels and base cells, the
+        indicator, the level bounds and the field transfer all work on the undeformed meshes; the
+        nodes' deformed positions are carried as a field), otherwise the mesh as it is."""
+        surface = self.model.free_surface
+        if surface is None:
+            yield self.locator()
+            return
+        with surface.undeformed():
+            # Not the particles' cell geometry (the deformed one). Snapped: the new mesh's nodes are
+            # old nodes or old edges' midpoints, and their positions must not depend on the partition.
+            yield PointEvaluator(self.model.mesh, snap=True)
+
     def _transfer_fields(self, mesh: dolfinx.mesh.Mesh,
-                         candidates: Callable[[npt.NDArray[np.int32]], Candidates | None] | None = None) -> list:
-        """New solvers on ``mesh`` with the fields carried over; returns the old solvers
-        (``candidates``: see :func:`convection.adapt.transfer.transfer_function`)."""
+                         candidates: Callable[[npt.NDArray[np.int32]], Candidates | None] | None,
+                         evaluator: PointEvaluator, /) -> list:
+        """New solvers on ``mesh`` with the fields carried over by ``evaluator`` (of the current
+        mesh); returns the old solvers (``candidates``: see
+        :func:`convection.adapt.transfer.transfer_function`)."""
         model = self.model
-        evaluator = self.locator()
 
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
             transfer_function(src, dst, evaluator=evaluator, candidates=candidates)

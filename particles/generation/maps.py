@@ -16,19 +16,31 @@ import numpy.typing as npt
 import dolfinx.mesh
 
 from fembase.dolfinx_compat import coordinate_map
-from fembase.geometry import cell_nodes, is_affine_simplex, pull_back
+from fembase.geometry import cell_nodes, geometry_dofmap, is_affine_simplex, pull_back
 
-__all__ = ["CellMaps"]
+__all__ = ["CellMaps", "key_cells_by"]
 
 
-def _lex_sort_rows(nodes: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Sort the nodes of every cell lexicographically, shape=(m, n, gdim) -> same."""
+_KEY_COORDINATES = "_particles_key_coordinates"
+
+
+def key_cells_by(mesh: dolfinx.mesh.Mesh, x: npt.NDArray[np.float64], /) -> None:
+    """Key the cells of ``mesh`` (:attr:`CellMaps.keys`, and the vertex order of their maps) by
+    the node positions ``x`` (shape=(num_nodes, 3), the layout of ``mesh.geometry.x``) instead of
+    the nodes' current ones: a mesh whose nodes move (a free surface) keys its cells by their
+    undeformed positions, which are the same bits on every partition; the moved positions differ
+    in round-off between partitions, and so would every random draw keyed by them."""
+    setattr(mesh, _KEY_COORDINATES, x)
+
+
+def _lex_order(nodes: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
+    """The lexicographic order of the nodes of every cell, shape=(m, n, gdim) -> (m, n)."""
     m, n, gdim = nodes.shape
     order = np.tile(np.arange(n), (m, 1))
     for d in reversed(range(gdim)):
         values = np.take_along_axis(nodes[:, :, d], order, axis=1)
         order = np.take_along_axis(order, np.argsort(values, axis=1, kind="stable"), axis=1)
-    return np.take_along_axis(nodes, order[:, :, None], axis=1)
+    return order
 
 
 def _abs_det(jac: list[list[npt.NDArray[np.float64]]], gdim: int, tdim: int) -> npt.NDArray[np.float64]:
@@ -67,11 +79,13 @@ class CellMaps:
         num_owned = mesh.topology.index_map(self.tdim).size_local
         self.cells = np.arange(num_owned, dtype=np.int32)
         nodes = cell_nodes(mesh, self.cells)
-        canonical = _lex_sort_rows(nodes)
-        self.keys = canonical.reshape(num_owned, nodes.shape[1] * self.gdim)
+        key_x = getattr(mesh, _KEY_COORDINATES, None)  # key_cells_by
+        key_nodes = nodes if key_x is None else key_x[geometry_dofmap(mesh)[self.cells]][:, :, : self.gdim]
+        order = _lex_order(key_nodes)[:, :, None]
+        self.keys = np.take_along_axis(key_nodes, order, axis=1).reshape(num_owned, nodes.shape[1] * self.gdim)
         self.affine = is_affine_simplex(mesh)
         self.basix_cell = getattr(basix.CellType, mesh.topology.cell_name())
-        self._nodes = canonical if self.affine else nodes
+        self._nodes = np.take_along_axis(nodes, order, axis=1) if self.affine else nodes
         if not self.affine:
             self._element = basix.create_element(basix.ElementFamily.P, self.basix_cell,
                                                  coordinate_map(mesh).degree, basix.LagrangeVariant.gll_warped)

@@ -10,9 +10,11 @@ from mpi4py import MPI
 
 import dolfinx.mesh
 
+from fembase.dolfinx_compat import refine_keeping_partition
 from fembase.evaluation import locate
 from particles import Swarm
 from particles.advection import Advector
+from particles.adaptivity import move_to_mesh
 from particles.moving_mesh import follow_mesh
 
 
@@ -99,3 +101,33 @@ def test_mesh_moved_updates_the_cell_geometry(amount):
     follow_mesh(swarm)
     _check_located(swarm)
     assert np.allclose(swarm.geometry.coords, swarm.mesh.geometry.x[:, :2])
+
+
+def test_a_move_to_a_coarser_mesh_pulls_in_the_particles_above_its_chords(world):
+    """A particle in a fine mesh's raised top cells lies above the coarse mesh's straight top (the
+    chord of the fine surface): :func:`particles.adaptivity.move_to_mesh` moves it down onto that
+    top with ``inward``, and loses it without. The fine mesh is refined from the coarse one on each
+    cell's rank (as the adaptivity's meshes are)."""
+    coarse = dolfinx.mesh.create_unit_square(world, 4, 4)
+    fine = refine_keeping_partition(coarse)
+    x = fine.geometry.x
+    bump = np.isclose(x[:, 1], 1.0) & np.isclose(np.mod(x[:, 0] * 8, 2.0), 1.0)  # x = 1/8, 3/8, ...
+    x[bump, 1] += 0.02
+    swarm = Swarm(fine)
+    # the same points on every rank (just under each raised node, above y = 1), kept where owned
+    pts = np.column_stack([np.arange(1, 8, 2) / 8.0, np.full(4, 1.01)])
+    found = locate(fine, pts, geometry=swarm.geometry)
+    ok = (found.cells >= 0) & (found.cells < swarm.num_owned_cells)
+    swarm.add(np.flatnonzero(ok), pts[ok], found.xref[ok], found.cells[ok])
+    assert swarm.global_num_particles() == 4
+    counts = {}
+    for inward in (True, False):
+        swarm.inward = (lambda p: np.tile([0.0, -1.0], (p.shape[0], 1))) if inward else None
+        moved, stats = move_to_mesh(swarm, coarse)
+        counts[inward] = stats
+        if inward:
+            assert moved.global_num_particles() == 4
+            _check_located(moved)
+            assert np.all(np.abs(moved.x[:, 1] - 1.0) < 1e-12)  # on the top, inside to round-off
+    assert counts[True].pulled_in == 4 and counts[True].lost == 0
+    assert counts[False].pulled_in == 0 and counts[False].lost == 4

@@ -332,6 +332,24 @@ def owned_box(mesh: dolfinx.mesh.Mesh) -> npt.NDArray[np.float64]:
     return box
 
 
+_REFERENCE_COORDINATES = "_fembase_reference_coordinates"
+
+
+def set_reference_coordinates(mesh: dolfinx.mesh.Mesh, x: npt.NDArray[np.float64], /) -> None:
+    """Register the undeformed node positions ``x`` (shape=(num_nodes, 3), the layout of
+    ``mesh.geometry.x``) of a mesh whose nodes move (a free surface): what must not depend on the
+    motion's history (the particles' cell keys, a curved mesh's cell sizes in forms) is taken from
+    them. The moved positions differ in round-off between partitions and between a run and its
+    resume."""
+    setattr(mesh, _REFERENCE_COORDINATES, x)
+
+
+def reference_coordinates(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.float64]:
+    """The registered undeformed node positions (:func:`set_reference_coordinates`), or the
+    mesh's own."""
+    return getattr(mesh, _REFERENCE_COORDINATES, mesh.geometry.x)
+
+
 def cell_nodes(mesh: dolfinx.mesh.Mesh, cells: npt.NDArray[np.int32]) -> npt.NDArray[np.float64]:
     """Geometry node coordinates of ``cells`` in DOLFINx order, shape=(m, num_nodes, gdim), float64."""
     gdim = mesh.geometry.dim

@@ -63,6 +63,15 @@ def run_cli(args: list[str], ranks: int = 1, timeout: float = 300) -> subprocess
     return subprocess.run(command(args, ranks), cwd=ROOT, env=env(), capture_output=True, text=True, timeout=timeout)
 
 
+def run_on_ranks(config: Path, folders: dict[int, Path], extra: list[str] = ()) -> dict[int, Path]:
+    """Run ``config`` with the overrides ``extra`` into ``folders[ranks]`` on each rank count
+    (asserting that each run ends well); returns ``folders``."""
+    for ranks, folder in folders.items():
+        proc = run_cli(["run", str(config), "--output", str(folder), *sets(list(extra))], ranks)
+        assert proc.returncode == 0, proc.stderr
+    return folders
+
+
 def rows(run_dir: Path) -> list[dict[str, str]]:
     """The rows of a run's statistics.csv, as written (strings)."""
     with open(Path(run_dir) / "statistics.csv", newline="") as f:

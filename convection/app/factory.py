@@ -24,6 +24,8 @@ section             component
 
 from __future__ import annotations
 
+import contextlib
+
 import dataclasses
 import sys
 import time
@@ -42,7 +44,7 @@ from convection.adapt.levels import MeshLevels
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
 from convection.deform.motion import FreeSurface
-from convection.deform.surface import FreeSurfaceSettings, surface_terms
+from convection.deform.surface import FreeSurfaceSettings, free_surface_boundaries, surface_terms
 from convection.io.checkpoint import (
     CheckpointError, Checkpointer, SavedRun, fill_functions, restore_mesh, restore_particles, restore_state,
     saved_values,
@@ -246,22 +248,27 @@ def _free_surface(config: dict[str, Any], domain: Domain, mesh: dolfinx.mesh.Mes
 
 
 def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, materials: Materials, stokes: StokesSolver,
-               temperature: TransportSolver, restore: SavedRun | None) -> ParticleManager | None:
+               temperature: TransportSolver, restore: SavedRun | None, surface: FreeSurface | None
+               ) -> ParticleManager | None:
     """The run's particles (None without), generated or the checkpoint's swarm."""
     # The confinement margin follows the curvature of the coarsest cells a hierarchy hands out (its
     # base, curved): it covers every mesh of the run, and a resumed run gets the same margin as the
-    # run it continues (the mesh it starts from is refined differently from the first one).
+    # run it continues (the mesh it starts from is refined differently from the first one). A free
+    # surface's mesh: its undeformed cells (the deformed ones differ between a run and its resume).
     if not particles_enabled(config):
         return None
     manifold = meshes.manifold
     confinement_mesh = manifold.curve(meshes.hierarchy.base) if manifold is not None else meshes.mesh
+    with surface.undeformed() if surface is not None and confinement_mesh is meshes.mesh else contextlib.nullcontext():
+        confine = domain.confinement(confinement_mesh, free=free_surface_boundaries(config))
     ccfg = config["composition"]
     extra = particle_properties(materials, domain.gdim) if ccfg["source"] == "particles" else []
     context = PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p)
     particles = ParticleManager.from_config(
         config["particles"], meshes.mesh, directory=config["output"]["directory"], extra_properties=extra,
         make_function=point_function(config), field_degree=ccfg["degree"], context=context,
-        generate_particles=restore is None, confine=domain.confinement(confinement_mesh),
+        generate_particles=restore is None,
+        confine=confine,
         output_units=output_units(scaling) if (scaling := scaling_of(config)) is not None else None)
     if restore is not None:
         saved = restore.components["model"]
@@ -312,7 +319,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
                                   stabilisation=energy.stabilisation, velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
                                        gdim=domain.gdim))
-    particles = _particles(config, meshes, domain, materials, stokes, temperature, restore)
+    particles = _particles(config, meshes, domain, materials, stokes, temperature, restore, free_surface)
     composition = _composition(config, mesh, approximation, materials, particles, energy.stabilisation)
     if particles is not None:
         # Particle properties the viscosity laws read (e.g. plastic_strain), averaged onto the mesh

@@ -408,17 +408,18 @@ def _check_expression(config: dict[str, Any], key: str, text: str, *, boundary: 
 
 
 def _check_initial_topography(config: dict[str, Any]) -> None:
-    """free_surface.initial_topography: finite in the domain, and the surface above the box's bottom
-    at the top's probe points (lower, the mesh would fold: the run refuses it too)."""
+    """free_surface.initial_topography: finite in the domain, and the surface above the bottom at
+    the top's probe points (lower, the mesh would fold: the run refuses it too)."""
     key, text = "free_surface.initial_topography", config["free_surface"]["initial_topography"]
     expression = _check_expression(config, key, text)
-    domain = config_domain(config)
-    points = boundary_probes(domain, domain.top, probe_level(config))
-    depth = float(domain.gravity.top) - float(domain.lower[-1])
+    domain, level = config_domain(config), probe_level(config)
+    points = boundary_probes(domain, domain.top, level)
+    bottom = np.asarray(boundary_probes(domain, domain.bottom, level), dtype=np.float64)
+    depth = float(np.max(domain.gravity.depth_at(bottom.T[:, : domain.gdim])))
     lowest = float(np.min(expression(points)))
     if lowest <= -depth:
         raise ConfigError(f"config key '{key}': {text!r} is {lowest:.6g} on the top: the surface must stay above the "
-                          f"box's bottom ({depth:.6g} below the top)")
+                          f"bottom ({depth:.6g} below the top)")
 
 
 def _check_velocity_values(config: dict[str, Any], gdim: int) -> None:

@@ -42,8 +42,8 @@ from convection.geometry.domain import Domain, keep_boundary_facets
 from fembase.dolfinx_compat import (
     cell_dofmap, coordinate_map, create_vector, function_space, geometry_dofmap, interpolation_points, petsc_vector,
 )
+from fembase.geometry import set_reference_coordinates
 from fembase.state import State
-from particles.generation.maps import key_cells_by
 
 __all__ = ["FreeSurface", "cell_quality"]
 
@@ -66,14 +66,16 @@ def cell_quality(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.float64]:
 
 
 def _deform_initially(mesh: dolfinx.mesh.Mesh, domain: Domain, height: Callable[[np.ndarray], np.ndarray], /) -> None:
-    """Raise the box's top to ``height(x)`` above its reference level (``x`` shape=(3, n) -> (n,)),
+    """Raise the top to ``height(x)`` above its reference level (``x`` shape=(3, n) -> (n,)),
     every node along ``e_up`` in proportion to its height above the bottom (a column keeps its
-    cells' order). Local (every rank moves its own and its ghost nodes alike)."""
+    cells' order). Collective (the bottom's depth is the largest over the ranks; every rank moves
+    its own and its ghost nodes alike)."""
     x = mesh.geometry.x
-    axis = mesh.geometry.dim - 1
-    bottom, top = float(domain.lower[axis]), float(domain.gravity.top)
-    fraction = (x[:, axis] - bottom) / (top - bottom)
-    x[:, axis] += fraction * np.asarray(height(x.T), dtype=np.float64).reshape(-1)
+    gdim = mesh.geometry.dim
+    depth = domain.gravity.depth_at(x[:, :gdim])
+    thickness = mesh.comm.allreduce(float(depth.max(initial=0.0)), op=MPI.MAX)  # the bottom's depth
+    fraction = 1.0 - depth / thickness
+    x[:, :gdim] += (fraction * np.asarray(height(x.T), dtype=np.float64).reshape(-1))[:, None] * domain.up(x)
 
 
 class FreeSurface:
@@ -95,7 +97,7 @@ class FreeSurface:
         keep_boundary_facets(domain, mesh)
         self.mesh, self.domain, self.terms = mesh, domain, terms
         self._reference_x = mesh.geometry.x.copy()  # the undeformed nodes (what a restore makes again)
-        key_cells_by(mesh, self._reference_x)  # the particles' random draws: the same on every partition
+        set_reference_coordinates(mesh, self._reference_x)  # keys of random draws, curved cells' sizes
         self.W = function_space(mesh, "Lagrange", coordinate_map(mesh).degree)
         self.w = dolfinx.fem.Function(self.W, name="mesh_velocity")
         self._node = _node_of_dof(self.W)
@@ -193,7 +195,7 @@ class FreeSurface:
         owned = self.W.dofmap.index_map.size_local
         nodes = self._node[self._surface[self._surface < owned]]
         x = self.mesh.geometry.x[nodes, : self.mesh.geometry.dim]
-        return x, x[:, -1] - float(self.domain.gravity.top)
+        return x, 0.0 - self.domain.gravity.depth_at(x)  # 0.0 -: no -0.0 at the reference level
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> State:

@@ -122,7 +122,8 @@ def free_surface_boundaries(config: dict[str, Any], /) -> tuple[str, ...]:
 
 
 def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain: type[Domain], /) -> None:
-    """The cross-key checks of a free surface (ConfigError naming the key): the top of a box; not
+    """The cross-key checks of a free surface (ConfigError naming the key): the top of a box or the
+    annulus's outer circle; not
     yet with the multigrid; ``buoyancy`` known."""
     names = free_surface_boundaries(config)
     if not names:
@@ -132,8 +133,9 @@ def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain:
         return
     for name in names:
         if name not in domain.free_surfaces:
-            raise ConfigError(f"config key 'boundary.velocity.{name}': a free surface is the top of a box for now "
-                              f"(mesh.geometry box, boundary.velocity.top)")
+            raise ConfigError(f"config key 'boundary.velocity.{name}': a free surface is the top of a box or the "
+                              f"outer circle of an annulus for now (boundary.velocity.top of a box, "
+                              f"boundary.velocity.outer of mesh.geometry annulus)")
     if config["stokes"]["solver"] == "multigrid":
         raise ConfigError("config key 'stokes.solver': the multigrid is not with a free surface yet (its mesh moves; "
                           "the coarser levels do not follow it)")

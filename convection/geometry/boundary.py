@@ -156,8 +156,9 @@ def weak_free_slip_boundaries(bcs: dict[str, VelocityBC], domain: Domain, /) -> 
 
 def has_rotation_null_space(bcs: dict[str, VelocityBC], domain: Domain, /) -> bool:
     """Whether the velocity is only defined up to rigid rotations about the centre (a shell free
-    slip on every boundary: one rotation in 2D, three in 3D)."""
-    return domain.has_rotations({n for n, bc in bcs.items() if bc.kind == "free_slip"})
+    slip or a free surface on every boundary: one rotation in 2D, three in 3D; a rotation moves no
+    surface of the undeformed shell)."""
+    return domain.has_rotations({n for n, bc in bcs.items() if bc.kind in ("free_slip", "free_surface")})
 
 
 class NitscheTerms(NamedTuple):

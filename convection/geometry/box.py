@@ -347,9 +347,9 @@ class BoxDomain(Domain):
         marker = _side_marker(mesh, name, box_bounds(mesh) if bounds is None else bounds)
         return dolfinx.mesh.locate_entities_boundary(mesh, fdim, marker).astype(np.int32)
 
-    def facet_tags(self, mesh: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.MeshTags:
+    def _boundary_facets(self, mesh: dolfinx.mesh.Mesh, /) -> list[npt.NDArray[np.int32]]:
         bounds = box_bounds(mesh)
-        return self.tag_facets(mesh, [self.locate_facets(mesh, side, bounds=bounds) for side in self.boundaries])
+        return [self.locate_facets(mesh, side, bounds=bounds) for side in self.boundaries]
 
     def normal_axis(self, name: str, /) -> int:
         return side_axis(name, self.gdim)[0]

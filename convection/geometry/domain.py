@@ -34,6 +34,7 @@ from fembase.dolfinx_compat import DirichletBC
 __all__ = ["Columns", "Domain", "keep_boundary_facets", "kept_facets", "safe_product"]
 
 _KEPT_FACETS = "_convection_kept_facets"
+_FACET_TAGS = "_convection_facet_tags"
 
 
 def keep_boundary_facets(domain: "Domain", mesh: dolfinx.mesh.Mesh, /) -> None:
@@ -187,6 +188,11 @@ class Domain(ABC):
         """Unit up vectors at points ``x`` (shape=(n, gdim) or (n, 3)), shape=(n, gdim)."""
         return self.gravity.up_at(np.asarray(x, dtype=np.float64)[:, : self.gdim])
 
+    def inward(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
+        """Unit directions into the domain from its moving surface at points ``x`` (shape=(n,
+        gdim)), shape=(n, gdim): down (:func:`particles.moving_mesh.pull_in` follows them)."""
+        return -self.up(x)
+
     def check_boundary_names(self, names: Any, /) -> None:
         """Raise ValueError naming the valid names if ``names`` holds one that is not a boundary."""
         unknown = [n for n in names if n not in self.boundaries]
@@ -234,9 +240,11 @@ class Domain(ABC):
         refined cells stay straight."""
         return None
 
-    def confinement(self, mesh: dolfinx.mesh.Mesh, /) -> Callable[[npt.NDArray[np.float64]], None] | None:
+    def confinement(self, mesh: dolfinx.mesh.Mesh, /, *, free: tuple[str, ...] = ()
+                    ) -> Callable[[npt.NDArray[np.float64]], None] | None:
         """``confine(x)`` that moves particles outside the domain back in (points shape=(n, gdim),
-        in place; collective to build), or None when straight walls need none."""
+        in place; collective to build), or None when straight walls need none; ``free``: free
+        surfaces, which move (particles are not held at them)."""
         return None
 
     # ------------------------------------------------------------------ boundaries
@@ -245,8 +253,19 @@ class Domain(ABC):
         """Local indices of the boundary facets of boundary ``name``. Collective."""
 
     def facet_tags(self, mesh: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.MeshTags:
-        """Facet tags of the boundaries: ``boundaries[i]`` gets value ``i + 1``. Collective."""
-        return self.tag_facets(mesh, [self.locate_facets(mesh, name) for name in self.boundaries])
+        """Facet tags of the boundaries: ``boundaries[i]`` gets value ``i + 1``. Collective on the
+        first call for a mesh; later calls return the same tags (the measures of one form must
+        share them: e.g. Nitsche's free slip inside and a free surface outside)."""
+        cached = getattr(mesh, _FACET_TAGS, None)
+        if cached is not None and cached[0] == self.boundaries:
+            return cached[1]
+        tags = self.tag_facets(mesh, self._boundary_facets(mesh))
+        setattr(mesh, _FACET_TAGS, (self.boundaries, tags))
+        return tags
+
+    def _boundary_facets(self, mesh: dolfinx.mesh.Mesh, /) -> list[npt.NDArray[np.int32]]:
+        """The facets of every boundary, in the order of :attr:`boundaries`. Collective."""
+        return [self.locate_facets(mesh, name) for name in self.boundaries]
 
     @staticmethod
     def tag_facets(mesh: dolfinx.mesh.Mesh, facets: list[npt.NDArray[np.int32]], /) -> dolfinx.mesh.MeshTags:

@@ -50,6 +50,9 @@ class Gravity(Protocol):
     def up_axis(self, gdim: int, /) -> int | None:
         """The coordinate axis that ``e_up`` is everywhere, or None (it turns)."""
 
+    def depth_at(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
+        """Depth below the top surface at points ``x`` (shape=(n, gdim)), shape=(n,)."""
+
 
 @dataclass(frozen=True)
 class VerticalGravity:
@@ -78,6 +81,9 @@ class VerticalGravity:
     def up_axis(self, gdim: int, /) -> int | None:
         return gdim - 1
 
+    def depth_at(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
+        return self.top - np.asarray(x, dtype=np.float64)[:, -1]
+
 
 @dataclass(frozen=True)
 class RadialGravity:
@@ -104,3 +110,6 @@ class RadialGravity:
 
     def up_axis(self, gdim: int, /) -> int | None:
         return None
+
+    def depth_at(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
+        return self.outer_radius - np.linalg.norm(np.asarray(x, dtype=np.float64), axis=1)

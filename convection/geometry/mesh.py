@@ -28,6 +28,7 @@ import ufl
 
 from fembase.distribute import create_reproducible_mesh
 from fembase.dolfinx_compat import cell_dofmap, coordinate_map, function_space, geometry_dofmap, gmsh_model_to_mesh
+from fembase.geometry import reference_coordinates
 
 __all__ = ["cell_diameter", "cell_values", "cell_volumes", "gmsh_mesh", "mesh_uniformly"]
 
@@ -110,8 +111,10 @@ def cell_volumes(mesh: dolfinx.mesh.Mesh, /) -> npt.NDArray[np.float64]:
 
 def cell_diameter(mesh: dolfinx.mesh.Mesh, /) -> ufl.core.expr.Expr:
     """Cell diameter for forms: ``ufl.CellDiameter`` on straight-sided cells; on curved cells (which
-    FFCx 0.5 cannot generate ``CellDiameter`` for) a DG0 Function of the largest vertex distance.
-    Not collective (ghost cells are computed directly)."""
+    FFCx 0.5 cannot generate ``CellDiameter`` for) a DG0 Function of the largest vertex distance,
+    of the undeformed cells for a moving mesh (:func:`fembase.geometry.reference_coordinates`: the
+    forms are made once, and a resumed run makes them on the mesh as it was saved). Not collective
+    (ghost cells are computed directly)."""
     if coordinate_map(mesh).degree == 1:
         return ufl.CellDiameter(mesh)
     V0 = function_space(mesh, "DG", 0)
@@ -119,7 +122,7 @@ def cell_diameter(mesh: dolfinx.mesh.Mesh, /) -> ufl.core.expr.Expr:
     num_cells = mesh.topology.index_map(tdim).size_local + mesh.topology.index_map(tdim).num_ghosts
     num_vertices = dolfinx.cpp.mesh.cell_num_vertices(mesh.topology.cell_type)
     nodes = geometry_dofmap(mesh)[:num_cells, :num_vertices]
-    x = mesh.geometry.x[nodes]
+    x = reference_coordinates(mesh)[nodes]
     h = np.zeros(num_cells)
     for i in range(num_vertices):
         for j in range(i + 1, num_vertices):

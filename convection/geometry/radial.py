@@ -87,10 +87,12 @@ def check_radial_section(config: Mapping[str, Any], /) -> None:
         raise ConfigError(f"config key 'mesh.geometry_degree': must be 1 or 2, got {mesh['geometry_degree']}")
 
 
-def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: Any, /) -> Callable[[npt.NDArray[np.float64]], None]:
+def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: Any, /, *, outer: bool = True
+                      ) -> Callable[[npt.NDArray[np.float64]], None]:
     """``confine(x)``: move points (shape=(n, gdim), in place) that lie outside the radii of ``spec``
     (its ``inner_radius`` and ``outer_radius``: a shell's or a sector's), or within
-    ``margin`` of its surfaces, radially to ``r_inner + margin`` / ``r_outer - margin``.
+    ``margin`` of its surfaces, radially to ``r_inner + margin`` / ``r_outer - margin``
+    (``outer=False``: the inner surface only; a free outer surface moves).
 
     For particles (:class:`particles.manager.ParticleManager`): a straight Runge-Kutta step along a
     curved free-slip surface ends slightly outside it. The curved cells' boundary is within
@@ -111,6 +113,8 @@ def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: Any, /) -> Callable[[npt.ND
         padding = mesh.comm.allreduce(CellGeometry(mesh).curvature_padding, op=MPI.MAX)
         margin = 2.0 * padding**2 / spec.inner_radius + 1e-12 * spec.outer_radius
         lower, upper = spec.inner_radius + margin, spec.outer_radius - margin
+    if not outer:
+        upper = np.inf
 
     def confine(x: npt.NDArray[np.float64]) -> None:
         if x.shape[0] == 0:
@@ -210,9 +214,19 @@ class RadialDomain(Domain):
         cell = math.sqrt(3.0) / 4.0 * h * h if self.gdim == 2 else h**3 / (6.0 * math.sqrt(2.0))
         return self.spec.volume / cell
 
-    def confinement(self, mesh: dolfinx.mesh.Mesh, /) -> Callable[[npt.NDArray[np.float64]], None]:
-        """Moves particles outside the radii back in (:func:`shell_confinement`; collective)."""
-        return shell_confinement(mesh, self.spec)
+    def confinement(self, mesh: dolfinx.mesh.Mesh, /, *, free: tuple[str, ...] = ()
+                    ) -> Callable[[npt.NDArray[np.float64]], None]:
+        """Moves particles outside the radii back in (:func:`shell_confinement`; collective); not
+        at a free outer surface."""
+        return shell_confinement(mesh, self.spec, outer=self.top not in free)
+
+    def inward(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
+        """Radially in from the outer half, out from the inner half (into the domain from the
+        nearer surface)."""
+        x = np.asarray(x, dtype=np.float64)[:, : self.gdim]
+        r = np.linalg.norm(x, axis=1)
+        middle = 0.5 * (self.spec.inner_radius + self.spec.outer_radius)
+        return np.where((r > middle)[:, None], -1.0, 1.0) * self.up(x)
 
     def locate_facets(self, mesh: dolfinx.mesh.Mesh, name: str, /, *,
                       radii: tuple[float, float] | None = None) -> npt.NDArray[np.int32]:

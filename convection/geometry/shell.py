@@ -191,9 +191,9 @@ class ShellDomain(RadialDomain):
         """Where refined cells' geometry nodes go: a new (unfitted) :class:`ShellManifold`."""
         return ShellManifold(self.spec.inner_radius, self.spec.outer_radius, self.gdim)
 
-    def facet_tags(self, mesh: dolfinx.mesh.Mesh, /) -> dolfinx.mesh.MeshTags:
+    def _boundary_facets(self, mesh: dolfinx.mesh.Mesh, /) -> list[npt.NDArray[np.int32]]:
         radii = shell_radii(mesh)
-        return self.tag_facets(mesh, [self.locate_facets(mesh, name, radii=radii) for name in self.boundaries])
+        return [self.locate_facets(mesh, name, radii=radii) for name in self.boundaries]
 
     def has_rotations(self, free_slip: set[str], /) -> bool:
         """Free slip on both surfaces: rigid rotations (one in 2D, three in 3D) are free."""
@@ -209,6 +209,7 @@ class Annulus(ShellDomain):
     """The 2D shell: ``mesh.geometry: annulus``."""
 
     name: ClassVar[str] = "annulus"
+    free_surfaces: ClassVar[tuple[str, ...]] = ("outer",)
     description: ClassVar[str] = "2D annulus r_inner <= |x| <= r_outer around the origin (gmsh, curved cells)"
 
 

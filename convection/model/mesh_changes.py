@@ -73,8 +73,8 @@ class MeshChanges:
         surface = model.free_surface
         if surface is None:
             return lambda v: v
-        if model.particles is not None:  # particles the moving surface passes are moved back in, downwards
-            model.particles.swarm.inward = lambda x: -model.domain.up(x)
+        if model.particles is not None:  # particles the moving surface passes are moved back in
+            model.particles.swarm.inward = model.domain.inward
         with model.timers("mesh_motion"):
             surface.velocity(u)
         return surface.relative

@@ -319,12 +319,18 @@ class FreeSurfaceTopography(Topography):
 
     def _surface(self, model: Model) -> tuple[np.ndarray, np.ndarray]:
         """Every rank's owned surface nodes, gathered in the order of their positions: positions
-        across the surface, shape=(n, gdim - 1), and heights, shape=(n,) (collective)."""
+        across the surface, shape=(n, gdim - 1) (a box: the horizontal coordinates; an annulus:
+        ``x, y`` of the nodes, shape=(n, 2), in the order of their angle), and heights, shape=(n,)
+        (collective)."""
         x, h = model.free_surface.heights()
-        gathered = model.comm.allgather((x[:, :-1], h))
+        radial = model.domain.gravity.up_axis(model.domain.gdim) is None
+        gathered = model.comm.allgather((x if radial else x[:, :-1], h))
         across = np.concatenate([g[0] for g in gathered])
         heights = np.concatenate([g[1] for g in gathered])
-        order = np.lexsort(across.T[::-1]) if across.size else np.zeros(0, dtype=np.int64)
+        if radial and across.shape[1] == 2:
+            order = np.argsort(np.arctan2(across[:, 1], across[:, 0]), kind="stable")
+        else:
+            order = np.lexsort(across.T[::-1]) if across.size else np.zeros(0, dtype=np.int64)
         return across[order], heights[order]
 
     def heights(self, model: Model) -> np.ndarray:

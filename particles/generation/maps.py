@@ -16,21 +16,9 @@ import numpy.typing as npt
 import dolfinx.mesh
 
 from fembase.dolfinx_compat import coordinate_map
-from fembase.geometry import cell_nodes, geometry_dofmap, is_affine_simplex, pull_back
+from fembase.geometry import cell_nodes, geometry_dofmap, is_affine_simplex, pull_back, reference_coordinates
 
-__all__ = ["CellMaps", "key_cells_by"]
-
-
-_KEY_COORDINATES = "_particles_key_coordinates"
-
-
-def key_cells_by(mesh: dolfinx.mesh.Mesh, x: npt.NDArray[np.float64], /) -> None:
-    """Key the cells of ``mesh`` (:attr:`CellMaps.keys`, and the vertex order of their maps) by
-    the node positions ``x`` (shape=(num_nodes, 3), the layout of ``mesh.geometry.x``) instead of
-    the nodes' current ones: a mesh whose nodes move (a free surface) keys its cells by their
-    undeformed positions, which are the same bits on every partition; the moved positions differ
-    in round-off between partitions, and so would every random draw keyed by them."""
-    setattr(mesh, _KEY_COORDINATES, x)
+__all__ = ["CellMaps"]
 
 
 def _lex_order(nodes: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
@@ -79,8 +67,8 @@ class CellMaps:
         num_owned = mesh.topology.index_map(self.tdim).size_local
         self.cells = np.arange(num_owned, dtype=np.int32)
         nodes = cell_nodes(mesh, self.cells)
-        key_x = getattr(mesh, _KEY_COORDINATES, None)  # key_cells_by
-        key_nodes = nodes if key_x is None else key_x[geometry_dofmap(mesh)[self.cells]][:, :, : self.gdim]
+        # keyed by the undeformed positions of a moving mesh (the same bits on every partition)
+        key_nodes = reference_coordinates(mesh)[geometry_dofmap(mesh)[self.cells]][:, :, : self.gdim]
         order = _lex_order(key_nodes)[:, :, None]
         self.keys = np.take_along_axis(key_nodes, order, axis=1).reshape(num_owned, nodes.shape[1] * self.gdim)
         self.affine = is_affine_simplex(mesh)

@@ -13,7 +13,7 @@ import shutil
 import numpy as np
 import pytest
 
-from _runs import CONFIGS, assert_same_statistics, kill_run, rows, rows_written, run_cli, sets
+from _runs import CONFIGS, assert_same_statistics, kill_run, rows, rows_written, run_cli, run_on_ranks, sets
 
 from convection.io.checkpoint import latest_checkpoint
 
@@ -54,13 +54,8 @@ def test_relaxation_at_ci_size(tmp_path, bench):
 
 def _on_1_2_3_ranks(tmp_path, extra: list[str]) -> dict[int, list[dict[str, str]]]:
     """The statistics rows of the config with ``extra`` run on 1, 2 and 3 ranks."""
-    runs = {}
-    for ranks in (1, 2, 3):
-        out = tmp_path / f"ranks{ranks}"
-        proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets(extra)], ranks)
-        assert proc.returncode == 0, proc.stderr
-        runs[ranks] = rows(out)
-    return runs
+    folders = run_on_ranks(CONFIG, {ranks: tmp_path / f"ranks{ranks}" for ranks in (1, 2, 3)}, extra)
+    return {ranks: rows(folder) for ranks, folder in folders.items()}
 
 
 def test_ranks_agree_and_no_particle_is_lost(tmp_path):

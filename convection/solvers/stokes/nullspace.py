@@ -91,6 +91,11 @@ class RigidRotations:
                 self._rotations.append(rotation)
         return self._rotations
 
+    def mesh_moved(self) -> None:
+        """The mesh's nodes moved: the rotations and their Gram matrix are made again at the next
+        use (from the nodes' new positions; a resumed run makes them from the same positions)."""
+        self._rotations, self._moment_forms, self._gram = [], {}, None
+
     def remove(self, u: dolfinx.fem.Function, /) -> None:
         """Subtract the L2 projection of ``u`` (in ``V``) onto the rotations. Collective."""
         rotations = self.rotations

@@ -257,6 +257,11 @@ def _levels_of(mesh: dolfinx.mesh.Mesh, solver: str, coarse_meshes: Sequence[dol
                      "(coarse_meshes=, Domain.create_mesh_levels)")
 
 
+def _free_surfaces(surface: SurfaceTerms | None, /) -> dict[str, VelocityBC]:
+    """The free surfaces as velocity conditions (for the rotations: a free surface lets them)."""
+    return {name: VelocityBC("free_surface") for name in (surface.names if surface is not None else ())}
+
+
 def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
     """The registry name behind ``name``: ``"auto"`` is ``"iterative"`` in 3D (``"iterative_gamg"``
     when ``rotations``, i.e. both shell surfaces are free slip) and ``"direct"`` in 2D, any other
@@ -353,8 +358,7 @@ class StokesSolver(PetscSolver):
         nonlinear: Picard or Newton settings (:mod:`convection.solvers.stokes.nonlinear`), used when the
             viscosity depends on the flow (default: :class:`NonlinearSettings`'s defaults).
         multigrid: The ``stokes.multigrid`` settings (how many levels the caller makes).
-        surface: The free surfaces' terms (:mod:`convection.deform.surface`; their boundaries are
-            left out of ``bcs``), or None.
+        surface: The free surfaces' terms (:mod:`convection.deform.surface`; not in ``bcs``), or None.
         coarse_meshes: The meshes ``mesh`` is nested in, coarse to fine
             (:meth:`convection.geometry.domain.Domain.create_mesh_levels`), or what gives them for a
             mesh (:class:`convection.adapt.levels.MeshLevels`: also for the meshes of an adaptive
@@ -364,8 +368,7 @@ class StokesSolver(PetscSolver):
     Attributes:
         u: velocity, vector P(degree) Function; also the initial guess of the next iterative solve.
         p: pressure, P(degree-1) Function (zero mean when the pressure has a null space).
-        V, Q: the velocity and pressure spaces.
-        solver: the registry name in use (``"auto"`` resolved).
+        V, Q: the velocity and pressure spaces; solver: the registry name in use (``"auto"`` resolved).
         is_iterative: True for the Krylov solvers.
         discretisation: the spaces and forms.
         linear_system: the matrices, vectors and KSP (:attr:`ksp`).
@@ -393,7 +396,7 @@ class StokesSolver(PetscSolver):
         self.domain.check_boundary_names(self.bcs)
         self.degree = degree
         self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
-        self.has_rotation_null_space = has_rotation_null_space(self.bcs, self.domain)
+        self.has_rotation_null_space = has_rotation_null_space({**self.bcs, **_free_surfaces(surface)}, self.domain)
         self.buoyancy_theta = float(buoyancy_theta)
         self.nonlinear_settings = nonlinear
         self.multigrid_settings = multigrid
@@ -526,8 +529,10 @@ class StokesSolver(PetscSolver):
                             setup_seconds, assemblies=int(refresh))
 
     def mesh_moved(self) -> None:
-        """The mesh's nodes moved (a free surface): the next solve assembles the operator anew."""
+        """The mesh's nodes moved (a free surface): a new operator and rotations at the next solve."""
         self._operator_current = False
+        if self._rotations is not None:
+            self._rotations.mesh_moved()
 
     def _lagged(self) -> LaggedPreconditioner | None:
         """The lag of the preconditioner, None where it is set up at every operator change (also

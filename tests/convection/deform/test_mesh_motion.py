@@ -85,8 +85,13 @@ def test_configs_a_free_surface_refuses(overrides, key):
         load_config(CONFIGS / "blankenbach_1a.yaml", overrides)
 
 
-def test_free_surface_on_a_shell_is_refused():
-    with pytest.raises(ConfigError, match="a free surface is the top of a box"):
+def test_an_annulus_topography_below_the_inner_circle_is_refused():
+    with pytest.raises(ConfigError, match="free_surface.initial_topography"):
+        load_config(CONFIGS / "annulus_free_surface.yaml", ["free_surface.initial_topography=1.5*cos(4*phi)"])
+
+
+def test_free_surface_on_a_spherical_shell_is_refused():
+    with pytest.raises(ConfigError, match="a free surface is the top of a box or the outer circle of an annulus"):
         load_config(CONFIGS / "shell_adaptive.yaml", ["boundary.velocity.outer=free_surface",
                                                       "free_surface.buoyancy=1e3"])
 

@@ -9,7 +9,12 @@ give 398.1, 395.8 and 396.1 m (ASPECT: ~396 m); their peaks are 842.5 m (16.82 M
 
 Usage::
 
-    python benchmarks/free_surface/crameri_case2.py [--cells 224x56 448x112] [--end 20] [--dt 20] [--out DIR]
+    python benchmarks/free_surface/crameri_case2.py [--cells 224x56 112x28+4] [--end 20] [--dt 20] [--cfl 0.1]
+                                                     [--out DIR]
+
+``NXxNZ`` is a uniform mesh; ``NXxNZ+L`` a base mesh adapted up to ``L`` levels finer (each halves
+the cells) where the materials' edges are (the Kelly indicator of the fractions: the blob and
+the lid's base), every 4 steps.
 
 Writes ``<out>/crameri_case2.md`` (the largest topography at the published times, each resolution
 beside the codes' spread) and ``<out>/crameri_case2.png`` (against time).
@@ -44,19 +49,43 @@ PUBLISHED = {  # largest topography [m] at TIMES (MILAMIN, SULEC, Underworld)
 }
 
 
-def run(cells: tuple[int, int], dt: float, end: float, out: Path) -> dict[str, Any]:
-    """One run; the largest topography [m] against time [Myr] and its cost (collective)."""
+ADAPTIVE = ["adaptivity.enabled=true", "adaptivity.every=4", "adaptivity.fields=[composition]",
+            "adaptivity.refine_fraction=0.2", "adaptivity.coarsen_fraction=0.5"]
+"""The adaptivity of a ``NXxNZ+L`` run (with ``adaptivity.max_level=L``)."""
+
+
+def parse_mesh(text: str) -> tuple[tuple[int, int], int]:
+    """``"224x56"`` -> ((224, 56), 0); ``"112x28+4"`` -> ((112, 28), 4)."""
+    base, _, levels = text.partition("+")
+    nx, nz = (int(c) for c in base.split("x"))
+    return (nx, nz), int(levels or 0)
+
+
+def label(r: dict[str, Any]) -> str:
+    """``224x56 (12.5 km)`` or ``112x28 + 4 levels (1.56 km)``."""
+    finest = 2800.0 / r["cells"][0] / 2 ** r.get("levels", 0)
+    levels = f" + {r['levels']} levels" if r.get("levels") else ""
+    return f"{r['cells'][0]}x{r['cells'][1]}{levels} ({finest:.3g} km)"
+
+
+def run(cells: tuple[int, int], dt: float, end: float, out: Path, *, levels: int = 0,
+        cfl: float | None = None) -> dict[str, Any]:
+    """One run (``levels`` > 0: adapted up to that many levels finer); the largest topography [m]
+    against time [Myr] and its cost (collective)."""
     config = load_config(ROOT / "configs" / "crameri_case2_free_surface.yaml", [
         f"mesh.cells=[{cells[0]},{cells[1]}]", f"time.dt_max={dt} kyr", f"time.end={end} Myr",
-        "output.fields_every=0", "output.progress=none", f"output.directory={out}"])
+        "output.fields_every=0", "output.progress=none", f"output.directory={out}",
+        *([*ADAPTIVE, f"adaptivity.max_level={levels}"] if levels else []),
+        *([f"time.cfl={cfl}"] if cfl is not None else [])])
     start = time.perf_counter()
     run_config(config)
     wall = time.perf_counter() - start
     with open(out / "statistics_physical.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    return {"cells": list(cells), "dt": dt, "t": [float(r["time [Myr]"]) for r in rows],
-            "top": [1e3 * float(r["topography_max [km]"]) for r in rows], "lost": int(rows[-1]["n_lost"]),
-            "steps": len(rows) - 1, "wall": wall}
+    return {"cells": list(cells), "levels": levels, "cfl": config["time"]["cfl"], "dt": dt,
+            "t": [float(r["time [Myr]"]) for r in rows], "top": [1e3 * float(r["topography_max [km]"]) for r in rows],
+            "lost": int(rows[-1]["n_lost"]), "steps": len(rows) - 1, "wall": wall,
+            "cells_max": max(int(r["cells"]) for r in rows)}
 
 
 def write(out: Path, results: list[dict[str, Any]]) -> None:
@@ -65,18 +94,19 @@ def write(out: Path, results: list[dict[str, Any]]) -> None:
              "particles, 16 per cell). The largest topography [m] at the published times, beside MILAMIN, SULEC and "
              "Underworld (ASPECT's benchmarks/crameri_et_al/case_2 data).", "",
              "| t [Myr] | " + " | ".join(PUBLISHED) + " | spread | "
-             + " | ".join(f"{r['cells'][0]}x{r['cells'][1]} (dt {r['dt']:g} kyr)" for r in results) + " |",
+             + " | ".join(f"{label(r)}, CFL {r.get('cfl', 0.1):g}" for r in results) + " |",
              "|---|" + "---|" * (len(PUBLISHED) + 1 + len(results))]
     for i, t in enumerate(TIMES):
         codes = [v[i] for v in PUBLISHED.values()]
         ours = [f"{np.interp(t, r['t'], r['top']):.1f}" if r["t"][-1] >= t - 1e-9 else "-" for r in results]
         lines.append(f"| {t:g} | " + " | ".join(f"{c:.1f}" for c in codes) + f" | {min(codes):.1f}-{max(codes):.1f} | "
                      + " | ".join(ours) + " |")
-    lines += ["", "| run | steps | wall [s] | lost | peak [m] | at [Myr] |", "|---|---|---|---|---|---|"]
+    lines += ["", "| run | largest dt [kyr] | steps | most cells | wall [s] | lost | peak [m] | at [Myr] |",
+              "|---|---|---|---|---|---|---|---|"]
     for r in results:
         k = int(np.argmax(r["top"]))
-        lines.append(f"| {r['cells'][0]}x{r['cells'][1]}, dt {r['dt']:g} kyr | {r['steps']} | {r['wall']:.0f} | "
-                     f"{r['lost']} | {r['top'][k]:.1f} | {r['t'][k]:.2f} |")
+        lines.append(f"| {label(r)}, CFL {r.get('cfl', 0.1):g} | {r['dt']:g} | {r['steps']} | {r.get('cells_max', '-')} | "
+                     f"{r['wall']:.0f} | {r['lost']} | {r['top'][k]:.1f} | {r['t'][k]:.2f} |")
     (out / "crameri_case2.md").write_text("\n".join(lines) + "\n")
     (out / "crameri_case2.json").write_text(json.dumps(results, indent=1))
     _picture(out / "crameri_case2.png", results)
@@ -85,7 +115,7 @@ def write(out: Path, results: list[dict[str, Any]]) -> None:
 def _picture(path: Path, results: list[dict[str, Any]]) -> None:
     curves = [(np.asarray(TIMES), np.asarray(values), name, {"marker": "o", "markersize": 3, "linewidth": 0.8})
               for name, values in PUBLISHED.items()]
-    curves += [(np.asarray(r["t"]), np.asarray(r["top"]), f"this code, {r['cells'][0]}x{r['cells'][1]}",
+    curves += [(np.asarray(r["t"]), np.asarray(r["top"]), f"this code, {label(r)}",
                 {"color": "k", "linestyle": "--" if r is results[-1] else ":", "linewidth": 1.2}) for r in results]
     curves_figure(path, curves, xlabel="time [Myr]", ylabel="largest topography [m]",
                   title="Crameri case 2: a blob under a lithosphere, free surface")
@@ -96,14 +126,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cells", nargs="+", default=["224x56"])
     parser.add_argument("--end", type=float, default=20.0, help="end time [Myr]")
     parser.add_argument("--dt", type=float, default=20.0, help="largest step [kyr]")
+    parser.add_argument("--cfl", type=float, default=None, help="Courant number (default: the config's, 0.1)")
     parser.add_argument("--out", default=str(HERE))
+    parser.add_argument("--keep", action="store_true",
+                        help="keep the other runs of <out>/crameri_case2.json in the table (runs made one at a time)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     results = []
+    if args.keep and (out / "crameri_case2.json").exists():
+        wanted = {label({"cells": c, "levels": lv}) for c, lv in map(parse_mesh, args.cells)}
+        results = [r for r in json.loads((out / "crameri_case2.json").read_text()) if label(r) not in wanted]
     for text in args.cells:
-        cells = tuple(int(c) for c in text.split("x"))
-        r = run(cells, args.dt, args.end, out / "runs" / f"case2_{text}")
+        cells, levels = parse_mesh(text)
+        r = run(cells, args.dt, args.end, out / "runs" / f"case2_{text}", levels=levels, cfl=args.cfl)
         results.append(r)
+        results.sort(key=lambda r: 2800.0 / r["cells"][0] / 2 ** r.get("levels", 0), reverse=True)  # coarse first
         if MPI.COMM_WORLD.rank == 0:
             print(f"{text}: topography at 3 Myr {np.interp(3.0, r['t'], r['top']):.1f} m, peak {max(r['top']):.1f} m, "
                   f"{r['wall']:.0f} s, lost {r['lost']}", flush=True)

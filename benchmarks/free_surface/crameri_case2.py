@@ -113,10 +113,15 @@ def write(out: Path, results: list[dict[str, Any]]) -> None:
 
 
 def _picture(path: Path, results: list[dict[str, Any]]) -> None:
-    curves = [(np.asarray(TIMES), np.asarray(values), name, {"marker": "o", "markersize": 3, "linewidth": 0.8})
+    """The codes' curves over the time the runs cover, and the runs (each its own gray and dashes)."""
+    end = max(r["t"][-1] for r in results)
+    shown = np.asarray([t for t in TIMES if t <= end * (1 + 1e-9)])
+    curves = [(shown, np.asarray(values[: shown.size]), name, {"marker": "o", "markersize": 3, "linewidth": 0.8})
               for name, values in PUBLISHED.items()]
+    styles = [(":", "0.55"), ("-.", "0.35"), ("--", "0.0"), ("-", "0.0")]
     curves += [(np.asarray(r["t"]), np.asarray(r["top"]), f"this code, {label(r)}",
-                {"color": "k", "linestyle": "--" if r is results[-1] else ":", "linewidth": 1.2}) for r in results]
+                {"color": styles[i % 4][1], "linestyle": styles[i % 4][0], "linewidth": 1.2})
+               for i, r in enumerate(results)]
     curves_figure(path, curves, xlabel="time [Myr]", ylabel="largest topography [m]",
                   title="Crameri case 2: a blob under a lithosphere, free surface")
 

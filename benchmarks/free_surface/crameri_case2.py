@@ -10,7 +10,7 @@ give 398.1, 395.8 and 396.1 m (ASPECT: ~396 m); their peaks are 842.5 m (16.82 M
 Usage::
 
     python benchmarks/free_surface/crameri_case2.py [--cells 224x56 112x28+4] [--end 20] [--dt 20] [--cfl 0.1]
-                                                     [--out DIR]
+                                                     [--composition particles|field] [--keep] [--out DIR]
 
 ``NXxNZ`` is a uniform mesh; ``NXxNZ+L`` a base mesh adapted up to ``L`` levels finer (each halves
 the cells) where the materials' edges are (the Kelly indicator of the fractions: the blob and
@@ -62,29 +62,36 @@ def parse_mesh(text: str) -> tuple[tuple[int, int], int]:
 
 
 def label(r: dict[str, Any]) -> str:
-    """``224x56 (12.5 km)`` or ``112x28 + 4 levels (1.56 km)``."""
+    """``224x56 (12.5 km)``, ``112x28 + 4 levels (1.56 km)``, ``... , fields`` (materials as fields)."""
     finest = 2800.0 / r["cells"][0] / 2 ** r.get("levels", 0)
     levels = f" + {r['levels']} levels" if r.get("levels") else ""
-    return f"{r['cells'][0]}x{r['cells'][1]}{levels} ({finest:.3g} km)"
+    fields = ", fields" if r.get("composition") == "field" else ""
+    return f"{r['cells'][0]}x{r['cells'][1]}{levels} ({finest:.3g} km){fields}"
+
+
+FIELDS = ["composition.source=field", "composition.degree=2", "particles=null",
+          "output.statistics=[time,velocity,topography,free_surface,mesh,stokes,wall_time]"]
+"""The materials as advected P2 fields instead of particles (``--composition field``)."""
 
 
 def run(cells: tuple[int, int], dt: float, end: float, out: Path, *, levels: int = 0,
-        cfl: float | None = None) -> dict[str, Any]:
-    """One run (``levels`` > 0: adapted up to that many levels finer); the largest topography [m]
-    against time [Myr] and its cost (collective)."""
+        cfl: float | None = None, composition: str = "particles") -> dict[str, Any]:
+    """One run (``levels`` > 0: adapted up to that many levels finer; ``composition``: the
+    materials on ``particles`` or as advected ``field``s); the largest topography [m] against time
+    [Myr] and its cost (collective)."""
     config = load_config(ROOT / "configs" / "crameri_case2_free_surface.yaml", [
         f"mesh.cells=[{cells[0]},{cells[1]}]", f"time.dt_max={dt} kyr", f"time.end={end} Myr",
         "output.fields_every=0", "output.progress=none", f"output.directory={out}",
         *([*ADAPTIVE, f"adaptivity.max_level={levels}"] if levels else []),
-        *([f"time.cfl={cfl}"] if cfl is not None else [])])
+        *([f"time.cfl={cfl}"] if cfl is not None else []), *(FIELDS if composition == "field" else [])])
     start = time.perf_counter()
     run_config(config)
     wall = time.perf_counter() - start
     with open(out / "statistics_physical.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    return {"cells": list(cells), "levels": levels, "cfl": config["time"]["cfl"], "dt": dt,
+    return {"cells": list(cells), "levels": levels, "cfl": config["time"]["cfl"], "dt": dt, "composition": composition,
             "t": [float(r["time [Myr]"]) for r in rows], "top": [1e3 * float(r["topography_max [km]"]) for r in rows],
-            "lost": int(rows[-1]["n_lost"]), "steps": len(rows) - 1, "wall": wall,
+            "lost": int(rows[-1].get("n_lost", 0)), "steps": len(rows) - 1, "wall": wall,
             "cells_max": max(int(r["cells"]) for r in rows)}
 
 
@@ -132,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--end", type=float, default=20.0, help="end time [Myr]")
     parser.add_argument("--dt", type=float, default=20.0, help="largest step [kyr]")
     parser.add_argument("--cfl", type=float, default=None, help="Courant number (default: the config's, 0.1)")
+    parser.add_argument("--composition", choices=("particles", "field"), default="particles",
+                        help="the materials on particles (the config's) or as advected P2 fields")
     parser.add_argument("--out", default=str(HERE))
     parser.add_argument("--keep", action="store_true",
                         help="keep the other runs of <out>/crameri_case2.json in the table (runs made one at a time)")
@@ -139,11 +148,13 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     results = []
     if args.keep and (out / "crameri_case2.json").exists():
-        wanted = {label({"cells": c, "levels": lv}) for c, lv in map(parse_mesh, args.cells)}
+        wanted = {label({"cells": c, "levels": lv, "composition": args.composition})
+                  for c, lv in map(parse_mesh, args.cells)}
         results = [r for r in json.loads((out / "crameri_case2.json").read_text()) if label(r) not in wanted]
     for text in args.cells:
         cells, levels = parse_mesh(text)
-        r = run(cells, args.dt, args.end, out / "runs" / f"case2_{text}", levels=levels, cfl=args.cfl)
+        r = run(cells, args.dt, args.end, out / "runs" / f"case2_{text}_{args.composition}", levels=levels,
+                cfl=args.cfl, composition=args.composition)
         results.append(r)
         results.sort(key=lambda r: 2800.0 / r["cells"][0] / 2 ** r.get("levels", 0), reverse=True)  # coarse first
         if MPI.COMM_WORLD.rank == 0:

@@ -488,8 +488,8 @@ class _RunLoop:
                 _close(out, model)
             raise
         _close(out, model)
-        if failure is not None:
-            reason = f"failed at step {model.timestep}, t={model.time:.6g}: {failure}"
+        if failure is not None:  # the time in the model's units, as the progress shows it
+            reason = f"failed at step {model.timestep}, t={out.progress.time_text(model.time)}: {failure}"
         summary = self._summary(reason)
         if failure is not None:
             raise RunFailure(reason)

@@ -125,9 +125,9 @@ def _picture(path: Path, results: list[dict[str, Any]]) -> None:
     shown = np.asarray([t for t in TIMES if t <= end * (1 + 1e-9)])
     curves = [(shown, np.asarray(values[: shown.size]), name, {"marker": "o", "markersize": 3, "linewidth": 0.8})
               for name, values in PUBLISHED.items()]
-    styles = [(":", "0.55"), ("-.", "0.35"), ("--", "0.0"), ("-", "0.0")]
+    styles = [(":", "0.55"), ("-.", "0.35"), ("--", "0.0"), ("-", "tab:purple"), ("-", "tab:red"), ("--", "tab:brown")]
     curves += [(np.asarray(r["t"]), np.asarray(r["top"]), f"this code, {label(r)}",
-                {"color": styles[i % 4][1], "linestyle": styles[i % 4][0], "linewidth": 1.2})
+                {"color": styles[i % len(styles)][1], "linestyle": styles[i % len(styles)][0], "linewidth": 1.2})
                for i, r in enumerate(results)]
     curves_figure(path, curves, xlabel="time [Myr]", ylabel="largest topography [m]",
                   title="Crameri case 2: a blob under a lithosphere, free surface")

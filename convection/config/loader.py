@@ -669,6 +669,10 @@ def _check_particles(config: dict[str, Any]) -> None:
         INTERPOLATORS[name](**params)
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key 'particles.interpolator': {err}") from None
+    wanted = getattr(INTERPOLATORS[name], "target_degree", None)  # the fields it writes: DG of this degree
+    if wanted is not None and particles_enabled(config) and config["composition"]["degree"] != wanted:
+        raise ConfigError(f"config key 'composition.degree': {name} writes DG{wanted} fields; set composition.degree: "
+                          f"{wanted} (is {config['composition']['degree']})")
     columns = [m["name"] for m in material_table(config)[0]] if config["composition"]["source"] == "particles" else []
     built = []
     for i, spec in enumerate(section["properties"]):

@@ -287,7 +287,8 @@ class CompositionSettings:
                         help="static: fractions fixed at their initial regions; particles: averaged from advected "
                              "particles; field: advected continuous fields (SUPG, no diffusion)")
     degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
-                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares); source field needs >= 1")
+                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for quadratic_least_squares); "
+                             "source field needs >= 1")
 
     def __post_init__(self) -> None:
         check_degree(self.source, self.degree)

@@ -23,6 +23,7 @@ from particles.interpolation.cell_average import CellAverage
 from particles.interpolation.distance_weighted import DistanceWeighted
 from particles.interpolation.least_squares import LeastSquares
 from particles.interpolation.nearest import Nearest
+from particles.interpolation.quadratic_least_squares import QuadraticLeastSquares
 from particles.interpolation.shape_function import ShapeFunction
 from fembase.registry import Registry
 from particles.swarm import Swarm
@@ -35,6 +36,7 @@ __all__ = [
     "Interpolator",
     "LeastSquares",
     "Nearest",
+    "QuadraticLeastSquares",
     "ShapeFunction",
     "describe_interpolators",
     "get_interpolator",
@@ -42,7 +44,7 @@ __all__ = [
 ]
 
 INTERPOLATORS: Registry[type[Interpolator]] = Registry(
-    "particle interpolator", (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares)
+    "particle interpolator", (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares, QuadraticLeastSquares)
 )
 """Interpolator classes by their lowercase config name."""
 

@@ -41,7 +41,7 @@ from particles.interpolation._kernels import least_squares_moments
 from particles.interpolation.distance_weighted import cell_diameters
 from particles.swarm import Swarm
 
-__all__ = ["LeastSquares"]
+__all__ = ["LeastSquares", "fit_target"]
 
 
 class _Fit:
@@ -83,6 +83,7 @@ class LeastSquares:
 
     name: ClassVar[str] = "least_squares"
     description: ClassVar[str] = "linear least-squares fit per cell into DG1, optional bound-preserving limiter"
+    target_degree: ClassVar[int] = 1
 
     limit: bool = False
     use_neighbours: bool = True
@@ -91,10 +92,7 @@ class LeastSquares:
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:
         """Write the per-cell linear fits of ``property_name`` into ``target`` (collective)."""
-        space = TargetSpace(target, swarm.num_owned_cells)
-        space.require(self.name, continuous=False, degree=1)
-        if swarm.gdim != swarm.tdim:
-            raise ValueError(f"{self.name} needs gdim == tdim")
+        space = fit_target(self.name, swarm, target, self.target_degree)
         n_owned = swarm.num_owned_cells
         samples = gather_samples(swarm, property_name, component, ghosts=self.use_neighbours)
         geo = swarm.geometry
@@ -128,6 +126,16 @@ class LeastSquares:
         den[space.dofs] = has[:, None]
         return write_with_cell_means(swarm, space, target, self.name, num=num, den=den,
                                      values=samples.values[: swarm.num_particles], ghost_particles=samples.num_ghosts)
+
+
+def fit_target(method: str, swarm: Swarm, target: dolfinx.fem.Function, degree: int, /) -> TargetSpace:
+    """The target space of a per-cell fit: DG of ``degree``, on a mesh with gdim == tdim (raises
+    ValueError naming ``method`` otherwise)."""
+    space = TargetSpace(target, swarm.num_owned_cells)
+    space.require(method, continuous=False, degree=degree)
+    if swarm.gdim != swarm.tdim:
+        raise ValueError(f"{method} needs gdim == tdim")
+    return space
 
 
 def _limit(values: npt.NDArray[np.float64], centre: npt.NDArray[np.float64], lo: npt.NDArray[np.float64],

@@ -31,6 +31,8 @@ CASES = [
     ("shape_function", ("DG", 1), {}),
     ("least_squares", ("DG", 1), {}),
     ("least_squares", ("DG", 1), {"limit": True}),
+    ("quadratic_least_squares", ("DG", 2), {}),
+    ("quadratic_least_squares", ("DG", 2), {"limit": True}),
 ]
 
 
@@ -70,7 +72,8 @@ def _sorted_rows(table, ncols_key):
 
 # ----------------------------------------------------------------------------------- registry
 def test_registry_and_errors():
-    assert set(INTERPOLATORS) == {"nearest", "cell_average", "distance_weighted", "shape_function", "least_squares"}
+    assert set(INTERPOLATORS) == {"nearest", "cell_average", "distance_weighted", "shape_function", "least_squares",
+                                  "quadratic_least_squares"}
     assert all(name == name.lower() and text for name, text in describe_interpolators().items())
     with pytest.raises(ValueError, match="cell_average"):
         get_interpolator("bilinear")
@@ -187,7 +190,7 @@ def test_empty_cells_give_finite_values(method, space, params):
     assert stats.empty_cells == int(np.count_nonzero(np.diff(swarm.offsets) == 0)) > 0
     assert stats.filled_dofs > 0 and stats.fill_rounds >= 3
     lo, hi = swarm.property("v").min(), swarm.property("v").max()
-    if not (method == "least_squares" and not params.get("limit")):
+    if not (method in ("least_squares", "quadratic_least_squares") and not params.get("limit")):  # fits extrapolate
         assert np.all(u.x.array >= lo - 1e-12) and np.all(u.x.array <= hi + 1e-12)
     empty = Swarm(mesh)
     empty.add_property("v")
@@ -215,6 +218,8 @@ PARALLEL_CASES = [
     ("shape_function", ("Lagrange", 1), {}),
     ("least_squares", ("DG", 1), {"limit": True}),
     ("least_squares", ("DG", 1), {}),
+    ("quadratic_least_squares", ("DG", 2), {}),
+    ("quadratic_least_squares", ("DG", 2), {"limit": True}),
 ]
 
 

@@ -118,7 +118,8 @@ class MeshChanges:
         model = self.model
         balancer = model.balancer
         assert balancer is not None
-        with model.timers("balancing"), self._reference_frame():
+        surface = model.free_surface  # the undeformed cells, as _reference_frame, without its locator
+        with model.timers("balancing"), surface.undeformed() if surface is not None else contextlib.nullcontext():
             before = balancer.loads(model.mesh, self._swarm())
             mesh = balancer.new_mesh(model.mesh, self._swarm())
         self.move_to(mesh)

@@ -104,3 +104,18 @@ def test_the_config_asks_for_dg2():
     config = load_config(CONFIGS / "rayleigh_taylor_3.yaml", ["particles.interpolator={name: quadratic_least_squares}",
                                                              "composition.degree=2"])
     assert config["particles"]["interpolator"]["name"] == "quadratic_least_squares"
+
+
+def test_a_config_run_with_the_quadratic_fit(tmp_path):
+    """configs/rayleigh_taylor_3.yaml with its materials on DG2 fields from the quadratic fit, on 2
+    ranks: it runs, no particle lost, the same particles as on 1 rank."""
+    from _runs import CONFIGS, rows, run_on_ranks
+
+    extra = ["particles.interpolator={name: quadratic_least_squares, limit: true}", "composition.degree=2",
+             "mesh.cells=[12,12]", "time.end=60", "output.progress=none", "output.fields_every=0", "particles.output=null"]
+    runs = run_on_ranks(CONFIGS / "rayleigh_taylor_3.yaml", {1: tmp_path / "1", 2: tmp_path / "2"}, extra)
+    a, b = rows(runs[1]), rows(runs[2])
+    assert len(a) == len(b) > 2 and all(r["n_lost"] == "0" for r in a + b)
+    for x, y in zip(a, b):
+        assert x["n_particles"] == y["n_particles"]
+        assert float(y["vrms"]) == pytest.approx(float(x["vrms"]), rel=1e-6)

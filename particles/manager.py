@@ -240,7 +240,8 @@ def particles_per_cell_summary(swarm: Swarm, /) -> tuple[int, float, int]:
 
 def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh,
                       directory: str | Path | None, extra_properties: Sequence[ParticleProperty],
-                      make_function: MakeFunction | None, output_units: OutputUnits | None = None) -> dict[str, Any]:
+                      make_function: MakeFunction | None, output_units: OutputUnits | None = None,
+                      name: str = "particles") -> dict[str, Any]:
     """The :class:`ParticleManager` keyword arguments a config section gives (see
     :meth:`ParticleManager.from_config`): generator, integrator, properties, interpolator,
     population, writer and output."""
@@ -259,8 +260,8 @@ def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfi
         if directory is None:
             raise ValueError("particle output needs an output directory")
         writer = PARTICLE_WRITERS.lookup(out.format)(
-            directory, properties=None if out.properties is None else list(out.properties), every_nth=out.every_nth,
-            units=output_units)
+            directory, name=name, properties=None if out.properties is None else list(out.properties),
+            every_nth=out.every_nth, units=output_units)
     return {"generator": generator, "integrator": settings.integrator, "properties": properties,
             "interpolator": interpolator, "population": population, "writer": writer, "output": schedule}
 
@@ -387,7 +388,8 @@ class ParticleManager:
     def from_config(cls, section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh, /, *, directory: str | Path | None = None,
                     extra_properties: Sequence[ParticleProperty] = (), make_function: MakeFunction | None = None,
                     field_degree: int = 0, context: PropertyContext | None = None, confine: Confine | None = None,
-                    generate_particles: bool = True, output_units: OutputUnits | None = None) -> ParticleManager:
+                    generate_particles: bool = True, output_units: OutputUnits | None = None,
+                    name: str = "particles") -> ParticleManager:
         """One manager from one config section (collective).
 
         ``section`` is a :class:`~particles.settings.ParticleSettings` or its config section (its
@@ -398,10 +400,10 @@ class ParticleManager:
         ``directory``: where the particle output goes (needed for output); ``extra_properties``:
         properties the caller needs besides the section's (e.g. one composition per material),
         carried first; ``output_units``: the output's conversion to physical units (None: as they
-        are); the others as for the class."""
-        return cls(mesh, **_config_arguments(section, mesh, directory, extra_properties, make_function, output_units),
-                   field_degree=field_degree, context=context, generate_particles=generate_particles,
-                   confine=confine)
+        are); ``name``: the output files' stem; the others as for the class."""
+        arguments = _config_arguments(section, mesh, directory, extra_properties, make_function, output_units, name)
+        return cls(mesh, **arguments, field_degree=field_degree, context=context,
+                   generate_particles=generate_particles, confine=confine)
 
     # ------------------------------------------------------------------ queries
     @property

@@ -89,11 +89,12 @@ def assert_same_statistics(a: Path, b: Path, *, ignore: tuple[str, ...] = ("wall
                 assert x[key] == y[key], (key, x["step"], x[key], y[key])
 
 
-def final_particles(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ids, positions and properties of the particles in the newest checkpoint, sorted by id."""
+def final_particles(run_dir: Path, part: str = "particles") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ids, positions and properties of the particles in the newest checkpoint (its ``part``: a
+    particle system's file stem), sorted by id."""
     from convection.io.checkpoint import latest_checkpoint
 
-    with h5py.File(latest_checkpoint(run_dir) / "particles.h5", "r") as f:
+    with h5py.File(latest_checkpoint(run_dir) / f"{part}.h5", "r") as f:
         ids = f["ids"][...]
         order = np.argsort(ids)
         return ids[order], f["x"][...][order], f["properties"][...][order]

@@ -15,7 +15,7 @@ them); results do not change, only where they are computed.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -31,7 +31,7 @@ __all__ = ["BALANCE_STRATEGIES", "BalanceSettings", "Balancer", "RankLoads"]
 
 @dataclass(frozen=True)
 class BalancingStrategy:
-    """A balancing strategy: on a step that is due, ``wants(balancer, mesh, swarm)`` decides whether
+    """A balancing strategy: on a step that is due, ``wants(balancer, mesh, swarms)`` decides whether
     to repartition (collective where it measures the loads)."""
 
     name: str
@@ -39,18 +39,18 @@ class BalancingStrategy:
     wants: Callable[[Balancer, dolfinx.mesh.Mesh, Swarm | None], bool]
 
 
-def _over_threshold(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
-    return balancer.loads(mesh, swarm).load_imbalance > balancer.threshold
+def _over_threshold(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /) -> bool:
+    return balancer.loads(mesh, swarms).load_imbalance > balancer.threshold
 
 
 BALANCE_STRATEGIES: Registry[BalancingStrategy] = Registry("balancing strategy", (
-    BalancingStrategy("none", "never repartition", lambda balancer, mesh, swarm: False),
-    BalancingStrategy("every", "repartition every N steps", lambda balancer, mesh, swarm: True),
+    BalancingStrategy("none", "never repartition", lambda balancer, mesh, swarms: False),
+    BalancingStrategy("every", "repartition every N steps", lambda balancer, mesh, swarms: True),
     BalancingStrategy("threshold", "repartition when max/mean of the load over ranks exceeds a threshold (checked "
                       "every N steps)", _over_threshold),
 ))
 """Balancing strategies by name: each decides, on a step that is due, whether to repartition
-(``wants(balancer, mesh, swarm)``)."""
+(``wants(balancer, mesh, swarms)``)."""
 
 
 @dataclass(frozen=True)
@@ -79,10 +79,10 @@ class RankLoads:
         return self._ratio(self.load)
 
     @classmethod
-    def measure(cls, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /, *, particle_weight: float) -> RankLoads:
-        """The loads of ``mesh`` and the particles of ``swarm`` (collective)."""
+    def measure(cls, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /, *, particle_weight: float) -> RankLoads:
+        """The loads of ``mesh`` and the particles of ``swarms`` (every particle system's; collective)."""
         owned = mesh.topology.index_map(mesh.topology.dim).size_local
-        particles = swarm.num_particles if swarm is not None else 0
+        particles = sum(swarm.num_particles for swarm in swarms)
         gathered = mesh.comm.allgather((owned, particles, owned + particle_weight * particles))
         return cls(*(np.array(column) for column in zip(*gathered)))
 
@@ -131,19 +131,22 @@ class Balancer:
         self.particle_weight = settings.particle_weight
         self.method = settings.method
 
-    def loads(self, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> RankLoads:
-        """Cells, particles and load per rank (collective)."""
-        return RankLoads.measure(mesh, swarm, particle_weight=self.particle_weight)
+    def loads(self, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /) -> RankLoads:
+        """Cells, particles (of every swarm in ``swarms``) and load per rank (collective)."""
+        return RankLoads.measure(mesh, swarms, particle_weight=self.particle_weight)
 
-    def due(self, timestep: int, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> bool:
+    def due(self, timestep: int, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /) -> bool:
         """Whether to repartition after step ``timestep`` (collective for ``threshold``)."""
         if mesh.comm.size == 1 or timestep % self.every != 0:
             return False
-        return BALANCE_STRATEGIES[self.strategy].wants(self, mesh, swarm)
+        return BALANCE_STRATEGIES[self.strategy].wants(self, mesh, swarms)
 
-    def new_mesh(self, mesh: dolfinx.mesh.Mesh, swarm: Swarm | None, /) -> dolfinx.mesh.Mesh:
-        """The same cells on a partition with equal loads (collective)."""
+    def new_mesh(self, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /) -> dolfinx.mesh.Mesh:
+        """The same cells on a partition with equal loads, a cell weighing 1 + W (its particles of
+        every swarm in ``swarms``) (collective)."""
         num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
-        counts = swarm.particles_per_cell().astype(np.float64) if swarm is not None else np.zeros(num_owned)
+        counts = np.zeros(num_owned)
+        for swarm in swarms:
+            counts += swarm.particles_per_cell()
         return self.hierarchy.repartition(mesh, counts, particle_weight=self.particle_weight, method=self.method)
 

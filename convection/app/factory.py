@@ -52,10 +52,11 @@ from convection.io.checkpoint import (
 from convection.model.composition import (
     COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
 )
+from convection.config.particle_systems import particle_sections, primary_system
 from convection.config.units import scaling_of
 from convection.io.output_units import output_units
 from convection.config.loader import (
-    config_gdim, dump_config, expression_constants, material_table, multigrid_levels, particles_enabled, point_function,
+    config_gdim, dump_config, expression_constants, material_table, multigrid_levels, point_function,
     viscosity_laws,
 )
 from convection.geometry.registry import domain_from_config
@@ -73,6 +74,7 @@ from convection.solvers.transport import EnergySettings, TransportSolver
 from convection.schema import ConfigError, settings_from
 from fembase.dolfinx_compat import function_space, petsc_vector
 from particles.manager import ParticleManager
+from particles.systems import ParticleSystems, file_stem
 from particles.properties import PropertyContext
 
 __all__ = ["build_model", "materials_from_config", "run_config", "run_settings", "temperature_bcs_from_config",
@@ -249,41 +251,47 @@ def _free_surface(config: dict[str, Any], domain: Domain, mesh: dolfinx.mesh.Mes
 
 def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, materials: Materials, stokes: StokesSolver,
                temperature: TransportSolver, restore: SavedRun | None, surface: FreeSurface | None
-               ) -> ParticleManager | None:
-    """The run's particles (None without), generated or the checkpoint's swarm."""
+               ) -> ParticleSystems | None:
+    """The run's particle systems (None without), generated or the checkpoint's swarms."""
     # The confinement margin follows the curvature of the coarsest cells a hierarchy hands out (its
     # base, curved): it covers every mesh of the run, and a resumed run gets the same margin as the
     # run it continues (the mesh it starts from is refined differently from the first one). A free
     # surface's mesh: its undeformed cells (the deformed ones differ between a run and its resume).
-    if not particles_enabled(config):
+    sections = particle_sections(config)
+    if not sections:
         return None
     manifold = meshes.manifold
     confinement_mesh = manifold.curve(meshes.hierarchy.base) if manifold is not None else meshes.mesh
     with surface.undeformed() if surface is not None and confinement_mesh is meshes.mesh else contextlib.nullcontext():
         confine = domain.confinement(confinement_mesh, free=free_surface_boundaries(config))
     ccfg = config["composition"]
-    extra = particle_properties(materials, domain.gdim) if ccfg["source"] == "particles" else []
+    primary = primary_system(config)
     context = PropertyContext(u_new=stokes.u, temperature=temperature.T, pressure=stokes.p)
-    particles = ParticleManager.from_config(
-        config["particles"], meshes.mesh, directory=config["output"]["directory"], extra_properties=extra,
-        make_function=point_function(config), field_degree=ccfg["degree"], context=context,
-        generate_particles=restore is None,
-        confine=confine,
-        output_units=output_units(scaling) if (scaling := scaling_of(config)) is not None else None)
-    if restore is not None:
-        saved = restore.components["model"]
-        restore_particles(restore, particles, dataclasses.replace(context, time=saved["time"],
-                                                                   dt=saved["dt_previous"]))
-    return particles
+    scaling = scaling_of(config)
+    systems = {}
+    for name, section in sections.items():  # each system draws from its own seeds: they do not interact
+        extra = particle_properties(materials, domain.gdim) if ccfg["source"] == "particles" and name == primary else []
+        systems[name] = ParticleManager.from_config(
+            section, meshes.mesh, directory=config["output"]["directory"], extra_properties=extra,
+            make_function=point_function(config), field_degree=ccfg["degree"], context=context,
+            generate_particles=restore is None, confine=confine, name=file_stem(name),
+            output_units=output_units(scaling) if scaling is not None else None)
+        if restore is not None:
+            saved = restore.components["model"]
+            restore_particles(restore, systems[name], dataclasses.replace(context, time=saved["time"],
+                                                                          dt=saved["dt_previous"]),
+                              part=file_stem(name))
+    return ParticleSystems(systems, primary=primary)
 
 
 def _composition(config: dict[str, Any], mesh: dolfinx.mesh.Mesh, approximation: Any, materials: Materials,
-                 particles: ParticleManager | None, stabilisation: str) -> Any:
+                 particles: ParticleSystems | None, stabilisation: str) -> Any:
     """Where the material fractions come from (None without materials)."""
     if not len(materials):
         return None
     composition = settings_from(CompositionSettings, config["composition"])
-    inputs = CompositionInputs(mesh, approximation, materials, particles, composition.degree, stabilisation)
+    inputs = CompositionInputs(mesh, approximation, materials, particles.primary if particles is not None else None,
+                               composition.degree, stabilisation)
     return COMPOSITION_SOURCES.lookup(composition.source).build(inputs)
 
 
@@ -325,7 +333,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         # Particle properties the viscosity laws read (e.g. plastic_strain), averaged onto the mesh
         # with the particles' interpolator after every step.
         for name in approximation.viscosity_law.field_names:
-            particles.track(name)
+            particles.primary.track(name)
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
                   particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer, free_surface=free_surface)
     if restore is not None:

@@ -13,7 +13,8 @@ Every config has at least ``mesh.cells`` (or a shell ``mesh.geometry`` with ``me
 - ``materials``: any number of named materials, each with an initial region, a compositional
   Rayleigh number and a viscosity (instead of ``initial.composition``);
 - ``composition``: where the material fractions come from (static, field, particles);
-- ``particles``: generator, integrator, interpolator, properties, population bounds, output;
+- ``particles``: generator, integrator, interpolator, properties, population bounds, output; or a
+  list of named particle systems, each with these keys (:mod:`convection.config.particle_systems`);
 - ``stokes``, ``energy``: discretisation and solver choices;
 - ``time``: end time, CFL number, step limits, steady-state stop;
 - ``adaptivity``: refine/coarsen between levels every N steps;
@@ -39,6 +40,10 @@ import yaml
 
 from convection.expressions import Expression, ExpressionError
 from convection.config.files import read_document, safe_load
+from convection.config.particle_systems import (
+    carries_particles, check_primary, listed_systems, override_target, particle_sections, primary_system,
+    resolve_systems,
+)
 from convection.config.units import apply_scaling, scaling_of
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
@@ -177,7 +182,9 @@ SCHEMA: dict[str, Any] = {
     "composition": section_schema(CompositionSettings),
     "particles": {
         "enabled": Field("bool", None, nullable=True,
-                         help="carry particles (null: when composition.source is particles; true: also as tracers)"),
+                         help="carry particles (null: when composition.source is particles; true: also as tracers); "
+                              "particles may instead be a list of named systems [{name: ..., generator: ..., ...}], "
+                              "each with the keys below but this one, and each carried"),
         **section_schema(ParticleSettings),
     },
     "time": section_schema(TimeSettings),
@@ -333,6 +340,7 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
             if enabled:
                 raise ConfigError(f"config key '{key}': runs on mesh.geometry {cls.name} do not adapt or "
                                   "repartition yet")
+    check_primary(config)
     _check_materials(config)
     cls.check_boundaries(config)
     for name, value in config["initial"]["constants"].items():
@@ -458,20 +466,32 @@ def _check_size(config: dict[str, Any]) -> None:
 
 
 def _check_particle_count(config: dict[str, Any], cells: float) -> None:
-    """Refuse generators and population bounds that ask for more than :data:`MAX_PARTICLES`."""
-    generator = config["particles"]["generator"]
-    asked = []
-    for key in ("particles_per_cell", "num_particles"):
-        try:
-            number = float(generator.get(key) or 0.0)
-        except (TypeError, ValueError, OverflowError):
-            continue  # reported by the particle checks
-        asked.append((f"particles.generator.{key}", safe_product(number, cells) if key == "particles_per_cell" else number))
-    asked.append(("particles.population.min_per_cell", safe_product(config["particles"]["population"]["min_per_cell"], cells)))
+    """Refuse generators and population bounds that ask for more than :data:`MAX_PARTICLES` (each,
+    and the generators of all systems together)."""
+    asked, total = [], 0.0
+    for where, section in _system_keys(config).items():
+        generator = section["generator"]
+        for key in ("particles_per_cell", "num_particles"):
+            try:
+                number = float(generator.get(key) or 0.0)
+            except (TypeError, ValueError, OverflowError):
+                continue  # reported by the particle checks
+            asked.append((f"{where}.generator.{key}", safe_product(number, cells) if key == "particles_per_cell" else number))
+            total += asked[-1][1]
+        asked.append((f"{where}.population.min_per_cell", safe_product(section["population"]["min_per_cell"], cells)))
+    asked.append(("particles", total))
     for key, count in asked:
         if count > MAX_PARTICLES:
             raise ConfigError(f"config key '{key}': up to {count:.3g} particles on the finest mesh (more than "
                               f"{MAX_PARTICLES:.0e}, several GB)")
+
+
+def _system_keys(config: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The particle sections of a resolved config by their config key (``particles``, or
+    ``particles.<name>`` for listed systems); the one mapping also when the run carries none."""
+    listed = listed_systems(config)
+    return {f"particles.{name}" if listed else "particles": section
+            for name, section in particle_sections(config, carried=False).items()}
 
 
 def expression_constants(config: dict[str, Any]) -> dict[str, float]:
@@ -574,9 +594,13 @@ def _check_rheology(config: dict[str, Any]) -> None:
 
 
 def _property_names(config: dict[str, Any]) -> list[str]:
-    """Names of the particle properties of a resolved config (as given: names or {name: ...})."""
-    names = []
-    for item in config["particles"]["properties"]:
+    """Names of the particle properties of a resolved config's primary system (as given: names or
+    {name: ...})."""
+    names: list[str] = []
+    primary = primary_system(config)
+    if primary is None:
+        return names
+    for item in particle_sections(config).get(primary, {}).get("properties", []):
         if isinstance(item, str):
             names.append(item)
         elif isinstance(item, dict) and isinstance(item.get("name"), str):
@@ -614,9 +638,8 @@ def _check_materials(config: dict[str, Any]) -> None:
 
 
 def particles_enabled(config: dict[str, Any]) -> bool:
-    """Whether a run of ``config`` carries particles."""
-    enabled = config["particles"]["enabled"]
-    return config["composition"]["source"] == "particles" if enabled is None else bool(enabled)
+    """Whether a run of ``config`` carries particles (:func:`convection.config.particle_systems.carries_particles`)."""
+    return carries_particles(config)
 
 
 def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[str], Callable]:
@@ -645,59 +668,81 @@ def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[
 
 
 def _check_particles(config: dict[str, Any]) -> None:
-    from particles.manager import build_generator, build_properties
-    from particles.interpolation import INTERPOLATORS
-    from particles.population import PopulationControl
-
+    """Every particle system's section (the one mapping also when the run carries no particles)."""
     section = config["particles"]
-    if section["enabled"] is False and config["composition"]["source"] == "particles":
+    if isinstance(section, dict) and section["enabled"] is False and config["composition"]["source"] == "particles":
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
+    primary = primary_system(config)
     make = point_function(config, probe=True)
+    for (name, section), where in zip(particle_sections(config, carried=False).items(), _system_keys(config)):
+        feeds = name == primary  # the system whose fields the model reads
+        _check_system_components(config, section, where, make, feeds=feeds)
+        _check_system_properties(config, section, where, make, feeds=feeds)
+
+
+def _check_system_components(config: dict[str, Any], section: dict[str, Any], where: str, make: Callable, *,
+                             feeds: bool) -> None:
+    """A system's generator and interpolator (``where``: its config key; ``feeds``: the model reads
+    its fields, whose degree the interpolator decides)."""
+    from particles.manager import build_generator
+    from particles.interpolation import INTERPOLATORS
+
     try:
         generator = build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"config key 'particles.generator': {err}") from None
+        raise ConfigError(f"config key '{where}.generator': {err}") from None
     if config_domain(config).curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
-        raise ConfigError(f"config key 'particles.generator.name': {generator.name} needs straight-sided cells; the "
+        raise ConfigError(f"config key '{where}.generator.name': {generator.name} needs straight-sided cells; the "
                           f"{config['mesh']['geometry']} has curved ones (mesh.geometry_degree 2): use "
                           "metropolis_hastings (with a density, e.g. \"r < r_inner + 0.15\", or none for uniform)")
     params = dict(section["interpolator"])
     name = params.pop("name", None)
     if not isinstance(name, str) or name not in INTERPOLATORS:
-        raise ConfigError(f"config key 'particles.interpolator.name': {short_repr(name)} is not one of {sorted(INTERPOLATORS)}")
+        raise ConfigError(f"config key '{where}.interpolator.name': {short_repr(name)} is not one of "
+                          f"{sorted(INTERPOLATORS)}")
     try:
         INTERPOLATORS[name](**params)
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"config key 'particles.interpolator': {err}") from None
+        raise ConfigError(f"config key '{where}.interpolator': {err}") from None
     wanted = getattr(INTERPOLATORS[name], "target_degree", None)  # the fields it writes: DG of this degree
-    if wanted is not None and particles_enabled(config) and config["composition"]["degree"] != wanted:
+    if wanted is not None and feeds and particles_enabled(config) and config["composition"]["degree"] != wanted:
         raise ConfigError(f"config key 'composition.degree': {name} writes DG{wanted} fields; set composition.degree: "
                           f"{wanted} (is {config['composition']['degree']})")
-    columns = [m["name"] for m in material_table(config)[0]] if config["composition"]["source"] == "particles" else []
+
+
+def _check_system_properties(config: dict[str, Any], section: dict[str, Any], where: str, make: Callable, *,
+                             feeds: bool) -> None:
+    """A system's properties (the materials' fractions besides, for the system that carries them),
+    population bounds and output properties."""
+    from particles.manager import build_properties
+    from particles.population import PopulationControl
+
+    materials = feeds and config["composition"]["source"] == "particles"
+    columns = [m["name"] for m in material_table(config)[0]] if materials else []
     built = []
     for i, spec in enumerate(section["properties"]):
         try:
             built.append(build_properties([spec], make_function=make)[0])
         except (TypeError, ValueError) as err:
-            raise ConfigError(f"config key 'particles.properties[{i}]': {str(err).removeprefix('item 0: ')}") from None
+            raise ConfigError(f"config key '{where}.properties[{i}]': {str(err).removeprefix('item 0: ')}") from None
         columns.append(built[-1].column)
     for i, prop in enumerate(built):
         missing = [c for c in prop.requires() if c not in columns]
         if missing:
-            raise ConfigError(f"config key 'particles.properties[{i}]': {prop.column!r} needs the particle property "
-                              f"{missing[0]!r}; add it to particles.properties")
+            raise ConfigError(f"config key '{where}.properties[{i}]': {prop.column!r} needs the particle property "
+                              f"{missing[0]!r}; add it to {where}.properties")
     repeated = sorted({c for c in columns if columns.count(c) > 1})
     if repeated:
-        raise ConfigError(f"config key 'particles.properties': more than one property (or material) named {repeated[0]!r}"
-                          "; give properties distinct labels")
+        raise ConfigError(f"config key '{where}.properties': more than one property (or material) named "
+                          f"{repeated[0]!r}; give properties distinct labels")
     pop = section["population"]
     try:
         PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"])
     except ValueError as err:
-        raise ConfigError(f"config key 'particles.population': {err}") from None
+        raise ConfigError(f"config key '{where}.population': {err}") from None
     for name in section["output"]["properties"] or ():
         if name not in columns:
-            raise ConfigError(f"config key 'particles.output.properties': {name!r} is not carried; carried: {columns}")
+            raise ConfigError(f"config key '{where}.output.properties': {name!r} is not carried; carried: {columns}")
 
 
 def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:
@@ -719,14 +764,17 @@ def parse_overrides(items: Iterable[str]) -> list[tuple[list[str], Any]]:
 
 
 def _apply_override(document: dict[str, Any], path: list[str], value: Any) -> None:
-    node = document
-    for i, part in enumerate(path[:-1]):
-        child = node.get(part)
+    node, i = document, 0
+    while i < len(path) - 1:
+        child = node.get(path[i])
         if child is None:
-            child = node[part] = {}
+            child = node[path[i]] = {}
+        if isinstance(child, list) and i + 2 < len(path):  # listed particle systems: particles.<name or index>.<key>
+            child = override_target(child, path[i + 1], path)
+            i += 1
         if not isinstance(child, dict):
             raise ConfigError(f"--set {'.'.join(path)}: '{'.'.join(path[:i + 1])}' is not a section")
-        node = child
+        node, i = child, i + 1
     node[path[-1]] = value
 
 
@@ -767,7 +815,10 @@ def _load(path: str | Path | None, overrides: Iterable[str], document: dict | No
         _apply_override(document, key_path, value)
     check_document_shape(document)
     document = apply_scaling(document)
+    systems = resolve_systems(document)
     config = validate(SCHEMA, document)
+    if systems is not None:
+        config["particles"] = systems
     _resolve_rayleigh(config)
     _resolve_boundaries(config, document)
     _check_consistency(config, document)

@@ -17,7 +17,9 @@ A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the
   the fields of every component (``functions/<component>/<name>``: ``u``, ``p``, ``T^n``,
   ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``, advected or static material fractions): owned dof values
   with the owned dof coordinates;
-- ``particles.h5``: the particles with their properties (:func:`particles.checkpoint.save_checkpoint`).
+- ``particles.h5``: the particles with their properties (:func:`particles.checkpoint.save_checkpoint`);
+  with several particle systems one file per system, ``particles_<name>.h5``
+  (:func:`particles.systems.file_stem`).
 
 The folder is written under a hidden temporary name and renamed when complete, so a run killed at
 any moment leaves only complete checkpoints under ``checkpoint_*`` names (at worst a stray hidden
@@ -70,6 +72,7 @@ from fembase.distribute import cell_owners_by_input, mesh_fingerprint
 from fembase.files import H5Sink
 from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.manager import ParticleManager
+from particles.systems import file_stem
 from particles.properties import PropertyContext
 
 __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpointer", "SavedRun", "latest_checkpoint",
@@ -263,8 +266,8 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
         sink.replicated("state", np.frombuffer(json.dumps(state).encode(), dtype=np.uint8))
         sink.attrs(format=FORMAT, version=VERSION, config_version=CONFIG_VERSION, num_ranks=comm.size,
                    step=model.timestep, time=model.time, token=token)
-    if model.particles is not None:
-        save_checkpoint(tmp / "particles.h5", model.particles.swarm, step=model.timestep, time=model.time, token=token)
+    for name, manager in model.particles.items() if model.particles is not None else ():
+        save_checkpoint(tmp / f"{file_stem(name)}.h5", manager.swarm, step=model.timestep, time=model.time, token=token)
     comm.Barrier()
     if comm.rank == 0:
         if final.exists():
@@ -311,11 +314,11 @@ def _inspect(path: Path) -> SavedRun | str:
         return f"damaged ({' '.join(str(err).split())})"
     saved = SavedRun(path, config, state, num_ranks)
     try:
-        has_particles = "particles" in saved.components
+        parts = [name for name in saved.components if name == "particles" or name.startswith("particles_")]
     except (KeyError, TypeError, AttributeError) as err:
         return f"damaged (its state lacks {err})"
-    if has_particles:
-        problem = _other_part(path / "particles.h5", identity)
+    for part in parts:  # one swarm per particle system
+        problem = _other_part(path / f"{part}.h5", identity)
         if problem is not None:
             return problem
     return saved
@@ -556,11 +559,12 @@ def saved_values(saved: SavedRun, name: str, /) -> npt.NDArray[np.float64]:
         return f[f"functions/{name}/values"][...]
 
 
-def restore_particles(saved: SavedRun, manager: ParticleManager, context: PropertyContext, /) -> bool:
-    """Give ``manager`` the checkpoint's particle swarm (collective; its scalars come back with the
-    other components', :func:`restore_state`). Returns whether the particles came back exactly
-    (same ranks, same order)."""
-    restored = load_checkpoint(saved.path / "particles.h5", manager.mesh)
+def restore_particles(saved: SavedRun, manager: ParticleManager, context: PropertyContext, /, *,
+                      part: str = "particles") -> bool:
+    """Give ``manager`` the checkpoint's particle swarm ``<part>.h5`` (collective; its scalars come
+    back with the other components', :func:`restore_state`). Returns whether the particles came back
+    exactly (same ranks, same order)."""
+    restored = load_checkpoint(saved.path / f"{part}.h5", manager.mesh)
     manager.adopt(restored.swarm, context=context)
     return restored.exact
 

@@ -289,6 +289,10 @@ class CompositionSettings:
     degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
                         help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for quadratic_least_squares); "
                              "source field needs >= 1")
+    particle_system: str | None = param(None,
+                                        help="with several particle systems: the one whose particles carry the "
+                                             "material fractions and the fields the viscosity laws read (null: the "
+                                             "first)")
 
     def __post_init__(self) -> None:
         check_degree(self.source, self.degree)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import contextlib
 from functools import partial
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 import dolfinx.fem
 import dolfinx.mesh
@@ -33,6 +33,7 @@ from convection.adapt.adaptivity import INDICATOR_FIELDS
 from convection.adapt.rebalance import RankLoads
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from fembase.geometry import Candidates
+from particles.swarm import Swarm
 
 if TYPE_CHECKING:
     from convection.model.model import Model
@@ -52,9 +53,15 @@ class MeshChanges:
         self.model = model
         self._point_evaluator: PointEvaluator | None = None
 
-    def _swarm(self):
+    def _swarm(self) -> Swarm | None:
+        """The primary particle system's swarm (None without particles)."""
         particles = self.model.particles
-        return particles.swarm if particles is not None else None
+        return particles.primary.swarm if particles is not None else None
+
+    def _swarms(self) -> list[Swarm]:
+        """Every particle system's swarm."""
+        particles = self.model.particles
+        return particles.swarms if particles is not None else []
 
     def locator(self) -> PointEvaluator:
         """Point location and evaluation on the current mesh (built once per mesh; shares the
@@ -74,7 +81,7 @@ class MeshChanges:
         if surface is None:
             return lambda v: v
         if model.particles is not None:  # particles the moving surface passes are moved back in
-            model.particles.swarm.inward = model.domain.inward
+            model.particles.set_inward(model.domain.inward)
         with model.timers("mesh_motion"):
             surface.velocity(u)
         return surface.relative
@@ -107,8 +114,8 @@ class MeshChanges:
             mesh = adaptivity.new_mesh(model.mesh, fields or [fallback], locator=locator, time=model.time)
             # Both meshes are refined from one base: each particle is looked for first among the
             # new cells of its old cell's base cell, not with a bounding-box search of the new mesh.
-            swarm = self._swarm()
-            candidates = None if swarm is None else adaptivity.hierarchy.candidates(mesh, model.mesh, swarm.cells)
+            candidates = {name: adaptivity.hierarchy.candidates(mesh, model.mesh, manager.swarm.cells)
+                          for name, manager in (model.particles.items() if model.particles is not None else ())}
         self.move_to(mesh, candidates=candidates, nested=True)
         return before, model.num_cells
 
@@ -120,15 +127,16 @@ class MeshChanges:
         assert balancer is not None
         surface = model.free_surface  # the undeformed cells, as _reference_frame, without its locator
         with model.timers("balancing"), surface.undeformed() if surface is not None else contextlib.nullcontext():
-            before = balancer.loads(model.mesh, self._swarm())
-            mesh = balancer.new_mesh(model.mesh, self._swarm())
+            before = balancer.loads(model.mesh, self._swarms())
+            mesh = balancer.new_mesh(model.mesh, self._swarms())
         self.move_to(mesh)
-        return before, balancer.loads(model.mesh, self._swarm())
+        return before, balancer.loads(model.mesh, self._swarms())
 
-    def move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Candidates | None = None,
+    def move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Mapping[str, Candidates] | None = None,
                 nested: bool = False) -> None:
         """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles
-        (``candidates``: where to look for each particle first, see ``ParticleManager.to_mesh``;
+        (``candidates``: where to look for each particle first, by particle system, see
+        ``ParticleManager.to_mesh``;
         ``nested``: both meshes are refined from the adaptivity's base mesh, so the fields' nodes are
         looked for among the old cells of their base cell first)."""
         model = self.model

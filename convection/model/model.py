@@ -7,7 +7,7 @@ The model holds the mesh's solvers and the components that act on them, each wit
 - ``temperature`` (:class:`convection.solvers.transport.TransportSolver`, or None for a fixed ``T = 0``);
 - ``composition`` (a :data:`convection.model.composition.COMPOSITION_SOURCES` entry, or None): the
   material fractions;
-- ``particles`` (:class:`particles.manager.ParticleManager`, or None);
+- ``particles`` (:class:`particles.systems.ParticleSystems`: one or several particle systems, or None);
 - ``adaptivity`` (:class:`convection.adapt.adaptivity.Adaptivity`) and ``balancer``
   (:class:`convection.adapt.rebalance.Balancer`), each with its own schedule;
 - ``free_surface`` (:class:`convection.deform.motion.FreeSurface`, or None): the mesh moves with
@@ -57,7 +57,7 @@ from convection.solvers.timestep import cfl_timestep
 from convection.solvers.transport import TransportSolver
 from fembase.state import State, Stateful
 from fembase.timing import Timers
-from particles.manager import ParticleManager
+from particles.systems import ParticleSystems, file_stem
 from particles.properties import PropertyContext
 
 __all__ = ["Model", "StepReport"]
@@ -86,14 +86,14 @@ class Model:
             extrapolated velocity), or None for ``T = 0``.
         solve_temperature: False keeps the temperature at its initial value.
         composition: The material fractions, or None.
-        particles: The particles, or None.
+        particles: The particle systems, or None.
         adaptivity: Mesh adaptivity, or None.
         balancer: Load balancing, or None.
     """
 
     def __init__(self, stokes: StokesSolver, /, *, temperature: TransportSolver | None = None,
                  solve_temperature: bool = True, composition: CompositionSource | None = None,
-                 particles: ParticleManager | None = None, adaptivity: Adaptivity | None = None,
+                 particles: ParticleSystems | None = None, adaptivity: Adaptivity | None = None,
                  balancer: Balancer | None = None, free_surface: FreeSurface | None = None) -> None:
         if temperature is not None and temperature.velocity_extrapolation:
             raise ValueError("the model extrapolates the velocity itself: build the temperature solver with "
@@ -204,8 +204,8 @@ class Model:
             out["temperature"] = self.temperature
         if self.composition is not None:
             out["composition"] = self.composition
-        if self.particles is not None:
-            out["particles"] = self.particles
+        for name, manager in self.particles.items() if self.particles is not None else ():
+            out[file_stem(name)] = manager  # one per particle system
         if self.free_surface is not None:
             out["free_surface"] = self.free_surface
         return out
@@ -315,8 +315,8 @@ class Model:
         return self._mesh_changes.rebalance()
 
     def _rebalance_if_due(self) -> tuple[RankLoads, RankLoads] | None:
-        swarm = self.particles.swarm if self.particles is not None else None
-        if self.balancer is None or not self.balancer.due(self.timestep, self.mesh, swarm):
+        swarms = self.particles.swarms if self.particles is not None else []
+        if self.balancer is None or not self.balancer.due(self.timestep, self.mesh, swarms):
             return None
         return self.rebalance()
 

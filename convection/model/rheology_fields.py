@@ -29,7 +29,7 @@ import ufl
 
 from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space, interpolation_points
-from particles.manager import ParticleManager
+from particles.systems import ParticleSystems
 
 __all__ = ["ExpressionField", "Flow", "RheologyFields", "flow_viscosity"]
 
@@ -109,11 +109,11 @@ class RheologyFields:
         ValueError: The particles ask for a rate the rheology does not provide.
     """
 
-    def __init__(self, stokes: StokesSolver, particles: ParticleManager | None, /) -> None:
+    def __init__(self, stokes: StokesSolver, particles: ParticleSystems | None, /) -> None:
         self.particles = particles
         law = stokes.approximation.viscosity_law
         declared = law.rate_fields()
-        wanted = particles.properties.rate_fields if particles is not None else ()
+        wanted = particles.rate_fields if particles is not None else ()
         unknown = [name for name in wanted if name not in declared]
         if unknown:
             raise ValueError(f"no mesh field {unknown[0]!r} for the particles to integrate; the rheology provides "

@@ -71,6 +71,7 @@ from convection.postprocess.base import (
 )
 from convection.postprocess.geodynamics import FreeSurfaceStatistics, MaterialStatistics, PointValues, Topography
 from fembase.registry import Registry
+from particles.manager import ParticleManager
 from fembase.state import State
 
 __all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "ModelFeatures", "Postprocessor", "check_statistics",
@@ -163,20 +164,43 @@ class StokesStatistics(Column):
 
 
 class ParticleStatistics(Column):
+    """The primary particle system's counts (the one whose fields the model reads), and with
+    several systems each other system's under its name (``n_particles_<name>``, ...)."""
+
     name: ClassVar[str] = "particles"
-    description: ClassVar[str] = "particle count, lost/added/removed particles, particles per cell min/mean/max"
+    description: ClassVar[str] = ("particle count, lost/added/removed particles, particles per cell min/mean/max "
+                                  "(other particle systems: the same columns suffixed _<name>)")
     columns = ("n_particles", "n_lost", "n_added", "n_removed", "ppc_min", "ppc_mean", "ppc_max")
+
+    def __init__(self, others: tuple[str, ...] = (), /) -> None:
+        self.others = others
+        self.columns = (*type(self).columns, *(f"{c}_{name}" for name in others for c in type(self).columns))
 
     @classmethod
     def missing(cls, features: ModelFeatures) -> str | None:
         return None if features.particles else "needs particles (particles.enabled: true)"
 
+    @classmethod
+    def create(cls, model: Model, options: Mapping[str, Any]) -> ParticleStatistics | None:
+        if not cls.applies(model):
+            return None
+        systems = model.particles
+        return cls(tuple(name for name in systems.names if name != systems.primary_name))
+
     def __call__(self, model: Model, /) -> dict[str, float]:
-        manager = model.particles
-        assert manager is not None
+        systems = model.particles
+        assert systems is not None
+        out = self._counts(systems.primary, "")
+        for name in self.others:
+            out.update(self._counts(systems[name], f"_{name}"))
+        return out
+
+    @staticmethod
+    def _counts(manager: ParticleManager, suffix: str) -> dict[str, float]:
         lo, mean, hi = manager.particles_per_cell()
-        return {"n_particles": manager.num_particles, "n_lost": manager.lost, "n_added": manager.added,
-                "n_removed": manager.removed, "ppc_min": lo, "ppc_mean": mean, "ppc_max": hi}
+        values = {"n_particles": manager.num_particles, "n_lost": manager.lost, "n_added": manager.added,
+                  "n_removed": manager.removed, "ppc_min": lo, "ppc_mean": mean, "ppc_max": hi}
+        return {f"{key}{suffix}": value for key, value in values.items()}
 
 
 class LoadStatistics(Column):
@@ -185,8 +209,8 @@ class LoadStatistics(Column):
     columns = ("cell_imbalance", "particle_imbalance")
 
     def __call__(self, model: Model, /) -> dict[str, float]:
-        swarm = model.particles.swarm if model.particles is not None else None
-        loads = RankLoads.measure(model.mesh, swarm, particle_weight=0.0)
+        swarms = model.particles.swarms if model.particles is not None else []
+        loads = RankLoads.measure(model.mesh, swarms, particle_weight=0.0)
         return {"cell_imbalance": loads.cell_imbalance, "particle_imbalance": loads.particle_imbalance}
 
 

@@ -239,7 +239,8 @@ class Watch:
         for pp in self._own:
             values.update(pp(model))
         if self._count:
-            values.update(n_particles=model.particles.num_particles, n_lost=model.particles.lost)
+            primary = model.particles.primary  # as the particles statistics' columns
+            values.update(n_particles=primary.num_particles, n_lost=primary.lost)
         return Watched.of(values)
 
     def measure(self, model: Model, /) -> Watched:
@@ -555,7 +556,7 @@ class _RunLoop:
         if out.written != model.timestep:
             out.write_fields(model)
         with model.timers("output"):
-            if model.particles is not None and model.particles.writer is not None:
+            if model.particles is not None and model.particles.writes:
                 model.particles.update(model.property_context(), step=model.timestep, final=True)
         if self.checkpoints is not None and self.checkpoints.settings.at_end:
             self.checkpoints.write(model, self._state(), only_if_new=True)

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import yaml
 
+from convection.config.particle_systems import document_generators
+
 HERE = Path(__file__).resolve().parents[1]
 IGNORED = ("wall_time",)
 
@@ -40,11 +42,11 @@ def _shrunk(config: Path, steps: int) -> list[str]:
         extra = [f"mesh.cells=[{','.join(str(max(4, c // 3)) for c in mesh['cells'])}]"]
     else:
         extra = [f"mesh.resolution={mesh['resolution'] * 1.8:.3g}"]
-    generator = (raw.get("particles") or {}).get("generator") or {}
-    if "particles_per_cell" in generator:
-        extra.append(f"particles.generator.particles_per_cell={min(8, generator['particles_per_cell'])}")
-    if "num_particles" in generator:
-        extra.append(f"particles.generator.num_particles={min(3000, generator['num_particles'])}")
+    for prefix, generator in document_generators(raw).items():
+        if "particles_per_cell" in generator:
+            extra.append(f"{prefix}.generator.particles_per_cell={min(8, generator['particles_per_cell'])}")
+        if "num_particles" in generator:
+            extra.append(f"{prefix}.generator.num_particles={min(3000, generator['num_particles'])}")
     if (raw.get("adaptivity") or {}).get("enabled"):
         extra.append(f"adaptivity.every={min(4, raw['adaptivity'].get('every', 10))}")
     extra += [f"time.max_steps={steps}", "output.progress=none", "output.fields_every=5"]

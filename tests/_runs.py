@@ -16,6 +16,7 @@ import h5py
 import numpy as np
 import yaml
 
+from convection.config.particle_systems import document_generators
 from convection.launch import mpi_environment, mpirun
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,11 +46,11 @@ def shrink(config: Path, *, divisor: int, coarsen: float, max_particles: int, ma
         extra = [f"mesh.cells=[{','.join(str(max(4, c // divisor)) for c in mesh['cells'])}]"]
     else:  # a shell meshed by gmsh to a resolution
         extra = [f"mesh.resolution={mesh['resolution'] * coarsen:.3g}"]
-    generator = (raw.get("particles") or {}).get("generator") or {}
-    if "particles_per_cell" in generator:
-        extra.append(f"particles.generator.particles_per_cell={min(max_per_cell, generator['particles_per_cell'])}")
-    if "num_particles" in generator:
-        extra.append(f"particles.generator.num_particles={min(max_particles, generator['num_particles'])}")
+    for prefix, generator in document_generators(raw).items():
+        if "particles_per_cell" in generator:
+            extra.append(f"{prefix}.generator.particles_per_cell={min(max_per_cell, generator['particles_per_cell'])}")
+        if "num_particles" in generator:
+            extra.append(f"{prefix}.generator.num_particles={min(max_particles, generator['num_particles'])}")
     return extra
 
 

@@ -34,7 +34,7 @@ from convection.schema import ConfigError, section_schema, short_repr, validate
 from particles.settings import ParticleSettings
 from particles.systems import DEFAULT_SYSTEM
 
-__all__ = ["MAX_PARTICLE_SYSTEMS", "carries_particles", "check_primary", "listed_systems", "override_target",
+__all__ = ["MAX_PARTICLE_SYSTEMS", "carries_particles", "document_generators", "check_primary", "listed_systems", "override_target",
            "particle_sections", "primary_system", "resolve_systems"]
 
 MAX_PARTICLE_SYSTEMS = 16
@@ -143,3 +143,13 @@ def override_target(node: list[Any], part: str, path: list[str]) -> Any:
         if isinstance(item, dict) and item.get("name") == part:
             return item
     raise ConfigError(f"--set {'.'.join(path)}: {part!r} is neither an index nor the name of an item of the list")
+
+
+def document_generators(document: dict[str, Any], /) -> dict[str, dict[str, Any]]:
+    """The generator mappings of a config document as written (not resolved) by the ``--set``
+    prefix of each system's section: ``{"particles": ...}`` or ``{"particles.<name>": ...}`` for
+    listed systems (e.g. to cap the particle counts of a shipped config for a small run)."""
+    section = document.get("particles") or {}
+    items = [(f"particles.{s.get('name')}", s) for s in section if isinstance(s, dict)] if isinstance(section, list) \
+        else [("particles", section)] if isinstance(section, dict) else []
+    return {prefix: s.get("generator") or {} for prefix, s in items if isinstance(s.get("generator") or {}, dict)}

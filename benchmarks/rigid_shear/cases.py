@@ -31,12 +31,11 @@ from mpi4py import MPI
 
 import dolfinx.fem
 
+from benchmarks.rigid_shear.problem import StokesSolver, exact_density
 from particles.generation import RandomUniform
 from particles.interpolation import CellAverage, Interpolator, LeastSquares, QuadraticLeastSquares
 from particles.manager import ParticleManager
 from particles.properties.function import FunctionProperty
-
-from problem import StokesSolver, exact_density
 
 __all__ = ["INTERPOLATORS", "Case", "run_case"]
 

@@ -29,16 +29,17 @@ from typing import Any, Iterator, Sequence
 from mpi4py import MPI
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parents[1]))
 
-from cases import INTERPOLATORS, Case, run_case  # noqa: E402
-from problem import StokesSolver, unit_square  # noqa: E402
-from report import write_figure, write_table  # noqa: E402
+from benchmarks.rigid_shear.cases import INTERPOLATORS, Case, run_case  # noqa: E402
+from benchmarks.rigid_shear.problem import StokesSolver, unit_square  # noqa: E402
+from benchmarks.rigid_shear.report import write_figure, write_table  # noqa: E402
 
 __all__ = ["main", "parse", "sweep"]
 
 PROBLEMS = ("instantaneous", "time_dependent")
-DEFAULT_INTERPOLATORS = ("exact", "cell_average", "least_squares", "least_squares_limited", "quadratic_least_squares")
+DEFAULT_INTERPOLATORS = ("exact", "cell_average", "least_squares", "least_squares_limited", "quadratic_least_squares",
+                         "quadratic_least_squares_limited")
 
 
 def parse(argv: Sequence[str] | None = None, /) -> argparse.Namespace:

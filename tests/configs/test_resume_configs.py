@@ -80,8 +80,10 @@ def test_killed_config_resumes_bit_for_bit(tmp_path, name, ranks):
     assert proc.returncode == 0, proc.stderr
     assert "note:" not in proc.stderr, proc.stderr  # the exact path, not the fallback
     assert_same_statistics(reference, killed)
-    if (latest_checkpoint(reference) / "particles.h5").exists():
-        for a, b in zip(final_particles(reference), final_particles(killed)):
+    parts = sorted(p.stem for p in latest_checkpoint(reference).glob("particles*.h5"))  # one per particle system
+    assert parts == sorted(p.stem for p in latest_checkpoint(killed).glob("particles*.h5"))
+    for part in parts:
+        for a, b in zip(final_particles(reference, part), final_particles(killed, part)):
             assert np.array_equal(a, b)
 
 

@@ -82,3 +82,17 @@ def test_parallel_errors_equal_serial():
         assert (a["interpolator"], a["problem"], a["particles"], a["lost"]) == (
             b["interpolator"], b["problem"], b["particles"], b["lost"])
         assert np.allclose([a["u"], a["p"], a["rho"]], [b["u"], b["p"], b["rho"]], rtol=1e-8, atol=0.0)
+
+
+def test_paper_time_dependent_rows_complete():
+    """aspect_q2q1.json holds every Q2/Q1 run of the paper's time-dependent problem (ASPECT's
+    2019 ``time-dependent/`` result files, today's ``steady-state/``): 2 interpolators x 2
+    integrators x 7 particle counts x 4 resolutions, each error positive."""
+    from benchmarks.rigid_shear.report import PAPER_PPC, paper_rows
+
+    rows = [r for r in paper_rows() if r["problem"] == "time_dependent"]
+    keys = {(r["interpolator"], r["integrator"], r["ppc_per_quad"], r["h"]) for r in rows}
+    assert len(rows) == len(keys) == 2 * 2 * len(PAPER_PPC) * 4
+    assert {k[:2] for k in keys} == {(i, t) for i in ("cell_average", "least_squares") for t in ("rk2", "rk4")}
+    assert {k[3] for k in keys} == {1 / 8, 1 / 16, 1 / 32, 1 / 64}
+    assert all(r[q] > 0.0 for r in rows for q in ("u", "p", "rho"))

@@ -58,7 +58,7 @@ if TYPE_CHECKING:
     import pyvista as pv
 
 __all__ = ["RunFilesError", "read_statistics", "read_last_field", "field_units", "plot_run", "import_pyvista",
-           "snapshot_times", "plot_snapshots", "field_files", "check_run_folder"]
+           "snapshot_times", "plot_snapshots", "particle_series", "field_files", "check_run_folder"]
 
 _FIELD_FILE = re.compile(r"fields_([0-9]+)\.h5")
 """The per-mesh field files :class:`convection.io.fields.FieldOutput` writes."""
@@ -527,6 +527,25 @@ class _Labels:
         return f"{name} [{unit}]" if unit and unit != "1" else name
 
 
+def particle_series(directory: Path, system: str | None = None, /) -> Path | None:
+    """The particle output (XDMF series) a picture draws: system ``system``'s
+    (``particles_<name>.xdmf``), or by default ``particles.xdmf``, else the first system's by name;
+    None if the run wrote no particles.
+
+    Raises:
+        ValueError: ``system`` wrote no output here (naming those that did).
+    """
+    written = sorted(directory.glob("particles*.xdmf"))
+    if system is None:
+        default = directory / "particles.xdmf"
+        return default if default.is_file() else (written[0] if written else None)
+    path = directory / ("particles.xdmf" if system == "particles" else f"particles_{system}.xdmf")
+    if not path.is_file():
+        names = [p.stem.removeprefix("particles_") for p in written]
+        raise ValueError(f"no output of the particle system {system!r} in {directory} (written: {names or 'none'})")
+    return path
+
+
 def plot_snapshots(
     directory: str | Path,
     times: Sequence[float] | None = None,
@@ -534,6 +553,7 @@ def plot_snapshots(
     particle_property: str | None = None,
     *,
     particle_radius: float | None = None,
+    particle_system: str | None = None,
     out_dir: str | Path | None = None,
     log: Callable[[str], None] | None = print,
 ) -> list[Path]:
@@ -552,6 +572,9 @@ def plot_snapshots(
             default black particles (spherical shells: ``displacement`` if the particles carry it).
         particle_radius: Spherical shells: draw only the particles within this distance of the
             centre (default all of the northern hemisphere).
+        particle_system: The particle system drawn, of a run with several (its output
+            ``particles_<name>.xdmf``); default the run's ``particles.xdmf``, else the first
+            system's output by name.
         out_dir: Folder of the pictures (default ``directory/snapshots``).
         log: Receives one line per skipped picture (default ``print``; None: silent).
 
@@ -561,12 +584,13 @@ def plot_snapshots(
     Raises:
         RunFilesError: ``fields.xdmf`` is missing, or it, ``particles.xdmf`` or an HDF5 file of a
             drawn time is damaged.
-        ValueError: ``field`` or ``particle_property`` does not exist.
+        ValueError: ``field``, ``particle_property`` or ``particle_system`` does not exist.
     """
     say = log if log is not None else (lambda line: None)
     directory = Path(directory)
     fields = _Series(directory / "fields.xdmf")
-    particles = _Series(directory / "particles.xdmf") if (directory / "particles.xdmf").is_file() else None
+    series = particle_series(directory, particle_system)
+    particles = _Series(series) if series is not None else None
     out_dir = directory / "snapshots" if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     labels = _Labels(field_units(directory) or {})
@@ -798,6 +822,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--particle-radius", type=float, default=None, metavar="R",
                         help="spherical shells: draw only particles within R of the centre (default: all of the "
                              "northern hemisphere)")
+    parser.add_argument("--particle-system", default=None, metavar="NAME",
+                        help="of a run with several particle systems: the one drawn (default: the first that "
+                             "wrote output, by name)")
     parser.add_argument("--snapshots", default=None, metavar="DIR",
                         help="folder of the snapshot pictures (default RUN_DIR/snapshots)")
     args = parser.parse_args(argv)
@@ -819,7 +846,8 @@ def _draw(args: argparse.Namespace) -> None:
               "no snapshots")
         return
     paths = plot_snapshots(directory, args.times, args.field, args.particle_property,
-                           particle_radius=args.particle_radius, out_dir=args.snapshots)
+                           particle_radius=args.particle_radius, particle_system=args.particle_system,
+                           out_dir=args.snapshots)
     for path in paths:
         print(path)
 

@@ -248,3 +248,19 @@ def test_viscosity_on_a_log_scale_and_titles_in_units(tmp_path):
     assert (labels.time(2.5), labels.of("viscosity"), labels.of("material")) == ("2.5 Myr", "viscosity [Pa*s]",
                                                                               "material")
     assert _Labels().time(2.5) == "2.5" and field_units(tmp_path / "nowhere") is None
+
+
+def test_the_particle_system_drawn(tmp_path):
+    """particles.xdmf by default; of a run with several systems the one asked for, else the first
+    by name; an unknown one is named with those written."""
+    from convection.io.pictures import particle_series
+
+    assert particle_series(tmp_path) is None
+    for name in ("particles_tracers.xdmf", "particles_dense.xdmf"):
+        (tmp_path / name).write_text("<Xdmf/>")
+    assert particle_series(tmp_path) == tmp_path / "particles_dense.xdmf"
+    assert particle_series(tmp_path, "tracers") == tmp_path / "particles_tracers.xdmf"
+    with pytest.raises(ValueError, match=r"'slab'.*written: \['dense', 'tracers'\]"):
+        particle_series(tmp_path, "slab")
+    (tmp_path / "particles.xdmf").write_text("<Xdmf/>")
+    assert particle_series(tmp_path) == tmp_path / "particles.xdmf"

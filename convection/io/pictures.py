@@ -589,8 +589,7 @@ def plot_snapshots(
     say = log if log is not None else (lambda line: None)
     directory = Path(directory)
     fields = _Series(directory / "fields.xdmf")
-    series = particle_series(directory, particle_system)
-    particles = _Series(series) if series is not None else None
+    particles = _Series(series) if (series := particle_series(directory, particle_system)) is not None else None
     out_dir = directory / "snapshots" if out_dir is None else Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     labels = _Labels(field_units(directory) or {})

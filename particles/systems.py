@@ -96,6 +96,11 @@ class ParticleSystems:
         return self._systems[self.primary_name]
 
     @property
+    def swarm(self) -> Swarm:
+        """The primary system's swarm (a one-system run's particles)."""
+        return self.primary.swarm
+
+    @property
     def swarms(self) -> list[Swarm]:
         """Every system's swarm, in order (e.g. a load balancer's particle weights count them all)."""
         return [manager.swarm for manager in self]

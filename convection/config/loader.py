@@ -692,7 +692,7 @@ def _check_particles(config: dict[str, Any]) -> None:
                           "; give properties distinct labels")
     pop = section["population"]
     try:
-        PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"])
+        PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"], pop["method"], pop["bandwidth"])
     except ValueError as err:
         raise ConfigError(f"config key 'particles.population': {err}") from None
     for name in section["output"]["properties"] or ():

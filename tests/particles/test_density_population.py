@@ -193,3 +193,11 @@ def test_density_method_and_score_are_rank_count_independent():
     same = all(np.array_equal(a, b) for a, b in zip(par[0], ser[0])) and par[1] == ser[1] and par[1][0] > 0 \
         and par[1][1] > 0 and all(np.array_equal(a, b) for a, b in zip(par[2:5], ser[2:5])) and par[5] == ser[5]
     assert comm.allreduce(bool(same), op=MPI.LAND)
+
+
+def test_the_score_postprocessor_is_registered_and_only_on_request():
+    from convection.postprocess.postprocessors import POSTPROCESSORS, ParticleDistribution
+
+    assert POSTPROCESSORS.lookup("particle_distribution") is ParticleDistribution
+    assert ParticleDistribution.by_default(None) is False
+    assert ParticleDistribution.columns[0] == "distribution_score"

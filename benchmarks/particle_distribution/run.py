@@ -132,7 +132,10 @@ def main(argv: list[str] | None = None) -> int:
         f"# Particle distribution: population control by count vs by density\n\n"
         f"configs/vankeken_1a_particles.yaml to t = {end:g} ({args.ranks} rank(s)); "
         f"score: mean and max over cells of ASPECT's distribution score (granularity 2); "
-        f"ppc: particles per cell.\n\n" + table(stats, end))
+        f"ppc: particles per cell.\n\n" + table(stats, end) + "\n" + "; ".join(
+            f"{m}: {int(stats[m]['step'][-1])} steps, {stats[m]['n_particles'][-1]:.0f} particles and "
+            f"{stats[m]['cells'][-1]:.0f} cells at the end, wall time {stats[m]['wall_time'][-1]:.0f} s"
+            for m in METHODS) + "\n")
     figure(stats, args.results / "distribution.png")
     summary = {m: {"score_time_average": _mean_in_time(stats[m], "distribution_score"),
                    "score_end": float(stats[m]["distribution_score"][-1]), "steps": int(stats[m]["step"][-1]),

@@ -159,7 +159,9 @@ def _removal_kernel(cells, excess, offsets, nb_off, nb_cells, x, ids, radius, re
         for _ in range(excess[t]):
             best = -1
             for i in range(n):
-                if alive[i] and (best < 0 or rho[i] > rho[best] or (rho[i] == rho[best] and ids[r0 + i] > ids[r0 + best])):
+                if not alive[i]:
+                    continue
+                if best < 0 or rho[i] > rho[best] or (rho[i] == rho[best] and ids[r0 + i] > ids[r0 + best]):
                     best = i
             alive[best] = False
             remove[r0 + best] = True

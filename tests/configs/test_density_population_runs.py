@@ -1,5 +1,5 @@
 """configs/vankeken_1a_particles.yaml with ``particles.population.method=density`` and the
-``particle_distribution`` statistics: the same particles on 1 and 2 ranks, and a resume from a
+``particle_distribution`` statistics: the same particles on 1, 2 and 3 ranks, and a resume from a
 checkpoint bit for bit."""
 
 import shutil
@@ -21,21 +21,24 @@ def _small(steps: int) -> list[str]:
             "particles.population.method=density", STATISTICS]
 
 
-def test_density_control_gives_the_same_particles_on_1_and_2_ranks(tmp_path):
-    runs = run_on_ranks(CONFIG, {1: tmp_path / "1", 2: tmp_path / "2"}, _small(14))
-    a, b = rows(runs[1]), rows(runs[2])
-    assert len(a) == len(b) == 15
-    exact = ("step", "cells", "n_particles", "n_added", "n_removed", "ppc_min", "ppc_max")
-    for x, y in zip(a, b):
-        assert [x[k] for k in exact] == [y[k] for k in exact]
-        assert float(y["distribution_score"]) == pytest.approx(float(x["distribution_score"]), rel=1e-9)
-        assert float(y["vrms"]) == pytest.approx(float(x["vrms"]), rel=1e-6)
-    assert int(a[-1]["n_added"]) > 0 and int(a[-1]["n_removed"]) > 0
+def test_density_control_gives_the_same_particles_on_1_2_and_3_ranks(tmp_path):
+    runs = run_on_ranks(CONFIG, {r: tmp_path / str(r) for r in (1, 2, 3)}, _small(14))
+    a = rows(runs[1])
+    assert len(a) == 15 and int(a[-1]["n_added"]) > 0 and int(a[-1]["n_removed"]) > 0
     assert all(0.0 <= float(r["distribution_score_min"]) <= float(r["distribution_score"])
                <= float(r["distribution_score_max"]) <= 1.0 for r in a)
-    (ids1, x1, p1), (ids2, x2, p2) = final_particles(runs[1]), final_particles(runs[2])
-    assert np.array_equal(ids1, ids2)
-    assert np.allclose(x1, x2, rtol=0, atol=1e-9) and np.allclose(p1, p2, rtol=0, atol=1e-8)
+    ids1, x1, p1 = final_particles(runs[1])
+    exact = ("step", "cells", "n_particles", "n_added", "n_removed", "ppc_min", "ppc_max")
+    for ranks in (2, 3):
+        b = rows(runs[ranks])
+        assert len(b) == len(a)
+        for x, y in zip(a, b):
+            assert [x[k] for k in exact] == [y[k] for k in exact]
+            assert float(y["distribution_score"]) == pytest.approx(float(x["distribution_score"]), rel=1e-9)
+            assert float(y["vrms"]) == pytest.approx(float(x["vrms"]), rel=1e-6)
+        ids, x, p = final_particles(runs[ranks])
+        assert np.array_equal(ids1, ids)
+        assert np.allclose(x1, x, rtol=0, atol=1e-9) and np.allclose(p1, p, rtol=0, atol=1e-8)
 
 
 @pytest.mark.parametrize("ranks", [1, 2])

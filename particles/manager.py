@@ -252,7 +252,8 @@ def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfi
     interp = dict(settings.interpolator)
     interpolator = get_interpolator(interp.pop("name"), **interp)
     pop = settings.population
-    population = PopulationControl(pop.min_per_cell, pop.max_per_cell, pop.seed) if pop.enabled else None
+    population = PopulationControl(pop.min_per_cell, pop.max_per_cell, pop.seed, pop.method,
+                                   pop.bandwidth) if pop.enabled else None
     out = settings.output
     schedule = OutputSchedule(out.every_steps, out.every_time)
     writer = None

@@ -8,6 +8,10 @@ cells with more than max"):
   keys are removed.
 - **Addition**: a cell with ``n < min_per_cell`` gets ``min_per_cell - n`` particles at uniformly
   random positions in the cell (the reference-cell sampling of :mod:`particles.generation`).
+- **Method** ``density`` (:mod:`particles.density`): the same counts are removed and added, but
+  the removed particles are the most clustered ones (highest kernel density estimate, greedily)
+  and the new ones go where the estimate is lowest (uniformly random within the emptiest of the
+  cell's sub-cells), following ASPECT's point-density-function algorithms.
 - **Randomness** is counter-based and keyed by ``(seed, step, cell key)`` with the generators'
   partition-independent cell key (the cell's sorted node coordinates), so the same swarm gives the
   same result on any number of ranks.
@@ -39,17 +43,20 @@ from particles.generation.base import first_free_id, insert_in_cells
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
 from particles.generation.sampling import uniform_reference_points
+from particles.density import Neighbourhood, addition_points, removal_mask
 from particles.ghosts import ghost_exchange_for
 from particles.interpolation.fill import fill_cells
 from particles.swarm import Swarm
 
-__all__ = ["Initialise", "PopulationControl", "PopulationStats", "control_population", "copy_nearest"]
+__all__ = ["METHODS", "Initialise", "PopulationControl", "PopulationStats", "control_population", "copy_nearest"]
 
 Initialise = Callable[[Swarm, npt.NDArray[np.int64]], None]
 """Hook setting the properties of new particles: ``initialise(swarm, rows)`` (called on all ranks)."""
 
 _STREAM_ADD = 0x5A17
 _STREAM_REMOVE = 0x5A18
+METHODS = ("count", "density")
+"""Population-control methods: random choice (``count``) or by particle density (``density``)."""
 
 
 @dataclass(frozen=True)
@@ -130,17 +137,26 @@ class PopulationControl:
         min_per_cell: Cells with fewer particles get new ones (0: never add).
         max_per_cell: Cells with more particles lose some (None: never remove).
         seed: Random seed (combined with the step and the cell key).
+        method: ``count`` (random particles removed, new ones uniformly random in the cell) or
+            ``density`` (most clustered removed, new ones where the density is lowest).
+        bandwidth: Kernel radius of the ``density`` method in cell diameters / sqrt(tdim).
     """
 
     min_per_cell: int = 0
     max_per_cell: int | None = None
     seed: int = 0
+    method: str = "count"
+    bandwidth: float = 0.3
 
     def __post_init__(self) -> None:
         if self.min_per_cell < 0:
             raise ValueError("min_per_cell must be >= 0")
         if self.max_per_cell is not None and self.max_per_cell < max(self.min_per_cell, 1):
             raise ValueError("max_per_cell must be >= max(min_per_cell, 1)")
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {list(METHODS)}, not {self.method!r}")
+        if not self.bandwidth > 0:
+            raise ValueError("bandwidth must be > 0")
 
     def apply(self, swarm: Swarm, /, *, step: int = 0, initialise: Initialise | None = None) -> PopulationStats:
         """Remove particles above ``max_per_cell`` and add particles below ``min_per_cell`` (collective).
@@ -168,6 +184,10 @@ class PopulationControl:
         if self.max_per_cell is None:
             return 0
         counts = swarm.particles_per_cell()
+        if self.method == "density":
+            if not swarm.comm.allreduce(bool(np.any(counts > self.max_per_cell)), op=MPI.LOR):
+                return 0
+            return swarm.remove(removal_mask(swarm, Neighbourhood.of(swarm, self.bandwidth), self.max_per_cell))
         if not np.any(counts > self.max_per_cell):
             return 0
         streams = self._streams(maps, _STREAM_REMOVE, step)
@@ -187,7 +207,11 @@ class PopulationControl:
         idx = np.repeat(np.arange(need.shape[0]), need)
         within = np.arange(total) - np.repeat(np.cumsum(need) - need, need)
         streams = self._streams(maps, _STREAM_ADD, step)
-        xhat = uniform_reference_points(maps.basix_cell, uniforms(streams[idx], within, maps.tdim))
+        u = uniforms(streams[idx], within, maps.tdim)
+        if self.method == "density":
+            idx, xhat = addition_points(Neighbourhood.of(swarm, self.bandwidth), maps, need, u)
+        else:
+            xhat = uniform_reference_points(maps.basix_cell, u)
         new_ids = base + offsets[idx] + within
         insert_in_cells(swarm, maps, idx, xhat, new_ids)
         rows = np.flatnonzero(swarm.ids >= base).astype(np.int64)
@@ -196,9 +220,11 @@ class PopulationControl:
 
 
 def control_population(swarm: Swarm, /, *, min_per_cell: int = 0, max_per_cell: int | None = None, seed: int = 0,
-                       step: int = 0, initialise: Initialise | None = None) -> PopulationStats:
+                       step: int = 0, initialise: Initialise | None = None, method: str = "count",
+                       bandwidth: float = 0.3) -> PopulationStats:
     """Keep every cell's particle count in ``[min_per_cell, max_per_cell]`` (collective).
 
     See :class:`PopulationControl`.
     """
-    return PopulationControl(min_per_cell, max_per_cell, seed).apply(swarm, step=step, initialise=initialise)
+    control = PopulationControl(min_per_cell, max_per_cell, seed, method, bandwidth)
+    return control.apply(swarm, step=step, initialise=initialise)

@@ -35,6 +35,11 @@ class PopulationSettings:
     min_per_cell: int = param(0, minimum=0, help="cells with fewer particles get new ones")
     max_per_cell: int | None = param(None, minimum=1, help="cells with more particles lose some (null: never)")
     seed: int = param(0, help="random seed of the population control")
+    method: str = param("count", choices=("count", "density"),
+                        help="count: random particles removed, new ones uniformly random in the cell; density: "
+                             "the most clustered removed, new ones where the kernel density estimate is lowest")
+    bandwidth: float = param(0.3, exclusive_minimum=0.0,
+                             help="kernel radius of the density method, in cell diameters / sqrt(dim)")
 
     @property
     def enabled(self) -> bool:

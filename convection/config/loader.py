@@ -737,7 +737,7 @@ def _check_system_properties(config: dict[str, Any], section: dict[str, Any], wh
                           f"{repeated[0]!r}; give properties distinct labels")
     pop = section["population"]
     try:
-        PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"])
+        PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"], pop["method"], pop["bandwidth"])
     except ValueError as err:
         raise ConfigError(f"config key '{where}.population': {err}") from None
     for name in section["output"]["properties"] or ():

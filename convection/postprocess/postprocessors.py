@@ -16,6 +16,9 @@ name            columns
 ``stokes``      stokes_iterations
 ``particles``   n_particles, n_lost (cumulative), n_added, n_removed (population control),
                 ppc_min, ppc_mean, ppc_max (particles per cell)
+``particle_distribution`` distribution_score (mean over cells), distribution_score_min, _max, _std:
+                how evenly the particles spread inside their cells, ASPECT's particle distribution
+                score (:mod:`particles.distribution`; only when asked for)
 ``load``        cell_imbalance, particle_imbalance (max/mean over ranks)
 ``entrainment`` entrainment: volume of a material above a height / its initial volume
                 (one column per material, ``entrainment_<name>``, for ``all``)
@@ -201,6 +204,33 @@ class ParticleStatistics(Column):
         values = {"n_particles": manager.num_particles, "n_lost": manager.lost, "n_added": manager.added,
                   "n_removed": manager.removed, "ppc_min": lo, "ppc_mean": mean, "ppc_max": hi}
         return {f"{key}{suffix}": value for key, value in values.items()}
+
+
+class ParticleDistribution(Column):
+    """ASPECT's particle distribution score (:func:`particles.distribution.distribution_score`,
+    granularity 2): per cell ``S = sum_b (c_b - n/B)^2 / (n^2 (B - 1) / B)`` over its ``B = 2**tdim``
+    equal-volume sub-cells, 0 for an even spread, 1 for all particles in one sub-cell or none;
+    min, mean, max and standard deviation over all cells, of the primary particle system (the one
+    carrying the composition). Collective; only when asked for."""
+
+    name: ClassVar[str] = "particle_distribution"
+    description: ClassVar[str] = "particle distribution score per cell (0 even .. 1 clustered): mean, min, max, std"
+    columns = ("distribution_score", "distribution_score_min", "distribution_score_max", "distribution_score_std")
+
+    @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        return ParticleStatistics.missing(features)
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return False
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        from particles.distribution import distribution_score
+        assert model.particles is not None
+        score = distribution_score(model.particles.primary.swarm, 2)
+        return {"distribution_score": score.mean, "distribution_score_min": score.min,
+                "distribution_score_max": score.max, "distribution_score_std": score.std}
 
 
 class LoadStatistics(Column):
@@ -437,8 +467,8 @@ def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelF
 
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
-    LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance, SurfaceVelocity,
-    MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics))
+    ParticleDistribution, LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance,
+    SurfaceVelocity, MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

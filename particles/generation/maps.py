@@ -107,6 +107,22 @@ class CellMaps:
                    for g in range(self.gdim)]
         return _abs_det(jac, self.gdim, self.tdim)
 
+    def pull(self, idx: npt.NDArray[np.int64], x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Inverse of :meth:`push` for affine simplices: reference points (p, tdim) in this class's
+        frame of physical points ``x`` (p, gdim) in cells ``self.cells[idx]`` (each cell's map solved
+        on its own, so the bits do not depend on the partition; least squares if gdim > tdim)."""
+        if not self.affine:
+            raise ValueError("CellMaps.pull needs affine simplex cells")
+        nodes = self._nodes[np.asarray(idx, dtype=np.int64)]
+        jac = np.swapaxes(nodes[:, 1 : self.tdim + 1, :] - nodes[:, :1, :], 1, 2)  # (p, gdim, tdim)
+        rhs = np.asarray(x, dtype=np.float64).reshape(-1, self.gdim) - nodes[:, 0, :]
+        if rhs.shape[0] == 0:
+            return np.empty((0, self.tdim))
+        if self.gdim != self.tdim:
+            rhs = np.einsum("pgt,pg->pt", jac, rhs)
+            jac = np.einsum("pgt,pgs->pts", jac, jac)
+        return np.linalg.solve(jac, rhs[:, :, None])[:, :, 0]
+
     def to_dolfinx_reference(self, idx: npt.NDArray[np.int64], xhat: npt.NDArray[np.float64],
                              x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Reference coordinates in DOLFINx's frame of cell ``self.cells[idx]`` for the swarm."""

@@ -77,10 +77,12 @@ class QuadraticLeastSquares(LeastSquares):
         # Fit the departure from the cell's mean (a constant is then reproduced to the last bit).
         counts = np.bincount(cells, minlength=n)
         mean = np.bincount(cells, weights=values, minlength=n) / np.maximum(counts, 1)
-        A = np.zeros((n, nb, nb))
-        b = np.zeros((n, nb))
-        np.add.at(A, cells, phi[:, :, None] * phi[:, None, :])
-        np.add.at(b, cells, phi * (values - mean[cells])[:, None])
+        A = np.empty((n, nb, nb))
+        for i in range(nb):  # per-cell sums in particle order (np.bincount: np.add.at's sums, faster)
+            for j in range(i, nb):
+                A[:, i, j] = A[:, j, i] = np.bincount(cells, weights=phi[:, i] * phi[:, j], minlength=n)
+        departure = values - mean[cells]
+        b = np.stack([np.bincount(cells, weights=phi[:, i] * departure, minlength=n) for i in range(nb)], axis=1)
         ok = counts >= nb
         if np.any(ok):
             eig = np.linalg.eigvalsh(A[ok])

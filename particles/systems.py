@@ -72,6 +72,12 @@ class ParticleSystems:
         if self.primary_name not in self._systems:
             raise ValueError(f"no particle system {self.primary_name!r}; the systems are {list(self._systems)}")
 
+    @classmethod
+    def of(cls, particles: ParticleSystems | ParticleManager, /) -> ParticleSystems:
+        """``particles`` itself, or one manager as the one system :data:`DEFAULT_SYSTEM` (a run
+        built from components, as a config's single ``particles`` section)."""
+        return particles if isinstance(particles, ParticleSystems) else cls({DEFAULT_SYSTEM: particles})
+
     # ------------------------------------------------------------------ the systems
     def __getitem__(self, name: str, /) -> ParticleManager:
         return self._systems[name]

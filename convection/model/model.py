@@ -57,6 +57,7 @@ from convection.solvers.timestep import cfl_timestep
 from convection.solvers.transport import TransportSolver
 from fembase.state import State, Stateful
 from fembase.timing import Timers
+from particles.manager import ParticleManager
 from particles.systems import ParticleSystems, file_stem
 from particles.properties import PropertyContext
 
@@ -86,14 +87,14 @@ class Model:
             extrapolated velocity), or None for ``T = 0``.
         solve_temperature: False keeps the temperature at its initial value.
         composition: The material fractions, or None.
-        particles: The particle systems, or None.
+        particles: The particle systems (or one manager: a system named ``particles``), or None.
         adaptivity: Mesh adaptivity, or None.
         balancer: Load balancing, or None.
     """
 
     def __init__(self, stokes: StokesSolver, /, *, temperature: TransportSolver | None = None,
                  solve_temperature: bool = True, composition: CompositionSource | None = None,
-                 particles: ParticleSystems | None = None, adaptivity: Adaptivity | None = None,
+                 particles: ParticleSystems | ParticleManager | None = None, adaptivity: Adaptivity | None = None,
                  balancer: Balancer | None = None, free_surface: FreeSurface | None = None) -> None:
         if temperature is not None and temperature.velocity_extrapolation:
             raise ValueError("the model extrapolates the velocity itself: build the temperature solver with "
@@ -102,7 +103,7 @@ class Model:
         self.temperature = temperature
         self.solve_temperature = solve_temperature and temperature is not None
         self.composition = composition
-        self.particles = particles
+        self.particles = ParticleSystems.of(particles) if particles is not None else None
         self.adaptivity = adaptivity
         self.balancer = balancer
         self.free_surface = free_surface
@@ -116,7 +117,7 @@ class Model:
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
         self._mesh_changes = MeshChanges(self)
-        self.rheology = RheologyFields(stokes, particles)
+        self.rheology = RheologyFields(stokes, self.particles)
 
     # ------------------------------------------------------------------ state
     @property

@@ -37,7 +37,7 @@ import dolfinx.mesh
 from dolfinx.fem import form
 
 from fembase.dolfinx_compat import (assemble_block_matrix, assemble_block_vector, create_block_matrix,
-                                    create_block_vector, function_space)
+                                    create_block_vector, element_degree, function_space)
 
 __all__ = ["Errors", "StokesSolver", "exact_density", "unit_square"]
 
@@ -158,7 +158,7 @@ class StokesSolver:
     def solve(self, density: dolfinx.fem.Function | None, /) -> None:
         """Solve with the buoyancy ``density * g`` (a scalar DG Function on this mesh; None: the
         exact density); fills :attr:`u` and :attr:`p` (collective)."""
-        degree = None if density is None else density.function_space.ufl_element().degree()
+        degree = None if density is None else element_degree(density.function_space)
         rho, L0 = self._rhs_form(degree)
         if rho is not None:
             rho.interpolate(density)
@@ -189,7 +189,7 @@ class StokesSolver:
     def errors(self, density: dolfinx.fem.Function | None, /) -> Errors:
         """L2 errors of the last solve and of ``density`` (None: the exact density, error 0)
         (collective)."""
-        degree = None if density is None else density.function_space.ufl_element().degree()
+        degree = None if density is None else element_degree(density.function_space)
         rho, _ = self._rhs_form(degree)
         if degree not in self._error_forms:
             u_ex, p_ex, rho_ex, _ = self._exact

@@ -9,6 +9,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from fembase.distribute import refine_on_ranks
 from fembase.dolfinx_compat import function_space
 from particles.manager import ParticleManager, build_generator, build_properties
 from particles.population import PopulationControl
@@ -66,7 +67,7 @@ def test_a_system_is_the_same_beside_another(world):
     both = ParticleSystems({"dense": _dense(mesh, u), "tracers": _tracers(mesh, u)}, primary="dense")
     for systems in (*alone.values(), both):
         _run(systems, u)
-    fine = dolfinx.mesh.refine(mesh)
+    fine = refine_on_ranks(mesh)
     for systems in (*alone.values(), both):
         systems.to_mesh(fine, step=7)
     for name in ("dense", "tracers"):

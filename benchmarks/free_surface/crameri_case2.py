@@ -28,7 +28,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -75,15 +75,15 @@ FIELDS = ["composition.source=field", "composition.degree=2", "particles=null",
 
 
 def run(cells: tuple[int, int], dt: float, end: float, out: Path, *, levels: int = 0,
-        cfl: float | None = None, composition: str = "particles") -> dict[str, Any]:
+        cfl: float | None = None, composition: str = "particles", overrides: Sequence[str] = ()) -> dict[str, Any]:
     """One run (``levels`` > 0: adapted up to that many levels finer; ``composition``: the
-    materials on ``particles`` or as advected ``field``s); the largest topography [m] against time
-    [Myr] and its cost (collective)."""
+    materials on ``particles`` or as advected ``field``s; ``overrides``: more ``--set`` texts); the
+    largest topography [m] against time [Myr] and its cost (collective)."""
     config = load_config(ROOT / "configs" / "crameri_case2_free_surface.yaml", [
         f"mesh.cells=[{cells[0]},{cells[1]}]", f"time.dt_max={dt} kyr", f"time.end={end} Myr",
         "output.fields_every=0", "output.progress=none", f"output.directory={out}",
         *([*ADAPTIVE, f"adaptivity.max_level={levels}"] if levels else []),
-        *([f"time.cfl={cfl}"] if cfl is not None else []), *(FIELDS if composition == "field" else [])])
+        *([f"time.cfl={cfl}"] if cfl is not None else []), *(FIELDS if composition == "field" else []), *overrides])
     start = time.perf_counter()
     run_config(config)
     wall = time.perf_counter() - start

@@ -21,9 +21,13 @@ in the surface's slope this adds to the operator::
     + theta dt B (u . n) (v . e_up)                on the free surface.
 
 Without it (``theta = 0``) steps longer than the relaxation time of the surface's shortest
-resolved wavelength make the surface overshoot and oscillate ("drunken sailor"); ``theta = 0.5``
-(ASPECT's default) is second order for a relaxing surface, ``theta = 1`` first order and most
-damping.
+resolved wavelength make the surface overshoot and oscillate ("drunken sailor"). A mode relaxing
+with time ``tau`` is multiplied per step by ``A = (tau - (1 - theta) dt) / (tau + theta dt)``:
+``theta = 1`` (the default) gives ``0 < A < 1`` for every ``dt``, no overshoot however long the
+step; ``theta = 0.5`` (ASPECT's default) is second order for ``dt << tau`` but ``A -> -1`` for
+``dt >> tau``: the surface rings. The stabilisation needs the step it anticipates: the model
+solves the flow again when a step is longer than the one the flow was solved for (the first step:
+:meth:`convection.model.model.Model.step`).
 """
 
 from __future__ import annotations
@@ -47,9 +51,10 @@ class FreeSurfaceSettings:
     """The ``free_surface`` config section (used where a boundary's velocity condition is
     ``free_surface``)."""
 
-    theta: float = param(0.5, minimum=0.0, maximum=1.0,
+    theta: float = param(1.0, minimum=0.0, maximum=1.0,
                          help="free-surface stabilisation (Kaus et al. 2010): the surface load anticipated theta dt "
-                              "into the step; 0: none")
+                              "into the step; 1: no overshoot at any step, 0.5: second order where dt < the "
+                              "relaxation time, 0: none")
     buoyancy: float | None = param(None, minimum=0.0,
                                    help="B = rho0 g L^3 / (eta0 kappa), the weight of the reference density in the "
                                         "surface load (null: from scaling.density and scaling.gravity)")

@@ -15,6 +15,10 @@ The model holds the mesh's solvers and the components that act on them, each wit
 
 One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
 
+0. where the flow anticipates the step's end (a free surface's stabilisation, a predicted buoyancy)
+   and was solved for a shorter step than ``dt`` (on the first step: for none), it is solved again
+   for ``dt``; a shorter step than the flow's keeps it (the anticipation then damps more, never
+   overshoots);
 1. the velocity at the step's end is extrapolated, ``u* = (1 + w) u^n - w u^{n-1}``
    (``w = dt / dt_previous``; ``u* = u^n`` on the first step) — the model is the one owner of the
    previous velocity;
@@ -235,11 +239,12 @@ class Model:
         return {"u_previous": self.u_previous}
 
     # ------------------------------------------------------------------ time stepping
-    def solve_flow(self) -> StokesResult:
-        """Solve Stokes for the current temperature and fractions."""
-        # dt: the step just taken predicts the coming one (for a semi-implicit buoyancy).
+    def solve_flow(self, dt: float | None = None, /) -> StokesResult:
+        """Solve Stokes for the current temperature and fractions, stabilised over the coming step
+        ``dt`` (default: the step just taken predicts it; see :meth:`step`)."""
         flow = self.flow()
-        result = self.stokes.solve(flow.T, flow.fractions, dt=self.dt_previous, fields=flow.fields or None)
+        dt = self.dt_previous if dt is None else dt
+        result = self.stokes.solve(flow.T, flow.fractions, dt=dt, fields=flow.fields or None)
         if self.rheology.rates:
             with self.timers("plastic_strain_rate"):
                 self.rheology.update_rates(flow)
@@ -265,6 +270,10 @@ class Model:
         """Advance the model by ``dt`` (see the module docstring); starts the model if needed."""
         if self.flow_result is None:
             self.start()
+        if self.stokes.depends_on_step and dt > self.dt_previous * (1.0 + 1e-12):
+            # The flow was stabilised for a shorter step (at the first step: none): solve it again for
+            # this one, or a step far longer than the surface's relaxation overshoots.
+            self.solve_flow(dt)
         u = self.stokes.u
         u_end = self._velocity_at_step_end(dt)
         u_materials = u if self.stokes.buoyancy_theta > 0.0 else u_end

@@ -58,6 +58,15 @@ def safe_load(text: str, where: str) -> Any:
         raise ConfigError(f"{where}: a value cannot be read: {str(err).split(';')[0]}") from None
 
 
+def yaml_position(err: yaml.YAMLError, /) -> str:
+    """`` at line L, column C: what was wrong`` of a YAML error (empty where PyYAML gives no place)."""
+    mark = getattr(err, "problem_mark", None)
+    if mark is None:
+        return ""
+    problem = getattr(err, "problem", None)
+    return f" at line {mark.line + 1}, column {mark.column + 1}" + (f": {problem}" if problem else "")
+
+
 def read_document(p: Path) -> Any:
     """The parsed YAML of a config file (at most :data:`MAX_CONFIG_BYTES`, UTF-8)."""
     where = f"config file '{p}'"
@@ -79,6 +88,4 @@ def read_document(p: Path) -> Any:
     try:
         return safe_load(text, where)
     except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        at = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{where}: invalid YAML{at}") from None
+        raise ConfigError(f"{where}: invalid YAML{yaml_position(err)}") from None

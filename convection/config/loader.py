@@ -44,7 +44,7 @@ from convection.config.particle_systems import (
     carries_particles, check_primary, listed_systems, override_target, particle_sections, primary_system,
     resolve_systems,
 )
-from convection.config.units import apply_scaling, scaling_of
+from convection.config.units import apply_scaling, in_written_terms, scaling_of, written_quantities
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
@@ -691,6 +691,9 @@ def _check_system_components(config: dict[str, Any], section: dict[str, Any], wh
         generator = build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key '{where}.generator': {err}") from None
+    if getattr(generator, "density", None) is not None:
+        _check_generator_density(config, f"{where}.generator.density", section["generator"].get("density"),
+                                 generator.density)
     if config_domain(config).curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
         raise ConfigError(f"config key '{where}.generator.name': {generator.name} needs straight-sided cells; the "
                           f"{config['mesh']['geometry']} has curved ones (mesh.geometry_degree 2): use "
@@ -708,6 +711,26 @@ def _check_system_components(config: dict[str, Any], section: dict[str, Any], wh
     if wanted is not None and feeds and particles_enabled(config) and config["composition"]["degree"] != wanted:
         raise ConfigError(f"config key 'composition.degree': {name} writes DG{wanted} fields; set composition.degree: "
                           f"{wanted} (is {config['composition']['degree']})")
+
+
+def _check_generator_density(config: dict[str, Any], key: str, text: Any, density: Callable, /) -> None:
+    """A generator's density: >= 0 at every probe point of the domain and > 0 at one (the
+    generator refuses a negative value, and can place nothing where the density is 0 everywhere)."""
+    gdim = config_gdim(config)
+    points = np.asarray(domain_probes(config_domain(config), probe_level(config)), dtype=np.float64)[:gdim].T
+    values = np.asarray(density(points), dtype=np.float64).reshape(-1)
+    worst = int(np.argmin(values))
+    if values[worst] < 0.0:
+        scaling = scaling_of(config)
+        where = points[worst] * (scaling.factor("length") if scaling is not None else 1.0)
+        unit = f" {scaling.unit_label('length')}" if scaling is not None else ""
+        names = ("x", "z") if gdim == 2 else ("x", "y", "z")
+        at = ", ".join(f"{name} = {value + 0.0:.6g}{unit}" for name, value in zip(names, where))
+        raise ConfigError(f"config key '{key}': {short_repr(text)} is {values[worst]:.6g} at {at}: a density must "
+                          "be >= 0 everywhere")
+    if not np.any(values > 0.0):
+        raise ConfigError(f"config key '{key}': {short_repr(text)} is 0 everywhere in the domain: no particle could "
+                          "be placed")
 
 
 def _check_system_properties(config: dict[str, Any], section: dict[str, Any], where: str, make: Callable, *,
@@ -814,14 +837,18 @@ def _load(path: str | Path | None, overrides: Iterable[str], document: dict | No
     for key_path, value in parse_overrides(overrides):
         _apply_override(document, key_path, value)
     check_document_shape(document)
+    written = written_quantities(document)
     document = apply_scaling(document)
-    systems = resolve_systems(document)
-    config = validate(SCHEMA, document)
-    if systems is not None:
-        config["particles"] = systems
-    _resolve_rayleigh(config)
-    _resolve_boundaries(config, document)
-    _check_consistency(config, document)
+    try:
+        systems = resolve_systems(document)
+        config = validate(SCHEMA, document)
+        if systems is not None:
+            config["particles"] = systems
+        _resolve_rayleigh(config)
+        _resolve_boundaries(config, document)
+        _check_consistency(config, document)
+    except ConfigError as err:  # report a value with a unit as written, not as the solver's number
+        raise in_written_terms(err, written, document) from None
     return config
 
 

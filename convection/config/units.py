@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 from typing import Any
 
 from convection.physics.scaling import Scaling, ScalingSettings, looks_like_quantity, parse_quantity, registry
 from convection.schema import ConfigError, key_text, section_schema, short_repr, validate
 
-__all__ = ["apply_scaling", "scaling_of"]
+__all__ = ["apply_scaling", "in_written_terms", "scaling_of", "written_quantities"]
 
 _NUMBERS = ("Ra", "Rb")
 """Keys that are nondimensional numbers by definition (a unit there is a mistake)."""
@@ -76,6 +77,37 @@ def _first_quantity(node: Any, path: tuple[str, ...] = ()) -> tuple[str, str] | 
     elif parse_quantity(node) is not None:
         return ".".join(path), node
     return None
+
+
+def written_quantities(node: Any, path: tuple[str, ...] = ()) -> dict[str, str]:
+    """Every value with a unit in a document, by its dotted key (the key :func:`apply_scaling`
+    reports it under; list items share their list's key), as written."""
+    if isinstance(node, dict):
+        return {k: v for name, value in node.items() for k, v in written_quantities(value, (*path, key_text(name))).items()}
+    if isinstance(node, list):
+        return {k: v for value in node for k, v in written_quantities(value, path).items()}
+    return {".".join(path): node} if parse_quantity(node) is not None else {}
+
+
+_KEY = re.compile(r"config key '([^']+)'")
+
+
+def in_written_terms(err: ConfigError, written: dict[str, str], document: dict[str, Any], /) -> ConfigError:
+    """``err`` (raised on the nondimensional ``document``) with the value of the key it names as the
+    user wrote it: a check sees ``-99.99999999999999`` where the config says ``-1e23 Pa s``."""
+    message = str(err)
+    match = _KEY.search(message)
+    if match is None or match.group(1) not in written:
+        return err
+    text = written[match.group(1)]
+    node: Any = document
+    for part in match.group(1).split("."):
+        node = node.get(part) if isinstance(node, dict) else None
+    if isinstance(node, (int, float)) and not isinstance(node, bool):
+        for shown in dict.fromkeys((short_repr(node), repr(node), str(node), f"{node:.6g}")):
+            if f"got {shown}" in message:
+                return ConfigError(message.replace(f"got {shown}", f"got {text}"))
+    return ConfigError(f"{message} (written: {text})")
 
 
 def _convert(node: Any, scaling: Scaling, path: tuple[str, ...]) -> Any:

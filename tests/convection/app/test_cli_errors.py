@@ -81,6 +81,35 @@ def test_invalid_yaml(tmp_path):
     assert proc.returncode == 2 and "invalid YAML" in proc.stderr and "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize("overrides, message", [
+    # a value with a unit is reported as written, not as the solver's number (-99.99999999999999)
+    (["materials.block.viscosity=-1e23 Pa s"],
+     "config key 'materials.block.viscosity': expected a positive number or a law {name: ..., ...}, got -1e23 Pa s"),
+    (["time.end=-3 Myr"], "config key 'time.end': must be > 0.0, got -3 Myr"),
+    # a negative particle density is refused where it is, in the model's units (the run failed with exit 1)
+    (["composition.source=particles",
+      "particles.generator={name: random_density, num_particles: 100, density: 'z - 300*km', seed: 1}"],
+     "config key 'particles.generator.density': 'z - 300*km' is -0.585938 at x = 0 km, z = 0 km: a density must be "
+     ">= 0 everywhere"),
+    (["composition.source=particles",
+      "particles.generator={name: metropolis_hastings, num_particles: 100, density: '0*x', seed: 1}"],
+     "config key 'particles.generator.density': '0*x' is 0 everywhere in the domain: no particle could be placed"),
+])
+def test_check_refuses_in_the_users_terms(overrides, message):
+    config = ROOT / "configs" / "sinking_block.yaml"
+    proc = _run(["check", str(config), *[a for o in overrides for a in ("--set", o)]], ranks=1)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == f"error: {message}"
+
+
+def test_invalid_yaml_names_line_and_column(tmp_path):
+    """The line and column where PyYAML found the problem, and the problem."""
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, "mesh:\n  cells: [8, 8]\n  upper: {a: 1\n  lower: [0, 0]\n"))
+    assert str(err.value) == (f"config file '{tmp_path / 'bad.yaml'}': invalid YAML at line 4, column 8: expected ',' "
+                              "or '}', but got ':'")
+
+
 def test_check_prints_resolved_config():
     proc = _run(["check", str(GOOD), "--set", "time.end=0.5", "--output", "elsewhere"], ranks=1)
     assert proc.returncode == 0, proc.stderr

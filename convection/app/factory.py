@@ -70,7 +70,7 @@ from convection.run.loop import BlowUp, OutputSettings, Resume, RunSettings, Run
 from convection.io.run_folder import RunFolderLock
 from convection.solvers.stokes.solver import StokesSettings, StokesSolver
 from convection.solvers.petsc_options import PetscSolver
-from convection.solvers.transport import EnergySettings, TransportSolver
+from convection.solvers.transport import EnergySettings, TransportSolver, interpolate_initial
 from convection.schema import ConfigError, settings_from
 from fembase.dolfinx_compat import function_space, petsc_vector
 from particles.manager import ParticleManager
@@ -138,7 +138,7 @@ def _initial_fields(config: dict[str, Any], materials: Materials, temperature_bc
     def fields_on(mesh: dolfinx.mesh.Mesh) -> list:
         V = function_space(mesh, "Lagrange", config["energy"]["degree"])
         T = dolfinx.fem.Function(V)
-        T.interpolate(initial_T)
+        interpolate_initial(T, initial_T, bounded=config["initial"]["temperature_bounded"])
         dolfinx.fem.petsc.set_bc(petsc_vector(T), temperature_dirichlet_bcs(V, temperature_bcs, domain))
         T.x.scatter_forward()
         indicator_fields = {
@@ -326,7 +326,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,
                                   stabilisation=energy.stabilisation, velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
-                                       gdim=domain.gdim))
+                                       gdim=domain.gdim), bounded=config["initial"]["temperature_bounded"])
     particles = _particles(config, meshes, domain, materials, stokes, temperature, restore, free_surface)
     composition = _composition(config, mesh, approximation, materials, particles, energy.stabilisation)
     if particles is not None:

@@ -171,6 +171,9 @@ SCHEMA: dict[str, Any] = {
     },
     "initial": {
         "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical), r, phi, theta"),
+        "temperature_bounded": Field("bool", False, help="set the initial temperature by its linear interpolant at "
+                                     "the vertices, within the expression's values everywhere (P2 at every node "
+                                     "overshoots a sharp anomaly by up to 1/8 of its jump between the nodes)"),
         "composition": Field("str", None, nullable=True,
                              help="expression in x, y, z (1 = dense/second material), or null for none"),
         "constants": Field("mapping", {}, max_items=MAX_ENTRIES, help="named constants usable in the expressions"),

@@ -172,3 +172,53 @@ def test_parallel_decay_error_equals_serial():
     e_parallel = _decay_error(10, 2, dts, comm=MPI.COMM_WORLD)
     e_serial = _decay_error(10, 2, dts, comm=MPI.COMM_SELF)
     assert abs(e_parallel - e_serial) < 1e-7 * e_serial
+
+
+def _range_between_nodes(T) -> tuple[float, float]:
+    """min and max of a P2 field everywhere (its exact P4 interpolant's nodal values), over all ranks."""
+    mesh = T.function_space.mesh
+    fine = dolfinx.fem.Function(function_space(mesh, "Lagrange", 4))
+    fine.interpolate(T)
+    values = fine.x.array
+    return (mesh.comm.allreduce(float(values.min()), op=MPI.MIN), mesh.comm.allreduce(float(values.max()), op=MPI.MAX))
+
+
+def test_bounded_initial_temperature_stays_within_the_expression(world):
+    """A sharp blob (1 inside a circle, 0 outside) on P2: the nodal interpolant overshoots between the
+    nodes by up to 1/8 of the jump (measured -0.124 / 1.125 at the P4 nodes); the bounded one stays in [0, 1] and equals
+    the expression at the vertices."""
+    from convection.solvers.transport import interpolate_initial
+
+    mesh = dolfinx.mesh.create_unit_square(world, 16, 16)
+    blob = lambda x: ((x[0] - 0.5) ** 2 + (x[1] - 0.5) ** 2 < 0.3**2).astype(float)  # noqa: E731
+    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
+    interpolate_initial(T, blob)
+    low, high = _range_between_nodes(T)
+    assert low < -0.1 and high > 1.1
+    interpolate_initial(T, blob, bounded=True)
+    low, high = _range_between_nodes(T)
+    assert low >= -1e-12 and high <= 1.0 + 1e-12
+    linear = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1))
+    linear.interpolate(blob)
+    back = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1))
+    back.interpolate(T)
+    assert np.allclose(back.x.array, linear.x.array, rtol=0.0, atol=1e-12)  # the vertices keep the expression's values
+
+
+def test_bounded_initial_temperature_from_a_config():
+    """``initial.temperature_bounded: true`` reaches the model's temperature: a hot blob (1) in the
+    conductive profile 1 - z (0.5 at its centre's depth), which the boundary values keep: on P2 it
+    rises above 1 between the nodes, bounded it stays within [0, 1]."""
+    from convection import load_config
+    from convection.app.factory import build_model
+    from _runs import CONFIGS
+
+    sharp = "where((x - 0.5)**2 + (z - 0.5)**2 < 0.09, 1.0, 1 - z)"
+    sets = ["mesh.cells=[12,12]", f"initial.temperature={sharp}"]
+    ranges = {}
+    for bounded in (False, True):
+        model = build_model(load_config(CONFIGS / "blankenbach_1a.yaml", [*sets, f"initial.temperature_bounded={bounded}"]))
+        ranges[bounded] = _range_between_nodes(model.T)
+        model.destroy()
+    assert ranges[False][1] > 1.1  # measured 1.175
+    assert ranges[True][0] >= -1e-12 and ranges[True][1] <= 1.0 + 1e-12

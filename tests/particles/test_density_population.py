@@ -1,5 +1,5 @@
-"""Population control by particle density (particles/density.py), the equal-volume sub-cells
-(particles/subcells.py) and the distribution score (particles/distribution.py)."""
+"""Population control by particle density (particles/population/density.py), the equal-volume sub-cells
+(particles/population/subcells.py) and the distribution score (particles/population/distribution.py)."""
 
 import basix
 import numpy as np
@@ -10,13 +10,13 @@ import dolfinx.mesh
 
 from fembase.geometry import locate_owned
 from particles import Swarm
-from particles.density import Neighbourhood, particle_density, removal_mask
-from particles.distribution import cell_scores, distribution_score, scores_of_counts
+from particles.population.density import Neighbourhood, particle_density, removal_mask
+from particles.population.distribution import cell_scores, distribution_score, scores_of_counts
 from particles.generation import generate
 from particles.generation.maps import CellMaps
 from particles.generation.sampling import uniform_reference_points
-from particles.population import PopulationControl, control_population
-from particles.subcells import SubCells
+from particles.population.control import PopulationControl, control_population
+from particles.population.subcells import SubCells
 
 
 def _placed(mesh, x, first_id=0):

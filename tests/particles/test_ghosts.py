@@ -8,7 +8,7 @@ import dolfinx.mesh
 
 from particles import Swarm
 from particles.generation import generate
-from particles.ghosts import exchange_ghosts, ghost_exchange_for, vertex_complete
+from particles.parallel.ghosts import exchange_ghosts, ghost_exchange_for, vertex_complete
 
 
 def _setup(comm, ghost_mode, n=9):

@@ -10,7 +10,7 @@ import dolfinx.mesh
 from fembase.dolfinx_compat import bounding_box_tree, compute_collisions
 from fembase.geometry import cell_nodes, locate_owned, pull_back, push_forward
 from particles import Swarm
-from particles.migration import Migrator, migrate, migrator_for
+from particles.parallel.migration import Migrator, migrate, migrator_for
 
 
 def _locate_local(mesh, x):

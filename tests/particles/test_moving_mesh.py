@@ -1,4 +1,4 @@
-"""Particles on a mesh whose nodes move (particles/moving_mesh.py): every particle found again in the
+"""Particles on a mesh whose nodes move (particles/relocation/moving_mesh.py): every particle found again in the
 moved cells, none lost; those the sinking top leaves outside are moved down onto it (with the
 swarm's ``inward``) or lost (without); the advection path applies the same rule. Collective checks."""
 
@@ -14,8 +14,8 @@ from fembase.dolfinx_compat import refine_keeping_partition
 from fembase.evaluation import locate
 from particles import Swarm
 from particles.advection import Advector
-from particles.adaptivity import move_to_mesh
-from particles.moving_mesh import follow_mesh
+from particles.relocation.new_mesh import move_to_mesh
+from particles.relocation.moving_mesh import follow_mesh
 
 
 def _swarm(comm, n_per_rank: int = 3000) -> Swarm:
@@ -105,7 +105,7 @@ def test_mesh_moved_updates_the_cell_geometry(amount):
 
 def test_a_move_to_a_coarser_mesh_pulls_in_the_particles_above_its_chords(world):
     """A particle in a fine mesh's raised top cells lies above the coarse mesh's straight top (the
-    chord of the fine surface): :func:`particles.adaptivity.move_to_mesh` moves it down onto that
+    chord of the fine surface): :func:`particles.relocation.new_mesh.move_to_mesh` moves it down onto that
     top with ``inward``, and loses it without. The fine mesh is refined from the coarse one on each
     cell's rank (as the adaptivity's meshes are)."""
     coarse = dolfinx.mesh.create_unit_square(world, 4, 4)

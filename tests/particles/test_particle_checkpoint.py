@@ -20,7 +20,7 @@ from convection.launch import mpirun
 from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.advection import Advector
-from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from particles.io.swarm_checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.generation import generate
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -247,7 +247,7 @@ def test_damaged_checkpoint_under_mpirun_does_not_hang(tmp_path):
         sys.path.insert(0, {str(ROOT)!r})
         from mpi4py import MPI
         import dolfinx.mesh
-        from particles.checkpoint import CheckpointError, load_checkpoint
+        from particles.io.swarm_checkpoint import CheckpointError, load_checkpoint
         mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 4, 4)
         lines = []
         for name in ("missing.h5", "garbage.h5"):

@@ -22,7 +22,7 @@ from fembase.dolfinx_compat import function_space
 from fembase.files import H5Sink
 from particles import Swarm
 from particles.generation import generate
-from particles.output import ParticleWriter, write_mesh_fields
+from particles.io.output import ParticleWriter, write_mesh_fields
 
 N_PARTICLES = 400
 
@@ -213,7 +213,7 @@ def test_killed_writer_leaves_only_complete_files(tmp_path):
         import dolfinx.mesh
         from particles import Swarm
         from particles.generation import generate
-        from particles.output import ParticleWriter
+        from particles.io.output import ParticleWriter
         mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
         swarm = Swarm(mesh)
         generate(swarm, "random_uniform", num_particles=50, seed=1)

@@ -8,7 +8,7 @@ import dolfinx.mesh
 
 from fembase.evaluation import locate
 from particles import Swarm
-from particles.transport import relocate
+from particles.relocation.between_cells import relocate
 
 
 def _mesh(kind, comm=MPI.COMM_SELF):
@@ -83,7 +83,7 @@ def test_unmoved_particles_stay():
 
 @pytest.mark.mpi
 def test_relocate_then_migrate_distributed():
-    from particles.migration import migrate
+    from particles.parallel.migration import migrate
 
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_unit_square(comm, 16, 16)
@@ -115,7 +115,7 @@ def test_relocation_hands_over_the_outside_rows(kind):
     """After a relocation without sort, outside_rows() (the rows the relocation listed: ghost cells
     from the kernel, -1 or ghost from the bounding-box fallback) equals a scan of all rows, also
     after some of them were discarded; serially the fallback's -1 rows are the only ones."""
-    from particles.kernels import rows_outside
+    from particles.storage.row_kernels import rows_outside
 
     comm = MPI.COMM_WORLD
     mesh = _mesh(kind, comm)

@@ -6,7 +6,7 @@ from convection.adapt.hierarchy import MeshHierarchy
 from convection.geometry.box import BoxSpec, create_box_mesh
 from fembase.geometry import CellGeometry
 from particles import Swarm
-from particles.adaptivity import move_to_mesh
+from particles.relocation.new_mesh import move_to_mesh
 from particles.generation import generate
 
 from _helpers import gathered

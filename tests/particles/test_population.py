@@ -8,7 +8,7 @@ import dolfinx.mesh
 
 from particles import Swarm
 from particles.generation import generate
-from particles.population import PopulationControl, control_population
+from particles.population.control import PopulationControl, control_population
 
 
 def _swarm(comm, n=8, num=600, seed=2):

@@ -421,18 +421,18 @@ def _ode_run(comm, integrator):
 @pytest.mark.mpi
 @pytest.mark.parametrize("integrator", ["rk2", "rk4"])
 def test_ode_properties_across_ranks_match_serial(integrator, monkeypatch):
-    import particles.advection
+    import particles.advection.advector
 
     comm = MPI.COMM_WORLD
     sent_per_move = []
-    migrate = particles.advection._migrate
+    migrate = particles.advection.advector._migrate
 
     def counting_migrate(swarm):
         counts = migrate(swarm)
         sent_per_move.append(counts[0])
         return counts
 
-    monkeypatch.setattr(particles.advection, "_migrate", counting_migrate)
+    monkeypatch.setattr(particles.advection.advector, "_migrate", counting_migrate)
     ids, props, sent = _ode_run(comm, integrator)
     stages = {"rk2": 2, "rk4": 4}[integrator]
     mid_step = sum(c for i, c in enumerate(sent_per_move) if i % stages != stages - 1)

@@ -151,7 +151,7 @@ def test_append_nothing_with_a_stage_table(mesh):
 def test_packed_rows_round_trip(mesh, stage_width):
     """pack_by_slot groups rows by destination (stable within one) with every column; append_packed
     writes them back as appended rows, keeping the pending counts of the next sort right."""
-    from particles.kernels import pack_by_slot
+    from particles.storage.row_kernels import pack_by_slot
 
     rng = np.random.default_rng(8)
     source = Swarm(mesh)

@@ -1,4 +1,4 @@
-"""The per-particle buffers behind a :class:`particles.swarm.Swarm`.
+"""The per-particle buffers behind a :class:`particles.storage.swarm.Swarm`.
 
 Every per-particle array (ids, positions, reference positions, cells, property table, stage table)
 is a buffer with spare rows, of which rows ``0:n`` are in use: appending rows costs O(rows) (a full
@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import numpy.typing as npt
 
-from particles.kernels import append_packed, gather_particles, scatter_particles
+from particles.storage.row_kernels import append_packed, gather_particles, scatter_particles
 
 __all__ = ["FIELDS", "RowBuffers", "capacity_for"]
 
@@ -136,7 +136,7 @@ class RowBuffers:
     def append_packed(self, table: npt.NDArray[np.float64], cells: npt.NDArray[np.int32],
                       counts: npt.NDArray[np.int64], num_owned_cells: int) -> None:
         """Write the particles of a packed message table after the last row in one compiled pass
-        (:func:`particles.kernels.append_packed`; ``counts``, shape=(num_owned_cells + 2,) or
+        (:func:`particles.storage.row_kernels.append_packed`; ``counts``, shape=(num_owned_cells + 2,) or
         empty, gets the new rows per sort bucket)."""
         m = table.shape[0]
         width = 2 + self.gdim + self.tdim + self.props.shape[1] + self.stage_width

@@ -1,8 +1,8 @@
 """Numba kernels of the particle hot paths: counting sort by cell, relocation, stage tables, packing.
 
 Each kernel is one compiled loop over particles (no per-particle Python). The kernels only see
-flat NumPy arrays; the Python layers (:mod:`particles.swarm`, :mod:`fembase.evaluation`,
-:mod:`particles.transport`) prepare them from DOLFINx objects once per mesh or function space. The
+flat NumPy arrays; the Python layers (:mod:`particles.storage.swarm`, :mod:`fembase.evaluation`,
+:mod:`particles.relocation.between_cells`) prepare them from DOLFINx objects once per mesh or function space. The
 general finite-element kernels (evaluation, pull-back, location) are in :mod:`fembase.kernels`.
 """
 

@@ -19,7 +19,7 @@ The file appears atomically (temporary name, then ``os.replace``).
 :func:`load_checkpoint` restores exactly (same particles on the same ranks in the same order, same
 ``xref`` bit for bit) when the rank count and the cell partition are the same as when saving and
 the stored reference positions map back to the stored positions. Otherwise each rank reads an
-equal slice, locates its particles and :func:`particles.migration.migrate` hands them to their
+equal slice, locates its particles and :func:`particles.parallel.migration.migrate` hands them to their
 owners; ids, positions and properties are preserved. A missing or damaged file raises
 :class:`CheckpointError` on every rank: rank 0 checks the file alone and broadcasts its verdict
 before any collective open, and read errors in the collective phase are reduced over all ranks.
@@ -40,8 +40,8 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase.files import H5Sink
-from particles.migration import migrate
-from particles.swarm import Swarm
+from particles.parallel.migration import migrate
+from particles.storage.swarm import Swarm
 
 __all__ = ["FORMAT", "VERSION", "CheckpointError", "Restored", "load_checkpoint", "save_checkpoint"]
 

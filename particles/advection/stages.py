@@ -13,8 +13,8 @@ from typing import TYPE_CHECKING, Callable, Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from particles.kernels import stage_combination
-from particles.swarm import Swarm
+from particles.storage.row_kernels import stage_combination
+from particles.storage.swarm import Swarm
 
 if TYPE_CHECKING:
     from particles.advection import ButcherTableau, ParticleODE

@@ -41,7 +41,7 @@ from fembase.dolfinx_compat import element_degree, function_space, is_discontinu
 from fembase.files import H5Sink, exclusive_offset
 from fembase.registry import Registry
 from fembase.xdmf import XdmfSeries, data_item
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["PARTICLE_WRITERS", "OutputRecord", "ParticleOutput", "ParticleWriter", "write_mesh_fields"]
 

@@ -8,7 +8,7 @@ cells with more than max"):
   keys are removed.
 - **Addition**: a cell with ``n < min_per_cell`` gets ``min_per_cell - n`` particles at uniformly
   random positions in the cell (the reference-cell sampling of :mod:`particles.generation`).
-- **Method** ``density`` (:mod:`particles.density`): the same counts are removed and added, but
+- **Method** ``density`` (:mod:`particles.population.density`): the same counts are removed and added, but
   the removed particles are the most clustered ones (highest kernel density estimate, greedily)
   and the new ones go where the estimate is lowest (uniformly random within the emptiest of the
   cell's sub-cells), following ASPECT's point-density-function algorithms.
@@ -43,10 +43,10 @@ from particles.generation.base import first_free_id, insert_in_cells
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
 from particles.generation.sampling import uniform_reference_points
-from particles.density import Neighbourhood, addition_points, removal_mask
-from particles.ghosts import ghost_exchange_for
+from particles.population.density import Neighbourhood, addition_points, removal_mask
+from particles.parallel.ghosts import ghost_exchange_for
 from particles.interpolation.fill import fill_cells
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["METHODS", "Initialise", "PopulationControl", "PopulationStats", "control_population", "copy_nearest"]
 

@@ -33,7 +33,7 @@ import dolfinx.mesh
 
 from fembase.dolfinx_compat import SCATTER_ADD
 from fembase.geometry import unique_pairs
-from particles.swarm import PropertyLayout, Swarm
+from particles.storage.swarm import PropertyLayout, Swarm
 
 __all__ = ["GhostExchange", "GhostParticles", "exchange_ghosts", "ghost_exchange_for", "vertex_complete"]
 

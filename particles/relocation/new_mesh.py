@@ -7,7 +7,7 @@ at all, so the new cells are found by a *rank-local* bounding-box search on the 
 refined without redistribution keep every region on the rank that owned it, so almost every
 particle is found among this rank's new cells without communication. Particles that land in a
 ghost cell or outside this rank's new cells (after a repartition) are handed on by the migration
-step (:func:`particles.migration.migrate`), which also counts any particle found nowhere.
+step (:func:`particles.parallel.migration.migrate`), which also counts any particle found nowhere.
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ from scipy.spatial import cKDTree
 import dolfinx.mesh
 
 from fembase.geometry import Candidates
-from particles.migration import migrate
-from particles.moving_mesh import pull_in
-from particles.swarm import Swarm
+from particles.parallel.migration import migrate
+from particles.relocation.moving_mesh import pull_in
+from particles.storage.swarm import Swarm
 
 __all__ = ["MeshChangeStats", "move_to_mesh"]
 
@@ -80,7 +80,7 @@ def move_to_mesh(swarm: Swarm, mesh: dolfinx.mesh.Mesh, /, *,
 
 def _nearest_owned_cells(swarm: Swarm, /) -> npt.NDArray[np.int32]:
     """Per particle, its cell, or for one in no local cell the owned cell with the nearest centre
-    (where :func:`particles.moving_mesh.pull_in` starts looking along ``inward``), shape=(n,)."""
+    (where :func:`particles.relocation.moving_mesh.pull_in` starts looking along ``inward``), shape=(n,)."""
     cells = swarm.cells.copy()
     missing = np.flatnonzero(cells < 0)
     if missing.size and swarm.num_owned_cells:

@@ -1,4 +1,4 @@
-"""Named column ranges of a swarm's property table (:attr:`particles.swarm.Swarm.properties`)."""
+"""Named column ranges of a swarm's property table (:attr:`particles.storage.swarm.Swarm.properties`)."""
 
 from __future__ import annotations
 

@@ -15,7 +15,7 @@ import dolfinx.mesh
 
 from fembase.dolfinx_compat import function_space
 from particles.interpolation import Interpolator
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["TrackedFields"]
 

@@ -1,4 +1,4 @@
-"""Who keeps an unlocated particle: the offer rounds of :mod:`particles.migration`.
+"""Who keeps an unlocated particle: the offer rounds of :mod:`particles.parallel.migration`.
 
 A rank offers a particle no local cell contains to every other rank whose owned bounding box
 contains it, with the number of such candidates. A sole candidate decides alone: it keeps the
@@ -16,14 +16,15 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase.geometry import OwnedLocation, locate_owned
-from particles._exchange import known_exchange
-from particles.swarm import Swarm
+from particles.parallel.exchange import known_exchange
+from particles.storage.swarm import Swarm
 
 __all__ = ["Kept", "append_kept", "offers_by_rank", "settle_offers"]
 
 Kept = list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int32]]]
-"""Offered particles a rank keeps, per batch: rows of a packed table (:func:`particles.kernels.pack_by_slot`),
-their reference positions shape=(m, tdim) and the owned cells shape=(m,) found here."""
+"""Offered particles a rank keeps, per batch: rows of a packed table
+(:func:`particles.storage.row_kernels.pack_by_slot`), their reference positions shape=(m, tdim) and
+the owned cells shape=(m,) found here."""
 
 
 def offers_by_rank(inside: npt.NDArray[np.bool_]) -> dict[int, npt.NDArray[np.int64]]:

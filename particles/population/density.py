@@ -8,7 +8,7 @@ Following ASPECT's "point density function" removal and addition algorithms (PRs
   .. math::  \\rho(y) = \\sum_{q \\in P(c)} K\\big(|y - x_q| / h_c\\big), \\qquad K(r) = \\max(0, 1 - r^2),
 
   the Epanechnikov kernel, where ``P(c)`` are the particles of ``c`` and of every cell sharing a
-  vertex with it (other ranks' cells through the ghost exchange of :mod:`particles.ghosts`, so
+  vertex with it (other ranks' cells through the ghost exchange of :mod:`particles.parallel.ghosts`, so
   particles near a cell's edge are not under-counted), and ``h_c = bandwidth * diam(c) /
   sqrt(tdim)`` (``diam``: the largest distance between two nodes of the cell; bandwidth 0.3 as
   ASPECT's default). A particle's own term ``K(0) = 1`` is included.
@@ -18,7 +18,7 @@ Following ASPECT's "point density function" removal and addition algorithms (PRs
   are those before this call's removals (every cell decides from the same snapshot).
 - **Addition.** A cell with ``n < min`` particles gets ``min - n`` particles one at a time: ``rho``
   is evaluated at the centroids of the cell's ``g**tdim`` equal-volume sub-cells
-  (:class:`particles.subcells.SubCells`, ``g = 4``); the new particle goes to a uniformly random
+  (:class:`particles.population.subcells.SubCells`, ``g = 4``); the new particle goes to a uniformly random
   point of the sub-cell with the lowest estimate (ties: the lowest sub-cell index, random numbers
   as in the count method), then its kernel is added to the estimates at the centroids.
 
@@ -38,9 +38,9 @@ import numpy.typing as npt
 from fembase.geometry import cell_nodes
 from particles.generation.maps import CellMaps
 from particles.generation.sampling import uniform_reference_points
-from particles.ghosts import ghost_exchange_for
-from particles.subcells import SubCells
-from particles.swarm import Swarm
+from particles.parallel.ghosts import ghost_exchange_for
+from particles.population.subcells import SubCells
+from particles.storage.swarm import Swarm
 
 __all__ = ["ADD_GRANULARITY", "Neighbourhood", "addition_points", "density_at", "particle_density",
            "removal_mask"]

@@ -4,23 +4,23 @@ ASPECT keeps particles in a multimap keyed by cell. Here the same invariant is k
 arrays sorted by the owning local cell, plus CSR offsets: the particles of cell ``K`` are the
 contiguous rows ``offsets[K]:offsets[K + 1]`` of every per-particle array. The order is restored
 by a counting sort (two compiled passes, stable, O(n + cells)); the relocation kernel of
-:mod:`particles.transport` counts the particles per cell while it relocates them, so the sort
+:mod:`particles.relocation.between_cells` counts the particles per cell while it relocates them, so the sort
 after a move only has the second pass to do.
 
 Particles live only in cells this rank owns (local indices ``0 <= K < num_owned_cells``). Code that
 moves particles may temporarily leave a particle in a ghost cell (``K >= num_owned_cells``) or
 unlocated (``K == -1``); :meth:`Swarm.sort` restores the invariant only for owned cells, and the
-migration step (``particles.migration``) hands the others to their owners.
+migration step (``particles.parallel.migration``) hands the others to their owners.
 
 The per-particle arrays are views of buffers with spare rows: rows arriving from other ranks are
-appended in O(rows) and rows leaving are only marked (:data:`particles.kernels.DEAD`); the next
+appended in O(rows) and rows leaving are only marked (:data:`particles.storage.row_kernels.DEAD`); the next
 :meth:`Swarm.sort` places the new rows and drops the marked ones in the same pass, so a migration
 costs O(particles sent + received) plus that one sort. The sort writes into the buffers the
 previous sort released (fresh memory costs page faults that dominate a sort).
 
-A :class:`Swarm` delegates to three parts: the buffers (:mod:`particles._swarm_rows`), the order
-by cell (:mod:`particles._cell_order`: the sort and the rows per cell a relocation hands it) and
-the named column ranges of the property table (:mod:`particles._property_layout`).
+A :class:`Swarm` delegates to three parts: the buffers (:mod:`particles.storage.rows`), the order
+by cell (:mod:`particles.storage.cell_order`: the sort and the rows per cell a relocation hands it) and
+the named column ranges of the property table (:mod:`particles.storage.property_layout`).
 """
 
 from __future__ import annotations
@@ -34,10 +34,10 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase.geometry import CellGeometry
-from particles._cell_order import CellOrder
-from particles._property_layout import PropertyLayout, PropertyLayouts
-from particles._swarm_rows import RowBuffers
-from particles.kernels import DEAD, rows_outside
+from particles.storage.cell_order import CellOrder
+from particles.storage.property_layout import PropertyLayout, PropertyLayouts
+from particles.storage.rows import RowBuffers
+from particles.storage.row_kernels import DEAD, rows_outside
 
 __all__ = ["PropertyLayout", "Swarm"]
 
@@ -78,7 +78,7 @@ class Swarm:
         inward: ``inward(x)``, unit directions into the domain at points shape=(n, gdim) ->
             shape=(n, gdim), where a moving boundary (a free surface) may pass particles: a
             particle found in no cell after a relocation is moved back in along it
-            (:func:`particles.moving_mesh.pull_in`); None (the default): such particles are lost.
+            (:func:`particles.relocation.moving_mesh.pull_in`); None (the default): such particles are lost.
     """
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, /) -> None:
@@ -107,7 +107,7 @@ class Swarm:
     def mesh_moved(self) -> None:
         """The mesh's nodes moved: take their new positions into the cell geometry (cell maps,
         bounding boxes). ``cells`` and ``xref`` are those of the old positions until
-        :func:`particles.moving_mesh.follow_mesh` finds the particles again. Local."""
+        :func:`particles.relocation.moving_mesh.follow_mesh` finds the particles again. Local."""
         if self._geometry is not None:
             self._geometry.moved()
 
@@ -240,7 +240,7 @@ class Swarm:
         self._order.appended(cells)
 
     def append_packed(self, table: npt.NDArray[np.float64], cells: npt.NDArray[np.int32], /) -> None:
-        """Append the particles of a message table (the rows :func:`particles.kernels.pack_by_slot`
+        """Append the particles of a message table (the rows :func:`particles.storage.row_kernels.pack_by_slot`
         makes: [id bits, hint, x, xref, properties, stage], shape=(m, 2 + gdim + tdim + columns +
         stage_width)) in the given cells (shape=(m,)), unsorted, in one compiled pass; as
         :meth:`append_rows`."""

@@ -8,8 +8,8 @@ linearly in time in between: stage ``i`` of a Butcher tableau ``(a, b, c)`` uses
     x_{n+1} = x_0 + dt sum_i b_i k_i.
 
 After every stage position the particle's cell and reference position are updated
-(:func:`particles.transport.relocate`) and particles that left this rank's cells are migrated
-(:func:`particles.migration.migrate`; the swarm is sorted by cell once, after the last stage);
+(:func:`particles.relocation.between_cells.relocate`) and particles that left this rank's cells are migrated
+(:func:`particles.parallel.migration.migrate`; the swarm is sorted by cell once, after the last stage);
 the start position ``x_0`` and the slopes ``k_j`` still needed later travel with the particle in
 the swarm's stage table (:meth:`Swarm.stage_table`, kept allocated from step to step). A slope
 needed only for the next stage position is pushed into the position at once and never stored, so
@@ -43,13 +43,13 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from fembase.registry import Registry
-from particles._stages import IntegratedState, StagePlan
-from particles._velocity import EvaluatorCache, LinearVelocity
-from particles.kernels import stage_combination
-from particles.migration import migrate
-from particles.moving_mesh import pull_in
-from particles.swarm import Swarm
-from particles.transport import TransportStats, relocate
+from particles.advection.stages import IntegratedState, StagePlan
+from particles.advection.velocity import EvaluatorCache, LinearVelocity
+from particles.storage.row_kernels import stage_combination
+from particles.parallel.migration import migrate
+from particles.relocation.moving_mesh import pull_in
+from particles.storage.swarm import Swarm
+from particles.relocation.between_cells import TransportStats, relocate
 
 __all__ = ["AdvectionStats", "Advector", "ButcherTableau", "INTEGRATORS", "ParticleODE", "get_integrator"]
 
@@ -136,7 +136,7 @@ class AdvectionStats:
         relocation_seconds: Transport between cells, including the sort.
         communication_seconds: Migration.
         pulled_in: Particles (this rank, summed over stages) a moving boundary had passed, moved
-            back in (:func:`particles.moving_mesh.pull_in`).
+            back in (:func:`particles.relocation.moving_mesh.pull_in`).
     """
 
     transport: TransportStats
@@ -199,8 +199,8 @@ class _StepRecord:
 class Advector:
     """Advance the particles of a swarm with an explicit Runge-Kutta method (collective).
 
-    The velocity between two Functions is evaluated by :class:`particles._velocity.LinearVelocity`;
-    which slopes are stored, and the integrated state, are :mod:`particles._stages`.
+    The velocity between two Functions is evaluated by :class:`particles.advection.velocity.LinearVelocity`;
+    which slopes are stored, and the integrated state, are :mod:`particles.advection.stages`.
 
     Args:
         swarm: The particles (sorted, all in owned cells).

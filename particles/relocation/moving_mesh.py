@@ -3,7 +3,7 @@
 When the mesh deforms, a particle keeps its physical position ``x`` but its cell and reference
 position are those of the old node positions. :func:`follow_mesh` takes the new positions into the
 swarm's cell geometry and the migrator's rank boxes, then relocates every particle with the same
-compiled path a time step uses (:func:`particles.transport.relocate`: the old cell, its facet
+compiled path a time step uses (:func:`particles.relocation.between_cells.relocate`: the old cell, its facet
 neighbour, its vertex neighbours, then the bounding-box tree) and migrates those that are now in
 another rank's cell.
 
@@ -39,15 +39,15 @@ from petsc4py import PETSc
 
 from fembase.dolfinx_compat import cell_dofmap, function_space, petsc_vector
 from fembase.geometry import CellGeometry
-from particles.migration import migrate, migrator_for
-from particles.swarm import Swarm
-from particles.transport import relocate
+from particles.parallel.migration import migrate, migrator_for
+from particles.storage.swarm import Swarm
+from particles.relocation.between_cells import relocate
 
 __all__ = ["FollowStats", "follow_mesh", "pull_in"]
 
 Inward = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
 """``inward(x)``: unit directions into the domain at points shape=(n, gdim) -> shape=(n, gdim)
-(:attr:`particles.swarm.Swarm.inward`)."""
+(:attr:`particles.storage.swarm.Swarm.inward`)."""
 
 _DOUBLINGS = 40  # from 2^-40 of a cell size up to one cell size along the inward line
 _BISECTIONS = 60  # halves the bracket below round-off of any coordinate
@@ -159,7 +159,7 @@ def pull_in(swarm: Swarm, old_cells: npt.NDArray[np.int32], /) -> int:
     moved (this rank). Nothing happens without ``swarm.inward``. Collective (every rank calls it
     with the same ``swarm.inward`` set or not): the first call finds the boundary's vertices.
 
-    Call after :func:`particles.transport.relocate` with ``sort=False`` (the relocation here
+    Call after :func:`particles.relocation.between_cells.relocate` with ``sort=False`` (the relocation here
     hands the swarm new per-cell counts for the next sort)."""
     if swarm.inward is None:
         return 0

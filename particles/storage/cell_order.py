@@ -1,4 +1,4 @@
-"""The order of a :class:`particles.swarm.Swarm`'s rows by cell: the counting sort, and what a
+"""The order of a :class:`particles.storage.swarm.Swarm`'s rows by cell: the counting sort, and what a
 relocation tells it.
 
 A sort places each row in a bucket: its owned cell (``0:num_owned_cells``), then one bucket for
@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from particles._swarm_rows import RowBuffers
-from particles.kernels import count_buckets, sort_destinations
+from particles.storage.rows import RowBuffers
+from particles.storage.row_kernels import count_buckets, sort_destinations
 
 __all__ = ["CellOrder"]
 

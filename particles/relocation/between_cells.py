@@ -7,11 +7,11 @@ particle in order of descending ``a . b_K'`` (``a`` = particle - vertex, ``b_K'`
 candidate ``K'`` - vertex), then the other vertex neighbours of the old
 cell; only particles still not found use a bounding-box search over this rank's owned and ghost
 cells. Particles found nowhere get ``cells = -1``; particles found in ghost cells keep the ghost
-index. Migration (:mod:`particles.migration`) then hands both kinds on. The relocation kernel
+index. Migration (:mod:`particles.parallel.migration`) then hands both kinds on. The relocation kernel
 counts the particles per cell as it goes, so the re-sort by cell that follows (counting sort) is a
 single pass.
 
-Affine simplices use a compiled kernel (:func:`particles.kernels.relocate_affine_simplex`); other
+Affine simplices use a compiled kernel (:func:`particles.storage.row_kernels.relocate_affine_simplex`); other
 cells a vectorised search over the vertex neighbours with Newton pull-backs.
 """
 
@@ -22,8 +22,8 @@ from typing import NamedTuple
 import numpy as np
 
 from fembase.geometry import CellGeometry
-from particles.kernels import DEAD, NEIGHBOUR, SKIPPED, STAYED, UNRESOLVED, relocate_affine_simplex
-from particles.swarm import Swarm
+from particles.storage.row_kernels import DEAD, NEIGHBOUR, SKIPPED, STAYED, UNRESOLVED, relocate_affine_simplex
+from particles.storage.swarm import Swarm
 
 __all__ = ["TransportStats", "relocate"]
 

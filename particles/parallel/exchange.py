@@ -1,4 +1,4 @@
-"""Point-to-point exchanges of float64 tables, the message patterns of :mod:`particles.migration`.
+"""Point-to-point exchanges of float64 tables, the message patterns of :mod:`particles.parallel.migration`.
 
 Every table has one row per particle (or answer) and the same number of columns on all ranks.
 """

@@ -14,7 +14,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from fembase.evaluation import Evaluator
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["EvaluatorCache", "LinearVelocity"]
 

@@ -32,10 +32,10 @@ from mpi4py import MPI
 import dolfinx.mesh
 
 from fembase.geometry import owned_box
-from particles._exchange import neighbour_exchange, sparse_exchange
-from particles._offers import Kept, append_kept, offers_by_rank, settle_offers
-from particles.kernels import pack_by_slot
-from particles.swarm import Swarm
+from particles.parallel.exchange import neighbour_exchange, sparse_exchange
+from particles.parallel.offers import Kept, append_kept, offers_by_rank, settle_offers
+from particles.storage.row_kernels import pack_by_slot
+from particles.storage.swarm import Swarm
 
 __all__ = ["MigrationStats", "Migrator", "migrate", "migrator_for"]
 
@@ -72,7 +72,7 @@ class MigrationStats:
 def _pack(swarm: Swarm, rows: npt.NDArray[np.int64], slots: npt.NDArray[np.int64], nslots: int,
           hints: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
     """Rows of particles as one float64 table [id, hint, x, xref, properties, stage] grouped by
-    destination slot (:func:`particles.kernels.pack_by_slot`), with the first row of every slot."""
+    destination slot (:func:`particles.storage.row_kernels.pack_by_slot`), with the first row of every slot."""
     stage = swarm.stage if swarm.stage_width else np.empty((swarm.num_particles, 0))
     return pack_by_slot(np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(slots, dtype=np.int64),
                         nslots, swarm.ids.view(np.float64), np.ascontiguousarray(hints, dtype=np.float64),
@@ -103,8 +103,8 @@ def _neighbour_ranks(comm: MPI.Intracomm, ghost_owners: npt.NDArray[np.int32]) -
 class Migrator:
     """Communication pattern of one mesh, computed once (collective constructor).
 
-    The messages go point-to-point (:mod:`particles._exchange`); who keeps an unlocated particle
-    is settled by offer rounds (:mod:`particles._offers`).
+    The messages go point-to-point (:mod:`particles.parallel.exchange`); who keeps an unlocated particle
+    is settled by offer rounds (:mod:`particles.parallel.offers`).
 
     Attributes:
         neighbours: Ranks that own one of my ghost cells or ghost one of my cells, sorted, int32.
@@ -144,7 +144,7 @@ class Migrator:
     def _neighbour_exchange(self, table: npt.NDArray[np.float64], offsets: npt.NDArray[np.int64]
                             ) -> dict[int, npt.NDArray[np.float64]]:
         """Send rows ``offsets[s]:offsets[s + 1]`` of ``table`` to neighbour ``s``; return {source:
-        table} of the non-empty ones received (:func:`particles._exchange.neighbour_exchange`)."""
+        table} of the non-empty ones received (:func:`particles.parallel.exchange.neighbour_exchange`)."""
         return neighbour_exchange(self.comm, self.neighbours, table, offsets, _TAG_DATA)
 
     # ------------------------------------------------------------------ migration
@@ -300,7 +300,7 @@ class Migrator:
         tags: tuple[int, int],
     ) -> tuple[Kept, int]:
         """Settle offered particles point-to-point between the pairs of an offer round
-        (:func:`particles._offers.settle_offers`). Returns the kept rows (table, xref, owned cell)
+        (:func:`particles.parallel.offers.settle_offers`). Returns the kept rows (table, xref, owned cell)
         per batch and the particles lost here."""
         return settle_offers(self.comm, self.mesh, swarm, inside, received, tags)
 

@@ -2,7 +2,7 @@
 ``particle distribution score`` postprocessor (benchmarks/particle_distribution).
 
 Each owned cell is split into ``B = g**tdim`` equal-volume sub-cells (buckets,
-:class:`particles.subcells.SubCells`, granularity ``g``, default 2). With ``n`` particles in the
+:class:`particles.population.subcells.SubCells`, granularity ``g``, default 2). With ``n`` particles in the
 cell, ``c_b`` of them in bucket ``b`` and the ideal count ``m = n / B``:
 
 .. math::
@@ -32,8 +32,8 @@ import numpy as np
 import numpy.typing as npt
 
 from particles.generation.maps import CellMaps
-from particles.subcells import SubCells
-from particles.swarm import Swarm
+from particles.population.subcells import SubCells
+from particles.storage.swarm import Swarm
 
 __all__ = ["DistributionScore", "cell_scores", "canonical_reference", "distribution_score", "scores_of_counts"]
 

@@ -8,16 +8,14 @@ stage slopes still needed later (one block of ``width`` columns each).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Iterator, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
+from particles.advection.integrators import ButcherTableau, ParticleODE
 from particles.storage.row_kernels import stage_combination
 from particles.storage.swarm import Swarm
-
-if TYPE_CHECKING:
-    from particles.advection import ButcherTableau, ParticleODE
 
 __all__ = ["IntegratedState", "StagePlan"]
 

@@ -25,7 +25,7 @@ import dolfinx.fem
 import numpy as np
 import numpy.typing as npt
 
-from particles.advection import ParticleODE
+from particles.advection.integrators import ParticleODE
 from particles.properties._base import (
     NEW_PARTICLE_POLICIES,
     UPDATE_POLICIES,

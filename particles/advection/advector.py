@@ -43,9 +43,8 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from particles.advection.integrators import ParticleODE, get_integrator
-from particles.advection.stages import IntegratedState, StagePlan
+from particles.advection.stages import IntegratedState, StagePlan, stage_combination
 from particles.advection.velocity import EvaluatorCache, LinearVelocity
-from particles.storage.row_kernels import stage_combination
 from particles.parallel.migration import migrate
 from particles.relocation.moving_mesh import pull_in
 from particles.storage.swarm import Swarm

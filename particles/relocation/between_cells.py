@@ -11,7 +11,7 @@ index. Migration (:mod:`particles.parallel.migration`) then hands both kinds on.
 counts the particles per cell as it goes, so the re-sort by cell that follows (counting sort) is a
 single pass.
 
-Affine simplices use a compiled kernel (:func:`particles.storage.row_kernels.relocate_affine_simplex`); other
+Affine simplices use a compiled kernel (:func:`particles.relocation.affine_walk.relocate_affine_simplex`); other
 cells a vectorised search over the vertex neighbours with Newton pull-backs.
 """
 
@@ -22,7 +22,8 @@ from typing import NamedTuple
 import numpy as np
 
 from fembase.geometry import CellGeometry
-from particles.storage.row_kernels import DEAD, NEIGHBOUR, SKIPPED, STAYED, UNRESOLVED, relocate_affine_simplex
+from particles.relocation.affine_walk import NEIGHBOUR, SKIPPED, STAYED, UNRESOLVED, relocate_affine_simplex
+from particles.storage.row_kernels import DEAD
 from particles.storage.swarm import Swarm
 
 __all__ = ["TransportStats", "relocate"]

@@ -23,7 +23,7 @@ from particles.advection import Advector
 from particles.io.swarm_checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.generation import generate
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 N_CELLS = 10
 N_PARTICLES = 300
 DT = 0.5 / N_CELLS  # CFL 0.5 for max |u| = 1

@@ -208,7 +208,7 @@ def test_killed_writer_leaves_only_complete_files(tmp_path):
     script = textwrap.dedent(
         f"""
         import os, signal, sys
-        sys.path.insert(0, {str(Path(__file__).resolve().parents[2])!r})
+        sys.path.insert(0, {str(Path(__file__).resolve().parents[3])!r})
         from mpi4py import MPI
         import dolfinx.mesh
         from particles import Swarm

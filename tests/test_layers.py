@@ -3,6 +3,7 @@ particles never imports convection, and no package imports another package's pri
 
 import ast
 from pathlib import Path
+from typing import Callable
 
 import pytest
 
@@ -96,17 +97,23 @@ def _room(module: str) -> int | None:
     return ROOMS.index(parts[1])
 
 
-def test_convection_rooms_import_only_downwards():
-    """No room of convection imports a room above it, not even inside a function."""
+def _upward_imports(room: Callable[[str], int | None]) -> list[str]:
+    """Every import (inside functions too) of a module whose ``room`` is above the importer's."""
     wrong = []
     for module, path in sorted(_modules().items()):
-        here = _room(module)
+        here = room(module)
         if here is None:
             continue
         for imported in _runtime_imports(path):
-            there = _room(imported)
+            there = room(imported)
             if there is not None and there > here:
                 wrong.append(f"{module} imports {imported}")
+    return wrong
+
+
+def test_convection_rooms_import_only_downwards():
+    """No room of convection imports a room above it, not even inside a function."""
+    wrong = _upward_imports(_room)
     assert not wrong, wrong
 
 
@@ -124,16 +131,9 @@ def _particle_room(module: str) -> int | None:
 
 
 def test_particle_rooms_import_only_downwards():
-    """No room of particles imports a room above it or a public face, not even inside a function."""
-    wrong = []
-    for module, path in sorted(_modules().items()):
-        here = _particle_room(module)
-        if here is None or here == len(PARTICLE_ROOMS):
-            continue
-        for imported in _runtime_imports(path):
-            there = _particle_room(imported)
-            if there is not None and there > here:
-                wrong.append(f"{module} imports {imported}")
+    """No room of particles imports a room above it or a public face (the faces rank above every
+    room), not even inside a function."""
+    wrong = _upward_imports(_particle_room)
     assert not wrong, wrong
 
 

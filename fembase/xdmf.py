@@ -1,7 +1,7 @@
 """The one XDMF time-series writer: a Temporal collection of Uniform grids in one ``.xdmf`` file.
 
 Both the field output (:mod:`convection.io.fields`: each time on the mesh of its time) and the
-particle output (:mod:`particles.output`: each step a Polyvertex grid) keep their series with an
+particle output (:mod:`particles.io.output`: each step a Polyvertex grid) keep their series with an
 :class:`XdmfSeries`: grids by a key (the time or the step), read back from an existing file when a
 run continues, and the file rewritten atomically by rank 0 after every output
 (:func:`fembase.files.atomic_write_text`), so ParaView (or ``pyvista.get_reader``) opens the whole

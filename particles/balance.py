@@ -4,7 +4,7 @@ the particles along (seed paper section 2.4).
 :func:`rebalance` counts the particles per cell, lets a partition method of :mod:`fembase.partition`
 choose a new owner for every cell (:func:`fembase.distribute.cell_owners`), creates the mesh anew on
 that partition (:func:`fembase.distribute.redistribute`) and moves the particles to it
-(:func:`particles.adaptivity.move_to_mesh`). Functions on the old mesh are the caller's to carry
+(:func:`particles.relocation.new_mesh.move_to_mesh`). Functions on the old mesh are the caller's to carry
 over (or to rebuild on ``swarm.mesh``).
 """
 
@@ -13,8 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 from fembase.distribute import cell_owners, redistribute
-from particles.adaptivity import move_to_mesh
-from particles.swarm import Swarm
+from particles.relocation.new_mesh import move_to_mesh
+from particles.storage.swarm import Swarm
 
 __all__ = ["rebalance"]
 

@@ -8,9 +8,9 @@ from its registry (:mod:`particles.generation`, :mod:`particles.advection`,
 - an integrator (Runge-Kutta tableau) advancing positions and the properties that obey an ODE;
 - a :class:`~particles.properties.PropertyManager` for the properties every particle carries;
 - an interpolator that turns properties into mesh fields (:meth:`ParticleManager.track`);
-- optional population bounds (:class:`~particles.population.PopulationControl`), applied at
+- optional population bounds (:class:`~particles.population.control.PopulationControl`), applied at
   creation, after every advection step and after every change of mesh;
-- an optional :class:`~particles.output.ParticleWriter` with an :class:`OutputSchedule`.
+- an optional :class:`~particles.io.output.ParticleWriter` with an :class:`OutputSchedule`.
 
 A time step from ``t`` to ``t + dt`` takes two collective calls::
 
@@ -26,10 +26,10 @@ repartitioning), then applies the population bounds again.
 
 New particles made by population control copy every property from the nearest older particle of
 their cell (from neighbouring cells' averages in a cell that had none; both across ranks, so the
-result does not depend on the rank count, :func:`particles.population.copy_nearest`); properties
+result does not depend on the rank count, :func:`particles.population.control.copy_nearest`); properties
 whose new-particle policy is ``"reinitialise"`` are then evaluated afresh at the new particles.
 
-The tracked mesh fields live in :class:`particles._tracked_fields.TrackedFields`; when output is
+The tracked mesh fields live in :class:`particles.interpolation.tracked_fields.TrackedFields`; when output is
 next due is kept by this module's ``_OutputClock``.
 
 This module never imports ``convection``; it works on any DOLFINx mesh.
@@ -53,19 +53,19 @@ import dolfinx.mesh
 
 from fembase.geometry import Candidates
 from fembase.state import State
-from particles._tracked_fields import TrackedFields
-from particles.adaptivity import move_to_mesh
+from particles.interpolation.tracked_fields import TrackedFields
+from particles.relocation.new_mesh import move_to_mesh
 from particles.advection import Advector, get_integrator
 from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
 from particles.interpolation import CellAverage, Interpolator, get_interpolator
-from particles.migration import migrate
-from particles.moving_mesh import FollowStats, follow_mesh
-from particles.output import PARTICLE_WRITERS, OutputRecord, OutputUnits, ParticleWriter
-from particles.population import PopulationControl, PopulationStats, copy_nearest
+from particles.parallel.migration import migrate
+from particles.relocation.moving_mesh import FollowStats, follow_mesh
+from particles.io.output import PARTICLE_WRITERS, OutputRecord, OutputUnits, ParticleWriter
+from particles.population.control import PopulationControl, PopulationStats, copy_nearest
 from particles.settings import ParticleSettings, particle_settings
 from particles.properties import PROPERTIES, ParticleProperty, PropertyContext, PropertyManager, create_property
-from particles.swarm import Swarm
-from particles.transport import relocate
+from particles.storage.swarm import Swarm
+from particles.relocation.between_cells import relocate
 
 __all__ = [
     "AdvanceReport",
@@ -484,8 +484,8 @@ class ParticleManager:
         return AdvanceReport(int(stats.global_lost), int(sent), population)
 
     def follow_mesh(self) -> FollowStats:
-        """Find every particle again after the mesh's nodes moved (:func:`particles.moving_mesh.follow_mesh`),
-        then re-interpolate the tracked fields (collective)."""
+        """Find every particle again after the mesh's nodes moved
+        (:func:`particles.relocation.moving_mesh.follow_mesh`), then re-interpolate the tracked fields (collective)."""
         stats = follow_mesh(self.swarm)
         self.timings["particle_mesh_motion"] += stats.seconds
         self.lost += stats.lost
@@ -515,7 +515,7 @@ class ParticleManager:
     def state(self) -> State:
         """What a checkpoint needs besides the swarm (:mod:`fembase.state`; JSON-able scalars):
         counters, output schedule, timings. The swarm is a checkpoint part of its own
-        (:mod:`particles.checkpoint`), given back by :meth:`adopt`."""
+        (:mod:`particles.io.swarm_checkpoint`), given back by :meth:`adopt`."""
         return State(scalars={"lost": self.lost, "added": self.added, "removed": self.removed, "pulled_in": self.pulled_in,
                               **self._clock.state(), "timings": dict(self.timings)})
 
@@ -545,7 +545,7 @@ class ParticleManager:
             context: Fields on the new mesh for properties that new particles evaluate afresh.
             step: The current step number (keys the population's random draws).
             candidates: Cells of ``mesh`` to search first for each particle, in the order of
-                ``self.swarm`` (:func:`particles.adaptivity.move_to_mesh`).
+                ``self.swarm`` (:func:`particles.relocation.new_mesh.move_to_mesh`).
 
         Returns:
             Particles lost in the move (global; 0 unless the meshes cover different domains).

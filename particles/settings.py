@@ -4,7 +4,7 @@ The dataclasses are the one declaration of a ``particles`` config section: their
 defaults of :meth:`particles.manager.ParticleManager.from_config`, and ``convection``'s config
 loader turns them into the schema of its ``particles`` section (and its config reference), so
 the two cannot drift apart. Names are checked against the registries
-(:data:`particles.advection.INTEGRATORS`, :data:`particles.output.PARTICLE_WRITERS`), read when a
+(:data:`particles.advection.INTEGRATORS`, :data:`particles.io.output.PARTICLE_WRITERS`), read when a
 config is checked.
 """
 
@@ -30,7 +30,7 @@ def _is_list(value: Any) -> str | None:
 
 @dataclass(frozen=True)
 class PopulationSettings:
-    """Particles per cell kept within bounds (:class:`particles.population.PopulationControl`)."""
+    """Particles per cell kept within bounds (:class:`particles.population.control.PopulationControl`)."""
 
     min_per_cell: int = param(0, minimum=0, help="cells with fewer particles get new ones")
     max_per_cell: int | None = param(None, minimum=1, help="cells with more particles lose some (null: never)")
@@ -49,14 +49,14 @@ class PopulationSettings:
 
 @dataclass(frozen=True)
 class ParticleOutputSettings:
-    """When and what particle output is written (:mod:`particles.output`)."""
+    """When and what particle output is written (:mod:`particles.io.output`)."""
 
     every_steps: int | None = param(None, minimum=1, help="write particles every N steps")
     every_time: float | None = param(None, exclusive_minimum=0.0,
                                      help="write particles at the first step after every multiple of this time")
     properties: tuple[str, ...] | None = param(None, help="properties written (null: all)")
     every_nth: int = param(1, minimum=1, help="write only particles with id % every_nth == 0")
-    format: str = param("xdmf", choices=_names("particles.output", "PARTICLE_WRITERS"),
+    format: str = param("xdmf", choices=_names("particles.io.output", "PARTICLE_WRITERS"),
                         help="the particles' file format")
 
 

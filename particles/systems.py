@@ -36,10 +36,10 @@ import dolfinx.mesh
 
 from fembase.geometry import Candidates
 from particles.manager import AdvanceReport, ParticleManager
-from particles.moving_mesh import FollowStats
-from particles.output import OutputRecord
+from particles.relocation.moving_mesh import FollowStats
+from particles.io.output import OutputRecord
 from particles.properties import PropertyContext
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["DEFAULT_SYSTEM", "ParticleSystems", "file_stem"]
 
@@ -174,7 +174,7 @@ class ParticleSystems:
 
     def set_inward(self, inward: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]] | None, /) -> None:
         """Every swarm moves particles that a moving surface passed back in along ``inward``
-        (:mod:`particles.moving_mesh`)."""
+        (:mod:`particles.relocation.moving_mesh`)."""
         for swarm in self.swarms:
             swarm.inward = inward
 

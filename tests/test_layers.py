@@ -3,6 +3,7 @@ particles never imports convection, and no package imports another package's pri
 
 import ast
 from pathlib import Path
+from typing import Callable
 
 import pytest
 
@@ -70,13 +71,13 @@ def _modules() -> dict[str, Path]:
     return out
 
 
-def _runtime_imports(path: Path):
+def _runtime_imports(path: Path, type_checking: bool = False):
     """Imported module names of ``path`` (``from a import b`` gives ``a.b`` when that is a module),
-    leaving out imports under ``if TYPE_CHECKING:``."""
+    leaving out imports under ``if TYPE_CHECKING:`` unless ``type_checking``."""
     tree = ast.parse(path.read_text())
     skipped = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING" and not type_checking:
             skipped.update(id(n) for n in ast.walk(node))
     modules = _modules()
     for node in ast.walk(tree):
@@ -96,24 +97,52 @@ def _room(module: str) -> int | None:
     return ROOMS.index(parts[1])
 
 
-def test_convection_rooms_import_only_downwards():
-    """No room of convection imports a room above it, not even inside a function."""
+def _upward_imports(room: Callable[[str], int | None]) -> list[str]:
+    """Every import (inside functions too) of a module whose ``room`` is above the importer's."""
     wrong = []
     for module, path in sorted(_modules().items()):
-        here = _room(module)
+        here = room(module)
         if here is None:
             continue
         for imported in _runtime_imports(path):
-            there = _room(imported)
+            there = room(imported)
             if there is not None and there > here:
                 wrong.append(f"{module} imports {imported}")
+    return wrong
+
+
+def test_convection_rooms_import_only_downwards():
+    """No room of convection imports a room above it, not even inside a function."""
+    wrong = _upward_imports(_room)
     assert not wrong, wrong
 
 
-def test_no_import_cycles():
-    """The module import graph (every import, those inside functions included) has no cycle."""
-    modules = _modules()
-    graph = {name: sorted({m for m in _runtime_imports(path) if m in modules and m != name})
+PARTICLE_ROOMS = ("storage", "parallel", "relocation", "advection", "generation", "properties", "interpolation",
+                  "population", "io")
+"""particles' rooms from the floor up (the map in particles/__init__.py): a room imports only from rooms below
+it; the public faces (manager, systems, settings, balance) import from any room, and no room from them."""
+
+
+def _particle_room(module: str) -> int | None:
+    parts = module.split(".")
+    if parts[0] != "particles" or len(parts) < 2:
+        return None
+    return PARTICLE_ROOMS.index(parts[1]) if parts[1] in PARTICLE_ROOMS else len(PARTICLE_ROOMS)
+
+
+def test_particle_rooms_import_only_downwards():
+    """No room of particles imports a room above it or a public face (the faces rank above every
+    room), not even inside a function."""
+    wrong = _upward_imports(_particle_room)
+    assert not wrong, wrong
+
+
+@pytest.mark.parametrize("package", [None, "particles"])
+def test_no_import_cycles(package):
+    """The module import graph (every import, those inside functions included) has no cycle; in
+    particles not even through the imports under ``if TYPE_CHECKING:`` (none hides a cycle there)."""
+    modules = {name: path for name, path in _modules().items() if package in (None, name.split(".")[0])}
+    graph = {name: sorted({m for m in _runtime_imports(path, package is not None) if m in modules and m != name})
              for name, path in modules.items()}
     index: dict[str, int] = {}
     low: dict[str, int] = {}

@@ -10,7 +10,7 @@ Usage::
 Each method (``particles.population.method: count`` and ``density``) runs once, one after the
 other, with the statistics ``time, mesh, particles, particle_distribution, wall_time``: the
 distribution score of ASPECT's benchmark (per cell ``S = sum_b (c_b - n/B)^2 / (n^2 (B-1)/B)`` over
-``B = 4`` equal sub-cells, 0 even .. 1 all in one; :mod:`particles.distribution`) and the
+``B = 4`` equal sub-cells, 0 even .. 1 all in one; :mod:`particles.population.distribution`) and the
 particles per cell min/mean/max. The runs' statistics.csv and output are kept in ``log/``
 (``log/<method>.csv``, ``log/<method>.log``); ``results.md`` gets the table (every 250 time units
 and the averages over the run) and ``distribution.png`` the curves. The last line printed is JSON.

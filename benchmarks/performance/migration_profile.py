@@ -20,9 +20,9 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-import particles.advection as advection
-import particles.migration as migration
-import particles.swarm as swarm_module
+import particles.advection.advector as advection
+import particles.parallel.migration as migration
+import particles.storage.swarm as swarm_module
 
 _totals: collections.Counter = collections.Counter()
 _state = {"on": False, "calls": 0}

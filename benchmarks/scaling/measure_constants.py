@@ -132,7 +132,7 @@ def migration_cost() -> None:
     import dolfinx.mesh
 
     from particles import Swarm
-    from particles.migration import migrator_for
+    from particles.parallel.migration import migrator_for
 
     comm = MPI.COMM_WORLD
     n = 64
@@ -199,7 +199,7 @@ def python_loops() -> None:
     import dolfinx.mesh
 
     from particles import Swarm
-    from particles.migration import Migrator
+    from particles.parallel.migration import Migrator
 
     comm = MPI.COMM_WORLD
     # The real Migrator methods on one rank with the allgathered boxes replaced by P boxes.
@@ -337,8 +337,8 @@ def advect3d(n: int = 12, per_cell: int = 20, steps: int = 10, integrator: str =
     import dolfinx.mesh
 
     from particles.advection import Advector
-    from particles.migration import Migrator
-    from particles.swarm import Swarm
+    from particles.parallel.migration import Migrator
+    from particles.storage.swarm import Swarm
 
     comm = MPI.COMM_WORLD
     mesh = dolfinx.mesh.create_unit_cube(comm, n, n, n)
@@ -418,8 +418,8 @@ def advect3d(n: int = 12, per_cell: int = 20, steps: int = 10, integrator: str =
 # ------------------------------------------------------------------------------------------- vortex
 def vortex(argv: list[str]) -> None:
     """Run benchmarks/performance/vortex.py with Swarm.sort and Migrator.migrate timed apart."""
-    from particles.migration import Migrator
-    from particles.swarm import Swarm
+    from particles.parallel.migration import Migrator
+    from particles.storage.swarm import Swarm
 
     calls: dict[str, list[tuple[int, float]]] = {"sort": [], "migrate": []}
     orig_sort, orig_migrate = Swarm.sort, Migrator.migrate

@@ -25,7 +25,7 @@ from convection.adapt.hierarchy import MeshHierarchy
 from convection.schema import Names, param
 from fembase.registry import Registry
 from fembase.partition import PARTITIONERS
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["BALANCE_STRATEGIES", "BalanceSettings", "Balancer", "RankLoads"]
 

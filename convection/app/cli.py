@@ -229,7 +229,7 @@ def _expected_code(err: Exception) -> int | None:
         return EXIT_CONFIG_ERROR
     if isinstance(err, _Refused):
         return err.code
-    checkpoint = sys.modules.get("particles.checkpoint")  # loaded by whatever raised one (it loads slowly)
+    checkpoint = sys.modules.get("particles.io.swarm_checkpoint")  # loaded by whatever raised one (it loads slowly)
     if checkpoint is not None and isinstance(err, checkpoint.CheckpointError):
         return EXIT_RUNTIME_ERROR
     return None

@@ -741,7 +741,7 @@ def _check_system_properties(config: dict[str, Any], section: dict[str, Any], wh
     """A system's properties (the materials' fractions besides, for the system that carries them),
     population bounds and output properties."""
     from particles.manager import build_properties
-    from particles.population import PopulationControl
+    from particles.population.control import PopulationControl
 
     materials = feeds and config["composition"]["source"] == "particles"
     columns = [m["name"] for m in material_table(config)[0]] if materials else []

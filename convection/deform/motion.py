@@ -14,7 +14,7 @@ normal), so the mesh moves along ``e_up`` only and the sides stay where they are
 A step moves every node by ``dt w e_up``. The temperature and the advected material fields are
 carried in the moving frame: their nodal values move with the nodes, and they are advected with
 ``u - w e_up`` (:meth:`FreeSurface.relative`). Particles keep their positions and are found again
-in the moved cells (:func:`particles.moving_mesh.follow_mesh`).
+in the moved cells (:func:`particles.relocation.moving_mesh.follow_mesh`).
 
 The cells' shape is watched (:func:`cell_quality`: ``4 sqrt(3) |K| / sum(l^2)`` for a triangle,
 the same measure scaled to 1 for the regular tetrahedron): 1 for an equilateral cell, 0 for a

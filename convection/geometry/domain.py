@@ -190,7 +190,7 @@ class Domain(ABC):
 
     def inward(self, x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
         """Unit directions into the domain from its moving surface at points ``x`` (shape=(n,
-        gdim)), shape=(n, gdim): down (:func:`particles.moving_mesh.pull_in` follows them)."""
+        gdim)), shape=(n, gdim): down (:func:`particles.relocation.moving_mesh.pull_in` follows them)."""
         return -self.up(x)
 
     def check_boundary_names(self, names: Any, /) -> None:

@@ -17,7 +17,7 @@ A checkpoint is a folder ``RUN_DIR/checkpoints/checkpoint_NNNNNN`` (NNNNNN = the
   the fields of every component (``functions/<component>/<name>``: ``u``, ``p``, ``T^n``,
   ``T^{n-1}``, ``T^{n-2}``, ``u^{n-1}``, advected or static material fractions): owned dof values
   with the owned dof coordinates;
-- ``particles.h5``: the particles with their properties (:func:`particles.checkpoint.save_checkpoint`);
+- ``particles.h5``: the particles with their properties (:func:`particles.io.swarm_checkpoint.save_checkpoint`);
   with several particle systems one file per system, ``particles_<name>.h5``
   (:func:`particles.systems.file_stem`).
 
@@ -70,7 +70,7 @@ from fembase.state import State
 from fembase.distribute import MeshPiece, create_mesh_from_piece, mesh_piece
 from fembase.distribute import cell_owners_by_input, mesh_fingerprint
 from fembase.files import H5Sink
-from particles.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from particles.io.swarm_checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.manager import ParticleManager
 from particles.systems import file_stem
 from particles.properties import PropertyContext

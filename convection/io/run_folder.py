@@ -22,7 +22,7 @@ from types import TracebackType
 from mpi4py import MPI
 
 from convection.schema import short_repr
-from particles.checkpoint import CheckpointError
+from particles.io.swarm_checkpoint import CheckpointError
 
 __all__ = ["LOCK_NAME", "RunFolderError", "RunFolderLock", "check_output_directory"]
 
@@ -56,7 +56,7 @@ def check_output_directory(text: str) -> str | None:
 
 class RunFolderError(CheckpointError):
     """A run folder cannot be used: in use by another run, not creatable, or one of its files
-    damaged. Raised on every rank alike; a :class:`~particles.checkpoint.CheckpointError`, so the
+    damaged. Raised on every rank alike; a :class:`~particles.io.swarm_checkpoint.CheckpointError`, so the
     command line reports it as a missing or damaged folder (one line, exit code 1)."""
 
 

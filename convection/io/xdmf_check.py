@@ -6,7 +6,7 @@ empty data set (or a ``TypeError`` deep in pyvista). :class:`XdmfSeries` parses 
 item exists, is readable and holds as many values as the XDMF says; what is wrong is one line
 (:class:`RunFilesError`) naming the file.
 
-The series is the layout this project writes (``convection.io.fields``, ``particles.output``): a
+The series is the layout this project writes (``convection.io.fields``, ``particles.io.output``): a
 ``Domain`` with one temporal ``Collection`` grid of ``Uniform`` grids, each with a ``Time`` and
 ``DataItem`` elements ``Format="HDF"`` whose text is ``FILE.h5:/dataset``.
 """

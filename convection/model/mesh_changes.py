@@ -15,7 +15,7 @@ are carried to the new mesh like a field over the undeformed one, and the new me
 before the particles are found in it (:meth:`convection.deform.motion.FreeSurface.to_mesh`). Each cell is mapped affinely
 in both configurations, so a field's nodal values mean the same in either. Particles keep their
 positions; where coarser cells' surface (the chord of the finer one's) passes below a particle, it
-is moved down onto it (:func:`particles.moving_mesh.pull_in`, counted as pulled in).
+is moved down onto it (:func:`particles.relocation.moving_mesh.pull_in`, counted as pulled in).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from convection.adapt.adaptivity import INDICATOR_FIELDS
 from convection.adapt.rebalance import RankLoads
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from fembase.geometry import Candidates
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 if TYPE_CHECKING:
     from convection.model.model import Model
@@ -89,7 +89,7 @@ class MeshChanges:
     def move(self, dt: float, /) -> None:
         """Move the mesh's nodes by ``dt`` times the free surface's mesh velocity and find the
         particles again in the moved cells (those the sinking surface left outside are moved
-        down inside: :mod:`particles.moving_mesh`)."""
+        down inside: :mod:`particles.relocation.moving_mesh`)."""
         model = self.model
         with model.timers("mesh_motion"):
             model.free_surface.move(dt)

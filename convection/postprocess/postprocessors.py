@@ -18,7 +18,7 @@ name            columns
                 ppc_min, ppc_mean, ppc_max (particles per cell)
 ``particle_distribution`` distribution_score (mean over cells), distribution_score_min, _max, _std:
                 how evenly the particles spread inside their cells, ASPECT's particle distribution
-                score (:mod:`particles.distribution`; only when asked for)
+                score (:mod:`particles.population.distribution`; only when asked for)
 ``load``        cell_imbalance, particle_imbalance (max/mean over ranks)
 ``entrainment`` entrainment: volume of a material above a height / its initial volume
                 (one column per material, ``entrainment_<name>``, for ``all``)
@@ -207,7 +207,7 @@ class ParticleStatistics(Column):
 
 
 class ParticleDistribution(Column):
-    """ASPECT's particle distribution score (:func:`particles.distribution.distribution_score`,
+    """ASPECT's particle distribution score (:func:`particles.population.distribution.distribution_score`,
     granularity 2): per cell ``S = sum_b (c_b - n/B)^2 / (n^2 (B - 1) / B)`` over its ``B = 2**tdim``
     equal-volume sub-cells, 0 for an even spread, 1 for all particles in one sub-cell or none;
     min, mean, max and standard deviation over all cells, of the primary particle system (the one
@@ -226,7 +226,7 @@ class ParticleDistribution(Column):
         return False
 
     def __call__(self, model: Model, /) -> dict[str, float]:
-        from particles.distribution import distribution_score
+        from particles.population.distribution import distribution_score
         assert model.particles is not None
         score = distribution_score(model.particles.primary.swarm, 2)
         return {"distribution_score": score.mean, "distribution_score_min": score.min,

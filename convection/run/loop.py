@@ -31,7 +31,7 @@ from convection.schema import REQUIRED, Names, param, subsection
 from convection.run.progress import Progress
 from convection.physics.scaling import ColumnUnits, Scaling
 from convection.io.run_folder import RunFolderError
-from particles.checkpoint import CheckpointError
+from particles.io.swarm_checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
 __all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary", "SteadyState", "Watch", "Watched", "run"]

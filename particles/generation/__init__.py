@@ -21,7 +21,7 @@ from particles.generation.random_density import RandomDensity, RandomUniform
 from particles.generation.reference_points import ReferencePoints
 from particles.generation.shell import Shell
 from fembase.registry import Registry
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = [
     "GENERATORS",

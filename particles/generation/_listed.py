@@ -12,7 +12,7 @@ import numpy.typing as npt
 
 from fembase.geometry import locate_owned, owned_box
 from particles.generation.base import GenerationResult, first_free_id
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["in_box", "insert_listed_points"]
 

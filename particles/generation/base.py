@@ -10,7 +10,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from particles.generation.maps import CellMaps
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["Density", "GenerationResult", "Generator", "evaluate_density", "first_free_id", "insert_in_cells"]
 

@@ -17,7 +17,7 @@ import numpy.typing as npt
 from fembase.geometry import owned_box
 from particles.generation._listed import insert_listed_points
 from particles.generation.base import GenerationResult
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["BoxLattice"]
 

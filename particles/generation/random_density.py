@@ -23,7 +23,7 @@ from particles.generation.base import Density, GenerationResult, first_free_id, 
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
 from particles.generation.sampling import cell_weights, uniform_reference_points
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["RandomDensity", "RandomUniform"]
 

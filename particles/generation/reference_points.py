@@ -17,7 +17,7 @@ import numpy.typing as npt
 from particles.generation.base import GenerationResult, first_free_id, insert_in_cells
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["ReferencePoints"]
 

@@ -6,7 +6,7 @@ a scalar DOLFINx Function and returns :class:`InterpolationStats`. A property of
 interpolated directly; for a multi-column property pass the column as ``component``.
 
 Empty cells never give NaN: see :mod:`particles.interpolation.fill` (outward averaging over
-vertex-neighbour cells, across ranks through the vertex ghost layer of :mod:`particles.ghosts`,
+vertex-neighbour cells, across ranks through the vertex ghost layer of :mod:`particles.parallel.ghosts`,
 which is built from vertex sharing and so works with DOLFINx 0.5's ``GhostMode.shared_facet`` and
 ``none``; 0.5 refuses ``shared_vertex``). All interpolators give the same field on any number of
 ranks.
@@ -26,7 +26,7 @@ from particles.interpolation.nearest import Nearest
 from particles.interpolation.quadratic_least_squares import QuadraticLeastSquares
 from particles.interpolation.shape_function import ShapeFunction
 from fembase.registry import Registry
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = [
     "INTERPOLATORS",

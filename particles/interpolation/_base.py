@@ -14,9 +14,9 @@ import dolfinx.fem
 import dolfinx.la
 
 from fembase.dolfinx_compat import SCATTER_ADD, cell_dofmap
-from particles.ghosts import GhostExchange, ghost_exchange_for
+from particles.parallel.ghosts import GhostExchange, ghost_exchange_for
 from particles.interpolation.fill import fill_cells
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = [
     "InterpolationStats",

@@ -21,7 +21,7 @@ from mpi4py import MPI
 import dolfinx.fem
 
 from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_result
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["CellAverage"]
 

@@ -8,7 +8,7 @@ dominates and ``u_d`` is its value to round-off. The reach is:
 
 - discontinuous targets: the particles of the dof's cell, plus (``use_neighbours=True``) those of
   all cells sharing a vertex with it, including other ranks' cells through the ghost layer of
-  :mod:`particles.ghosts` (complete for any DOLFINx ghost mode);
+  :mod:`particles.parallel.ghosts` (complete for any DOLFINx ghost mode);
 - continuous targets (P1, any Lagrange degree): the particles of every cell containing the dof,
   summed over ranks by a reverse scatter (``use_neighbours`` is not accepted).
 
@@ -25,8 +25,8 @@ import numpy as np
 import dolfinx.fem
 
 from particles.interpolation._base import InterpolationStats, TargetSpace, gather_samples, write_with_cell_means
-from particles.interpolation._kernels import idw_accumulate
-from particles.swarm import Swarm
+from particles.interpolation._cell_kernels import idw_accumulate
+from particles.storage.swarm import Swarm
 
 __all__ = ["DistanceWeighted", "cell_diameters"]
 

@@ -2,7 +2,7 @@
 
 Rule (partition independent, never NaN): a cell without particles in reach is *empty*. In each
 round, every empty owned cell that has at least one non-empty vertex-neighbour cell (owned, or a
-halo cell of another rank, see :mod:`particles.ghosts`) takes the arithmetic mean of the values of
+halo cell of another rank, see :mod:`particles.parallel.ghosts`) takes the arithmetic mean of the values of
 those neighbours and counts as non-empty from the next round on (Jacobi sweeps: a round only reads
 values of the previous round, so the result does not depend on the partition or the cell order).
 Rounds repeat until no empty cell is left on any rank. If no cell anywhere has a value (an empty
@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from particles.ghosts import GhostExchange
+from particles.parallel.ghosts import GhostExchange
 
 __all__ = ["fill_cells"]
 

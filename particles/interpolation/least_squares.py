@@ -10,7 +10,7 @@ Fallbacks, in order, for a cell whose own particles do not determine a linear fi
 ``gdim + 1`` or a normal matrix with reciprocal condition number below ``rcond``):
 
 1. ``use_neighbours=True``: the fit over the particles of the cell *and* its vertex-neighbour
-   cells, including other ranks' cells through the ghost layer of :mod:`particles.ghosts`;
+   cells, including other ranks' cells through the ghost layer of :mod:`particles.parallel.ghosts`;
 2. the constant average of the cell's own particles, or, if it has none, of the particles of its
    neighbourhood (``use_neighbours=True``);
 3. nothing in reach: the empty-cell rule of :mod:`particles.interpolation.fill`.
@@ -37,9 +37,9 @@ from particles.interpolation._base import (
     gather_samples,
     write_with_cell_means,
 )
-from particles.interpolation._kernels import least_squares_moments
+from particles.interpolation._cell_kernels import least_squares_moments
 from particles.interpolation.distance_weighted import cell_diameters
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["LeastSquares", "fit_target"]
 

@@ -16,8 +16,8 @@ import numpy as np
 import dolfinx.fem
 
 from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_with_cell_means
-from particles.interpolation._kernels import nearest_values
-from particles.swarm import Swarm
+from particles.interpolation._cell_kernels import nearest_values
+from particles.storage.swarm import Swarm
 
 __all__ = ["Nearest"]
 

@@ -32,7 +32,7 @@ from fembase.dolfinx_compat import function_space
 from particles.interpolation._base import InterpolationStats, property_values
 from particles.interpolation.distance_weighted import cell_diameters
 from particles.interpolation.least_squares import LeastSquares, fit_target
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["QuadraticLeastSquares", "monomials"]
 

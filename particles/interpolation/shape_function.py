@@ -25,7 +25,7 @@ import numpy as np
 import dolfinx.fem
 
 from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_with_cell_means
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["ShapeFunction"]
 

@@ -25,7 +25,7 @@ import dolfinx.fem
 import numpy as np
 import numpy.typing as npt
 
-from particles.advection import ParticleODE
+from particles.advection.integrators import ParticleODE
 from particles.properties._base import (
     NEW_PARTICLE_POLICIES,
     UPDATE_POLICIES,
@@ -49,7 +49,7 @@ from particles.properties.strain_rate import StrainRate
 from particles.properties.temperature import Temperature
 from particles.properties.time_since_creation import TimeSinceCreation
 from particles.properties.velocity import Velocity
-from particles.swarm import PropertyLayout, Swarm
+from particles.storage.swarm import PropertyLayout, Swarm
 from fembase.registry import Registry
 
 __all__ = [
@@ -159,7 +159,7 @@ class PropertyManager:
 
     def attach(self, swarm: Swarm, /) -> None:
         """Manage ``swarm`` instead (the same particles on a new mesh, e.g. after
-        :func:`particles.adaptivity.move_to_mesh`). Evaluators are rebuilt for the new mesh and the
+        :func:`particles.relocation.new_mesh.move_to_mesh`). Evaluators are rebuilt for the new mesh and the
         remembered context keeps its time but drops its fields (they live on the old mesh).
 
         Raises:

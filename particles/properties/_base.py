@@ -20,7 +20,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from fembase.evaluation import Evaluator
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = [
     "NEW_PARTICLE_POLICIES",

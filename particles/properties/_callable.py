@@ -12,7 +12,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from particles.properties._base import ParticleProperty, PropertyContext, evaluate_at, write_rows
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["PointFunction", "Source", "SourceValue", "evaluate_source", "source_size"]
 

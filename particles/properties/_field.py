@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from particles.properties._base import ParticleProperty, PropertyContext, evaluate_at, write_rows
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["FieldValue"]
 

@@ -6,7 +6,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["interpolate_from_neighbours"]
 

@@ -10,7 +10,7 @@ import numpy.typing as npt
 
 from particles.properties._base import ParticleProperty, PropertyContext, write_rows
 from particles.properties._tensor import strain_rate_invariant
-from particles.swarm import Swarm
+from particles.storage.swarm import Swarm
 
 __all__ = ["Damage"]
 

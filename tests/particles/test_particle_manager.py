@@ -13,8 +13,8 @@ import ufl
 from fembase.distribute import refine_on_ranks
 from fembase.dolfinx_compat import function_space
 from particles.manager import OutputSchedule, ParticleManager, build_generator, build_properties
-from particles.output import ParticleWriter
-from particles.population import PopulationControl
+from particles.io.output import ParticleWriter
+from particles.population.control import PopulationControl
 from particles.properties import InitialComposition, PropertyContext
 
 from _helpers import gathered

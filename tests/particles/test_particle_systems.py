@@ -12,7 +12,7 @@ import dolfinx.mesh
 from fembase.distribute import refine_on_ranks
 from fembase.dolfinx_compat import function_space
 from particles.manager import ParticleManager, build_generator, build_properties
-from particles.population import PopulationControl
+from particles.population.control import PopulationControl
 from particles.properties import PropertyContext
 from particles.systems import ParticleSystems, file_stem
 

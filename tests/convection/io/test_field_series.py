@@ -24,7 +24,7 @@ from convection.io.pictures import import_pyvista
 from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from particles import Swarm
 from particles.generation import generate
-from particles.output import ParticleWriter
+from particles.io.output import ParticleWriter
 
 if TYPE_CHECKING:
     import pyvista as pv

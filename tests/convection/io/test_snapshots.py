@@ -18,7 +18,7 @@ from convection.io.pictures import _Labels, field_units, main, plot_snapshots, s
 from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from particles import Swarm
 from particles.generation import generate
-from particles.output import ParticleWriter
+from particles.io.output import ParticleWriter
 
 TIMES = (0.0, 1.0, 2.0)
 

@@ -94,6 +94,7 @@ class Model:
         particles: The particle systems (or one manager: a system named ``particles``), or None.
         adaptivity: Mesh adaptivity, or None.
         balancer: Load balancing, or None.
+        free_surface: The free surface's mesh motion, or None.
     """
 
     def __init__(self, stokes: StokesSolver, /, *, temperature: TransportSolver | None = None,
@@ -115,8 +116,7 @@ class Model:
         self.time = 0.0
         self.timestep = 0
         self.dt_previous = 0.0
-        self.stokes_assemblies = 0
-        """How many times the Stokes operator was assembled anew since this model was built."""
+        self.stokes_assemblies = 0  # how many times the Stokes operator was assembled anew
         self.u_previous: dolfinx.fem.Function | None = None
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
@@ -153,11 +153,9 @@ class Model:
         return self.composition.fields if self.composition is not None else ()
 
     def fields(self) -> dict[str, dolfinx.fem.Function]:
-        """Every field by name, for output: temperature, velocity, pressure, the material fractions
-        and, with two or more materials, ``material`` (:func:`convection.physics.materials.material_index`);
-        with materials of different densities, the ``density`` anomaly; the viscosity wherever it varies; the second
-        invariants of the strain rate and of the deviatoric stress, ``strain_rate_II`` and
-        ``stress_II`` (the last four at the cell midpoints; collective)."""
+        """Every field by name, for output: temperature, velocity, pressure, the material fractions, ``material``
+        (two or more; :func:`convection.physics.materials.material_index`), the ``density`` anomaly, the viscosity where
+        it varies, ``strain_rate_II`` and ``stress_II`` (the last four at the cell midpoints; collective)."""
         out = {"velocity": self.stokes.u, "pressure": self.stokes.p}
         if self.temperature is not None:
             out = {"temperature": self.temperature.T, **out}
@@ -240,11 +238,10 @@ class Model:
 
     # ------------------------------------------------------------------ time stepping
     def solve_flow(self, dt: float | None = None, /) -> StokesResult:
-        """Solve Stokes for the current temperature and fractions, stabilised over the coming step
-        ``dt`` (default: the step just taken predicts it; see :meth:`step`)."""
+        """Solve Stokes now, anticipating the coming step ``dt`` (default: the step just taken)."""
         flow = self.flow()
-        dt = self.dt_previous if dt is None else dt
-        result = self.stokes.solve(flow.T, flow.fractions, dt=dt, fields=flow.fields or None)
+        result = self.stokes.solve(flow.T, flow.fractions, dt=self.dt_previous if dt is None else dt,
+                                   fields=flow.fields or None)
         if self.rheology.rates:
             with self.timers("plastic_strain_rate"):
                 self.rheology.update_rates(flow)
@@ -270,10 +267,8 @@ class Model:
         """Advance the model by ``dt`` (see the module docstring); starts the model if needed."""
         if self.flow_result is None:
             self.start()
-        if self.stokes.depends_on_step and dt > self.dt_previous * (1.0 + 1e-12):
-            # The flow was stabilised for a shorter step (at the first step: none): solve it again for
-            # this one, or a step far longer than the surface's relaxation overshoots.
-            self.solve_flow(dt)
+        if (self.stokes.buoyancy_theta > 0.0 or self.stokes.discretisation.anticipates_step) and dt > self.dt_previous:
+            self.solve_flow(dt)  # it anticipated a shorter step (the first step: none): step 0 above
         u = self.stokes.u
         u_end = self._velocity_at_step_end(dt)
         u_materials = u if self.stokes.buoyancy_theta > 0.0 else u_end

@@ -109,6 +109,18 @@ class StokesDiscretisation:
         self.surface = surface
         self.surface_dt = SurfaceTerms.step_constant(mesh) if surface is not None else None
 
+    @property
+    def anticipates_step(self) -> bool:
+        """Whether the forms depend on the coming step ``dt`` (a free surface with ``theta > 0``)."""
+        return self.surface is not None and self.surface.theta > 0.0
+
+    def set_surface_step(self, dt: float, /) -> bool:
+        """Set the step the free surface's stabilisation anticipates; whether the operator changed."""
+        if self.surface_dt is None or self.surface_dt.value == dt:
+            return False
+        self.surface_dt.value = dt
+        return True
+
     def viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
         """The viscosity (UFL) for ``T``, ``C`` and, for :mod:`convection.physics.rheology` laws, the flow:
         ``flow = {"u": ..., "p": ..., "fields": {...}}`` (the current iterate's Functions)."""

@@ -494,8 +494,8 @@ class StokesSolver(PetscSolver):
         """
         forms = self.prepare(T, C, fields=fields)
         t0 = time.perf_counter()
-        if self.surface is not None and self.discretisation.surface_dt.value != dt:  # the stabilisation's dt
-            self.discretisation.surface_dt.value, self._operator_current = dt, False
+        if self.discretisation.set_surface_step(dt):  # the free surface's stabilisation is for dt
+            self._operator_current = False
         if self._nonlinear is not None:
             result = self._nonlinear.solve(forms, self._forms_key, T, C, fields)
             if self._rotations is not None:
@@ -527,12 +527,6 @@ class StokesSolver(PetscSolver):
         norm = self.linear_system.residual_norm()
         return StokesResult(int(self.linear_system.iterations), norm, t1 - t0, time.perf_counter() - t1,
                             setup_seconds, assemblies=int(refresh))
-
-    @property
-    def depends_on_step(self) -> bool:
-        """Whether a solve depends on the coming step ``dt``: a free surface's stabilisation
-        (``theta > 0``) or a predicted buoyancy (``buoyancy_theta > 0``) anticipate the step's end."""
-        return (self.surface is not None and self.surface.theta > 0.0) or self._semi_implicit is not None
 
     def mesh_moved(self) -> None:
         """The mesh's nodes moved (a free surface): a new operator and rotations at the next solve."""

@@ -55,9 +55,15 @@ def test_no_dolfinx_version_checks_outside_the_floor():
     assert not wrong, wrong
 
 
-ROOMS = ("geometry", "physics", "solvers", "adapt", "model", "postprocess", "io", "run", "config", "app")
+ROOMS = ("geometry", "physics", "deform", "solvers", "adapt", "model", "postprocess", "io", "run", "config", "app")
 """convection's rooms from the floor up: a room imports only from rooms below it (and from the
 floor modules ``schema``, ``expressions``, ``launch``, ``_lazy``, from particles and fembase)."""
+
+
+def test_every_folder_of_convection_is_a_room():
+    """A new folder of convection/ takes its place in ROOMS, so that its imports are checked."""
+    folders = {p.parent.name for p in (ROOT / "convection").glob("*/__init__.py")}
+    assert folders == set(ROOMS), sorted(folders ^ set(ROOMS))
 
 
 def _modules() -> dict[str, Path]:

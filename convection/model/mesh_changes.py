@@ -22,23 +22,65 @@ from __future__ import annotations
 
 import contextlib
 from functools import partial
-from typing import TYPE_CHECKING, Callable, Iterator, Mapping
+from typing import Callable, Iterator, Mapping, Protocol
 
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
-from convection.adapt.adaptivity import INDICATOR_FIELDS
-from convection.adapt.rebalance import RankLoads
+from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity
+from convection.adapt.rebalance import Balancer, RankLoads
 from convection.adapt.transfer import PointEvaluator, transfer_function
+from convection.deform.motion import FreeSurface
+from convection.geometry.domain import Domain
+from convection.model.composition import CompositionSource
+from convection.solvers.stokes.solver import StokesSolver
+from convection.solvers.transport import TransportSolver
 from fembase.geometry import Candidates
+from fembase.timing import Timers
+from particles.properties import PropertyContext
 from particles.swarm import Swarm
+from particles.systems import ParticleSystems
 
-if TYPE_CHECKING:
-    from convection.model.model import Model
+__all__ = ["ChangingModel", "MeshChanges"]
 
-__all__ = ["MeshChanges"]
+
+class ChangingModel(Protocol):
+    """The model as a mesh change sees it: the components it rebuilds on the new mesh (the
+    solvers, the free surface, the previous velocity) and those it asks to move (composition,
+    particles). :class:`convection.model.model.Model` is one; this protocol keeps the model, which
+    owns its :class:`MeshChanges`, out of this module's imports."""
+
+    stokes: StokesSolver
+    temperature: TransportSolver | None
+    composition: CompositionSource | None
+    particles: ParticleSystems | None
+    adaptivity: Adaptivity | None
+    balancer: Balancer | None
+    free_surface: FreeSurface | None
+    u_previous: dolfinx.fem.Function | None
+    timers: Timers
+    time: float
+    timestep: int
+    mesh_version: int
+
+    @property
+    def mesh(self) -> dolfinx.mesh.Mesh: ...
+
+    @property
+    def domain(self) -> Domain: ...
+
+    @property
+    def num_cells(self) -> int: ...
+
+    @property
+    def T(self) -> dolfinx.fem.Function | None: ...
+
+    @property
+    def fractions(self) -> tuple[dolfinx.fem.Function, ...]: ...
+
+    def property_context(self) -> PropertyContext: ...
 
 
 class MeshChanges:
@@ -49,7 +91,7 @@ class MeshChanges:
         model: The model whose mesh changes (its solvers, history, fractions and particles).
     """
 
-    def __init__(self, model: Model, /) -> None:
+    def __init__(self, model: ChangingModel, /) -> None:
         self.model = model
         self._point_evaluator: PointEvaluator | None = None
 

@@ -76,18 +76,12 @@ def _modules() -> dict[str, Path]:
     return out
 
 
-def _runtime_imports(path: Path):
+def _module_imports(path: Path):
     """Imported module names of ``path`` (``from a import b`` gives ``a.b`` when that is a module),
-    leaving out imports under ``if TYPE_CHECKING:``."""
-    tree = ast.parse(path.read_text())
-    skipped = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
-            skipped.update(id(n) for n in ast.walk(node))
+    every import: those inside functions, and those under ``if TYPE_CHECKING:`` too (an import
+    only the type checker runs still ties the two modules together)."""
     modules = _modules()
-    for node in ast.walk(tree):
-        if id(node) in skipped:
-            continue
+    for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names = [f"{node.module}.{alias.name}" for alias in node.names]
             yield from [n for n in names if n in modules] or [node.module]
@@ -103,23 +97,35 @@ def _room(module: str) -> int | None:
 
 
 def test_convection_rooms_import_only_downwards():
-    """No room of convection imports a room above it, not even inside a function."""
+    """No room of convection imports a room above it, not even inside a function or for the type
+    checker only."""
     wrong = []
     for module, path in sorted(_modules().items()):
         here = _room(module)
         if here is None:
             continue
-        for imported in _runtime_imports(path):
+        for imported in _module_imports(path):
             there = _room(imported)
             if there is not None and there > here:
                 wrong.append(f"{module} imports {imported}")
     assert not wrong, wrong
 
 
+KNOWN_CYCLES = [
+    # particles/_stages.py imports ButcherTableau and ParticleODE from particles/advection.py for the
+    # type checker, and advection.py imports the stages: being cut by the engineer who moves
+    # particles/ into rooms (DESIGN.md section 3); delete this entry with that change.
+    ["particles._stages", "particles.advection"],
+]
+"""Cycles that exist and are being removed elsewhere: the test fails on any other cycle, and on
+one of these when it is gone (so that its entry goes too)."""
+
+
 def test_no_import_cycles():
-    """The module import graph (every import, those inside functions included) has no cycle."""
+    """The module import graph (every import: inside functions and under ``if TYPE_CHECKING:``
+    too) has no cycle but the known ones."""
     modules = _modules()
-    graph = {name: sorted({m for m in _runtime_imports(path) if m in modules and m != name})
+    graph = {name: sorted({m for m in _module_imports(path) if m in modules and m != name})
              for name, path in modules.items()}
     index: dict[str, int] = {}
     low: dict[str, int] = {}
@@ -148,7 +154,8 @@ def test_no_import_cycles():
     for node in sorted(graph):
         if node not in index:
             connect(node)
-    assert not cycles, cycles
+    assert sorted(cycles) == sorted(KNOWN_CYCLES), f"cycles {cycles}, known {KNOWN_CYCLES}: cut a new cycle, " \
+        "and delete a known one's entry when it is gone"
 
 
 GEOMETRY_WORDS = {"box", "annulus", "spherical_shell", "sector", "shell", "radial", "vertical", "inner", "outer",

@@ -105,7 +105,7 @@ __all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD
            "element", "element_degree", "entities_to_geometry", "evaluate_expression", "form", "function_space",
            "geometry_dofmap", "gmsh_model_to_mesh", "incident_entities", "interpolate_on_cells", "interpolation_points", "is_discontinuous",
            "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector", "refine_keeping_partition",
-           "topological_dimension", "value_size", "xdmf_lagrange_degree"]
+           "repartitioned_manifolds_nest", "topological_dimension", "value_size", "xdmf_lagrange_degree"]
 
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
 """(major, minor) of the DOLFINx in use."""
@@ -130,6 +130,13 @@ SCATTER_ADD = dolfinx.la.InsertMode.add if _NEW else dolfinx.la.ScatterMode.add
 REFINE_KEEPS_GHOSTS: bool = not _NEW
 """Whether :func:`refine_keeping_partition` gives the refined mesh ghost cells (0.5) or none (0.9;
 :func:`fembase.distribute.refine_on_ranks` makes the facet ghost layer again)."""
+
+
+def repartitioned_manifolds_nest() -> bool:
+    """Whether the refined levels of a repartitioned curved (manifold) mesh nest rank by rank, as
+    geometric multigrid's prolongation (:mod:`fembase.multigrid`) needs: on 0.5 they do; on 0.9 a
+    node of a repartitioned spherical shell lay in no coarser cell of its rank."""
+    return not _NEW
 
 
 # ---------------------------------------------------------------------- meshes

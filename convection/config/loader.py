@@ -59,7 +59,7 @@ from convection.schema import (
     settings_from, short_repr, validate,
 )
 from convection.physics.approximation import PhysicsSettings
-from fembase.dolfinx_compat import DOLFINX_VERSION
+from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.stokes.solver import AUTO, StokesSettings, check_viscosity_rules
@@ -314,7 +314,8 @@ def _check_multigrid(config: dict[str, Any]) -> None:
         count = domain.mesh_levels(levels)
     except ValueError as err:
         raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
-    if config["balance"]["strategy"] != "none" and domain.manifold() is not None and DOLFINX_VERSION >= (0, 7):
+    if config["balance"]["strategy"] != "none" and domain.manifold() is not None \
+            and not repartitioned_manifolds_nest():
         raise ConfigError("config key 'balance.strategy': stokes.solver multigrid on a repartitioned curved mesh needs "
                           "DOLFINx 0.5 for now (on 0.9 a node of the repartitioned shell lay in no coarser cell of "
                           "its rank); use balance.strategy: none, or stokes.solver: iterative")

@@ -48,11 +48,51 @@ def test_no_private_module_of_another_package(package):
     assert not wrong, wrong
 
 
+OUTSIDE_THE_FLOOR = ("particles", "convection", "tests", "demos", "benchmarks", "scripts")
+"""Where no code branches on the DOLFINx version: it asks a capability of
+:mod:`fembase.dolfinx_compat` (e.g. ``repartitioned_manifolds_nest()``) instead."""
+
+
+def _version_branches(path: Path) -> list[str]:
+    """Where ``path`` reads the DOLFINx version: ``DOLFINX_VERSION`` named or imported, a
+    ``__version__`` compared, or a version compared with a tuple of numbers (``sys.version_info``,
+    Python's own, is not DOLFINx's); "line what" for each line."""
+    found: dict[int, str] = {}
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Name) and node.id == "DOLFINX_VERSION" \
+                or isinstance(node, ast.Attribute) and node.attr == "DOLFINX_VERSION" \
+                or isinstance(node, ast.alias) and node.name == "DOLFINX_VERSION":
+            found.setdefault(node.lineno, "names DOLFINX_VERSION")
+        elif isinstance(node, ast.Compare):
+            names = {n.id if isinstance(n, ast.Name) else n.attr for n in ast.walk(node)
+                     if isinstance(n, (ast.Name, ast.Attribute))} - {"version_info"}
+            tuples = any(isinstance(n, ast.Tuple) and n.elts and all(isinstance(e, ast.Constant) and
+                                                                     isinstance(e.value, int) for e in n.elts)
+                         for n in ast.walk(node))
+            if "__version__" in names or tuples and any("version" in name.lower() for name in names):
+                found.setdefault(node.lineno, f"compares {ast.unparse(node)!r}")
+    return [f"{line} {what}" for line, what in sorted(found.items())]
+
+
 def test_no_dolfinx_version_checks_outside_the_floor():
-    """Only fembase may know which DOLFINx it runs on."""
-    wrong = [f"{path.relative_to(ROOT)}" for package in ("particles", "convection")
-             for path in sorted((ROOT / package).rglob("*.py")) if "__version__" in path.read_text()]
+    """Only fembase may know which DOLFINx it runs on: outside it, code asks a capability."""
+    wrong = [f"{path.relative_to(ROOT)}:{line}" for folder in OUTSIDE_THE_FLOOR
+             for path in sorted((ROOT / folder).rglob("*.py")) for line in _version_branches(path)]
+    wrong += [f"{path.relative_to(ROOT)}" for package in ("particles", "convection")
+              for path in sorted((ROOT / package).rglob("*.py")) if "__version__" in path.read_text()]
     assert not wrong, wrong
+
+
+def test_the_version_check_sees_version_branches(tmp_path):
+    """The check above finds each way of branching on the version (what the loader once did)."""
+    path = tmp_path / "branches.py"
+    path.write_text("from fembase.dolfinx_compat import DOLFINX_VERSION\n"
+                    "import dolfinx\n"
+                    "new = dolfinx.__version__ >= '0.7'\n"
+                    "if compat.DOLFINX_VERSION < (0, 7):\n    pass\n"
+                    "old = version < (0, 7)\n"
+                    "python = sys.version_info >= (3, 12)\n")
+    assert [line.split()[0] for line in _version_branches(path)] == ["1", "3", "4", "6"]
 
 
 ROOMS = ("geometry", "physics", "deform", "solvers", "adapt", "model", "postprocess", "io", "run", "config", "app")

@@ -21,12 +21,12 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 __all__ = ["cli_command", "launched_rank", "launcher", "mpi_environment", "mpirun", "run_config"]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def launcher() -> tuple[str, bool]:
     """(path, is_open_mpi) of the MPI launcher for this Python's MPI: ``$PIC_MPIEXEC`` if set, else
     ``mpiexec`` beside this Python (a venv whose MPI came from a wheel: the PyPI route), else

@@ -36,7 +36,8 @@ import dataclasses
 import math
 import typing
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from fembase.params import (  # re-exported: the declaration helpers live in the floor
     MAX_ENTRIES, REQUIRED, Names, annotation_kind, param, settings_as_section, settings_from, short_repr, subsection,

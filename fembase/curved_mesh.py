@@ -8,7 +8,7 @@ depends on the given mesh and the map only.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt

@@ -26,7 +26,8 @@ cells get owners from a partition method (or the owners a checkpoint saved,
 from __future__ import annotations
 
 import hashlib
-from typing import Any, Callable, NamedTuple, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt

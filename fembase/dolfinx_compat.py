@@ -84,7 +84,8 @@ Nothing outside :mod:`fembase` checks a DOLFINx version (tests/test_layers.py).
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt

@@ -17,7 +17,8 @@ Pure NumPy, serial: :mod:`particles.balance` calls them on one rank and distribu
 
 from __future__ import annotations
 
-from typing import Any, Protocol, Sequence
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt

@@ -22,7 +22,7 @@ global vertex numbers (for adjacency) and per-cell values (:meth:`GhostExchange.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt

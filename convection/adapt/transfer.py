@@ -17,7 +17,7 @@ nodes of the new mesh lie just outside the old one.
 from __future__ import annotations
 
 import hashlib
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt

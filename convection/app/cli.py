@@ -26,7 +26,8 @@ import signal
 import sys
 import traceback
 from pathlib import Path
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from mpi4py import MPI
 

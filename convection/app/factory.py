@@ -30,7 +30,8 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import dolfinx.fem
 import dolfinx.fem.petsc

@@ -33,7 +33,8 @@ import copy
 import importlib
 import math
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 import numpy as np
 import yaml

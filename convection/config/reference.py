@@ -19,7 +19,8 @@ import dataclasses
 import inspect
 import re
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
 
 import yaml
 

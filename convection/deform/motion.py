@@ -26,7 +26,8 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Callable, Iterator
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -233,7 +234,7 @@ class FreeSurface:
         return self._coordinates()
 
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, positions: dolfinx.fem.Function,
-                transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None], /) -> "FreeSurface":
+                transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None], /) -> FreeSurface:
         """This free surface on ``mesh``, a mesh made from the undeformed one (an adaptation, a
         repartition), in the reference configuration: ``mesh`` is undeformed and this one's mesh
         too (inside :meth:`undeformed`); the deformed ``positions`` (:meth:`positions`), a field

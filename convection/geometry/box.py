@@ -112,7 +112,7 @@ class BoxSpec:
     diagonal: str = "right"
 
     @classmethod
-    def from_config(cls, mesh_config: Mapping[str, Any]) -> "BoxSpec":
+    def from_config(cls, mesh_config: Mapping[str, Any]) -> BoxSpec:
         cells = tuple(int(n) for n in mesh_config["cells"])
         gdim = len(cells)
         lower = tuple(mesh_config["lower"] or [0.0] * gdim)
@@ -194,11 +194,11 @@ class BoxDomain(Domain):
         self.spec = spec
 
     @classmethod
-    def from_spec(cls, spec: BoxSpec, /) -> "BoxDomain":
+    def from_spec(cls, spec: BoxSpec, /) -> BoxDomain:
         return cls(spec.lower, spec.upper, spec=spec)
 
     @classmethod
-    def around(cls, mesh: dolfinx.mesh.Mesh, /) -> "BoxDomain":
+    def around(cls, mesh: dolfinx.mesh.Mesh, /) -> BoxDomain:
         """The box a mesh fills (its global bounding box; collective). For solvers built on a box
         mesh without a domain."""
         bounds = box_bounds(mesh)
@@ -209,7 +209,7 @@ class BoxDomain(Domain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> "BoxDomain":
+    def from_config(cls, mesh: Mapping[str, Any], /) -> BoxDomain:
         return cls.from_spec(BoxSpec.from_config(mesh))
 
     @classmethod

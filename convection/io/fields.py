@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import ClassVar, Mapping, Protocol
+from collections.abc import Mapping
+from typing import ClassVar, Protocol
 
 import dolfinx.fem
 import dolfinx.io

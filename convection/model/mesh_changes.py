@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import contextlib
 from functools import partial
-from typing import Callable, Iterator, Mapping, Protocol
+from collections.abc import Callable, Iterator, Mapping
+from typing import Protocol
 
 import dolfinx.fem
 import dolfinx.mesh

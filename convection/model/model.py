@@ -38,7 +38,8 @@ loop in Python (see ``demos/``).
 
 from __future__ import annotations
 
-from typing import Any, Mapping, NamedTuple
+from collections.abc import Mapping
+from typing import Any, NamedTuple
 
 import dolfinx.fem
 import dolfinx.mesh

@@ -16,7 +16,8 @@ nondimensional internal heating ``H`` and viscosity ``eta(T, C)`` given by a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import ufl
 

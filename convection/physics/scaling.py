@@ -38,7 +38,8 @@ import functools
 import math
 import re
 from dataclasses import dataclass, field, fields
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from convection.schema import ConfigError, param, short_repr, subsection
 

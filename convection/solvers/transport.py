@@ -333,7 +333,7 @@ class TransportSolver(PetscSolver):
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(
         self,
-        old: "TransportSolver",
+        old: TransportSolver,
         transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
     ) -> None:
         """Copy the full time history (``T``, ``T_old``, ``T_old2``, previous velocity, previous

@@ -567,7 +567,7 @@ class StokesSolver(PetscSolver):
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(
         self,
-        old: "StokesSolver",
+        old: StokesSolver,
         transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
     ) -> None:
         """Copy ``u`` and ``p`` (the initial guess) from ``old``, a solver on the previous mesh, by

@@ -43,9 +43,9 @@ from fembase.params import (  # re-exported: the declaration helpers live in the
     MAX_ENTRIES, REQUIRED, Names, annotation_kind, param, settings_as_section, settings_from, short_repr, subsection,
 )
 
-__all__ = ["MAX_DEGREE", "MAX_DEPTH", "MAX_ENTRIES", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "Names",
-           "check_document_shape", "check_finite_values", "key_text", "param", "section_schema", "settings_as_section",
-           "settings_from", "short_repr", "subsection", "validate"]
+__all__ = ["MAX_DEGREE", "MAX_DEPTH", "MAX_ENTRIES", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field",
+           "Names", "check_document_shape", "check_finite_values", "key_text", "param", "section_schema",
+           "settings_as_section", "settings_from", "short_repr", "subsection", "validate"]
 
 MAX_MESSAGE = 400
 """Longest error message (characters); longer ones are cut with ``...``."""
@@ -325,7 +325,8 @@ def validate(schema: Mapping[str, Any], document: Any, prefix: str = "") -> dict
         raise ConfigError(f"config section '{where}': expected a mapping, got {_type_name(document)}")
     unknown = sorted((name for name in document if name not in schema), key=repr)  # keys of any type
     if unknown:
-        raise ConfigError(f"config key '{prefix}{key_text(unknown[0])}': unknown; allowed keys in {where}: {sorted(schema)}")
+        raise ConfigError(f"config key '{prefix}{key_text(unknown[0])}': unknown; allowed keys in {where}: "
+                          f"{sorted(schema)}")
     result: dict[str, Any] = {}
     for name, spec in schema.items():
         key = f"{prefix}{name}"

@@ -44,9 +44,9 @@ from fembase.geometry import locate
 from fembase.partition import PARTITIONERS, partition
 
 __all__ = ["GHOST_LAYERS", "CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "cell_owners_by_input",
-           "create_mesh_from_piece", "create_nested_meshes", "create_partitioned_mesh", "create_reproducible_mesh", "duplicate_cells",
-           "gather_cell_layout", "mesh_fingerprint", "mesh_piece", "owner_partitioner", "pull", "redistribute",
-           "redistribution", "refine_on_ranks"]
+           "create_mesh_from_piece", "create_nested_meshes", "create_partitioned_mesh", "create_reproducible_mesh",
+           "duplicate_cells", "gather_cell_layout", "mesh_fingerprint", "mesh_piece", "owner_partitioner", "pull",
+           "redistribute", "redistribution", "refine_on_ranks"]
 
 
 def _starts(comm: MPI.Comm, n: int) -> npt.NDArray[np.int64]:

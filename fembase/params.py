@@ -23,8 +23,8 @@ import typing
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, Union
 
-__all__ = ["MAX_ENTRIES", "REQUIRED", "Choices", "Names", "annotation_kind", "param", "settings_as_section", "settings_from",
-           "short_repr", "subsection"]
+__all__ = ["MAX_ENTRIES", "REQUIRED", "Choices", "Names", "annotation_kind", "param", "settings_as_section",
+           "settings_from", "short_repr", "subsection"]
 
 
 MAX_ENTRIES = 100

@@ -67,7 +67,8 @@ class PartitionMethod(Protocol):
 
 
 def morton_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
-                  particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float) -> npt.NDArray[np.int32]:
+                  particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float
+                  ) -> npt.NDArray[np.int32]:
     """Contiguous blocks of equal load ``cells + W particles`` along a Morton curve.
 
     Args:

@@ -442,7 +442,8 @@ class MeshHierarchy:
         piece = mesh_piece(mesh, owners[base_of])
         self.recipe = MeshRecipe(base_piece, [], piece, levels)
         return self.chain.create(mesh.comm,  # not ``comm``: the old base is gone, and its communicator
-                                 self.recipe, self.base, self.new_domain, self.mesh_domain(), nested=self.curved is None)
+                                 self.recipe, self.base, self.new_domain, self.mesh_domain(),
+                                 nested=self.curved is None)
 
     def new_domain(self) -> ufl.Mesh:
         """A new UFL domain for a mesh to create (DOLFINx ties each domain object to one mesh)."""

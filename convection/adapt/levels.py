@@ -65,7 +65,8 @@ def _cells(mesh: dolfinx.mesh.Mesh) -> int:
     return mesh.topology.index_map(mesh.topology.dim).size_global
 
 
-def coarsening_levels(meshes: Sequence[dolfinx.mesh.Mesh], /, *, ratio: float = MAX_RATIO) -> tuple[dolfinx.mesh.Mesh, ...]:
+def coarsening_levels(meshes: Sequence[dolfinx.mesh.Mesh], /, *, ratio: float = MAX_RATIO
+                      ) -> tuple[dolfinx.mesh.Mesh, ...]:
     """Of nested ``meshes`` (coarse to fine, the last the finest), those a multigrid takes as levels
     (module docstring), coarse to fine: the finest always, the coarsest when it has fewer cells
     (a repartition of an unrefined mesh leaves its base with as many)."""

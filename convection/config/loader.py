@@ -383,8 +383,8 @@ def _check_statistics(config: dict[str, Any]) -> None:
     gdim = config_gdim(config)
     for name, point in config["diagnostics"]["points"].items():
         if not (isinstance(point, list) and len(point) == gdim and all(_finite_number(c) is not None for c in point)):
-            raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': expected [x, y{', z' if gdim == 3 else ''}] "
-                              f"({gdim} numbers), got {short_repr(point)}")
+            raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': "
+                              f"expected [x, y{', z' if gdim == 3 else ''}] ({gdim} numbers), got {short_repr(point)}")
         if not str(name).isidentifier():
             raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': a point's name is a column suffix: "
                               "letters, digits and _")
@@ -478,7 +478,8 @@ def _check_particle_count(config: dict[str, Any], cells: float) -> None:
                 number = float(generator.get(key) or 0.0)
             except (TypeError, ValueError, OverflowError):
                 continue  # reported by the particle checks
-            asked.append((f"{where}.generator.{key}", safe_product(number, cells) if key == "particles_per_cell" else number))
+            asked.append((f"{where}.generator.{key}",
+                          safe_product(number, cells) if key == "particles_per_cell" else number))
             total += asked[-1][1]
         asked.append((f"{where}.population.min_per_cell", safe_product(section["population"]["min_per_cell"], cells)))
     asked.append(("particles", total))
@@ -615,7 +616,8 @@ def _check_materials(config: dict[str, Any]) -> None:
     if config["materials"]:
         legacy = (("initial.composition", config["initial"]["composition"] is not None),
                   ("physics.Rb", config["physics"]["Rb"] != 0.0),
-                  ("physics.viscosity.material_viscosities", config["physics"]["viscosity"]["material_viscosities"] is not None))
+                  ("physics.viscosity.material_viscosities",
+                   config["physics"]["viscosity"]["material_viscosities"] is not None))
         for key, given in legacy:
             if given:
                 raise ConfigError(f"config key '{key}': not with the materials section (give each material its "
@@ -780,7 +782,8 @@ def _apply_override(document: dict[str, Any], path: list[str], value: Any) -> No
     node[path[-1]] = value
 
 
-def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, document: dict | None = None) -> dict[str, Any]:
+def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, document: dict | None = None
+                ) -> dict[str, Any]:
     """Read, override and validate a run configuration.
 
     Args:

@@ -104,7 +104,8 @@ class FreeSurface:
         self._node = _node_of_dof(self.W)
         fdim = mesh.topology.dim - 1
         self._surface = np.unique(np.concatenate([
-            dolfinx.fem.locate_dofs_topological(self.W, fdim, domain.locate_facets(mesh, name)) for name in terms.names]))
+            dolfinx.fem.locate_dofs_topological(self.W, fdim, domain.locate_facets(mesh, name))
+            for name in terms.names]))
         bottom = dolfinx.fem.locate_dofs_topological(self.W, fdim, domain.locate_facets(mesh, domain.bottom))
         self._w_surface = dolfinx.fem.Function(self.W)
         self._bcs = [dolfinx.fem.dirichletbc(self._w_surface, self._surface),
@@ -182,8 +183,8 @@ class FreeSurface:
         self.moves += 1
         self.quality_min = self._quality()
         if self.quality_min <= 0.0:
-            raise RuntimeError(f"the free surface's mesh motion turned a cell inside out (quality {self.quality_min:.3g}):"
-                               " take shorter steps (time.cfl, time.dt_max)")
+            raise RuntimeError("the free surface's mesh motion turned a cell inside out "
+                               f"(quality {self.quality_min:.3g}): take shorter steps (time.cfl, time.dt_max)")
 
     def _quality(self) -> float:
         """The lowest cell quality over all ranks, negative if a cell turned inside out."""

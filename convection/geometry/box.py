@@ -144,7 +144,8 @@ def _box(comm: MPI.Comm, spec: BoxSpec) -> dolfinx.mesh.Mesh:
     """DOLFINx's rectangle or box mesh of ``spec`` on ``comm``."""
     ghost_mode = dolfinx.mesh.GhostMode.shared_facet
     if spec.gdim == 2:
-        cell_type = dolfinx.mesh.CellType.triangle if spec.cell_type == "simplex" else dolfinx.mesh.CellType.quadrilateral
+        cell_type = (dolfinx.mesh.CellType.triangle if spec.cell_type == "simplex"
+                     else dolfinx.mesh.CellType.quadrilateral)
         diagonal = getattr(dolfinx.mesh.DiagonalType, spec.diagonal.replace("/", "_"))
         return dolfinx.mesh.create_rectangle(
             comm, [np.array(spec.lower), np.array(spec.upper)], list(spec.cells), cell_type,

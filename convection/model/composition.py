@@ -35,8 +35,8 @@ from fembase.state import State
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
-__all__ = ["COMPOSITION_SOURCES", "CompositionInputs", "CompositionSettings", "CompositionSource", "FieldComposition", "ParticleComposition",
-           "StaticComposition", "Transfer", "composition_space", "particle_properties"]
+__all__ = ["COMPOSITION_SOURCES", "CompositionInputs", "CompositionSettings", "CompositionSource", "FieldComposition",
+           "ParticleComposition", "StaticComposition", "Transfer", "composition_space", "particle_properties"]
 
 Transfer = Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]
 """``transfer(source_on_old_mesh, target_on_new_mesh)`` fills the target (collective)."""
@@ -288,8 +288,8 @@ class CompositionSettings:
                         help="static: fractions fixed at their initial regions; particles: averaged from advected "
                              "particles; field: advected continuous fields (SUPG, no diffusion)")
     degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
-                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for quadratic_least_squares); "
-                             "source field needs >= 1")
+                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for "
+                             "quadratic_least_squares); source field needs >= 1")
     particle_system: str | None = param(None,
                                         help="with several particle systems: the one whose particles carry the "
                                              "material fractions and the fields the viscosity laws read (null: the "

@@ -12,8 +12,8 @@ put back undeformed, and the hierarchy's levels and base cells, the refinement i
 bounds (``min_level_where``, ...: positions in the undeformed box) and the fields' transfer all see
 the undeformed meshes, where the new mesh nests in the base exactly; the nodes' deformed positions
 are carried to the new mesh like a field over the undeformed one, and the new mesh takes them
-before the particles are found in it (:meth:`convection.deform.motion.FreeSurface.to_mesh`). Each cell is mapped affinely
-in both configurations, so a field's nodal values mean the same in either. Particles keep their
+before the particles are found in it (:meth:`convection.deform.motion.FreeSurface.to_mesh`). Each cell is mapped
+affinely in both configurations, so a field's nodal values mean the same in either. Particles keep their
 positions; where coarser cells' surface (the chord of the finer one's) passes below a particle, it
 is moved down onto it (:func:`particles.moving_mesh.pull_in`, counted as pulled in).
 """

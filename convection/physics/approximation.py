@@ -24,7 +24,9 @@ import ufl
 from fembase.registry import Registry
 from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.schema import Names, param, subsection
-from convection.physics.rheology import Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
+from convection.physics.rheology import (
+    Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
+)
 
 
 def _geometric(eta0: Any, etas: list[Any], cs: list[Any], background: Any, closed_form: bool) -> Any:

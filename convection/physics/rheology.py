@@ -482,7 +482,8 @@ class Damaged(ViscosityLawBase):
 
     def __call__(self, state: FlowState) -> Any:
         if self.field not in state.fields:
-            raise ValueError(f"viscosity law 'damaged' needs the mesh field {self.field!r}; have {sorted(state.fields)}")
+            raise ValueError(f"viscosity law 'damaged' needs the mesh field {self.field!r}; "
+                             f"have {sorted(state.fields)}")
         return ufl.max_value(1.0 - state.fields[self.field], self.residual) * self.law(state)
 
 

@@ -87,7 +87,8 @@ def on_support(form: ufl.Form, w: dolfinx.fem.Function, /) -> ufl.Form:
     return ufl.Form(integrals)
 
 
-def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /) -> float:
+def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /
+                  ) -> float:
     """Consistent boundary flux ``int_side grad T . n ds`` (``n`` the outward normal) through the
     boundary ``side`` of ``domain`` (default: the solver's). Collective.
 
@@ -123,7 +124,8 @@ def side_integral(solver: TransportSolver, side: str, domain: Domain | None = No
     return float(total[0]), float(total[1])
 
 
-def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /) -> float:
+def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /
+            ) -> float:
     """Nusselt number through the boundary ``side`` of ``domain`` (default: the solver's) from the
     consistent boundary flux. Collective.
 

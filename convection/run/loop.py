@@ -35,7 +35,8 @@ from convection.io.run_folder import RunFolderError
 from particles.checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
-__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary", "SteadyState", "Watch", "Watched", "run"]
+__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary",
+           "SteadyState", "Watch", "Watched", "run"]
 
 
 PROGRESS_MODES = ("auto", "bar", "lines", "none")

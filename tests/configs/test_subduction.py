@@ -43,7 +43,8 @@ def test_subduction_in_units(tmp_path):
 def _benchmark():
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("schmeling_run", CONFIGS.parent / "benchmarks" / "schmeling" / "run.py")
+    spec = importlib.util.spec_from_file_location("schmeling_run",
+                                                  CONFIGS.parent / "benchmarks" / "schmeling" / "run.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

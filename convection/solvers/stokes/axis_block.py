@@ -17,8 +17,8 @@ in the same order and the other ranks' contributions at its assembly (as ``A`` w
 entries then replace ``A``'s. On one rank that is the same to the last bit; on several, PETSc sums
 the contributions a rank sends to another's rows before sending them, in an order that depends on
 everything it sends (the vector form also sends the other components' zeros), so a few entries
-differ in the last place (measured: 1-2 of 17 000 per rank at 4^3, relative 1.5e-16). Rows and columns of strong velocity
-conditions keep ``A0``'s values (the conditions on component ``k`` are skipped in ``M``'s
+differ in the last place (measured: 1-2 of 17 000 per rank at 4^3, relative 1.5e-16). Rows and columns of strong
+velocity conditions keep ``A0``'s values (the conditions on component ``k`` are skipped in ``M``'s
 assembly; the element matrices of the scalar and the vector form agree entry by entry, checked in
 tests/convection/solvers/test_axis_block.py). ``A``'s other entries are never touched: they are
 ``A0``'s.

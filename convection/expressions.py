@@ -90,11 +90,11 @@ def _numeric(tree: ast.Expression) -> dict[str, Any]:
     values: dict[str, Any] = {f"{_HIDDEN}not": np.logical_not, f"{_HIDDEN}and": np.logical_and,
                               f"{_HIDDEN}or": np.logical_or}
 
-    def call(name: str, args: list[ast.AST], node: ast.AST) -> ast.AST:
+    def call(name: str, args: list[ast.expr], node: ast.AST) -> ast.expr:
         return ast.copy_location(ast.Call(func=ast.Name(id=f"{_HIDDEN}{name}", ctx=ast.Load()), args=args,
                                           keywords=[]), node)
 
-    def pairwise(name: str, args: list[ast.AST], node: ast.AST) -> ast.AST:
+    def pairwise(name: str, args: list[ast.expr], node: ast.AST) -> ast.expr:
         return args[0] if len(args) == 1 else call(name, [args[0], pairwise(name, args[1:], node)], node)
 
     class Logical(ast.NodeTransformer):  # bottom-up (the depth is bounded before this runs)
@@ -118,7 +118,7 @@ def _numeric(tree: ast.Expression) -> dict[str, Any]:
     def literal(node: ast.AST) -> ast.AST | None:
         if isinstance(node, ast.Constant):
             name = f"{_HIDDEN}k{len(values)}"
-            values[name] = np.float64(float(node.value))
+            values[name] = np.float64(float(node.value))  # type: ignore[arg-type]  # a number: checked before
             return ast.copy_location(ast.Name(id=name, ctx=ast.Load()), node)
         return None
 

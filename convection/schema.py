@@ -265,8 +265,8 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"config key '{key}': expected a list of {item_kind}, got {_got(value)}")
         if spec.length is not None and len(value) not in spec.length:
-            allowed = " or ".join(str(n) for n in spec.length)
-            raise ConfigError(f"config key '{key}': expected {allowed} entries, got {len(value)}")
+            lengths = " or ".join(str(n) for n in spec.length)
+            raise ConfigError(f"config key '{key}': expected {lengths} entries, got {len(value)}")
         items = [_coerce_scalar(item_kind, v, f"{key}[{i}]") for i, v in enumerate(value)]
         for i, item in enumerate(items):
             _check_bounds(spec, item, f"{key}[{i}]")

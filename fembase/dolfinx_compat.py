@@ -125,8 +125,11 @@ if _NEW:
     import basix
     import basix.ufl
 
-DirichletBC: type = dolfinx.fem.DirichletBC if _NEW else dolfinx.fem.DirichletBCMetaClass
-"""The class of ``dolfinx.fem.dirichletbc``'s results."""
+if _NEW:
+    DirichletBC = dolfinx.fem.DirichletBC
+    """The class of ``dolfinx.fem.dirichletbc``'s results."""
+else:
+    DirichletBC = dolfinx.fem.DirichletBCMetaClass
 
 SCATTER_ADD = dolfinx.la.InsertMode.add if _NEW else dolfinx.la.ScatterMode.add
 """The mode of ``x.scatter_reverse`` that adds ghost contributions to their owners."""

@@ -61,9 +61,12 @@ def morton_order(points: npt.NDArray[np.float64], /, *, bits: int = 16) -> npt.N
 
 
 class PartitionMethod(Protocol):
+    """What every partition method takes; a method may take more keywords (``rcb_owners``: ``balance``, ``axes``),
+    which :func:`partition` passes on as its ``options``."""
+
     def __call__(self, points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
                  particles: npt.NDArray[np.float64], nparts: int, /, *,
-                 particle_weight: float, **options: Any) -> npt.NDArray[np.int32]: ...
+                 particle_weight: float) -> npt.NDArray[np.int32]: ...
 
 
 def morton_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],

@@ -79,7 +79,7 @@ class XdmfSeries:
 def grid_time(grid: ET.Element, /) -> float | None:
     """The time of a Uniform grid (its ``Time`` value), or None."""
     time = grid.find("Time")
-    return None if time is None else float(time.get("Value"))
+    return None if time is None else float(time.attrib["Value"])
 
 
 def data_item(h5name: str, dataset: str, shape: tuple[int, ...], dtype: np.dtype, /) -> ET.Element:
@@ -100,7 +100,7 @@ def declare_types(grid: ET.Element, directory: Path, /) -> None:
     items = [item for item in grid.iter("DataItem") if item.get("Format") == "HDF" and item.text]
     files: dict[str, list[tuple[ET.Element, str]]] = {}
     for item in items:
-        h5name, _, dataset = item.text.strip().partition(":")
+        h5name, _, dataset = (item.text or "").strip().partition(":")
         files.setdefault(h5name, []).append((item, dataset))
     for h5name, entries in files.items():
         with h5py.File(directory / h5name, "r") as h5:

@@ -187,7 +187,8 @@ class MeshLevels:
         if coarse not in self._straight:
             return None
         straight, curved_of = self._straight[coarse]
-        manifold = self.hierarchy.manifold
+        manifold = self.hierarchy.manifold if self.hierarchy is not None else None
+        assert manifold is not None, "curved levels come from a hierarchy with a manifold"
         points = manifold.straight_points(owned_nodes(fine))
         found = CellGeometry(straight).locate(points, owned_only=True)
         cells, xref = found.cells.copy(), found.xref.copy()

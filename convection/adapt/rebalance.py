@@ -36,7 +36,7 @@ class BalancingStrategy:
 
     name: str
     description: str
-    wants: Callable[[Balancer, dolfinx.mesh.Mesh, Swarm | None], bool]
+    wants: Callable[[Balancer, dolfinx.mesh.Mesh, Sequence[Swarm]], bool]
 
 
 def _over_threshold(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /) -> bool:

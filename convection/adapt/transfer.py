@@ -87,7 +87,7 @@ class PointEvaluator:
         The answers for the last few point sets are remembered: the fields of one element on one
         target mesh (u, T and its history, ...) ask for the same interpolation points.
         """
-        key = hashlib.blake2b(np.ascontiguousarray(points).view(np.uint8), digest_size=16).digest() + \
+        key = hashlib.blake2b(np.ascontiguousarray(points).view(np.uint8).data, digest_size=16).digest() + \
             np.int64(points.shape[0]).tobytes()
         found = self._located.get(key)
         if found is None:

@@ -250,7 +250,8 @@ def _check_mesh(config: dict[str, Any], document: dict[str, Any]) -> None:
     """The keys of the geometry (another geometry's key given a value other than its default is an
     error: it would be ignored), then the geometry's own checks."""
     cls = domain_class(config)
-    given = document.get("mesh") if isinstance(document.get("mesh"), dict) else {}
+    mesh = document.get("mesh")
+    given = mesh if isinstance(mesh, dict) else {}
     for key, field in SCHEMA["mesh"].items():
         if key in given and key not in (*cls.config_keys, "geometry", "max_cells") \
                 and config["mesh"][key] != field.default:

@@ -94,6 +94,8 @@ class FreeSurface:
         moves: Steps moved.
     """
 
+    _positions: dolfinx.fem.Function  # the deformed node positions :meth:`to_mesh` carried over to a new mesh
+
     def __init__(self, mesh: dolfinx.mesh.Mesh, domain: Domain, terms: SurfaceTerms, /) -> None:
         keep_boundary_facets(domain, mesh)
         self.mesh, self.domain, self.terms = mesh, domain, terms

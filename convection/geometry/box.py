@@ -11,6 +11,7 @@ condition on the velocity component normal to it; the pressure is pinned at the 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -187,7 +188,8 @@ class BoxDomain(Domain):
     free_surfaces: ClassVar[tuple[str, ...]] = ("top",)
     bottom: ClassVar[str] = "bottom"
 
-    def __init__(self, lower: Sequence[float], upper: Sequence[float], /, *, spec: BoxSpec | None = None) -> None:
+    def __init__(self, lower: Sequence[float] | npt.NDArray[np.float64],
+                 upper: Sequence[float] | npt.NDArray[np.float64], /, *, spec: BoxSpec | None = None) -> None:
         self.lower = tuple(float(v) for v in lower)
         self.upper = tuple(float(v) for v in upper)
         self.gdim = len(self.lower)
@@ -331,7 +333,7 @@ class BoxDomain(Domain):
         self.mesh_levels(levels)
         specs = [dataclasses.replace(spec, cells=tuple(n // 2 ** k for n in spec.cells))
                  for k in range(levels - 1, -1, -1)]
-        return create_nested_meshes(comm, [lambda c, s=s: _box(c, s) for s in specs], owners=owners)
+        return create_nested_meshes(comm, [functools.partial(_box, spec=s) for s in specs], owners=owners)
 
     def estimated_cells(self) -> float:
         """Cells of the base mesh."""

@@ -53,7 +53,7 @@ class Plate:
 
     centre: tuple[float, ...]
     rate: float
-    pole: tuple[float, float] = (0.0, 90.0)
+    pole: tuple[float, ...] = (0.0, 90.0)
 
     def __post_init__(self) -> None:
         if len(self.centre) not in (1, 2) or len(self.pole) != 2:

@@ -75,6 +75,9 @@ class CompositionSource(Protocol):
 
     def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None: ...
 
+    @classmethod
+    def build(cls, inputs: CompositionInputs, /) -> CompositionSource: ...
+
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None: ...
 
     def destroy(self) -> None: ...
@@ -236,6 +239,7 @@ class ParticleComposition:
 
     @classmethod
     def build(cls, inputs: CompositionInputs, /) -> ParticleComposition:
+        assert inputs.particles is not None, "the particles composition source needs particles"
         return cls(inputs.particles, inputs.materials)
 
     def __init__(self, manager: ParticleManager, materials: Materials, /) -> None:
@@ -265,7 +269,7 @@ class ParticleComposition:
         """Nothing to free."""
 
 
-COMPOSITION_SOURCES: Registry[type] = Registry("composition source",
+COMPOSITION_SOURCES: Registry[type[CompositionSource]] = Registry("composition source",
                                                (StaticComposition, FieldComposition, ParticleComposition))
 """Composition sources by their config name (``composition.source``); each is made from
 :class:`CompositionInputs` by its ``build``."""

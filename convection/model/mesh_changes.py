@@ -134,6 +134,7 @@ class MeshChanges:
         particles again in the moved cells (those the sinking surface left outside are moved
         down inside: :mod:`particles.moving_mesh`)."""
         model = self.model
+        assert model.free_surface is not None, "only a free surface moves the mesh's nodes"
         with model.timers("mesh_motion"):
             model.free_surface.move(dt)
         model.stokes.mesh_moved()
@@ -175,7 +176,7 @@ class MeshChanges:
         self.move_to(mesh)
         return before, balancer.loads(model.mesh, self._swarms())
 
-    def move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Mapping[str, Candidates] | None = None,
+    def move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Mapping[str, Candidates | None] | None = None,
                 nested: bool = False) -> None:
         """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles
         (``candidates``: where to look for each particle first, by particle system, see
@@ -199,6 +200,7 @@ class MeshChanges:
             old = self._transfer_fields(mesh, nodes_in, locator)
         if surface is not None:
             surface.release()  # the old mesh may be the hierarchy's base
+            assert model.free_surface is not None  # the new mesh's, made above
             model.free_surface.displace()
             old.append(surface)
         if model.particles is not None:  # the manager times its own move
@@ -239,16 +241,16 @@ class MeshChanges:
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
             transfer_function(src, dst, evaluator=evaluator, candidates=candidates)
 
-        old = [model.stokes, model.temperature]
-        model.stokes = model.stokes.on_mesh(mesh)
-        model.stokes.transfer_from(old[0], transfer)
-        if model.temperature is not None:
-            model.temperature = model.temperature.on_mesh(mesh)
-            model.temperature.transfer_from(old[1], transfer)
+        old_stokes, old_temperature = model.stokes, model.temperature
+        model.stokes = old_stokes.on_mesh(mesh)
+        model.stokes.transfer_from(old_stokes, transfer)
+        if old_temperature is not None:
+            model.temperature = old_temperature.on_mesh(mesh)
+            model.temperature.transfer_from(old_temperature, transfer)
         if model.u_previous is not None:
             u_previous = dolfinx.fem.Function(model.stokes.u.function_space)
             transfer(model.u_previous, u_previous)
             model.u_previous = u_previous
         if model.composition is not None:
             model.composition.to_mesh(mesh, transfer)
-        return old
+        return [old_stokes, old_temperature]

@@ -175,6 +175,7 @@ class SemiImplicitOperator:
             others = () if preconditioner is None else (preconditioner,)
             block.add(A, forms.a_si_component[3], *others)
             return preconditioner is not None
+        assert A0 is not None, "the vector form adds to A0's copy"
         A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         # Into A's (0, 0) block, skipping the Dirichlet rows and columns (their unit diagonal is in A).
         rows = self._velocity_rows()

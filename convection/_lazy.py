@@ -9,7 +9,8 @@ every module in ``__init__``.
 from __future__ import annotations
 
 import importlib
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 
 def lazy_exports(package: str, exports: dict[str, str], /) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import ast
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -84,16 +85,16 @@ def _replace_children(tree: ast.AST, replace: Any) -> None:
 def _numeric(tree: ast.Expression) -> dict[str, Any]:
     """Rewrite a checked tree so that every value is a NumPy number, and return the names it now
     uses: ``not a`` becomes ``logical_not(a)``, ``a and b`` ``logical_and(a, b)`` (``or`` alike), a
-    chained comparison ``0 < x < 1`` the ``and`` of its pairs (all elementwise on arrays), and each literal a name bound to a ``numpy.float64``
-    (``True`` is 1.0), so no exact (unbounded) Python integer or bool can arise."""
+    chained comparison ``0 < x < 1`` the ``and`` of its pairs (all elementwise on arrays), and each literal a name bound
+    to a ``numpy.float64`` (``True`` is 1.0), so no exact (unbounded) Python integer or bool can arise."""
     values: dict[str, Any] = {f"{_HIDDEN}not": np.logical_not, f"{_HIDDEN}and": np.logical_and,
                               f"{_HIDDEN}or": np.logical_or}
 
-    def call(name: str, args: list[ast.AST], node: ast.AST) -> ast.AST:
+    def call(name: str, args: list[ast.expr], node: ast.AST) -> ast.expr:
         return ast.copy_location(ast.Call(func=ast.Name(id=f"{_HIDDEN}{name}", ctx=ast.Load()), args=args,
                                           keywords=[]), node)
 
-    def pairwise(name: str, args: list[ast.AST], node: ast.AST) -> ast.AST:
+    def pairwise(name: str, args: list[ast.expr], node: ast.AST) -> ast.expr:
         return args[0] if len(args) == 1 else call(name, [args[0], pairwise(name, args[1:], node)], node)
 
     class Logical(ast.NodeTransformer):  # bottom-up (the depth is bounded before this runs)
@@ -117,7 +118,7 @@ def _numeric(tree: ast.Expression) -> dict[str, Any]:
     def literal(node: ast.AST) -> ast.AST | None:
         if isinstance(node, ast.Constant):
             name = f"{_HIDDEN}k{len(values)}"
-            values[name] = np.float64(float(node.value))
+            values[name] = np.float64(float(node.value))  # type: ignore[arg-type]  # a number: checked before
             return ast.copy_location(ast.Name(id=name, ctx=ast.Load()), node)
         return None
 
@@ -236,7 +237,8 @@ class Expression:
                 namespace["r"] = r
                 if "theta" in names:
                     z = x[2] if self.gdim == 3 else np.zeros_like(r)
-                    namespace["theta"] = np.arccos(np.clip(np.where(r > 0, z / np.where(r > 0, r, 1.0), 0.0), -1.0, 1.0))
+                    namespace["theta"] = np.arccos(np.clip(np.where(r > 0, z / np.where(r > 0, r, 1.0), 0.0),
+                                                           -1.0, 1.0))
             if "phi" in names:
                 namespace["phi"] = np.arctan2(x[1], x[0])
             value = eval(self._code, {"__builtins__": {}}, namespace)  # noqa: S307 - names checked above

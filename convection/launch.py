@@ -21,12 +21,12 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Mapping, Sequence
 
 __all__ = ["cli_command", "launched_rank", "launcher", "mpi_environment", "mpirun", "run_config"]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def launcher() -> tuple[str, bool]:
     """(path, is_open_mpi) of the MPI launcher for this Python's MPI: ``$PIC_MPIEXEC`` if set, else
     ``mpiexec`` beside this Python (a venv whose MPI came from a wheel: the PyPI route), else
@@ -52,13 +52,13 @@ def mpirun(ranks: int, /) -> list[str]:
     return [path, "-n", str(ranks), *(["--oversubscribe"] if open_mpi else [])]
 
 
-def launched_rank(environ: dict[str, str] | None = None, /) -> int | None:
+def launched_rank(environ: Mapping[str, str] | None = None, /) -> int | None:
     """The rank the launcher gave this process (None: not started by a launcher), read from the
     environment without initialising MPI."""
-    environ = os.environ if environ is None else environ
+    variables = os.environ if environ is None else environ
     for name in ("OMPI_COMM_WORLD_RANK", "PMI_RANK"):
-        if environ.get(name, "").isdigit():
-            return int(environ[name])
+        if variables.get(name, "").isdigit():
+            return int(variables[name])
     return None
 
 

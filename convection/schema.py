@@ -36,15 +36,16 @@ import dataclasses
 import math
 import typing
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from fembase.params import (  # re-exported: the declaration helpers live in the floor
     MAX_ENTRIES, REQUIRED, Names, annotation_kind, param, settings_as_section, settings_from, short_repr, subsection,
 )
 
-__all__ = ["MAX_DEGREE", "MAX_DEPTH", "MAX_ENTRIES", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field", "Names",
-           "check_document_shape", "check_finite_values", "key_text", "param", "section_schema", "settings_as_section",
-           "settings_from", "short_repr", "subsection", "validate"]
+__all__ = ["MAX_DEGREE", "MAX_DEPTH", "MAX_ENTRIES", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field",
+           "Names", "check_document_shape", "check_finite_values", "key_text", "param", "section_schema",
+           "settings_as_section", "settings_from", "short_repr", "subsection", "validate"]
 
 MAX_MESSAGE = 400
 """Longest error message (characters); longer ones are cut with ``...``."""
@@ -264,8 +265,8 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"config key '{key}': expected a list of {item_kind}, got {_got(value)}")
         if spec.length is not None and len(value) not in spec.length:
-            allowed = " or ".join(str(n) for n in spec.length)
-            raise ConfigError(f"config key '{key}': expected {allowed} entries, got {len(value)}")
+            lengths = " or ".join(str(n) for n in spec.length)
+            raise ConfigError(f"config key '{key}': expected {lengths} entries, got {len(value)}")
         items = [_coerce_scalar(item_kind, v, f"{key}[{i}]") for i, v in enumerate(value)]
         for i, item in enumerate(items):
             _check_bounds(spec, item, f"{key}[{i}]")
@@ -324,7 +325,8 @@ def validate(schema: Mapping[str, Any], document: Any, prefix: str = "") -> dict
         raise ConfigError(f"config section '{where}': expected a mapping, got {_type_name(document)}")
     unknown = sorted((name for name in document if name not in schema), key=repr)  # keys of any type
     if unknown:
-        raise ConfigError(f"config key '{prefix}{key_text(unknown[0])}': unknown; allowed keys in {where}: {sorted(schema)}")
+        raise ConfigError(f"config key '{prefix}{key_text(unknown[0])}': unknown; allowed keys in {where}: "
+                          f"{sorted(schema)}")
     result: dict[str, Any] = {}
     for name, spec in schema.items():
         key = f"{prefix}{name}"

@@ -8,7 +8,7 @@ depends on the given mesh and the map only.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -58,7 +58,7 @@ def curve_mesh(straight: dolfinx.mesh.Mesh, place: PointMap, /, *, degree: int =
     piece_starts = starts + (edge_starts if edge_starts is not None else 0)
     rank = np.searchsorted(starts, vertex_global, side="right") - 1
     renumbered = [vertex_global - starts[rank] + piece_starts[rank]]
-    if degree == 2:
+    if edge_starts is not None:  # degree 2
         rank = np.searchsorted(edge_starts, edge_global, side="right") - 1
         renumbered.append(edge_global - edge_starts[rank] + piece_starts[rank] + (starts[rank + 1] - starts[rank]))
     curved_x = place(np.concatenate(own_x))

@@ -26,7 +26,8 @@ cells get owners from a partition method (or the owners a checkpoint saved,
 from __future__ import annotations
 
 import hashlib
-from typing import Any, Callable, NamedTuple, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -43,9 +44,9 @@ from fembase.geometry import locate
 from fembase.partition import PARTITIONERS, partition
 
 __all__ = ["GHOST_LAYERS", "CellLayout", "MeshPiece", "WeightedMesh", "cell_owners", "cell_owners_by_input",
-           "create_mesh_from_piece", "create_nested_meshes", "create_partitioned_mesh", "create_reproducible_mesh", "duplicate_cells",
-           "gather_cell_layout", "mesh_fingerprint", "mesh_piece", "owner_partitioner", "pull", "redistribute",
-           "redistribution", "refine_on_ranks"]
+           "create_mesh_from_piece", "create_nested_meshes", "create_partitioned_mesh", "create_reproducible_mesh",
+           "duplicate_cells", "gather_cell_layout", "mesh_fingerprint", "mesh_piece", "owner_partitioner", "pull",
+           "redistribute", "redistribution", "refine_on_ranks"]
 
 
 def _starts(comm: MPI.Comm, n: int) -> npt.NDArray[np.int64]:

@@ -27,7 +27,8 @@ C++ mesh object                   ``mesh._mesh``                   ``mesh._cpp_o
 PETSc vector of a Function        ``f.vector``                     ``f.x.petsc_vec``
 reverse scatter mode              ``la.ScatterMode.add``           ``la.InsertMode.add``
 Dirichlet condition class         ``fem.DirichletBCMetaClass``     ``fem.DirichletBC``
-interpolation points              ``element.interpolation_points()`` ``element.interpolation_points()`` on 0.9, a property from 0.10
+interpolation points              ``element.                       ``element.interpolation_points()``
+                                  interpolation_points()``         on 0.9, a property from 0.10
 interpolating on some cells       ``f.interpolate(g, cells=...)``  ``f.interpolate(g, cells0=...)``
 form compiler options             ``form_compiler_params``,        ``form_compiler_options``,
                                   ``jit_params``                   ``jit_options``
@@ -84,7 +85,8 @@ Nothing outside :mod:`fembase` checks a DOLFINx version (tests/test_layers.py).
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -98,14 +100,16 @@ import dolfinx.la
 import dolfinx.mesh
 import ufl
 
-__all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list", "assemble_block_matrix",
-           "assemble_block_vector", "assemble_matrix_into", "atan2", "bounding_box_tree", "cell_dofmap", "cell_partitioner",
-           "compute_collisions", "coordinate_element", "coordinate_element_description", "coordinate_element_from",
-           "coordinate_map", "cpp_mesh", "create_block_matrix", "create_block_vector", "create_mesh", "create_vector",
-           "element", "element_degree", "entities_to_geometry", "evaluate_expression", "form", "function_space",
-           "geometry_dofmap", "gmsh_model_to_mesh", "incident_entities", "interpolate_on_cells", "interpolation_points", "is_discontinuous",
-           "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector", "refine_keeping_partition",
-           "topological_dimension", "value_size", "xdmf_lagrange_degree"]
+__all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD", "adjacency_list",
+           "assemble_block_matrix", "assemble_block_vector", "assemble_matrix_into", "atan2", "bounding_box_tree",
+           "cell_dofmap", "cell_partitioner", "compute_collisions", "coordinate_element",
+           "coordinate_element_description", "coordinate_element_from", "coordinate_map", "cpp_mesh",
+           "create_block_matrix", "create_block_vector", "create_mesh", "create_vector", "element", "element_degree",
+           "entities_to_geometry", "evaluate_expression", "form", "function_space", "geometry_dofmap",
+           "gmsh_model_to_mesh", "incident_entities", "interpolate_on_cells", "interpolation_points",
+           "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
+           "refine_keeping_partition", "repartitioned_manifolds_nest", "topological_dimension", "value_size",
+           "xdmf_lagrange_degree"]
 
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
 """(major, minor) of the DOLFINx in use."""
@@ -121,8 +125,11 @@ if _NEW:
     import basix
     import basix.ufl
 
-DirichletBC: type = dolfinx.fem.DirichletBC if _NEW else dolfinx.fem.DirichletBCMetaClass
-"""The class of ``dolfinx.fem.dirichletbc``'s results."""
+if _NEW:
+    DirichletBC = dolfinx.fem.DirichletBC
+    """The class of ``dolfinx.fem.dirichletbc``'s results."""
+else:
+    DirichletBC = dolfinx.fem.DirichletBCMetaClass
 
 SCATTER_ADD = dolfinx.la.InsertMode.add if _NEW else dolfinx.la.ScatterMode.add
 """The mode of ``x.scatter_reverse`` that adds ghost contributions to their owners."""
@@ -130,6 +137,13 @@ SCATTER_ADD = dolfinx.la.InsertMode.add if _NEW else dolfinx.la.ScatterMode.add
 REFINE_KEEPS_GHOSTS: bool = not _NEW
 """Whether :func:`refine_keeping_partition` gives the refined mesh ghost cells (0.5) or none (0.9;
 :func:`fembase.distribute.refine_on_ranks` makes the facet ghost layer again)."""
+
+
+def repartitioned_manifolds_nest() -> bool:
+    """Whether the refined levels of a repartitioned curved (manifold) mesh nest rank by rank, as
+    geometric multigrid's prolongation (:mod:`fembase.multigrid`) needs: on 0.5 they do; on 0.9 a
+    node of a repartitioned spherical shell lay in no coarser cell of its rank."""
+    return not _NEW
 
 
 # ---------------------------------------------------------------------- meshes
@@ -254,7 +268,8 @@ def incident_entities(mesh: dolfinx.mesh.Mesh, entities: npt.NDArray[np.int32], 
     return dolfinx.mesh.compute_incident_entities(mesh, entities, d0, d1)
 
 
-def entities_to_geometry(mesh: dolfinx.mesh.Mesh, dim: int, entities: npt.NDArray[np.int32], /) -> npt.NDArray[np.int32]:
+def entities_to_geometry(mesh: dolfinx.mesh.Mesh, dim: int, entities: npt.NDArray[np.int32], /
+                         ) -> npt.NDArray[np.int32]:
     """Geometry nodes of mesh entities of dimension ``dim``, shape=(len(entities), nodes)."""
     entities = np.asarray(entities, dtype=np.int32)
     if _NEW:

@@ -92,19 +92,19 @@ class H5Sink:
                 dset[offset : offset + local.shape[0]] = local
         else:
             pieces = self.comm.gather(local, root=0)
-            if self.comm.rank == 0:
+            if pieces is not None:  # rank 0
                 self._create(name, None, None, data=np.concatenate(pieces))
 
     def replicated(self, name: str, value: npt.ArrayLike) -> None:
         """Dataset ``name`` holding rank 0's ``value`` (collective; shape and dtype from rank 0)."""
-        value = np.ascontiguousarray(value) if self.comm.rank == 0 else None
-        meta = self.comm.bcast((value.shape, value.dtype.str) if value is not None else None, root=0)
+        array = np.ascontiguousarray(value) if self.comm.rank == 0 else None
+        meta = self.comm.bcast((array.shape, array.dtype.str) if array is not None else None, root=0)
         if self.parallel and self.comm.size > 1:
             dset = self._create(name, meta[0], np.dtype(meta[1]))
-            if self.comm.rank == 0 and value.size:
-                dset[...] = value
-        elif self.comm.rank == 0:
-            self._create(name, None, None, data=value)
+            if array is not None and array.size:  # rank 0
+                dset[...] = array
+        elif array is not None:  # rank 0
+            self._create(name, None, None, data=array)
 
     def attrs(self, **values: object) -> None:
         """Root attributes (rank 0's values are written; collective)."""

@@ -49,7 +49,8 @@ def _cached_ffcx_jit(comm: Any, ufl_object: Any, *args: Any, **kwargs: Any) -> A
     """``dolfinx.jit.ffcx_jit`` with the in-process cache; the compiler options (their names differ
     between DOLFINx versions) are part of the key, as in FFCx's own cache."""
     options = repr([repr(sorted(a.items())) if isinstance(a, dict) else repr(a) for a in args]
-                   + sorted((k, repr(sorted(v.items())) if isinstance(v, dict) else repr(v)) for k, v in kwargs.items()))
+                   + sorted((k, repr(sorted(v.items())) if isinstance(v, dict) else repr(v))
+                            for k, v in kwargs.items()))
     key = _key(ufl_object, options)
     if key is not None:
         hit = key in _CACHE

@@ -172,7 +172,8 @@ def locate_among_candidates(groups, offsets, links, x, origin, K, tol, limit, ce
 
 
 @numba.njit(cache=True)
-def max_among_candidates(groups, offsets, links, x, origin, K, tol, values, num_owned, best, hit, ghost):  # pragma: no cover
+def max_among_candidates(groups, offsets, links, x, origin, K, tol, values, num_owned, best, hit,
+                         ghost):  # pragma: no cover
     """For each point ``x[i]`` (affine simplices, gdim == tdim in {2, 3}): the largest ``values[c]``
     over its candidate cells ``links[offsets[g]:offsets[g+1]]``, ``g = groups[i]``, that contain it
     (into ``best[i]``, left as given where none does), whether any does (``hit[i]``) and whether

@@ -12,7 +12,8 @@ of the bounding-box tree (Newton for curved cells).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -20,10 +21,44 @@ import numpy.typing as npt
 from fembase import kernels
 from fembase.dolfinx_compat import compute_collisions
 
-if TYPE_CHECKING:
-    from fembase.geometry import CellGeometry
+__all__ = ["Candidates", "Located", "SearchedCells", "TreeSearch", "containing_cells", "locate_points",
+           "max_over_containing"]
 
-__all__ = ["Candidates", "Located", "TreeSearch", "containing_cells", "locate_points", "max_over_containing"]
+
+class SearchedCells(Protocol):
+    """What the searches read of the cells they search: :class:`fembase.geometry.CellGeometry` has
+    it (this protocol keeps :mod:`fembase.geometry`, which calls the searches, out of this
+    module's imports).
+
+    Attributes:
+        gdim, tdim: Geometric and topological dimensions.
+        affine: True for degree-1 simplices, where ``origin`` and ``K`` are valid.
+        origin: First vertex of each cell, shape=(num_local_cells, gdim).
+        K: (Pseudo-)inverse Jacobian of each cell map, shape=(num_local_cells, tdim, gdim).
+        tol: Relative tolerance of the inside-cell test, in reference coordinates.
+        num_owned_cells, num_local_cells: Owned cells, and owned plus ghost cells.
+        tree: The bounding-box tree over all local cells.
+    """
+
+    gdim: int
+    tdim: int
+    affine: bool
+    origin: npt.NDArray[np.float64]
+    K: npt.NDArray[np.float64]
+    tol: float
+    num_owned_cells: int
+    num_local_cells: int
+
+    @property
+    def tree(self) -> Any: ...
+
+    def pull_back(self, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Reference coordinates of points ``x`` (shape=(m, gdim)) in ``cells`` (shape=(m,))."""
+        ...
+
+    def inside(self, xref: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+        """Whether reference points lie in the reference cell, shape=(m,)."""
+        ...
 
 
 class Located(NamedTuple):
@@ -56,12 +91,12 @@ class Candidates(NamedTuple):
 TreeSearch = Callable[[npt.NDArray[np.float64]], Candidates]
 """The cells whose bounding boxes hold each point (points shape=(m, gdim), one group per point)."""
 
-def _compiled(geometry: CellGeometry) -> bool:
+def _compiled(geometry: SearchedCells) -> bool:
     """Whether the compiled kernels search the geometry's cells (affine simplices, gdim == tdim in {2, 3})."""
     return geometry.affine and geometry.gdim == geometry.tdim and geometry.gdim in (2, 3)
 
 
-def locate_points(geometry: CellGeometry, points: npt.ArrayLike, tree: TreeSearch, *, owned_only: bool = False,
+def locate_points(geometry: SearchedCells, points: npt.ArrayLike, tree: TreeSearch, *, owned_only: bool = False,
                   candidates: Candidates | None = None) -> Located:
     """:meth:`fembase.geometry.CellGeometry.locate`, whose bounding-box search is ``tree``."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, geometry.gdim)
@@ -95,7 +130,7 @@ def locate_points(geometry: CellGeometry, points: npt.ArrayLike, tree: TreeSearc
     return Located(cells, xref)
 
 
-def max_over_containing(geometry: CellGeometry, points: npt.ArrayLike, values: npt.NDArray[np.int32],
+def max_over_containing(geometry: SearchedCells, points: npt.ArrayLike, values: npt.NDArray[np.int32],
                         tree: TreeSearch, *, default: int = -1, candidates: Candidates | None = None
                         ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
     """:meth:`fembase.geometry.CellGeometry.max_over_containing`, whose bounding-box search is ``tree``."""
@@ -125,7 +160,7 @@ def max_over_containing(geometry: CellGeometry, points: npt.ArrayLike, values: n
     return largest, hit, ghost
 
 
-def containing_cells(geometry: CellGeometry, points: npt.ArrayLike, *, owned_only: bool = False
+def containing_cells(geometry: SearchedCells, points: npt.ArrayLike, *, owned_only: bool = False
                      ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], npt.NDArray[np.float64]]:
     """:meth:`fembase.geometry.CellGeometry.colliding`: every candidate of the geometry's
     bounding-box tree pulled back and tested."""

@@ -20,10 +20,11 @@ import dataclasses
 import reprlib
 import types
 import typing
-from typing import Any, Callable, Iterable, Mapping, Union
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any, Union
 
-__all__ = ["MAX_ENTRIES", "REQUIRED", "Choices", "Names", "annotation_kind", "param", "settings_as_section", "settings_from",
-           "short_repr", "subsection"]
+__all__ = ["MAX_ENTRIES", "REQUIRED", "Choices", "Names", "annotation_kind", "param", "settings_as_section",
+           "settings_from", "short_repr", "subsection"]
 
 
 MAX_ENTRIES = 100
@@ -53,7 +54,7 @@ REQUIRED: Any = _Required()
 """Marker default: the user must give this key."""
 
 
-Choices = Union[tuple[str, ...], Callable[[], Iterable[str]]]
+Choices = tuple[str, ...] | Callable[[], Iterable[str]]
 """Allowed names: a tuple, or a callable returning them (e.g. a registry's keys, read when checked)."""
 
 

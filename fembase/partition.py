@@ -17,7 +17,8 @@ Pure NumPy, serial: :mod:`particles.balance` calls them on one rank and distribu
 
 from __future__ import annotations
 
-from typing import Any, Protocol, Sequence
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -60,13 +61,17 @@ def morton_order(points: npt.NDArray[np.float64], /, *, bits: int = 16) -> npt.N
 
 
 class PartitionMethod(Protocol):
+    """What every partition method takes; a method may take more keywords (``rcb_owners``: ``balance``, ``axes``),
+    which :func:`partition` passes on as its ``options``."""
+
     def __call__(self, points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
                  particles: npt.NDArray[np.float64], nparts: int, /, *,
-                 particle_weight: float, **options: Any) -> npt.NDArray[np.int32]: ...
+                 particle_weight: float) -> npt.NDArray[np.int32]: ...
 
 
 def morton_owners(points: npt.NDArray[np.float64], cells: npt.NDArray[np.float64],
-                  particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float) -> npt.NDArray[np.int32]:
+                  particles: npt.NDArray[np.float64], nparts: int, /, *, particle_weight: float
+                  ) -> npt.NDArray[np.int32]:
     """Contiguous blocks of equal load ``cells + W particles`` along a Morton curve.
 
     Args:

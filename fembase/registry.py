@@ -15,7 +15,8 @@ error naming the role and listing the valid names::
 
 from __future__ import annotations
 
-from typing import Any, Generic, Iterable, TypeVar
+from collections.abc import Iterable
+from typing import Any, Generic, TypeVar
 
 __all__ = ["Registry"]
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import h5py
 import numpy as np
@@ -78,7 +79,7 @@ class XdmfSeries:
 def grid_time(grid: ET.Element, /) -> float | None:
     """The time of a Uniform grid (its ``Time`` value), or None."""
     time = grid.find("Time")
-    return None if time is None else float(time.get("Value"))
+    return None if time is None else float(time.attrib["Value"])
 
 
 def data_item(h5name: str, dataset: str, shape: tuple[int, ...], dtype: np.dtype, /) -> ET.Element:
@@ -99,7 +100,7 @@ def declare_types(grid: ET.Element, directory: Path, /) -> None:
     items = [item for item in grid.iter("DataItem") if item.get("Format") == "HDF" and item.text]
     files: dict[str, list[tuple[ET.Element, str]]] = {}
     for item in items:
-        h5name, _, dataset = item.text.strip().partition(":")
+        h5name, _, dataset = (item.text or "").strip().partition(":")
         files.setdefault(h5name, []).append((item, dataset))
     for h5name, entries in files.items():
         with h5py.File(directory / h5name, "r") as h5:

@@ -26,10 +26,10 @@ def rebalance(swarm: Swarm, /, *, particle_weight: float = 1.0, method: str = "r
 
     The mesh is created anew on the partition :func:`cell_owners` chooses (same cells and
     vertices; by default with the vertex ghost layer, see :func:`owner_partitioner`), and every
-    particle (id, position, properties) is moved to the rank owning its cell there. With ``rcb`` every cut balances the load ``1 + W n`` alone
-    (``balance=("load",)`` unless given), so ranks get equal work rather than equal cells and equal
-    particles at once (what the convection runs ask of it). Functions on the old mesh are not carried over: build them
-    again on ``result.mesh`` (or interpolate them across). On one rank the swarm itself is
+    particle (id, position, properties) is moved to the rank owning its cell there. With ``rcb`` every cut balances the
+    load ``1 + W n`` alone (``balance=("load",)`` unless given), so ranks get equal work rather than equal cells and
+    equal particles at once (what the convection runs ask of it). Functions on the old mesh are not carried over: build
+    them again on ``result.mesh`` (or interpolate them across). On one rank the swarm itself is
     returned.
 
     Args:

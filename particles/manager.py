@@ -42,7 +42,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -386,11 +387,11 @@ class ParticleManager:
 
     # ------------------------------------------------------------------ construction from a config
     @classmethod
-    def from_config(cls, section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh, /, *, directory: str | Path | None = None,
-                    extra_properties: Sequence[ParticleProperty] = (), make_function: MakeFunction | None = None,
-                    field_degree: int = 0, context: PropertyContext | None = None, confine: Confine | None = None,
-                    generate_particles: bool = True, output_units: OutputUnits | None = None,
-                    name: str = "particles") -> ParticleManager:
+    def from_config(cls, section: Mapping[str, Any] | ParticleSettings, mesh: dolfinx.mesh.Mesh, /, *,
+                    directory: str | Path | None = None, extra_properties: Sequence[ParticleProperty] = (),
+                    make_function: MakeFunction | None = None, context: PropertyContext | None = None,
+                    confine: Confine | None = None, generate_particles: bool = True, field_degree: int = 0,
+                    output_units: OutputUnits | None = None, name: str = "particles") -> ParticleManager:
         """One manager from one config section (collective).
 
         ``section`` is a :class:`~particles.settings.ParticleSettings` or its config section (its
@@ -516,8 +517,8 @@ class ParticleManager:
         """What a checkpoint needs besides the swarm (:mod:`fembase.state`; JSON-able scalars):
         counters, output schedule, timings. The swarm is a checkpoint part of its own
         (:mod:`particles.io.swarm_checkpoint`), given back by :meth:`adopt`."""
-        return State(scalars={"lost": self.lost, "added": self.added, "removed": self.removed, "pulled_in": self.pulled_in,
-                              **self._clock.state(), "timings": dict(self.timings)})
+        return State(scalars={"lost": self.lost, "added": self.added, "removed": self.removed,
+                              "pulled_in": self.pulled_in, **self._clock.state(), "timings": dict(self.timings)})
 
     def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
         """Take the saved :meth:`state` scalars back (after :meth:`adopt`); no fields to fill."""

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from fembase.params import MAX_ENTRIES, Names, param, settings_from, short_repr, subsection
 

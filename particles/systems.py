@@ -26,7 +26,7 @@ This module never imports ``convection``; it works on any DOLFINx mesh.
 
 from __future__ import annotations
 
-from typing import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 
 import numpy as np
 import numpy.typing as npt

@@ -69,7 +69,8 @@ def demo_page(path: Path) -> str:
         return f"# {path.stem}\n\n```python\n{source}\n```\n"
     doc, code = match.groups()
     title, _, rest = doc.strip().partition("\n")
-    return (f"<!-- generated from {relative} -->\n\n# {title.strip().rstrip('.')}\n\n{_rst_to_markdown(rest.strip())}\n\n"
+    return (f"<!-- generated from {relative} -->\n\n# {title.strip().rstrip('.')}\n\n"
+            f"{_rst_to_markdown(rest.strip())}\n\n"
             f"## The script (`{relative}`)\n\n```python\n{code.strip()}\n```\n")
 
 

@@ -102,9 +102,9 @@ if [ "$route" = pypi ]; then
     stamp=.venv/.project-installed
     if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ requirements/constraints.txt -nt "$stamp" ] \
             || [ requirements/pypi.txt -nt "$stamp" ]; then
-        echo "[setup] pip install -r requirements/pypi.txt -e .[test,docs] (PyPI's DOLFINx)" >&2
+        echo "[setup] pip install -r requirements/pypi.txt -e .[test,docs,lint] (PyPI's DOLFINx)" >&2
         t0=$SECONDS
-        .venv/bin/pip install -q -c requirements/constraints.txt -r requirements/pypi.txt -e ".[test,docs]" >&2
+        .venv/bin/pip install -q -c requirements/constraints.txt -r requirements/pypi.txt -e ".[test,docs,lint]" >&2
         echo "[setup] pip took $((SECONDS - t0)) s" >&2
         # dolfinx_solver (the wheel's loader of its bundled PETSc, MPICH and other libraries) must
         # be imported before dolfinx: a .pth file does it at the start of every Python of this
@@ -146,9 +146,9 @@ fi
 stamp=.venv/.project-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ requirements/constraints.txt -nt "$stamp" ] \
         || [ "$pins" -nt "$stamp" ]; then
-    echo "[setup] pip install -e .[test,docs] (numpy pinned to Debian's $debian_numpy)" >&2
+    echo "[setup] pip install -e .[test,docs,lint] (numpy pinned to Debian's $debian_numpy)" >&2
     t0=$SECONDS
-    .venv/bin/pip install -q -c "$pins" -c requirements/constraints.txt -e ".[test,docs]" >&2
+    .venv/bin/pip install -q -c "$pins" -c requirements/constraints.txt -e ".[test,docs,lint]" >&2
     echo "[setup] pip took $((SECONDS - t0)) s" >&2
     # The compiled stack must still be Debian's: numpy (the pin) and h5py (the MPI build).
     .venv/bin/python - "$debian_numpy" <<'EOF' >&2

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Set everything up (idempotent) and run the test suite: the collective tests under MPI's launcher
+# Set everything up (idempotent), lint and type check (scripts/lint.sh: ruff, mypy), and run the
+# test suite: the collective tests under MPI's launcher
 # with 2 ranks and 3 ranks (Open MPI's mpirun --oversubscribe, or MPICH's mpiexec on the PyPI route:
 # python -m convection.launch N tells which), then the serial tests (exit 5, none collected,
 # fails). Extra arguments go to every pytest call. PIC_DOLFINX=pypi: the PyPI route (setup.sh).
@@ -22,6 +23,12 @@ if [ -n "${PIC_TEST_WATCHDOG:-}" ]; then
 fi
 
 status=0
+
+# Lint and type check first (seconds): a failure fails the run, and the tests still run so that
+# one CI run shows both.
+lint=0
+bash scripts/lint.sh "$py" || lint=$?
+[ "$lint" -ne 0 ] && status=$lint
 
 logdir="$(mktemp -d)"
 for n in 2 3; do
@@ -48,4 +55,5 @@ echo "== serial tests =="
 rc=0
 "$py" -m pytest -m "not slow and not mpi" "$@" || rc=$?
 [ "$rc" -ne 0 ] && status=$rc
+[ "$lint" -ne 0 ] && echo "== scripts/lint.sh failed (exit $lint): see its output at the top =="
 exit "$status"

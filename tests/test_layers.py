@@ -3,7 +3,7 @@ particles never imports convection, and no package imports another package's pri
 
 import ast
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 import pytest
 
@@ -49,16 +49,62 @@ def test_no_private_module_of_another_package(package):
     assert not wrong, wrong
 
 
+OUTSIDE_THE_FLOOR = ("particles", "convection", "tests", "demos", "benchmarks", "scripts")
+"""Where no code branches on the DOLFINx version: it asks a capability of
+:mod:`fembase.dolfinx_compat` (e.g. ``repartitioned_manifolds_nest()``) instead."""
+
+
+def _version_branches(path: Path) -> list[str]:
+    """Where ``path`` reads the DOLFINx version: ``DOLFINX_VERSION`` named or imported, a
+    ``__version__`` compared, or a version compared with a tuple of numbers (``sys.version_info``,
+    Python's own, is not DOLFINx's); "line what" for each line."""
+    found: dict[int, str] = {}
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Name) and node.id == "DOLFINX_VERSION" \
+                or isinstance(node, ast.Attribute) and node.attr == "DOLFINX_VERSION" \
+                or isinstance(node, ast.alias) and node.name == "DOLFINX_VERSION":
+            found.setdefault(node.lineno, "names DOLFINX_VERSION")
+        elif isinstance(node, ast.Compare):
+            names = {n.id if isinstance(n, ast.Name) else n.attr for n in ast.walk(node)
+                     if isinstance(n, (ast.Name, ast.Attribute))} - {"version_info"}
+            tuples = any(isinstance(n, ast.Tuple) and n.elts and all(isinstance(e, ast.Constant) and
+                                                                     isinstance(e.value, int) for e in n.elts)
+                         for n in ast.walk(node))
+            if "__version__" in names or tuples and any("version" in name.lower() for name in names):
+                found.setdefault(node.lineno, f"compares {ast.unparse(node)!r}")
+    return [f"{line} {what}" for line, what in sorted(found.items())]
+
+
 def test_no_dolfinx_version_checks_outside_the_floor():
-    """Only fembase may know which DOLFINx it runs on."""
-    wrong = [f"{path.relative_to(ROOT)}" for package in ("particles", "convection")
-             for path in sorted((ROOT / package).rglob("*.py")) if "__version__" in path.read_text()]
+    """Only fembase may know which DOLFINx it runs on: outside it, code asks a capability."""
+    wrong = [f"{path.relative_to(ROOT)}:{line}" for folder in OUTSIDE_THE_FLOOR
+             for path in sorted((ROOT / folder).rglob("*.py")) for line in _version_branches(path)]
+    wrong += [f"{path.relative_to(ROOT)}" for package in ("particles", "convection")
+              for path in sorted((ROOT / package).rglob("*.py")) if "__version__" in path.read_text()]
     assert not wrong, wrong
 
 
-ROOMS = ("geometry", "physics", "solvers", "adapt", "model", "postprocess", "io", "run", "config", "app")
+def test_the_version_check_sees_version_branches(tmp_path):
+    """The check above finds each way of branching on the version (what the loader once did)."""
+    path = tmp_path / "branches.py"
+    path.write_text("from fembase.dolfinx_compat import DOLFINX_VERSION\n"
+                    "import dolfinx\n"
+                    "new = dolfinx.__version__ >= '0.7'\n"
+                    "if compat.DOLFINX_VERSION < (0, 7):\n    pass\n"
+                    "old = version < (0, 7)\n"
+                    "python = sys.version_info >= (3, 12)\n")
+    assert [line.split()[0] for line in _version_branches(path)] == ["1", "3", "4", "6"]
+
+
+ROOMS = ("geometry", "physics", "deform", "solvers", "adapt", "model", "postprocess", "io", "run", "config", "app")
 """convection's rooms from the floor up: a room imports only from rooms below it (and from the
 floor modules ``schema``, ``expressions``, ``launch``, ``_lazy``, from particles and fembase)."""
+
+
+def test_every_folder_of_convection_is_a_room():
+    """A new folder of convection/ takes its place in ROOMS, so that its imports are checked."""
+    folders = {p.parent.name for p in (ROOT / "convection").glob("*/__init__.py")}
+    assert folders == set(ROOMS), sorted(folders ^ set(ROOMS))
 
 
 def _modules() -> dict[str, Path]:
@@ -71,18 +117,12 @@ def _modules() -> dict[str, Path]:
     return out
 
 
-def _runtime_imports(path: Path, type_checking: bool = False):
+def _module_imports(path: Path):
     """Imported module names of ``path`` (``from a import b`` gives ``a.b`` when that is a module),
-    leaving out imports under ``if TYPE_CHECKING:`` unless ``type_checking``."""
-    tree = ast.parse(path.read_text())
-    skipped = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING" and not type_checking:
-            skipped.update(id(n) for n in ast.walk(node))
+    every import: those inside functions, and those under ``if TYPE_CHECKING:`` too (an import
+    only the type checker runs still ties the two modules together)."""
     modules = _modules()
-    for node in ast.walk(tree):
-        if id(node) in skipped:
-            continue
+    for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names = [f"{node.module}.{alias.name}" for alias in node.names]
             yield from [n for n in names if n in modules] or [node.module]
@@ -98,13 +138,14 @@ def _room(module: str) -> int | None:
 
 
 def _upward_imports(room: Callable[[str], int | None]) -> list[str]:
-    """Every import (inside functions too) of a module whose ``room`` is above the importer's."""
+    """Every import (inside functions and for the type checker too) of a module whose ``room`` is
+    above the importer's."""
     wrong = []
     for module, path in sorted(_modules().items()):
         here = room(module)
         if here is None:
             continue
-        for imported in _runtime_imports(path):
+        for imported in _module_imports(path):
             there = room(imported)
             if there is not None and there > here:
                 wrong.append(f"{module} imports {imported}")
@@ -112,7 +153,8 @@ def _upward_imports(room: Callable[[str], int | None]) -> list[str]:
 
 
 def test_convection_rooms_import_only_downwards():
-    """No room of convection imports a room above it, not even inside a function."""
+    """No room of convection imports a room above it, not even inside a function or for the type
+    checker only."""
     wrong = _upward_imports(_room)
     assert not wrong, wrong
 
@@ -132,17 +174,16 @@ def _particle_room(module: str) -> int | None:
 
 def test_particle_rooms_import_only_downwards():
     """No room of particles imports a room above it or a public face (the faces rank above every
-    room), not even inside a function."""
+    room), not even inside a function or for the type checker only."""
     wrong = _upward_imports(_particle_room)
     assert not wrong, wrong
 
 
-@pytest.mark.parametrize("package", [None, "particles"])
-def test_no_import_cycles(package):
-    """The module import graph (every import, those inside functions included) has no cycle; in
-    particles not even through the imports under ``if TYPE_CHECKING:`` (none hides a cycle there)."""
-    modules = {name: path for name, path in _modules().items() if package in (None, name.split(".")[0])}
-    graph = {name: sorted({m for m in _runtime_imports(path, package is not None) if m in modules and m != name})
+def test_no_import_cycles():
+    """The module import graph (every import: inside functions and under ``if TYPE_CHECKING:``
+    too) has no cycle."""
+    modules = _modules()
+    graph = {name: sorted({m for m in _module_imports(path) if m in modules and m != name})
              for name, path in modules.items()}
     index: dict[str, int] = {}
     low: dict[str, int] = {}

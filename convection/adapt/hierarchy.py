@@ -98,6 +98,7 @@ class RefinementChain:
         """The mesh of a repartition's ``recipe`` (its ``mesh`` piece), made with the meshes of its
         ``levels`` (each with a new ``level_domain()``); ``nested`` (every cell went with its base
         cell, straight meshes): the chain starts anew with ``base``, those and the mesh (collective)."""
+        assert recipe.mesh is not None, "a repartition's recipe has its mesh piece"
         meshes = [base, *(create_mesh_from_piece(comm, piece, level_domain()).mesh for piece in recipe.levels)]
         mesh = create_mesh_from_piece(comm, recipe.mesh, mesh_domain).mesh
         if nested:
@@ -203,6 +204,7 @@ def _base_owners(comm: MPI.Comm, midpoints: npt.NDArray[np.float64] | None, base
     comm.Reduce(counts, total, op=MPI.SUM, root=0)
     owners = None
     if comm.rank == 0:
+        assert midpoints is not None, "rank 0 has the base cells' midpoints"
         owners = partition(method, midpoints, total[0], total[1], comm.size, particle_weight=particle_weight)
     return comm.bcast(owners, root=0)
 
@@ -442,7 +444,8 @@ class MeshHierarchy:
         piece = mesh_piece(mesh, owners[base_of])
         self.recipe = MeshRecipe(base_piece, [], piece, levels)
         return self.chain.create(mesh.comm,  # not ``comm``: the old base is gone, and its communicator
-                                 self.recipe, self.base, self.new_domain, self.mesh_domain(), nested=self.curved is None)
+                                 self.recipe, self.base, self.new_domain, self.mesh_domain(),
+                                 nested=self.curved is None)
 
     def new_domain(self) -> ufl.Mesh:
         """A new UFL domain for a mesh to create (DOLFINx ties each domain object to one mesh)."""

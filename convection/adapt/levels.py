@@ -65,7 +65,8 @@ def _cells(mesh: dolfinx.mesh.Mesh) -> int:
     return mesh.topology.index_map(mesh.topology.dim).size_global
 
 
-def coarsening_levels(meshes: Sequence[dolfinx.mesh.Mesh], /, *, ratio: float = MAX_RATIO) -> tuple[dolfinx.mesh.Mesh, ...]:
+def coarsening_levels(meshes: Sequence[dolfinx.mesh.Mesh], /, *, ratio: float = MAX_RATIO
+                      ) -> tuple[dolfinx.mesh.Mesh, ...]:
     """Of nested ``meshes`` (coarse to fine, the last the finest), those a multigrid takes as levels
     (module docstring), coarse to fine: the finest always, the coarsest when it has fewer cells
     (a repartition of an unrefined mesh leaves its base with as many)."""
@@ -186,7 +187,8 @@ class MeshLevels:
         if coarse not in self._straight:
             return None
         straight, curved_of = self._straight[coarse]
-        manifold = self.hierarchy.manifold
+        manifold = self.hierarchy.manifold if self.hierarchy is not None else None
+        assert manifold is not None, "curved levels come from a hierarchy with a manifold"
         points = manifold.straight_points(owned_nodes(fine))
         found = CellGeometry(straight).locate(points, owned_only=True)
         cells, xref = found.cells.copy(), found.xref.copy()

@@ -15,7 +15,7 @@ them); results do not change, only where they are computed.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -36,7 +36,7 @@ class BalancingStrategy:
 
     name: str
     description: str
-    wants: Callable[[Balancer, dolfinx.mesh.Mesh, Swarm | None], bool]
+    wants: Callable[[Balancer, dolfinx.mesh.Mesh, Sequence[Swarm]], bool]
 
 
 def _over_threshold(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /) -> bool:

@@ -17,7 +17,7 @@ nodes of the new mesh lie just outside the old one.
 from __future__ import annotations
 
 import hashlib
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -87,7 +87,7 @@ class PointEvaluator:
         The answers for the last few point sets are remembered: the fields of one element on one
         target mesh (u, T and its history, ...) ask for the same interpolation points.
         """
-        key = hashlib.blake2b(np.ascontiguousarray(points).view(np.uint8), digest_size=16).digest() + \
+        key = hashlib.blake2b(np.ascontiguousarray(points).view(np.uint8).data, digest_size=16).digest() + \
             np.int64(points.shape[0]).tobytes()
         found = self._located.get(key)
         if found is None:

@@ -26,7 +26,8 @@ import signal
 import sys
 import traceback
 from pathlib import Path
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from mpi4py import MPI
 
@@ -159,7 +160,8 @@ def _resume(comm: MPI.Comm, directory: str, overrides: list[str], checkpoint: st
         raise _Refused(f"run folder '{run_dir}' not found", EXIT_RUNTIME_ERROR)
     path = Path(checkpoint) if checkpoint else latest_checkpoint(run_dir)
     if path is None:
-        raise _Refused(f"run folder '{run_dir}' has no complete checkpoint (checkpoints/checkpoint_*)", EXIT_RUNTIME_ERROR)
+        raise _Refused(f"run folder '{run_dir}' has no complete checkpoint (checkpoints/checkpoint_*)",
+                       EXIT_RUNTIME_ERROR)
     saved = read_checkpoint(path, comm)
     config = _local(load_config, None, [*_checked_overrides(overrides), _literal("output.directory", str(run_dir))],
                     document=saved.config)

@@ -30,7 +30,8 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import dolfinx.fem
 import dolfinx.fem.petsc
@@ -200,8 +201,8 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
     if acfg["enabled"]:
         bounds = None
         if acfg["min_level_where"] is not None or acfg["max_level_where"] is not None:
-            bounds = LevelBounds(acfg["min_level_where"], acfg["max_level_where"], constants=expression_constants(config),
-                                 gdim=domain.gdim)
+            bounds = LevelBounds(acfg["min_level_where"], acfg["max_level_where"],
+                                 constants=expression_constants(config), gdim=domain.gdim)
         adaptivity = Adaptivity(hierarchy, settings_from(AdaptivitySettings, acfg), bounds=bounds)
         if restore is None:
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
@@ -319,8 +320,9 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     stokes_settings = settings_from(StokesSettings, config["stokes"])
     if meshes.coarse is not None:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
         stokes_settings = dataclasses.replace(stokes_settings, solver="multigrid")
-    stokes = StokesSolver(mesh, approximation, bcs={n: bc for n, bc in velocity_bcs.items() if bc.kind != "free_surface"},
-                          domain=domain, coarse_meshes=meshes.coarse or (),
+    stokes = StokesSolver(mesh, approximation,
+                          bcs={n: bc for n, bc in velocity_bcs.items() if bc.kind != "free_surface"}, domain=domain,
+                          coarse_meshes=meshes.coarse or (),
                           surface=free_surface.terms if free_surface is not None else None, **vars(stokes_settings))
     energy = settings_from(EnergySettings, config["energy"])
     temperature = TransportSolver(mesh, approximation, bcs=temperature_bcs, domain=domain, degree=energy.degree,
@@ -335,7 +337,8 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
         for name in approximation.viscosity_law.field_names:
             particles.primary.track(name)
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
-                  particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer, free_surface=free_surface)
+                  particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer,
+                  free_surface=free_surface)
     if restore is not None:
         restore_state(model, restore, exact=meshes.exact)
     return model

@@ -39,9 +39,9 @@ ConfigLoader.add_implicit_resolver(
 
 
 def safe_load(text: str, where: str) -> Any:
-    """``yaml.load(text, ConfigLoader)`` (safe, with YAML 1.2's floats); what else PyYAML raises on hostile input becomes a ConfigError
-    naming ``where``: RecursionError (deep nesting), ValueError (an integer with more digits than
-    Python converts, an impossible date), MemoryError.
+    """``yaml.load(text, ConfigLoader)`` (safe, with YAML 1.2's floats); what else PyYAML raises on hostile input
+    becomes a ConfigError naming ``where``: RecursionError (deep nesting), ValueError (an integer with more digits
+    than Python converts, an impossible date), MemoryError.
 
     Raises:
         yaml.YAMLError: the text is not YAML.

@@ -33,7 +33,8 @@ import copy
 import importlib
 import math
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 import numpy as np
 import yaml
@@ -59,7 +60,7 @@ from convection.schema import (
     settings_from, short_repr, validate,
 )
 from convection.physics.approximation import PhysicsSettings
-from fembase.dolfinx_compat import DOLFINX_VERSION
+from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.stokes.solver import AUTO, StokesSettings, check_viscosity_rules
@@ -252,7 +253,8 @@ def _check_mesh(config: dict[str, Any], document: dict[str, Any]) -> None:
     """The keys of the geometry (another geometry's key given a value other than its default is an
     error: it would be ignored), then the geometry's own checks."""
     cls = domain_class(config)
-    given = document.get("mesh") if isinstance(document.get("mesh"), dict) else {}
+    mesh = document.get("mesh")
+    given = mesh if isinstance(mesh, dict) else {}
     for key, field in SCHEMA["mesh"].items():
         if key in given and key not in (*cls.config_keys, "geometry", "max_cells") \
                 and config["mesh"][key] != field.default:
@@ -317,7 +319,8 @@ def _check_multigrid(config: dict[str, Any]) -> None:
         count = domain.mesh_levels(levels)
     except ValueError as err:
         raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
-    if config["balance"]["strategy"] != "none" and domain.manifold() is not None and DOLFINX_VERSION >= (0, 7):
+    if config["balance"]["strategy"] != "none" and domain.manifold() is not None \
+            and not repartitioned_manifolds_nest():
         raise ConfigError("config key 'balance.strategy': stokes.solver multigrid on a repartitioned curved mesh needs "
                           "DOLFINx 0.5 for now (on 0.9 a node of the repartitioned shell lay in no coarser cell of "
                           "its rank); use balance.strategy: none, or stokes.solver: iterative")
@@ -384,8 +387,8 @@ def _check_statistics(config: dict[str, Any]) -> None:
     gdim = config_gdim(config)
     for name, point in config["diagnostics"]["points"].items():
         if not (isinstance(point, list) and len(point) == gdim and all(_finite_number(c) is not None for c in point)):
-            raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': expected [x, y{', z' if gdim == 3 else ''}] "
-                              f"({gdim} numbers), got {short_repr(point)}")
+            raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': "
+                              f"expected [x, y{', z' if gdim == 3 else ''}] ({gdim} numbers), got {short_repr(point)}")
         if not str(name).isidentifier():
             raise ConfigError(f"config key 'diagnostics.points.{key_text(name)}': a point's name is a column suffix: "
                               "letters, digits and _")
@@ -479,7 +482,8 @@ def _check_particle_count(config: dict[str, Any], cells: float) -> None:
                 number = float(generator.get(key) or 0.0)
             except (TypeError, ValueError, OverflowError):
                 continue  # reported by the particle checks
-            asked.append((f"{where}.generator.{key}", safe_product(number, cells) if key == "particles_per_cell" else number))
+            asked.append((f"{where}.generator.{key}",
+                          safe_product(number, cells) if key == "particles_per_cell" else number))
             total += asked[-1][1]
         asked.append((f"{where}.population.min_per_cell", safe_product(section["population"]["min_per_cell"], cells)))
     asked.append(("particles", total))
@@ -616,7 +620,8 @@ def _check_materials(config: dict[str, Any]) -> None:
     if config["materials"]:
         legacy = (("initial.composition", config["initial"]["composition"] is not None),
                   ("physics.Rb", config["physics"]["Rb"] != 0.0),
-                  ("physics.viscosity.material_viscosities", config["physics"]["viscosity"]["material_viscosities"] is not None))
+                  ("physics.viscosity.material_viscosities",
+                   config["physics"]["viscosity"]["material_viscosities"] is not None))
         for key, given in legacy:
             if given:
                 raise ConfigError(f"config key '{key}': not with the materials section (give each material its "
@@ -694,9 +699,9 @@ def _check_system_components(config: dict[str, Any], section: dict[str, Any], wh
         generator = build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key '{where}.generator': {err}") from None
-    if getattr(generator, "density", None) is not None:
-        _check_generator_density(config, f"{where}.generator.density", section["generator"].get("density"),
-                                 generator.density)
+    density = getattr(generator, "density", None)
+    if density is not None:
+        _check_generator_density(config, f"{where}.generator.density", section["generator"].get("density"), density)
     if config_domain(config).curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
         raise ConfigError(f"config key '{where}.generator.name': {generator.name} needs straight-sided cells; the "
                           f"{config['mesh']['geometry']} has curved ones (mesh.geometry_degree 2): use "
@@ -804,7 +809,8 @@ def _apply_override(document: dict[str, Any], path: list[str], value: Any) -> No
     node[path[-1]] = value
 
 
-def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, document: dict | None = None) -> dict[str, Any]:
+def load_config(path: str | Path | None, overrides: Iterable[str] = (), *, document: dict | None = None
+                ) -> dict[str, Any]:
     """Read, override and validate a run configuration.
 
     Args:

@@ -34,8 +34,8 @@ from convection.schema import ConfigError, section_schema, short_repr, validate
 from particles.settings import ParticleSettings
 from particles.systems import DEFAULT_SYSTEM
 
-__all__ = ["MAX_PARTICLE_SYSTEMS", "carries_particles", "document_generators", "check_primary", "listed_systems", "override_target",
-           "particle_sections", "primary_system", "resolve_systems"]
+__all__ = ["MAX_PARTICLE_SYSTEMS", "carries_particles", "document_generators", "check_primary", "listed_systems",
+           "override_target", "particle_sections", "primary_system", "resolve_systems"]
 
 MAX_PARTICLE_SYSTEMS = 16
 """Most particle systems a config may list."""

@@ -19,13 +19,17 @@ import dataclasses
 import inspect
 import re
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from convection.config.loader import SCHEMA
 from convection.geometry.registry import DOMAINS
 from convection.schema import REQUIRED, Field, Names
+
+if TYPE_CHECKING:
+    from particles.properties import ParticleProperty
 
 __all__ = ["KeyDoc", "Parameter", "PluginRole", "plugin_roles", "render_markdown", "render_yaml", "schema_keys"]
 
@@ -176,7 +180,7 @@ def _dataclass_parameters(cls: type, *, skip: tuple[str, ...] = ()) -> list[Para
     return out
 
 
-def _property_parameters(cls: type) -> list[Parameter]:
+def _property_parameters(cls: type[ParticleProperty]) -> list[Parameter]:
     """A particle property's parameters, its update policies with their allowed values and this
     property's defaults."""
     from particles.properties import NEW_PARTICLE_POLICIES, UPDATE_POLICIES
@@ -229,7 +233,7 @@ def plugin_roles() -> list[PluginRole]:
 
 def _registry_choices() -> list[tuple[KeyDoc, dict[str, str]]]:
     """Schema keys whose allowed names come from a registry, with each name's description."""
-    out = []
+    out: list[tuple[KeyDoc, dict[str, str]]] = []
     for doc in schema_keys():
         if isinstance(doc.field.choices, Names):
             registry = doc.field.choices.registry()

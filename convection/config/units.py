@@ -83,7 +83,8 @@ def written_quantities(node: Any, path: tuple[str, ...] = ()) -> dict[str, str]:
     """Every value with a unit in a document, by its dotted key (the key :func:`apply_scaling`
     reports it under; list items share their list's key), as written."""
     if isinstance(node, dict):
-        return {k: v for name, value in node.items() for k, v in written_quantities(value, (*path, key_text(name))).items()}
+        return {k: v for name, value in node.items()
+                for k, v in written_quantities(value, (*path, key_text(name))).items()}
     if isinstance(node, list):
         return {k: v for value in node for k, v in written_quantities(value, path).items()}
     return {".".join(path): node} if parse_quantity(node) is not None else {}

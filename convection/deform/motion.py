@@ -26,7 +26,8 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Callable, Iterator
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -93,6 +94,8 @@ class FreeSurface:
         moves: Steps moved.
     """
 
+    _positions: dolfinx.fem.Function  # the deformed node positions :meth:`to_mesh` carried over to a new mesh
+
     def __init__(self, mesh: dolfinx.mesh.Mesh, domain: Domain, terms: SurfaceTerms, /) -> None:
         keep_boundary_facets(domain, mesh)
         self.mesh, self.domain, self.terms = mesh, domain, terms
@@ -103,7 +106,8 @@ class FreeSurface:
         self._node = _node_of_dof(self.W)
         fdim = mesh.topology.dim - 1
         self._surface = np.unique(np.concatenate([
-            dolfinx.fem.locate_dofs_topological(self.W, fdim, domain.locate_facets(mesh, name)) for name in terms.names]))
+            dolfinx.fem.locate_dofs_topological(self.W, fdim, domain.locate_facets(mesh, name))
+            for name in terms.names]))
         bottom = dolfinx.fem.locate_dofs_topological(self.W, fdim, domain.locate_facets(mesh, domain.bottom))
         self._w_surface = dolfinx.fem.Function(self.W)
         self._bcs = [dolfinx.fem.dirichletbc(self._w_surface, self._surface),
@@ -181,8 +185,8 @@ class FreeSurface:
         self.moves += 1
         self.quality_min = self._quality()
         if self.quality_min <= 0.0:
-            raise RuntimeError(f"the free surface's mesh motion turned a cell inside out (quality {self.quality_min:.3g}):"
-                               " take shorter steps (time.cfl, time.dt_max)")
+            raise RuntimeError("the free surface's mesh motion turned a cell inside out "
+                               f"(quality {self.quality_min:.3g}): take shorter steps (time.cfl, time.dt_max)")
 
     def _quality(self) -> float:
         """The lowest cell quality over all ranks, negative if a cell turned inside out."""
@@ -233,7 +237,7 @@ class FreeSurface:
         return self._coordinates()
 
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, positions: dolfinx.fem.Function,
-                transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None], /) -> "FreeSurface":
+                transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None], /) -> FreeSurface:
         """This free surface on ``mesh``, a mesh made from the undeformed one (an adaptation, a
         repartition), in the reference configuration: ``mesh`` is undeformed and this one's mesh
         too (inside :meth:`undeformed`); the deformed ``positions`` (:meth:`positions`), a field

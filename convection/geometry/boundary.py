@@ -116,7 +116,7 @@ def velocity_dirichlet_bcs(V: dolfinx.fem.FunctionSpace, bcs: dict[str, Velocity
         if bc.kind == "free_slip":
             dofs = dolfinx.fem.locate_dofs_topological(V.sub(axis), fdim, facets)
             out.append(dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(axis)))
-        elif bc.kind == "prescribed" and (callable(bc.value) or any(isinstance(c, str) for c in bc.value)):
+        elif bc.kind == "prescribed" and (callable(bc.value) or any(isinstance(c, str) for c in bc.value or ())):
             dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
             out.append(dolfinx.fem.dirichletbc(_velocity_function(V, bc.value), dofs))
         else:
@@ -223,6 +223,7 @@ def temperature_dirichlet_bcs(V: dolfinx.fem.FunctionSpace, bcs: dict[str, Tempe
     (``domain`` may be None when ``bcs`` is empty). Collective."""
     if not bcs:
         return []
+    assert domain is not None, "boundary conditions need the domain"
     domain.check_boundary_names(bcs)
     out = []
     for name in domain.boundaries:

@@ -11,6 +11,7 @@ condition on the velocity component normal to it; the pressure is pinned at the 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -112,7 +113,7 @@ class BoxSpec:
     diagonal: str = "right"
 
     @classmethod
-    def from_config(cls, mesh_config: Mapping[str, Any]) -> "BoxSpec":
+    def from_config(cls, mesh_config: Mapping[str, Any]) -> BoxSpec:
         cells = tuple(int(n) for n in mesh_config["cells"])
         gdim = len(cells)
         lower = tuple(mesh_config["lower"] or [0.0] * gdim)
@@ -144,7 +145,8 @@ def _box(comm: MPI.Comm, spec: BoxSpec) -> dolfinx.mesh.Mesh:
     """DOLFINx's rectangle or box mesh of ``spec`` on ``comm``."""
     ghost_mode = dolfinx.mesh.GhostMode.shared_facet
     if spec.gdim == 2:
-        cell_type = dolfinx.mesh.CellType.triangle if spec.cell_type == "simplex" else dolfinx.mesh.CellType.quadrilateral
+        cell_type = (dolfinx.mesh.CellType.triangle if spec.cell_type == "simplex"
+                     else dolfinx.mesh.CellType.quadrilateral)
         diagonal = getattr(dolfinx.mesh.DiagonalType, spec.diagonal.replace("/", "_"))
         return dolfinx.mesh.create_rectangle(
             comm, [np.array(spec.lower), np.array(spec.upper)], list(spec.cells), cell_type,
@@ -186,7 +188,8 @@ class BoxDomain(Domain):
     free_surfaces: ClassVar[tuple[str, ...]] = ("top",)
     bottom: ClassVar[str] = "bottom"
 
-    def __init__(self, lower: Sequence[float], upper: Sequence[float], /, *, spec: BoxSpec | None = None) -> None:
+    def __init__(self, lower: Sequence[float] | npt.NDArray[np.float64],
+                 upper: Sequence[float] | npt.NDArray[np.float64], /, *, spec: BoxSpec | None = None) -> None:
         self.lower = tuple(float(v) for v in lower)
         self.upper = tuple(float(v) for v in upper)
         self.gdim = len(self.lower)
@@ -194,11 +197,11 @@ class BoxDomain(Domain):
         self.spec = spec
 
     @classmethod
-    def from_spec(cls, spec: BoxSpec, /) -> "BoxDomain":
+    def from_spec(cls, spec: BoxSpec, /) -> BoxDomain:
         return cls(spec.lower, spec.upper, spec=spec)
 
     @classmethod
-    def around(cls, mesh: dolfinx.mesh.Mesh, /) -> "BoxDomain":
+    def around(cls, mesh: dolfinx.mesh.Mesh, /) -> BoxDomain:
         """The box a mesh fills (its global bounding box; collective). For solvers built on a box
         mesh without a domain."""
         bounds = box_bounds(mesh)
@@ -209,7 +212,7 @@ class BoxDomain(Domain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> "BoxDomain":
+    def from_config(cls, mesh: Mapping[str, Any], /) -> BoxDomain:
         return cls.from_spec(BoxSpec.from_config(mesh))
 
     @classmethod
@@ -330,7 +333,7 @@ class BoxDomain(Domain):
         self.mesh_levels(levels)
         specs = [dataclasses.replace(spec, cells=tuple(n // 2 ** k for n in spec.cells))
                  for k in range(levels - 1, -1, -1)]
-        return create_nested_meshes(comm, [lambda c, s=s: _box(c, s) for s in specs], owners=owners)
+        return create_nested_meshes(comm, [functools.partial(_box, spec=s) for s in specs], owners=owners)
 
     def estimated_cells(self) -> float:
         """Cells of the base mesh."""

@@ -37,7 +37,7 @@ _KEPT_FACETS = "_convection_kept_facets"
 _FACET_TAGS = "_convection_facet_tags"
 
 
-def keep_boundary_facets(domain: "Domain", mesh: dolfinx.mesh.Mesh, /) -> None:
+def keep_boundary_facets(domain: Domain, mesh: dolfinx.mesh.Mesh, /) -> None:
     """Find the facets of every boundary of ``mesh`` now and keep them with the mesh: a mesh whose
     nodes move (a free surface) keeps its boundaries where they were found on the undeformed mesh
     (the domains find them by their coordinates, which the motion changes). Collective."""
@@ -124,7 +124,7 @@ class Domain(ABC):
     # ------------------------------------------------------------------ config
     @classmethod
     @abstractmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> "Domain":
+    def from_config(cls, mesh: Mapping[str, Any], /) -> Domain:
         """The domain of a resolved ``mesh`` config section (checked by :meth:`check_config`)."""
 
     @classmethod

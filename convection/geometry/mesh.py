@@ -15,7 +15,8 @@ manifold (:mod:`fembase.manifold`, :class:`convection.adapt.hierarchy.MeshHierar
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt

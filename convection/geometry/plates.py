@@ -24,7 +24,8 @@ pole), see ``configs/shell_plates.yaml``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -52,7 +53,7 @@ class Plate:
 
     centre: tuple[float, ...]
     rate: float
-    pole: tuple[float, float] = (0.0, 90.0)
+    pole: tuple[float, ...] = (0.0, 90.0)
 
     def __post_init__(self) -> None:
         if len(self.centre) not in (1, 2) or len(self.pole) != 2:
@@ -92,7 +93,7 @@ class PlateVelocity:
             raise ValueError(f"plates need gdim 2 or 3, got {self.gdim}")
 
     @classmethod
-    def from_config(cls, section: Mapping[str, Any], gdim: int, /) -> "PlateVelocity":
+    def from_config(cls, section: Mapping[str, Any], gdim: int, /) -> PlateVelocity:
         """From ``{kind: plates, width: w, plates: [{centre: [...], pole: [...], rate: r}, ...]}``.
 
         Raises:

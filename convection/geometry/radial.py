@@ -36,7 +36,8 @@ class RadialMeshSettings:
     """The ``mesh`` keys of a domain between two radii around the origin (gmsh-meshed)."""
 
     radii: tuple[float, ...] = param((1.22, 2.22), length=(2,), exclusive_minimum=0.0,
-                                     help="[inner, outer] radius of an annulus/spherical shell/sector around the origin")
+                                     help="[inner, outer] radius of an annulus/spherical shell/sector around the "
+                                          "origin")
     resolution: float | None = param(None, exclusive_minimum=0.0,
                                      help="target cell size of an annulus/spherical shell (gmsh)")
     geometry_degree: int = param(2, minimum=1,

@@ -74,7 +74,7 @@ class SectorSpec:
             raise ValueError(f"geometry_degree must be 1 or 2, got {self.geometry_degree}")
 
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any]) -> "SectorSpec":
+    def from_config(cls, mesh: Mapping[str, Any]) -> SectorSpec:
         inner, outer = (float(r) for r in mesh["radii"])
         west, east = (float(a) for a in mesh["angles"])
         return cls(inner, outer, (west, east), float(mesh["resolution"]), int(mesh["geometry_degree"]))
@@ -146,7 +146,7 @@ class Sector(RadialDomain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> "Sector":
+    def from_config(cls, mesh: Mapping[str, Any], /) -> Sector:
         return cls(SectorSpec.from_config(mesh))
 
     @classmethod

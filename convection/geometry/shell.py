@@ -78,7 +78,7 @@ class ShellSpec:
                 raise ValueError(f"interface radius {r} is not between the inner and outer radii")
 
     @classmethod
-    def from_config(cls, mesh_config: Mapping[str, Any]) -> "ShellSpec":
+    def from_config(cls, mesh_config: Mapping[str, Any]) -> ShellSpec:
         gdim = 2 if mesh_config["geometry"] == "annulus" else 3
         inner, outer = (float(r) for r in mesh_config["radii"])
         return cls(gdim, inner, outer, float(mesh_config["resolution"]), int(mesh_config["geometry_degree"]))
@@ -147,7 +147,7 @@ class ShellDomain(RadialDomain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> "ShellDomain":
+    def from_config(cls, mesh: Mapping[str, Any], /) -> ShellDomain:
         return cls(ShellSpec.from_config(mesh))
 
     @classmethod

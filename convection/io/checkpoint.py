@@ -50,7 +50,8 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import h5py
 import numpy as np
@@ -76,8 +77,8 @@ from particles.systems import file_stem
 from particles.properties import PropertyContext
 
 __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpointer", "SavedRun", "latest_checkpoint",
-           "fill_functions", "list_checkpoints", "saved_values", "read_checkpoint", "restore_mesh", "restore_particles", "restore_state",
-           "write_checkpoint"]
+           "fill_functions", "list_checkpoints", "saved_values", "read_checkpoint", "restore_mesh", "restore_particles",
+           "restore_state", "write_checkpoint"]
 
 FORMAT = "convection-checkpoint"
 VERSION = 4  # 4: the scalars of each component (state "components"); 3: created owners and mesh fingerprints;
@@ -206,7 +207,8 @@ def _write_recipe(sink: H5Sink, recipe: MeshRecipe) -> list[str]:
         kind = "uniform" if marked is None else "marked"
         if marked is not None:
             sink.distributed(f"recipe/round_{i}", np.asarray(marked, dtype=np.int32))
-            sink.replicated(f"recipe/round_{i}_counts", np.asarray(sink.comm.allgather(int(marked.size)), dtype=np.int64))
+            sink.replicated(f"recipe/round_{i}_counts",
+                            np.asarray(sink.comm.allgather(int(marked.size)), dtype=np.int64))
         rounds.append(kind)
     return rounds
 
@@ -239,7 +241,8 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
             shutil.rmtree(stray, ignore_errors=True)
         tmp.mkdir(parents=True)
     comm.Barrier()
-    hierarchy = model.adaptivity.hierarchy if model.adaptivity else (model.balancer.hierarchy if model.balancer else None)
+    hierarchy = (model.adaptivity.hierarchy if model.adaptivity
+                 else (model.balancer.hierarchy if model.balancer else None))
     states = component_states(model)
     state = {"components": {name: s.scalars for name, s in states.items()}, "run": run_state, "num_ranks": comm.size,
              "recipe_rounds": None, "hierarchy": hierarchy is not None}
@@ -406,8 +409,9 @@ class RestoredMesh:
     note: str | None = None
 
 
-def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np.int32] | None], dolfinx.mesh.Mesh],
-                 /, *, hierarchical: bool, manifold: ShellManifold | None = None) -> RestoredMesh:
+def restore_mesh(saved: SavedRun, comm: MPI.Comm,
+                 make_base: Callable[[npt.NDArray[np.int32] | None], dolfinx.mesh.Mesh], /, *, hierarchical: bool,
+                 manifold: ShellManifold | None = None) -> RestoredMesh:
     """The checkpoint's mesh (collective).
 
     On the rank count it was written on the mesh is made as the run made it: the base mesh with the
@@ -449,8 +453,8 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArr
             # concatenated pieces holds on any rank count.
             canonical = _block(f, "recipe/base/canonical", comm).astype(np.int64)
             owners = (canonical * comm.size // max(hierarchy.num_base_cells, 1)).astype(np.int32)
-            hierarchy.replay(MeshRecipe(MeshPiece(_block(f, "recipe/base/cells", comm), _block(f, "recipe/base/x", comm),
-                                                  owners, canonical), []))
+            hierarchy.replay(MeshRecipe(MeshPiece(_block(f, "recipe/base/cells", comm),
+                                                  _block(f, "recipe/base/x", comm), owners, canonical), []))
         cells, x = _block(f, "mesh/cells", comm), _block(f, "mesh/x", comm)
         base_cells = _block(f, "mesh/base_cells", comm)
     # The saved cells, each sent to the rank that owns its base cell, so the mesh and its base
@@ -471,14 +475,16 @@ def _replay(saved: SavedRun, comm: MPI.Comm, make_base: Callable[[npt.NDArray[np
         owners = None
         if comm.rank == 0 and "mesh/created_owners" in f:
             owners = f["mesh/created_owners"][...].astype(np.int32)
-        pieces = {name: _read_piece(f, f"recipe/{name}", comm) if f"recipe/{name}" in f else None for name in ("base", "mesh")}
+        pieces = {name: _read_piece(f, f"recipe/{name}", comm) if f"recipe/{name}" in f else None
+                  for name in ("base", "mesh")}
         levels = []  # the meshes between the base and the mesh a repartition moved (multigrid levels)
         while f"recipe/level_{len(levels)}" in f:
             levels.append(_read_piece(f, f"recipe/level_{len(levels)}", comm))
         rounds = []
         for i, kind in enumerate(saved.state["recipe_rounds"] or []):
             counts = f[f"recipe/round_{i}_counts"][...] if kind == "marked" else None
-            rounds.append(None if kind == "uniform" else _slice(f, f"recipe/round_{i}", counts, comm.rank).astype(np.int32))
+            rounds.append(None if kind == "uniform"
+                          else _slice(f, f"recipe/round_{i}", counts, comm.rank).astype(np.int32))
     # A checkpoint after a repartition rebuilds its base from the saved pieces, not from the config.
     base = make_base(owners if pieces["base"] is None else None)
     hierarchy = MeshHierarchy(base, manifold=manifold) if hierarchical else None

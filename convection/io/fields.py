@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import ClassVar, Mapping, Protocol
+from collections.abc import Mapping
+from typing import ClassVar, Protocol
 
 import dolfinx.fem
 import dolfinx.io
@@ -199,7 +200,8 @@ class FieldOutput:
         """Keep the existing series up to ``resume_after``; number new files after the old ones."""
         last = -1
         if comm.rank == 0:
-            numbers = [int(p.stem.rsplit("_", 1)[1]) for p in self.directory.glob(f"{self.prefix}_[0-9][0-9][0-9].xdmf")]
+            numbers = [int(p.stem.rsplit("_", 1)[1])
+                       for p in self.directory.glob(f"{self.prefix}_[0-9][0-9][0-9].xdmf")]
             last = max(numbers, default=-1)
             self._series.load(grid_time)
             self._series.keep(lambda t: t <= self._resume_after * (1.0 + 1e-14))

@@ -7,8 +7,8 @@ converted, so that ParaView shows kilometres, centimetres per year, pascal secon
 - coordinates and particle positions: ``x = L x'`` in ``units.length``;
 - times: ``t = t0 t'`` (``t0 = L^2 / kappa``) in ``units.time``;
 - each field by its kind (:data:`convection.physics.scaling.FIELD_KINDS`): the velocity in
-  ``units.velocity``, the pressure and ``stress_II`` in ``units.stress``, the viscosity in ``units.viscosity``, ``strain_rate_II``
-  and the rates in ``units.strain_rate``, the temperature as a value ``T0 + dT T'`` in
+  ``units.velocity``, the pressure and ``stress_II`` in ``units.stress``, the viscosity in ``units.viscosity``,
+  ``strain_rate_II`` and the rates in ``units.strain_rate``, the temperature as a value ``T0 + dT T'`` in
   ``units.temperature``;
 - the density, ``rho = rho0 + rho' eta0 kappa / (g L^3)`` in ``units.density``, where ``rho' =
   sum_i Rb_i C_i - Ra T`` is the field's nondimensional density anomaly (the buoyancy numbers are
@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 

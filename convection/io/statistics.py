@@ -19,7 +19,8 @@ import os
 import uuid
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Callable, Mapping, NamedTuple, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -256,7 +257,8 @@ class BalanceLog:
     def _continue(self, step: int) -> StatisticsWriter | None:
         if not self.path.exists():
             return None
-        return StatisticsWriter(self.path, BALANCE_COLUMNS, comm=_mpi().COMM_SELF, resume_after_step=step, numeric=False)
+        return StatisticsWriter(self.path, BALANCE_COLUMNS, comm=_mpi().COMM_SELF, resume_after_step=step,
+                                numeric=False)
 
     def write(self, step: int, before: Any, after: Any) -> None:
         """Append a row; ``before``/``after`` have per-rank ``cells``, ``particles`` arrays and

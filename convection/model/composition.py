@@ -17,7 +17,8 @@ one time step with the advecting velocity ``u`` (already extrapolated to the ste
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar, Mapping, NamedTuple, Protocol
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
@@ -34,8 +35,8 @@ from fembase.state import State
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
-__all__ = ["COMPOSITION_SOURCES", "CompositionInputs", "CompositionSettings", "CompositionSource", "FieldComposition", "ParticleComposition",
-           "StaticComposition", "Transfer", "composition_space", "particle_properties"]
+__all__ = ["COMPOSITION_SOURCES", "CompositionInputs", "CompositionSettings", "CompositionSource", "FieldComposition",
+           "ParticleComposition", "StaticComposition", "Transfer", "composition_space", "particle_properties"]
 
 Transfer = Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]
 """``transfer(source_on_old_mesh, target_on_new_mesh)`` fills the target (collective)."""
@@ -73,6 +74,9 @@ class CompositionSource(Protocol):
     def fields(self) -> tuple[dolfinx.fem.Function, ...]: ...
 
     def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None: ...
+
+    @classmethod
+    def build(cls, inputs: CompositionInputs, /) -> CompositionSource: ...
 
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None: ...
 
@@ -235,6 +239,7 @@ class ParticleComposition:
 
     @classmethod
     def build(cls, inputs: CompositionInputs, /) -> ParticleComposition:
+        assert inputs.particles is not None, "the particles composition source needs particles"
         return cls(inputs.particles, inputs.materials)
 
     def __init__(self, manager: ParticleManager, materials: Materials, /) -> None:
@@ -264,7 +269,7 @@ class ParticleComposition:
         """Nothing to free."""
 
 
-COMPOSITION_SOURCES: Registry[type] = Registry("composition source",
+COMPOSITION_SOURCES: Registry[type[CompositionSource]] = Registry("composition source",
                                                (StaticComposition, FieldComposition, ParticleComposition))
 """Composition sources by their config name (``composition.source``); each is made from
 :class:`CompositionInputs` by its ``build``."""
@@ -287,8 +292,8 @@ class CompositionSettings:
                         help="static: fractions fixed at their initial regions; particles: averaged from advected "
                              "particles; field: advected continuous fields (SUPG, no diffusion)")
     degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
-                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for quadratic_least_squares); "
-                             "source field needs >= 1")
+                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for "
+                             "quadratic_least_squares); source field needs >= 1")
     particle_system: str | None = param(None,
                                         help="with several particle systems: the one whose particles carry the "
                                              "material fractions and the fields the viscosity laws read (null: the "

@@ -12,8 +12,8 @@ put back undeformed, and the hierarchy's levels and base cells, the refinement i
 bounds (``min_level_where``, ...: positions in the undeformed box) and the fields' transfer all see
 the undeformed meshes, where the new mesh nests in the base exactly; the nodes' deformed positions
 are carried to the new mesh like a field over the undeformed one, and the new mesh takes them
-before the particles are found in it (:meth:`convection.deform.motion.FreeSurface.to_mesh`). Each cell is mapped affinely
-in both configurations, so a field's nodal values mean the same in either. Particles keep their
+before the particles are found in it (:meth:`convection.deform.motion.FreeSurface.to_mesh`). Each cell is mapped
+affinely in both configurations, so a field's nodal values mean the same in either. Particles keep their
 positions; where coarser cells' surface (the chord of the finer one's) passes below a particle, it
 is moved down onto it (:func:`particles.relocation.moving_mesh.pull_in`, counted as pulled in).
 """
@@ -22,23 +22,66 @@ from __future__ import annotations
 
 import contextlib
 from functools import partial
-from typing import TYPE_CHECKING, Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from typing import Protocol
 
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
-from convection.adapt.adaptivity import INDICATOR_FIELDS
-from convection.adapt.rebalance import RankLoads
+from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity
+from convection.adapt.rebalance import Balancer, RankLoads
 from convection.adapt.transfer import PointEvaluator, transfer_function
+from convection.deform.motion import FreeSurface
+from convection.geometry.domain import Domain
+from convection.model.composition import CompositionSource
+from convection.solvers.stokes.solver import StokesSolver
+from convection.solvers.transport import TransportSolver
 from fembase.geometry import Candidates
+from fembase.timing import Timers
+from particles.properties import PropertyContext
 from particles.storage.swarm import Swarm
+from particles.systems import ParticleSystems
 
-if TYPE_CHECKING:
-    from convection.model.model import Model
+__all__ = ["ChangingModel", "MeshChanges"]
 
-__all__ = ["MeshChanges"]
+
+class ChangingModel(Protocol):
+    """The model as a mesh change sees it: the components it rebuilds on the new mesh (the
+    solvers, the free surface, the previous velocity) and those it asks to move (composition,
+    particles). :class:`convection.model.model.Model` is one; this protocol keeps the model, which
+    owns its :class:`MeshChanges`, out of this module's imports."""
+
+    stokes: StokesSolver
+    temperature: TransportSolver | None
+    composition: CompositionSource | None
+    particles: ParticleSystems | None
+    adaptivity: Adaptivity | None
+    balancer: Balancer | None
+    free_surface: FreeSurface | None
+    u_previous: dolfinx.fem.Function | None
+    timers: Timers
+    time: float
+    timestep: int
+    mesh_version: int
+
+    @property
+    def mesh(self) -> dolfinx.mesh.Mesh: ...
+
+    @property
+    def domain(self) -> Domain: ...
+
+    @property
+    def num_cells(self) -> int: ...
+
+    @property
+    def T(self) -> dolfinx.fem.Function | None: ...
+
+    @property
+    def fractions(self) -> tuple[dolfinx.fem.Function, ...]: ...
+
+    def property_context(self) -> PropertyContext: ...
 
 
 class MeshChanges:
@@ -49,7 +92,7 @@ class MeshChanges:
         model: The model whose mesh changes (its solvers, history, fractions and particles).
     """
 
-    def __init__(self, model: Model, /) -> None:
+    def __init__(self, model: ChangingModel, /) -> None:
         self.model = model
         self._point_evaluator: PointEvaluator | None = None
 
@@ -91,6 +134,7 @@ class MeshChanges:
         particles again in the moved cells (those the sinking surface left outside are moved
         down inside: :mod:`particles.relocation.moving_mesh`)."""
         model = self.model
+        assert model.free_surface is not None, "only a free surface moves the mesh's nodes"
         with model.timers("mesh_motion"):
             model.free_surface.move(dt)
         model.stokes.mesh_moved()
@@ -132,7 +176,7 @@ class MeshChanges:
         self.move_to(mesh)
         return before, balancer.loads(model.mesh, self._swarms())
 
-    def move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Mapping[str, Candidates] | None = None,
+    def move_to(self, mesh: dolfinx.mesh.Mesh, /, *, candidates: Mapping[str, Candidates | None] | None = None,
                 nested: bool = False) -> None:
         """Rebuild the solvers on ``mesh`` and carry every field, the history and the particles
         (``candidates``: where to look for each particle first, by particle system, see
@@ -156,6 +200,7 @@ class MeshChanges:
             old = self._transfer_fields(mesh, nodes_in, locator)
         if surface is not None:
             surface.release()  # the old mesh may be the hierarchy's base
+            assert model.free_surface is not None  # the new mesh's, made above
             model.free_surface.displace()
             old.append(surface)
         if model.particles is not None:  # the manager times its own move
@@ -196,16 +241,16 @@ class MeshChanges:
         def transfer(src: dolfinx.fem.Function, dst: dolfinx.fem.Function) -> None:
             transfer_function(src, dst, evaluator=evaluator, candidates=candidates)
 
-        old = [model.stokes, model.temperature]
-        model.stokes = model.stokes.on_mesh(mesh)
-        model.stokes.transfer_from(old[0], transfer)
-        if model.temperature is not None:
-            model.temperature = model.temperature.on_mesh(mesh)
-            model.temperature.transfer_from(old[1], transfer)
+        old_stokes, old_temperature = model.stokes, model.temperature
+        model.stokes = old_stokes.on_mesh(mesh)
+        model.stokes.transfer_from(old_stokes, transfer)
+        if old_temperature is not None:
+            model.temperature = old_temperature.on_mesh(mesh)
+            model.temperature.transfer_from(old_temperature, transfer)
         if model.u_previous is not None:
             u_previous = dolfinx.fem.Function(model.stokes.u.function_space)
             transfer(model.u_previous, u_previous)
             model.u_previous = u_previous
         if model.composition is not None:
             model.composition.to_mesh(mesh, transfer)
-        return old
+        return [old_stokes, old_temperature]

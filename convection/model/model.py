@@ -42,7 +42,8 @@ loop in Python (see ``demos/``).
 
 from __future__ import annotations
 
-from typing import Any, Mapping, NamedTuple
+from collections.abc import Mapping
+from typing import Any, NamedTuple
 
 import dolfinx.fem
 import dolfinx.mesh
@@ -273,7 +274,7 @@ class Model:
         u_end = self._velocity_at_step_end(dt)
         u_materials = u if self.stokes.buoyancy_theta > 0.0 else u_end
         frame = self._mesh_changes.moving_frame(u)  # u - u_mesh with a free surface
-        if self.solve_temperature:
+        if self.solve_temperature and self.temperature is not None:  # solve_temperature: there is one
             with self.timers("temperature"):
                 self.temperature.step(frame(u_end), dt)
         if self.composition is not None:

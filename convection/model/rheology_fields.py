@@ -22,7 +22,8 @@ read, the rates the particles integrate, and the viscosity (for output).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import dolfinx.fem
 import ufl

@@ -16,14 +16,17 @@ nondimensional internal heating ``H`` and viscosity ``eta(T, C)`` given by a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import ufl
 
 from fembase.registry import Registry
 from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.schema import Names, param, subsection
-from convection.physics.rheology import Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law
+from convection.physics.rheology import (
+    Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
+)
 
 
 def _geometric(eta0: Any, etas: list[Any], cs: list[Any], background: Any, closed_form: bool) -> Any:

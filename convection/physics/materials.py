@@ -14,7 +14,8 @@ the background, ``i`` where material ``i`` (counted from 1 in the given order) f
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt

@@ -51,7 +51,8 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar, Mapping, NamedTuple, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar, NamedTuple
 
 import ufl
 
@@ -236,7 +237,7 @@ class ViscosityLawBase:
     """What the law itself reads: a subset of {"temperature", "depth", "strain_rate", "pressure"}."""
 
     @classmethod
-    def from_config(cls, spec: Mapping[str, Any], key: str) -> "ViscosityLawBase":
+    def from_config(cls, spec: Mapping[str, Any], key: str) -> ViscosityLawBase:
         """The law for the mapping ``spec`` (without ``name``) of config key ``key``.
 
         Raises:
@@ -261,7 +262,7 @@ class ViscosityLawBase:
     def check(self, key: str) -> None:
         """Checks across parameters (raise ConfigError naming ``key``); none by default."""
 
-    def children(self) -> tuple["ViscosityLawBase", ...]:
+    def children(self) -> tuple[ViscosityLawBase, ...]:
         """The laws this one is built from."""
         return ()
 
@@ -302,7 +303,7 @@ class Weakening:
     factor: float = 0.25
 
     @classmethod
-    def from_config(cls, spec: Any, key: str) -> "Weakening":
+    def from_config(cls, spec: Any, key: str) -> Weakening:
         if not isinstance(spec, dict):
             raise ConfigError(f"config key '{key}': expected {{field, start, end, factor}}, got {short_repr(spec)}")
         unknown = [k for k in spec if k not in ("field", "start", "end", "factor")]
@@ -481,7 +482,8 @@ class Damaged(ViscosityLawBase):
 
     def __call__(self, state: FlowState) -> Any:
         if self.field not in state.fields:
-            raise ValueError(f"viscosity law 'damaged' needs the mesh field {self.field!r}; have {sorted(state.fields)}")
+            raise ValueError(f"viscosity law 'damaged' needs the mesh field {self.field!r}; "
+                             f"have {sorted(state.fields)}")
         return ufl.max_value(1.0 - state.fields[self.field], self.residual) * self.law(state)
 
 
@@ -647,7 +649,7 @@ def build_law(spec: Any, key: str) -> ViscosityLawBase:
     return law
 
 
-def yield_law(law: ViscosityLawBase) -> "ViscoPlastic | None":
+def yield_law(law: ViscosityLawBase) -> ViscoPlastic | None:
     """The visco-plastic law ``law`` is (or clips), or None."""
     while isinstance(law, Bounded):
         law = law.law

@@ -38,12 +38,13 @@ import functools
 import math
 import re
 from dataclasses import dataclass, field, fields
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from convection.schema import ConfigError, param, short_repr, subsection
 
-__all__ = ["FIELD_KINDS", "UNIT_KINDS", "ColumnUnits", "OutputUnits", "Quantity", "Scaling", "ScalingSettings", "parse_quantity",
-           "registry"]
+__all__ = ["FIELD_KINDS", "UNIT_KINDS", "ColumnUnits", "OutputUnits", "Quantity", "Scaling", "ScalingSettings",
+           "parse_quantity", "registry"]
 
 _NUMBER = re.compile(r"^\s*([-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)?)\s*(.*?)\s*$")
 """A number followed by a unit text (``3300 kg/m^3``, ``1e21 Pa s``, ``-5 cm/yr``)."""
@@ -222,10 +223,12 @@ class Scaling:
             if section.get(key) is None:
                 raise ConfigError(f"config key 'scaling.{key}': required in a model with units (e.g. "
                                   f"{'660 km' if key == 'length' else '1e21 Pa s'})")
-        dims = {"length": "[length]", "viscosity": "[mass] / [length] / [time]", "diffusivity": "[length] ** 2 / [time]",
+        dims = {"length": "[length]", "viscosity": "[mass] / [length] / [time]",
+                "diffusivity": "[length] ** 2 / [time]",
                 "density": "[mass] / [length] ** 3", "gravity": "[length] / [time] ** 2",
                 "thermal_expansivity": "1 / [temperature]", "temperature_difference": "[temperature]",
-                "reference_temperature": "[temperature]", "heat_capacity": "[length] ** 2 / [time] ** 2 / [temperature]"}
+                "reference_temperature": "[temperature]",
+                "heat_capacity": "[length] ** 2 / [time] ** 2 / [temperature]"}
         values: dict[str, Any] = {}
         for key, dimension in dims.items():
             text = section.get(key)
@@ -298,7 +301,8 @@ class Scaling:
 
     def rayleigh(self) -> float:
         """Ra = rho0 alpha dT g L^3 / (eta0 kappa)."""
-        rho0, alpha, dT = self.needed("density"), self.needed("thermal_expansivity"), self.needed("temperature_difference")
+        rho0, alpha = self.needed("density"), self.needed("thermal_expansivity")
+        dT = self.needed("temperature_difference")
         return self.buoyancy_number(rho0 * alpha * dT)
 
     def needed(self, name: str) -> float:

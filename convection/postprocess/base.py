@@ -6,7 +6,8 @@ column classes (:class:`Column`, :class:`Forms`, :func:`integral`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping, Protocol
+from collections.abc import Mapping
+from typing import Any, ClassVar, Protocol
 
 import dolfinx.fem
 from mpi4py import MPI

@@ -87,7 +87,15 @@ def on_support(form: ufl.Form, w: dolfinx.fem.Function, /) -> ufl.Form:
     return ufl.Form(integrals)
 
 
-def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /) -> float:
+def _domain_of(solver: TransportSolver, domain: Domain | None, /) -> Domain:
+    """``domain``, or the solver's own when it is None."""
+    out = solver.domain if domain is None else domain
+    assert out is not None, "the solver has no domain: pass one"
+    return out
+
+
+def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /
+                  ) -> float:
     """Consistent boundary flux ``int_side grad T . n ds`` (``n`` the outward normal) through the
     boundary ``side`` of ``domain`` (default: the solver's). Collective.
 
@@ -97,7 +105,7 @@ def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, d
     Dirichlet side this is the flux conjugate to the discrete solution, exact for fields the
     space represents (e.g. the conduction profile). The form is compiled once per solver.
     """
-    domain = solver.domain if domain is None else domain
+    domain = _domain_of(solver, domain)
     key = ("flux", id(u), side)
     if key not in solver.forms or solver.forms[key][1] is not u:
         w = dolfinx.fem.Function(solver.V)
@@ -110,7 +118,7 @@ def boundary_flux(solver: TransportSolver, u: dolfinx.fem.Function, side: str, d
 
 def side_integral(solver: TransportSolver, side: str, domain: Domain | None = None, /) -> tuple[float, float]:
     """``(int_side T ds, int_side 1 ds)`` over the whole mesh for the solver's field. Collective."""
-    domain = solver.domain if domain is None else domain
+    domain = _domain_of(solver, domain)
     key = ("side", side)
     if key not in solver.forms:
         mesh = solver.mesh
@@ -123,7 +131,8 @@ def side_integral(solver: TransportSolver, side: str, domain: Domain | None = No
     return float(total[0]), float(total[1])
 
 
-def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /) -> float:
+def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str, domain: Domain | None = None, /
+            ) -> float:
     """Nusselt number through the boundary ``side`` of ``domain`` (default: the solver's) from the
     consistent boundary flux. Collective.
 
@@ -144,7 +153,7 @@ def nusselt(energy_solver: TransportSolver, u: dolfinx.fem.Function, side: str, 
 
     The conduction profile gives 1.
     """
-    domain = energy_solver.domain if domain is None else domain
+    domain = _domain_of(energy_solver, domain)
     lower, upper = domain.opposite(side)
     flux_out = boundary_flux(energy_solver, u, side, domain)
     heat_flow = -flux_out if side == upper else flux_out

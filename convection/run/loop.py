@@ -12,7 +12,8 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, NamedTuple, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 from mpi4py import MPI
@@ -34,7 +35,8 @@ from convection.io.run_folder import RunFolderError
 from particles.io.swarm_checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
-__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary", "SteadyState", "Watch", "Watched", "run"]
+__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary",
+           "SteadyState", "Watch", "Watched", "run"]
 
 
 PROGRESS_MODES = ("auto", "bar", "lines", "none")

@@ -86,8 +86,8 @@ class Progress:
     def update(self, step: int, t: float, dt: float, vrms: float, *, extra: str = "", force: bool = False) -> None:
         tf, vf = self._units[0], self._units[2]
         if self.mode == "bar" and self._bar is not None:
-            self._bar.set_postfix_str(f"step={step} dt={dt * tf:.3g}{self._label(1)} vrms={vrms * vf:.5g}{self._label(3)} "
-                                      f"{extra}".strip(), refresh=False)
+            self._bar.set_postfix_str(f"step={step} dt={dt * tf:.3g}{self._label(1)} "
+                                      f"vrms={vrms * vf:.5g}{self._label(3)} {extra}".strip(), refresh=False)
             self._bar.update(min(t, self.end_time) * tf - self._bar.n)
         elif self.mode == "lines" and (force or step % self.every == 0):
             eta = self.eta(t)

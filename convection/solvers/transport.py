@@ -54,7 +54,8 @@ from convection.geometry.domain import Domain
 from convection.geometry.mesh import cell_diameter
 from convection.schema import MAX_DEGREE, Names, param
 from convection.solvers.petsc_options import (
-    HAS_HYPRE, MUMPS_LU, SCALAR_AMG, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers, set_owned_options,
+    HAS_HYPRE, MUMPS_LU, SCALAR_AMG, reproducible_lu, LinearSolver, PetscSolver, krylov_options, linear_solvers,
+    set_owned_options,
 )
 from fembase.dolfinx_compat import create_vector, element_degree, function_space, petsc_vector
 from fembase.state import State
@@ -204,13 +205,15 @@ class TransportSolver(PetscSolver):
         self._a = self._L = None
         self._A: PETSc.Mat | None = None
         self._b: PETSc.Vec | None = None
-        self.forms: dict[Any, Any] = {}  # compiled forms of diagnostics on these fields (convection.postprocess.diagnostics)
+        # compiled forms of diagnostics on these fields (convection.postprocess.diagnostics)
+        self.forms: dict[Any, Any] = {}
         self.name = name
         options = self._create_ksp(mesh.comm, solver, petsc_options)
         set_owned_options(self, self._prefix, options)
 
     def settings(self) -> dict[str, Any]:
-        return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "stabilisation": self.stabilisation, "solver": self.solver,
+        return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "stabilisation": self.stabilisation,
+                "solver": self.solver,
                 "petsc_options": self._user_options, "velocity_extrapolation": self.velocity_extrapolation,
                 "diffusivity": self.diffusivity, "heating": self.heating, "name": self.name}
 
@@ -355,7 +358,7 @@ class TransportSolver(PetscSolver):
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(
         self,
-        old: "TransportSolver",
+        old: TransportSolver,
         transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
     ) -> None:
         """Copy the full time history (``T``, ``T_old``, ``T_old2``, previous velocity, previous

@@ -9,7 +9,7 @@ grad u)``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt

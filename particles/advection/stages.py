@@ -8,7 +8,7 @@ stage slopes still needed later (one block of ``width`` columns each).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import numba
 import numpy as np

@@ -44,7 +44,8 @@ __all__ = [
 ]
 
 INTERPOLATORS: Registry[type[Interpolator]] = Registry(
-    "particle interpolator", (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares, QuadraticLeastSquares)
+    "particle interpolator",
+    (Nearest, CellAverage, DistanceWeighted, ShapeFunction, LeastSquares, QuadraticLeastSquares)
 )
 """Interpolator classes by their lowercase config name."""
 

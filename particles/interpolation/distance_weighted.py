@@ -51,7 +51,8 @@ class DistanceWeighted:
     """
 
     name: ClassVar[str] = "distance_weighted"
-    description: ClassVar[str] = "inverse-distance weighted average of the particles in the cell (and neighbours) at the dof points"
+    description: ClassVar[str] = ("inverse-distance weighted average of the particles in the cell (and neighbours) at "
+                                  "the dof points")
 
     power: float = 2.0
     use_neighbours: bool = False

@@ -53,8 +53,8 @@ class QuadraticLeastSquares(LeastSquares):
     ``use_neighbours``: for the linear fallback; ``rcond``: for both fits)."""
 
     name: ClassVar[str] = "quadratic_least_squares"
-    description: ClassVar[str] = ("quadratic least-squares fit per cell into DG2 (linear least squares where a cell has "
-                                  "too few particles), optional limiter")
+    description: ClassVar[str] = ("quadratic least-squares fit per cell into DG2 (linear least squares where a cell "
+                                  "has too few particles), optional limiter")
     target_degree: ClassVar[int] = 2
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,

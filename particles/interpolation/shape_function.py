@@ -35,7 +35,8 @@ class ShapeFunction:
     """Weighting by the target's basis functions at the particles (no parameters)."""
 
     name: ClassVar[str] = "shape_function"
-    description: ClassVar[str] = "u_i = sum phi_i(x_p) v_p / sum phi_i(x_p) into P1/Q1 (continuous, across ranks) or DG0/DG1"
+    description: ClassVar[str] = ("u_i = sum phi_i(x_p) v_p / sum phi_i(x_p) into P1/Q1 (continuous, across ranks) "
+                                  "or DG0/DG1")
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:

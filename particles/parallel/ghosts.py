@@ -22,7 +22,7 @@ global vertex numbers (for adjacency) and per-cell values (:meth:`GhostExchange.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -194,7 +194,8 @@ class GhostExchange:
         parts = [received[r] for r in sorted(received)]
         halo = np.concatenate(parts) if parts else np.empty((0, 1 + nv), dtype=np.int64)
         self.halo_globals = np.ascontiguousarray(halo[:, 0])
-        self.halo_owners = np.concatenate([np.full(received[r].shape[0], r, dtype=np.int32) for r in sorted(received)]) \
+        self.halo_owners = np.concatenate([np.full(received[r].shape[0], r, dtype=np.int32)
+                                           for r in sorted(received)]) \
             if parts else np.empty(0, dtype=np.int32)
         self._recv_slices, start = {}, 0
         for r in sorted(received):

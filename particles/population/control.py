@@ -31,7 +31,7 @@ cells with more than max"):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numba
 import numpy as np

@@ -18,7 +18,7 @@ gradient, integrated strain, damage) are advanced by the Advector together with 
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping, Sequence, Union
+from collections.abc import Mapping, Sequence
 
 import dolfinx.fem
 
@@ -88,7 +88,7 @@ PROPERTIES: Registry[type[ParticleProperty]] = Registry(
 
 create_property = PROPERTIES.create
 
-PropertySpec = Union[ParticleProperty, str]
+PropertySpec = ParticleProperty | str
 
 
 def dependency_order(properties: Sequence[ParticleProperty], /) -> list[ParticleProperty]:

@@ -12,7 +12,8 @@ Runge-Kutta scheme as the positions, through :meth:`ParticleProperty.rhs`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar, Mapping
+from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt

@@ -4,7 +4,8 @@ common base of the properties that store such a source's value under a label."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, ClassVar, Union
+from collections.abc import Callable
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -19,7 +20,7 @@ __all__ = ["PointFunction", "Source", "SourceValue", "evaluate_source", "source_
 PointFunction = Callable[[npt.NDArray[np.float64]], npt.ArrayLike]
 """``f(x)``: points shape=(m, gdim), float64 -> values shape=(m,) or (m, components)."""
 
-Source = Union[PointFunction, dolfinx.fem.Function]
+Source = PointFunction | dolfinx.fem.Function
 
 
 def source_size(source: Source, components: int) -> int:

@@ -27,7 +27,8 @@ def _orders(runs: list[dict], problem: str, interpolator: str, integrator: str =
     """Fitted orders of u, p, rho and the errors at the finest mesh (keys ``e_u``...)."""
     group = series(runs)[(problem, interpolator, 0 if interpolator == "exact" else 16, integrator)]
     h = [1.0 / r["cells"] for r in group]
-    out = {q: convergence(h, [r[q] for r in group])[1] for q in ("u", "p") + (("rho",) if interpolator != "exact" else ())}
+    out = {q: convergence(h, [r[q] for r in group])[1]
+           for q in ("u", "p") + (("rho",) if interpolator != "exact" else ())}
     out.update({f"e_{q}": group[-1][q] for q in ("u", "p", "rho")})
     return out
 

@@ -120,8 +120,9 @@ def test_a_3d_box_with_a_free_surface_relaxes_like_the_2d_one(tmp_path):
     for name, extra, ranks in (("2d", ["mesh.cells=[16,8]"], 1),
                                ("3d", ["mesh.cells=[16,2,8]", "mesh.upper=[2800 km, 175 km, 700 km]"], 2)):
         out = tmp_path / name
-        items = [*SMALL, *extra, "time.max_steps=5", "output.fields_every=0", "particles.generator.particles_per_cell=4",
-                 "particles.population.min_per_cell=2", "particles.population.max_per_cell=8"]
+        items = [*SMALL, *extra, "time.max_steps=5", "output.fields_every=0",
+                 "particles.generator.particles_per_cell=4", "particles.population.min_per_cell=2",
+                 "particles.population.max_per_cell=8"]
         proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets(items)], ranks)
         assert proc.returncode == 0, proc.stderr
         runs[name] = rows(out)

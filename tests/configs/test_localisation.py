@@ -16,7 +16,10 @@ import sys
 import numpy as np
 import pytest
 
-from _runs import CONFIGS, ROOT, assert_same_statistics, env, final_particles, final_property, kill_run, rows, rows_written, run_cli, sets
+from _runs import (
+    CONFIGS, ROOT, assert_same_statistics, env, final_particles, final_property, kill_run, rows, rows_written, run_cli,
+    sets,
+)
 
 CONFIG = CONFIGS / "localisation.yaml"
 SMALL = ["mesh.cells=[32,8]", "time.end=0.3", "output.progress=none", "output.fields_every=0",

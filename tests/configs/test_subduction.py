@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 
+import numpy as np
 import pytest
 
 from _runs import CONFIGS, run_cli, sets
@@ -42,7 +43,8 @@ def test_subduction_in_units(tmp_path):
 def _benchmark():
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("schmeling_run", CONFIGS.parent / "benchmarks" / "schmeling" / "run.py")
+    spec = importlib.util.spec_from_file_location("schmeling_run",
+                                                  CONFIGS.parent / "benchmarks" / "schmeling" / "run.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -58,7 +60,7 @@ def test_published_curves():
         assert bench.at(curve, 0.0) == pytest.approx(200.0, abs=3.0), name
     passing = [bench.passing(c, 400.0) for c in curves.values()]
     assert sorted(p for p in passing if p == p) == pytest.approx([35.5, 36.4, 37.5, 41.1], abs=0.1)
-    t = pytest.importorskip("numpy").array([0.0, 1.0, 2.0])
+    t = np.array([0.0, 1.0, 2.0])
     assert bench.passing((t, t * 300.0 + 200.0), 350.0) == pytest.approx(0.5)
 
 

@@ -140,7 +140,7 @@ def test_evaluation_distributed():
     found = locate(mesh, points)
     ok = found.cells >= 0
     vals = evaluate(u, found.cells[ok], found.xref[ok])
-    err = max((np.abs(vals[:, s] - _poly(3, points[ok].T, shift=s)[0]).max(initial=0.0) for s in range(3)))
+    err = max(np.abs(vals[:, s] - _poly(3, points[ok].T, shift=s)[0]).max(initial=0.0) for s in range(3))
     # every point is found by some rank (owned or ghost cell)
     hits = np.zeros(400, dtype=np.int32)
     hits[ok] = 1

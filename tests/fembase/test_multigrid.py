@@ -43,7 +43,8 @@ def test_prolongation_is_exact_on_the_coarse_space(world, dim, degree, vector):
     coarse = _unit(comm, dim, 4 if dim == 2 else 3)
     fine = refine_keeping_partition(coarse)
     shape = (dim,) if vector else None
-    Vc, Vf = function_space(coarse, "Lagrange", degree, shape=shape), function_space(fine, "Lagrange", degree, shape=shape)
+    Vc = function_space(coarse, "Lagrange", degree, shape=shape)
+    Vf = function_space(fine, "Lagrange", degree, shape=shape)
     P = prolongation(Vc, Vf)
     bs = dim if vector else 1
     assert P.getSize() == (Vf.dofmap.index_map.size_global * bs, Vc.dofmap.index_map.size_global * bs)

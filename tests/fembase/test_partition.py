@@ -199,7 +199,8 @@ def test_balanced_run_matches_unbalanced_run(tmp_path_factory):
     run("whenever", "balance.strategy=threshold", "balance.every=6", "balance.threshold=1")
     failed = []
     if not (abs(plain.vrms - balanced.vrms) <= 1e-9 * plain.vrms and plain.cells == balanced.cells):
-        failed.append(f"balanced run differs: vrms {plain.vrms} vs {balanced.vrms}, cells {plain.cells} vs {balanced.cells}")
+        failed.append(f"balanced run differs: vrms {plain.vrms} vs {balanced.vrms}, "
+                      f"cells {plain.cells} vs {balanced.cells}")
     if not (np.array_equal(plain_ids, balanced_ids) and np.array_equal(plain_ids, np.arange(plain_ids.size))):
         failed.append("particle ids differ or are not 0..n-1")
     if comm.rank == 0:

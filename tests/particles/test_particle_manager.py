@@ -46,8 +46,9 @@ def _manager(mesh, tmp=None, **kwargs):
     dense = InitialComposition(source=lambda x: (x[:, 1] > 0.5).astype(float), label="dense")
     kwargs.setdefault("properties", ["initial_position", "integrated_strain", "velocity"])
     kwargs["properties"] = [dense, *build_properties(kwargs["properties"])]
-    return ParticleManager(mesh, generator=build_generator({"name": "random_uniform", "particles_per_cell": 10, "seed": 3},
-                                                           num_cells=mesh.topology.index_map(2).size_global),
+    generator = build_generator({"name": "random_uniform", "particles_per_cell": 10, "seed": 3},
+                                num_cells=mesh.topology.index_map(2).size_global)
+    return ParticleManager(mesh, generator=generator,
                            context=PropertyContext(u_new=_rotation(mesh)), **kwargs)
 
 

@@ -63,7 +63,8 @@ def test_a_system_is_the_same_beside_another(world):
     has alone (its own seeds, ids and counters); the counts add up (serial and collective)."""
     mesh = _mesh(world)
     u = _flow(mesh)
-    alone = {"dense": ParticleSystems({"dense": _dense(mesh, u)}), "tracers": ParticleSystems({"tracers": _tracers(mesh, u)})}
+    alone = {"dense": ParticleSystems({"dense": _dense(mesh, u)}),
+             "tracers": ParticleSystems({"tracers": _tracers(mesh, u)})}
     both = ParticleSystems({"dense": _dense(mesh, u), "tracers": _tracers(mesh, u)}, primary="dense")
     for systems in (*alone.values(), both):
         _run(systems, u)

@@ -1,11 +1,9 @@
 """Particles on a curved (second-order) annulus mesh: location near curved boundaries, generation,
 rigid-rotation advection across ranks with no particle lost."""
 
-import math
 
 import numpy as np
 import pytest
-import ufl
 from mpi4py import MPI
 
 import dolfinx.fem

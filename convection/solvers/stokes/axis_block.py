@@ -17,8 +17,8 @@ in the same order and the other ranks' contributions at its assembly (as ``A`` w
 entries then replace ``A``'s. On one rank that is the same to the last bit; on several, PETSc sums
 the contributions a rank sends to another's rows before sending them, in an order that depends on
 everything it sends (the vector form also sends the other components' zeros), so a few entries
-differ in the last place (measured: 1-2 of 17 000 per rank at 4^3, relative 1.5e-16). Rows and columns of strong velocity
-conditions keep ``A0``'s values (the conditions on component ``k`` are skipped in ``M``'s
+differ in the last place (measured: 1-2 of 17 000 per rank at 4^3, relative 1.5e-16). Rows and columns of strong
+velocity conditions keep ``A0``'s values (the conditions on component ``k`` are skipped in ``M``'s
 assembly; the element matrices of the scalar and the vector form agree entry by entry, checked in
 tests/convection/solvers/test_axis_block.py). ``A``'s other entries are never touched: they are
 ``A0``'s.
@@ -175,6 +175,7 @@ class SemiImplicitOperator:
             others = () if preconditioner is None else (preconditioner,)
             block.add(A, forms.a_si_component[3], *others)
             return preconditioner is not None
+        assert A0 is not None, "the vector form adds to A0's copy"
         A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         # Into A's (0, 0) block, skipping the Dirichlet rows and columns (their unit diagonal is in A).
         rows = self._velocity_rows()

@@ -41,7 +41,9 @@ import ufl
 from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation
-from convection.geometry.boundary import VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries
+from convection.geometry.boundary import (
+    VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries,
+)
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
 from convection.deform.surface import SurfaceTerms

@@ -63,8 +63,8 @@ class MultigridSettings:
                              "per side); 0: halve while every count is even and stays >= 2 (16 -> 8 -> 4 -> 2: 4); "
                              "an adaptive mesh adds its refinement rounds above the base (convection/adapt/levels.py)")
     rebuild_steps: int = param(10, minimum=1,
-                               help="solves a preconditioner serves at most while only the semi-implicit buoyancy's term "
-                                    "changes (a linear solve, constant viscosity); 1: set up at every solve "
+                               help="solves a preconditioner serves at most while only the semi-implicit buoyancy's "
+                                    "term changes (a linear solve, constant viscosity); 1: set up at every solve "
                                     "(convection/solvers/stokes/lagged.py)")
     rebuild_dt_change: float = param(0.25, minimum=0.0,
                                      help="the kept preconditioner is set up again when the step changed by more than "

@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from petsc4py import PETSc
 
@@ -125,7 +126,8 @@ class NonlinearStokes:
     """Picard and Newton iterations of a Stokes problem (module docstring).
 
     Args:
-        discretisation: The spaces, conditions and forms (:class:`~convection.solvers.stokes.forms.StokesDiscretisation`).
+        discretisation: The spaces, conditions and forms
+            (:class:`~convection.solvers.stokes.forms.StokesDiscretisation`).
         system: The linear system whose matrices, vectors, ``u`` and ``p`` are used
             (:class:`~convection.solvers.stokes.linear.StokesLinearSystem`).
         settings: Method and tolerances.

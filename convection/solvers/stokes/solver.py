@@ -77,8 +77,8 @@ from convection.physics.buoyancy import SemiImplicitBuoyancy
 from convection.solvers.stokes.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
 from convection.schema import MAX_DEGREE, MAX_ENTRIES, ConfigError, Names, param, subsection
 from convection.solvers.petsc_options import (
-    HAS_HYPRE, MUMPS_LU, LinearSolver, PetscSolver, check_petsc_options, krylov_options, linear_solvers, reproducible_lu,
-    set_owned_options,
+    HAS_HYPRE, MUMPS_LU, LinearSolver, PetscSolver, check_petsc_options, krylov_options, linear_solvers,
+    reproducible_lu, set_owned_options,
 )
 from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
 from convection.solvers.stokes.linear import StokesLinearSystem
@@ -144,7 +144,8 @@ def block_schur_options(velocity: dict[str, Any], /, *, rtol: float = 1e-7) -> d
 
 
 STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
-    LinearSolver("direct", "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: gathered on rank 0, reproducible)",
+    LinearSolver("direct",
+                 "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: gathered on rank 0, reproducible)",
                  MUMPS_LU, reproducible_lu),
     LinearSolver(
         "iterative",
@@ -175,8 +176,8 @@ STOKES_SOLVER_NAMES: tuple[str, ...] = (AUTO, *STOKES_SOLVERS)
 """Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
 
 STOKES_SOLVER_CHOICES: dict[str, str] = {
-    AUTO: "multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D (iterative_gamg "
-          "for a shell with free slip on both surfaces), direct in 2D",
+    AUTO: "multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D "
+          "(iterative_gamg for a shell with free slip on both surfaces), direct in 2D",
     **{name: solver.description for name, solver in STOKES_SOLVERS.items()},
 }
 """One line on each of :data:`STOKES_SOLVER_NAMES` (the config reference lists them)."""
@@ -190,8 +191,8 @@ class StokesSettings:
     degree: int = param(2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)")
     solver: str = param(AUTO, choices=Names(STOKES_SOLVER_CHOICES),
                         help="auto: multigrid (FGMRES + block preconditioner, geometric multigrid) on a fixed 3D box "
-                             "whose cells halve twice, else iterative (AMG) in 3D (iterative_gamg for a shell free slip "
-                             "on both surfaces), direct (MUMPS) in 2D")
+                             "whose cells halve twice, else iterative (AMG) in 3D (iterative_gamg for a shell free "
+                             "slip on both surfaces), direct (MUMPS) in 2D")
     petsc_options: Mapping[str, Any] = param({}, check=check_petsc_options, max_items=MAX_ENTRIES,
                                              help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); "
                                                   "viewers may only print")
@@ -234,8 +235,13 @@ def check_viscosity_rules(depends_on: Collection[str], /, *, buoyancy_theta: flo
                           "use picard")
 
 
-def _levels_of(mesh: dolfinx.mesh.Mesh, solver: str, coarse_meshes: Sequence[dolfinx.mesh.Mesh]
-               | Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.mesh.Mesh]], /) -> tuple[str, tuple[dolfinx.mesh.Mesh, ...]]:
+CoarseMeshes = Sequence[dolfinx.mesh.Mesh] | Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.mesh.Mesh]]
+"""The meshes a multigrid's levels are made of, coarse to fine, or a collective callable making them
+from the fine mesh."""
+
+
+def _levels_of(mesh: dolfinx.mesh.Mesh, solver: str, coarse_meshes: CoarseMeshes, /
+               ) -> tuple[str, tuple[dolfinx.mesh.Mesh, ...]]:
     """The solver for ``mesh`` and, for the multigrid, the coarser meshes it is nested in
     (collective with a callable ``coarse_meshes``).
 
@@ -384,7 +390,7 @@ class StokesSolver(PetscSolver):
                  solver: str = _DEFAULTS.solver, petsc_options: Mapping[str, Any] | None = None,
                  nitsche_penalty: float | None = None, buoyancy_theta: float = _DEFAULTS.buoyancy_theta,
                  nonlinear: NonlinearSettings = _DEFAULTS.nonlinear, multigrid: MultigridSettings = _DEFAULTS.multigrid,
-                 coarse_meshes: Sequence[dolfinx.mesh.Mesh] | Callable[[dolfinx.mesh.Mesh], Sequence[dolfinx.mesh.Mesh]] = (),
+                 coarse_meshes: CoarseMeshes = (),
                  surface: SurfaceTerms | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
@@ -403,12 +409,12 @@ class StokesSolver(PetscSolver):
         self.is_nonlinear = approximation.is_nonlinear
         self._coarse_meshes = coarse_meshes
         check_viscosity_rules(approximation.viscosity_law.depends_on, buoyancy_theta=self.buoyancy_theta,
-                              method=nonlinear.method, pressure_level_free=all(s in self.bcs for s in self.domain.boundaries))
+                              method=nonlinear.method, pressure_level_free=set(self.domain.boundaries) <= set(self.bcs))
         self._semi_implicit = (SemiImplicitBuoyancy(mesh, approximation, self.buoyancy_theta)
                                if self.buoyancy_theta != 0.0 else None)
         self._asked_solver = solver
-        name, coarse = _levels_of(mesh, resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space),
-                                  coarse_meshes)
+        resolved = resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space)
+        name, coarse = _levels_of(mesh, resolved, coarse_meshes)
         self._petsc_options = self._create_ksp(mesh.comm, name, petsc_options)
         self.is_iterative = self.solver != "direct"
         self.surface = surface
@@ -561,13 +567,13 @@ class StokesSolver(PetscSolver):
         """The Functions a checkpoint fills: ``u``, ``p`` and the lagged preconditioner's."""
         out = {"u": self.u, "p": self.p}
         if self._lag is not None and "preconditioner" in scalars:
-            out.update({f"preconditioner/{name}": f for name, f in self._lag.restore(scalars["preconditioner"]).items()})
+            out.update({f"preconditioner/{k}": f for k, f in self._lag.restore(scalars["preconditioner"]).items()})
         return out
 
     # ------------------------------------------------------------------ adaptivity
     def transfer_from(
         self,
-        old: "StokesSolver",
+        old: StokesSolver,
         transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
     ) -> None:
         """Copy ``u`` and ``p`` (the initial guess) from ``old``, a solver on the previous mesh, by

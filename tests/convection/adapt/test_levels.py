@@ -46,8 +46,8 @@ def test_fixed_mesh_levels_are_the_boxes(world):
 def test_adaptive_levels_nest_and_coarsen(world, region, skipped):
     """Collective: the base refined twice where x < region. Refining half the box (128, 344, 1176
     cells serially), every mesh coarsens enough to be a level; refining a tenth (128, 200, 456),
-    the base has more than MAX_RATIO of the first round's cells and is skipped. The prolongations between the levels build (every
-    fine node in a coarse cell of its rank: they nest on this partition)."""
+    the base has more than MAX_RATIO of the first round's cells and is skipped. The prolongations between the levels
+    build (every fine node in a coarse cell of its rank: they nest on this partition)."""
     meshes, hierarchy = _setup(world)
     mesh = hierarchy.rebuild(meshes[-1], _wanted(meshes[-1], lambda x: x[:, 0] < region))
     rounds = hierarchy.chain.meshes
@@ -148,9 +148,9 @@ def test_coarsening_levels_keeps_both_ends():
 def test_curved_levels_nest_through_their_straight_cells(world):
     """Collective: the annulus (gmsh's straight base, the shell manifold curving every mesh)
     refined to level 2 near the outer circle and a ray (three rounds): the levels are the curved
-    base and the curved first round (the third round refined little: skipped); every node of a finer level is found through the straight cells (the
-    prolongations build) and the prolongation of a smooth field's interpolant agrees with the fine
-    interpolant to the curved cells' geometric error (quadratic maps of the circles), while a
+    base and the curved first round (the third round refined little: skipped); every node of a finer level is found
+    through the straight cells (the prolongations build) and the prolongation of a smooth field's interpolant agrees
+    with the fine interpolant to the curved cells' geometric error (quadratic maps of the circles), while a
     prolongation found in the curved cells themselves misses nodes outside the coarse boundary."""
     pytest.importorskip("gmsh")
     from convection.geometry.shell import ShellSpec, create_shell_mesh

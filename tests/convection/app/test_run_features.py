@@ -55,7 +55,8 @@ def _check_particle_run(out: Path) -> list[str]:
             problems.append(f"t={t}: {block.n_points} points (statistics: {n}), arrays {sorted(names)}")
         elif block.point_data["velocity"].shape != (n, 3):  # 2D vectors read as zero-padded 3-vectors
             problems.append(f"velocity array shape {block.point_data['velocity'].shape}")
-    if t > 0 and not np.all(block.point_data["integrated_strain"] >= 0) or block.point_data["integrated_strain"].max() <= 0:
+    strain = block.point_data["integrated_strain"]
+    if t > 0 and not np.all(strain >= 0) or strain.max() <= 0:
         problems.append("no strain accumulated")
     return problems
 

@@ -1,4 +1,5 @@
-"""End-to-end convection runs built from configs (convection.app.factory) and through the CLI (small meshes, few steps)."""
+"""End-to-end convection runs built from configs (convection.app.factory) and through the CLI (small meshes, few
+steps)."""
 
 import json
 import os

@@ -160,6 +160,7 @@ def test_a_material_entry_is_declared_once():
 
     assert SCHEMA["materials"].items == section_schema(MaterialSettings)
     material = Material("crust", lambda x: x[0])
-    assert (material.Rb, material.viscosity) == (MaterialSettings(initial="0").Rb, MaterialSettings(initial="0").viscosity)
+    default = MaterialSettings(initial="0")
+    assert (material.Rb, material.viscosity) == (default.Rb, default.viscosity)
     config = _minimal(materials={"crust": {"initial": "z > 0.9"}})
     assert config["materials"]["crust"] == settings_as_section(MaterialSettings(initial="z > 0.9"))

@@ -64,8 +64,8 @@ def test_shell_config_errors(sections, key):
 
 @pytest.mark.parametrize("geometry", ["annulus", "spherical_shell"])
 def test_shell_adaptivity_and_balance_allowed(geometry):
-    config = load_config(None, document=_document(mesh={"geometry": geometry, "resolution": 0.5}, adaptivity={"enabled": True},
-                                                  balance={"strategy": "every"}))
+    config = load_config(None, document=_document(mesh={"geometry": geometry, "resolution": 0.5},
+                                                  adaptivity={"enabled": True}, balance={"strategy": "every"}))
     assert config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "every"
 
 

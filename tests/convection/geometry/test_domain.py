@@ -84,7 +84,8 @@ def test_sector_domain():
 
 
 @pytest.mark.parametrize("mesh, extra, needle", [
-    ({"geometry": "annulus", "resolution": 0.3, "cells": [4, 4]}, {}, "'mesh.cells': not a key of mesh.geometry annulus"),
+    ({"geometry": "annulus", "resolution": 0.3, "cells": [4, 4]}, {},
+     "'mesh.cells': not a key of mesh.geometry annulus"),
     ({"cells": [4, 4], "radii": [1.0, 2.0]}, {}, "'mesh.radii': not a key of mesh.geometry box"),
     ({"cells": [4, 4], "radii": [1.22, 2.22], "resolution": None}, {}, None),
     ({"geometry": "sector", "resolution": 0.3, "angles": [0.0, 200.0]}, {}, "'mesh.angles'"),

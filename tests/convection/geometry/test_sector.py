@@ -80,7 +80,8 @@ def _solve(spec: SectorSpec, n: int, k: int, prescribed_sides: bool, comm: MPI.C
     volume = _integral(mesh, dolfinx.fem.Constant(mesh, 1.0) * ufl.dx)
     p_exact.x.array[:] -= _integral(mesh, p_exact * ufl.dx) / volume  # the solver's pressure has zero mean
     du, dp = stokes.u - u_exact, stokes.p - p_exact
-    u_error = math.sqrt(_integral(mesh, ufl.inner(du, du) * ufl.dx) / _integral(mesh, ufl.inner(u_exact, u_exact) * ufl.dx))
+    u_error = math.sqrt(_integral(mesh, ufl.inner(du, du) * ufl.dx)
+                        / _integral(mesh, ufl.inner(u_exact, u_exact) * ufl.dx))
     p_error = math.sqrt(_integral(mesh, dp * dp * ufl.dx) / _integral(mesh, p_exact * p_exact * ufl.dx))
     cells = mesh.topology.index_map(2).size_global
     stokes.destroy()

@@ -18,7 +18,12 @@ import h5py
 import pytest
 from mpi4py import MPI
 
-from _runs import command as _command, env as _env, error_line as _error_line, kill_session, run_cli as _run, sets as _sets
+from _runs import command as _command
+from _runs import env as _env
+from _runs import error_line as _error_line
+from _runs import kill_session
+from _runs import run_cli as _run
+from _runs import sets as _sets
 
 from convection.io.checkpoint import CheckpointError, latest_checkpoint, list_checkpoints, read_checkpoint
 from convection.io.pictures import read_statistics
@@ -87,7 +92,8 @@ def test_lock_refuses_a_second_holder_and_is_free_after_release(tmp_path):
     with RunFolderLock(folder, MPI.COMM_SELF) as lock:
         assert lock.held and folder.is_dir()
         assert (folder / LOCK_NAME).read_text() == f"pid {os.getpid()} on {os.uname().nodename}\n"
-        with pytest.raises(RunFolderError, match=re.escape(f"run folder '{folder}' is in use by another run (pid {os.getpid()} ")):
+        message = f"run folder '{folder}' is in use by another run (pid {os.getpid()} "
+        with pytest.raises(RunFolderError, match=re.escape(message)):
             RunFolderLock(folder, MPI.COMM_SELF).__enter__()
     with RunFolderLock(folder, MPI.COMM_SELF):  # released: free again
         pass
@@ -132,7 +138,8 @@ def test_a_second_run_or_resume_of_a_busy_folder_is_refused(tmp_path):
     try:
         _wait_for(proc, lambda: latest_checkpoint(run_dir) is not None)
         before = (run_dir / "config.yaml").read_text()
-        line = _error_line(_run(["run", str(CONFIG), "--output", str(run_dir), *_sets([*SMALL, "time.max_steps=2"])]), 1)
+        line = _error_line(_run(["run", str(CONFIG), "--output", str(run_dir),
+                                 *_sets([*SMALL, "time.max_steps=2"])]), 1)
         assert line == f"error: run folder '{run_dir}' is in use by another run (pid {proc.pid} on " \
                        f"{os.uname().nodename}); wait for it to end or use another folder"
         line = _error_line(_run(["resume", str(run_dir)], ranks=2), 1)

@@ -154,8 +154,12 @@ def test_temperature_with_particles_coloured_by_a_property(tmp_path):
     left, right = body[:, : w // 2], body[:, w // 2:]
     # material = x + 2 at t = 2: dark purple particles on the left, yellow ones on the right;
     # neither colour is in coolwarm (the temperature) or white
-    purple = lambda a: ((a[..., 0] < 0.35) & (a[..., 1] < 0.15) & (a[..., 2] > 0.25) & (a[..., 2] < 0.45)).sum()
-    yellow = lambda a: ((a[..., 0] > 0.75) & (a[..., 1] > 0.75) & (a[..., 2] < 0.35)).sum()
+    def purple(a):
+        return ((a[..., 0] < 0.35) & (a[..., 1] < 0.15) & (a[..., 2] > 0.25) & (a[..., 2] < 0.45)).sum()
+
+    def yellow(a):
+        return ((a[..., 0] > 0.75) & (a[..., 1] > 0.75) & (a[..., 2] < 0.35)).sum()
+
     assert purple(left) > 50 and yellow(right) > 50
     assert purple(right) < purple(left) / 5 and yellow(left) < yellow(right) / 5
     plain = plot_snapshots(directory, times=[2.0], log=None)[1]

@@ -7,7 +7,6 @@ import math
 
 import numpy as np
 import pytest
-import ufl
 import dolfinx
 from mpi4py import MPI
 

@@ -59,7 +59,8 @@ BOUNDARIES_3D = {
 @pytest.mark.parametrize("viscosity", ["constant", "temperature"])
 def test_component_block_is_the_vector_term_bit_for_bit_3d(world, monkeypatch, boundaries, viscosity):
     mesh = dolfinx.mesh.create_unit_cube(world, 4, 4, 4)
-    law = ViscosityLaw() if viscosity == "constant" else ViscosityLaw(temperature_law="frank_kamenetskii", gamma=np.log(1e3))
+    law = (ViscosityLaw() if viscosity == "constant"
+           else ViscosityLaw(temperature_law="frank_kamenetskii", gamma=np.log(1e3)))
     bcs = BOUNDARIES_3D[boundaries]
     fast = _matrices(mesh, bcs, law, "iterative", True, monkeypatch)
     slow = _matrices(mesh, bcs, law, "iterative", False, monkeypatch)

@@ -147,7 +147,8 @@ def _check_rigid_body_modes(mesh) -> None:
     gdim = mesh.geometry.dim
     V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    A = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * ufl.dx))
+    A = dolfinx.fem.petsc.assemble_matrix(
+        dolfinx.fem.form(ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * ufl.dx))
     A.assemble()
     modes = rigid_body_modes(V).getVecs()
     assert len(modes) == (3 if gdim == 2 else 6)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fembase.dolfinx_compat import DOLFINX_VERSION
+from fembase.dolfinx_compat import repartitioned_manifolds_nest
 import ufl
 import dolfinx
 from mpi4py import MPI
@@ -51,7 +51,8 @@ def _square(comm, n: int, contrast: float):
     meshes = domain.create_mesh_levels(comm, domain.mesh_levels())
     T = dolfinx.fem.Function(function_space(meshes[-1], "Lagrange", 2))
     T.interpolate(lambda x: 1.0 - x[1] + 0.1 * np.cos(np.pi * x[0]) * np.sin(np.pi * x[1]))
-    law = ViscosityLaw(temperature_law="frank_kamenetskii", gamma=np.log(contrast)) if contrast != 1.0 else ViscosityLaw()
+    law = (ViscosityLaw(temperature_law="frank_kamenetskii", gamma=np.log(contrast)) if contrast != 1.0
+           else ViscosityLaw())
     return meshes, T, BoussinesqApproximation(Ra=1e5, viscosity=law)
 
 
@@ -222,22 +223,25 @@ def test_balanced_adaptive_and_shell_multigrid_are_accepted():
                          ["stokes.solver=multigrid", "balance.strategy=every", "adaptivity.enabled=true",
                           "adaptivity.max_level=1"])
     assert config["balance"]["strategy"] == "every"
-    if DOLFINX_VERSION < (0, 7):
+    if repartitioned_manifolds_nest():
         shell = load_config(ROOT / "configs" / "shell_adaptive.yaml", ["stokes.solver=multigrid"])  # curved levels
     else:
         with pytest.raises(ConfigError, match="repartitioned curved mesh needs DOLFINx 0.5"):
             load_config(ROOT / "configs" / "shell_adaptive.yaml", ["stokes.solver=multigrid"])
-        shell = load_config(ROOT / "configs" / "shell_adaptive.yaml", ["stokes.solver=multigrid", "balance.strategy=none"])
+        shell = load_config(ROOT / "configs" / "shell_adaptive.yaml",
+                            ["stokes.solver=multigrid", "balance.strategy=none"])
     assert shell["stokes"]["solver"] == "multigrid"
 
 
 @pytest.mark.parametrize("sets, message", [
-    (["stokes.solver=iterative", "stokes.multigrid.levels=3"], "'stokes.multigrid.levels': only with stokes.solver: multigrid"),
+    (["stokes.solver=iterative", "stokes.multigrid.levels=3"],
+     "'stokes.multigrid.levels': only with stokes.solver: multigrid"),
     (["stokes.multigrid.levels=4"], "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
     (["stokes.solver=multigrid", "mesh.cells=[25,25,25]"], "'stokes.solver': multigrid needs coarser meshes"),
     (["stokes.solver=multigrid", "stokes.multigrid.levels=4", "mesh.cells=[20,20,20]"],
      "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
-    (["stokes.solver=multigrid", "balance.strategy=every"], "'balance.strategy': stokes.solver multigrid repartitions adaptive meshes only"),
+    (["stokes.solver=multigrid", "balance.strategy=every"],
+     "'balance.strategy': stokes.solver multigrid repartitions adaptive meshes only"),
 ])
 def test_config_rules(sets, message):
     with pytest.raises(ConfigError, match=message):

@@ -217,7 +217,8 @@ def test_bounded_initial_temperature_from_a_config():
     sets = ["mesh.cells=[12,12]", f"initial.temperature={sharp}"]
     ranges = {}
     for bounded in (False, True):
-        model = build_model(load_config(CONFIGS / "blankenbach_1a.yaml", [*sets, f"initial.temperature_bounded={bounded}"]))
+        config = load_config(CONFIGS / "blankenbach_1a.yaml", [*sets, f"initial.temperature_bounded={bounded}"])
+        model = build_model(config)
         ranges[bounded] = _range_between_nodes(model.T)
         model.destroy()
     assert ranges[False][1] > 1.1  # measured 1.175

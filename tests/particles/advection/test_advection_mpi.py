@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-import ufl
 from mpi4py import MPI
 
 import dolfinx.fem
@@ -10,6 +9,7 @@ import dolfinx.mesh
 
 from fembase.dolfinx_compat import function_space
 from particles import Swarm
+from particles.advection import Advector
 from particles.generation import RandomUniform, generate
 
 N_CELLS = 16
@@ -25,8 +25,6 @@ def _cellular_flow(x):
 
 
 def _advect(comm):
-    from particles.advection import Advector
-
     mesh = dolfinx.mesh.create_unit_square(comm, N_CELLS, N_CELLS)
     V = function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,))
     u = dolfinx.fem.Function(V)
@@ -51,7 +49,6 @@ def _advect(comm):
 
 @pytest.mark.mpi
 def test_rk2_rotation_conserves_particles_and_matches_serial():
-    pytest.importorskip("particles.advection")
     comm = MPI.COMM_WORLD
     ids0, ids, x, sent, lost = _advect(comm)
     ref_ids0, ref_ids, ref_x, _, ref_lost = _advect(MPI.COMM_SELF)

@@ -173,7 +173,8 @@ def test_means_match_hand_computed_values():
     swarm.add(np.arange(6), x, swarm.geometry.pull_back(cells, x), cells,
               np.array([1.0, 2.0, 4.0, 3.0, 3.0, 12.0])[:, None])
     u = dolfinx.fem.Function(function_space(mesh, "DG", 0))
-    expected = {"arithmetic": [7 / 3, 6.0], "geometric": [2.0, 108 ** (1 / 3)], "harmonic": [12 / 7, 3 / (2 / 3 + 1 / 12)]}
+    expected = {"arithmetic": [7 / 3, 6.0], "geometric": [2.0, 108 ** (1 / 3)],
+                "harmonic": [12 / 7, 3 / (2 / 3 + 1 / 12)]}
     for mean, values in expected.items():
         interpolate_to_mesh(swarm, "v", u, mean=mean)
         assert np.allclose(u.x.array, values, rtol=1e-14, atol=0), mean

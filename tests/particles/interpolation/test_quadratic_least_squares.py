@@ -112,7 +112,8 @@ def test_a_config_run_with_the_quadratic_fit(tmp_path):
     from _runs import CONFIGS, rows, run_on_ranks
 
     extra = ["particles.interpolator={name: quadratic_least_squares, limit: true}", "composition.degree=2",
-             "mesh.cells=[12,12]", "time.end=60", "output.progress=none", "output.fields_every=0", "particles.output=null"]
+             "mesh.cells=[12,12]", "time.end=60", "output.progress=none", "output.fields_every=0",
+             "particles.output=null"]
     runs = run_on_ranks(CONFIGS / "rayleigh_taylor_3.yaml", {1: tmp_path / "1", 2: tmp_path / "2"}, extra)
     a, b = rows(runs[1]), rows(runs[2])
     assert len(a) == len(b) > 2 and all(r["n_lost"] == "0" for r in a + b)

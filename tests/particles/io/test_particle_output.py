@@ -12,7 +12,6 @@ import h5py
 import meshio
 import numpy as np
 import pytest
-import ufl
 from mpi4py import MPI
 
 import dolfinx.fem

@@ -5,7 +5,6 @@ import math
 
 import numpy as np
 import pytest
-import ufl
 from mpi4py import MPI
 
 import dolfinx.fem

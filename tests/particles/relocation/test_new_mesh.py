@@ -23,7 +23,7 @@ def _check_adaptations(comm):
     rng = np.random.default_rng(3)  # same stream on every rank: wanted levels from a global rule
     mesh = base
     cell_counts = []
-    for k in range(20):
+    for _ in range(20):
         # Wanted level from a moving band (refine there, coarsen elsewhere), random depth.
         centre, depth = rng.uniform(0.1, 0.9), int(rng.integers(0, 4))
         midpoints = swarm.geometry.push_forward(np.arange(swarm.num_owned_cells, dtype=np.int32),

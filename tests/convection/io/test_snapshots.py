@@ -14,7 +14,8 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from convection.io.fields import FieldOutput
-from convection.io.pictures import _Labels, field_units, main, plot_snapshots, snapshot_times
+from convection.io.pictures import field_units, main, plot_snapshots, snapshot_times
+from convection.io.pictures.labels import Labels
 from fembase.dolfinx_compat import function_space, refine_keeping_partition
 from particles import Swarm
 from particles.generation import generate
@@ -244,10 +245,10 @@ def test_viscosity_on_a_log_scale_and_titles_in_units(tmp_path):
     assert np.allclose(bottom, colormaps["magma"](1.0)[:3], atol=0.03)  # 1e23: the high end
     (tmp_path / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km",
                                                              "fields": {"viscosity": "Pa*s", "material": "1"}}))
-    labels = _Labels(field_units(tmp_path))
+    labels = Labels(field_units(tmp_path))
     assert (labels.time(2.5), labels.of("viscosity"), labels.of("material")) == ("2.5 Myr", "viscosity [Pa*s]",
                                                                               "material")
-    assert _Labels().time(2.5) == "2.5" and field_units(tmp_path / "nowhere") is None
+    assert Labels().time(2.5) == "2.5" and field_units(tmp_path / "nowhere") is None
 
 
 def test_the_particle_system_drawn(tmp_path):

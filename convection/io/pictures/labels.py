@@ -1,11 +1,28 @@
-"""Titles and labels of the pictures in the output's units (:func:`convection.io.pictures.run_files.field_units`)."""
+"""Titles, axis labels and tick numbers of the pictures, in the output's units
+(:func:`convection.io.pictures.run_files.field_units`; a nondimensional run: the solver's numbers).
+
+Ticks are plain numbers (``1573``, ``0.25``), never an offset (``+1.5e3``) or a power of ten
+printed apart from the axis: where the numbers are very large or very small, the power goes into
+the label instead (``pressure [MPa] (×10^3)``).
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, NamedTuple
 
-__all__ = ["Labels", "time_label"]
+if TYPE_CHECKING:
+    from matplotlib.axis import Axis
+    from matplotlib.ticker import Formatter
+
+__all__ = ["AXIS_NAMES", "Labels", "TickScale", "pyvista_format", "plain_ticks", "tick_scale", "time_label"]
+
+AXIS_NAMES = ("x", "y", "z")
+"""The names of the coordinates (a 2D model's vertical coordinate is ``z`` as in its config)."""
+
+_PLAIN = (1e-3, 1e5)
+"""Numbers whose largest magnitude lies in this range are printed as they are."""
 
 
 def time_label(t: float) -> str:
@@ -25,3 +42,61 @@ class Labels:
     def of(self, name: str) -> str:
         unit = (self.units.get("fields") or {}).get(name)
         return f"{name} [{unit}]" if unit and unit != "1" else name
+
+    @property
+    def length(self) -> str | None:
+        """The unit of the coordinates (e.g. ``km``), None for nondimensional output."""
+        unit = self.units.get("length")
+        return str(unit) if unit else None
+
+    def axis(self, name: str) -> str:
+        """The label of coordinate ``name`` (``x``, ``y``, ``z``): ``x [km]``, or ``x``."""
+        return f"{name} [{self.length}]" if self.length else name
+
+
+class TickScale(NamedTuple):
+    """Ticks shown as ``value / 10**power``, the label saying so (``power`` 0: as they are)."""
+
+    power: int
+
+    def label(self, label: str) -> str:
+        return label if self.power == 0 else f"{label} (×$10^{{{self.power}}}$)"
+
+
+def tick_scale(lo: float, hi: float) -> TickScale:
+    """The scale of ticks between ``lo`` and ``hi``: a power of ten in steps of three when the
+    largest magnitude is outside [1e-3, 1e5) (``2.5e9`` is ticked ``2.5`` with ×10^9 in the label)."""
+    top = max(abs(lo), abs(hi))
+    if top == 0.0 or not math.isfinite(top) or _PLAIN[0] <= top < _PLAIN[1]:
+        return TickScale(0)
+    return TickScale(3 * math.floor(math.log10(top) / 3))
+
+
+def _formatter(scale: TickScale) -> Formatter:
+    from matplotlib.ticker import FuncFormatter, ScalarFormatter
+
+    if scale.power == 0:
+        formatter = ScalarFormatter(useOffset=False)
+        formatter.set_scientific(False)
+        return formatter
+    factor = 10.0 ** scale.power
+    return FuncFormatter(lambda value, _: f"{value / factor:.6g}")
+
+
+def plain_ticks(axis: Axis, lo: float, hi: float, label: str) -> str:
+    """Give the matplotlib ``axis`` plain tick numbers for values from ``lo`` to ``hi``; returns
+    ``label`` with the power of ten the ticks leave out, if any."""
+    scale = tick_scale(lo, hi)
+    axis.set_major_formatter(_formatter(scale))
+    return scale.label(label)
+
+
+def pyvista_format(lo: float, hi: float) -> str:
+    """A printf format of plain numbers for pyvista's scalar bars and axes from ``lo`` to ``hi``:
+    as many decimals as a fifth of the range needs (``%.0f`` for 273..1573 K, ``%.2f`` for 0..1);
+    ``%.3g`` where the numbers are very large or very small."""
+    if tick_scale(lo, hi).power != 0:
+        return "%.3g"
+    step = abs(hi - lo) / 5.0
+    decimals = 0 if step == 0.0 or step >= 1.0 else min(6, -math.floor(math.log10(step)))
+    return f"%.{decimals}f"

@@ -13,59 +13,14 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from _picture_runs import TIMES, field_functions, run_directory
 from convection.io.fields import FieldOutput
 from convection.io.pictures import field_units, main, plot_snapshots, snapshot_times
 from convection.io.pictures.labels import Labels
-from fembase.dolfinx_compat import function_space, refine_keeping_partition
+from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.generation import generate
 from particles.output import ParticleWriter
-
-TIMES = (0.0, 1.0, 2.0)
-
-
-def _functions(mesh: dolfinx.mesh.Mesh, temperature: str) -> dict[str, dolfinx.fem.Function]:
-    """material = [z > 1/2] (DG0), temperature = z or 0 (P2), velocity, pressure = x (P1).
-
-    z is the vertical coordinate: y in 2D, z in 3D.
-    """
-    up = mesh.geometry.dim - 1
-    material = dolfinx.fem.Function(function_space(mesh, "DG", 0))
-    material.interpolate(lambda x: (x[up] > 0.5).astype(np.float64))
-    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
-    T.interpolate(lambda x: x[up] if temperature == "z" else 0.0 * x[up])
-    u = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,)))
-    u.interpolate(lambda x: np.stack([x[1] - 0.5, 0.5 - x[0], 0 * x[0]][: mesh.geometry.dim]))
-    p = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1))
-    p.interpolate(lambda x: x[0])
-    return {"temperature": T, "velocity": u, "pressure": p, "material": material}
-
-
-def _run_directory(path: Path, *, temperature: str = "z", dim: int = 2, particles: bool = True) -> Path:
-    """A tiny run: fields at TIMES (the mesh refined before the last), particles, statistics.csv."""
-    comm = MPI.COMM_SELF
-    if dim == 2:
-        mesh = dolfinx.mesh.create_unit_square(comm, 6, 6)
-    else:
-        mesh = dolfinx.mesh.create_unit_cube(comm, 3, 3, 3)
-    mesh.topology.create_entities(1)
-    out = FieldOutput(path)
-    for t in TIMES:
-        if t == TIMES[-1]:
-            mesh = refine_keeping_partition(mesh)
-        out.write(_functions(mesh, temperature), t)
-    out.close()
-    if particles:
-        swarm = Swarm(mesh)
-        swarm.add_property("material")
-        generate(swarm, "random_uniform", num_particles=400, seed=2)
-        writer = ParticleWriter(path)
-        for step, t in enumerate(TIMES):
-            swarm.property("material")[:, 0] = swarm.x[:, 0] + t
-            writer.write(swarm, t, step)
-    lines = ["step,time,vrms,nusselt,cells"] + [f"{k},{t},{1 + t},{2 + t},{100}" for k, t in enumerate(TIMES)]
-    (path / "statistics.csv").write_text("\n".join(lines) + "\n")
-    return path
 
 
 def _check_picture(path: Path) -> None:
@@ -113,7 +68,7 @@ def test_snapshot_times_snap_to_written():
 
 
 def test_snapshots_of_a_2d_run(tmp_path):
-    directory = _run_directory(tmp_path)
+    directory = run_directory(tmp_path)
     skipped: list[str] = []
     paths = plot_snapshots(directory, log=skipped.append)
     names = sorted(p.name for p in paths)
@@ -126,7 +81,7 @@ def test_snapshots_of_a_2d_run(tmp_path):
 
 
 def test_particle_colours_and_chosen_times(tmp_path):
-    directory = _run_directory(tmp_path, temperature="zero")
+    directory = run_directory(tmp_path, temperature="zero")
     skipped: list[str] = []
     paths = plot_snapshots(directory, times=[0.9, 1.2], field="pressure", particle_property="material",
                            log=skipped.append)
@@ -144,7 +99,7 @@ def test_particle_colours_and_chosen_times(tmp_path):
 def test_temperature_with_particles_coloured_by_a_property(tmp_path):
     """With a particle property the temperature picture shows the particles on top in viridis (the
     seed's figure 5, right: a section coloured by initial radius); the pictures go to out_dir."""
-    directory = _run_directory(tmp_path)
+    directory = run_directory(tmp_path)
     out = tmp_path / "pictures"
     paths = plot_snapshots(directory, times=[2.0], particle_property="material", out_dir=out, log=None)
     assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
@@ -164,7 +119,7 @@ def test_temperature_with_particles_coloured_by_a_property(tmp_path):
 
 
 def test_unknown_names_list_the_known_ones(tmp_path):
-    directory = _run_directory(tmp_path)
+    directory = run_directory(tmp_path)
     with pytest.raises(ValueError, match="fields: .*material"):
         plot_snapshots(directory, field="density", log=None)
     with pytest.raises(ValueError, match="properties: id, rank, material"):
@@ -172,7 +127,7 @@ def test_unknown_names_list_the_known_ones(tmp_path):
 
 
 def test_snapshots_of_a_3d_run(tmp_path):
-    directory = _run_directory(tmp_path, dim=3)
+    directory = run_directory(tmp_path, dim=3)
     paths = plot_snapshots(directory, times=[2.0], log=None)
     assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
     for path in paths:
@@ -180,7 +135,7 @@ def test_snapshots_of_a_3d_run(tmp_path):
 
 
 def test_cli_draws_summary_and_snapshots(tmp_path, capsys):
-    directory = _run_directory(tmp_path, particles=False)
+    directory = run_directory(tmp_path, particles=False)
     assert main([str(directory), "--times", "2"]) == 0
     printed = capsys.readouterr().out.split()
     assert printed == [str(directory / "summary.png"), str(directory / "snapshots" / "material_0002_t2.png"),
@@ -229,7 +184,7 @@ def test_viscosity_on_a_log_scale_and_titles_in_units(tmp_path):
     import json
 
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 6, 6)
-    functions = _functions(mesh, "z")
+    functions = field_functions(mesh, "z")
     viscosity = dolfinx.fem.Function(function_space(mesh, "DG", 0))
     viscosity.interpolate(lambda x: np.where(x[1] > 0.5, 1e19, 1e23))
     out = FieldOutput(tmp_path)

@@ -5,23 +5,37 @@ logarithmic scale, the temperature with the mesh."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from convection.io.pictures.labels import Labels
+from convection.io.pictures.labels import Labels, plain_ticks
 from convection.io.pictures.series import Series, clim, field_values, import_pyvista, positive, read_particles
 
 if TYPE_CHECKING:
     import pyvista as pv
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-__all__ = ["Picture", "View", "composition_picture", "mean_cell_size", "picture_plane", "temperature_picture",
+__all__ = ["ColourBar", "Picture", "View", "composition_picture", "mean_cell_size", "picture_plane", "temperature_picture",
            "viscosity_picture"]
 
 
-_SIDE, _TOP, _BOTTOM = 30, 50, 100  # margins of a snapshot in pixels: sides, title, scalar bars
-_MAX_WIDTH, _MAX_HEIGHT, _MIN_WIDTH = 1000, 700, 600  # size of the domain in the picture, pixels
+_MAX_WIDTH, _MAX_HEIGHT = 1000, 700  # largest size of the domain in the picture, pixels
+_MIN_WIDTH = 600  # smallest width of the picture, pixels (room for the colour bars)
+_LEFT, _RIGHT, _TOP, _BELOW, _BARS = 85, 35, 45, 55, 80  # margins, pixels: axes, title, tick labels, colour bars
+_DPI = 100
 _MIN_EDGE_CELL_PIXELS = 50.0  # mesh edges are drawn if cells cover at least this many pixels on average
+
+
+class ColourBar(NamedTuple):
+    """A colour bar below a picture: what it is titled, its colour map and range; ``log``: a
+    logarithmic scale (the range in the values' units)."""
+
+    title: str
+    cmap: Any
+    limits: tuple[float, float]
+    log: bool = False
 
 
 class View(NamedTuple):
@@ -43,15 +57,16 @@ VIEW_3D = View((0, 2), 1, -1.0)  # from -y: x right, z up
 
 
 class Picture:
-    """An off-screen plotter framed on one plane of the domain, with room for a title and bars.
+    """One plane of the domain rendered off-screen by pyvista, framed by matplotlib: axes in the
+    output's units, the title above, the colour bars below (plain tick numbers).
 
     Args:
         data: The field data set (3D: its section).
         view: Which plane is shown and from where.
-        bars: Number of scalar bars (side by side below the domain).
+        labels: The output's units.
     """
 
-    def __init__(self, data: pv.DataSet, view: View, bars: int) -> None:
+    def __init__(self, data: pv.DataSet, view: View, labels: Labels) -> None:
         pv = import_pyvista()
         bounds = np.asarray(data.bounds, dtype=np.float64).reshape(3, 2)
         (x0, x1), (y0, y1) = bounds[view.axes[0]], bounds[view.axes[1]]
@@ -59,35 +74,37 @@ class Picture:
         width, height = max(x1 - x0, 1e-9 * extent), max(y1 - y0, 1e-9 * extent)
         self.scale = min(_MAX_WIDTH / width, _MAX_HEIGHT / height)  # pixels per length unit
         self.domain_pixels = (width * self.scale, height * self.scale)
-        size = (int(round(max(width * self.scale + 2 * _SIDE, _MIN_WIDTH))),
-                int(round(height * self.scale + _TOP + _BOTTOM)))
-        self.size = size
-        self.view, self.bars = view, bars
+        self.extent = (x0, x0 + width, y0, y0 + height)
+        self.view, self.labels = view, labels
+        self.bars: list[ColourBar] = []
+        size = (max(1, int(round(width * self.scale))), max(1, int(round(height * self.scale))))
         self.plotter = pv.Plotter(off_screen=True, window_size=size)
         self.plotter.set_background("white")
         focal = bounds.mean(axis=1)
-        focal[view.axes[0]] = 0.5 * (x0 + x1)
-        focal[view.axes[1]] = y0 + (0.5 * size[1] - _BOTTOM) / self.scale
+        focal[view.axes[0]], focal[view.axes[1]] = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
         self.front = bounds[view.normal, 1 if view.toward > 0 else 0]
         self.eps = 1e-3 * extent * view.toward  # lifts particles just above the field
         position = focal.copy()
         position[view.normal] = self.front + view.toward * 10.0 * extent
-        self._camera = (focal, position, 0.5 * size[1] / self.scale)
+        self._camera = (focal, position, 0.5 * height)
 
-    def bar(self, title: str, slot: int) -> dict[str, object]:
-        """scalar_bar_args of bar number ``slot`` (of ``self.bars``) below the domain."""
-        width = 0.84 / self.bars
-        return {"title": title, "vertical": False, "position_x": 0.08 + slot * width + 0.02,
-                "position_y": 8 / self.size[1], "width": width - 0.04, "height": 84 / self.size[1],
-                "color": "black", "title_font_size": 14, "label_font_size": 12, "fmt": "%.3g", "n_labels": 5,
-                "unconstrained_font_size": True}
+    def add(self, shown: pv.DataSet, scalars: str, bar: ColourBar, *, points: bool = False, **kwargs: Any) -> None:
+        """Draw ``shown`` coloured by ``scalars`` (points: as dots), with ``bar`` below the picture.
+        A logarithmic bar colours by the values' log10 (which ``scalars`` must hold)."""
+        limits = tuple(np.log10(bar.limits)) if bar.log else bar.limits
+        add = self.plotter.add_points if points else self.plotter.add_mesh
+        add(shown, scalars=scalars, cmap=bar.cmap, clim=limits, lighting=False, show_scalar_bar=False, **kwargs)
+        self.bars.append(bar)
 
     def save(self, title: str, path: Path) -> Path:
-        """Add the title, frame the camera and write the PNG."""
+        """Render the plane and write the PNG with its axes, title and colour bars."""
+        self.figure(title).savefig(path, dpi=_DPI)
+        return path
+
+    def figure(self, title: str) -> Figure:
+        """Render the plane (this closes the plotter) into a matplotlib figure with its axes, title
+        and colour bars."""
         plotter = self.plotter
-        plotter.add_text(title, position="upper_edge", font_size=9, color="black")
-        for bar in plotter.scalar_bars.values():
-            bar.SetTextPositionToPrecedeScalarBar()  # labels and title below the bar: no overlap
         plotter.enable_parallel_projection()
         focal, position, half_height = self._camera
         up = np.zeros(3)
@@ -97,9 +114,46 @@ class Picture:
         plotter.camera.up = tuple(up)
         plotter.camera.parallel_scale = half_height
         plotter.renderer.reset_camera_clipping_range()
-        plotter.screenshot(str(path))
+        image = plotter.screenshot(return_img=True)
         plotter.close()
-        return path
+        return _framed(image, self.extent, title, self.bars, self.labels)
+
+
+def _framed(image: np.ndarray, extent: tuple[float, float, float, float], title: str, bars: list[ColourBar],
+            labels: Labels) -> Figure:
+    """The rendered ``image`` of the plane ``extent`` (left, right, bottom, top) as a matplotlib figure
+    of the same pixels: axes x and z in the output's units, the title, the colour bars side by side below."""
+    from matplotlib.figure import Figure
+
+    height, width = image.shape[:2]
+    fig_w, fig_h = max(width + _LEFT + _RIGHT, _MIN_WIDTH), _TOP + height + _BELOW + _BARS
+    fig = Figure(figsize=(fig_w / _DPI, fig_h / _DPI), dpi=_DPI)
+    left = _LEFT + 0.5 * (fig_w - _LEFT - _RIGHT - width)
+    ax = fig.add_axes((left / fig_w, (_BELOW + _BARS) / fig_h, width / fig_w, height / fig_h))
+    ax.imshow(image, extent=extent, aspect="auto", interpolation="nearest")
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    ax.set_xlabel(plain_ticks(ax.xaxis, extent[0], extent[1], labels.axis("x")))
+    ax.set_ylabel(plain_ticks(ax.yaxis, extent[2], extent[3], labels.axis("z")))
+    ax.set_title(title, fontsize=11)
+    room = (fig_w - _LEFT - _RIGHT) / max(len(bars), 1)
+    for slot, bar in enumerate(bars):
+        cax = fig.add_axes(((_LEFT + slot * room + 20) / fig_w, 46 / fig_h, (room - 40) / fig_w, 14 / fig_h))
+        _colour_bar(fig, cax, bar)
+    return fig
+
+
+def _colour_bar(fig: Figure, cax: Axes, bar: ColourBar) -> None:
+    """A horizontal colour bar in ``cax``: plain tick numbers (decades on a logarithmic scale)."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LogNorm, Normalize
+
+    lo, hi = bar.limits
+    norm = LogNorm(lo, hi) if bar.log else Normalize(lo, hi)
+    colours = fig.colorbar(ScalarMappable(norm=norm, cmap=bar.cmap), cax=cax, orientation="horizontal")
+    label = bar.title if bar.log else plain_ticks(colours.ax.xaxis, lo, hi, bar.title)
+    colours.set_label(label, fontsize=10)
+    colours.ax.tick_params(labelsize=9)
 
 
 def picture_plane(data: pv.DataSet) -> tuple[pv.DataSet, View, float | None]:
@@ -154,11 +208,10 @@ def composition_picture(data: pv.DataSet, view: View, plane: float | None, name:
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):
             title += f"; particles at t = {labels.time(tp)}"
     colour_particles = cloud is not None and particle_property is not None
-    picture = Picture(data, view, bars=2 if colour_particles else 1)
+    picture = Picture(data, view, labels)
     # under black particles the field keeps to the lighter part of viridis, so the dots stay visible
     cmap = _light_viridis() if cloud is not None and not colour_particles else "viridis"
-    picture.plotter.add_mesh(data, scalars=name, cmap=cmap, clim=clim(field_values(data, name)), lighting=False,
-                             scalar_bar_args=picture.bar(labels.of(name), 0))
+    picture.add(data, name, ColourBar(labels.of(name), cmap, clim(field_values(data, name))))
     if cloud is not None:
         shown = _particles_near(cloud, picture, plane, cell_size)
         if shown.n_points:
@@ -174,12 +227,15 @@ def composition_picture(data: pv.DataSet, view: View, plane: float | None, name:
 def viscosity_picture(data: pv.DataSet, view: View, plane: float | None, t: float, path: Path,
                        labels: Labels) -> Path:
     """The viscosity per cell on a logarithmic colour scale (the runs whose viscosity varies)."""
-    picture = Picture(data, view, bars=1)
+    picture = Picture(data, view, labels)
     shown = data.copy(deep=False)
-    shown.cell_data["_log10_viscosity"] = np.log10(positive(field_values(data, "viscosity")))
-    picture.plotter.add_mesh(shown, scalars="_log10_viscosity", cmap="magma",
-                             clim=clim(shown.cell_data["_log10_viscosity"]), lighting=False,
-                             scalar_bar_args=picture.bar(f"log10 {labels.of('viscosity')}", 0))
+    values = positive(field_values(data, "viscosity"))
+    lo, hi = clim(values)
+    if hi >= 10.0 * lo > 0.0:  # spans a decade or more: a logarithmic scale
+        shown.cell_data["_log10_viscosity"] = np.log10(values)
+        picture.add(shown, "_log10_viscosity", ColourBar(labels.of("viscosity"), "magma", (lo, hi), log=True))
+    else:
+        picture.add(shown, "viscosity", ColourBar(labels.of("viscosity"), "magma", (lo, hi)))
     return picture.save(f"viscosity at t = {labels.time(t)}{_plane_label(plane)}", path)
 
 
@@ -189,8 +245,7 @@ def _add_coloured_points(picture: Picture, shown: pv.PolyData, name: str, *, cma
     values = field_values(shown, name)
     shown.point_data["_colour"] = values
     label = name if np.asarray(shown.point_data[name]).ndim == 1 else f"{name} magnitude"
-    picture.plotter.add_points(shown, scalars="_colour", cmap=cmap, clim=clim(values), point_size=size,
-                               lighting=False, scalar_bar_args=picture.bar(f"particles: {label}", 1))
+    picture.add(shown, "_colour", ColourBar(f"particles: {label}", cmap, clim(values)), points=True, point_size=size)
 
 
 def temperature_picture(data: pv.DataSet, view: View, plane: float | None, t: float, path: Path, *,
@@ -198,12 +253,11 @@ def temperature_picture(data: pv.DataSet, view: View, plane: float | None, t: fl
                          cell_size: float = 0.0, labels: Labels = Labels()) -> Path:
     """The temperature with the mesh; with ``particles`` and ``particle_property`` also the particles
     near the picture plane coloured by that property (viridis, beside the temperature's coolwarm)."""
-    picture = Picture(data, view, bars=2 if particles is not None and particle_property is not None else 1)
+    picture = Picture(data, view, labels)
     # mesh edges only where cells are large enough in the picture not to hide the colours
     edges = bool(picture.domain_pixels[0] * picture.domain_pixels[1] / max(data.n_cells, 1) >= _MIN_EDGE_CELL_PIXELS)
-    picture.plotter.add_mesh(data, scalars="temperature", cmap="coolwarm", clim=clim(field_values(data, "temperature")),
-                             lighting=False, show_edges=edges, edge_color="black", edge_opacity=0.2, line_width=0.5,
-                             scalar_bar_args=picture.bar(labels.of("temperature"), 0))
+    picture.add(data, "temperature", ColourBar(labels.of("temperature"), "coolwarm", clim(field_values(data, "temperature"))),
+                show_edges=edges, edge_color="black", edge_opacity=0.2, line_width=0.5)
     title = f"temperature at t = {labels.time(t)}{_plane_label(plane)}"
     if particles is not None and particle_property is not None and particles.times.size:
         cloud, tp = read_particles(particles, t, particle_property)

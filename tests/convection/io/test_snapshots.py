@@ -220,3 +220,42 @@ def test_the_particle_system_drawn(tmp_path):
         particle_series(tmp_path, "slab")
     (tmp_path / "particles.xdmf").write_text("<Xdmf/>")
     assert particle_series(tmp_path) == tmp_path / "particles.xdmf"
+
+
+def _bar_texts(fig, bar_axes):
+    fig.canvas.draw()
+    axis = bar_axes.xaxis
+    return [t.get_text() for t in axis.get_ticklabels() if t.get_text()], axis.get_offset_text().get_text()
+
+
+def test_snapshot_axes_in_the_runs_units_and_plain_colour_bars(tmp_path):
+    """A run in km: the picture's axes are x [km] and z [km] over the domain; a temperature bar in
+    K is ticked 400, 600, ... (no 1e+03, no offset); a viscosity over four decades is on a
+    logarithmic bar; a nondimensional run's axes are x and z."""
+    import json
+
+    from convection.io.pictures.sections import ColourBar, Picture, picture_plane
+    from convection.io.pictures.series import Series
+
+    directory = run_directory(tmp_path, particles=False)
+    (directory / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km", "fields": {}}))
+    data, _ = Series(directory / "fields.xdmf").read(2.0)
+    plane, view, _ = picture_plane(data)
+    picture = Picture(plane, view, Labels(field_units(directory)))
+    picture.add(plane, "temperature", ColourBar("temperature [K]", "coolwarm", (273.0, 1573.0)))
+    picture.add(plane, "pressure", ColourBar("viscosity [Pa s]", "magma", (1e19, 1e23), log=True))
+    fig = picture.figure("title")
+    field, temperature, viscosity = fig.axes
+    assert (field.get_xlabel(), field.get_ylabel(), field.get_title()) == ("x [km]", "z [km]", "title")
+    assert field.get_xlim() == (0.0, 1.0) and field.get_ylim() == (0.0, 1.0)
+    ticks, offset = _bar_texts(fig, temperature)
+    assert offset == "" and {"400", "800", "1200"} <= set(ticks) and all(t.isdigit() for t in ticks)
+    assert temperature.get_xlabel() == "temperature [K]"
+    assert viscosity.get_xscale() == "log" and viscosity.get_xlabel() == "viscosity [Pa s]"
+    assert len(fig.axes) == 3
+    plain = Picture(plane, view, Labels())
+    plain.add(plane, "temperature", ColourBar("temperature", "coolwarm", (0.0, 1.0)))
+    fig = plain.figure("title")
+    assert (fig.axes[0].get_xlabel(), fig.axes[0].get_ylabel()) == ("x", "z")
+    ticks, offset = _bar_texts(fig, fig.axes[1])
+    assert offset == "" and {"0.0", "0.4", "1.0"} <= set(ticks)

@@ -91,12 +91,15 @@ def plain_ticks(axis: Axis, lo: float, hi: float, label: str) -> str:
     return scale.label(label)
 
 
-def pyvista_format(lo: float, hi: float) -> str:
-    """A printf format of plain numbers for pyvista's scalar bars and axes from ``lo`` to ``hi``:
-    as many decimals as a fifth of the range needs (``%.0f`` for 273..1573 K, ``%.2f`` for 0..1);
+def pyvista_format(lo: float, hi: float, labels: int) -> str:
+    """A printf format of plain numbers for ``labels`` evenly spaced labels from ``lo`` to ``hi``
+    (pyvista's scalar bars and axes): as few decimals as print them exactly (``%.0f`` for 273..1573
+    K in 6 labels, ``%.1f`` for 0..1 in 6), else three significant digits of their spacing;
     ``%.3g`` where the numbers are very large or very small."""
     if tick_scale(lo, hi).power != 0:
         return "%.3g"
-    step = abs(hi - lo) / 5.0
-    decimals = 0 if step == 0.0 or step >= 1.0 else min(6, -math.floor(math.log10(step)))
-    return f"%.{decimals}f"
+    step = abs(hi - lo) / max(labels - 1, 1)
+    if step == 0.0:
+        return "%.0f"
+    exact = [d for d in range(7) if max(abs(round(lo, d) - lo), abs(round(step, d) - step)) <= 1e-9 * step]
+    return f"%.{exact[0] if exact else max(0, 2 - math.floor(math.log10(step)))}f"

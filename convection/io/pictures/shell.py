@@ -47,7 +47,7 @@ def shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, partic
     values = field_values(section, "temperature")
     plotter.add_mesh(section, scalars="temperature", cmap="coolwarm", clim=clim(values), lighting=False,
                      scalar_bar_args=dict(bar, title=f"{labels.of('temperature')} (equatorial plane)", position_x=0.06,
-                                          fmt=pyvista_format(*clim(values))))
+                                          fmt=pyvista_format(*clim(values), 5)))
     plotter.add_mesh(pv.Sphere(radius=inner, theta_resolution=96, phi_resolution=48), color="lightgrey",
                      smooth_shading=True)
     title = f"spherical shell at t = {labels.time(t)}"
@@ -76,7 +76,7 @@ def shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, partic
             plotter.add_points(shown, scalars="_colour", cmap="viridis", clim=clim(colour), point_size=size,
                                render_points_as_spheres=True,
                                scalar_bar_args=dict(bar, title=f"particles: {label}", position_x=0.56,
-                                                    fmt=pyvista_format(*clim(colour))))
+                                                    fmt=pyvista_format(*clim(colour), 5)))
         where = "z >= 0" + (f", r <= {max_radius:.4g}" if max_radius is not None else "")
         title += f"; {int(keep.sum())} particles ({where})"
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):

@@ -129,9 +129,42 @@ def test_unknown_names_list_the_known_ones(tmp_path):
 def test_snapshots_of_a_3d_run(tmp_path):
     directory = run_directory(tmp_path, dim=3)
     paths = plot_snapshots(directory, times=[2.0], log=None)
-    assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
-    for path in paths:
+    assert [p.name for p in paths] == ["material_0002_t2.png", "volume_0002_t2.png", "temperature_0002_t2.png"]
+    for path in (paths[0], paths[2]):
         _check_picture(path)  # the x-z section through the centre, z up
+
+
+def test_a_3d_box_in_perspective_three_slices_and_an_isosurface(tmp_path):
+    """The volume picture: slices x = y = z = 1/2 coloured by the temperature (= z), the isosurface
+    material = 1/2 (material = 1 in the cells above z = 1/3: within a cell of z = 1/3), gold on the
+    picture."""
+    import json
+
+    from convection.io.pictures.labels import Labels
+    from convection.io.pictures.series import Series
+    from convection.io.pictures.volume import volume_picture
+
+    directory = run_directory(tmp_path, dim=3, particles=False)
+    (directory / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km", "fields": {}}))
+    data, _ = Series(directory / "fields.xdmf").read(2.0)
+    data.cell_data["material"][:] = data.cell_centers().points[:, 2] > 1 / 3
+    view = volume_picture(data, "material", 2.0, tmp_path / "volume.png", labels=Labels(field_units(directory)))
+    assert view.field == "temperature" and view.surface_field == "material" and view.level == pytest.approx(0.5)
+    assert view.slices.n_blocks == 3
+    for axis, piece in enumerate(view.slices):  # slice_orthogonal: normals x, y, z in this order
+        bounds = np.asarray(piece.bounds).reshape(3, 2)
+        assert np.allclose(bounds[axis], 0.5) and np.allclose(np.delete(bounds, axis, axis=0), [[0, 1], [0, 1]])
+        assert "temperature" in piece.point_data.keys()
+    z = np.asarray(view.isosurface.points)[:, 2]
+    assert view.isosurface.n_points > 20 and np.all(np.abs(z - 1 / 3) <= 1 / 6 + 1e-9)
+    image = imread(view.path)[..., :3]
+    gold = (image[..., 0] > 0.8) & (image[..., 1] > 0.6) & (image[..., 1] < 0.9) & (image[..., 2] < 0.3)
+    assert gold.sum() > 2_000 and _colours(image) > 200
+    data.point_data["temperature"][:] = 0.0  # no temperature: the slices show the material
+    view = volume_picture(data, "material", 2.0, tmp_path / "material.png", labels=Labels())
+    assert (view.field, view.surface_field) == ("material", "material")
+    data.cell_data["material"][:] = 1.0
+    assert volume_picture(data, "material", 2.0, tmp_path / "nothing.png", labels=Labels()) is None
 
 
 def test_cli_draws_summary_and_snapshots(tmp_path, capsys):

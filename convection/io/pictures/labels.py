@@ -16,10 +16,7 @@ if TYPE_CHECKING:
     from matplotlib.axis import Axis
     from matplotlib.ticker import Formatter
 
-__all__ = ["AXIS_NAMES", "Labels", "TickScale", "pyvista_format", "plain_ticks", "tick_scale", "time_label"]
-
-AXIS_NAMES = ("x", "y", "z")
-"""The names of the coordinates (a 2D model's vertical coordinate is ``z`` as in its config)."""
+__all__ = ["Labels", "TickScale", "pyvista_format", "plain_ticks", "tick_scale", "time_label"]
 
 _PLAIN = (1e-3, 1e5)
 """Numbers whose largest magnitude lies in this range are printed as they are."""
@@ -50,7 +47,8 @@ class Labels:
         return str(unit) if unit else None
 
     def axis(self, name: str) -> str:
-        """The label of coordinate ``name`` (``x``, ``y``, ``z``): ``x [km]``, or ``x``."""
+        """The label of coordinate ``name`` (``x``, ``y``, ``z``; a 2D model's vertical coordinate is
+        ``z``, as in its config): ``x [km]``, or ``x``."""
         return f"{name} [{self.length}]" if self.length else name
 
 
@@ -94,12 +92,13 @@ def plain_ticks(axis: Axis, lo: float, hi: float, label: str) -> str:
 def pyvista_format(lo: float, hi: float, labels: int) -> str:
     """A printf format of plain numbers for ``labels`` evenly spaced labels from ``lo`` to ``hi``
     (pyvista's scalar bars and axes): as few decimals as print them exactly (``%.0f`` for 273..1573
-    K in 6 labels, ``%.1f`` for 0..1 in 6), else three significant digits of their spacing;
-    ``%.3g`` where the numbers are very large or very small."""
+    K in 6 labels, ``%.1f`` for 0..1 in 6), at most those of three significant digits of their
+    spacing; ``%.3g`` where the numbers are very large or very small."""
     if tick_scale(lo, hi).power != 0:
         return "%.3g"
     step = abs(hi - lo) / max(labels - 1, 1)
     if step == 0.0:
         return "%.0f"
-    exact = [d for d in range(7) if max(abs(round(lo, d) - lo), abs(round(step, d) - step)) <= 1e-9 * step]
-    return f"%.{exact[0] if exact else max(0, 2 - math.floor(math.log10(step)))}f"
+    most = max(0, 2 - math.floor(math.log10(step)))
+    exact = [d for d in range(most + 1) if max(abs(round(lo, d) - lo), abs(round(step, d) - step)) <= 1e-9 * step]
+    return f"%.{exact[0] if exact else most}f"

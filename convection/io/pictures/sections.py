@@ -1,6 +1,8 @@
-"""Flat pictures (pyvista, off-screen): a 2D domain seen from +z, or the x-z section of a 3D domain
-through its centre seen from -y; the material field with the particles, the viscosity on a
-logarithmic scale, the temperature with the mesh."""
+"""Flat pictures: a 2D domain seen from +z, or the x-z section of a 3D domain through its centre
+seen from -y; the material field with the particles, the viscosity (on a logarithmic scale where
+it spans a decade or more), the temperature with the mesh. pyvista renders the plane off-screen,
+exactly the domain's pixels; matplotlib frames that image with axes x and z in the output's units,
+the title and the colour bars (plain tick numbers, :mod:`convection.io.pictures.labels`)."""
 
 from __future__ import annotations
 

@@ -16,7 +16,8 @@ if TYPE_CHECKING:
     from matplotlib.axis import Axis
     from matplotlib.ticker import Formatter
 
-__all__ = ["Labels", "TickScale", "pyvista_format", "plain_ticks", "tick_scale", "time_label"]
+__all__ = ["Labels", "TickScale", "nice_ticks", "plain_ticks", "pyvista_format", "round_bar_labels", "tick_scale",
+           "time_label"]
 
 _PLAIN = (1e-3, 1e5)
 """Numbers whose largest magnitude lies in this range are printed as they are."""
@@ -102,3 +103,27 @@ def pyvista_format(lo: float, hi: float, labels: int) -> str:
     most = max(0, 2 - math.floor(math.log10(step)))
     exact = [d for d in range(most + 1) if max(abs(round(lo, d) - lo), abs(round(step, d) - step)) <= 1e-9 * step]
     return f"%.{exact[0] if exact else most}f"
+
+
+def nice_ticks(lo: float, hi: float, most: int = 6) -> list[float]:
+    """At most ``most`` round tick values between ``lo`` and ``hi`` (both included where round):
+    ``0, 0.2, ..., 1`` for -0.079..1 (matplotlib's MaxNLocator)."""
+    from matplotlib.ticker import MaxNLocator
+
+    span = abs(hi - lo)
+    values = MaxNLocator(most - 1).tick_values(lo, hi)
+    return [float(v) for v in values if lo - 1e-9 * span <= v <= hi + 1e-9 * span]
+
+
+def round_bar_labels(bar: Any, limits: tuple[float, float]) -> None:
+    """Label the VTK scalar bar ``bar`` (a pyvista plotter's ``scalar_bars[title]``) at round values
+    of its range ``limits`` (0, 0.25, ..., 1 for -0.079..1), printed plainly."""
+    from vtkmodules.vtkCommonCore import vtkDoubleArray
+
+    ticks = nice_ticks(*limits)
+    values = vtkDoubleArray()
+    for value in ticks:
+        values.InsertNextValue(value)
+    bar.SetUseCustomLabels(True)
+    bar.SetCustomLabels(values)
+    bar.SetLabelFormat(pyvista_format(ticks[0], ticks[-1], len(ticks)) if len(ticks) > 1 else "%.3g")

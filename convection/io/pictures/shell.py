@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from convection.io.pictures.labels import Labels, pyvista_format
+from convection.io.pictures.labels import Labels, round_bar_labels
 from convection.io.pictures.series import Series, clim, field_values, import_pyvista
 
 if TYPE_CHECKING:
@@ -42,12 +42,13 @@ def shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, partic
     plotter = pv.Plotter(off_screen=True, window_size=_SHELL_SIZE)
     plotter.set_background("white")
     bar = {"vertical": False, "height": 0.06, "width": 0.38, "position_y": 0.03, "color": "black",
-           "title_font_size": 14, "label_font_size": 12, "n_labels": 5}
+           "title_font_size": 14, "label_font_size": 12}
     section = data.slice(normal="z", origin=(0.0, 0.0, 0.0))
     values = field_values(section, "temperature")
+    title = f"{labels.of('temperature')} (equatorial plane)"
     plotter.add_mesh(section, scalars="temperature", cmap="coolwarm", clim=clim(values), lighting=False,
-                     scalar_bar_args=dict(bar, title=f"{labels.of('temperature')} (equatorial plane)", position_x=0.06,
-                                          fmt=pyvista_format(*clim(values), 5)))
+                     scalar_bar_args=dict(bar, title=title, position_x=0.06))
+    round_bar_labels(plotter.scalar_bars[title], clim(values))
     plotter.add_mesh(pv.Sphere(radius=inner, theta_resolution=96, phi_resolution=48), color="lightgrey",
                      smooth_shading=True)
     title = f"spherical shell at t = {labels.time(t)}"
@@ -75,8 +76,8 @@ def shell_picture(data: pv.DataSet, radii: tuple[float, float], t: float, partic
             label = name if np.asarray(cloud.point_data[name]).ndim == 1 else f"{name} magnitude"
             plotter.add_points(shown, scalars="_colour", cmap="viridis", clim=clim(colour), point_size=size,
                                render_points_as_spheres=True,
-                               scalar_bar_args=dict(bar, title=f"particles: {label}", position_x=0.56,
-                                                    fmt=pyvista_format(*clim(colour), 5)))
+                               scalar_bar_args=dict(bar, title=f"particles: {label}", position_x=0.56))
+            round_bar_labels(plotter.scalar_bars[f"particles: {label}"], clim(colour))
         where = "z >= 0" + (f", r <= {max_radius:.4g}" if max_radius is not None else "")
         title += f"; {int(keep.sum())} particles ({where})"
         if abs(tp - t) > 1e-9 * max(1.0, abs(t)):

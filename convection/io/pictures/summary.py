@@ -42,7 +42,7 @@ def summary_field(directory: Path) -> tuple[str, tuple[np.ndarray, np.ndarray, n
 
 
 def curve_panels(directory: Path, stats: dict[str, np.ndarray], log: Callable[[str], None] | None
-            ) -> tuple[np.ndarray, str, list[tuple[np.ndarray, str]]]:
+                 ) -> tuple[np.ndarray, str, list[tuple[np.ndarray, str]]]:
     """(time, its label, [(values, label)] of the lower panels): vrms, the Nusselt number where the run
     measured one, topography and cells; from statistics_physical.csv (with units) where the run wrote it."""
     physical = directory / "statistics_physical.csv"
@@ -125,8 +125,7 @@ def _draw_field(fig: Figure, ax: Axes, shown: tuple[str, tuple[np.ndarray, np.nd
     bar.set_label(plain_ticks(bar.ax.yaxis, lo, hi, labels.of(name)))
     for axis, coordinate, label in ((ax.xaxis, 0, ax.set_xlabel), (ax.yaxis, 1, ax.set_ylabel)):
         column = mesh.points[:, coordinate]
-        label(plain_ticks(axis, float(column.min()), float(column.max()),
-                          labels.axis("xz"[coordinate])))
+        label(plain_ticks(axis, float(column.min()), float(column.max()), labels.axis("xz"[coordinate])))
     ax.set_aspect("equal")
     where = f", {mesh.where}" if mesh.where else ""
     ax.set_title(f"{name} and mesh at t = {labels.time(t)}{where}")

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from convection.io.pictures.labels import Labels, pyvista_format
+from convection.io.pictures.labels import Labels, pyvista_format, round_bar_labels
 from convection.io.pictures.series import clim, field_values, import_pyvista, is_constant
 
 if TYPE_CHECKING:
@@ -79,12 +79,13 @@ def volume_picture(data: pv.DataSet, material: str | None, t: float, path: Path,
     plotter = pv.Plotter(off_screen=True, window_size=_SIZE)
     plotter.set_background("white")
     limits = clim(field_values(data, field))
-    bar = {"title": labels.of(field) + "\n", "vertical": True, "height": 0.5, "width": 0.06, "position_x": 0.88,
-           "position_y": 0.25, "color": "black", "title_font_size": 16, "label_font_size": 14, "n_labels": _LABELS,
-           "fmt": pyvista_format(*limits, _LABELS)}
+    title = labels.of(field) + "\n"  # the line below keeps the title off the top label
+    bar = {"title": title, "vertical": True, "height": 0.5, "width": 0.06, "position_x": 0.88, "position_y": 0.25,
+           "color": "black", "title_font_size": 16, "label_font_size": 14}
     for i, piece in enumerate(slices):
         plotter.add_mesh(piece, scalars=field, cmap=cmap, clim=limits, lighting=False, show_scalar_bar=i == 0,
                          scalar_bar_args=bar)
+    round_bar_labels(plotter.scalar_bars[title], limits)
     surface_values = field_values(data, surface_field)
     level = 0.5 * sum(clim(surface_values))
     points = data.cell_data_to_point_data() if surface_field in data.cell_data.keys() else data

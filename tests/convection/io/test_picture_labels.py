@@ -44,3 +44,10 @@ def test_pyvista_formats_print_evenly_spaced_labels_exactly():
     assert pyvista_format(0.0, 500.0, 6) == "%.0f" and pyvista_format(0.0, 512.0, 6) == "%.0f"  # 102 km apart
     assert pyvista_format(0.0013, 0.987, 6) == "%.3f"
     assert pyvista_format(1e19, 1e23, 5) == "%.3g" and pyvista_format(1.0, 1.0, 5) == "%.0f"
+
+
+def test_round_ticks_inside_the_range():
+    from convection.io.pictures.labels import nice_ticks
+
+    assert nice_ticks(-0.079, 1.0) == [0.0, 0.25, 0.5, 0.75, 1.0]
+    assert nice_ticks(273.0, 1573.0) == [300.0, 600.0, 900.0, 1200.0, 1500.0]

@@ -71,6 +71,7 @@ class FlatMesh(NamedTuple):
         points: Picture coordinates (horizontal, vertical), shape=(num_points, 2).
         triangles: Vertex indices, shape=(num_triangles, 3), int64.
         cell_of: The mesh cell of each triangle, shape=(num_triangles,), int64 (for cell values).
+        outlines: The cells (or faces) as the mesh has them, for its edges, shape=(num, 3 or 4).
         axes: The coordinates shown, e.g. ``(0, 1)`` in 2D, ``(0, 2)`` for an x-z plane in 3D.
         where: Which part of a 3D mesh is shown ("" in 2D).
     """
@@ -78,6 +79,7 @@ class FlatMesh(NamedTuple):
     points: np.ndarray
     triangles: np.ndarray
     cell_of: np.ndarray
+    outlines: np.ndarray
     axes: tuple[int, int]
     where: str
 
@@ -86,13 +88,17 @@ _TET_FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
 
 
 def flat_mesh(points: np.ndarray, cells: np.ndarray) -> FlatMesh | None:
-    """What of a mesh a matplotlib picture can draw: triangles as they are; of tetrahedra, the faces
-    on the plane y = (smallest y), the x-z side of a box nearest to a viewer at -y; None for other
-    cells or a 3D mesh without such a side (e.g. a spherical shell)."""
+    """What of a mesh a matplotlib picture can draw: triangles as they are, quadrilaterals cut in two;
+    of tetrahedra, the faces on the plane y = (smallest y), the x-z side of a box nearest to a viewer
+    at -y; None for hexahedra or a 3D mesh without such a side (e.g. a spherical shell)."""
     points = np.asarray(points, dtype=np.float64)
+    flat = points.shape[1] < 3 or np.ptp(points[:, 2]) == 0.0
     if cells.shape[1] == 3:
-        return FlatMesh(points[:, :2], cells.astype(np.int64), np.arange(len(cells)), (0, 1), "")
-    if cells.shape[1] != 4 or points.shape[1] < 3 or np.ptp(points[:, 2]) == 0.0:
+        return FlatMesh(points[:, :2], cells.astype(np.int64), np.arange(len(cells)), cells, (0, 1), "")
+    if cells.shape[1] == 4 and flat:  # quadrilaterals, their vertices in cyclic order (XDMF's)
+        halves = np.concatenate([cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]]).astype(np.int64)
+        return FlatMesh(points[:, :2], halves, np.tile(np.arange(len(cells)), 2), cells, (0, 1), "")
+    if cells.shape[1] != 4:
         return None
     y0, extent = float(points[:, 1].min()), float(np.ptp(points))
     on_side = np.abs(points[:, 1] - y0) <= 1e-9 * extent
@@ -101,14 +107,15 @@ def flat_mesh(points: np.ndarray, cells: np.ndarray) -> FlatMesh | None:
     if not keep.any():
         return None
     cell_of, face = np.nonzero(keep)
-    return FlatMesh(points[:, [0, 2]], faces[cell_of, face].astype(np.int64), cell_of.astype(np.int64), (0, 2),
-                    f"side y = {y0:.4g}")
+    triangles = faces[cell_of, face].astype(np.int64)
+    return FlatMesh(points[:, [0, 2]], triangles, cell_of.astype(np.int64), triangles, (0, 2), f"side y = {y0:.4g}")
 
 
 def _draw_field(fig: Figure, ax: Axes, shown: tuple[str, tuple[np.ndarray, np.ndarray, np.ndarray, float]],
                 mesh: FlatMesh, labels: Labels) -> None:
     """The field with the mesh, axes in the output's units, a colour bar with plain numbers."""
     import matplotlib.tri as mtri
+    from matplotlib.collections import PolyCollection
 
     name, (points, cells, values, t) = shown
     tri = mtri.Triangulation(mesh.points[:, 0], mesh.points[:, 1], mesh.triangles)
@@ -120,7 +127,8 @@ def _draw_field(fig: Figure, ax: Axes, shown: tuple[str, tuple[np.ndarray, np.nd
         lo, hi = 0.0, 1.0
     cmap = "coolwarm" if name == "temperature" else "viridis"
     image = ax.tripcolor(tri, shown_values, shading="gouraud" if at_points else "flat", cmap=cmap, vmin=lo, vmax=hi)
-    ax.triplot(tri, color="k", linewidth=0.1, alpha=0.4)
+    ax.add_collection(PolyCollection(mesh.points[mesh.outlines], facecolors="none", edgecolors="k", linewidths=0.1,
+                                     alpha=0.4))
     bar = fig.colorbar(image, ax=ax, fraction=0.04, pad=0.02)
     bar.set_label(plain_ticks(bar.ax.yaxis, lo, hi, labels.of(name)))
     for axis, coordinate, label in ((ax.xaxis, 0, ax.set_xlabel), (ax.yaxis, 1, ax.set_ylabel)):
@@ -206,7 +214,7 @@ def summary_figure(directory: str | Path, *, log: Callable[[str], None] | None =
         fig.text(0.5, 0.5, "nothing to draw: no field output and no vrms, Nusselt number, topography or cells",
                  ha="center", va="center")
     elif mesh is None:
-        fig.suptitle("no field output" if shown is None else f"{shown[0]}: no flat side of the mesh to draw")
+        fig.suptitle("no field output" if shown is None else f"{shown[0]}: not drawn (hexahedra, or no flat side y = min)")
     return fig
 
 

@@ -100,3 +100,14 @@ def test_flat_mesh_of_tetrahedra_is_the_side_nearest_minus_y():
     assert sorted(map(sorted, mesh.triangles.tolist())) == [[0, 1, 2], [1, 2, 4]]
     assert mesh.cell_of.tolist() == [0, 1] and np.array_equal(mesh.points, points[:, [0, 2]])
     assert flat_mesh(points[:, :2], np.array([[0, 1, 2]])).axes == (0, 1)
+
+
+def test_quadrilaterals_are_cut_in_two():
+    """XDMF lists a quadrilateral's vertices in cyclic order: the halves (0, 1, 2), (0, 2, 3) cover it."""
+    points = np.array([[0, 0], [0, 1], [1, 1], [1, 0], [2, 1], [2, 0]], dtype=np.float64)
+    mesh = flat_mesh(points, np.array([[0, 1, 2, 3], [3, 2, 4, 5]]))
+    assert mesh.triangles.tolist() == [[0, 1, 2], [3, 2, 4], [0, 2, 3], [3, 4, 5]]
+    assert mesh.cell_of.tolist() == [0, 1, 0, 1] and mesh.outlines.tolist() == [[0, 1, 2, 3], [3, 2, 4, 5]]
+    a, b, c = (points[mesh.triangles[:, i]] for i in range(3))
+    areas = 0.5 * np.abs(np.cross(b - a, c - a))
+    assert np.allclose(areas, 0.5) and areas.sum() == pytest.approx(2.0)

@@ -1,5 +1,7 @@
-"""``python -m convection.plot RUN_DIR [--png FILE] [--times T ...]``: the summary, then the snapshots;
-a missing or damaged run file is one line ``error: ...`` and exit code 1."""
+"""Pictures of a run folder: summary.png, then the snapshots (python -m convection.plot RUN_DIR).
+
+A missing or damaged run file is one line ``error: ...`` and exit code 1; an unknown field,
+particle property or particle system exit code 2."""
 
 from __future__ import annotations
 

@@ -125,11 +125,13 @@ def _framed(image: np.ndarray, extent: tuple[float, float, float, float], title:
             labels: Labels) -> Figure:
     """The rendered ``image`` of the plane ``extent`` (left, right, bottom, top) as a matplotlib figure
     of the same pixels: axes x and z in the output's units, the title, the colour bars side by side below."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     height, width = image.shape[:2]
     fig_w, fig_h = max(width + _LEFT + _RIGHT, _MIN_WIDTH), _TOP + height + _BELOW + _BARS
     fig = Figure(figsize=(fig_w / _DPI, fig_h / _DPI), dpi=_DPI)
+    FigureCanvasAgg(fig)  # draws without pyplot, as every matplotlib release does
     left = _LEFT + 0.5 * (fig_w - _LEFT - _RIGHT - width)
     ax = fig.add_axes((left / fig_w, (_BELOW + _BARS) / fig_h, width / fig_w, height / fig_h))
     ax.imshow(image, extent=extent, aspect="auto", interpolation="nearest")

@@ -143,23 +143,33 @@ _WIDE = 1.8
 """A field wider than this (width / height) goes above the curves, a narrower one beside them."""
 
 
-def _layout(fig: Figure, mesh: FlatMesh | None, curves: int) -> tuple[Axes | None, list[Axes]]:
-    """The field's axes (None without a field) and one axes per curve, nothing left empty: a wide
-    field above a row of curves, a narrower one beside a column of them (sharing the time axis)."""
+class _Layout(NamedTuple):
+    """The axes of a summary: the field's (None without a field), one per curve, and for each curve
+    whether the time is written below it."""
+
+    field: Axes | None
+    curves: list[Axes]
+    time_labelled: list[bool]
+
+
+def _layout(fig: Figure, mesh: FlatMesh | None, curves: int) -> _Layout:
+    """Axes for the field and the curves, nothing left empty: a wide field above a row of curves, a
+    narrower one beside a column of them (sharing the time axis, written below the last only)."""
     if mesh is None or curves == 0:
         grid = fig.add_gridspec(1, max(1, curves))
         field_ax = fig.add_subplot(grid[0, 0]) if mesh is not None else None
-        return field_ax, [fig.add_subplot(grid[0, i]) for i in range(curves)]
+        return _Layout(field_ax, [fig.add_subplot(grid[0, i]) for i in range(curves)], [True] * curves)
     width, height = np.ptp(mesh.points, axis=0)
     if width >= _WIDE * height:
         grid = fig.add_gridspec(2, curves)
-        return fig.add_subplot(grid[0, :]), [fig.add_subplot(grid[1, i]) for i in range(curves)]
+        return _Layout(fig.add_subplot(grid[0, :]), [fig.add_subplot(grid[1, i]) for i in range(curves)],
+                       [True] * curves)
     grid = fig.add_gridspec(curves, 2, width_ratios=[1.3, 1.0])
     first = fig.add_subplot(grid[0, 1])
-    rest = [fig.add_subplot(grid[i, 1], sharex=first) for i in range(1, curves)]
-    for ax in [first, *rest][:-1]:
+    column = [first, *(fig.add_subplot(grid[i, 1], sharex=first) for i in range(1, curves))]
+    for ax in column[:-1]:
         ax.tick_params(labelbottom=False)
-    return fig.add_subplot(grid[:, 0]), [first, *rest]
+    return _Layout(fig.add_subplot(grid[:, 0]), column, [False] * (curves - 1) + [True])
 
 
 def plot_run(directory: str | Path, png: str | Path | None = None, *, log: Callable[[str], None] | None = None) -> Path:
@@ -205,11 +215,11 @@ def summary_figure(directory: str | Path, *, log: Callable[[str], None] | None =
     labels = Labels(field_units(directory) or {})
     time, time_label, panels = curve_panels(directory, stats, log)
     fig = plt.figure(figsize=(12, 7 if mesh is not None and panels else 4), constrained_layout=True)
-    field_ax, curve_axes = _layout(fig, mesh, len(panels))
+    layout = _layout(fig, mesh, len(panels))
     if mesh is not None:
-        _draw_field(fig, field_ax, shown, mesh, labels)
-    for axi, (values, label) in zip(curve_axes, panels):
-        _draw_curve(axi, time[: len(values)], values, time_label, label)
+        _draw_field(fig, layout.field, shown, mesh, labels)
+    for axi, labelled, (values, label) in zip(layout.curves, layout.time_labelled, panels):
+        _draw_curve(axi, time[: len(values)], values, time_label if labelled else None, label)
     if mesh is None and not panels:
         fig.text(0.5, 0.5, "nothing to draw: no field output and no vrms, Nusselt number, topography or cells",
                  ha="center", va="center")
@@ -218,11 +228,12 @@ def summary_figure(directory: str | Path, *, log: Callable[[str], None] | None =
     return fig
 
 
-def _draw_curve(ax: Axes, time: np.ndarray, values: np.ndarray, time_label: str, label: str) -> None:
+def _draw_curve(ax: Axes, time: np.ndarray, values: np.ndarray, time_label: str | None, label: str) -> None:
     """One statistics column over time, with plain tick numbers."""
     ax.plot(time, values)
-    xlabel = plain_ticks(ax.xaxis, float(np.min(time, initial=0.0)), float(np.max(time, initial=0.0)), time_label)
-    if ax.xaxis.get_tick_params()["labelbottom"]:  # a column of curves: the time below the last only
+    xlabel = plain_ticks(ax.xaxis, float(np.min(time, initial=0.0)), float(np.max(time, initial=0.0)),
+                         time_label or "")
+    if time_label is not None:
         ax.set_xlabel(xlabel)
     finite = values[np.isfinite(values)]
     ax.set_ylabel(plain_ticks(ax.yaxis, float(np.min(finite, initial=0.0)), float(np.max(finite, initial=0.0)), label))

@@ -152,10 +152,9 @@ def relocate_affine_simplex(
     the old cell. ``status`` gets STAYED, NEIGHBOUR or UNRESOLVED (cell == -1 on input, or not found:
     left for the bounding-box fallback; ``cells`` is then unchanged), or SKIPPED for a discarded row
     (:data:`DEAD`). Every resolved or discarded particle adds 1 to ``counts[bucket]``
-    (shape=(num_owned + 2,), see :func:`particles.storage.row_kernels.count_buckets`); unresolved ones are
-    not counted. The rows
-    of the resolved particles now in a ghost cell are written, in row order, to the start of
-    ``outside`` (shape=(n,), int64). Returns ``(counts per status and then the number of those
+    (shape=(num_owned + 2,), see :func:`particles.storage.row_kernels.count_buckets`); unresolved ones
+    are not counted. The rows of the resolved particles now in a ghost cell are written, in row order,
+    to the start of ``outside`` (shape=(n,), int64). Returns ``(counts per status and then the number of those
     rows, shape=(4,), whether the counted rows are in bucket order)``.
     """
     res = np.zeros(4, dtype=np.int64)

@@ -91,14 +91,15 @@ def test_benchmark_at_ci_size():
 def test_summary_picture_fits_the_model(tmp_path):
     """No energy equation: the summary shows the block, not a constant temperature, and plots vrms in
     cm/yr against Myr, without a Nusselt panel."""
-    from convection.io.pictures import _panels, _summary_field, plot_run, read_statistics
+    from convection.io.pictures import plot_run, read_statistics
+    from convection.io.pictures.summary import curve_panels, summary_field
 
     out = tmp_path / "run"
     proc = run_cli(["run", str(CONFIG), "--output", str(out), *sets([*SMALL, "output.fields_every=2"])], 1)
     assert proc.returncode == 0, proc.stderr
-    name, _ = _summary_field(out)
+    name, _ = summary_field(out)
     assert name == "block"
-    time, time_label, panels = _panels(out, read_statistics(out / "statistics.csv"), None)
+    time, time_label, panels = curve_panels(out, read_statistics(out / "statistics.csv"), None)
     assert time_label == "time [Myr]"
     assert [label for _, label in panels] == ["vrms [cm/yr]", "cells"]
     assert plot_run(out).stat().st_size > 10_000

@@ -13,58 +13,14 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from _picture_runs import TIMES, field_functions, run_directory
 from convection.io.fields import FieldOutput
-from convection.io.pictures import _Labels, field_units, main, plot_snapshots, snapshot_times
-from fembase.dolfinx_compat import function_space, refine_keeping_partition
+from convection.io.pictures import field_units, main, plot_snapshots, snapshot_times
+from convection.io.pictures.labels import Labels
+from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.generation import generate
 from particles.io.output import ParticleWriter
-
-TIMES = (0.0, 1.0, 2.0)
-
-
-def _functions(mesh: dolfinx.mesh.Mesh, temperature: str) -> dict[str, dolfinx.fem.Function]:
-    """material = [z > 1/2] (DG0), temperature = z or 0 (P2), velocity, pressure = x (P1).
-
-    z is the vertical coordinate: y in 2D, z in 3D.
-    """
-    up = mesh.geometry.dim - 1
-    material = dolfinx.fem.Function(function_space(mesh, "DG", 0))
-    material.interpolate(lambda x: (x[up] > 0.5).astype(np.float64))
-    T = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2))
-    T.interpolate(lambda x: x[up] if temperature == "z" else 0.0 * x[up])
-    u = dolfinx.fem.Function(function_space(mesh, "Lagrange", 2, shape=(mesh.geometry.dim,)))
-    u.interpolate(lambda x: np.stack([x[1] - 0.5, 0.5 - x[0], 0 * x[0]][: mesh.geometry.dim]))
-    p = dolfinx.fem.Function(function_space(mesh, "Lagrange", 1))
-    p.interpolate(lambda x: x[0])
-    return {"temperature": T, "velocity": u, "pressure": p, "material": material}
-
-
-def _run_directory(path: Path, *, temperature: str = "z", dim: int = 2, particles: bool = True) -> Path:
-    """A tiny run: fields at TIMES (the mesh refined before the last), particles, statistics.csv."""
-    comm = MPI.COMM_SELF
-    if dim == 2:
-        mesh = dolfinx.mesh.create_unit_square(comm, 6, 6)
-    else:
-        mesh = dolfinx.mesh.create_unit_cube(comm, 3, 3, 3)
-    mesh.topology.create_entities(1)
-    out = FieldOutput(path)
-    for t in TIMES:
-        if t == TIMES[-1]:
-            mesh = refine_keeping_partition(mesh)
-        out.write(_functions(mesh, temperature), t)
-    out.close()
-    if particles:
-        swarm = Swarm(mesh)
-        swarm.add_property("material")
-        generate(swarm, "random_uniform", num_particles=400, seed=2)
-        writer = ParticleWriter(path)
-        for step, t in enumerate(TIMES):
-            swarm.property("material")[:, 0] = swarm.x[:, 0] + t
-            writer.write(swarm, t, step)
-    lines = ["step,time,vrms,nusselt,cells"] + [f"{k},{t},{1 + t},{2 + t},{100}" for k, t in enumerate(TIMES)]
-    (path / "statistics.csv").write_text("\n".join(lines) + "\n")
-    return path
 
 
 def _check_picture(path: Path) -> None:
@@ -112,7 +68,7 @@ def test_snapshot_times_snap_to_written():
 
 
 def test_snapshots_of_a_2d_run(tmp_path):
-    directory = _run_directory(tmp_path)
+    directory = run_directory(tmp_path)
     skipped: list[str] = []
     paths = plot_snapshots(directory, log=skipped.append)
     names = sorted(p.name for p in paths)
@@ -125,7 +81,7 @@ def test_snapshots_of_a_2d_run(tmp_path):
 
 
 def test_particle_colours_and_chosen_times(tmp_path):
-    directory = _run_directory(tmp_path, temperature="zero")
+    directory = run_directory(tmp_path, temperature="zero")
     skipped: list[str] = []
     paths = plot_snapshots(directory, times=[0.9, 1.2], field="pressure", particle_property="material",
                            log=skipped.append)
@@ -143,7 +99,7 @@ def test_particle_colours_and_chosen_times(tmp_path):
 def test_temperature_with_particles_coloured_by_a_property(tmp_path):
     """With a particle property the temperature picture shows the particles on top in viridis (the
     seed's figure 5, right: a section coloured by initial radius); the pictures go to out_dir."""
-    directory = _run_directory(tmp_path)
+    directory = run_directory(tmp_path)
     out = tmp_path / "pictures"
     paths = plot_snapshots(directory, times=[2.0], particle_property="material", out_dir=out, log=None)
     assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
@@ -167,7 +123,7 @@ def test_temperature_with_particles_coloured_by_a_property(tmp_path):
 
 
 def test_unknown_names_list_the_known_ones(tmp_path):
-    directory = _run_directory(tmp_path)
+    directory = run_directory(tmp_path)
     with pytest.raises(ValueError, match="fields: .*material"):
         plot_snapshots(directory, field="density", log=None)
     with pytest.raises(ValueError, match="properties: id, rank, material"):
@@ -175,15 +131,48 @@ def test_unknown_names_list_the_known_ones(tmp_path):
 
 
 def test_snapshots_of_a_3d_run(tmp_path):
-    directory = _run_directory(tmp_path, dim=3)
+    directory = run_directory(tmp_path, dim=3)
     paths = plot_snapshots(directory, times=[2.0], log=None)
-    assert [p.name for p in paths] == ["material_0002_t2.png", "temperature_0002_t2.png"]
-    for path in paths:
+    assert [p.name for p in paths] == ["material_0002_t2.png", "volume_0002_t2.png", "temperature_0002_t2.png"]
+    for path in (paths[0], paths[2]):
         _check_picture(path)  # the x-z section through the centre, z up
 
 
+def test_a_3d_box_in_perspective_three_slices_and_an_isosurface(tmp_path):
+    """The volume picture: slices x = y = z = 1/2 coloured by the temperature (= z), the isosurface
+    material = 1/2 (material = 1 in the cells above z = 1/3: within a cell of z = 1/3), gold on the
+    picture."""
+    import json
+
+    from convection.io.pictures.labels import Labels
+    from convection.io.pictures.series import Series
+    from convection.io.pictures.volume import volume_picture
+
+    directory = run_directory(tmp_path, dim=3, particles=False)
+    (directory / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km", "fields": {}}))
+    data, _ = Series(directory / "fields.xdmf").read(2.0)
+    data.cell_data["material"][:] = data.cell_centers().points[:, 2] > 1 / 3
+    view = volume_picture(data, "material", 2.0, tmp_path / "volume.png", labels=Labels(field_units(directory)))
+    assert view.field == "temperature" and view.surface_field == "material" and view.level == pytest.approx(0.5)
+    assert view.slices.n_blocks == 3
+    for axis, piece in enumerate(view.slices):  # slice_orthogonal: normals x, y, z in this order
+        bounds = np.asarray(piece.bounds).reshape(3, 2)
+        assert np.allclose(bounds[axis], 0.5) and np.allclose(np.delete(bounds, axis, axis=0), [[0, 1], [0, 1]])
+        assert "temperature" in piece.point_data.keys()
+    z = np.asarray(view.isosurface.points)[:, 2]
+    assert view.isosurface.n_points > 20 and np.all(np.abs(z - 1 / 3) <= 1 / 6 + 1e-9)
+    image = imread(view.path)[..., :3]
+    gold = (image[..., 0] > 0.8) & (image[..., 1] > 0.6) & (image[..., 1] < 0.9) & (image[..., 2] < 0.3)
+    assert gold.sum() > 2_000 and _colours(image) > 200
+    data.point_data["temperature"][:] = 0.0  # no temperature: the slices show the material
+    view = volume_picture(data, "material", 2.0, tmp_path / "material.png", labels=Labels())
+    assert (view.field, view.surface_field) == ("material", "material")
+    data.cell_data["material"][:] = 1.0
+    assert volume_picture(data, "material", 2.0, tmp_path / "nothing.png", labels=Labels()) is None
+
+
 def test_cli_draws_summary_and_snapshots(tmp_path, capsys):
-    directory = _run_directory(tmp_path, particles=False)
+    directory = run_directory(tmp_path, particles=False)
     assert main([str(directory), "--times", "2"]) == 0
     printed = capsys.readouterr().out.split()
     assert printed == [str(directory / "summary.png"), str(directory / "snapshots" / "material_0002_t2.png"),
@@ -232,7 +221,7 @@ def test_viscosity_on_a_log_scale_and_titles_in_units(tmp_path):
     import json
 
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 6, 6)
-    functions = _functions(mesh, "z")
+    functions = field_functions(mesh, "z")
     viscosity = dolfinx.fem.Function(function_space(mesh, "DG", 0))
     viscosity.interpolate(lambda x: np.where(x[1] > 0.5, 1e19, 1e23))
     out = FieldOutput(tmp_path)
@@ -248,10 +237,10 @@ def test_viscosity_on_a_log_scale_and_titles_in_units(tmp_path):
     assert np.allclose(bottom, colormaps["magma"](1.0)[:3], atol=0.03)  # 1e23: the high end
     (tmp_path / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km",
                                                              "fields": {"viscosity": "Pa*s", "material": "1"}}))
-    labels = _Labels(field_units(tmp_path))
+    labels = Labels(field_units(tmp_path))
     assert (labels.time(2.5), labels.of("viscosity"), labels.of("material")) == ("2.5 Myr", "viscosity [Pa*s]",
                                                                               "material")
-    assert _Labels().time(2.5) == "2.5" and field_units(tmp_path / "nowhere") is None
+    assert Labels().time(2.5) == "2.5" and field_units(tmp_path / "nowhere") is None
 
 
 def test_the_particle_system_drawn(tmp_path):
@@ -268,3 +257,42 @@ def test_the_particle_system_drawn(tmp_path):
         particle_series(tmp_path, "slab")
     (tmp_path / "particles.xdmf").write_text("<Xdmf/>")
     assert particle_series(tmp_path) == tmp_path / "particles.xdmf"
+
+
+def _bar_texts(fig, bar_axes):
+    fig.canvas.draw()
+    axis = bar_axes.xaxis
+    return [t.get_text() for t in axis.get_ticklabels() if t.get_text()], axis.get_offset_text().get_text()
+
+
+def test_snapshot_axes_in_the_runs_units_and_plain_colour_bars(tmp_path):
+    """A run in km: the picture's axes are x [km] and z [km] over the domain; a temperature bar in
+    K is ticked 400, 600, ... (no 1e+03, no offset); a viscosity over four decades is on a
+    logarithmic bar; a nondimensional run's axes are x and z."""
+    import json
+
+    from convection.io.pictures.sections import ColourBar, Picture, picture_plane
+    from convection.io.pictures.series import Series
+
+    directory = run_directory(tmp_path, particles=False)
+    (directory / "fields_units.json").write_text(json.dumps({"time": "Myr", "length": "km", "fields": {}}))
+    data, _ = Series(directory / "fields.xdmf").read(2.0)
+    plane, view, _ = picture_plane(data)
+    picture = Picture(plane, view, Labels(field_units(directory)))
+    picture.add(plane, "temperature", ColourBar("temperature [K]", "coolwarm", (273.0, 1573.0)))
+    picture.add(plane, "pressure", ColourBar("viscosity [Pa s]", "magma", (1e19, 1e23), log=True))
+    fig = picture.figure("title")
+    field, temperature, viscosity = fig.axes
+    assert (field.get_xlabel(), field.get_ylabel(), field.get_title()) == ("x [km]", "z [km]", "title")
+    assert field.get_xlim() == (0.0, 1.0) and field.get_ylim() == (0.0, 1.0)
+    ticks, offset = _bar_texts(fig, temperature)
+    assert offset == "" and {"400", "800", "1200"} <= set(ticks) and all(t.isdigit() for t in ticks)
+    assert temperature.get_xlabel() == "temperature [K]"
+    assert viscosity.get_xscale() == "log" and viscosity.get_xlabel() == "viscosity [Pa s]"
+    assert len(fig.axes) == 3
+    plain = Picture(plane, view, Labels())
+    plain.add(plane, "temperature", ColourBar("temperature", "coolwarm", (0.0, 1.0)))
+    fig = plain.figure("title")
+    assert (fig.axes[0].get_xlabel(), fig.axes[0].get_ylabel()) == ("x", "z")
+    ticks, offset = _bar_texts(fig, fig.axes[1])
+    assert offset == "" and {"0.0", "0.4", "1.0"} <= set(ticks)

@@ -8,8 +8,8 @@ relaxing mode's departure from equilibrium is then multiplied by ``tau / (tau + 
 (0, 1) for every step (docs/free_surface.md). The script runs the config at 0.25 Myr steps with
 the defaults, the same with ``theta = 0.5``, and the reference at 10 kyr steps, and reports for
 each: the highest topography at the first step and over the run, its ratio to the reference's
-highest topography up to the same time, and how often the rate of the highest topography changes
-sign from one step to the next.
+highest topography up to the same time, how often the rate of the highest topography changes sign,
+and how often it changes sign and back at the next step (ringing).
 
 Usage::
 
@@ -58,11 +58,24 @@ def run(overrides: dict[str, Any], dt_kyr: float, cells: tuple[int, int], end: f
             "steps": len(rows) - 1}
 
 
-def sign_changes(values: list[float]) -> int:
-    """How often the step-to-step change of ``values`` changes sign."""
+def _signs(values: list[float]) -> np.ndarray:
     rate = np.diff(np.asarray(values))
-    rate = rate[rate != 0.0]
-    return int(np.count_nonzero(np.sign(rate[1:]) != np.sign(rate[:-1])))
+    return np.sign(rate[rate != 0.0])
+
+
+def sign_changes(values: list[float]) -> int:
+    """How often the step-to-step change of ``values`` changes sign (a turn of the curve: a peak
+    of the physics counts too)."""
+    signs = _signs(values)
+    return int(np.count_nonzero(signs[1:] != signs[:-1]))
+
+
+def alternations(values: list[float]) -> int:
+    """How often the change of ``values`` changes sign at one step and back at the next: the
+    zigzag of a surface that overshoots and rings, which a turn of the physics (a plateau's
+    peak) does not make."""
+    signs = _signs(values)
+    return int(np.count_nonzero((signs[1:-1] != signs[:-2]) & (signs[2:] != signs[1:-1])))
 
 
 def overshoot(r: dict[str, Any], reference: dict[str, Any]) -> float:
@@ -80,12 +93,15 @@ def write(out: Path, cells: tuple[int, int], results: dict[str, dict[str, Any]])
              f"{cells[0]} x {cells[1]} cells to {reference['t'][-1]:.3g} Myr). Highest topography: the surface's "
              "highest point above the box's top; ratio: its largest ratio, over the run's steps, to the highest "
              "topography of the 10 kyr run up to the same time; sign changes: steps at which the rate of the "
-             "highest topography changes sign.", "",
-             "| run | steps | first step [km] | highest [km] | ratio to 10 kyr steps | sign changes | wall [s] |",
-             "|---|---|---|---|---|---|---|"]
+             "highest topography changes sign (turns of the curve); alternations: sign changes undone at the next "
+             "step (a zigzag: the surface ringing).", "",
+             "| run | steps | first step [km] | highest [km] | ratio to 10 kyr steps | sign changes | alternations | "
+             "wall [s] |",
+             "|---|---|---|---|---|---|---|---|"]
     for name, r in results.items():
         lines.append(f"| {name} | {r['steps']} | {r['top_max'][1]:.4g} | {max(r['top_max']):.4g} | "
-                     f"{overshoot(r, reference):.3f} | {sign_changes(r['top_max'])} | {r['wall']:.0f} |")
+                     f"{overshoot(r, reference):.3f} | {sign_changes(r['top_max'])} | {alternations(r['top_max'])} | "
+                     f"{r['wall']:.0f} |")
     (out / "plume_lid.md").write_text("\n".join(lines) + "\n")
     (out / "plume_lid.json").write_text(json.dumps(results, indent=1))
     _picture(out / "plume_lid.png", results)

@@ -17,7 +17,8 @@ One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
 
 0. where the flow anticipates the step's end (a free surface's stabilisation, a predicted buoyancy)
    and was solved for a shorter step than ``dt`` (on the first step: for none), it is solved again
-   for ``dt``; a shorter step than the flow's keeps it (the anticipation then damps more, never
+   for ``dt``, and ``u* = u^n`` in 1. (a flow solved for another step is not of the history ``u*``
+   extrapolates); a shorter step than the flow's keeps it (the anticipation then damps more, never
    overshoots);
 1. the velocity at the step's end is extrapolated, ``u* = (1 + w) u^n - w u^{n-1}``
    (``w = dt / dt_previous``; ``u* = u^n`` on the first step) — the model is the one owner of the
@@ -270,6 +271,7 @@ class Model:
             self.start()
         if (self.stokes.buoyancy_theta > 0.0 or self.stokes.discretisation.anticipates_step) and dt > self.dt_previous:
             self.solve_flow(dt)  # it anticipated a shorter step (the first step: none): step 0 above
+            self.u_previous = None  # u^n is then not of the history u* extrapolates
         u = self.stokes.u
         u_end = self._velocity_at_step_end(dt)
         u_materials = u if self.stokes.buoyancy_theta > 0.0 else u_end
@@ -299,9 +301,8 @@ class Model:
     def _velocity_at_step_end(self, dt: float) -> dolfinx.fem.Function:
         """u* (module docstring); then remembers u^n as the previous velocity."""
         u = self.stokes.u
-        if self.u_previous is None or self.dt_previous <= 0.0:
-            u_end = u
-        else:
+        u_end = u
+        if self.u_previous is not None and self.dt_previous > 0.0:
             w = dt / self.dt_previous
             u_end = dolfinx.fem.Function(u.function_space)
             u_end.x.array[:] = (1.0 + w) * u.x.array - w * self.u_previous.x.array

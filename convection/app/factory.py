@@ -120,7 +120,8 @@ def materials_from_config(config: dict[str, Any]) -> Materials:
     background_law, laws = viscosity_laws(config)
     materials = tuple(Material(m["name"], Expression(m["initial"], constants=constants, gdim=gdim), Rb=m["Rb"],
                                viscosity=law) for m, law in zip(table, laws))
-    return Materials(materials, mixing=config["physics"]["viscosity"]["mixing"], background_law=background_law)
+    return Materials(materials, mixing=config["physics"]["viscosity"]["mixing"], background_law=background_law,
+                     sharp=tuple(config["physics"]["viscosity"]["sharp"] or ()))
 
 
 def run_settings(config: dict[str, Any]) -> RunSettings:

@@ -122,6 +122,10 @@ class ViscositySettings:
                               help="viscosity of the background material (with the materials section)")
     mixing: str = param("geometric", choices=Names(MIXING_RULES),
                         help="volume-fraction weighted mixing of the material viscosities")
+    sharp: tuple[str, ...] = param((), help="materials (by name) that enter the viscosity by threshold, not by "
+                                           "mixing: a cell (point) at least half of them takes their viscosity, any "
+                                           "other the mixture of the rest, renormalised (e.g. [air]: sticky air's "
+                                           "thin film on a plate then does not weaken the plate's whole top cell)")
     temperature_law: str = param("none", choices=Names(TEMPERATURE_LAWS),
                                  help="temperature dependence of the material viscosities (older than law)")
     gamma: float = param(0.0, minimum=0.0, help="eta *= exp(-gamma T) for frank_kamenetskii")
@@ -176,6 +180,13 @@ class ViscosityLaw:
             when not given.
         gravity: along which the laws' depth is measured (:mod:`convection.geometry.gravity`:
             ``z_top - z`` in a box, ``r_outer - |x|`` in a shell).
+        sharp: indices ``i >= 1`` of the materials (in the order of ``laws``; 0, the background,
+            cannot be one) that enter by threshold instead of by mixing. With ``S = sum_{i in sharp}
+            C_i``: where ``S >= 1/2`` the viscosity is the mixture of the sharp materials alone
+            (fractions ``C_i / S``), elsewhere the mixture of the others (fractions ``C_j / (1 - S)``,
+            background ``C_0 / (1 - S)``). The volume fractions themselves (and so the buoyancy) are
+            unchanged. Meant for sticky air: a surface lowered by a few km into a 25 km cell makes
+            it ~10 % air, and the geometric mean then weakens the whole cell by ``10^(0.1 * 4)``.
     """
 
     material_viscosities: tuple[float, ...] | None = None
@@ -184,6 +195,7 @@ class ViscosityLaw:
     gamma: float = VISCOSITY_DEFAULTS.gamma
     laws: tuple[ViscosityLawBase, ...] | None = None
     gravity: Gravity = VerticalGravity()
+    sharp: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         _check_name(self.mixing, MIXING_RULES, "viscosity mixing rule")
@@ -198,6 +210,9 @@ class ViscosityLaw:
             object.__setattr__(self, "laws", (Constant(1.0),))
         if not self.laws:
             raise ValueError("laws needs at least the background material's law")
+        if any(not 1 <= i < len(self.laws) for i in self.sharp) or len(set(self.sharp)) != len(self.sharp):
+            raise ValueError(f"sharp must name distinct materials 1..{len(self.laws) - 1} (not the background), "
+                             f"got {self.sharp}")
 
     @property
     def is_nonlinear(self) -> bool:
@@ -313,7 +328,20 @@ class ViscosityLaw:
             raise ValueError(f"the viscosity law has {len(etas)} material(s), got {len(cs)} fraction(s)")
         cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in cs]
         background = 1.0 - _sum(cs)
-        return MIXING_RULES[self.mixing].mix(eta0, etas, cs, background, closed_form)
+        mix = MIXING_RULES[self.mixing].mix
+        if not self.sharp:
+            return mix(eta0, etas, cs, background, closed_form)
+        # Threshold on the sharp materials' total S; each side mixes its own materials, renormalised.
+        sharp = set(self.sharp)
+        total = _sum([c for i, c in enumerate(cs, start=1) if i in sharp])
+        inside = ufl.max_value(total, 1e-12)
+        outside = ufl.max_value(1.0 - total, 1e-12)
+        zero = ufl.as_ufl(0.0)
+        eta_in = mix(eta0, etas, [c / inside if i in sharp else zero for i, c in enumerate(cs, start=1)], zero,
+                     closed_form)
+        eta_out = mix(eta0, etas, [zero if i in sharp else c / outside for i, c in enumerate(cs, start=1)],
+                      background / outside, closed_form)
+        return ufl.conditional(ufl.ge(total, 0.5), eta_in, eta_out)
 
 
 def _sum(terms: list[Any]) -> Any:

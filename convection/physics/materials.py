@@ -84,17 +84,23 @@ class Materials:
         mixing: ``"arithmetic"``, ``"geometric"`` or ``"harmonic"`` (volume-fraction weighted).
         background_law: The background's :mod:`convection.physics.rheology` law (replaces
             ``background_viscosity``), or None.
+        sharp: Names of the materials that enter the viscosity by threshold rather than by mixing
+            (:class:`convection.physics.approximation.ViscosityLaw`'s ``sharp``).
     """
 
     materials: tuple[Material, ...] = ()
     background_viscosity: float = VISCOSITY_DEFAULTS.background
     mixing: str = VISCOSITY_DEFAULTS.mixing
     background_law: ViscosityLawBase | None = None
+    sharp: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         names = self.names
         if len(set(names)) != len(names):
             raise ValueError(f"material names must differ, got {names}")
+        unknown = [n for n in self.sharp if n not in names]
+        if unknown:
+            raise ValueError(f"sharp materials {unknown} are not among the materials {names}")
         if not self.background_viscosity > 0.0:
             raise ValueError(f"background viscosity must be > 0, got {self.background_viscosity}")
 
@@ -118,7 +124,8 @@ class Materials:
                 return law0
             return value if isinstance(value, ViscosityLawBase) else Constant(float(value))
         return ViscosityLaw(mixing=self.mixing, temperature_law=temperature_law, gamma=gamma,
-                            laws=(law0, *(law(m.viscosity) for m in self.materials)), gravity=gravity)
+                            laws=(law0, *(law(m.viscosity) for m in self.materials)), gravity=gravity,
+                            sharp=tuple(self.names.index(n) + 1 for n in self.sharp))
 
     def approximation(self, *, Ra: float, H: float = 0.0, temperature_law: str = "none",
                       gamma: float = 0.0, gravity: Gravity = VerticalGravity()) -> BoussinesqApproximation:

@@ -101,3 +101,51 @@ def test_numbers_are_constant_laws_of_one_path(mesh):
     law = ViscosityLaw((0.1, 1.0))
     assert law.numbers == (0.1, 1.0) and not law.is_constant
     assert _value(mesh, law(0.0, 0.5)) == pytest.approx(0.1 * math.exp(0.5 * math.log(10.0)), rel=1e-12)
+
+
+def _three_material_evaluator(mesh, law):
+    """f(C_1, C_2) -> law(0, (C_1, C_2)), compiled once with Constant fractions."""
+    cs = (dolfinx.fem.Constant(mesh, 0.0), dolfinx.fem.Constant(mesh, 0.0))
+    form = dolfinx.fem.form(law(0.0, cs) * ufl.dx(domain=mesh))
+
+    def evaluate(c1: float, c2: float) -> float:
+        cs[0].value, cs[1].value = c1, c2
+        return mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
+
+    return evaluate
+
+
+def test_sharp_material_enters_by_threshold(mesh):
+    """Sticky air (material 1, eta 1e-2) sharp, lithosphere (material 2, eta 1e2) and mantle (background,
+    1) mixed geometrically: a plate cell 10 % air keeps the plate's viscosity (geometric mixing
+    would give 10^1.4), a cell at least half air is air, and without air the rule is the plain one."""
+    plain = _three_material_evaluator(mesh, ViscosityLaw((1.0, 1e-2, 1e2)))
+    eta = _three_material_evaluator(mesh, ViscosityLaw((1.0, 1e-2, 1e2), sharp=(1,)))
+    assert plain(0.1, 0.9) == pytest.approx(10 ** 1.6, rel=1e-12)
+    assert eta(0.1, 0.9) == pytest.approx(1e2, rel=1e-12)
+    assert eta(0.2, 0.4) == pytest.approx(10.0, rel=1e-12)  # mantle and plate 1:1 -> sqrt(1 * 100)
+    assert eta(0.5, 0.5) == pytest.approx(1e-2, rel=1e-12)
+    assert eta(1.0, 0.0) == pytest.approx(1e-2, rel=1e-12)
+    for c2 in (0.0, 0.3, 1.0):
+        assert eta(0.0, c2) == pytest.approx(plain(0.0, c2), rel=1e-12)
+    harmonic = _three_material_evaluator(mesh, ViscosityLaw((1.0, 1e-2, 1e2), mixing="harmonic", sharp=(1,)))
+    assert harmonic(0.3, 0.35) == pytest.approx(1.0 / (0.5 / 1.0 + 0.5 / 1e2), rel=1e-12)
+
+
+def test_sharp_needs_materials():
+    with pytest.raises(ValueError, match="sharp"):
+        ViscosityLaw((1.0, 2.0), sharp=(0,))
+    with pytest.raises(ValueError, match="sharp"):
+        ViscosityLaw((1.0, 2.0), sharp=(2,))
+
+
+def test_materials_name_their_sharp_ones():
+    from convection.physics.materials import Material, Materials
+
+    def nothing(x):
+        return np.zeros(x.shape[1])
+
+    air, lith = Material("air", nothing, viscosity=1e-2), Material("lithosphere", nothing, viscosity=1e2)
+    assert Materials((air, lith), sharp=("air",)).viscosity_law().sharp == (1,)
+    with pytest.raises(ValueError, match="sharp"):
+        Materials((air, lith), sharp=("water",))

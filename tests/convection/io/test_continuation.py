@@ -18,10 +18,11 @@ from mpi4py import MPI
 from _runs import CONFIGS, rows, run_cli, sets
 
 import dolfinx.fem
+import dolfinx.geometry
 import dolfinx.mesh
 
 from convection.io.checkpoint import latest_checkpoint
-from fembase.dolfinx_compat import function_space
+from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, function_space
 
 CONFIG = CONFIGS / "blankenbach_1a.yaml"
 QUIET = ["output.progress=none", "output.fields_every=0", "time.steady_state_tolerance=null"]
@@ -71,9 +72,8 @@ def test_finer_mesh_gets_the_interpolant(source, tmp_path):
     T.x.array[:] = saved[index]
     points = np.zeros((coords.shape[0], 3))
     points[:, : coords.shape[1]] = coords
-    tree = dolfinx.geometry.bb_tree(mesh, 2) if hasattr(dolfinx.geometry, "bb_tree") \
-        else dolfinx.geometry.BoundingBoxTree(mesh, 2)
-    cells = dolfinx.geometry.compute_colliding_cells(mesh, dolfinx.geometry.compute_collisions(tree, points), points)
+    candidates = compute_collisions(bounding_box_tree(mesh, 2), points)
+    cells = dolfinx.geometry.compute_colliding_cells(mesh, candidates, points)
     first = np.array([cells.links(i)[0] for i in range(points.shape[0])], dtype=np.int32)
     expected = T.eval(points, first).reshape(-1)
     assert np.max(np.abs(continued - expected)) < 1e-12

@@ -106,3 +106,23 @@ def test_progress_eta_to_the_steady_state():
     assert "ETA 20s (steady)" in lines[0]
     assert "ETA 90s" in lines[1] and "steady" not in lines[1]
     assert "ETA 90s" in lines[2] and "steady" not in lines[2]
+
+
+def test_a_resumed_run_stops_where_the_uninterrupted_one_does(tmp_path):
+    """The rate test's history is in the checkpoint: stopped at step 40 and resumed, a small 1a run
+    stops at the same step, with the same numbers."""
+    from _runs import CONFIGS, run_cli, sets
+
+    small = ["mesh.cells=[8,8]", "time.steady_state_tolerance=null", "time.steady_state_rate=1e-2",
+             "time.steady_state_time_window=0.02", "output.progress=none", "output.fields_every=0"]
+    config = str(CONFIGS / "blankenbach_1a.yaml")
+    whole = run_cli(["run", config, "--output", str(tmp_path / "whole"), *sets(small)])
+    assert whole.returncode == 0, whole.stderr
+    part = run_cli(["run", config, "--output", str(tmp_path / "part"), *sets([*small, "time.max_steps=40"])])
+    assert part.returncode == 0, part.stderr
+    resumed = run_cli(["resume", str(tmp_path / "part"), *sets(["time.max_steps=null"])])
+    assert resumed.returncode == 0, resumed.stderr
+    first, second = (json.loads((tmp_path / name / "summary.json").read_text()) for name in ("whole", "part"))
+    assert first["reason"] == second["reason"] == "steady state"
+    assert first["steps"] == second["steps"] > 40
+    assert (first["time"], first["nusselt"], first["vrms"]) == (second["time"], second["nusselt"], second["vrms"])

@@ -19,7 +19,8 @@ the new run's first Stokes solve makes the velocity from it (the shipped laws ma
 the velocity for a given temperature, so a first guess would not save a factorisation), and
 materials and particles start from the new run's own initial condition. The time starts at 0.
 
-The source must be a box of the same extent, dimension and cell type, with a temperature; a run
+The source must be a domain meshed with straight cells (a box) of the same ``mesh.geometry``,
+extent, dimension and cell type, with a temperature; a run
 that adapts its mesh to its initial condition (``adaptivity.enabled``) cannot continue one (it
 adapts to ``initial.temperature``). :func:`check_source` says what is wrong in one line naming the
 key.
@@ -42,6 +43,7 @@ from scipy.spatial import cKDTree
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from convection.io.checkpoint import (CheckpointError, block, fill_functions, inspect_checkpoint, latest_checkpoint,
                                       read_checkpoint)
+from convection.geometry.registry import domain_from_config
 from convection.schema import ConfigError
 from fembase.distribute import MeshPiece, create_mesh_from_piece
 from fembase.dolfinx_compat import coordinate_element_from, function_space, mesh_domain
@@ -94,9 +96,9 @@ def check_source(config: dict[str, Any], /) -> None:
         raise ConfigError(f"config key '{KEY}': not with adaptivity.enabled (the initial mesh is adapted to "
                           "initial.temperature)")
     other = saved.config
-    if config["mesh"]["geometry"] != "box":
-        raise ConfigError(f"config key '{KEY}': only a box continues another run (mesh.geometry is "
-                          f"{config['mesh']['geometry']})")
+    if domain_from_config(config).manifold() is not None:
+        raise ConfigError(f"config key '{KEY}': only a domain meshed with straight cells continues another run "
+                          f"(mesh.geometry {config['mesh']['geometry']} is curved)")
     if len(other["mesh"].get("cells") or ()) != len(config["mesh"]["cells"]):
         raise ConfigError(f"config key '{KEY}': the source {path} is a {len(other['mesh'].get('cells') or ())}D "
                           f"run, this one is {len(config['mesh']['cells'])}D")

@@ -1,15 +1,22 @@
-"""Blankenbach et al. (1989) steady convection benchmark: run cases 1a/1b/1c and compare.
+"""Blankenbach et al. (1989) steady convection benchmark: run cases 1a/1b/1c/2a/2b and compare.
 
 Usage::
 
-    python benchmarks/blankenbach/run.py [--case 1a 1b 1c] [--ranks 2] [--quick]
-                                         [--adaptive] [--compare-ranks] [--out DIR]
+    python benchmarks/blankenbach/run.py [--case 1a 1b 1c 2a 2b] [--ranks 2] [--quick]
+                                         [--cells N] [--set KEY=VALUE ...]
+                                         [--adaptive] [--compare-ranks] [--continuation COARSE FINE]
+                                         [--out DIR]
 
 Each case runs ``configs/blankenbach_<case>.yaml`` with the CLI under mpirun (to steady state),
 then writes ``<out>/results.md`` — a table of the mesh used, Nu and vrms at steady state and their
-relative errors against ``reference.csv`` — and ``<out>/results.png``. ``--adaptive`` adds an
-adaptive run of case 1b and compares it with the uniform one; ``--compare-ranks`` runs 1a on 1
-and 2 ranks and reports the differences. ``--quick`` uses coarse meshes (for smoke tests).
+relative errors against ``reference.csv`` — and ``<out>/results.png``. ``--cells N`` runs every
+case with N cells vertically (and as many horizontally as keep the cells square); ``--set``
+passes config overrides to every run. ``--adaptive`` adds an adaptive run of case 1b and compares
+it with the uniform one; ``--compare-ranks`` runs 1a on 1 and 2 ranks and reports the
+differences; ``--continuation COARSE FINE`` runs each case with FINE cells vertically from a cold
+start and continued from its run with COARSE cells (``--initial-from``), side by side, and
+reports the steps and wall times to the steady state. ``--quick`` uses coarse meshes (for smoke
+tests).
 """
 
 from __future__ import annotations
@@ -45,9 +52,14 @@ def run_case(config: str, out: Path, ranks: int, overrides: list[str]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--case", nargs="+", default=["1a", "1b", "1c"], choices=["1a", "1b", "1c"])
+    parser.add_argument("--case", nargs="+", default=["1a", "1b", "1c"], choices=CASES)
     parser.add_argument("--ranks", type=int, default=2)
     parser.add_argument("--quick", action="store_true", help="coarse meshes, short runs")
+    parser.add_argument("--cells", type=int, default=None, help="cells vertically (default: the config's)")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="a config override for every run (repeatable)")
+    parser.add_argument("--continuation", nargs=2, type=int, default=None, metavar=("COARSE", "FINE"),
+                        help="run each case with FINE cells vertically cold and continued from COARSE")
     parser.add_argument("--adaptive", action="store_true", help="also run 1b adaptively and compare")
     parser.add_argument("--compare-ranks", action="store_true", help="run 1a on 1 and 2 ranks")
     parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "blankenbach"))
@@ -55,16 +67,16 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     ref = reference()
-    quick = ["mesh.cells=[12,12]", "time.steady_state_tolerance=1e-4"] if args.quick else []
+    quick = ["time.steady_state_tolerance=1e-4", "time.steady_state_rate=1e-1"] if args.quick else []
 
     rows = []
     results = {}
     for case in args.case:
-        summary = run_case(f"blankenbach_{case}.yaml", out / case, args.ranks, quick)
+        cells = 12 if args.quick else args.cells
+        sized = [*quick, *([cells_override(case, cells)] if cells else []), *args.overrides]
+        summary = run_case(f"blankenbach_{case}.yaml", out / case, args.ranks, sized)
         results[case] = summary
-        config = (out / case / "config.yaml").read_text()
-        cells = next(line.split(":", 1)[1].strip() for line in config.splitlines() if line.strip().startswith("cells:"))
-        rows.append((case, f"{cells} P2-P1/P2 uniform", summary, ref[case]))
+        rows.append((case, f"{mesh_cells(out / case)} P2-P1/P2 uniform", summary, ref[case]))
     if args.adaptive:
         # Base 16x16 refined at most once: the finest cells match the uniform 32x32 run.
         # Mesh changes perturb Nu/vrms slightly (~1e-5), so the steady-state test is looser.
@@ -95,12 +107,52 @@ def main(argv: list[str] | None = None) -> int:
                       f"(rel. diff {abs(one['nusselt'] - two['nusselt']) / one['nusselt']:.2e}), vrms {one['vrms']:.10f} vs "
                       f"{two['vrms']:.10f} (rel. diff {abs(one['vrms'] - two['vrms']) / one['vrms']:.2e}), "
                       f"steps {one['steps']} vs {two['steps']}"]
+    if args.continuation:
+        lines += ["", *continuation(args.case, *args.continuation, out, args.ranks, [*quick, *args.overrides])]
     table = "\n".join(lines) + "\n"
     (out / "results.md").write_text(table)
     print(table)
     _plot(results, ref, out / "results.png")
     print(f"wrote {out / 'results.md'} and {out / 'results.png'}")
     return 0
+
+
+CASES = ["1a", "1b", "1c", "2a", "2b"]
+WIDTH = {"2b": 2.5}
+"""The boxes' widths (height 1)."""
+
+
+def cells_override(case: str, cells: int) -> str:
+    """``mesh.cells`` for ``cells`` square cells vertically in the case's box."""
+    return f"mesh.cells=[{round(WIDTH.get(case, 1.0) * cells)},{cells}]"
+
+
+def mesh_cells(run_dir: Path) -> str:
+    """The ``mesh.cells`` a run folder's config.yaml holds, as written there."""
+    config = (run_dir / "config.yaml").read_text()
+    return next(line.split(":", 1)[1].strip() for line in config.splitlines() if line.strip().startswith("cells:"))
+
+
+def continuation(cases: list[str], coarse: int, fine: int, out: Path, ranks: int, overrides: list[str]) -> list[str]:
+    """Each case on ``fine`` cells from a cold start and continued from its run on ``coarse`` cells
+    (``initial.from_run``, run first), one after the other; the table's lines."""
+    lines = ["| case | mesh | start | steps | model time | wall time [s] | Nu | vrms |", "|---|---|---|---|---|---|---|---|"]
+    savings = [""]
+    for case in cases:
+        source = out / f"{case}_{coarse}"
+        config = f"blankenbach_{case}.yaml"
+        first = run_case(config, source, ranks, [cells_override(case, coarse), *overrides])
+        cold = run_case(config, out / f"{case}_{fine}_cold", ranks, [cells_override(case, fine), *overrides])
+        warm_dir = out / f"{case}_{fine}_from_{coarse}"
+        warm = run_case(config, warm_dir, ranks, [cells_override(case, fine), f"initial.from_run={source}", *overrides])
+        for label, s, folder in (("cold", first, source), ("cold", cold, out / f"{case}_{fine}_cold"),
+                                 (f"from {mesh_cells(source)}", warm, warm_dir)):
+            lines.append(f"| {case} | {mesh_cells(folder)} | {label} | {s['steps']} | {s['time']:.4f} | "
+                         f"{s['wall_time']:.1f} | {s['nusselt']:.6f} | {s['vrms']:.5f} |")
+        savings.append(f"{case}: continued from {coarse} cells, the {fine}-cell run took {warm['wall_time']:.1f} s "
+                       f"against {cold['wall_time']:.1f} s cold (ratio {warm['wall_time'] / cold['wall_time']:.2f}), "
+                       f"{warm['steps']} steps against {cold['steps']}")
+    return lines + savings
 
 
 def _plot(results: dict, ref: dict, png: Path) -> None:

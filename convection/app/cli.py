@@ -1,6 +1,7 @@
 """Command line: run, resume and check configurations; print the config reference.
 
     python -m convection run configs/NAME.yaml [--set key.sub=value ...] [--output DIR] [--resume]
+                                               [--initial-from RUN_DIR]
     python -m convection resume RUN_DIR [--set time.end=...] [--checkpoint PATH]
     python -m convection check configs/NAME.yaml [--set ...]
     python -m convection schema [--format markdown|yaml]     # the config reference
@@ -74,6 +75,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--output", default=None, help="output folder (overrides output.directory)")
     run.add_argument("--resume", action="store_true",
                      help="continue from the newest checkpoint in the output folder if there is one")
+    run.add_argument("--initial-from", default=None, metavar="RUN_DIR",
+                     help="start from another run's temperature (its folder or a checkpoint folder), interpolated "
+                          "onto this run's mesh (sets initial.from_run)")
     run.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     resume = sub.add_parser("resume", help="continue a run from its newest checkpoint")
     resume.add_argument("directory", help="the run's output folder")
@@ -85,6 +89,7 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument("config")
     check.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     check.add_argument("--output", default=None)
+    check.add_argument("--initial-from", default=None, metavar="RUN_DIR")
     schema = sub.add_parser("schema", help="print the config reference: every key, default, allowed value and "
                                            "plugin parameter")
     schema.add_argument("--format", choices=("markdown", "yaml"), default="markdown",
@@ -183,7 +188,13 @@ def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
         overrides = list(args.overrides)
         if args.output is not None:
             overrides.append(_literal("output.directory", args.output))
+        if args.initial_from is not None:
+            overrides.append(_literal("initial.from_run", args.initial_from))
         config = _local(load_config, args.config, overrides)
+        if config["initial"]["from_run"] is not None and not (args.command == "run" and args.resume):
+            from convection.io.continuation import check_source
+
+            _local(check_source, config)
         if args.command == "check":
             if comm.rank == 0:
                 from convection.config.loader import dump_config

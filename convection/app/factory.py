@@ -46,6 +46,7 @@ from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_
 from convection.geometry.domain import Domain
 from convection.deform.motion import FreeSurface
 from convection.deform.surface import FreeSurfaceSettings, free_surface_boundaries, surface_terms
+from convection.io.continuation import initial_temperature
 from convection.io.checkpoint import (
     CheckpointError, Checkpointer, SavedRun, fill_functions, restore_mesh, restore_particles, restore_state,
     saved_values,
@@ -330,6 +331,10 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
                                   stabilisation=energy.stabilisation, velocity_extrapolation=False)
     temperature.set_initial(Expression(config["initial"]["temperature"], constants=expression_constants(config),
                                        gdim=domain.gdim), bounded=config["initial"]["temperature_bounded"])
+    if restore is None and config["initial"]["from_run"] is not None:
+        continued = dolfinx.fem.Function(temperature.T.function_space)
+        initial_temperature(config["initial"]["from_run"], continued)
+        temperature.set_initial(continued)
     particles = _particles(config, meshes, domain, materials, stokes, temperature, restore, free_surface)
     composition = _composition(config, mesh, approximation, materials, particles, energy.stabilisation)
     if particles is not None:

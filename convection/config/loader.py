@@ -178,6 +178,10 @@ SCHEMA: dict[str, Any] = {
         "composition": Field("str", None, nullable=True,
                              help="expression in x, y, z (1 = dense/second material), or null for none"),
         "constants": Field("mapping", {}, max_items=MAX_ENTRIES, help="named constants usable in the expressions"),
+        "from_run": Field("str", None, nullable=True,
+                          help="start from another run's temperature instead of initial.temperature: its run folder "
+                               "(newest checkpoint) or a checkpoint folder; interpolated onto this mesh, on any rank "
+                               "count (a box of the same extent; command line: run --initial-from PATH)"),
     },
     "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(MaterialSettings),
                        help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),

@@ -49,7 +49,8 @@ EXPECTED: dict[str, str] = {
     **dict.fromkeys(("background", "viscosity", "eta0", "eta_star", "min_viscosity", "max_viscosity",
                      "material_viscosities"), _VISCOSITY),
     **dict.fromkeys(("yield_stress", "cohesion"), _STRESS),
-    "reference_strain_rate": "1 / [time]",
+    **dict.fromkeys(("reference_strain_rate", "steady_state_rate"), "1 / [time]"),
+    "steady_state_time_window": "[time]",
     "H": "[temperature] / [time]",
 }
 """The dimension a value with a unit must have, by the name of its key (a key not named here takes

@@ -77,8 +77,8 @@ from particles.systems import file_stem
 from particles.properties import PropertyContext
 
 __all__ = ["CONFIG_VERSION", "CheckpointError", "CheckpointSettings", "Checkpointer", "SavedRun", "latest_checkpoint",
-           "fill_functions", "list_checkpoints", "saved_values", "read_checkpoint", "restore_mesh", "restore_particles",
-           "restore_state", "write_checkpoint"]
+           "block", "fill_functions", "inspect_checkpoint", "list_checkpoints", "saved_values", "read_checkpoint",
+           "restore_mesh", "restore_particles", "restore_state", "write_checkpoint"]
 
 FORMAT = "convection-checkpoint"
 VERSION = 4  # 4: the scalars of each component (state "components"); 3: created owners and mesh fingerprints;
@@ -288,6 +288,11 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
 
 
 # ---------------------------------------------------------------------- read
+def inspect_checkpoint(path: str | os.PathLike[str], /) -> SavedRun | str:
+    """A checkpoint folder read back, or what is wrong with it in a few words (not collective)."""
+    return _inspect(Path(path))
+
+
 def _inspect(path: Path) -> SavedRun | str:
     """Check a checkpoint folder alone (rank 0); returns it read back, or what is wrong.
 
@@ -383,7 +388,7 @@ def _read_piece(f: h5py.File, name: str, comm: MPI.Comm) -> MeshPiece:
                      _slice(f, f"{name}/owners", cell_counts, comm.rank).astype(np.int32), canonical)
 
 
-def _block(f: h5py.File, name: str, comm: MPI.Comm) -> npt.NDArray:
+def block(f: h5py.File, name: str, comm: MPI.Comm) -> npt.NDArray:
     """This rank's equal block of rows of a dataset (another rank count than it was written on)."""
     total = int(f[name].shape[0])
     return f[name][total * comm.rank // comm.size: total * (comm.rank + 1) // comm.size]
@@ -451,12 +456,12 @@ def restore_mesh(saved: SavedRun, comm: MPI.Comm,
         if "recipe/base" in f:
             # The saved base pieces, read in equal blocks: the global vertex numbering of the
             # concatenated pieces holds on any rank count.
-            canonical = _block(f, "recipe/base/canonical", comm).astype(np.int64)
+            canonical = block(f, "recipe/base/canonical", comm).astype(np.int64)
             owners = (canonical * comm.size // max(hierarchy.num_base_cells, 1)).astype(np.int32)
-            hierarchy.replay(MeshRecipe(MeshPiece(_block(f, "recipe/base/cells", comm),
-                                                  _block(f, "recipe/base/x", comm), owners, canonical), []))
-        cells, x = _block(f, "mesh/cells", comm), _block(f, "mesh/x", comm)
-        base_cells = _block(f, "mesh/base_cells", comm)
+            hierarchy.replay(MeshRecipe(MeshPiece(block(f, "recipe/base/cells", comm),
+                                                  block(f, "recipe/base/x", comm), owners, canonical), []))
+        cells, x = block(f, "mesh/cells", comm), block(f, "mesh/x", comm)
+        base_cells = block(f, "mesh/base_cells", comm)
     # The saved cells, each sent to the rank that owns its base cell, so the mesh and its base
     # stay together (load balancing needs that).
     owners = _base_owners(hierarchy)[base_cells]

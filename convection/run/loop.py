@@ -30,13 +30,14 @@ from convection.postprocess.postprocessors import (
 )
 from convection.schema import REQUIRED, Names, param, subsection
 from convection.run.progress import Progress
+from convection.run.steady import SteadyRate, SteadyState
 from convection.physics.scaling import ColumnUnits, Scaling
 from convection.io.run_folder import RunFolderError
 from particles.io.swarm_checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
 __all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary",
-           "SteadyState", "Watch", "Watched", "run"]
+           "SteadyRate", "SteadyState", "Watch", "Watched", "run"]
 
 
 PROGRESS_MODES = ("auto", "bar", "lines", "none")
@@ -57,9 +58,18 @@ class TimeSettings:
                                             "w = dt/dt_previous, tame after a fast initial transient")
     max_steps: int | None = param(None, minimum=0, help="stop after this many steps (null: at time.end)")
     steady_state_tolerance: float | None = param(None, exclusive_minimum=0.0,
-                                                 help="stop when Nu and vrms change by less than this (relative) per "
-                                                      "unit step window")
+                                                 help="stop when Nu and vrms change by less than this (relative) over "
+                                                      "the last steady_state_window steps (depends on the step length; "
+                                                      "see steady_state_rate)")
     steady_state_window: int = param(20, minimum=1, help="steps over which the steady-state change is measured")
+    steady_state_rate: float | None = param(None, exclusive_minimum=0.0,
+                                            help="stop when R < this, R = max over Nu and vrms of "
+                                                 "max_{t-tau<=s<=t} |q(s) - q(t)| / (|q(t)| tau), the relative change "
+                                                 "per unit model time over tau = steady_state_time_window (does not "
+                                                 "depend on the step length); the ETA extrapolates log R to it")
+    steady_state_time_window: float = param(0.01, exclusive_minimum=0.0,
+                                            help="tau: the model time over which steady_state_rate's change is "
+                                                 "measured")
 
 
 @dataclass(frozen=True)
@@ -106,44 +116,6 @@ class RunSummary:
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
-
-
-class SteadyState:
-    """Stop when every watched quantity changed by less than ``tolerance`` (relative) over ``window`` steps.
-
-    Quantities that are None (not in this model, e.g. ``nusselt`` without a temperature equation)
-    are left out; the test needs at least one.
-    """
-
-    def __init__(self, tolerance: float | None, window: int, columns: Sequence[str] = ("vrms", "nusselt")) -> None:
-        self.tolerance = tolerance
-        self.window = window
-        self.columns = tuple(columns)
-        self._history: list[tuple[int, list[float]]] = []
-
-    def __call__(self, values: Mapping[str, float | None], step: int | None = None) -> bool:
-        """Add the values of a step (a value for the step already added last replaces it)."""
-        if step is not None and self._history and self._history[-1][0] == step:
-            self._history.pop()
-        entry = [np.nan if values.get(c) is None else float(values[c]) for c in self.columns]
-        self._history.append((-1 if step is None else step, entry))
-        if self.tolerance is None or len(self._history) <= self.window:
-            return False
-        recent = np.array([e for _, e in self._history[-self.window - 1:]])
-        present = ~np.all(np.isnan(recent), axis=0)
-        if not present.any():
-            return False
-        recent = recent[:, present]
-        scale = np.maximum(np.abs(recent[-1]), 1e-300)
-        change = np.max(np.abs(recent - recent[-1]), axis=0) / scale
-        return bool(np.all(change < self.tolerance))
-
-    def state(self) -> list[list[Any]]:
-        """The last ``window + 1`` entries (what a checkpoint keeps; JSON-able)."""
-        return [[step, [None if np.isnan(v) else v for v in entry]] for step, entry in self._history[-self.window - 1:]]
-
-    def restore(self, state: list[list[Any]]) -> None:
-        self._history = [(int(step), [np.nan if v is None else float(v) for v in entry]) for step, entry in state]
 
 
 def _timestep(model: Model, settings: RunSettings) -> float:
@@ -307,6 +279,7 @@ class Resume:
             (a checkpoint written before they were kept: measured again on resuming).
         last: Those of the checkpoint's step (the blow-up test's previous step), or None.
         steady: The steady-state test's recent history (:meth:`SteadyState.state`), or None.
+        steady_rate: The steady-state rate test's history (:meth:`SteadyRate.state`), or None.
     """
 
     wall_seconds: float
@@ -314,6 +287,7 @@ class Resume:
     first: Watched | None = None
     last: Watched | None = None
     steady: list[list[Any]] | None = None
+    steady_rate: dict[str, Any] | None = None
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], /) -> Resume:
@@ -321,7 +295,8 @@ class Resume:
         watched = state.get("watched") or {}
         first, last = watched.get("first"), watched.get("last")
         return cls(float(state["wall_seconds"]), dict(state["postprocessors"]),
-                   Watched.of(first) if first else None, Watched.of(last) if last else None, state.get("steady"))
+                   Watched.of(first) if first else None, Watched.of(last) if last else None, state.get("steady"),
+                   state.get("steady_rate"))
 
 
 class _Outputs:
@@ -369,12 +344,14 @@ class _Outputs:
         self.written = model.timestep if resume and output.fields_every and model.timestep % output.fields_every == 0 \
             else -1
 
-    def row(self, model: Model, row: dict[str, Any], now: Watched) -> None:
+    def row(self, model: Model, row: dict[str, Any], now: Watched, remaining: float | None = None) -> None:
+        """Write a step's statistics row (and fields when due); ``remaining``: the model time
+        estimated to a steady state, for the ETA (None: to the end time)."""
         self.statistics.write(row)
         if self.physical is not None and self.units is not None:
             self.physical.write(self.units.convert(row))
         extra = f"Nu={now.nusselt:.5g}" if now.nusselt is not None else ""
-        self.progress.update(model.timestep, model.time, model.dt_previous, now.vrms, extra=extra)
+        self.progress.update(model.timestep, model.time, model.dt_previous, now.vrms, extra=extra, remaining=remaining)
         if self.fields_every and model.timestep % self.fields_every == 0:
             self.write_fields(model)
 
@@ -450,8 +427,11 @@ class _RunLoop:
         self.checkpoints = checkpoints
         self.blowup = blowup
         self.out: _Outputs | None = None
-        self.steady = SteadyState(settings.time.steady_state_tolerance, settings.time.steady_state_window)
-        self.watch = Watch(model, self.postprocessors, nusselt=settings.time.steady_state_tolerance is not None)
+        time_settings = settings.time
+        self.steady = SteadyState(time_settings.steady_state_tolerance, time_settings.steady_state_window)
+        self.steady_rate = SteadyRate(time_settings.steady_state_rate, time_settings.steady_state_time_window)
+        steady = time_settings.steady_state_tolerance is not None or time_settings.steady_state_rate is not None
+        self.watch = Watch(model, self.postprocessors, nusselt=steady)
         self.first: Watched | None = None
         self.now: Watched | None = None
         self.report = True
@@ -468,6 +448,7 @@ class _RunLoop:
         self.now = resume.last or self.watch.measure(self.model)
         self.first = resume.first or self.now
         self.steady.restore(resume.steady or [])
+        self.steady_rate.restore(resume.steady_rate)
         self.report = False
         self.resumed = True
 
@@ -528,7 +509,7 @@ class _RunLoop:
             row = {k: v for pp in self.postprocessors for k, v in pp(model).items()}
             self.now = self.watch(model, row)
         self.first = self.first or self.now
-        self.out.row(model, row, self.now)
+        self.out.row(model, row, self.now, self.steady_rate.remaining())
         failure = self.blowup.check(self.now, self.first, previous)
         if failure:
             return failure
@@ -543,14 +524,17 @@ class _RunLoop:
             return "end time"
         if time_settings.max_steps is not None and model.timestep >= time_settings.max_steps:
             return "max steps"
-        if self.steady(self.now._asdict(), model.timestep):
+        watched = self.now._asdict()
+        if self.steady(watched, model.timestep):
+            return "steady state"
+        if self.steady_rate(watched, model.timestep, model.time):
             return "steady state"
         if model.comm.allreduce(bool(should_stop()), op=MPI.LOR):
             return "stopped by signal"
         return None
 
     def _state(self) -> dict[str, Any]:
-        return _state(self.postprocessors, self.start, self.first, self.now, self.steady)
+        return _state(self.postprocessors, self.start, self.first, self.now, self.steady, self.steady_rate)
 
     def _finish(self) -> None:
         """The last fields, particles and checkpoint of a run that did not fail."""
@@ -589,9 +573,9 @@ class _RunLoop:
 
 
 def _state(postprocessors: Sequence[Postprocessor], start: float, first: Watched | None, last: Watched | None,
-           steady: SteadyState) -> dict[str, Any]:
+           steady: SteadyState, steady_rate: SteadyRate) -> dict[str, Any]:
     """The run loop's part of a checkpoint (JSON-able): what :meth:`Resume.from_state` reads."""
     return {"wall_seconds": time.monotonic() - start,
             "postprocessors": {pp.name: pp.state().scalars for pp in postprocessors},
             "watched": {"first": first._asdict() if first else None, "last": last._asdict() if last else None},
-            "steady": steady.state()}
+            "steady": steady.state(), "steady_rate": steady_rate.state()}

@@ -33,6 +33,12 @@ def is_terminal(stream: TextIO) -> bool:
 class Progress:
     """Shows step, time, dt, vrms and an ETA from the simulated-time rate.
 
+    The ETA is the wall time per unit of simulated time so far times the simulated time left: to
+    the end time, or, for a run that stops at a steady state, to the steady state when
+    :meth:`update` is given an estimate of that (``remaining``; see
+    :meth:`convection.run.steady.SteadyRate.remaining`), whichever is sooner. The lines then say
+    ``ETA 120s (steady)`` instead of ``ETA 3600s``.
+
     Args:
         end_time: Simulated end time (the bar's total).
         mode: "auto" (bar on a terminal, lines otherwise), "bar", "lines" or "none".
@@ -76,22 +82,31 @@ class Progress:
     def _label(self, i: int) -> str:
         return f" {self._units[i]}" if self._units[i] else ""
 
-    def eta(self, t: float) -> float:
-        """Seconds left, extrapolated from the simulated-time rate so far (inf before any progress)."""
+    def eta(self, t: float, remaining: float | None = None) -> float:
+        """Seconds left, extrapolated from the simulated-time rate so far (inf before any progress):
+        to the end time, or over ``remaining`` simulated time if that is sooner."""
         elapsed = time.monotonic() - self._start
         if t <= 0.0:
             return float("inf")
-        return elapsed * max(self.end_time - t, 0.0) / t
+        left = max(self.end_time - t, 0.0)
+        if remaining is not None:
+            left = min(left, max(remaining, 0.0))
+        return elapsed * left / t
 
-    def update(self, step: int, t: float, dt: float, vrms: float, *, extra: str = "", force: bool = False) -> None:
+    def update(self, step: int, t: float, dt: float, vrms: float, *, extra: str = "", force: bool = False,
+               remaining: float | None = None) -> None:
+        """Show a step; ``remaining``: the simulated time estimated to a steady state (None: none)."""
         tf, vf = self._units[0], self._units[2]
+        steady = remaining is not None and remaining < self.end_time - t
         if self.mode == "bar" and self._bar is not None:
+            if steady:
+                extra = f"{extra} steady in ~{self.eta(t, remaining):.0f}s".strip()
             self._bar.set_postfix_str(f"step={step} dt={dt * tf:.3g}{self._label(1)} "
                                       f"vrms={vrms * vf:.5g}{self._label(3)} {extra}".strip(), refresh=False)
             self._bar.update(min(t, self.end_time) * tf - self._bar.n)
         elif self.mode == "lines" and (force or step % self.every == 0):
-            eta = self.eta(t)
-            eta_text = "?" if eta == float("inf") else f"{eta:.0f}s"
+            eta = self.eta(t, remaining)
+            eta_text = "?" if eta == float("inf") else f"{eta:.0f}s" + (" (steady)" if steady else "")
             line = (f"step {step:6d}  t={t * tf:.6g}{self._label(1)}  dt={dt * tf:.4g}{self._label(1)}  "
                     f"vrms={vrms * vf:.6g}{self._label(3)}  ETA {eta_text}")
             print(f"{line}  {extra}".rstrip(), file=self._stream or sys.stdout, flush=True)

@@ -1,0 +1,173 @@
+"""Start a run from another run's temperature: ``initial.from_run`` (``run --initial-from PATH``).
+
+The source is a run folder (its newest checkpoint; every run writes one at its end) or one
+checkpoint folder of it. Its temperature ``T^n`` becomes the new run's initial temperature, on the
+new run's mesh, element degree and rank count:
+
+- where every node of the new temperature space is a saved node (the same mesh, the same degree,
+  any partition), the saved values are copied: the continued run starts from the source's
+  temperature exactly;
+- otherwise the source's mesh is made again on the new run's ranks from the saved cells (each rank
+  an equal block of them, as a resume on another rank count does,
+  :func:`convection.io.checkpoint.restore_mesh`), its temperature filled from the saved values by
+  dof coordinates, and interpolated into the new space
+  (:func:`convection.adapt.transfer.transfer_function`, which finds the points another rank
+  holds): T_new = I_new(T_source), the same on any rank count to round-off.
+
+The Dirichlet values of the new run are imposed on the result. Only the temperature is taken:
+the new run's first Stokes solve makes the velocity from it (the shipped laws make Stokes linear in
+the velocity for a given temperature, so a first guess would not save a factorisation), and
+materials and particles start from the new run's own initial condition. The time starts at 0.
+
+The source must be a domain meshed with straight cells (a box) of the same ``mesh.geometry``,
+extent, dimension and cell type, with a temperature; a run
+that adapts its mesh to its initial condition (``adaptivity.enabled``) cannot continue one (it
+adapts to ``initial.temperature``). :func:`check_source` says what is wrong in one line naming the
+key.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import dolfinx.fem
+import dolfinx.mesh
+import h5py
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from scipy.spatial import cKDTree
+
+from convection.adapt.transfer import PointEvaluator, transfer_function
+from convection.io.checkpoint import (CheckpointError, block, fill_functions, inspect_checkpoint, latest_checkpoint,
+                                      read_checkpoint)
+from convection.geometry.registry import domain_from_config
+from convection.schema import ConfigError
+from fembase.distribute import MeshPiece, create_mesh_from_piece
+from fembase.dolfinx_compat import coordinate_element_from, function_space, mesh_domain
+
+__all__ = ["KEY", "check_source", "initial_temperature", "source_checkpoint"]
+
+KEY = "initial.from_run"
+"""The config key naming the source."""
+
+_SAME = (("mesh", "geometry"), ("mesh", "cell_type"), ("mesh", "lower"), ("mesh", "upper"))
+"""The source's config values that must equal the new run's (besides the dimension)."""
+
+
+def source_checkpoint(path: str | os.PathLike[str], /) -> Path | None:
+    """The checkpoint folder ``path`` names: the newest of a run folder, or ``path`` itself when it
+    is a checkpoint folder (holds a state.h5); None if neither."""
+    folder = Path(path)
+    if (folder / "state.h5").is_file():
+        return folder
+    return latest_checkpoint(folder) if folder.is_dir() else None
+
+
+def _extent(config: dict[str, Any], key: str) -> Any:
+    mesh = config["mesh"]
+    value = mesh.get(key)
+    if value is None:  # a box's defaults: the unit square or cube
+        return [0.0 if key == "lower" else 1.0] * len(mesh["cells"] or ())
+    return [float(v) for v in value]
+
+
+def check_source(config: dict[str, Any], /) -> None:
+    """Check ``initial.from_run`` of a resolved config (nothing to do when it is null); reads the
+    source's checkpoint (not collective).
+
+    Raises:
+        ConfigError: One line naming ``initial.from_run``: no checkpoint there, a damaged one, one
+            without a temperature, or a domain the new run's is not.
+    """
+    source = config["initial"]["from_run"]
+    if source is None:
+        return
+    path = source_checkpoint(source)
+    if path is None:
+        raise ConfigError(f"config key '{KEY}': '{source}' is neither a run folder with a checkpoint "
+                          "(checkpoints/checkpoint_*) nor a checkpoint folder")
+    saved = inspect_checkpoint(path)
+    if isinstance(saved, str):
+        raise ConfigError(f"config key '{KEY}': checkpoint {path}: {saved}")
+    if config["adaptivity"]["enabled"]:
+        raise ConfigError(f"config key '{KEY}': not with adaptivity.enabled (the initial mesh is adapted to "
+                          "initial.temperature)")
+    other = saved.config
+    if domain_from_config(config).manifold() is not None:
+        raise ConfigError(f"config key '{KEY}': only a domain meshed with straight cells continues another run "
+                          f"(mesh.geometry {config['mesh']['geometry']} is curved)")
+    if len(other["mesh"].get("cells") or ()) != len(config["mesh"]["cells"]):
+        raise ConfigError(f"config key '{KEY}': the source {path} is a {len(other['mesh'].get('cells') or ())}D "
+                          f"run, this one is {len(config['mesh']['cells'])}D")
+    for section, key in _SAME:
+        mine = _extent(config, key) if key in ("lower", "upper") else config[section][key]
+        theirs = _extent(other, key) if key in ("lower", "upper") else other[section].get(key)
+        if theirs != mine:
+            raise ConfigError(f"config key '{KEY}': the source {path} has {section}.{key} = {theirs}, this run "
+                              f"{mine}")
+    if not other["energy"]["enabled"]:
+        raise ConfigError(f"config key '{KEY}': the source {path} has no temperature (energy.enabled: false)")
+
+
+def _saved_temperature(path: Path) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Every rank's saved dof coordinates and values of the temperature (every rank reads all)."""
+    with h5py.File(path / "state.h5", "r") as f:
+        group = f["functions/temperature/T"]
+        return group["coords"][...], group["values"][...].reshape(-1)
+
+
+def _copy_if_same_nodes(target: dolfinx.fem.Function, coords: npt.NDArray[np.float64],
+                        values: npt.NDArray[np.float64]) -> bool:
+    """Copy the saved values into ``target`` if every owned node of it is a saved node, on every
+    rank (collective); returns whether it did."""
+    V = target.function_space
+    n = V.dofmap.index_map.size_local
+    local = V.tabulate_dof_coordinates()[:n]
+    distance, index = cKDTree(coords).query(local) if n else (np.zeros(0), np.zeros(0, dtype=int))
+    scale = max(1.0, float(np.abs(coords).max(initial=0.0)))
+    same = bool(np.all(distance <= 1e-12 * scale))
+    if not V.mesh.comm.allreduce(same, op=MPI.LAND):
+        return False
+    target.x.array[:n] = values[index]
+    target.x.scatter_forward()
+    return True
+
+
+def _source_mesh(path: Path, comm: MPI.Comm, like: dolfinx.mesh.Mesh) -> dolfinx.mesh.Mesh:
+    """The source's mesh made again on ``comm`` from its saved cells: each rank takes an equal block
+    of the saved cells and nodes and keeps its cells (collective). ``like``: a mesh of the new run
+    (its cell type and dimension; the saved geometry is affine)."""
+    with h5py.File(path / "state.h5", "r") as f:
+        cells, x = block(f, "mesh/cells", comm), block(f, "mesh/x", comm)
+    owners = np.full(cells.shape[0], comm.rank, dtype=np.int32)
+    domain = mesh_domain(coordinate_element_from((like.topology.cell_name(), 1, like.geometry.dim)))
+    return create_mesh_from_piece(comm, MeshPiece(cells.astype(np.int64), x, owners), domain).mesh
+
+
+def initial_temperature(source: str | os.PathLike[str], target: dolfinx.fem.Function, /) -> bool:
+    """Set the Function ``target`` (the new run's temperature space) to the source run's
+    temperature (module docstring). Collective.
+
+    Returns:
+        True when the values were copied (the same nodes), False when interpolated.
+
+    Raises:
+        CheckpointError: On every rank: the source has no readable checkpoint or no temperature.
+    """
+    mesh = target.function_space.mesh
+    comm = mesh.comm
+    path = source_checkpoint(source)
+    if path is None:
+        raise CheckpointError(f"{KEY}: '{source}' holds no checkpoint")
+    saved = read_checkpoint(path, comm)
+    coords, values = _saved_temperature(saved.path)
+    if _copy_if_same_nodes(target, coords, values):
+        return True
+    other = _source_mesh(saved.path, comm, mesh)
+    T = dolfinx.fem.Function(function_space(other, "Lagrange", int(saved.config["energy"]["degree"])))
+    fill_functions(saved, {"temperature/T": T}, exact=False)
+    transfer_function(T, target, evaluator=PointEvaluator(other, snap=True))
+    return False

@@ -26,8 +26,8 @@ with time ``tau`` is multiplied per step by ``A = (tau - (1 - theta) dt) / (tau 
 ``theta = 1`` (the default) gives ``0 < A < 1`` for every ``dt``, no overshoot however long the
 step; ``theta = 0.5`` (ASPECT's default) is second order for ``dt << tau`` but ``A -> -1`` for
 ``dt >> tau``: the surface rings. The stabilisation needs the step it anticipates: the model
-solves the flow again when a step is longer than the one the flow was solved for (the first step:
-:meth:`convection.model.model.Model.step`).
+solves the flow again when a step is more than twice the one the flow was solved for (the first
+step: :meth:`convection.model.model.Model.step`).
 """
 
 from __future__ import annotations

@@ -42,18 +42,12 @@ def _run(tmp_path, name: str, solver: str, ranks: int, extra: list[str] = ()) ->
     return rows(out)
 
 
-# Both solvers to |b - K x| <= 1e-10 |b|: at the default 1e-7 the AMG solve of the second step (its
-# flow solved again for a step 1.5 times longer) is 1.7e-4 off the converged vrms (measured on 1 rank:
-# 235.0717 against 235.0324; the multigrid 235.03243, both 235.03236 at 1e-11).
-TIGHT = ["stokes.petsc_options={ksp_rtol: 1.0e-10}"]
-
-
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_multigrid_run_equals_the_amg_run(tmp_path, ranks):
     """vrms, Nusselt number and entrainment of every step agree to 1e-5 (both solvers stop at
-    |b - K x| <= 1e-10 |b|); particles and cells are the same."""
-    multigrid = _run(tmp_path, "multigrid", "multigrid", ranks, TIGHT)
-    amg = _run(tmp_path, "amg", AMG, ranks, TIGHT)
+    |b - K x| <= 1e-7 |b|); particles and cells are the same."""
+    multigrid = _run(tmp_path, "multigrid", "multigrid", ranks)
+    amg = _run(tmp_path, "amg", AMG, ranks)
     assert len(multigrid) == len(amg) == 7
     for a, b in zip(multigrid, amg):
         for key in ("cells", "n_particles", "n_lost"):

@@ -29,13 +29,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from mpi4py import MPI
-
-from convection import load_config, run_config
-
 HERE = Path(__file__).resolve().parent
-CONFIG = HERE.parents[1] / "configs" / "plume_lid_free_surface.yaml"
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+from benchmarks.common import curves_figure  # noqa: E402
+from convection import load_config, run_config  # noqa: E402
+
+CONFIG = ROOT / "configs" / "plume_lid_free_surface.yaml"
 RUNS = {"defaults, dt 0.25 Myr": ({}, 250.0), "theta 0.5, dt 0.25 Myr": ({"free_surface.theta": 0.5}, 250.0)}
 REFERENCE = ("defaults, dt 10 kyr", ({}, 10.0))
 
@@ -108,22 +112,11 @@ def write(out: Path, cells: tuple[int, int], results: dict[str, dict[str, Any]])
 
 
 def _picture(path: Path, results: dict[str, dict[str, Any]]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
-    styles = {REFERENCE[0]: "k-", "defaults, dt 0.25 Myr": "bo-", "theta 0.5, dt 0.25 Myr": "r.--"}
-    for name, r in results.items():
-        ax.plot(r["t"], r["top_max"], styles.get(name, "-"), linewidth=1, markersize=3, label=name)
-    ax.set_xlabel("time [Myr]")
-    ax.set_ylabel("highest topography [km]")
-    ax.set_title("Plume head under a lid: the free surface at long steps")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
+    styles = {REFERENCE[0]: {"color": "k"}, "defaults, dt 0.25 Myr": {"color": "b", "marker": "o", "markersize": 3},
+              "theta 0.5, dt 0.25 Myr": {"color": "r", "marker": ".", "linestyle": "--", "markersize": 3}}
+    curves = [(r["t"], r["top_max"], name, {"linewidth": 1, **styles.get(name, {})}) for name, r in results.items()]
+    curves_figure(path, curves, xlabel="time [Myr]", ylabel="highest topography [km]",
+                  title="Plume head under a lid: the free surface at long steps", size=(6.4, 3.6))
 
 
 def main(argv: list[str] | None = None) -> int:

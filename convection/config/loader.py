@@ -330,8 +330,8 @@ def _check_multigrid(config: dict[str, Any]) -> None:
                           "its rank); use balance.strategy: none, or stokes.solver: iterative")
     if count < 2 and not config["adaptivity"]["enabled"]:  # adaptive: the refinement rounds are levels
         raise ConfigError(f"config key 'stokes.solver': multigrid needs coarser meshes nested in the mesh (a box whose "
-                          f"cells per side are even, e.g. 16, 20, 32) or an adaptive mesh, not a fixed mesh.geometry "
-                          f"{domain.name} with this mesh")
+                          f"cells per side are even, e.g. 16, 20, 32, of simplices not graded) or an adaptive mesh, "
+                          f"not a fixed mesh.geometry {domain.name} with this mesh")
 
 
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:

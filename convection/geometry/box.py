@@ -104,6 +104,8 @@ class BoxSpec:
         upper: Upper corner (same length).
         cell_type: "simplex" (triangles/tetrahedra) or "box" (quadrilaterals/hexahedra).
         diagonal: Diagonal direction for 2D simplices.
+        grading: Per direction, how much the cells bunch towards both ends of that axis
+            (:func:`graded`); None or zeros: uniform cells.
     """
 
     cells: tuple[int, ...]
@@ -111,6 +113,7 @@ class BoxSpec:
     upper: tuple[float, ...]
     cell_type: str = "simplex"
     diagonal: str = "right"
+    grading: tuple[float, ...] | None = None
 
     @classmethod
     def from_config(cls, mesh_config: Mapping[str, Any]) -> BoxSpec:
@@ -118,7 +121,9 @@ class BoxSpec:
         gdim = len(cells)
         lower = tuple(mesh_config["lower"] or [0.0] * gdim)
         upper = tuple(mesh_config["upper"] or [1.0] * gdim)
-        return cls(cells, lower, upper, mesh_config["cell_type"], mesh_config["diagonal"])
+        grading = mesh_config.get("grading")
+        return cls(cells, lower, upper, mesh_config["cell_type"], mesh_config["diagonal"],
+                   tuple(float(g) for g in grading) if grading is not None and any(grading) else None)
 
     @property
     def gdim(self) -> int:
@@ -139,23 +144,43 @@ class BoxMeshSettings:
     cell_type: str = param("simplex", choices=("simplex", "box"), help="triangles/tets or quads/hexes")
     diagonal: str = param("right", choices=("right", "left", "crossed", "left/right", "right/left"),
                           help="how a 2D simplex box mesh splits its squares into triangles (DOLFINx's diagonal)")
+    grading: tuple[float, ...] | None = param(
+        None, length=(2, 3), minimum=0.0, maximum=0.9,
+        help="per direction g: cells bunched towards both ends of that axis, the end cells (1 - g) and the middle "
+             "ones (1 + g) times the uniform size (x -> x - g L sin(2 pi x / L) / (2 pi)); e.g. [0, 0.5] for thermal "
+             "boundary layers at top and bottom; null: uniform")
+
+
+def graded(s: npt.NDArray[np.float64], g: float) -> npt.NDArray[np.float64]:
+    """The graded coordinate of ``s`` in [0, 1]: ``s - g sin(2 pi s) / (2 pi)``, monotone for g < 1,
+    fixing 0, 1/2 and 1, with the slope ``1 - g`` at both ends and ``1 + g`` in the middle (so a
+    uniform cell there becomes ``1 - g`` resp. ``1 + g`` times as long)."""
+    return s - g * np.sin(2.0 * np.pi * s) / (2.0 * np.pi)
 
 
 def _box(comm: MPI.Comm, spec: BoxSpec) -> dolfinx.mesh.Mesh:
-    """DOLFINx's rectangle or box mesh of ``spec`` on ``comm``."""
+    """DOLFINx's rectangle or box mesh of ``spec`` on ``comm``, its nodes moved by ``spec.grading``."""
     ghost_mode = dolfinx.mesh.GhostMode.shared_facet
     if spec.gdim == 2:
         cell_type = (dolfinx.mesh.CellType.triangle if spec.cell_type == "simplex"
                      else dolfinx.mesh.CellType.quadrilateral)
         diagonal = getattr(dolfinx.mesh.DiagonalType, spec.diagonal.replace("/", "_"))
-        return dolfinx.mesh.create_rectangle(
+        mesh = dolfinx.mesh.create_rectangle(
             comm, [np.array(spec.lower), np.array(spec.upper)], list(spec.cells), cell_type,
             ghost_mode=ghost_mode, diagonal=diagonal,
         )
-    cell_type = dolfinx.mesh.CellType.tetrahedron if spec.cell_type == "simplex" else dolfinx.mesh.CellType.hexahedron
-    return dolfinx.mesh.create_box(
-        comm, [np.array(spec.lower), np.array(spec.upper)], list(spec.cells), cell_type, ghost_mode=ghost_mode
-    )
+    else:
+        cell_type = (dolfinx.mesh.CellType.tetrahedron if spec.cell_type == "simplex"
+                     else dolfinx.mesh.CellType.hexahedron)
+        mesh = dolfinx.mesh.create_box(
+            comm, [np.array(spec.lower), np.array(spec.upper)], list(spec.cells), cell_type, ghost_mode=ghost_mode
+        )
+    x = mesh.geometry.x
+    for axis, g in enumerate(spec.grading or ()):
+        if g:
+            lo, length = spec.lower[axis], spec.upper[axis] - spec.lower[axis]
+            x[:, axis] = lo + length * graded((x[:, axis] - lo) / length, g)
+    return mesh
 
 
 def create_box_mesh(comm: MPI.Comm, spec: BoxSpec, /, *, owners: npt.NDArray[np.int32] | None = None
@@ -225,8 +250,8 @@ class BoxDomain(Domain):
         if mesh["cells"] is None:
             raise ConfigError("config key 'mesh.cells': required value missing (cells per direction, e.g. [32, 32])")
         gdim = len(mesh["cells"])
-        for key in ("lower", "upper"):
-            if mesh[key] is not None and len(mesh[key]) != gdim:
+        for key in ("lower", "upper", "grading"):
+            if mesh.get(key) is not None and len(mesh[key]) != gdim:
                 raise ConfigError(f"config key 'mesh.{key}': needs {gdim} entries like mesh.cells")
         lower = mesh["lower"] or [0.0] * gdim
         upper = mesh["upper"] or [1.0] * gdim
@@ -312,6 +337,11 @@ class BoxDomain(Domain):
         halving the cell size refines). With ``wanted`` 0, halve while every count is even and
         stays at least 2. 2D simplices split ``left/right`` or ``right/left`` alternate, and do not nest."""
         spec = self._spec()
+        if spec.grading is not None and spec.cell_type == "simplex":
+            if wanted > 1:
+                raise ValueError("a graded simplex box (mesh.grading) is nested in no coarser box: the diagonals of "
+                                 "its graded squares do not line up (use mesh.cell_type: box, or no grading)")
+            return 1
         if spec.gdim == 2 and spec.cell_type == "simplex" and "/" in spec.diagonal:
             if wanted > 1:
                 raise ValueError(f"mesh.diagonal {spec.diagonal} alternates from square to square: the boxes of "

@@ -24,6 +24,7 @@ _BOXES = {
     "2d_quad": BoxSpec((16, 8), (0.0, 0.0), (2.0, 1.0), cell_type="box"),
     "3d_tet": BoxSpec((4, 4, 8), (0.0, 0.0, 0.0), (1.0, 1.0, 2.0)),
     "3d_hex": BoxSpec((8, 8, 8), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), cell_type="box"),
+    "2d_quad_graded": BoxSpec((16, 8), (0.0, 0.0), (2.0, 1.0), cell_type="box", grading=(0.3, 0.6)),
 }
 
 
@@ -87,6 +88,10 @@ def test_levels_that_do_not_nest_are_refused():
     with pytest.raises(ValueError, match="alternates"):
         alternating.mesh_levels(2)
     assert BoxDomain.from_spec(BoxSpec((5, 5), (0.0, 0.0), (1.0, 1.0))).mesh_levels() == 1
+    graded = BoxDomain.from_spec(BoxSpec((8, 8), (0.0, 0.0), (1.0, 1.0), grading=(0.0, 0.5)))
+    assert graded.mesh_levels() == 1
+    with pytest.raises(ValueError, match="graded simplex box"):
+        graded.mesh_levels(2)
 
 
 def test_a_coarsest_mesh_without_cells_for_every_rank_is_refused(world):

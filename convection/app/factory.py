@@ -42,7 +42,7 @@ from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, Adaptivity
 
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.levels import MeshLevels
-from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
+from convection.geometry.boundary import VELOCITY_BC_KINDS, TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
 from convection.deform.motion import FreeSurface
 from convection.deform.surface import FreeSurfaceSettings, free_surface_boundaries, surface_terms
@@ -65,12 +65,11 @@ from convection.geometry.registry import domain_from_config
 from convection.expressions import Expression
 from convection.physics.materials import Material, Materials
 from convection.model.model import Model
-from convection.geometry.plates import PlateVelocity
 from convection.postprocess.postprocessors import DiagnosticsSettings, create_postprocessors
 from convection.adapt.rebalance import BalanceSettings, Balancer
 from convection.run.loop import BlowUp, OutputSettings, Resume, RunSettings, RunSummary, TimeSettings, run
 from convection.io.run_folder import RunFolderLock
-from convection.solvers.stokes.solver import StokesSettings, StokesSolver
+from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, StokesSolver
 from convection.solvers.petsc_options import PetscSolver
 from convection.solvers.transport import EnergySettings, TransportSolver, interpolate_initial
 from convection.schema import ConfigError, settings_from
@@ -91,13 +90,8 @@ def velocity_bcs_from_config(section: dict, domain: Domain) -> dict[str, Velocit
         value = section[side]
         if value is None:
             continue
-        if isinstance(value, dict) and value["kind"] == "plates":
-            result[side] = VelocityBC("prescribed", PlateVelocity.from_config(value, domain.gdim))
-        elif isinstance(value, dict):
-            components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
-            result[side] = VelocityBC(value["kind"], components or None)
-        else:
-            result[side] = VelocityBC(value)
+        kind = value["kind"] if isinstance(value, dict) else value
+        result[side] = VELOCITY_BC_KINDS[kind].from_config(value, domain.gdim)
     return result
 
 
@@ -215,7 +209,7 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
         levels = MeshLevels(coarse[:-1], coarse[-1], hierarchy)
         if hierarchy is not None:
             hierarchy.keep_levels = True  # a repartition moves the refinement rounds' meshes too
-    elif adaptivity is not None and config["stokes"]["solver"] == "multigrid":
+    elif adaptivity is not None and STOKES_SOLVER_CHOICES[config["stokes"]["solver"]].nested:
         # No box nests below the base (a shell; a box whose cells do not halve): the levels are
         # the refinement rounds (curved on a shell).
         levels = MeshLevels((), hierarchy.base, hierarchy)
@@ -323,7 +317,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     if meshes.coarse is not None:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
         stokes_settings = dataclasses.replace(stokes_settings, solver="multigrid")
     stokes = StokesSolver(mesh, approximation,
-                          bcs={n: bc for n, bc in velocity_bcs.items() if bc.kind != "free_surface"}, domain=domain,
+                          bcs={n: bc for n, bc in velocity_bcs.items() if not bc.spec.moves}, domain=domain,
                           coarse_meshes=meshes.coarse or (),
                           surface=free_surface.terms if free_surface is not None else None, **vars(stokes_settings))
     energy = settings_from(EnergySettings, config["energy"])

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import copy
 import importlib
-import math
 from pathlib import Path
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -46,6 +45,7 @@ from convection.config.particle_systems import (
     resolve_systems,
 )
 from convection.config.units import apply_scaling, in_written_terms, scaling_of, written_quantities
+from convection.geometry.boundary import VELOCITY_BC_KINDS
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
@@ -59,11 +59,12 @@ from convection.schema import (
     MAX_ENTRIES, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
     settings_from, short_repr, validate,
 )
+from convection.schema import finite_number as _finite_number
 from convection.physics.approximation import PhysicsSettings
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
-from convection.solvers.stokes.solver import AUTO, StokesSettings, check_viscosity_rules
+from convection.solvers.stokes.solver import AUTO, STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings
 
@@ -74,18 +75,7 @@ MAX_PARTICLES = 1e8
 """Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
 MAX_STEPS = 1e9
 """Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
-VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates", "free_surface")
-
-
-def _finite_number(value: Any) -> float | None:
-    """``value`` as a float if it is a finite number (not a bool, not text), else None."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    try:
-        number = float(value)
-    except OverflowError:
-        return None
-    return number if math.isfinite(number) else None
+VELOCITY_KINDS = tuple(VELOCITY_BC_KINDS)
 
 
 def _check_velocity_bc(value: Any) -> str | None:
@@ -93,33 +83,7 @@ def _check_velocity_bc(value: Any) -> str | None:
     if not isinstance(kind, str) or kind not in VELOCITY_KINDS:
         return (f"velocity condition {short_repr(value)} is not one of {list(VELOCITY_KINDS)} "
                 "(or {kind: prescribed, value: [..]})")
-    if kind == "plates":
-        if not isinstance(value, dict):
-            return "a plates velocity needs the form {kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
-        from convection.geometry.plates import PlateVelocity
-
-        try:
-            PlateVelocity.from_config(value, 3)
-        except (TypeError, ValueError, OverflowError) as err:  # TypeError: e.g. keys of mixed types
-            return str(err)
-        return None
-    if isinstance(value, dict):
-        extra = [name for name in value if name not in ("kind", "value")]
-        if extra:
-            return f"unknown entry {short_repr(extra[0])}; allowed: ['kind', 'value']"
-        if kind == "prescribed" and not isinstance(value.get("value"), list):
-            return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
-        for i, component in enumerate(value.get("value") or ()):
-            if isinstance(component, str):
-                try:
-                    Expression(component, gdim=3)
-                except ExpressionError as err:
-                    return f"value[{i}]: {err}"
-            elif _finite_number(component) is None:
-                return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
-    elif kind == "prescribed":
-        return "a prescribed velocity needs the form {kind: prescribed, value: [vx, vy(, vz)]}"
-    return None
+    return VELOCITY_BC_KINDS[kind].check_config(value)
 
 
 def _check_temperature_bc(value: Any) -> str | None:
@@ -286,7 +250,7 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
     stokes = config["stokes"]
     domain = domain if domain is not None else config_domain(config)
     wanted = stokes["multigrid"]["levels"]
-    if stokes["solver"] == "multigrid":
+    if STOKES_SOLVER_CHOICES[stokes["solver"]].nested:
         return domain.mesh_levels(wanted)
     fixed = (not config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "none"
              and not free_surface_boundaries(config))
@@ -304,7 +268,7 @@ def _check_multigrid(config: dict[str, Any]) -> None:
     only means something with it (or with ``auto`` where that picks it)."""
     stokes = config["stokes"]
     levels = stokes["multigrid"]["levels"]
-    if stokes["solver"] != "multigrid":
+    if not STOKES_SOLVER_CHOICES[stokes["solver"]].nested:
         if levels != 0:
             try:
                 picked = multigrid_levels(config) > 1
@@ -337,7 +301,8 @@ def _check_multigrid(config: dict[str, Any]) -> None:
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:
     _check_mesh(config, document)
     _check_multigrid(config)
-    check_free_surface(config, document, domain_class(config))
+    check_free_surface(config, document, domain_class(config),
+                       multigrid=STOKES_SOLVER_CHOICES[config["stokes"]["solver"]].nested)
     if config["free_surface"]["initial_topography"] is not None:
         _check_initial_topography(config)
     adapt = config["adaptivity"]
@@ -443,7 +408,7 @@ def _check_initial_topography(config: dict[str, Any]) -> None:
 def _check_velocity_values(config: dict[str, Any], gdim: int) -> None:
     """Prescribed velocities: gdim components, each expression finite on its boundary."""
     for side, bc in config["boundary"]["velocity"].items():
-        if not (isinstance(bc, dict) and bc["kind"] == "prescribed"):
+        if not (isinstance(bc, dict) and VELOCITY_BC_KINDS[bc["kind"]].needs_value):
             continue
         if len(bc["value"]) != gdim:
             raise ConfigError(f"config key 'boundary.velocity.{side}.value': needs {gdim} components")

@@ -31,7 +31,7 @@ from convection.schema import MAX_DEGREE, ConfigError, Names, param
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
 from fembase.registry import Registry
-from fembase.state import State
+from fembase.state import State, Stateful
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
@@ -62,7 +62,7 @@ class CompositionInputs(NamedTuple):
     stabilisation: str
 
 
-class CompositionSource(Protocol):
+class CompositionSource(Stateful, Protocol):
     """Gives the material fields; see the module docstring."""
 
     name: ClassVar[str]
@@ -92,7 +92,7 @@ def composition_space(mesh: dolfinx.mesh.Mesh, degree: int, /) -> dolfinx.fem.Fu
     return function_space(mesh, "DG", 0) if degree == 0 else function_space(mesh, "Lagrange", degree)
 
 
-class StaticComposition:
+class StaticComposition(Stateful):
     """Fractions interpolated from the initial regions and kept fixed.
 
     Args:
@@ -145,7 +145,7 @@ class StaticComposition:
         """Nothing to free."""
 
 
-class FieldComposition:
+class FieldComposition(Stateful):
     """Fractions advected as continuous fields (one transport solver per material, no diffusion).
 
     Args:
@@ -222,7 +222,7 @@ def particle_properties(materials: Materials, gdim: int, /) -> list[InitialCompo
     return [InitialComposition(source=region(m.initial), label=m.name) for m in materials.materials]
 
 
-class ParticleComposition:
+class ParticleComposition(Stateful):
     """Fractions averaged per cell from particle properties (one per material).
 
     The particle manager must carry :func:`particle_properties` of the materials; the model

@@ -32,6 +32,7 @@ from petsc4py import PETSc
 from convection.schema import short_repr
 from fembase import jit_cache
 from fembase.registry import Registry
+from fembase.state import Stateful
 
 __all__ = ["PetscSolver",
     "check_petsc_options",
@@ -217,7 +218,7 @@ def destroy_petsc_objects(owner: object, names: Sequence[str], /) -> None:
             setattr(owner, name, None)
 
 
-class PetscSolver:
+class PetscSolver(Stateful):
     """Life cycle shared by the PDE solvers: a named linear-solver setup, a PETSc KSP with its own
     options prefix, explicit destruction, and a copy of the solver on another mesh.
 

@@ -66,7 +66,7 @@ from convection.expressions import Expression
 from convection.physics.materials import Material, Materials
 from convection.model.model import Model
 from convection.postprocess.postprocessors import DiagnosticsSettings, create_postprocessors
-from convection.adapt.rebalance import BalanceSettings, Balancer
+from convection.adapt.rebalance import BALANCE_STRATEGIES, BalanceSettings, Balancer
 from convection.run.loop import BlowUp, OutputSettings, Resume, RunSettings, RunSummary, TimeSettings, run
 from convection.io.run_folder import RunFolderLock
 from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, StokesSolver
@@ -166,7 +166,7 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
             comm: MPI.Comm, restore: SavedRun | None) -> _Meshes:
     """The run's mesh: the base mesh (adapted to the initial condition), or the checkpoint's."""
     acfg, bcfg = config["adaptivity"], config["balance"]
-    hierarchical = acfg["enabled"] or bcfg["strategy"] != "none"
+    hierarchical = acfg["enabled"] or BALANCE_STRATEGIES[bcfg["strategy"]].repartitions
     # A curved domain's hierarchy refines the straight-sided base and curves what it hands out.
     manifold = domain.manifold() if hierarchical else None
     straight = manifold is not None
@@ -203,7 +203,8 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
         if restore is None:
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])
-    balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if bcfg["strategy"] != "none" else None
+    repartitions = BALANCE_STRATEGIES[bcfg["strategy"]].repartitions
+    balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if repartitions else None
     levels = None
     if coarse:
         levels = MeshLevels(coarse[:-1], coarse[-1], hierarchy)
@@ -221,7 +222,7 @@ def _free_surface(config: dict[str, Any], domain: Domain, mesh: dolfinx.mesh.Mes
                   restore: SavedRun | None, *, exact: bool) -> FreeSurface | None:
     """The free surfaces (None without): made on the undeformed mesh, then the mesh takes the
     initial topography, or a checkpoint's coordinates, before anything else is built on it."""
-    names = tuple(name for name, bc in bcs.items() if bc.kind == "free_surface")
+    names = tuple(name for name, bc in bcs.items() if bc.spec.moves)
     if not names:
         return None
     settings = settings_from(FreeSurfaceSettings, config["free_surface"])
@@ -267,7 +268,8 @@ def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, material
     scaling = scaling_of(config)
     systems = {}
     for name, section in sections.items():  # each system draws from its own seeds: they do not interact
-        extra = particle_properties(materials, domain.gdim) if ccfg["source"] == "particles" and name == primary else []
+        feeds = COMPOSITION_SOURCES[ccfg["source"]].carried_by_particles and name == primary
+        extra = particle_properties(materials, domain.gdim) if feeds else []
         systems[name] = ParticleManager.from_config(
             section, meshes.mesh, directory=config["output"]["directory"], extra_properties=extra,
             make_function=point_function(config), field_degree=ccfg["degree"], context=context,

@@ -50,9 +50,9 @@ from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
 from convection.adapt.adaptivity import AdaptivitySettings
-from convection.adapt.rebalance import BalanceSettings
+from convection.adapt.rebalance import BALANCE_STRATEGIES, BalanceSettings
 from convection.deform.surface import FreeSurfaceSettings, check_free_surface, free_surface_boundaries
-from convection.model.composition import CompositionSettings
+from convection.model.composition import COMPOSITION_SOURCES, CompositionSettings
 from convection.postprocess.postprocessors import DiagnosticsSettings, ModelFeatures, check_statistics
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
 from convection.schema import (
@@ -60,7 +60,7 @@ from convection.schema import (
     settings_from, short_repr, validate,
 )
 from convection.schema import finite_number as _finite_number
-from convection.physics.approximation import PhysicsSettings
+from convection.physics.approximation import TEMPERATURE_LAWS, PhysicsSettings
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
@@ -252,7 +252,7 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
     wanted = stokes["multigrid"]["levels"]
     if STOKES_SOLVER_CHOICES[stokes["solver"]].nested:
         return domain.mesh_levels(wanted)
-    fixed = (not config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "none"
+    fixed = (not config["adaptivity"]["enabled"] and not BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions
              and not free_surface_boundaries(config))
     if stokes["solver"] == AUTO and fixed and config_gdim(config) == 3:
         levels = domain.mesh_levels(wanted)
@@ -278,7 +278,7 @@ def _check_multigrid(config: dict[str, Any]) -> None:
                 raise ConfigError("config key 'stokes.multigrid.levels': only with stokes.solver: multigrid (or auto "
                                   "on a fixed 3D box whose cells halve)")
         return
-    if config["balance"]["strategy"] != "none" and not config["adaptivity"]["enabled"]:
+    if BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions and not config["adaptivity"]["enabled"]:
         raise ConfigError("config key 'balance.strategy': stokes.solver multigrid repartitions adaptive meshes only: "
                           "a repartitioned fixed mesh is nested rank by rank in no coarser mesh (use iterative, or "
                           "balance.strategy: none)")
@@ -287,7 +287,7 @@ def _check_multigrid(config: dict[str, Any]) -> None:
         count = domain.mesh_levels(levels)
     except ValueError as err:
         raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
-    if config["balance"]["strategy"] != "none" and domain.manifold() is not None \
+    if BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions and domain.manifold() is not None \
             and not repartitioned_manifolds_nest():
         raise ConfigError("config key 'balance.strategy': stokes.solver multigrid on a repartitioned curved mesh needs "
                           "DOLFINx 0.5 for now (on 0.9 a node of the repartitioned shell lay in no coarser cell of "
@@ -311,7 +311,7 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     cls = domain_class(config)
     if not cls.refinable:
         for key, enabled in (("adaptivity.enabled", adapt["enabled"]),
-                             ("balance.strategy", config["balance"]["strategy"] != "none")):
+                             ("balance.strategy", BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions)):
             if enabled:
                 raise ConfigError(f"config key '{key}': runs on mesh.geometry {cls.name} do not adapt or "
                                   "repartition yet")
@@ -547,7 +547,7 @@ def _check_rheology(config: dict[str, Any]) -> None:
     if visc["law"] is not None and visc["background"] != 1.0:
         raise ConfigError("config key 'physics.viscosity.background': not with physics.viscosity.law (the law is the "
                           "background's)")
-    if visc["temperature_law"] != "none":
+    if TEMPERATURE_LAWS[visc["temperature_law"]].factor is not None:
         raise ConfigError("config key 'physics.viscosity.temperature_law': not with viscosity laws (give the "
                           "temperature dependence in the law, e.g. {name: exponential, gamma_T: ...})")
     law0, others = laws
@@ -603,7 +603,7 @@ def _check_materials(config: dict[str, Any]) -> None:
     table, _ = material_table(config)
     names = [m["name"] for m in table]
     source = config["composition"]["source"]
-    if source != "static" and not table:
+    if COMPOSITION_SOURCES[source].needs_materials and not table:
         raise ConfigError(f"config key 'composition.source': {source} needs materials (the materials section or "
                           "initial.composition)")
     settings_from(CompositionSettings, config["composition"])  # its checks (the degree a source needs)
@@ -647,7 +647,8 @@ def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[
 def _check_particles(config: dict[str, Any]) -> None:
     """Every particle system's section (the one mapping also when the run carries no particles)."""
     section = config["particles"]
-    if isinstance(section, dict) and section["enabled"] is False and config["composition"]["source"] == "particles":
+    carried = COMPOSITION_SOURCES[config["composition"]["source"]].carried_by_particles
+    if isinstance(section, dict) and section["enabled"] is False and carried:
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
     primary = primary_system(config)
     make = point_function(config, probe=True)
@@ -717,7 +718,7 @@ def _check_system_properties(config: dict[str, Any], section: dict[str, Any], wh
     from particles.manager import build_properties
     from particles.population.control import PopulationControl
 
-    materials = feeds and config["composition"]["source"] == "particles"
+    materials = feeds and COMPOSITION_SOURCES[config["composition"]["source"]].carried_by_particles
     columns = [m["name"] for m in material_table(config)[0]] if materials else []
     built = []
     for i, spec in enumerate(section["properties"]):

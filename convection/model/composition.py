@@ -68,6 +68,10 @@ class CompositionSource(Stateful, Protocol):
     name: ClassVar[str]
     description: ClassVar[str]
     min_degree: ClassVar[int]
+    needs_materials: ClassVar[bool]
+    """A config with this source must name materials (the static source makes none without)."""
+    carried_by_particles: ClassVar[bool]
+    """The fractions come from particles: the primary particle system carries the materials."""
     materials: Materials
 
     @property
@@ -102,6 +106,8 @@ class StaticComposition(Stateful):
     """
 
     name: ClassVar[str] = "static"
+    needs_materials: ClassVar[bool] = False
+    carried_by_particles: ClassVar[bool] = False
     min_degree: ClassVar[int] = 0
     description: ClassVar[str] = "fractions set from the initial regions and kept fixed"
 
@@ -157,6 +163,8 @@ class FieldComposition(Stateful):
     """
 
     name: ClassVar[str] = "field"
+    needs_materials: ClassVar[bool] = True
+    carried_by_particles: ClassVar[bool] = False
     min_degree: ClassVar[int] = 1
     description: ClassVar[str] = "fractions advected as continuous fields (SUPG + BDF2, no diffusion)"
 
@@ -234,6 +242,8 @@ class ParticleComposition(Stateful):
     """
 
     name: ClassVar[str] = "particles"
+    needs_materials: ClassVar[bool] = True
+    carried_by_particles: ClassVar[bool] = True
     min_degree: ClassVar[int] = 0
     description: ClassVar[str] = "fractions averaged per cell from the particles' material properties"
 

@@ -52,7 +52,7 @@ from convection.io.checkpoint import (
     saved_values,
 )
 from convection.model.composition import (
-    COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
+    COMPOSITION_SOURCES, CompositionContext, CompositionSettings, StaticComposition, particle_properties,
 )
 from convection.config.particle_systems import particle_sections, primary_system
 from convection.config.units import scaling_of
@@ -289,9 +289,9 @@ def _composition(config: dict[str, Any], mesh: dolfinx.mesh.Mesh, approximation:
     if not len(materials):
         return None
     composition = settings_from(CompositionSettings, config["composition"])
-    inputs = CompositionInputs(mesh, approximation, materials, particles.primary if particles is not None else None,
-                               composition.degree, stabilisation)
-    return COMPOSITION_SOURCES.lookup(composition.source).build(inputs)
+    context = CompositionContext(mesh, approximation, materials, particles.primary if particles is not None else None,
+                                 stabilisation)
+    return COMPOSITION_SOURCES.build(composition.source, composition, context)
 
 
 def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,

@@ -64,7 +64,7 @@ from convection.physics.approximation import TEMPERATURE_LAWS, PhysicsSettings
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
-from convection.solvers.stokes.solver import AUTO, STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
+from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings
 
@@ -254,7 +254,7 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
         return domain.mesh_levels(wanted)
     fixed = (not config["adaptivity"]["enabled"] and not BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions
              and not free_surface_boundaries(config))
-    if stokes["solver"] == AUTO and fixed and config_gdim(config) == 3:
+    if STOKES_SOLVER_CHOICES[stokes["solver"]].by_mesh and fixed and config_gdim(config) == 3:
         levels = domain.mesh_levels(wanted)
         coarsest = domain.estimated_cells() / 8 ** (levels - 1)
         return levels if levels >= AUTO_MULTIGRID_LEVELS and coarsest >= ranks else 1

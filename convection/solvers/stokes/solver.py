@@ -156,6 +156,7 @@ class StokesLinearSolver(LinearSolver):
 
     nested: bool = False
     needs_hypre: bool = False
+    by_mesh = False  # the name itself, never picked by the mesh (AutoStokesSolver is)
 
     def resolve(self, gdim: int, /, *, rotations: bool = False) -> str:
         """This solver's name (see :func:`resolve_solver`)."""
@@ -203,7 +204,8 @@ class AutoStokesSolver:
     name = AUTO
     description = ("multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D "
                    "(iterative_gamg for a shell with free slip on both surfaces), direct in 2D")
-    nested = False  # a run of a config may pick the multigrid (convection.config.loader.multigrid_levels)
+    nested = False
+    by_mesh = True  # a run of a config may pick the multigrid (convection.config.loader.multigrid_levels)
 
     def resolve(self, gdim: int, /, *, rotations: bool = False) -> str:
         """``"iterative"`` in 3D (``"iterative_gamg"`` with ``rotations`` or without hypre), ``"direct"`` in 2D."""

@@ -217,6 +217,17 @@ def _coerce_scalar(kind: str, value: Any, key: str) -> Any:
     return value
 
 
+def finite_number(value: Any) -> float | None:
+    """``value`` as a float if it is a finite number (not a bool, not text), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
 def _number_problem(value: Any) -> str | None:
     """What is wrong with ``value`` as a number of a run: non-finite (also as text, ``"nan"``,
     ``"1e999"``) or an integer beyond int64; None if nothing (or not a number)."""

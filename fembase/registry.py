@@ -11,17 +11,42 @@ error naming the role and listing the valid names::
     GENERATORS = Registry("particle generator", (RandomUniform, BoxLattice))
     GENERATORS.create("random_uniform", num_particles=5, seed=1)  # == RandomUniform(5, seed=1)
     GENERATORS.create("random")  # ValueError: unknown particle generator 'random'; valid: [...]
+
+The one shape of a plugin (:class:`Plugin`): a ``Settings`` dataclass (its parameters, declared with
+:func:`fembase.params.param`) and a classmethod ``build(settings, context)``, where ``context``
+holds what the family's implementations are made from (the mesh, the materials, ...);
+:meth:`Registry.build` makes the one registered under a name. Families whose entries are ready
+objects (Butcher tableaux, mixing rules, linear-solver setups) register those and are asked, not built.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any, Generic, TypeVar
+from typing import Any, ClassVar, Generic, Protocol, TypeVar
 
-__all__ = ["Registry"]
+__all__ = ["Plugin", "Registry"]
 
 E = TypeVar("E")
 T = TypeVar("T")
+
+
+class Plugin(Protocol):
+    """The one shape of a plugin: a name, a one-line description, its settings and how it is built.
+
+    Attributes:
+        name: The lowercase config name.
+        description: One line for listings and the config reference.
+        Settings: The frozen dataclass of its parameters (fields made by :func:`fembase.params.param`).
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    Settings: ClassVar[type]
+
+    @classmethod
+    def build(cls, settings: Any, context: Any, /) -> Any:
+        """The implementation for ``settings`` (a ``Settings``) in ``context`` (what the family's
+        implementations are made from)."""
 
 
 class Registry(dict[str, E], Generic[E]):
@@ -69,6 +94,14 @@ class Registry(dict[str, E], Generic[E]):
             ValueError: Unknown name (the message lists the valid names), or invalid parameters.
         """
         return self.lookup(name)(**parameters)
+
+    def build(self, name: str, settings: Any, context: Any, /) -> Any:
+        """The :class:`Plugin` registered as ``name`` built by its ``build(settings, context)``.
+
+        Raises:
+            ValueError: Unknown name (the message lists the valid names).
+        """
+        return self.lookup(name).build(settings, context)  # type: ignore[attr-defined]
 
     def describe(self) -> dict[str, str]:
         """One-line description of every registered implementation, by name."""

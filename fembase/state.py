@@ -8,7 +8,10 @@ stepping, a postprocessor that remembers its first value, ...) implements :class
 - :meth:`Stateful.restore` takes the saved scalars back and returns the Functions (the same names
   as :attr:`State.fields`) that the checkpoint then fills with the saved values, exactly or by
   coordinates. A component that must make a Function first (a history that did not exist yet)
-  makes it there.
+  makes it there;
+- :meth:`Stateful.restored` is called once every component's Functions are filled.
+
+:class:`Stateful` is also a no-op base to inherit: a component overrides what it keeps.
 
 A checkpoint (``convection.io.checkpoint``) writes and reads these and nothing else of a component;
 the mesh and the particle swarm, which must exist before the components are built, are its own
@@ -39,11 +42,23 @@ class State:
 
 @runtime_checkable
 class Stateful(Protocol):
-    """A component whose state a checkpoint keeps (see the module docstring)."""
+    """A component whose state a checkpoint keeps (see the module docstring).
+
+    Also a no-op base: a class that names it (``class Solver(Stateful):``) inherits an empty
+    :meth:`state`, a :meth:`restore` that fills nothing and a :meth:`restored` that does nothing, and
+    overrides what it keeps. The checkpoint calls :meth:`restored` of every component.
+    """
 
     def state(self) -> State:
-        """The fields and scalars that continue this component."""
+        """The fields and scalars that continue this component (default: nothing)."""
+        return State()
 
     def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
         """Take the saved ``scalars`` back; returns the Functions to be filled with the saved field
-        values, by the names of :meth:`state`'s fields."""
+        values, by the names of :meth:`state`'s fields (default: none)."""
+        return {}
+
+    def restored(self) -> None:
+        """The Functions of :meth:`restore` are filled (on every component): finish the restore,
+        e.g. move the mesh's nodes to the filled coordinates (default: nothing to do)."""
+        return None

@@ -53,7 +53,7 @@ import dolfinx.fem
 import dolfinx.mesh
 
 from fembase.geometry import Candidates
-from fembase.state import State
+from fembase.state import State, Stateful
 from particles.interpolation.tracked_fields import TrackedFields
 from particles.relocation.new_mesh import move_to_mesh
 from particles.advection import Advector, get_integrator
@@ -332,7 +332,7 @@ class _OutputClock:
         self.next_time = float(scalars["next_output_time"])
 
 
-class ParticleManager:
+class ParticleManager(Stateful):
     """The particles of one run and every component acting on them (see the module docstring).
 
     Construction is collective: it generates the particles, initialises their properties from

@@ -37,6 +37,8 @@ class BalancingStrategy:
     name: str
     description: str
     wants: Callable[[Balancer, dolfinx.mesh.Mesh, Sequence[Swarm]], bool]
+    repartitions: bool = True
+    """False: never repartitions (no balancer is made; the mesh keeps its first partition)."""
 
 
 def _over_threshold(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarms: Sequence[Swarm], /) -> bool:
@@ -44,7 +46,7 @@ def _over_threshold(balancer: Balancer, mesh: dolfinx.mesh.Mesh, swarms: Sequenc
 
 
 BALANCE_STRATEGIES: Registry[BalancingStrategy] = Registry("balancing strategy", (
-    BalancingStrategy("none", "never repartition", lambda balancer, mesh, swarms: False),
+    BalancingStrategy("none", "never repartition", lambda balancer, mesh, swarms: False, repartitions=False),
     BalancingStrategy("every", "repartition every N steps", lambda balancer, mesh, swarms: True),
     BalancingStrategy("threshold", "repartition when max/mean of the load over ranks exceeds a threshold (checked "
                       "every N steps)", _over_threshold),

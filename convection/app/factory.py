@@ -42,7 +42,7 @@ from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, Adaptivity
 
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.levels import MeshLevels
-from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
+from convection.geometry.boundary import VELOCITY_BC_KINDS, TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
 from convection.deform.motion import FreeSurface
 from convection.deform.surface import FreeSurfaceSettings, free_surface_boundaries, surface_terms
@@ -52,7 +52,7 @@ from convection.io.checkpoint import (
     saved_values,
 )
 from convection.model.composition import (
-    COMPOSITION_SOURCES, CompositionInputs, CompositionSettings, StaticComposition, particle_properties,
+    COMPOSITION_SOURCES, CompositionContext, CompositionSettings, StaticComposition, particle_properties,
 )
 from convection.config.particle_systems import particle_sections, primary_system
 from convection.config.units import scaling_of
@@ -65,12 +65,11 @@ from convection.geometry.registry import domain_from_config
 from convection.expressions import Expression
 from convection.physics.materials import Material, Materials
 from convection.model.model import Model
-from convection.geometry.plates import PlateVelocity
 from convection.postprocess.postprocessors import DiagnosticsSettings, create_postprocessors
-from convection.adapt.rebalance import BalanceSettings, Balancer
+from convection.adapt.rebalance import BALANCE_STRATEGIES, BalanceSettings, Balancer
 from convection.run.loop import BlowUp, OutputSettings, Resume, RunSettings, RunSummary, TimeSettings, run
 from convection.io.run_folder import RunFolderLock
-from convection.solvers.stokes.solver import StokesSettings, StokesSolver
+from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, StokesSolver
 from convection.solvers.petsc_options import PetscSolver
 from convection.solvers.transport import EnergySettings, TransportSolver, interpolate_initial
 from convection.schema import ConfigError, settings_from
@@ -91,13 +90,8 @@ def velocity_bcs_from_config(section: dict, domain: Domain) -> dict[str, Velocit
         value = section[side]
         if value is None:
             continue
-        if isinstance(value, dict) and value["kind"] == "plates":
-            result[side] = VelocityBC("prescribed", PlateVelocity.from_config(value, domain.gdim))
-        elif isinstance(value, dict):
-            components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
-            result[side] = VelocityBC(value["kind"], components or None)
-        else:
-            result[side] = VelocityBC(value)
+        kind = value["kind"] if isinstance(value, dict) else value
+        result[side] = VELOCITY_BC_KINDS[kind].from_config(value, domain.gdim)
     return result
 
 
@@ -172,7 +166,7 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
             comm: MPI.Comm, restore: SavedRun | None) -> _Meshes:
     """The run's mesh: the base mesh (adapted to the initial condition), or the checkpoint's."""
     acfg, bcfg = config["adaptivity"], config["balance"]
-    hierarchical = acfg["enabled"] or bcfg["strategy"] != "none"
+    hierarchical = acfg["enabled"] or BALANCE_STRATEGIES[bcfg["strategy"]].repartitions
     # A curved domain's hierarchy refines the straight-sided base and curves what it hands out.
     manifold = domain.manifold() if hierarchical else None
     straight = manifold is not None
@@ -209,13 +203,14 @@ def _meshes(config: dict[str, Any], domain: Domain, materials: Materials, temper
         if restore is None:
             mesh = adaptivity.initial_mesh(_initial_fields(config, materials, temperature_bcs, domain),
                                            rounds=acfg["initial_steps"])
-    balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if bcfg["strategy"] != "none" else None
+    repartitions = BALANCE_STRATEGIES[bcfg["strategy"]].repartitions
+    balancer = Balancer(hierarchy, settings_from(BalanceSettings, bcfg)) if repartitions else None
     levels = None
     if coarse:
         levels = MeshLevels(coarse[:-1], coarse[-1], hierarchy)
         if hierarchy is not None:
             hierarchy.keep_levels = True  # a repartition moves the refinement rounds' meshes too
-    elif adaptivity is not None and config["stokes"]["solver"] == "multigrid":
+    elif adaptivity is not None and STOKES_SOLVER_CHOICES[config["stokes"]["solver"]].nested:
         # No box nests below the base (a shell; a box whose cells do not halve): the levels are
         # the refinement rounds (curved on a shell).
         levels = MeshLevels((), hierarchy.base, hierarchy)
@@ -227,7 +222,7 @@ def _free_surface(config: dict[str, Any], domain: Domain, mesh: dolfinx.mesh.Mes
                   restore: SavedRun | None, *, exact: bool) -> FreeSurface | None:
     """The free surfaces (None without): made on the undeformed mesh, then the mesh takes the
     initial topography, or a checkpoint's coordinates, before anything else is built on it."""
-    names = tuple(name for name, bc in bcs.items() if bc.kind == "free_surface")
+    names = tuple(name for name, bc in bcs.items() if bc.spec.moves)
     if not names:
         return None
     settings = settings_from(FreeSurfaceSettings, config["free_surface"])
@@ -273,7 +268,8 @@ def _particles(config: dict[str, Any], meshes: _Meshes, domain: Domain, material
     scaling = scaling_of(config)
     systems = {}
     for name, section in sections.items():  # each system draws from its own seeds: they do not interact
-        extra = particle_properties(materials, domain.gdim) if ccfg["source"] == "particles" and name == primary else []
+        feeds = COMPOSITION_SOURCES[ccfg["source"]].carried_by_particles and name == primary
+        extra = particle_properties(materials, domain.gdim) if feeds else []
         systems[name] = ParticleManager.from_config(
             section, meshes.mesh, directory=config["output"]["directory"], extra_properties=extra,
             make_function=point_function(config), field_degree=ccfg["degree"], context=context,
@@ -293,9 +289,9 @@ def _composition(config: dict[str, Any], mesh: dolfinx.mesh.Mesh, approximation:
     if not len(materials):
         return None
     composition = settings_from(CompositionSettings, config["composition"])
-    inputs = CompositionInputs(mesh, approximation, materials, particles.primary if particles is not None else None,
-                               composition.degree, stabilisation)
-    return COMPOSITION_SOURCES.lookup(composition.source).build(inputs)
+    context = CompositionContext(mesh, approximation, materials, particles.primary if particles is not None else None,
+                                 stabilisation)
+    return COMPOSITION_SOURCES.build(composition.source, composition, context)
 
 
 def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
@@ -323,7 +319,7 @@ def build_model(config: dict[str, Any], /, *, comm: MPI.Comm = MPI.COMM_WORLD,
     if meshes.coarse is not None:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
         stokes_settings = dataclasses.replace(stokes_settings, solver="multigrid")
     stokes = StokesSolver(mesh, approximation,
-                          bcs={n: bc for n, bc in velocity_bcs.items() if bc.kind != "free_surface"}, domain=domain,
+                          bcs={n: bc for n, bc in velocity_bcs.items() if not bc.spec.moves}, domain=domain,
                           coarse_meshes=meshes.coarse or (),
                           surface=free_surface.terms if free_surface is not None else None, **vars(stokes_settings))
     energy = settings_from(EnergySettings, config["energy"])

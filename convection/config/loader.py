@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import copy
 import importlib
-import math
 from pathlib import Path
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -46,24 +45,26 @@ from convection.config.particle_systems import (
     resolve_systems,
 )
 from convection.config.units import apply_scaling, in_written_terms, scaling_of, written_quantities
+from convection.geometry.boundary import VELOCITY_BC_KINDS
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
 from convection.adapt.adaptivity import AdaptivitySettings
-from convection.adapt.rebalance import BalanceSettings
+from convection.adapt.rebalance import BALANCE_STRATEGIES, BalanceSettings
 from convection.deform.surface import FreeSurfaceSettings, check_free_surface, free_surface_boundaries
-from convection.model.composition import CompositionSettings
+from convection.model.composition import COMPOSITION_SOURCES, CompositionSettings
 from convection.postprocess.postprocessors import DiagnosticsSettings, ModelFeatures, check_statistics
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
 from convection.schema import (
     MAX_ENTRIES, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
     settings_from, short_repr, validate,
 )
-from convection.physics.approximation import PhysicsSettings
+from convection.schema import finite_number as _finite_number
+from convection.physics.approximation import TEMPERATURE_LAWS, PhysicsSettings
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
-from convection.solvers.stokes.solver import AUTO, StokesSettings, check_viscosity_rules
+from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings
 
@@ -74,18 +75,7 @@ MAX_PARTICLES = 1e8
 """Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
 MAX_STEPS = 1e9
 """Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
-VELOCITY_KINDS = ("free_slip", "no_slip", "prescribed", "plates", "free_surface")
-
-
-def _finite_number(value: Any) -> float | None:
-    """``value`` as a float if it is a finite number (not a bool, not text), else None."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    try:
-        number = float(value)
-    except OverflowError:
-        return None
-    return number if math.isfinite(number) else None
+VELOCITY_KINDS = tuple(VELOCITY_BC_KINDS)
 
 
 def _check_velocity_bc(value: Any) -> str | None:
@@ -93,33 +83,7 @@ def _check_velocity_bc(value: Any) -> str | None:
     if not isinstance(kind, str) or kind not in VELOCITY_KINDS:
         return (f"velocity condition {short_repr(value)} is not one of {list(VELOCITY_KINDS)} "
                 "(or {kind: prescribed, value: [..]})")
-    if kind == "plates":
-        if not isinstance(value, dict):
-            return "a plates velocity needs the form {kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
-        from convection.geometry.plates import PlateVelocity
-
-        try:
-            PlateVelocity.from_config(value, 3)
-        except (TypeError, ValueError, OverflowError) as err:  # TypeError: e.g. keys of mixed types
-            return str(err)
-        return None
-    if isinstance(value, dict):
-        extra = [name for name in value if name not in ("kind", "value")]
-        if extra:
-            return f"unknown entry {short_repr(extra[0])}; allowed: ['kind', 'value']"
-        if kind == "prescribed" and not isinstance(value.get("value"), list):
-            return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
-        for i, component in enumerate(value.get("value") or ()):
-            if isinstance(component, str):
-                try:
-                    Expression(component, gdim=3)
-                except ExpressionError as err:
-                    return f"value[{i}]: {err}"
-            elif _finite_number(component) is None:
-                return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
-    elif kind == "prescribed":
-        return "a prescribed velocity needs the form {kind: prescribed, value: [vx, vy(, vz)]}"
-    return None
+    return VELOCITY_BC_KINDS[kind].check_config(value)
 
 
 def _check_temperature_bc(value: Any) -> str | None:
@@ -286,11 +250,11 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
     stokes = config["stokes"]
     domain = domain if domain is not None else config_domain(config)
     wanted = stokes["multigrid"]["levels"]
-    if stokes["solver"] == "multigrid":
+    if STOKES_SOLVER_CHOICES[stokes["solver"]].nested:
         return domain.mesh_levels(wanted)
-    fixed = (not config["adaptivity"]["enabled"] and config["balance"]["strategy"] == "none"
+    fixed = (not config["adaptivity"]["enabled"] and not BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions
              and not free_surface_boundaries(config))
-    if stokes["solver"] == AUTO and fixed and config_gdim(config) == 3:
+    if STOKES_SOLVER_CHOICES[stokes["solver"]].by_mesh and fixed and config_gdim(config) == 3:
         levels = domain.mesh_levels(wanted)
         coarsest = domain.estimated_cells() / 8 ** (levels - 1)
         return levels if levels >= AUTO_MULTIGRID_LEVELS and coarsest >= ranks else 1
@@ -304,7 +268,7 @@ def _check_multigrid(config: dict[str, Any]) -> None:
     only means something with it (or with ``auto`` where that picks it)."""
     stokes = config["stokes"]
     levels = stokes["multigrid"]["levels"]
-    if stokes["solver"] != "multigrid":
+    if not STOKES_SOLVER_CHOICES[stokes["solver"]].nested:
         if levels != 0:
             try:
                 picked = multigrid_levels(config) > 1
@@ -314,7 +278,7 @@ def _check_multigrid(config: dict[str, Any]) -> None:
                 raise ConfigError("config key 'stokes.multigrid.levels': only with stokes.solver: multigrid (or auto "
                                   "on a fixed 3D box whose cells halve)")
         return
-    if config["balance"]["strategy"] != "none" and not config["adaptivity"]["enabled"]:
+    if BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions and not config["adaptivity"]["enabled"]:
         raise ConfigError("config key 'balance.strategy': stokes.solver multigrid repartitions adaptive meshes only: "
                           "a repartitioned fixed mesh is nested rank by rank in no coarser mesh (use iterative, or "
                           "balance.strategy: none)")
@@ -323,7 +287,7 @@ def _check_multigrid(config: dict[str, Any]) -> None:
         count = domain.mesh_levels(levels)
     except ValueError as err:
         raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
-    if config["balance"]["strategy"] != "none" and domain.manifold() is not None \
+    if BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions and domain.manifold() is not None \
             and not repartitioned_manifolds_nest():
         raise ConfigError("config key 'balance.strategy': stokes.solver multigrid on a repartitioned curved mesh needs "
                           "DOLFINx 0.5 for now (on 0.9 a node of the repartitioned shell lay in no coarser cell of "
@@ -337,7 +301,8 @@ def _check_multigrid(config: dict[str, Any]) -> None:
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:
     _check_mesh(config, document)
     _check_multigrid(config)
-    check_free_surface(config, document, domain_class(config))
+    check_free_surface(config, document, domain_class(config),
+                       multigrid=STOKES_SOLVER_CHOICES[config["stokes"]["solver"]].nested)
     if config["free_surface"]["initial_topography"] is not None:
         _check_initial_topography(config)
     adapt = config["adaptivity"]
@@ -346,7 +311,7 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     cls = domain_class(config)
     if not cls.refinable:
         for key, enabled in (("adaptivity.enabled", adapt["enabled"]),
-                             ("balance.strategy", config["balance"]["strategy"] != "none")):
+                             ("balance.strategy", BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions)):
             if enabled:
                 raise ConfigError(f"config key '{key}': runs on mesh.geometry {cls.name} do not adapt or "
                                   "repartition yet")
@@ -443,7 +408,7 @@ def _check_initial_topography(config: dict[str, Any]) -> None:
 def _check_velocity_values(config: dict[str, Any], gdim: int) -> None:
     """Prescribed velocities: gdim components, each expression finite on its boundary."""
     for side, bc in config["boundary"]["velocity"].items():
-        if not (isinstance(bc, dict) and bc["kind"] == "prescribed"):
+        if not (isinstance(bc, dict) and VELOCITY_BC_KINDS[bc["kind"]].needs_value):
             continue
         if len(bc["value"]) != gdim:
             raise ConfigError(f"config key 'boundary.velocity.{side}.value': needs {gdim} components")
@@ -582,7 +547,7 @@ def _check_rheology(config: dict[str, Any]) -> None:
     if visc["law"] is not None and visc["background"] != 1.0:
         raise ConfigError("config key 'physics.viscosity.background': not with physics.viscosity.law (the law is the "
                           "background's)")
-    if visc["temperature_law"] != "none":
+    if TEMPERATURE_LAWS[visc["temperature_law"]].factor is not None:
         raise ConfigError("config key 'physics.viscosity.temperature_law': not with viscosity laws (give the "
                           "temperature dependence in the law, e.g. {name: exponential, gamma_T: ...})")
     law0, others = laws
@@ -638,7 +603,7 @@ def _check_materials(config: dict[str, Any]) -> None:
     table, _ = material_table(config)
     names = [m["name"] for m in table]
     source = config["composition"]["source"]
-    if source != "static" and not table:
+    if COMPOSITION_SOURCES[source].needs_materials and not table:
         raise ConfigError(f"config key 'composition.source': {source} needs materials (the materials section or "
                           "initial.composition)")
     settings_from(CompositionSettings, config["composition"])  # its checks (the degree a source needs)
@@ -682,7 +647,8 @@ def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[
 def _check_particles(config: dict[str, Any]) -> None:
     """Every particle system's section (the one mapping also when the run carries no particles)."""
     section = config["particles"]
-    if isinstance(section, dict) and section["enabled"] is False and config["composition"]["source"] == "particles":
+    carried = COMPOSITION_SOURCES[config["composition"]["source"]].carried_by_particles
+    if isinstance(section, dict) and section["enabled"] is False and carried:
         raise ConfigError("config key 'particles.enabled': composition.source: particles needs particles")
     primary = primary_system(config)
     make = point_function(config, probe=True)
@@ -752,7 +718,7 @@ def _check_system_properties(config: dict[str, Any], section: dict[str, Any], wh
     from particles.manager import build_properties
     from particles.population.control import PopulationControl
 
-    materials = feeds and config["composition"]["source"] == "particles"
+    materials = feeds and COMPOSITION_SOURCES[config["composition"]["source"]].carried_by_particles
     columns = [m["name"] for m in material_table(config)[0]] if materials else []
     built = []
     for i, spec in enumerate(section["properties"]):

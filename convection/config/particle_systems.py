@@ -30,6 +30,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
+from convection.model.composition import COMPOSITION_SOURCES
 from convection.schema import ConfigError, section_schema, short_repr, validate
 from particles.settings import ParticleSettings
 from particles.systems import DEFAULT_SYSTEM
@@ -102,7 +103,8 @@ def carries_particles(config: dict[str, Any], /) -> bool:
     if isinstance(section, list):
         return True
     enabled = section["enabled"]
-    return config["composition"]["source"] == "particles" if enabled is None else bool(enabled)
+    carried = COMPOSITION_SOURCES[config["composition"]["source"]].carried_by_particles
+    return carried if enabled is None else bool(enabled)
 
 
 def primary_system(config: dict[str, Any], /) -> str | None:

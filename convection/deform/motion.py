@@ -44,7 +44,7 @@ from fembase.dolfinx_compat import (
     cell_dofmap, coordinate_map, create_vector, function_space, geometry_dofmap, interpolation_points, petsc_vector,
 )
 from fembase.geometry import set_reference_coordinates
-from fembase.state import State
+from fembase.state import State, Stateful
 
 __all__ = ["FreeSurface", "cell_quality"]
 
@@ -79,7 +79,7 @@ def _deform_initially(mesh: dolfinx.mesh.Mesh, domain: Domain, height: Callable[
     x[:, :gdim] += (fraction * np.asarray(height(x.T), dtype=np.float64).reshape(-1))[:, None] * domain.up(x)
 
 
-class FreeSurface:
+class FreeSurface(Stateful):
     """The free surfaces of a box and the motion of its mesh (module docstring). Collective.
 
     Args:

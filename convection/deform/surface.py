@@ -40,6 +40,7 @@ import dolfinx
 import ufl
 from petsc4py import PETSc
 
+from convection.geometry.boundary import VELOCITY_BC_KINDS
 from convection.geometry.domain import Domain
 from convection.schema import ConfigError, param
 
@@ -122,14 +123,17 @@ def surface_terms(names: tuple[str, ...], settings: FreeSurfaceSettings, /) -> S
 
 def free_surface_boundaries(config: dict[str, Any], /) -> tuple[str, ...]:
     """The boundaries of a resolved config whose velocity condition is ``free_surface``."""
-    return tuple(name for name, value in config["boundary"]["velocity"].items()
-                 if value == "free_surface" or (isinstance(value, dict) and value.get("kind") == "free_surface"))
+    kinds = {name: value.get("kind") if isinstance(value, dict) else value
+             for name, value in config["boundary"]["velocity"].items()}
+    return tuple(name for name, kind in kinds.items() if isinstance(kind, str) and kind in VELOCITY_BC_KINDS
+                 and VELOCITY_BC_KINDS[kind].moves)
 
 
-def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain: type[Domain], /) -> None:
+def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain: type[Domain], /, *,
+                       multigrid: bool) -> None:
     """The cross-key checks of a free surface (ConfigError naming the key): the top of a box or the
-    annulus's outer circle; not
-    yet with the multigrid; ``buoyancy`` known."""
+    annulus's outer circle; not yet with the multigrid (``multigrid``: ``stokes.solver`` names it);
+    ``buoyancy`` known."""
     names = free_surface_boundaries(config)
     if not names:
         if config["free_surface"] != dataclasses.asdict(FreeSurfaceSettings()):  # set, but for nothing
@@ -141,7 +145,7 @@ def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain:
             raise ConfigError(f"config key 'boundary.velocity.{name}': a free surface is the top of a box or the "
                               f"outer circle of an annulus for now (boundary.velocity.top of a box, "
                               f"boundary.velocity.outer of mesh.geometry annulus)")
-    if config["stokes"]["solver"] == "multigrid":
+    if multigrid:
         raise ConfigError("config key 'stokes.solver': the multigrid is not with a free surface yet (its mesh moves; "
                           "the coarser levels do not follow it)")
     if config["free_surface"]["buoyancy"] is None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import dolfinx
 import numpy as np
@@ -21,20 +21,151 @@ import ufl
 from petsc4py import PETSc
 
 from convection.geometry.domain import Domain
+from convection.expressions import Expression, ExpressionError
 from convection.geometry.mesh import cell_diameter
+from convection.geometry.plates import PlateVelocity
+from convection.schema import finite_number, short_repr
 from fembase.dolfinx_compat import DirichletBC
+from fembase.registry import Registry
 
-__all__ = ["TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS", "NitscheTerms", "TemperatureBC", "VelocityBC",
+__all__ = ["TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS", "NitscheTerms", "VelocityKind", "TemperatureBC", "VelocityBC",
            "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs", "velocity_dirichlet_bcs",
            "weak_free_slip_boundaries"]
 
-VELOCITY_BC_KINDS: dict[str, str] = {
-    "free_slip": "zero normal velocity, zero tangential traction",
-    "no_slip": "zero velocity",
-    "prescribed": "velocity equal to `value`: a constant vector, or expressions in x, y, z, r, ... per component",
-    "free_surface": "zero traction; the surface moves with the flow and the mesh deforms (the free_surface section)",
-}
-"""Registry of velocity boundary condition kinds (name -> one-line description)."""
+class VelocityKind:
+    """One kind of velocity condition, as ``boundary.velocity.<side>`` names it (an entry of
+    :data:`VELOCITY_BC_KINDS`): how a config gives it, the :class:`VelocityBC` it makes and the
+    Dirichlet conditions that impose it. Subclasses override what differs.
+
+    Attributes:
+        name, description: The config name and one line.
+        condition: A :class:`VelocityBC` of this kind exists (False: a config form of another kind).
+        needs_value: The config gives ``{kind: <name>, value: [...]}`` and :class:`VelocityBC` a value.
+        rotations_free: Lets the flow slide along the boundary (a shell's rigid rotations cross it nowhere).
+        weak_without_axis: Imposed weakly (:func:`nitsche_free_slip`) where the boundary has no normal axis.
+        moves: The boundary moves with the flow (:mod:`convection.deform`), a natural condition here.
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    condition: ClassVar[bool] = True
+    needs_value: ClassVar[bool] = False
+    rotations_free: ClassVar[bool] = False
+    weak_without_axis: ClassVar[bool] = False
+    moves: ClassVar[bool] = False
+
+    def check_config(self, value: Any, /) -> str | None:
+        """What is wrong with the config's ``value`` of this kind (a name or a mapping), or None."""
+        if not isinstance(value, dict):
+            return (f"a {self.name} velocity needs the form {{kind: {self.name}, value: [vx, vy(, vz)]}}"
+                    if self.needs_value else None)
+        extra = [name for name in value if name not in ("kind", "value")]
+        if extra:
+            return f"unknown entry {short_repr(extra[0])}; allowed: ['kind', 'value']"
+        if self.needs_value and not isinstance(value.get("value"), list):
+            return f"a {self.name} velocity needs 'value: [vx, vy(, vz)]'"
+        for i, component in enumerate(value.get("value") or ()):
+            if isinstance(component, str):
+                try:
+                    Expression(component, gdim=3)
+                except ExpressionError as err:
+                    return f"value[{i}]: {err}"
+            elif finite_number(component) is None:
+                return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
+        return None
+
+    def from_config(self, value: Any, gdim: int, /) -> VelocityBC:
+        """The condition the config's checked ``value`` of this kind gives in ``gdim`` dimensions."""
+        if not isinstance(value, dict):
+            return VelocityBC(self.name)
+        components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
+        return VelocityBC(self.name, components or None)
+
+    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
+        """The strong conditions on the boundary ``name`` (none: a natural or weak condition). Collective."""
+        return []
+
+    def homogeneous(self, bc: VelocityBC, /) -> VelocityBC:
+        """``bc`` with zero values on the same dofs."""
+        return bc
+
+
+class FreeSlip(VelocityKind):
+    name = "free_slip"
+    description = "zero normal velocity, zero tangential traction"
+    rotations_free = weak_without_axis = True
+
+    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
+        """Zero velocity component along the boundary's normal axis; none without one (Nitsche)."""
+        axis = domain.normal_axis(name)
+        if axis is None:
+            return []
+        facets = domain.locate_facets(V.mesh, name)
+        dofs = dolfinx.fem.locate_dofs_topological(V.sub(axis), V.mesh.topology.dim - 1, facets)
+        return [dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(axis))]
+
+
+class Prescribed(VelocityKind):
+    name = "prescribed"
+    description = "velocity equal to `value`: a constant vector, or expressions in x, y, z, r, ... per component"
+    needs_value = True
+
+    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
+        """Every component fixed: a constant vector, or the interpolated expressions or callable."""
+        facets = domain.locate_facets(V.mesh, name)
+        fdim = V.mesh.topology.dim - 1
+        if callable(value) or any(isinstance(c, str) for c in value or ()):
+            dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+            return [dolfinx.fem.dirichletbc(_velocity_function(V, value), dofs)]
+        constant = np.asarray(value, dtype=float)
+        if constant.shape != (V.mesh.geometry.dim,):
+            raise ValueError(f"Prescribed velocity on {name!r} must have {V.mesh.geometry.dim} components")
+        dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
+        return [dolfinx.fem.dirichletbc(constant.astype(PETSc.ScalarType), dofs, V)]
+
+    def homogeneous(self, bc: VelocityBC, /) -> VelocityBC:
+        return VelocityBC("no_slip")
+
+
+class NoSlip(Prescribed):
+    name = "no_slip"
+    description = "zero velocity"
+    needs_value = False
+
+    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
+        return super().dirichlet(V, domain, name, (0.0,) * V.mesh.geometry.dim)
+
+    def homogeneous(self, bc: VelocityBC, /) -> VelocityBC:
+        return bc
+
+
+class Plates(VelocityKind):
+    name = "plates"
+    description = "rigid plates on a spherical shell's outer surface: a prescribed velocity"
+    condition = False
+
+    def check_config(self, value: Any, /) -> str | None:
+        if not isinstance(value, dict):
+            return "a plates velocity needs the form {kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
+        try:
+            PlateVelocity.from_config(value, 3)
+        except (TypeError, ValueError, OverflowError) as err:  # TypeError: e.g. keys of mixed types
+            return str(err)
+        return None
+
+    def from_config(self, value: Any, gdim: int, /) -> VelocityBC:
+        return VelocityBC(Prescribed.name, PlateVelocity.from_config(value, gdim))
+
+
+class FreeSurface(VelocityKind):
+    name = "free_surface"
+    description = "zero traction; the surface moves with the flow and the mesh deforms (the free_surface section)"
+    rotations_free = moves = True
+
+
+VELOCITY_BC_KINDS: Registry[VelocityKind] = Registry("velocity condition", (
+    FreeSlip(), NoSlip(), Prescribed(), Plates(), FreeSurface()))
+"""Registry of the velocity condition kinds a config names (the order of the config's messages)."""
 
 TEMPERATURE_BC_KINDS: dict[str, str] = {
     "dirichlet": "temperature equal to the constant `value`",
@@ -60,12 +191,16 @@ class VelocityBC:
     value: tuple[float | str, ...] | Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
-        if self.kind not in VELOCITY_BC_KINDS:
-            raise ValueError(
-                f"Unknown velocity BC kind {self.kind!r}; valid names: {sorted(VELOCITY_BC_KINDS)}"
-            )
-        if self.kind == "prescribed" and self.value is None:
-            raise ValueError("A 'prescribed' velocity BC needs a value")
+        if self.kind not in VELOCITY_BC_KINDS or not VELOCITY_BC_KINDS[self.kind].condition:
+            raise ValueError(f"Unknown velocity BC kind {self.kind!r}; valid names: "
+                             f"{sorted(n for n, kind in VELOCITY_BC_KINDS.items() if kind.condition)}")
+        if self.spec.needs_value and self.value is None:
+            raise ValueError(f"A {self.kind!r} velocity BC needs a value")
+
+    @property
+    def spec(self) -> VelocityKind:
+        """The kind's entry of :data:`VELOCITY_BC_KINDS`."""
+        return VELOCITY_BC_KINDS[self.kind]
 
 
 @dataclass(frozen=True)
@@ -101,38 +236,17 @@ def velocity_dirichlet_bcs(V: dolfinx.fem.FunctionSpace, bcs: dict[str, Velocity
     missing from ``bcs`` get no condition (natural, zero traction). Collective.
     """
     domain.check_boundary_names(bcs)
-    mesh = V.mesh
-    gdim = mesh.geometry.dim
-    fdim = mesh.topology.dim - 1
     out = []
     for name in domain.boundaries:
         bc = bcs.get(name)
-        if bc is None or bc.kind == "free_surface":
-            continue
-        axis = domain.normal_axis(name)
-        if bc.kind == "free_slip" and axis is None:
-            continue
-        facets = domain.locate_facets(mesh, name)
-        if bc.kind == "free_slip":
-            dofs = dolfinx.fem.locate_dofs_topological(V.sub(axis), fdim, facets)
-            out.append(dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(axis)))
-        elif bc.kind == "prescribed" and (callable(bc.value) or any(isinstance(c, str) for c in bc.value or ())):
-            dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
-            out.append(dolfinx.fem.dirichletbc(_velocity_function(V, bc.value), dofs))
-        else:
-            value = np.zeros(gdim) if bc.kind == "no_slip" else np.asarray(bc.value, dtype=float)
-            if value.shape != (gdim,):
-                raise ValueError(f"Prescribed velocity on {name!r} must have {gdim} components")
-            dofs = dolfinx.fem.locate_dofs_topological(V, fdim, facets)
-            out.append(dolfinx.fem.dirichletbc(value.astype(PETSc.ScalarType), dofs, V))
+        if bc is not None:
+            out.extend(bc.spec.dirichlet(V, domain, name, bc.value))
     return out
 
 
 def _velocity_function(V: dolfinx.fem.FunctionSpace, value: Any) -> dolfinx.fem.Function:
     """The velocity ``value`` (numbers or expression texts per component, or a callable on points)
     interpolated into ``V``."""
-    from convection.expressions import Expression
-
     gdim = V.mesh.geometry.dim
     if callable(value):
         f = dolfinx.fem.Function(V)
@@ -150,7 +264,7 @@ def _velocity_function(V: dolfinx.fem.FunctionSpace, value: Any) -> dolfinx.fem.
 
 def weak_free_slip_boundaries(bcs: dict[str, VelocityBC], domain: Domain, /) -> tuple[str, ...]:
     """The boundaries with free slip that have no normal axis, where :func:`nitsche_free_slip` applies."""
-    return tuple(n for n in domain.boundaries if n in bcs and bcs[n].kind == "free_slip"
+    return tuple(n for n in domain.boundaries if n in bcs and bcs[n].spec.weak_without_axis
                  and domain.normal_axis(n) is None)
 
 
@@ -158,7 +272,7 @@ def has_rotation_null_space(bcs: dict[str, VelocityBC], domain: Domain, /) -> bo
     """Whether the velocity is only defined up to rigid rotations about the centre (a shell free
     slip or a free surface on every boundary: one rotation in 2D, three in 3D; a rotation moves no
     surface of the undeformed shell)."""
-    return domain.has_rotations({n for n, bc in bcs.items() if bc.kind in ("free_slip", "free_surface")})
+    return domain.has_rotations({n for n, bc in bcs.items() if bc.spec.rotations_free})
 
 
 class NitscheTerms(NamedTuple):

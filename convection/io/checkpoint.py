@@ -531,8 +531,7 @@ def restore_state(model: Model, saved: SavedRun, /, *, exact: bool) -> None:
             functions[f"{component}/{name}"] = target
     fill_functions(saved, functions, exact=exact)
     for stateful in model.components().values():
-        if hasattr(stateful, "restored"):
-            stateful.restored()
+        stateful.restored()
 
 
 def fill_functions(saved: SavedRun, functions: Mapping[str, dolfinx.fem.Function], /, *, exact: bool) -> None:

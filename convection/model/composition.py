@@ -31,26 +31,25 @@ from convection.schema import MAX_DEGREE, ConfigError, Names, param
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import function_space
 from fembase.registry import Registry
-from fembase.state import State
+from fembase.state import State, Stateful
 from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
-__all__ = ["COMPOSITION_SOURCES", "CompositionInputs", "CompositionSettings", "CompositionSource", "FieldComposition",
+__all__ = ["COMPOSITION_SOURCES", "CompositionContext", "CompositionSettings", "CompositionSource", "FieldComposition",
            "ParticleComposition", "StaticComposition", "Transfer", "composition_space", "particle_properties"]
 
 Transfer = Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]
 """``transfer(source_on_old_mesh, target_on_new_mesh)`` fills the target (collective)."""
 
 
-class CompositionInputs(NamedTuple):
-    """What a composition source is made from (each takes what it needs).
+class CompositionContext(NamedTuple):
+    """What a composition source is made from, beside its settings (each takes what it needs).
 
     Attributes:
         mesh: The model's mesh.
         approximation: The physics (advected fields use its transport).
         materials: The materials whose fractions the source gives.
         particles: The particles (None without).
-        degree: The fields' degree (``composition.degree``).
         stabilisation: The advection's stabilisation (``energy.stabilisation``).
     """
 
@@ -58,16 +57,48 @@ class CompositionInputs(NamedTuple):
     approximation: BoussinesqApproximation
     materials: Materials
     particles: ParticleManager | None
-    degree: int
     stabilisation: str
 
 
-class CompositionSource(Protocol):
+def check_degree(source: str, degree: int, /) -> None:
+    """Raise :class:`ConfigError` (naming ``composition.degree``) if the composition source
+    ``source`` cannot use fields of ``degree`` (its ``min_degree``: an advected field needs >= 1)."""
+    need = COMPOSITION_SOURCES.lookup(source).min_degree
+    if degree < need:
+        raise ConfigError(f"config key 'composition.degree': the composition source {source!r} needs degree >= {need}, "
+                          f"got {degree}")
+
+
+@dataclass(frozen=True)
+class CompositionSettings:
+    """The ``composition`` config section: where the material fractions come from."""
+
+    source: str = param("static", choices=Names(lambda: COMPOSITION_SOURCES),
+                        help="static: fractions fixed at their initial regions; particles: averaged from advected "
+                             "particles; field: advected continuous fields (SUPG, no diffusion)")
+    degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
+                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for "
+                             "quadratic_least_squares); source field needs >= 1")
+    particle_system: str | None = param(None,
+                                        help="with several particle systems: the one whose particles carry the "
+                                             "material fractions and the fields the viscosity laws read (null: the "
+                                             "first)")
+
+    def __post_init__(self) -> None:
+        check_degree(self.source, self.degree)
+
+
+class CompositionSource(Stateful, Protocol):
     """Gives the material fields; see the module docstring."""
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type]
     min_degree: ClassVar[int]
+    needs_materials: ClassVar[bool]
+    """A config with this source must name materials (the static source makes none without)."""
+    carried_by_particles: ClassVar[bool]
+    """The fractions come from particles: the primary particle system carries the materials."""
     materials: Materials
 
     @property
@@ -76,7 +107,7 @@ class CompositionSource(Protocol):
     def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None: ...
 
     @classmethod
-    def build(cls, inputs: CompositionInputs, /) -> CompositionSource: ...
+    def build(cls, settings: CompositionSettings, context: CompositionContext, /) -> CompositionSource: ...
 
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None: ...
 
@@ -92,7 +123,7 @@ def composition_space(mesh: dolfinx.mesh.Mesh, degree: int, /) -> dolfinx.fem.Fu
     return function_space(mesh, "DG", 0) if degree == 0 else function_space(mesh, "Lagrange", degree)
 
 
-class StaticComposition:
+class StaticComposition(Stateful):
     """Fractions interpolated from the initial regions and kept fixed.
 
     Args:
@@ -102,12 +133,15 @@ class StaticComposition:
     """
 
     name: ClassVar[str] = "static"
+    Settings: ClassVar[type] = CompositionSettings
+    needs_materials: ClassVar[bool] = False
+    carried_by_particles: ClassVar[bool] = False
     min_degree: ClassVar[int] = 0
     description: ClassVar[str] = "fractions set from the initial regions and kept fixed"
 
     @classmethod
-    def build(cls, inputs: CompositionInputs, /) -> StaticComposition:
-        return cls(inputs.mesh, inputs.materials, degree=inputs.degree)
+    def build(cls, settings: CompositionSettings, context: CompositionContext, /) -> StaticComposition:
+        return cls(context.mesh, context.materials, degree=settings.degree)
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, materials: Materials, /, *, degree: int = 0) -> None:
         self.materials = materials
@@ -145,7 +179,7 @@ class StaticComposition:
         """Nothing to free."""
 
 
-class FieldComposition:
+class FieldComposition(Stateful):
     """Fractions advected as continuous fields (one transport solver per material, no diffusion).
 
     Args:
@@ -157,13 +191,16 @@ class FieldComposition:
     """
 
     name: ClassVar[str] = "field"
+    Settings: ClassVar[type] = CompositionSettings
+    needs_materials: ClassVar[bool] = True
+    carried_by_particles: ClassVar[bool] = False
     min_degree: ClassVar[int] = 1
     description: ClassVar[str] = "fractions advected as continuous fields (SUPG + BDF2, no diffusion)"
 
     @classmethod
-    def build(cls, inputs: CompositionInputs, /) -> FieldComposition:
-        return cls(inputs.mesh, inputs.approximation, inputs.materials, degree=inputs.degree,
-                   stabilisation=inputs.stabilisation)
+    def build(cls, settings: CompositionSettings, context: CompositionContext, /) -> FieldComposition:
+        return cls(context.mesh, context.approximation, context.materials, degree=settings.degree,
+                   stabilisation=context.stabilisation)
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, approximation: BoussinesqApproximation, materials: Materials, /, *,
                  degree: int = 2, stabilisation: str = "supg") -> None:
@@ -222,7 +259,7 @@ def particle_properties(materials: Materials, gdim: int, /) -> list[InitialCompo
     return [InitialComposition(source=region(m.initial), label=m.name) for m in materials.materials]
 
 
-class ParticleComposition:
+class ParticleComposition(Stateful):
     """Fractions averaged per cell from particle properties (one per material).
 
     The particle manager must carry :func:`particle_properties` of the materials; the model
@@ -234,13 +271,16 @@ class ParticleComposition:
     """
 
     name: ClassVar[str] = "particles"
+    Settings: ClassVar[type] = CompositionSettings
+    needs_materials: ClassVar[bool] = True
+    carried_by_particles: ClassVar[bool] = True
     min_degree: ClassVar[int] = 0
     description: ClassVar[str] = "fractions averaged per cell from the particles' material properties"
 
     @classmethod
-    def build(cls, inputs: CompositionInputs, /) -> ParticleComposition:
-        assert inputs.particles is not None, "the particles composition source needs particles"
-        return cls(inputs.particles, inputs.materials)
+    def build(cls, settings: CompositionSettings, context: CompositionContext, /) -> ParticleComposition:
+        assert context.particles is not None, "the particles composition source needs particles"
+        return cls(context.particles, context.materials)
 
     def __init__(self, manager: ParticleManager, materials: Materials, /) -> None:
         self.materials = materials
@@ -271,33 +311,5 @@ class ParticleComposition:
 
 COMPOSITION_SOURCES: Registry[type[CompositionSource]] = Registry("composition source",
                                                (StaticComposition, FieldComposition, ParticleComposition))
-"""Composition sources by their config name (``composition.source``); each is made from
-:class:`CompositionInputs` by its ``build``."""
-
-
-def check_degree(source: str, degree: int, /) -> None:
-    """Raise :class:`ConfigError` (naming ``composition.degree``) if the composition source
-    ``source`` cannot use fields of ``degree`` (its ``min_degree``: an advected field needs >= 1)."""
-    need = COMPOSITION_SOURCES.lookup(source).min_degree
-    if degree < need:
-        raise ConfigError(f"config key 'composition.degree': the composition source {source!r} needs degree >= {need}, "
-                          f"got {degree}")
-
-
-@dataclass(frozen=True)
-class CompositionSettings:
-    """The ``composition`` config section: where the material fractions come from."""
-
-    source: str = param("static", choices=Names(COMPOSITION_SOURCES),
-                        help="static: fractions fixed at their initial regions; particles: averaged from advected "
-                             "particles; field: advected continuous fields (SUPG, no diffusion)")
-    degree: int = param(0, minimum=0, maximum=MAX_DEGREE,
-                        help="0: DG0 cell values; >= 1: Lagrange (DG1 for least_squares, DG2 for "
-                             "quadratic_least_squares); source field needs >= 1")
-    particle_system: str | None = param(None,
-                                        help="with several particle systems: the one whose particles carry the "
-                                             "material fractions and the fields the viscosity laws read (null: the "
-                                             "first)")
-
-    def __post_init__(self) -> None:
-        check_degree(self.source, self.degree)
+"""Composition sources by their config name (``composition.source``); each is made by its
+``build(settings, context)`` from :class:`CompositionSettings` and a :class:`CompositionContext`."""

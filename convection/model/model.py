@@ -84,7 +84,7 @@ class StepReport(NamedTuple):
     rebalanced: tuple[RankLoads, RankLoads] | None = None
 
 
-class Model:
+class Model(Stateful):
     """Boussinesq convection with optional materials, particles, adaptivity and balancing.
 
     All methods are collective.

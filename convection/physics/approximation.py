@@ -246,7 +246,7 @@ class ViscosityLaw:
         """True when ``eta`` depends on neither ``T`` nor ``C`` (nor on the flow or a field)."""
         temperature_free = TEMPERATURE_LAWS[self.temperature_law].factor is None or self.gamma == 0.0
         # Only plain constants are known to be equal (a clipped constant counts as variable).
-        values = {law.eta0 if law.name == "constant" else None for law in self.laws}
+        values = {law.constant_value() for law in self.laws}
         return None not in values and len(values) == 1 and temperature_free
 
     def __call__(self, T: Any, C: Any, /, *, u: Any = None, p: Any = None,

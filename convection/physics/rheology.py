@@ -266,6 +266,10 @@ class ViscosityLawBase:
         """The laws this one is built from."""
         return ()
 
+    def constant_value(self) -> float | None:
+        """The viscosity where it is one known number everywhere (a plain constant), else None."""
+        return None
+
     @property
     def depends_on(self) -> frozenset[str]:
         """Everything the law's value depends on: its own inputs, those of its children and the
@@ -333,6 +337,9 @@ class Constant(ViscosityLawBase):
 
     def __call__(self, state: FlowState) -> Any:
         return ufl.as_ufl(self.eta0)
+
+    def constant_value(self) -> float | None:
+        return self.eta0
 
 
 @dataclass(frozen=True)

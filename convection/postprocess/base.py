@@ -14,7 +14,7 @@ from mpi4py import MPI
 
 from convection.model.model import Model
 from convection.schema import param
-from fembase.state import State
+from fembase.state import State, Stateful
 
 __all__ = ["NEEDS_ENERGY", "Column", "DiagnosticsSettings", "Forms", "ModelFeatures", "Postprocessor", "integral"]
 
@@ -107,8 +107,9 @@ class ModelFeatures:
                    columns=model.domain.columns(1, 1) is not None, free_surface=model.free_surface is not None)
 
 
-class Column:
-    """Default construction: no options; applies to every model unless :meth:`missing` says otherwise."""
+class Column(Stateful):
+    """Default construction: no options; applies to every model unless :meth:`missing` says otherwise;
+    nothing to keep in a checkpoint (the columns are measured afresh every step)."""
 
     name: ClassVar[str]
     description: ClassVar[str]
@@ -136,9 +137,3 @@ class Column:
     def create(cls, model: Model, options: Mapping[str, Any]) -> Any:
         return cls() if cls.applies(model) else None
 
-    def state(self) -> State:
-        """Nothing to keep: the columns are measured afresh every step."""
-        return State()
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
-        return {}

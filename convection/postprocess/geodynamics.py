@@ -54,24 +54,14 @@ from convection.postprocess.base import DiagnosticsSettings, Forms, ModelFeature
 from convection.schema import ConfigError
 from fembase.dolfinx_compat import function_space, value_size
 from fembase.geometry import locate_owned
-from fembase.state import State
+from fembase.state import Stateful
 
 __all__ = ["FreeSurfaceStatistics", "FreeSurfaceTopography", "MaterialStatistics", "PointValues", "Topography"]
 
 _AXES = ("x", "y", "z")
 
 
-class _Stateless:
-    """Columns measured afresh every step: a checkpoint keeps nothing."""
-
-    def state(self) -> State:
-        return State()
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
-        return {}
-
-
-class MaterialStatistics(_Stateless):
+class MaterialStatistics(Stateful):
     """Volume, centroid, velocities and deepest point of every material (module docstring)."""
 
     name: ClassVar[str] = "materials"
@@ -154,7 +144,7 @@ def _cell_integrals(form: Any, owned: int) -> np.ndarray:
     return values
 
 
-class PointValues(_Stateless):
+class PointValues(Stateful):
     """The fields at named points (module docstring)."""
 
     name: ClassVar[str] = "points"
@@ -237,7 +227,7 @@ class _Samples:
         self.cells = cells[mine]
 
 
-class Topography(_Stateless):
+class Topography(Stateful):
     """The surface under a material that fills the top (module docstring)."""
 
     name: ClassVar[str] = "topography"
@@ -348,7 +338,7 @@ class FreeSurfaceTopography(Topography):
                 "topography_rms": float(np.sqrt(np.mean(h**2)))}
 
 
-class FreeSurfaceStatistics(_Stateless):
+class FreeSurfaceStatistics(Stateful):
     """The mesh of a free surface: its worst cell, and the particles the sinking surface passed."""
 
     name: ClassVar[str] = "free_surface"

@@ -76,7 +76,7 @@ from convection.postprocess.base import (
 from convection.postprocess.geodynamics import FreeSurfaceStatistics, MaterialStatistics, PointValues, Topography
 from fembase.registry import Registry
 from particles.manager import ParticleManager
-from fembase.state import State
+from fembase.state import State, Stateful
 
 __all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "ModelFeatures", "Postprocessor", "check_statistics",
            "create_postprocessors"]
@@ -315,7 +315,9 @@ class Entrainment:
         return {column: integral(model, above) / self._initial[column] for column, (above, _) in forms.items()}
 
 
-class WallTime:
+class WallTime(Stateful):
+    """Nothing in a checkpoint: the run loop keeps the wall time of a resumed run."""
+
     name: ClassVar[str] = "wall_time"
     description: ClassVar[str] = "wall seconds since the run started"
     columns = ("wall_time",)
@@ -326,13 +328,6 @@ class WallTime:
     @classmethod
     def create(cls, model: Model, options: Mapping[str, Any]) -> WallTime:
         return cls(float(options.get("start", time.monotonic())))
-
-    def state(self) -> State:
-        """Nothing: the run loop keeps the wall time of a resumed run."""
-        return State()
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, Any]:
-        return {}
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         return {"wall_time": time.monotonic() - self.start}

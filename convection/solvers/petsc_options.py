@@ -25,12 +25,14 @@ import weakref
 from dataclasses import dataclass
 from types import MappingProxyType
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from petsc4py import PETSc
 
 from convection.schema import short_repr
 from fembase import jit_cache
+from fembase.registry import Registry
+from fembase.state import Stateful
 
 __all__ = ["PetscSolver",
     "check_petsc_options",
@@ -160,12 +162,15 @@ class LinearSolver:
         options: Default PETSc options without the solver's prefix (read-only; copy with ``dict``).
         parallel_options: The defaults on a given number of ranks (more than one), when they differ
             from ``options`` (None: ``options``).
+        iterative: A Krylov solve (it counts iterations and starts from the previous solution);
+            False: a direct factorisation.
     """
 
     name: str
     description: str
     options: Mapping[str, Any]
     parallel_options: Callable[[int], Mapping[str, Any]] | None = None
+    iterative: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
@@ -176,9 +181,12 @@ class LinearSolver:
         return {**defaults, **(overrides or {})}
 
 
-def linear_solvers(*solvers: LinearSolver) -> dict[str, LinearSolver]:
-    """Registry of the linear solvers a PDE solver offers, by name."""
-    return {solver.name: solver for solver in solvers}
+def linear_solvers(kind: str, /, *solvers: L) -> Registry[L]:
+    """Registry of the linear solvers a PDE solver of ``kind`` (``"Stokes"``, ...) offers, by name."""
+    return Registry(f"{kind} solver", solvers)
+
+
+L = TypeVar("L", bound=LinearSolver)
 
 
 def _clear(prefix: str, keys: list[str]) -> None:
@@ -210,7 +218,7 @@ def destroy_petsc_objects(owner: object, names: Sequence[str], /) -> None:
             setattr(owner, name, None)
 
 
-class PetscSolver:
+class PetscSolver(Stateful):
     """Life cycle shared by the PDE solvers: a named linear-solver setup, a PETSc KSP with its own
     options prefix, explicit destruction, and a copy of the solver on another mesh.
 

@@ -58,6 +58,7 @@ from convection.solvers.petsc_options import (
     set_owned_options,
 )
 from fembase.dolfinx_compat import create_vector, element_degree, function_space, petsc_vector
+from fembase.registry import Registry
 from fembase.state import State
 
 STABILISATIONS: dict[str, str] = {
@@ -66,13 +67,15 @@ STABILISATIONS: dict[str, str] = {
 }
 """Registry of advection stabilisations (lowercase name -> one-line description)."""
 
-TRANSPORT_SOLVERS: dict[str, LinearSolver] = linear_solvers(
+TRANSPORT_SOLVERS: Registry[LinearSolver] = linear_solvers(
+    "transport",
     LinearSolver(
         "iterative",
         "GMRES + BoomerAMG" if HAS_HYPRE else "GMRES + GAMG (this PETSc has no hypre for BoomerAMG)",
         krylov_options("gmres", SCALAR_AMG, rtol=1e-10, atol=1e-14, max_it=1000),
     ),
-    LinearSolver("direct", "MUMPS LU (on several ranks: gathered on rank 0, reproducible)", MUMPS_LU, reproducible_lu),
+    LinearSolver("direct", "MUMPS LU (on several ranks: gathered on rank 0, reproducible)", MUMPS_LU, reproducible_lu,
+                 iterative=False),
 )
 """Registry of linear solvers for the transport equation (lowercase name -> description and default
 PETSc options)."""
@@ -260,7 +263,7 @@ class TransportSolver(PetscSolver):
             self._b = create_vector(self._L)
             self.ksp.setOperators(self._A)
             self.ksp.setFromOptions()
-            if self.solver == "iterative":
+            if TRANSPORT_SOLVERS[self.solver].iterative:
                 self.ksp.setInitialGuessNonzero(True)
 
     # ------------------------------------------------------------------ state
@@ -330,7 +333,7 @@ class TransportSolver(PetscSolver):
         self._coef_last.value[:] = coef
         self.dt_old = dt
         self.steps += 1
-        iterations = self.ksp.getIterationNumber() if self.solver == "iterative" else 1
+        iterations = self.ksp.getIterationNumber() if TRANSPORT_SOLVERS[self.solver].iterative else 1
         return TransportResult(int(iterations), order, float(dt))
 
     def state(self) -> State:

@@ -59,6 +59,8 @@ class Interpolator(Protocol):
 
     name: ClassVar[str]
     description: ClassVar[str]
+    discontinuous: ClassVar[bool]
+    """Its fields are cell-wise (a DG space of the tracked fields' degree), not continuous."""
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats: ...

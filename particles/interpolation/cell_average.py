@@ -37,6 +37,7 @@ class CellAverage:
     """
 
     name: ClassVar[str] = "cell_average"
+    discontinuous: ClassVar[bool] = True
     description: ClassVar[str] = "arithmetic, geometric or harmonic mean of the particles in each cell (DG)"
 
     mean: str = "arithmetic"

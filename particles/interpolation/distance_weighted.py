@@ -51,6 +51,7 @@ class DistanceWeighted:
     """
 
     name: ClassVar[str] = "distance_weighted"
+    discontinuous: ClassVar[bool] = False
     description: ClassVar[str] = ("inverse-distance weighted average of the particles in the cell (and neighbours) at "
                                   "the dof points")
 

@@ -82,6 +82,7 @@ class LeastSquares:
     """
 
     name: ClassVar[str] = "least_squares"
+    discontinuous: ClassVar[bool] = True
     description: ClassVar[str] = "linear least-squares fit per cell into DG1, optional bound-preserving limiter"
     target_degree: ClassVar[int] = 1
 

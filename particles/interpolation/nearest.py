@@ -27,6 +27,7 @@ class Nearest:
     """Value of the nearest particle of the cell at each dof point (no parameters)."""
 
     name: ClassVar[str] = "nearest"
+    discontinuous: ClassVar[bool] = False
     description: ClassVar[str] = "value of the particle of the cell nearest to each dof point (DG)"
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,

@@ -53,6 +53,7 @@ class QuadraticLeastSquares(LeastSquares):
     ``use_neighbours``: for the linear fallback; ``rcond``: for both fits)."""
 
     name: ClassVar[str] = "quadratic_least_squares"
+    discontinuous: ClassVar[bool] = True
     description: ClassVar[str] = ("quadratic least-squares fit per cell into DG2 (linear least squares where a cell "
                                   "has too few particles), optional limiter")
     target_degree: ClassVar[int] = 2

@@ -35,6 +35,7 @@ class ShapeFunction:
     """Weighting by the target's basis functions at the particles (no parameters)."""
 
     name: ClassVar[str] = "shape_function"
+    discontinuous: ClassVar[bool] = False
     description: ClassVar[str] = ("u_i = sum phi_i(x_p) v_p / sum phi_i(x_p) into P1/Q1 (continuous, across ranks) "
                                   "or DG0/DG1")
 

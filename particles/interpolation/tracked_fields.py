@@ -83,8 +83,7 @@ class TrackedFields:
     def _new_field(self, mesh: dolfinx.mesh.Mesh, label: str) -> dolfinx.fem.Function:
         """A Function for a tracked field; all tracked fields of one mesh share one space."""
         if self._space is None or self._space.mesh is not mesh:
-            discontinuous = self.degree == 0 or self.interpolator.name in ("cell_average", "least_squares",
-                                                                            "quadratic_least_squares")
+            discontinuous = self.degree == 0 or self.interpolator.discontinuous
             family = "DG" if discontinuous else "Lagrange"
             self._space = function_space(mesh, family, self.degree)
         return dolfinx.fem.Function(self._space, name=label)

@@ -119,7 +119,7 @@ class NonlinearResult(NamedTuple):
 
 def homogeneous(bcs: dict[str, VelocityBC]) -> dict[str, VelocityBC]:
     """The same conditions with zero values (prescribed -> no slip: the same dofs)."""
-    return {side: VelocityBC("no_slip") if bc.kind == "prescribed" else bc for side, bc in bcs.items()}
+    return {side: bc.spec.homogeneous(bc) for side, bc in bcs.items()}
 
 
 class NonlinearStokes:

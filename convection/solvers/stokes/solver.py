@@ -85,6 +85,7 @@ from convection.solvers.stokes.linear import StokesLinearSystem
 from convection.solvers.stokes.lagged import LaggedPreconditioner, assemble_operator
 from convection.solvers.stokes.multigrid import GEOMETRIC_MULTIGRID, MultigridSettings, VelocityMultigrid
 from convection.solvers.stokes.nonlinear import NonlinearResult, NonlinearSettings, NonlinearStokes
+from fembase.registry import Registry
 from fembase.state import State
 
 _BOOMERAMG_SYSTEMS: dict[str, Any] = {
@@ -143,28 +144,51 @@ def block_schur_options(velocity: dict[str, Any], /, *, rtol: float = 1e-7) -> d
     )
 
 
-STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
-    LinearSolver("direct",
-                 "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: gathered on rank 0, reproducible)",
-                 MUMPS_LU, reproducible_lu),
-    LinearSolver(
+@dataclass(frozen=True)
+class StokesLinearSolver(LinearSolver):
+    """A linear solver of :class:`StokesSolver` (an entry of :data:`STOKES_SOLVERS`).
+
+    Attributes (beyond :class:`LinearSolver`'s):
+        nested: Geometric multigrid over the meshes the mesh is nested in (``coarse_meshes``): its
+            semi-implicit buoyancy term goes into the preconditioning matrix, which may lag.
+        needs_hypre: Uses hypre's BoomerAMG (refused by a PETSc without hypre).
+    """
+
+    nested: bool = False
+    needs_hypre: bool = False
+    by_mesh = False  # the name itself, never picked by the mesh (AutoStokesSolver is)
+
+    def resolve(self, gdim: int, /, *, rotations: bool = False) -> str:
+        """This solver's name (see :func:`resolve_solver`)."""
+        if self.needs_hypre and not HAS_HYPRE:
+            raise ValueError(f"Stokes solver {self.name!r} uses hypre's BoomerAMG, which this PETSc does not have; "
+                             "use 'iterative_gamg' or 'direct'")
+        return self.name
+
+
+STOKES_SOLVERS: Registry[StokesLinearSolver] = linear_solvers(
+    "Stokes",
+    StokesLinearSolver(
+        "direct", "MUMPS LU on the monolithic Taylor-Hood system (on several ranks: gathered on rank 0, reproducible)",
+        MUMPS_LU, reproducible_lu, iterative=False),
+    StokesLinearSolver(
         "iterative",
         "FGMRES + block-triangular Schur preconditioner: BoomerAMG (systems) on velocity, SOR on -M_p/eta",
-        block_schur_options(_BOOMERAMG_SYSTEMS),
+        block_schur_options(_BOOMERAMG_SYSTEMS), needs_hypre=True,
     ),
-    LinearSolver(
+    StokesLinearSolver(
         "iterative_gamg",
         "FGMRES + block-triangular Schur preconditioner: GAMG with rigid-body modes on velocity, SOR on -M_p/eta",
         block_schur_options(_GAMG_RIGID_BODY),
     ),
-    LinearSolver(
+    StokesLinearSolver(
         "multigrid",
         "FGMRES + block-triangular Schur preconditioner: geometric multigrid on velocity (nested boxes, Galerkin "
         "coarse operators, Chebyshev/Jacobi smoothing), SOR on -M_p/eta",
         # Three symmetric SOR sweeps on the pressure mass matrix (one for the AMG solvers): as good
         # as its exact inverse here, 27 -> 19 iterations on 16^3 cubes (2 ranks), for little
         # next to a V-cycle (benchmarks/scaling/stokes_multigrid.md).
-        {**block_schur_options(GEOMETRIC_MULTIGRID), "fieldsplit_p_pc_sor_its": 3},
+        {**block_schur_options(GEOMETRIC_MULTIGRID), "fieldsplit_p_pc_sor_its": 3}, nested=True,
     ),
 )
 """Registry of Stokes solver kinds (lowercase name -> description and default PETSc options)."""
@@ -172,15 +196,31 @@ STOKES_SOLVERS: dict[str, LinearSolver] = linear_solvers(
 AUTO = "auto"
 """Solver name resolved by the mesh: ``"iterative"`` in 3D, ``"direct"`` in 2D (see :func:`resolve_solver`)."""
 
-STOKES_SOLVER_NAMES: tuple[str, ...] = (AUTO, *STOKES_SOLVERS)
-"""Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
 
-STOKES_SOLVER_CHOICES: dict[str, str] = {
-    AUTO: "multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D "
-          "(iterative_gamg for a shell with free slip on both surfaces), direct in 2D",
-    **{name: solver.description for name, solver in STOKES_SOLVERS.items()},
-}
-"""One line on each of :data:`STOKES_SOLVER_NAMES` (the config reference lists them)."""
+@dataclass(frozen=True)
+class AutoStokesSolver:
+    """The choice ``"auto"``: a solver of :data:`STOKES_SOLVERS` picked by the mesh (:func:`resolve_solver`)."""
+
+    name = AUTO
+    description = ("multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D "
+                   "(iterative_gamg for a shell with free slip on both surfaces), direct in 2D")
+    nested = False
+    by_mesh = True  # a run of a config may pick the multigrid (convection.config.loader.multigrid_levels)
+
+    def resolve(self, gdim: int, /, *, rotations: bool = False) -> str:
+        """``"iterative"`` in 3D (``"iterative_gamg"`` with ``rotations`` or without hypre), ``"direct"`` in 2D."""
+        if gdim == 3:
+            return "iterative_gamg" if rotations or not HAS_HYPRE else "iterative"
+        return "direct"
+
+
+STOKES_SOLVER_CHOICES: Registry[StokesLinearSolver | AutoStokesSolver] = Registry(
+    "Stokes solver", (AutoStokesSolver(), *STOKES_SOLVERS.values()))
+"""What ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept: ``"auto"`` and the
+:data:`STOKES_SOLVERS`; each ``resolve``s to a name of :data:`STOKES_SOLVERS`."""
+
+STOKES_SOLVER_NAMES: tuple[str, ...] = tuple(STOKES_SOLVER_CHOICES)
+"""Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
 
 
 @dataclass(frozen=True)
@@ -189,7 +229,7 @@ class StokesSettings:
     of the same names take their defaults from here)."""
 
     degree: int = param(2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)")
-    solver: str = param(AUTO, choices=Names(STOKES_SOLVER_CHOICES),
+    solver: str = param(AUTO, choices=Names(STOKES_SOLVER_CHOICES.describe()),
                         help="auto: multigrid (FGMRES + block preconditioner, geometric multigrid) on a fixed 3D box "
                              "whose cells halve twice, else iterative (AMG) in 3D (iterative_gamg for a shell free "
                              "slip on both surfaces), direct (MUMPS) in 2D")
@@ -252,7 +292,7 @@ def _levels_of(mesh: dolfinx.mesh.Mesh, solver: str, coarse_meshes: CoarseMeshes
     Raises:
         ValueError: The multigrid without coarser meshes for a fixed mesh.
     """
-    if solver != "multigrid":
+    if not STOKES_SOLVERS[solver].nested:
         return solver, ()
     coarse = tuple(coarse_meshes(mesh) if callable(coarse_meshes) else coarse_meshes)
     if coarse:
@@ -287,16 +327,9 @@ def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
     A PETSc without hypre (the one in PyPI's DOLFINx wheel) has no BoomerAMG: there ``"auto"`` is
     ``"iterative_gamg"`` in 3D, and ``"iterative"`` is refused (ValueError).
     """
-    if name == AUTO:
-        if gdim == 3:
-            return "iterative_gamg" if rotations or not HAS_HYPRE else "iterative"
-        return "direct"
-    if name not in STOKES_SOLVERS:
+    if name not in STOKES_SOLVER_CHOICES:
         raise ValueError(f"Unknown Stokes solver {name!r}; valid names: {list(STOKES_SOLVER_NAMES)}")
-    if name == "iterative" and not HAS_HYPRE:
-        raise ValueError("Stokes solver 'iterative' uses hypre's BoomerAMG, which this PETSc does not have; "
-                         "use 'iterative_gamg' or 'direct'")
-    return name
+    return STOKES_SOLVER_CHOICES[name].resolve(gdim, rotations=rotations)
 
 
 def _same_objects(a: Any, b: Any) -> bool:
@@ -416,13 +449,14 @@ class StokesSolver(PetscSolver):
         resolved = resolve_solver(solver, mesh.geometry.dim, rotations=self.has_rotation_null_space)
         name, coarse = _levels_of(mesh, resolved, coarse_meshes)
         self._petsc_options = self._create_ksp(mesh.comm, name, petsc_options)
-        self.is_iterative = self.solver != "direct"
+        kind = STOKES_SOLVERS[name]
+        self.is_iterative = kind.iterative
         self.surface = surface
         self.discretisation = StokesDiscretisation(mesh, approximation, domain=self.domain, bcs=self.bcs, degree=degree,
                                                    nitsche_penalty=self.nitsche_penalty, surface=surface)
         self.V, self.Q = self.discretisation.V, self.discretisation.Q
         hierarchy = None
-        if self.solver == "multigrid":
+        if kind.nested:
             hierarchy = VelocityMultigrid(self.V, coarse, locate=getattr(coarse_meshes, "locate", None))
             self._petsc_options = {**self._petsc_options, "fieldsplit_u_pc_mg_levels": hierarchy.levels}
         self.u = dolfinx.fem.Function(self.V, name="velocity")
@@ -434,10 +468,9 @@ class StokesSolver(PetscSolver):
         self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
             self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, domain=self.domain,
             iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space, multigrid=hierarchy,
-            term_in_preconditioner=self.solver == "multigrid",
-            operator_preconditions=self.solver == "multigrid" and not self.is_nonlinear)
+            term_in_preconditioner=kind.nested, operator_preconditions=kind.nested and not self.is_nonlinear)
 
-        lags = (self.solver == "multigrid" and not self.is_nonlinear and self._semi_implicit is not None
+        lags = (kind.nested and not self.is_nonlinear and self._semi_implicit is not None
                 and not approximation.is_variable_viscosity and multigrid.rebuild_steps > 1)
         self._lag = LaggedPreconditioner(mesh, multigrid.rebuild_steps, multigrid.rebuild_dt_change) if lags else None
         self.forms: StokesForms | None = None

@@ -1,8 +1,9 @@
 """Helpers shared by the benchmark scripts: run a config with the CLI (optionally under mpirun, with
 a wall-time limit), read a ``reference.csv`` and sample a statistics curve at fixed times.
 
-The benchmark scripts (``benchmarks/<name>/run.py``) import this module after putting the project
-root on ``sys.path``.
+The benchmark scripts (``benchmarks/<name>/run.py``, run as ``python -m benchmarks.<name>.run``)
+import it as ``benchmarks.common``; their declaration, command line and load log are
+:mod:`benchmarks.harness`.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import csv
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

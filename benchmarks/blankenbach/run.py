@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/blankenbach/run.py [--case 1a 1b 1c 2a 2b] [--ranks 2] [--quick]
+    python -m benchmarks.blankenbach.run [--case 1a 1b 1c 2a 2b] [--ranks 2] [--quick]
                                          [--cells N] [--set KEY=VALUE ...]
                                          [--adaptive] [--compare-ranks] [--continuation COARSE FINE]
                                          [--out DIR]
@@ -27,12 +27,11 @@ import json
 import sys
 from pathlib import Path
 
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 
 def reference() -> dict[str, dict[str, float]]:

@@ -14,9 +14,9 @@ least-squares slope of ln A over t <= ``--fit`` kyr.
 
 Usage::
 
-    python benchmarks/crameri/run.py [--cells 224x64 448x128] [--air 1e19 1e18 1e17] [--dt 0.25]
+    python -m benchmarks.crameri.run [--cells 224x64 448x128] [--air 1e19 1e18 1e17] [--dt 0.25]
                                      [--fit 30] [--mixing geometric] [--out DIR]
-    python benchmarks/crameri/run.py --collect DIR [DIR ...]      # the tables of earlier runs, together
+    python -m benchmarks.crameri.run --collect DIR [DIR ...]      # the tables of earlier runs, together
 
 Writes ``<out>/results.md`` (fitted rate against the published one per resolution and air
 viscosity, with the cost) and ``<out>/results.png`` (A(t) against the analytical curve).
@@ -32,17 +32,16 @@ import time
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+from mpi4py import MPI
+
+from convection import load_config, run_config
+from convection.postprocess import POSTPROCESSORS
+from convection.postprocess.base import DiagnosticsSettings
+from convection.postprocess.geodynamics import Topography
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from convection import load_config, run_config  # noqa: E402
-from convection.postprocess import POSTPROCESSORS  # noqa: E402
-from convection.postprocess.base import DiagnosticsSettings  # noqa: E402
-from convection.postprocess.geodynamics import Topography  # noqa: E402
 
 RATE = 2.139e-12
 """Crameri et al.'s relaxation rate [1/s]."""

@@ -24,36 +24,24 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 import json
 import sys
 import time
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+import yaml
+from mpi4py import MPI
+
+from benchmarks.common import curves_figure
+from benchmarks.crameri import run as STICKY  # the sticky-air runs, the published rate and the fit
+from convection import load_config, run_config
+from convection.postprocess import POSTPROCESSORS
+from convection.postprocess.geodynamics import FreeSurfaceTopography
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-import yaml  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from benchmarks.common import curves_figure  # noqa: E402
-from convection import load_config, run_config  # noqa: E402
-from convection.postprocess import POSTPROCESSORS  # noqa: E402
-from convection.postprocess.geodynamics import FreeSurfaceTopography  # noqa: E402
-
-
-def _sticky_air_script() -> Any:
-    """benchmarks/crameri/run.py (the sticky-air runs, the published rate and the fit)."""
-    spec = importlib.util.spec_from_file_location("crameri_sticky_air", ROOT / "benchmarks" / "crameri" / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-STICKY = _sticky_air_script()
 _TRAPEZOID = getattr(np, "trapezoid", None) or np.trapz  # numpy 2 renamed it
 RATE, AMPLITUDE, KYR = STICKY.RATE, STICKY.AMPLITUDE, STICKY.KYR
 

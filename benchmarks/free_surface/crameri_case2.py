@@ -30,15 +30,14 @@ import time
 from pathlib import Path
 from typing import Any, Sequence
 
+import numpy as np
+from mpi4py import MPI
+
+from benchmarks.common import curves_figure
+from convection import load_config, run_config
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from benchmarks.common import curves_figure  # noqa: E402
-from convection import load_config, run_config  # noqa: E402
 
 TIMES = (0.1, 0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0)
 """Myr."""

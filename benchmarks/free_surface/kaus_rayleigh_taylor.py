@@ -10,7 +10,7 @@ should follow.
 
 Usage::
 
-    python benchmarks/free_surface/kaus_rayleigh_taylor.py [--end 6] [--cells 64] [--reference] [--out DIR]
+    python -m benchmarks.free_surface.kaus_rayleigh_taylor [--end 6] [--cells 64] [--reference] [--out DIR]
 
 Writes ``<out>/kaus_rayleigh_taylor.md`` (per run: steps reached, why it stopped, largest vrms and
 topography, their values at 1, 3 and 5 Myr) and ``<out>/kaus_rayleigh_taylor.png`` (vrms and the
@@ -27,15 +27,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from mpi4py import MPI
+
+from convection import load_config, run_config
+from convection.run.loop import RunFailure
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from convection import load_config, run_config  # noqa: E402
-from convection.run.loop import RunFailure  # noqa: E402
 
 RUNS = {"theta 0.5, dt 10 kyr": (0.5, 10.0), "theta 0, dt 10 kyr": (0.0, 10.0)}
 REFERENCE = {"theta 0, dt 2.5 kyr": (0.0, 2.5)}

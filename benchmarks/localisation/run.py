@@ -2,9 +2,9 @@
 
 Usage::
 
-    python benchmarks/localisation/run.py                 # with and without weakening, picture
-    python benchmarks/localisation/run.py --methods       # Picard against Newton, per step
-    python benchmarks/localisation/run.py --cells 32x8    # smaller
+    python -m benchmarks.localisation.run                 # with and without weakening, picture
+    python -m benchmarks.localisation.run --methods       # Picard against Newton, per step
+    python -m benchmarks.localisation.run --cells 32x8    # smaller
 
 The default runs the model twice, with the strain weakening of the config (yield stress
 ``sigma_y w(e)``, ``w`` linear from 1 at plastic strain ``e = 0.05`` to 0.25 at ``e = 0.5``) and
@@ -35,12 +35,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 CONFIG = ROOT / "configs" / "localisation.yaml"
 

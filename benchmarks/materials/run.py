@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/materials/run.py [--cells 16 24 32] [--end 300] [--ranks 2] [--out DIR] [--no-run]
+    python -m benchmarks.materials.run [--cells 16 24 32] [--end 300] [--ranks 2] [--out DIR] [--no-run]
 
 Runs ``configs/rayleigh_taylor_3.yaml`` (light bottom layer, dense middle layer, stiff lid) with
 ``composition.source: particles`` (DG0 cell averages of 20 particles per cell) and with
@@ -23,13 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import curves_figure
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from benchmarks.common import curves_figure  # noqa: E402
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 SOURCES = {"particles": ["composition.source=particles", "composition.degree=0"],
            "field": ["composition.source=field", "composition.degree=2"]}

@@ -3,9 +3,9 @@
 
 Usage::
 
-    python benchmarks/particle_distribution/run.py                  # both methods to t = 2000, 1 rank
-    python benchmarks/particle_distribution/run.py --end 300 --ranks 2
-    python benchmarks/particle_distribution/run.py --report-only    # table and picture from log/
+    python -m benchmarks.particle_distribution.run                  # both methods to t = 2000, 1 rank
+    python -m benchmarks.particle_distribution.run --end 300 --ranks 2
+    python -m benchmarks.particle_distribution.run --report-only    # table and picture from log/
 
 Each method (``particles.population.method: count`` and ``density``) runs once, one after the
 other, with the statistics ``time, mesh, particles, particle_distribution, wall_time``: the
@@ -28,12 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import start_cli_run
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from benchmarks.common import start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 CONFIG = ROOT / "configs" / "vankeken_1a_particles.yaml"
 METHODS = ("count", "density")

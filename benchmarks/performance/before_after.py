@@ -3,7 +3,7 @@
 Usage::
 
     git worktree add /tmp/before <commit>          # the code before the change
-    python benchmarks/performance/before_after.py --before /tmp/before [--repeat 3] [--out FILE]
+    python -m benchmarks.performance.before_after --before /tmp/before [--repeat 3] [--out FILE]
 
 Runs each job with each checkout's own code (its ``benchmarks/`` script and packages), alternating
 before and after, ``--repeat`` times, and reports the best wall time of each (and the ratio after /
@@ -31,9 +31,9 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[2]
 JOBS = {
-    "van Keken 1a to t = 300, 2 ranks": (["benchmarks/vanKeken/run.py", "--case", "1a", "--ranks", "2", "--end", "300"],
+    "van Keken 1a to t = 300, 2 ranks": (["-m", "benchmarks.vanKeken.run", "--case", "1a", "--ranks", "2", "--end", "300"],
                                         "1a/statistics.csv"),
-    "Tosi case 2, 150 steps, 1 rank": (["benchmarks/tosi/run.py", "--case", "2", "--set", "time.max_steps=150"],
+    "Tosi case 2, 150 steps, 1 rank": (["-m", "benchmarks.tosi.run", "--case", "2", "--set", "time.max_steps=150"],
                                       "case2/statistics.csv"),
 }
 

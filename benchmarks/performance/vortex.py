@@ -21,7 +21,7 @@ partition gives nearly all of them to one rank) and builds the velocity space on
 ``--naive`` runs the straightforward DOLFINx way instead (serial only): every step a bounding-box
 collision search, ``compute_colliding_cells`` and ``Function.eval`` for every particle, Euler.
 
-Run: ``python benchmarks/performance/vortex.py --cells 64 --particles 393216 --steps 50``
+Run: ``python -m benchmarks.performance.vortex --cells 64 --particles 393216 --steps 50``
 or under ``mpirun -n 2`` (particles then migrate between ranks).
 """
 

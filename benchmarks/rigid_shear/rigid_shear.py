@@ -5,10 +5,10 @@ cases.py: one run).
 
 Run (from the project root; the full sweep, then the table and the picture)::
 
-    python benchmarks/rigid_shear/rigid_shear.py
-    python benchmarks/rigid_shear/rigid_shear.py --problems time_dependent --ppc 16 --interpolators least_squares
-    mpirun -n 2 python benchmarks/rigid_shear/rigid_shear.py --cells 8 16 --results /tmp/r.json
-    python benchmarks/rigid_shear/rigid_shear.py --report-only
+    python -m benchmarks.rigid_shear.rigid_shear
+    python -m benchmarks.rigid_shear.rigid_shear --problems time_dependent --ppc 16 --interpolators least_squares
+    mpirun -n 2 python -m benchmarks.rigid_shear.rigid_shear --cells 8 16 --results /tmp/r.json
+    python -m benchmarks.rigid_shear.rigid_shear --report-only
 
 Every run's result merges into ``--results`` (default results.json here; a run with the same
 parameters replaces the old one), one JSON line per run goes to ``--log`` (default
@@ -28,12 +28,11 @@ from typing import Any, Iterator, Sequence
 
 from mpi4py import MPI
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
+from benchmarks.rigid_shear.cases import INTERPOLATORS, Case, run_case
+from benchmarks.rigid_shear.problem import StokesSolver, unit_square
+from benchmarks.rigid_shear.report import write_figure, write_table
 
-from benchmarks.rigid_shear.cases import INTERPOLATORS, Case, run_case  # noqa: E402
-from benchmarks.rigid_shear.problem import StokesSolver, unit_square  # noqa: E402
-from benchmarks.rigid_shear.report import write_figure, write_table  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 __all__ = ["main", "parse", "sweep"]
 

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/scaling/balance_rt.py [--ranks 2 3] [--steps 60] [--ppc 200] [--out DIR]
+    python -m benchmarks.scaling.balance_rt [--ranks 2 3] [--steps 60] [--ppc 200] [--out DIR]
 
 Runs ``configs/vankeken_1a.yaml`` (0.9142 x 1, fine cells only near the interface, particles
 uniform in space) for ``--steps`` steps under three partitionings, each on every rank count:
@@ -28,12 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 STRATEGIES = {
     "default": [],

@@ -19,7 +19,7 @@ sharp contrast that no coarse mesh resolves). The right-hand side is a vertical 
 
 Usage (under mpirun for several ranks; the machine should be otherwise idle)::
 
-    mpirun -n 2 python benchmarks/scaling/gmg_velocity_block.py --dim 3 --base 2 --levels 1 2 3 4 \\
+    mpirun -n 2 python -m benchmarks.scaling.gmg_velocity_block --dim 3 --base 2 --levels 1 2 3 4 \\
         --contrast 0 4 6 --methods gmg hypre [--out benchmarks/scaling/gmg_velocity_block.md]
 
 At 32³ run one row per process (``--levels 4 --methods hypre --repeat 1``): a process that
@@ -39,20 +39,19 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx.fem
+import dolfinx.fem.petsc
+import dolfinx.mesh
+
+from fembase.dolfinx_compat import function_space, petsc_vector, refine_keeping_partition
+from fembase.multigrid import prolongation
+
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-
-import numpy as np  # noqa: E402
-import ufl  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-from petsc4py import PETSc  # noqa: E402
-
-import dolfinx.fem  # noqa: E402
-import dolfinx.fem.petsc  # noqa: E402
-import dolfinx.mesh  # noqa: E402
-
-from fembase.dolfinx_compat import function_space, petsc_vector, refine_keeping_partition  # noqa: E402
-from fembase.multigrid import prolongation  # noqa: E402
 
 _MG_OPTIONS = {"pc_mg_galerkin": "both", "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
                "mg_levels_ksp_max_it": 2, "mg_coarse_ksp_type": "preonly", "mg_coarse_pc_type": "redundant"}

@@ -3,7 +3,7 @@ Rayleigh-Taylor setup (configs/vankeken_1a.yaml) for Euler and RK2 at CFL 1 and 
 
 Usage::
 
-    python benchmarks/scaling/lost_particles.py [--steps 1000] [--ranks 2] [--out DIR]
+    python -m benchmarks.scaling.lost_particles [--steps 1000] [--ranks 2] [--out DIR]
 
 Runs the four combinations with the CLI under mpirun, reads ``n_particles`` and ``n_lost`` from
 each statistics.csv and writes ``<out>/lost_particles.md``. The seed paper reports < 0.002 % per
@@ -16,12 +16,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

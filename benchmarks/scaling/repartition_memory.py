@@ -1,9 +1,9 @@
 """Rank memory of a repartition: the gathered path (every cell through rank 0) against the
 distributed one (every rank hands ``create_mesh`` its own cells).
 
-    mpirun -n 2 python benchmarks/scaling/repartition_memory.py gathered --cells 224
-    mpirun -n 2 python benchmarks/scaling/repartition_memory.py distributed --cells 224
-    mpirun -n 2 python benchmarks/scaling/repartition_memory.py distributed --dim 3 --cells 26
+    mpirun -n 2 python -m benchmarks.scaling.repartition_memory gathered --cells 224
+    mpirun -n 2 python -m benchmarks.scaling.repartition_memory distributed --cells 224
+    mpirun -n 2 python -m benchmarks.scaling.repartition_memory distributed --dim 3 --cells 26
 
 A unit square of 2 n^2 triangles (or a unit cube of 6 n^3 tetrahedra) is redistributed to diagonal
 bands. Per rank it prints the

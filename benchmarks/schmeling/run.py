@@ -15,8 +15,8 @@ geometric mixing (and, for context, arithmetic/harmonic mixing and LAPEX2D).
 
 Usage::
 
-    python benchmarks/schmeling/run.py [--cells 120x30 ...] [--end 60] [--ranks 2] [--out DIR]
-    python benchmarks/schmeling/run.py --collect RUN_DIR [RUN_DIR ...] [--out DIR]
+    python -m benchmarks.schmeling.run [--cells 120x30 ...] [--end 60] [--ranks 2] [--out DIR]
+    python -m benchmarks.schmeling.run --collect RUN_DIR [RUN_DIR ...] [--out DIR]
 
 Each run writes ``<out>/run_<cells>/``; ``<out>/results.md`` gets the tip depth every 10 Myr beside
 the geometric-mixing codes and the times at which the tip passes 400 and 600 km, and
@@ -32,13 +32,12 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from benchmarks.common import read_reference, start_cli_run
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-
-from benchmarks.common import read_reference, start_cli_run  # noqa: E402
 
 AIR = 50.0
 """Sticky-air thickness [km]: the undisturbed surface lies this far below the box's top."""

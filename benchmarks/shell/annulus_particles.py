@@ -13,24 +13,21 @@ for ``--steps`` steps on each rank count, writing the particles every ``--every`
 
 Prints a JSON summary and writes ``results_annulus_particles.md``.
 
-Usage: ``python benchmarks/shell/annulus_particles.py --steps 100 --every 20 --ranks 1 2``
+Usage: ``python -m benchmarks.shell.annulus_particles --steps 100 --every 20 --ranks 1 2``
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-sys.path.insert(0, str(HERE.parent))
+from benchmarks.common import start_cli_run
+from convection.io.pictures import read_statistics
 
-from common import start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 RANK_DEPENDENT = ("wall_time", "cell_imbalance", "particle_imbalance")
 CONFIG = HERE.parents[1] / "configs" / "annulus_layer.yaml"

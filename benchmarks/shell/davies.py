@@ -19,9 +19,9 @@ The Nusselt numbers are the heat flow through a surface over the conductive heat
 
 Usage::
 
-    python benchmarks/shell/davies.py --cases 2.1 1.1 --resolutions 0.1 0.07 0.05
-    python benchmarks/shell/davies.py --cases 2.1 --resolutions 0.14 --adaptive 1   # adaptive mesh
-    python benchmarks/shell/davies.py --table          # the table from measured/davies.json only
+    python -m benchmarks.shell.davies --cases 2.1 1.1 --resolutions 0.1 0.07 0.05
+    python -m benchmarks.shell.davies --cases 2.1 --resolutions 0.14 --adaptive 1   # adaptive mesh
+    python -m benchmarks.shell.davies --table          # the table from measured/davies.json only
 
 Writes ``measured/davies.json`` (merged with earlier runs: one record per case and resolution) and
 prints the markdown table of ``README.md``.
@@ -37,12 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-sys.path.insert(0, str(HERE.parent))
+from benchmarks.common import start_cli_run
+from convection.io.pictures import read_statistics
 
-from common import start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 CONFIG = HERE.parents[1] / "configs" / "annulus_davies.yaml"
 MEASURED = HERE / "measured" / "davies.json"

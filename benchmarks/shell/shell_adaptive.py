@@ -4,8 +4,8 @@ weighted repartition, and its pictures.
 
 Usage::
 
-    python benchmarks/shell/shell_adaptive.py [--ranks 2] [--steps 40] [--reuse]   # the comparison
-    python benchmarks/shell/shell_adaptive.py --picture RUN_DIR              # the seed's figure 5
+    python -m benchmarks.shell.shell_adaptive [--ranks 2] [--steps 40] [--reuse]   # the comparison
+    python -m benchmarks.shell.shell_adaptive --picture RUN_DIR              # the seed's figure 5
 
 The comparison runs the config on ``--ranks`` ranks for ``--steps`` steps in five ways:
 
@@ -47,12 +47,10 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-sys.path.insert(0, str(HERE.parent))
+from benchmarks.common import ROOT, start_cli_run
+from convection.io.pictures import read_statistics
 
-from common import ROOT, start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 CONFIG = ROOT / "configs" / "shell_adaptive.yaml"
 VARIANTS = {

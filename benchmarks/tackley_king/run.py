@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/tackley_king/run.py --case 2d 3d [--quick] [--ranks 1] [--jobs 2] [--end 0.02]
+    python -m benchmarks.tackley_king.run --case 2d 3d [--quick] [--ranks 1] [--jobs 2] [--end 0.02]
         [--series 40x10 80x10] [--time-limit 3900] [--reuse] [--out DIR] [--results DIR]
 
 Runs ``configs/thick_layer_<case>.yaml`` with the CLI: in 2D a series of uniform meshes
@@ -33,11 +33,10 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
+from benchmarks.common import ROOT, read_reference, sample, start_cli_run
+from convection.io.pictures import read_statistics
 
-from benchmarks.common import ROOT, read_reference, sample, start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 RB = 1.0e6
 DT_FACTOR = 0.25

@@ -2,10 +2,10 @@
 
 Usage::
 
-    python benchmarks/tosi/run.py --case N [--cells 48] [--ranks 1] [--method newton] [--out DIR]
-    python benchmarks/tosi/run.py --methods [--cells 24] [--steps 40]    # Picard vs Newton per step
-    python benchmarks/tosi/run.py --cost [--cells 32]                     # case 2 on 1 and 2 ranks
-    python benchmarks/tosi/run.py --table                                 # results.md, results.png
+    python -m benchmarks.tosi.run --case N [--cells 48] [--ranks 1] [--method newton] [--out DIR]
+    python -m benchmarks.tosi.run --methods [--cells 24] [--steps 40]    # Picard vs Newton per step
+    python -m benchmarks.tosi.run --cost [--cells 32]                     # case 2 on 1 and 2 ranks
+    python -m benchmarks.tosi.run --table                                 # results.md, results.png
 
 ``--case N`` runs case N with the CLI to steady state (case 5a: to ``--end``, default 6, and the
 last full period of its oscillation is measured) and prints one JSON line last: the steady-state (5a: last-cycle
@@ -50,12 +50,11 @@ import sys
 import time
 from pathlib import Path
 
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 GAMMA_T = math.log(1e5)
 CASES = {  # case -> (Delta eta_z, sigma_y or None)

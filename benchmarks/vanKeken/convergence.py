@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/vanKeken/convergence.py [--case 1a|1b|1c] [--cells 16 24 32] [--ppc 10 20 40]
+    python -m benchmarks.vanKeken.convergence [--case 1a|1b|1c] [--cells 16 24 32] [--ppc 10 20 40]
         [--zip] [--min-ppc M ...] [--max-level L] [--cfl C ...] [--end T] [--fit-half-width W]
         [--ranks 2] [--out DIR] [--no-run | --skip-existing] [--name NAME]
         [--publish [--section TITLE]] [--publish-plot] [--set KEY=VALUE ...]
@@ -50,13 +50,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parents[1]))
+from convection.config.loader import load_config
+from convection.io.pictures import read_statistics
+from benchmarks.vanKeken.run import CONFIGS, ROOT, fitted_peak, peak, reference, run_case
 
-from convection.config.loader import load_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
-from run import CONFIGS, ROOT, fitted_peak, peak, reference, run_case  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 CASES = ("1a", "1b", "1c")
 DEFAULT_END = {"1a": 300.0, "1b": 120.0, "1c": 80.0}

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/vanKeken/run.py [--case 1a 1b 1c 2] [--ranks 2] [--quick] [--end T] [--out DIR] [--no-run]
+    python -m benchmarks.vanKeken.run [--case 1a 1b 1c 2] [--ranks 2] [--quick] [--end T] [--out DIR] [--no-run]
 
 Runs ``configs/vankeken_<case>.yaml`` (case 2: ``configs/vankeken_case2.yaml``) with the CLI under
 mpirun, then from each statistics.csv:
@@ -33,12 +33,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 QUICK = ["mesh.cells=[16,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=10"]
 QUICK_2 = ["mesh.cells=[32,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=10"]

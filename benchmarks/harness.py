@@ -138,11 +138,13 @@ class Benchmark:
         """The docstring's first line."""
         return (self.doc or "").strip().split("\n")[0]
 
-    def parser(self, *, cases: Mapping[str, Case] | None = None, default_cases: Sequence[str] | None = None,
-               **kwargs: object) -> argparse.ArgumentParser:
-        """A parser with the declared common options (and ``--case`` over ``cases``, several names
-        allowed, default ``default_cases``); ``kwargs`` go to ``ArgumentParser``."""
-        parser = argparse.ArgumentParser(description=self.description, **kwargs)  # type: ignore[arg-type]
+    def parser(self, *, cases: Mapping[str, object] | Sequence[str] | None = None,
+               default_cases: Sequence[str] | None = None, **kwargs: object) -> argparse.ArgumentParser:
+        """A parser with the declared common options, and ``--case`` (several names allowed, default
+        ``default_cases``, else the first) over the names of ``cases`` (:func:`cases`, or any mapping
+        by name); ``kwargs`` go to ``ArgumentParser`` (``description``: the docstring's first line)."""
+        kwargs.setdefault("description", self.description)
+        parser = argparse.ArgumentParser(**kwargs)  # type: ignore[arg-type]
         if cases is not None:
             parser.add_argument("--case", nargs="+", default=list(default_cases or list(cases)[:1]),
                                 choices=sorted(cases), help=self.helps.get("case"))
@@ -166,7 +168,7 @@ class Benchmark:
     def log_load(self, moment: str, /) -> Load:
         """Print (and return) the machine's load at ``moment`` ("start", "end", ...) to the log."""
         load = Load.now()
-        print(f"[{self.description[:60]}] {moment}: {load}", flush=True)
+        print(f"{moment}: {load}", flush=True)
         return load
 
     @staticmethod

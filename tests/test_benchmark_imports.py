@@ -53,3 +53,18 @@ def test_the_guard_sees_what_it_guards_against():
             'importlib.import_module("benchmarks.free_surface.plume_lid")']
     assert not any(_loads_a_benchmark_by_path(ast.parse(c, mode="eval").body) for c in fine)
     assert SYS_PATH_EDIT.search("sys.path.insert(0, str(ROOT))") and not SYS_PATH_EDIT.search("print(sys.path)")
+
+
+def test_the_harness_gives_the_declared_options_only():
+    from benchmarks.harness import Benchmark, Case, Load, cases
+
+    declared = Benchmark("A benchmark.\n\nMore.", out=Path("runs"), ranks=(1, 2), quick="", overrides=True)
+    parser = declared.parser(cases=cases(Case("a", "vankeken_1a.yaml"), Case("b", "vankeken_1b.yaml")))
+    args = parser.parse_args([])
+    assert vars(args) == {"case": ["a"], "ranks": [1, 2], "quick": False, "out": Path("runs"), "set": []}
+    args = parser.parse_args(["--case", "b", "a", "--ranks", "3", "--out", "x", "--set", "k=1", "--quick"])
+    assert (args.case, args.ranks, args.out, args.set, args.quick) == (["b", "a"], [3], Path("x"), ["k=1"], True)
+    assert parser.description == "A benchmark."
+    assert vars(Benchmark(None).parser().parse_args([])) == {}
+    load = Load.now()
+    assert len(load.averages) == 3 and load.cores >= 1 and str(load).startswith("load average ")

@@ -22,7 +22,6 @@ motion and particle relocation; the same model on a fixed flat-topped mesh for t
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
@@ -35,6 +34,7 @@ import yaml
 from mpi4py import MPI
 
 from benchmarks.common import curves_figure
+from benchmarks.harness import Benchmark
 from benchmarks.crameri import run as STICKY  # the sticky-air runs, the published rate and the fit
 from convection import load_config, run_config
 from convection.postprocess import POSTPROCESSORS
@@ -42,6 +42,7 @@ from convection.postprocess.geodynamics import FreeSurfaceTopography
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+BENCHMARK = Benchmark(__doc__, out=HERE)
 _TRAPEZOID = getattr(np, "trapezoid", None) or np.trapz  # numpy 2 renamed it
 RATE, AMPLITUDE, KYR = STICKY.RATE, STICKY.AMPLITUDE, STICKY.KYR
 
@@ -188,7 +189,7 @@ def _best(make: Any, repeat: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", nargs="+", default=["112x28", "224x56"])
     parser.add_argument("--dt", type=float, nargs="+", default=[0.25], help="time steps [kyr]")
     parser.add_argument("--theta", type=float, default=0.5, help="free_surface.theta")
@@ -198,8 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fit", type=float, default=30.0, help="fit the rate over t <= this [kyr]")
     parser.add_argument("--repeat", type=int, default=1, help="run each free-surface and fixed run this often; the "
                                                                   "table keeps the fastest (best of N)")
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     comm = MPI.COMM_WORLD
     results = []

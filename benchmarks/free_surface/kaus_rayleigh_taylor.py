@@ -19,7 +19,6 @@ largest topography against time, both runs and the reference).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
@@ -30,11 +29,13 @@ from typing import Any
 import numpy as np
 from mpi4py import MPI
 
+from benchmarks.harness import Benchmark
 from convection import load_config, run_config
 from convection.run.loop import RunFailure
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+BENCHMARK = Benchmark(__doc__, out=HERE)
 
 RUNS = {"theta 0.5, dt 10 kyr": (0.5, 10.0), "theta 0, dt 10 kyr": (0.0, 10.0)}
 REFERENCE = {"theta 0, dt 2.5 kyr": (0.0, 2.5)}
@@ -113,12 +114,12 @@ def _picture(path: Path, results: dict[str, dict[str, Any]]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--end", type=float, default=6.0, help="end time [Myr]")
     parser.add_argument("--cells", type=int, default=64)
     parser.add_argument("--reference", action="store_true", help="also the unstabilised run at 2.5 kyr steps")
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     results = {}
     runs = {**RUNS, **(REFERENCE if args.reference else {})}

@@ -28,11 +28,13 @@ from typing import Any, Iterator, Sequence
 
 from mpi4py import MPI
 
+from benchmarks.harness import Benchmark
 from benchmarks.rigid_shear.cases import INTERPOLATORS, Case, run_case
 from benchmarks.rigid_shear.problem import StokesSolver, unit_square
 from benchmarks.rigid_shear.report import write_figure, write_table
 
 HERE = Path(__file__).resolve().parent
+BENCHMARK = Benchmark(__doc__)
 
 __all__ = ["main", "parse", "sweep"]
 
@@ -43,7 +45,7 @@ DEFAULT_INTERPOLATORS = ("exact", "cell_average", "least_squares", "least_square
 
 def parse(argv: Sequence[str] | None = None, /) -> argparse.Namespace:
     """The command line."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--problems", nargs="+", default=list(PROBLEMS), choices=PROBLEMS)
     parser.add_argument("--cells", nargs="+", type=int, default=[8, 16, 32, 64], help="squares per side (h = 1/cells)")
     parser.add_argument("--ppc", nargs="+", type=int, default=[4, 16, 64], help="particles per triangle")
@@ -137,7 +139,7 @@ def main(argv: Sequence[str] | None = None, /) -> None:
     if comm.rank == 0:
         args.log.parent.mkdir(parents=True, exist_ok=True)
         with open(args.log, "a") as f:
-            f.write(json.dumps({"argv": sys.argv, "ranks": comm.size}) + "\n")
+            f.write(json.dumps({"argv": sys.argv, "ranks": comm.size, **BENCHMARK.log_load("start").record()}) + "\n")
     t0 = time.perf_counter()
     new = sweep(args, comm)
     if comm.rank == 0:

@@ -21,18 +21,19 @@ above the number of cores run oversubscribed (the table says so).
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.harness import OUTPUT, Benchmark
 from convection.launch import run_config
 from convection.io.pictures import read_statistics
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "balance_rt", ranks=(2, 3))
 
 STRATEGIES = {
     "default": [],
@@ -101,13 +102,12 @@ def plot(results: dict[tuple[int, str], dict[str, np.ndarray]], path: Path) -> N
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--ranks", type=int, nargs="+", default=[2, 3])
+    parser = BENCHMARK.parser()
     parser.add_argument("--steps", type=int, default=60)
     parser.add_argument("--ppc", type=int, default=200, help="particles per cell of the initial mesh")
     parser.add_argument("--strategies", nargs="+", default=list(STRATEGIES), choices=list(STRATEGIES))
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "balance_rt"))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     results = run_all(out, args.ranks, args.steps, args.ppc, args.strategies)
     text = table(results, args.ppc)

@@ -78,6 +78,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from benchmarks.harness import Benchmark
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.geometry.boundary import VelocityBC
 from convection.launch import mpi_environment
@@ -92,6 +93,7 @@ from particles.generation import generate
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+BENCHMARK = Benchmark(__doc__, out=HERE, ranks=(1, 2, 4))
 
 R_IN = 0.55
 R_OUT = 1.0
@@ -682,13 +684,12 @@ def driver(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--worker", action="store_true", help="run one configuration (under mpirun)")
     parser.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2: annulus; 3: spherical shell")
     parser.add_argument("--radial", type=int, default=32, help="worker, 2D: cell layers between the circles")
     parser.add_argument("--resolution", type=float, default=0.2, help="worker, 3D: gmsh cell size")
     parser.add_argument("--study", choices=("strong", "weak", "both"), default="both")
-    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--strong-size", type=float, default=None,
                         help="strong scaling mesh: radial layers (2D, default 32) or cell size (3D, default 0.2)")
     parser.add_argument("--weak-size", type=float, default=None,
@@ -709,13 +710,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=1, help="runs per configuration; the table keeps the fastest")
     parser.add_argument("--no-yield", dest="yield_when_idle", action="store_false",
                         help="let waiting ranks spin (OpenMPI default without --oversubscribe)")
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
     if args.worker:
         record = worker(args)
         if MPI.COMM_WORLD.rank == 0:
             print(json.dumps(record), flush=True)
         return 0
+    BENCHMARK.log_load("start")
     return driver(args)
 
 

@@ -12,23 +12,23 @@ each statistics.csv and writes ``<out>/lost_particles.md``. The seed paper repor
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
+from benchmarks.harness import OUTPUT, Benchmark
 from convection.launch import run_config
 from convection.io.pictures import read_statistics
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "lost_particles", ranks=2)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--steps", type=int, default=1000)
-    parser.add_argument("--ranks", type=int, default=2)
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "lost_particles"))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     rows = ["| integrator | CFL | steps | end time | particles | lost | lost per 1000 steps |", "|---|---|---|---|---|---|---|"]
     for integrator in ("euler", "rk2"):

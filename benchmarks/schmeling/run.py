@@ -35,9 +35,11 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import read_reference, start_cli_run
+from benchmarks.harness import Benchmark
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+BENCHMARK = Benchmark(__doc__, out=HERE, ranks=2)
 
 AIR = 50.0
 """Sticky-air thickness [km]: the undisturbed surface lies this far below the box's top."""
@@ -171,13 +173,12 @@ def _picture(png: Path, ours: dict[str, tuple], published: dict[str, tuple]) -> 
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cells", nargs="+", default=["120x30"], help="meshes, NXxNY (default 120x30: 25 km cells)")
     parser.add_argument("--end", type=float, default=60.0, help="end time [Myr]")
-    parser.add_argument("--ranks", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=HERE)
     parser.add_argument("--collect", nargs="+", type=Path, help="only tabulate these run directories")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     if args.collect:
         runs = args.collect
     else:

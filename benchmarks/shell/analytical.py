@@ -37,7 +37,6 @@ base uniformly ``--levels`` times (the adaptive code path's meshes, uniformly re
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -50,6 +49,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from benchmarks.harness import Benchmark
 from convection.adapt.adaptivity import AdaptivitySettings, kelly_indicator, wanted_levels
 
 from convection.adapt.hierarchy import MeshHierarchy
@@ -60,6 +60,7 @@ from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells
 from fembase.manifold import ShellManifold
 
+BENCHMARK = Benchmark(__doc__)
 KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 R_INNER, R_OUTER, R_DELTA = 1.22, 2.22, 1.72
 
@@ -285,7 +286,7 @@ def fitted_order(h: list[float], errors: list[float]) -> float | None:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kind", choices=KINDS, default="smooth_free_slip")
     parser.add_argument("--dim", type=int, choices=(2, 3), default=2)
     parser.add_argument("--n", type=int, default=2, help="wave number (2D) or harmonic degree l (3D)")

@@ -24,7 +24,8 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any
+from collections.abc import Iterator, Sequence
 
 from mpi4py import MPI
 

@@ -395,7 +395,6 @@ def advect3d(n: int = 12, per_cell: int = 20, steps: int = 10, integrator: str =
     advector.step(uh, uh, dt)  # warm-up (numba)
     Swarm.sort, Migrator.migrate = timed_sort, timed_migrate
     ev = rel = com = 0.0
-    changed = 0
     comm.Barrier()
     t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(steps):

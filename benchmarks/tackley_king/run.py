@@ -28,7 +28,8 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -60,7 +61,7 @@ class Member(NamedTuple):
     ppc: int
 
     @classmethod
-    def parse(cls, text: str) -> "Member":
+    def parse(cls, text: str) -> Member:
         n, p = text.lower().split("x")
         return cls(int(n), int(p))
 

@@ -3,7 +3,9 @@ x ranges (mantle side, trench, plate), from fields_000.h5 of a DG0 run.
 
     python -m benchmarks.schmeling.log.air_budget RUN_DIR
 """
-import sys, h5py, numpy as np
+import sys
+import h5py
+import numpy as np
 run = sys.argv[1]
 with h5py.File(f"{run}/fields_000.h5") as f:
     xy = f["Mesh/mesh/geometry"][:]; cells = f["Mesh/mesh/topology"][:]

@@ -4,7 +4,9 @@ and mean log10 viscosity (23 for intact plate).
 
     python -m benchmarks.schmeling.log.air_film RUN_DIR
 """
-import sys, h5py, numpy as np
+import sys
+import h5py
+import numpy as np
 run = sys.argv[1]
 with h5py.File(f"{run}/fields_000.h5") as f:
     xy = f["Mesh/mesh/geometry"][:]; cells = f["Mesh/mesh/topology"][:]

@@ -18,12 +18,12 @@ once, at module level, and builds its command line, its load log and its outputs
         BENCHMARK.publish(args.out / "results.md", table)   # written as given, echoed, "wrote ..."
         curves_figure(args.out / "results.png", curves, xlabel="time", ylabel="vrms")
 
-The common options, each present only when the declaration gives its default: ``--out`` (a
-``Path``), ``--results`` (a ``Path``, or None), ``--ranks`` (an int, or a list for a sweep), ``--quick``
-(coarse smoke settings, with its help text), ``--set KEY=VALUE`` (repeated config overrides),
-``--no-run`` (re-measure existing runs) and ``--case`` (names from :func:`cases`). A script adds
-its own options to the parser it gets. The numbers and the tables stay the script's: the harness
-writes the text it is given, byte for byte.
+The common options, each present only when the declaration gives its default (or asks for it
+with the default None): ``--out`` (a ``Path``), ``--results`` (a ``Path``, or None), ``--ranks``
+(an int, or a list for a sweep), ``--quick`` (coarse smoke settings, with its help text), ``--set
+KEY=VALUE`` (repeated config overrides), ``--no-run`` (re-measure existing runs) and ``--case``
+(names from :func:`cases`). A script adds its own options to the parser it gets. The numbers and
+the tables stay the script's: the harness writes the text it is given, byte for byte.
 """
 
 from __future__ import annotations
@@ -112,7 +112,8 @@ class Benchmark:
 
     Attributes:
         doc: The script's docstring; its first line is the command line's description.
-        out: Default of ``--out`` (None: no ``--out``).
+        out: Default of ``--out`` (None: no ``--out``, unless ``out_option``).
+        out_option: Whether ``--out`` exists with the default None (the script then writes no file).
         results: Default of ``--results``, the folder of tables and pictures when it differs from
             ``--out`` (may be None: the script then decides).
         results_option: Whether ``--results`` exists.
@@ -125,6 +126,7 @@ class Benchmark:
 
     doc: str | None
     out: Path | None = None
+    out_option: bool = False
     results: Path | None = None
     results_option: bool = False
     ranks: int | tuple[int, ...] | None = None
@@ -154,7 +156,7 @@ class Benchmark:
             parser.add_argument("--ranks", type=int, default=self.ranks, help=self.helps.get("ranks"))
         if self.quick is not None:
             parser.add_argument("--quick", action="store_true", help=self.quick or None)
-        if self.out is not None:
+        if self.out is not None or self.out_option:
             parser.add_argument("--out", type=Path, default=self.out, help=self.helps.get("out"))
         if self.results_option:
             parser.add_argument("--results", type=Path, default=self.results, help=self.helps.get("results"))

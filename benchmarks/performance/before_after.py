@@ -20,7 +20,6 @@ the last digit) and says so in the table. Writes a Markdown table to ``--out`` (
 
 from __future__ import annotations
 
-import argparse
 import csv
 import os
 import subprocess
@@ -29,7 +28,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.harness import Benchmark, Load
+
 HERE = Path(__file__).resolve().parents[2]
+BENCHMARK = Benchmark(__doc__, out_option=True)
 JOBS = {
     "van Keken 1a to t = 300, 2 ranks": (["-m", "benchmarks.vanKeken.run", "--case", "1a", "--ranks", "2", "--end", "300"],
                                         "1a/statistics.csv"),
@@ -56,13 +58,12 @@ def _rows(path: Path) -> list[dict[str, str]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--before", type=Path, required=True, help="checkout of the code before the change")
     parser.add_argument("--after", type=Path, default=HERE, help="checkout after (default: this one)")
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
-    load = os.getloadavg()
+    load = Load.now().averages
     trees = {"before": args.before.resolve(), "after": args.after.resolve()}
     lines = ["| job | before (s) | after (s) | after / before | statistics |", "|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:

@@ -21,6 +21,9 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmarks.harness import Benchmark
+
+BENCHMARK = Benchmark(__doc__)
 RANKS = [12, 24, 48, 96, 192, 384, 768, 1536, 3072, 6144, 12288]
 
 
@@ -263,7 +266,7 @@ def thick_layer_table(t: ThickLayer, sizes: tuple[int, ...] = (32, 64, 128),
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = BENCHMARK.parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--thick-layer", action="store_true",
                     help="only the projection of the 3D thick layer with the multigrid Stokes solver")
     ap.add_argument("--strong-cells", type=float, default=3 * 2 ** 20, help="ASSUMED strong-scaling cells")

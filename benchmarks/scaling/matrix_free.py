@@ -30,8 +30,6 @@ Usage (the machine otherwise idle)::
 
 from __future__ import annotations
 
-import argparse
-import os
 import time
 from pathlib import Path
 
@@ -44,9 +42,11 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from benchmarks.harness import Benchmark, Load
 from fembase.dolfinx_compat import cell_dofmap, function_space, geometry_dofmap
 
 HERE = Path(__file__).resolve().parent
+BENCHMARK = Benchmark(__doc__, out_option=True)
 
 QUADRATURE_DEGREE = 2
 """grad(P2) . grad(P2) is of degree 2 on an affine cell: the 4-point rule is exact."""
@@ -189,13 +189,12 @@ def measure(n: int, *, repeat: int, applications: int, eta: float = 1.0) -> list
 
 
 def main(argv: list[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[8, 16])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--applications", type=int, default=10)
-    parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
-    load = " ".join(f"{value:.2f}" for value in os.getloadavg())
+    load = " ".join(f"{value:.2f}" for value in Load.now().averages)
     lines = [
         "# The P2 velocity block's action: assembled (PETSc) against matrix-free (numba), one core",
         "",

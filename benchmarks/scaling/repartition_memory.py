@@ -23,7 +23,10 @@ from mpi4py import MPI
 import dolfinx.mesh
 import ufl
 
+from benchmarks.harness import Benchmark
 from fembase.distribute import create_partitioned_mesh, gather_cell_layout, redistribute
+
+BENCHMARK = Benchmark(__doc__)
 
 
 def _status(key: str) -> int:
@@ -35,7 +38,7 @@ def _status(key: str) -> int:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = BENCHMARK.parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("path", choices=["gathered", "distributed"])
     parser.add_argument("--cells", type=int, default=224, help="cells per side n")
     parser.add_argument("--dim", type=int, choices=[2, 3], default=2)

@@ -23,7 +23,6 @@ Prints one markdown row per size, contrast and solver (``--header`` first prints
 
 from __future__ import annotations
 
-import argparse
 import gc
 import os
 import resource
@@ -35,6 +34,7 @@ from mpi4py import MPI
 
 import dolfinx
 
+from benchmarks.harness import Benchmark
 from convection.geometry.boundary import VelocityBC
 from convection.geometry.box import SIDES_2D, SIDES_3D, BoxDomain, BoxSpec
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
@@ -42,6 +42,7 @@ from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space
 
 HERE = Path(__file__).resolve().parent
+BENCHMARK = Benchmark(__doc__)
 
 HEADER = ("| dim | cells per side | Stokes unknowns | viscosity contrast | solver | levels | iterations | "
           "setup + solve [s] | assembly [s] | memory [bytes / unknown] |\n|---|---|---|---|---|---|---|---|---|---|")
@@ -85,7 +86,7 @@ def measure(comm: MPI.Comm, dim: int, n: int, contrast: float, solver: str,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--dim", type=int, default=3)
     parser.add_argument("--sizes", type=int, nargs="+", default=[8, 16])
     parser.add_argument("--contrast", type=float, nargs="+", default=[1.0, 1e4])

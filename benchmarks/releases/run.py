@@ -26,7 +26,6 @@ Usage (scripts/compare_releases.sh runs both sides and compares)::
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import platform
@@ -36,9 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.harness import Benchmark
 from benchmarks.vanKeken.run import measure as measure_vankeken
 
 ROOT = Path(__file__).resolve().parents[2]
+BENCHMARK = Benchmark(__doc__)
 
 ANALYTICAL_KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 TOLERANCES = {"blankenbach": 1e-8, "analytical": 1e-8, "vankeken": 1e-6}
@@ -163,7 +164,7 @@ def _versions(r: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     sub = parser.add_subparsers(dest="command", required=True)
     m = sub.add_parser("measure", help="run the benchmarks on this release")
     m.add_argument("--out", type=Path, default=ROOT / "output" / "releases")

@@ -1,8 +1,9 @@
 """Helpers shared by the benchmark scripts: run a config with the CLI (optionally under mpirun, with
 a wall-time limit), read a ``reference.csv`` and sample a statistics curve at fixed times.
 
-The benchmark scripts (``benchmarks/<name>/run.py``) import this module after putting the project
-root on ``sys.path``.
+The benchmark scripts (``benchmarks/<name>/run.py``, run as ``python -m benchmarks.<name>.run``)
+import it as ``benchmarks.common``; their declaration, command line and load log are
+:mod:`benchmarks.harness`.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import csv
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from convection.launch import cli_command, mpi_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 
-__all__ = ["ROOT", "CliRun", "curves_figure", "read_reference", "sample", "start_cli_run"]
+__all__ = ["ROOT", "CliRun", "curves_figure", "iterations_figure", "read_reference", "sample", "start_cli_run"]
 
 # Exit codes of a run stopped by its wall-time limit: coreutils timeout (124) or the CLI's own
 # 128 + SIGTERM when the signal reached it first.
@@ -114,3 +115,25 @@ def curves_figure(png: Path, curves: Sequence[tuple[np.ndarray, np.ndarray, str,
     plt.close(fig)
     return png
 
+
+
+def iterations_figure(png: Path, counts: Mapping[str, Sequence[int]], /, *, title: str) -> Path:
+    """Nonlinear iterations per time step of the Picard and Newton runs (``counts["picard"]``,
+    ``counts["newton"]``), on a log axis, into ``png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method in ("picard", "newton"):
+        ax.plot(range(len(counts[method])), counts[method], "o-", ms=3, label=method)
+    ax.set_xlabel("time step")
+    ax.set_ylabel("nonlinear iterations to |F|/|b| <= 1e-8")
+    ax.set_yscale("log")
+    ax.legend()
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png

@@ -20,12 +20,12 @@ export OMPI_MCA_btl_tcp_disable_family=6   # Open MPI 5's IPv6 pairing warning (
 py="$(bash scripts/setup.sh | tail -n 1)"
 rm -rf output/releases/meshes   # made again by this machine's gmsh, read by the other release
 echo "== $host_release (this machine) ==" >&2
-a="$("$py" benchmarks/releases/run.py measure --out output/releases | tail -n 1)"
+a="$("$py" -m benchmarks.releases.run measure --out output/releases | tail -n 1)"
 echo "== $other (scripts/in_release_root.sh) ==" >&2
 bash scripts/in_release_root.sh "$other" -- bash scripts/setup.sh >/dev/null
-b="$(bash scripts/in_release_root.sh "$other" -- .venv/bin/python benchmarks/releases/run.py measure --out output/releases | tail -n 1)"
+b="$(bash scripts/in_release_root.sh "$other" -- .venv/bin/python -m benchmarks.releases.run measure --out output/releases | tail -n 1)"
 compare_status=0
-"$py" benchmarks/releases/run.py compare "$a" "$b" --table benchmarks/releases/results.md || compare_status=1
+"$py" -m benchmarks.releases.run compare "$a" "$b" --table benchmarks/releases/results.md || compare_status=1
 
 # --- checkpoints across the releases ---
 on() {   # on RELEASE CMD...: run CMD on this machine or in the other release's root

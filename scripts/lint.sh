@@ -17,6 +17,6 @@ export RUFF_CACHE_DIR="$cache/ruff" MYPY_CACHE_DIR="$cache/mypy"
 status=0
 echo "== ruff check . =="
 "$py" -m ruff check . || status=$?
-echo "== mypy (convection, particles, fembase) =="
+echo "== mypy (convection, particles, fembase, benchmarks/harness.py, benchmarks/common.py) =="
 "$py" -m mypy || { rc=$?; [ "$status" -eq 0 ] && status=$rc; }
 exit "$status"

@@ -13,7 +13,7 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 # Open MPI 5 (Debian 13) warns on every rank about IPv6 interface pairing: one machine, IPv4 only.
 export OMPI_MCA_btl_tcp_disable_family=6
 ranks="${RANKS:-2}"
-"$py" benchmarks/vanKeken/run.py --case 1a --ranks "$ranks" --end 300 --out output/vanKeken_1a \
+"$py" -m benchmarks.vanKeken.run --case 1a --ranks "$ranks" --end 300 --out output/vanKeken_1a \
     --set output.fields_every=10 --set particles.output.every_time=100 \
     --set "particles.output.properties=[composition]" "$@"
 # Snapshots of the composition with the particles on top (output/vanKeken_1a/1a/snapshots/).

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/blankenbach/run.py [--case 1a 1b 1c 2a 2b] [--ranks 2] [--quick]
+    python -m benchmarks.blankenbach.run [--case 1a 1b 1c 2a 2b] [--ranks 2] [--quick]
                                          [--cells N] [--set KEY=VALUE ...]
                                          [--adaptive] [--compare-ranks] [--continuation COARSE FINE]
                                          [--out DIR]
@@ -21,18 +21,19 @@ tests).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
 from pathlib import Path
 
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "blankenbach", ranks=2, quick="coarse meshes, short runs",
+                      overrides=True, helps={"set": "a config override for every run (repeatable)"})
 
 
 def reference() -> dict[str, dict[str, float]]:
@@ -51,20 +52,15 @@ def run_case(config: str, out: Path, ranks: int, overrides: list[str]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--case", nargs="+", default=["1a", "1b", "1c"], choices=CASES)
-    parser.add_argument("--ranks", type=int, default=2)
-    parser.add_argument("--quick", action="store_true", help="coarse meshes, short runs")
+    parser = BENCHMARK.parser(cases=CASES, default_cases=["1a", "1b", "1c"])
     parser.add_argument("--cells", type=int, default=None, help="cells vertically (default: the config's)")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="a config override for every run (repeatable)")
     parser.add_argument("--continuation", nargs=2, type=int, default=None, metavar=("COARSE", "FINE"),
                         help="run each case with FINE cells vertically cold and continued from COARSE")
     parser.add_argument("--adaptive", action="store_true", help="also run 1b adaptively and compare")
     parser.add_argument("--compare-ranks", action="store_true", help="run 1a on 1 and 2 ranks")
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "blankenbach"))
     args = parser.parse_args(argv)
-    out = Path(args.out)
+    BENCHMARK.log_load("start")
+    out = args.out
     out.mkdir(parents=True, exist_ok=True)
     ref = reference()
     quick = ["time.steady_state_tolerance=1e-4", "time.steady_state_rate=1e-1"] if args.quick else []
@@ -73,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     results = {}
     for case in args.case:
         cells = 12 if args.quick else args.cells
-        sized = [*quick, *([cells_override(case, cells)] if cells else []), *args.overrides]
+        sized = [*quick, *([cells_override(case, cells)] if cells else []), *args.set]
         summary = run_case(f"blankenbach_{case}.yaml", out / case, args.ranks, sized)
         results[case] = summary
         rows.append((case, f"{mesh_cells(out / case)} P2-P1/P2 uniform", summary, ref[case]))
@@ -108,12 +104,11 @@ def main(argv: list[str] | None = None) -> int:
                       f"{two['vrms']:.10f} (rel. diff {abs(one['vrms'] - two['vrms']) / one['vrms']:.2e}), "
                       f"steps {one['steps']} vs {two['steps']}"]
     if args.continuation:
-        lines += ["", *continuation(args.case, *args.continuation, out, args.ranks, [*quick, *args.overrides])]
+        lines += ["", *continuation(args.case, *args.continuation, out, args.ranks, [*quick, *args.set])]
     table = "\n".join(lines) + "\n"
-    (out / "results.md").write_text(table)
-    print(table)
+    BENCHMARK.publish(out / "results.md", table)
     _plot(results, ref, out / "results.png")
-    print(f"wrote {out / 'results.md'} and {out / 'results.png'}")
+    print(f"wrote {out / 'results.png'}")
     return 0
 
 

@@ -14,9 +14,9 @@ least-squares slope of ln A over t <= ``--fit`` kyr.
 
 Usage::
 
-    python benchmarks/crameri/run.py [--cells 224x64 448x128] [--air 1e19 1e18 1e17] [--dt 0.25]
+    python -m benchmarks.crameri.run [--cells 224x64 448x128] [--air 1e19 1e18 1e17] [--dt 0.25]
                                      [--fit 30] [--mixing geometric] [--out DIR]
-    python benchmarks/crameri/run.py --collect DIR [DIR ...]      # the tables of earlier runs, together
+    python -m benchmarks.crameri.run --collect DIR [DIR ...]      # the tables of earlier runs, together
 
 Writes ``<out>/results.md`` (fitted rate against the published one per resolution and air
 viscosity, with the cost) and ``<out>/results.png`` (A(t) against the analytical curve).
@@ -32,17 +32,18 @@ import time
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+from mpi4py import MPI
+
+from benchmarks.harness import Benchmark
+from convection import load_config, run_config
+from convection.postprocess import POSTPROCESSORS
+from convection.postprocess.base import DiagnosticsSettings
+from convection.postprocess.geodynamics import Topography
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from convection import load_config, run_config  # noqa: E402
-from convection.postprocess import POSTPROCESSORS  # noqa: E402
-from convection.postprocess.base import DiagnosticsSettings  # noqa: E402
-from convection.postprocess.geodynamics import Topography  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=HERE)
 
 RATE = 2.139e-12
 """Crameri et al.'s relaxation rate [1/s]."""
@@ -184,7 +185,7 @@ def theta_study(args: argparse.Namespace, out: Path) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", nargs="+", default=["224x64", "448x128"])
     parser.add_argument("--air", type=float, nargs="+", default=[1e19, 1e18, 1e17])
     parser.add_argument("--dt", type=float, default=0.25, help="time step [kyr]")
@@ -193,12 +194,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--theta-study", action="store_true",
                         help="instead: the first --cells and --air at CFL 0.1, 0.5, 1 (no step cap) with "
                              "stokes.buoyancy_theta 0, 0.5 and 1; writes theta.md")
-    parser.add_argument("--out", default=str(HERE))
     parser.add_argument("--collect", nargs="+", metavar="DIR",
                         help="no runs: write the results of earlier --out folders (their results.json) together")
     args = parser.parse_args(argv)
-    out = Path(args.out)
+    out = args.out
     comm = MPI.COMM_WORLD
+    if comm.rank == 0:
+        BENCHMARK.log_load("start")
     if args.collect:
         collected = [r for folder in args.collect for r in _read(Path(folder) / "results.json")]
         if comm.rank == 0:

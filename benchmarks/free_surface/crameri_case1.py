@@ -22,38 +22,27 @@ motion and particle relocation; the same model on a fixed flat-topped mesh for t
 
 from __future__ import annotations
 
-import argparse
 import csv
-import importlib.util
 import json
 import sys
 import time
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+import yaml
+from mpi4py import MPI
+
+from benchmarks.common import curves_figure
+from benchmarks.harness import Benchmark
+from benchmarks.crameri import run as STICKY  # the sticky-air runs, the published rate and the fit
+from convection import load_config, run_config
+from convection.postprocess import POSTPROCESSORS
+from convection.postprocess.geodynamics import FreeSurfaceTopography
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-import yaml  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from benchmarks.common import curves_figure  # noqa: E402
-from convection import load_config, run_config  # noqa: E402
-from convection.postprocess import POSTPROCESSORS  # noqa: E402
-from convection.postprocess.geodynamics import FreeSurfaceTopography  # noqa: E402
-
-
-def _sticky_air_script() -> Any:
-    """benchmarks/crameri/run.py (the sticky-air runs, the published rate and the fit)."""
-    spec = importlib.util.spec_from_file_location("crameri_sticky_air", ROOT / "benchmarks" / "crameri" / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-STICKY = _sticky_air_script()
+BENCHMARK = Benchmark(__doc__, out=HERE)
 _TRAPEZOID = getattr(np, "trapezoid", None) or np.trapz  # numpy 2 renamed it
 RATE, AMPLITUDE, KYR = STICKY.RATE, STICKY.AMPLITUDE, STICKY.KYR
 
@@ -200,7 +189,7 @@ def _best(make: Any, repeat: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", nargs="+", default=["112x28", "224x56"])
     parser.add_argument("--dt", type=float, nargs="+", default=[0.25], help="time steps [kyr]")
     parser.add_argument("--theta", type=float, default=0.5, help="free_surface.theta")
@@ -210,8 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fit", type=float, default=30.0, help="fit the rate over t <= this [kyr]")
     parser.add_argument("--repeat", type=int, default=1, help="run each free-surface and fixed run this often; the "
                                                                   "table keeps the fastest (best of N)")
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     comm = MPI.COMM_WORLD
     results = []

@@ -22,23 +22,24 @@ beside the codes' spread) and ``<out>/crameri_case2.png`` (against time).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
+
+import numpy as np
+from mpi4py import MPI
+
+from benchmarks.common import curves_figure
+from benchmarks.harness import Benchmark
+from convection import load_config, run_config
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from benchmarks.common import curves_figure  # noqa: E402
-from convection import load_config, run_config  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=HERE)
 
 TIMES = (0.1, 0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0)
 """Myr."""
@@ -134,17 +135,17 @@ def _picture(path: Path, results: list[dict[str, Any]]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", nargs="+", default=["224x56"])
     parser.add_argument("--end", type=float, default=20.0, help="end time [Myr]")
     parser.add_argument("--dt", type=float, default=20.0, help="largest step [kyr]")
     parser.add_argument("--cfl", type=float, default=None, help="Courant number (default: the config's, 0.1)")
     parser.add_argument("--composition", choices=("particles", "field"), default="particles",
                         help="the materials on particles (the config's) or as advected P2 fields")
-    parser.add_argument("--out", default=str(HERE))
     parser.add_argument("--keep", action="store_true",
                         help="keep the other runs of <out>/crameri_case2.json in the table (runs made one at a time)")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     results = []
     if args.keep and (out / "crameri_case2.json").exists():

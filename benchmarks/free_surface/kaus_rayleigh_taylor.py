@@ -10,7 +10,7 @@ should follow.
 
 Usage::
 
-    python benchmarks/free_surface/kaus_rayleigh_taylor.py [--end 6] [--cells 64] [--reference] [--out DIR]
+    python -m benchmarks.free_surface.kaus_rayleigh_taylor [--end 6] [--cells 64] [--reference] [--out DIR]
 
 Writes ``<out>/kaus_rayleigh_taylor.md`` (per run: steps reached, why it stopped, largest vrms and
 topography, their values at 1, 3 and 5 Myr) and ``<out>/kaus_rayleigh_taylor.png`` (vrms and the
@@ -19,7 +19,6 @@ largest topography against time, both runs and the reference).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
@@ -27,15 +26,16 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from mpi4py import MPI
+
+from benchmarks.harness import Benchmark
+from convection import load_config, run_config
+from convection.run.loop import RunFailure
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from convection import load_config, run_config  # noqa: E402
-from convection.run.loop import RunFailure  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=HERE)
 
 RUNS = {"theta 0.5, dt 10 kyr": (0.5, 10.0), "theta 0, dt 10 kyr": (0.0, 10.0)}
 REFERENCE = {"theta 0, dt 2.5 kyr": (0.0, 2.5)}
@@ -114,12 +114,12 @@ def _picture(path: Path, results: dict[str, dict[str, Any]]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--end", type=float, default=6.0, help="end time [Myr]")
     parser.add_argument("--cells", type=int, default=64)
     parser.add_argument("--reference", action="store_true", help="also the unstabilised run at 2.5 kyr steps")
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     results = {}
     runs = {**RUNS, **(REFERENCE if args.reference else {})}

@@ -13,7 +13,7 @@ and how often it changes sign and back at the next step (ringing).
 
 Usage::
 
-    python benchmarks/free_surface/plume_lid.py [--cells 112x28] [--end 20] [--out DIR]
+    python -m benchmarks.free_surface.plume_lid [--cells 112x28] [--end 20] [--out DIR]
 
 Writes ``<out>/plume_lid.md``, ``<out>/plume_lid.json`` and ``<out>/plume_lid.png`` (the highest
 topography against time, every run).
@@ -21,7 +21,6 @@ topography against time, every run).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
@@ -29,15 +28,16 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from mpi4py import MPI
+
+from benchmarks.common import curves_figure
+from benchmarks.harness import Benchmark
+from convection import load_config, run_config
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-from benchmarks.common import curves_figure  # noqa: E402
-from convection import load_config, run_config  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=HERE)
 
 CONFIG = ROOT / "configs" / "plume_lid_free_surface.yaml"
 RUNS = {"defaults, dt 0.25 Myr": ({}, 250.0), "theta 0.5, dt 0.25 Myr": ({"free_surface.theta": 0.5}, 250.0)}
@@ -120,11 +120,11 @@ def _picture(path: Path, results: dict[str, dict[str, Any]]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", default="112x28", help="NXxNZ")
     parser.add_argument("--end", type=float, default=20.0, help="end time [Myr]")
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     cells = tuple(int(n) for n in args.cells.split("x"))
     out = Path(args.out)
     results = {}

@@ -2,9 +2,9 @@
 
 Usage::
 
-    python benchmarks/localisation/run.py                 # with and without weakening, picture
-    python benchmarks/localisation/run.py --methods       # Picard against Newton, per step
-    python benchmarks/localisation/run.py --cells 32x8    # smaller
+    python -m benchmarks.localisation.run                 # with and without weakening, picture
+    python -m benchmarks.localisation.run --methods       # Picard against Newton, per step
+    python -m benchmarks.localisation.run --cells 32x8    # smaller
 
 The default runs the model twice, with the strain weakening of the config (yield stress
 ``sigma_y w(e)``, ``w`` linear from 1 at plastic strain ``e = 0.05`` to 0.25 at ``e = 0.5``) and
@@ -26,7 +26,6 @@ last.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -35,12 +34,16 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from benchmarks.common import iterations_figure
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "localisation", results=HERE, results_option=True, ranks=1,
+                      overrides=True, helps={"set": "extra config override key=value", "out": "run folders",
+                                             "results": "where the tables and pictures go"})
 
 CONFIG = ROOT / "configs" / "localisation.yaml"
 
@@ -162,34 +165,17 @@ def methods(out: Path, results: Path, *, cells: str, steps: int, ranks: int) -> 
         lines.append(f"| {method} | {sum(c)} | {sum(c) / len(c):.2f} | {max(c)} | {walls[method]:.0f} |")
     lines += ["", _load_line()]
     (results / "methods.md").write_text("\n".join(lines) + "\n")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for method in ("picard", "newton"):
-        ax.plot(range(len(counts[method])), counts[method], "o-", ms=3, label=method)
-    ax.set_xlabel("time step")
-    ax.set_ylabel("nonlinear iterations to |F|/|b| <= 1e-8")
-    ax.set_yscale("log")
-    ax.legend()
-    ax.set_title(f"localisation model, {cells}")
-    fig.tight_layout()
-    fig.savefig(results / "methods.png", dpi=110)
+    iterations_figure(results / "methods.png", counts, title=f"localisation model, {cells}")
     return {"cells": cells, **{m: sum(counts[m]) for m in counts}, **{f"{m}_max": max(counts[m]) for m in counts}}
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", default="64x16", help="NXxNY")
-    parser.add_argument("--ranks", type=int, default=1)
     parser.add_argument("--methods", action="store_true", help="Picard against Newton, per step")
     parser.add_argument("--steps", type=int, default=40)
-    parser.add_argument("--set", action="append", default=[], help="extra config override key=value")
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "localisation"), help="run folders")
-    parser.add_argument("--results", default=str(HERE), help="where the tables and pictures go")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = Path(args.results)

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/materials/run.py [--cells 16 24 32] [--end 300] [--ranks 2] [--out DIR] [--no-run]
+    python -m benchmarks.materials.run [--cells 16 24 32] [--end 300] [--ranks 2] [--out DIR] [--no-run]
 
 Runs ``configs/rayleigh_taylor_3.yaml`` (light bottom layer, dense middle layer, stiff lid) with
 ``composition.source: particles`` (DG0 cell averages of 20 particles per cell) and with
@@ -17,19 +17,19 @@ between the two finest resolutions. Writes ``<out>/results.md`` and ``<out>/vrms
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import curves_figure
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from benchmarks.common import curves_figure  # noqa: E402
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "materials", ranks=2, no_run="only re-measure existing runs")
 
 SOURCES = {"particles": ["composition.source=particles", "composition.degree=0"],
            "field": ["composition.source=field", "composition.degree=2"]}
@@ -45,13 +45,11 @@ def max_difference(a: dict, b: dict) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", type=int, nargs="+", default=[16, 24, 32])
     parser.add_argument("--end", type=float, default=300.0)
-    parser.add_argument("--ranks", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=ROOT / "output" / "benchmarks" / "materials")
-    parser.add_argument("--no-run", action="store_true", help="only re-measure existing runs")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     stats: dict[tuple[str, int], dict] = {}
     for n in args.cells:
         for source, overrides in SOURCES.items():
@@ -73,12 +71,9 @@ def main(argv: list[str] | None = None) -> int:
         df = max_difference(f, stats["field", previous]) if previous else float("nan")
         lines.append(f"| {n}x{n} | {between:.3%} | {dp:.3%} | {df:.3%} | {p['vrms'].max():.5e} | {f['vrms'].max():.5e} |")
         previous = n
-    text = "\n".join(lines) + "\n"
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "results.md").write_text(text)
-    print(text)
+    BENCHMARK.publish(args.out / "results.md", "\n".join(lines) + "\n")
     _plot(stats, args.cells, args.out / "vrms.png")
-    print(f"wrote {args.out / 'results.md'} and {args.out / 'vrms.png'}")
+    print(f"wrote {args.out / 'vrms.png'}")
     return 0
 
 

@@ -3,9 +3,9 @@
 
 Usage::
 
-    python benchmarks/particle_distribution/run.py                  # both methods to t = 2000, 1 rank
-    python benchmarks/particle_distribution/run.py --end 300 --ranks 2
-    python benchmarks/particle_distribution/run.py --report-only    # table and picture from log/
+    python -m benchmarks.particle_distribution.run                  # both methods to t = 2000, 1 rank
+    python -m benchmarks.particle_distribution.run --end 300 --ranks 2
+    python -m benchmarks.particle_distribution.run --report-only    # table and picture from log/
 
 Each method (``particles.population.method: count`` and ``density``) runs once, one after the
 other, with the statistics ``time, mesh, particles, particle_distribution, wall_time``: the
@@ -18,7 +18,6 @@ and the averages over the run) and ``distribution.png`` the curves. The last lin
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 import sys
@@ -28,12 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import start_cli_run
+from benchmarks.harness import Benchmark
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from benchmarks.common import start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+BENCHMARK = Benchmark(__doc__, results=HERE, results_option=True, ranks=1,
+                      helps={"ranks": "MPI ranks of each run (default 1)",
+                             "results": "folder of results.md, distribution.png, log/"})
 
 CONFIG = ROOT / "configs" / "vankeken_1a_particles.yaml"
 METHODS = ("count", "density")
@@ -113,12 +115,11 @@ def figure(stats: dict[str, dict[str, np.ndarray]], png: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--end", type=float, default=2000.0, help="end time (default 2000)")
-    parser.add_argument("--ranks", type=int, default=1, help="MPI ranks of each run (default 1)")
-    parser.add_argument("--results", type=Path, default=HERE, help="folder of results.md, distribution.png, log/")
     parser.add_argument("--report-only", action="store_true", help="no runs: table and picture from log/")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     log = args.results / "log"
     log.mkdir(parents=True, exist_ok=True)
     walls = {}

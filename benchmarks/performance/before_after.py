@@ -3,7 +3,7 @@
 Usage::
 
     git worktree add /tmp/before <commit>          # the code before the change
-    python benchmarks/performance/before_after.py --before /tmp/before [--repeat 3] [--out FILE]
+    python -m benchmarks.performance.before_after --before /tmp/before [--repeat 3] [--out FILE]
 
 Runs each job with each checkout's own code (its ``benchmarks/`` script and packages), alternating
 before and after, ``--repeat`` times, and reports the best wall time of each (and the ratio after /
@@ -20,7 +20,6 @@ the last digit) and says so in the table. Writes a Markdown table to ``--out`` (
 
 from __future__ import annotations
 
-import argparse
 import csv
 import os
 import subprocess
@@ -29,11 +28,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.harness import Benchmark, Load
+
 HERE = Path(__file__).resolve().parents[2]
+BENCHMARK = Benchmark(__doc__, out_option=True)
 JOBS = {
-    "van Keken 1a to t = 300, 2 ranks": (["benchmarks/vanKeken/run.py", "--case", "1a", "--ranks", "2", "--end", "300"],
+    "van Keken 1a to t = 300, 2 ranks": (["-m", "benchmarks.vanKeken.run", "--case", "1a", "--ranks", "2", "--end", "300"],
                                         "1a/statistics.csv"),
-    "Tosi case 2, 150 steps, 1 rank": (["benchmarks/tosi/run.py", "--case", "2", "--set", "time.max_steps=150"],
+    "Tosi case 2, 150 steps, 1 rank": (["-m", "benchmarks.tosi.run", "--case", "2", "--set", "time.max_steps=150"],
                                       "case2/statistics.csv"),
 }
 
@@ -56,13 +58,12 @@ def _rows(path: Path) -> list[dict[str, str]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--before", type=Path, required=True, help="checkout of the code before the change")
     parser.add_argument("--after", type=Path, default=HERE, help="checkout after (default: this one)")
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
-    load = os.getloadavg()
+    load = Load.now().averages
     trees = {"before": args.before.resolve(), "after": args.after.resolve()}
     lines = ["| job | before (s) | after (s) | after / before | statistics |", "|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:

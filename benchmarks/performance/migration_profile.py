@@ -5,7 +5,7 @@ waiting for a slower rank is counted apart) and the parts of ``Migrator.migrate`
 per rank one JSON line of milliseconds per migration (the first two migrations, before the loop,
 are left out). Timing wrappers add a few microseconds per part.
 
-Run: ``mpirun -n 2 python benchmarks/performance/migration_profile.py --cells 64 --particles
+Run: ``mpirun -n 2 python -m benchmarks.performance.migration_profile --cells 64 --particles
 393216 --steps 50 --integrator euler --balance``.
 """
 
@@ -16,7 +16,6 @@ import json
 import runpy
 import sys
 import time
-from pathlib import Path
 
 from mpi4py import MPI
 
@@ -68,7 +67,7 @@ advection._migrate = _measured
 if __name__ == "__main__":
     sys.argv = ["vortex.py"] + sys.argv[1:]
     try:
-        runpy.run_path(str(Path(__file__).with_name("vortex.py")), run_name="__main__")
+        runpy.run_module("benchmarks.performance.vortex", run_name="__main__")
     finally:
         calls = max(_totals.pop("calls", 0), 1)
         per_call = {k: round(v * 1e3 / calls, 4) for k, v in sorted(_totals.items())}

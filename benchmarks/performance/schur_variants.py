@@ -14,7 +14,7 @@ the package.
   add ``"fieldsplit_p_bfbt_ksp_type": "cg", "fieldsplit_p_bfbt_ksp_rtol": 1e-10`` for exact inner
   solves; default one BoomerAMG V-cycle). Serial only.
 
-Example: ``SCHUR_W=geo python benchmarks/performance/schur_variants.py --viscosity layer --cells 8
+Example: ``SCHUR_W=geo python -m benchmarks.performance.schur_variants --viscosity layer --cells 8
 --solver iterative --steps 3``.
 """
 
@@ -23,7 +23,6 @@ from __future__ import annotations
 import os
 import runpy
 import sys
-from pathlib import Path
 
 import numpy as np
 import ufl
@@ -163,4 +162,4 @@ stokes_forms.StokesDiscretisation.forms = _forms
 
 if __name__ == "__main__":
     sys.argv = ["stokes3d.py"] + sys.argv[1:]
-    runpy.run_path(str(Path(__file__).with_name("stokes3d.py")), run_name="__main__")
+    runpy.run_module("benchmarks.performance.stokes3d", run_name="__main__")

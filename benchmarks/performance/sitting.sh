@@ -11,7 +11,7 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 . "$(dirname "${BASH_SOURCE[0]}")/sitting_common.sh"   # V, RATE, run
 # The machine's own 2-process ceiling: two independent serial runs with half the particles each,
 # started together; their combined rate is twice the slower one's.
-HALF="benchmarks/performance/vortex.py --cells 64 --particles 196608 --steps 50 --integrator euler"
+HALF="-m benchmarks.performance.vortex --cells 64 --particles 196608 --steps 50 --integrator euler"
 PAIR='import json,sys; r=[json.loads(l)["particle_updates_per_second"] for l in sys.stdin if l.startswith("{")]; print("rate=%.0f (two independent half runs: %s)" % (2 * min(r), ", ".join("%.0f" % x for x in r)))'
 for r in $(seq "$ROUNDS"); do
   run "deal.II step-68, 1 rank" bash "$STEP68" 6 8 0.1 2 1

@@ -45,12 +45,14 @@ from petsc4py import PETSc
 import dolfinx.fem
 import dolfinx.mesh
 
+from benchmarks.harness import Benchmark
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.geometry.boundary import VelocityBC
 from convection.geometry.box import SIDES_3D
 from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space
 
+BENCHMARK = Benchmark(__doc__)
 SHIFT_PER_STEP = 0.005
 
 
@@ -145,7 +147,7 @@ def run(n: int, solver: str, args: argparse.Namespace) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cells", type=int, nargs="+", default=[8, 10, 12, 16, 20])
     parser.add_argument("--solver", nargs="+", default=["iterative"])
     parser.add_argument("--viscosity", choices=("constant", "temperature", "layer"), default="constant")

@@ -21,7 +21,7 @@ partition gives nearly all of them to one rank) and builds the velocity space on
 ``--naive`` runs the straightforward DOLFINx way instead (serial only): every step a bounding-box
 collision search, ``compute_colliding_cells`` and ``Function.eval`` for every particle, Euler.
 
-Run: ``python benchmarks/performance/vortex.py --cells 64 --particles 393216 --steps 50``
+Run: ``python -m benchmarks.performance.vortex --cells 64 --particles 393216 --steps 50``
 or under ``mpirun -n 2`` (particles then migrate between ranks).
 """
 
@@ -39,6 +39,7 @@ import dolfinx.fem
 import dolfinx.geometry
 import dolfinx.mesh
 
+from benchmarks.harness import Benchmark
 from fembase.dolfinx_compat import bounding_box_tree, compute_collisions, function_space
 from fembase.evaluation import locate
 from fembase.partition import PARTITIONERS
@@ -46,6 +47,7 @@ from particles import Swarm
 from particles.advection import INTEGRATORS, Advector
 from particles.balance import rebalance
 
+BENCHMARK = Benchmark(__doc__)
 DT = 0.002
 CENTRE = np.array([0.5, 0.75])
 RADII = (0.01, 0.15)
@@ -201,7 +203,7 @@ def run_naive(args: argparse.Namespace, mesh: dolfinx.mesh.Mesh, n: int, steps: 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cells", type=int, default=64, help="squares per side (each split in 2 triangles)")
     parser.add_argument("--degree", type=int, default=2, help="velocity Lagrange degree")
     parser.add_argument("--particles", type=int, default=393216)

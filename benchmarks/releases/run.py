@@ -20,13 +20,12 @@ analytical errors, 1e-6 for van Keken).
 
 Usage (scripts/compare_releases.sh runs both sides and compares)::
 
-    python benchmarks/releases/run.py measure --out output/releases
-    python benchmarks/releases/run.py compare output/releases/bookworm.json output/releases/trixie.json
+    python -m benchmarks.releases.run measure --out output/releases
+    python -m benchmarks.releases.run compare output/releases/bookworm.json output/releases/trixie.json
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import platform
@@ -36,10 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
+from benchmarks.harness import Benchmark
+from benchmarks.vanKeken.run import measure as measure_vankeken
 
-from benchmarks.vanKeken.run import measure as measure_vankeken  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
+BENCHMARK = Benchmark(__doc__)
 
 ANALYTICAL_KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 TOLERANCES = {"blankenbach": 1e-8, "analytical": 1e-8, "vankeken": 1e-6}
@@ -93,18 +93,18 @@ def measure(out: Path) -> Path:
     work.mkdir(parents=True, exist_ok=True)
     result: dict = {"release": name, "versions": versions()}
 
-    _python("benchmarks/blankenbach/run.py", "--case", "1a", "--out", str(work / "blankenbach"))
+    _python("-m", "benchmarks.blankenbach.run", "--case", "1a", "--out", str(work / "blankenbach"))
     summary = json.loads((work / "blankenbach" / "1a" / "summary.json").read_text())
     result["blankenbach"] = {"nusselt": summary["nusselt"], "vrms": summary["vrms"], "steps": summary["steps"]}
 
     result["analytical"] = {}
     for kind in ANALYTICAL_KINDS:
-        document = json.loads(_python("benchmarks/shell/analytical.py", "--kind", kind, "--levels", "0", "1", "2",
+        document = json.loads(_python("-m", "benchmarks.shell.analytical", "--kind", kind, "--levels", "0", "1", "2",
                                       "--mesh-dir", str(out / "meshes")).stdout)
         result["analytical"][kind] = [{"level": lv["level"], "cells": lv["cells"], "velocity_error": lv["velocity_error"],
                                        "pressure_error": lv["pressure_error"]} for lv in document["levels"]]
 
-    _python("benchmarks/vanKeken/run.py", "--case", "1a", "--ranks", "2", "--end", "300", "--out", str(work / "vankeken"))
+    _python("-m", "benchmarks.vanKeken.run", "--case", "1a", "--ranks", "2", "--end", "300", "--out", str(work / "vankeken"))
     stats = _statistics(work / "vankeken" / "1a" / "statistics.csv")
     first = measure_vankeken(stats)
     result["vankeken"] = {"peak_vrms": first.peak_vrms, "peak_time": first.peak_time,
@@ -164,7 +164,7 @@ def _versions(r: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     sub = parser.add_subparsers(dest="command", required=True)
     m = sub.add_parser("measure", help="run the benchmarks on this release")
     m.add_argument("--out", type=Path, default=ROOT / "output" / "releases")

@@ -5,10 +5,10 @@ cases.py: one run).
 
 Run (from the project root; the full sweep, then the table and the picture)::
 
-    python benchmarks/rigid_shear/rigid_shear.py
-    python benchmarks/rigid_shear/rigid_shear.py --problems time_dependent --ppc 16 --interpolators least_squares
-    mpirun -n 2 python benchmarks/rigid_shear/rigid_shear.py --cells 8 16 --results /tmp/r.json
-    python benchmarks/rigid_shear/rigid_shear.py --report-only
+    python -m benchmarks.rigid_shear.rigid_shear
+    python -m benchmarks.rigid_shear.rigid_shear --problems time_dependent --ppc 16 --interpolators least_squares
+    mpirun -n 2 python -m benchmarks.rigid_shear.rigid_shear --cells 8 16 --results /tmp/r.json
+    python -m benchmarks.rigid_shear.rigid_shear --report-only
 
 Every run's result merges into ``--results`` (default results.json here; a run with the same
 parameters replaces the old one), one JSON line per run goes to ``--log`` (default
@@ -24,16 +24,18 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any
+from collections.abc import Iterator, Sequence
 
 from mpi4py import MPI
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
+from benchmarks.harness import Benchmark
+from benchmarks.rigid_shear.cases import INTERPOLATORS, Case, run_case
+from benchmarks.rigid_shear.problem import StokesSolver, unit_square
+from benchmarks.rigid_shear.report import write_figure, write_table
 
-from benchmarks.rigid_shear.cases import INTERPOLATORS, Case, run_case  # noqa: E402
-from benchmarks.rigid_shear.problem import StokesSolver, unit_square  # noqa: E402
-from benchmarks.rigid_shear.report import write_figure, write_table  # noqa: E402
+HERE = Path(__file__).resolve().parent
+BENCHMARK = Benchmark(__doc__)
 
 __all__ = ["main", "parse", "sweep"]
 
@@ -44,7 +46,7 @@ DEFAULT_INTERPOLATORS = ("exact", "cell_average", "least_squares", "least_square
 
 def parse(argv: Sequence[str] | None = None, /) -> argparse.Namespace:
     """The command line."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--problems", nargs="+", default=list(PROBLEMS), choices=PROBLEMS)
     parser.add_argument("--cells", nargs="+", type=int, default=[8, 16, 32, 64], help="squares per side (h = 1/cells)")
     parser.add_argument("--ppc", nargs="+", type=int, default=[4, 16, 64], help="particles per triangle")
@@ -138,7 +140,7 @@ def main(argv: Sequence[str] | None = None, /) -> None:
     if comm.rank == 0:
         args.log.parent.mkdir(parents=True, exist_ok=True)
         with open(args.log, "a") as f:
-            f.write(json.dumps({"argv": sys.argv, "ranks": comm.size}) + "\n")
+            f.write(json.dumps({"argv": sys.argv, "ranks": comm.size, **BENCHMARK.log_load("start").record()}) + "\n")
     t0 = time.perf_counter()
     new = sweep(args, comm)
     if comm.rank == 0:

@@ -4,7 +4,7 @@ its assembly (and ASPECT's preconditioner build and right-hand side), the temper
 particles, read from the raw logs (ASPECT's timing table; this project's summary.json and
 statistics.csv).
 
-Usage: python benchmarks/scaling/aspect_thick_layer_table.py LOG_DIR > TABLE.md
+Usage: python -m benchmarks.scaling.aspect_thick_layer_table LOG_DIR > TABLE.md
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/scaling/balance_rt.py [--ranks 2 3] [--steps 60] [--ppc 200] [--out DIR]
+    python -m benchmarks.scaling.balance_rt [--ranks 2 3] [--steps 60] [--ppc 200] [--out DIR]
 
 Runs ``configs/vankeken_1a.yaml`` (0.9142 x 1, fine cells only near the interface, particles
 uniform in space) for ``--steps`` steps under three partitionings, each on every rank count:
@@ -21,19 +21,19 @@ above the number of cores run oversubscribed (the table says so).
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "balance_rt", ranks=(2, 3))
 
 STRATEGIES = {
     "default": [],
@@ -102,13 +102,12 @@ def plot(results: dict[tuple[int, str], dict[str, np.ndarray]], path: Path) -> N
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--ranks", type=int, nargs="+", default=[2, 3])
+    parser = BENCHMARK.parser()
     parser.add_argument("--steps", type=int, default=60)
     parser.add_argument("--ppc", type=int, default=200, help="particles per cell of the initial mesh")
     parser.add_argument("--strategies", nargs="+", default=list(STRATEGIES), choices=list(STRATEGIES))
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "balance_rt"))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     results = run_all(out, args.ranks, args.steps, args.ppc, args.strategies)
     text = table(results, args.ppc)

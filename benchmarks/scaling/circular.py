@@ -49,10 +49,10 @@ Each phase is summed over the steps per rank; the report gives the slowest rank'
 
 Usage (the driver runs every configuration under ``mpirun`` and collects one JSON line per run)::
 
-    python benchmarks/scaling/circular.py                          # 2D strong + weak, ranks 1 2 4
-    python benchmarks/scaling/circular.py --dim 3 --steps 20       # spherical shell, FGMRES + AMG
-    mpirun -n 2 python benchmarks/scaling/circular.py --worker --radial 32    # one 2D run
-    mpirun -n 2 python benchmarks/scaling/circular.py --worker --dim 3 --resolution 0.2
+    python -m benchmarks.scaling.circular                          # 2D strong + weak, ranks 1 2 4
+    python -m benchmarks.scaling.circular --dim 3 --steps 20       # spherical shell, FGMRES + AMG
+    mpirun -n 2 python -m benchmarks.scaling.circular --worker --radial 32    # one 2D run
+    mpirun -n 2 python -m benchmarks.scaling.circular --worker --dim 3 --resolution 0.2
 
 Four ranks on the 2-core machine run with ``--oversubscribe`` and are marked as oversubscribed.
 """
@@ -78,22 +78,22 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw  # noqa: E402
-from convection.geometry.boundary import VelocityBC  # noqa: E402
-from convection.launch import mpi_environment  # noqa: E402
-from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_confinement, shell_domain  # noqa: E402
-from convection.solvers.stokes.solver import STOKES_SOLVER_NAMES, StokesSolver  # noqa: E402
-from convection.solvers.timestep import cfl_timestep  # noqa: E402
+from benchmarks.harness import Benchmark
+from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.geometry.boundary import VelocityBC
+from convection.launch import mpi_environment
+from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_confinement, shell_domain
+from convection.solvers.stokes.solver import STOKES_SOLVER_NAMES, StokesSolver
+from convection.solvers.timestep import cfl_timestep
 from fembase.dolfinx_compat import coordinate_element_from, geometry_dofmap, mesh_domain
 from fembase.dolfinx_compat import create_mesh as compat_create_mesh
-from particles import Swarm  # noqa: E402
-from particles.advection import Advector  # noqa: E402
-from particles.generation import generate  # noqa: E402
+from particles import Swarm
+from particles.advection import Advector
+from particles.generation import generate
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+BENCHMARK = Benchmark(__doc__, out=HERE, ranks=(1, 2, 4))
 
 R_IN = 0.55
 R_OUT = 1.0
@@ -510,7 +510,7 @@ def run_one(spec: RunSpec, args: argparse.Namespace) -> dict:
     if spec.ranks > (os.cpu_count() or 1):
         cmd.append("--oversubscribe")
     size = ["--radial", str(int(spec.size))] if args.dim == 2 else ["--resolution", str(spec.size)]
-    cmd += [sys.executable, str(Path(__file__).resolve()), "--worker", "--dim", str(args.dim), *size,
+    cmd += [sys.executable, "-m", "benchmarks.scaling.circular", "--worker", "--dim", str(args.dim), *size,
             "--particles-per-cell", str(args.particles_per_cell), "--steps", str(args.steps), "--cfl", str(args.cfl),
             "--omega-inner", str(args.omega_inner), "--omega-outer", str(args.omega_outer),
             "--integrator", args.integrator, "--solver", args.solver, "--seed", str(args.seed)]
@@ -684,13 +684,12 @@ def driver(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--worker", action="store_true", help="run one configuration (under mpirun)")
     parser.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2: annulus; 3: spherical shell")
     parser.add_argument("--radial", type=int, default=32, help="worker, 2D: cell layers between the circles")
     parser.add_argument("--resolution", type=float, default=0.2, help="worker, 3D: gmsh cell size")
     parser.add_argument("--study", choices=("strong", "weak", "both"), default="both")
-    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--strong-size", type=float, default=None,
                         help="strong scaling mesh: radial layers (2D, default 32) or cell size (3D, default 0.2)")
     parser.add_argument("--weak-size", type=float, default=None,
@@ -711,13 +710,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=1, help="runs per configuration; the table keeps the fastest")
     parser.add_argument("--no-yield", dest="yield_when_idle", action="store_false",
                         help="let waiting ranks spin (OpenMPI default without --oversubscribe)")
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
     if args.worker:
         record = worker(args)
         if MPI.COMM_WORLD.rank == 0:
             print(json.dumps(record), flush=True)
         return 0
+    BENCHMARK.log_load("start")
     return driver(args)
 
 

@@ -2,10 +2,10 @@
 from constants measured on this machine (see ``cost_model.md`` for each constant's command) to
 12 ... 12 288 ranks.
 
-    python benchmarks/scaling/cost_model.py                  # tables (markdown) + cost_model.png
-    python benchmarks/scaling/cost_model.py --alpha 5e-6     # another network latency assumption
-    python benchmarks/scaling/cost_model.py --strong-cells 3145728 --ppc 40 --weak-cells 24576
-    python benchmarks/scaling/cost_model.py --thick-layer    # the 3D thick layer with the multigrid Stokes solver
+    python -m benchmarks.scaling.cost_model                  # tables (markdown) + cost_model.png
+    python -m benchmarks.scaling.cost_model --alpha 5e-6     # another network latency assumption
+    python -m benchmarks.scaling.cost_model --strong-cells 3145728 --ppc 40 --weak-cells 24576
+    python -m benchmarks.scaling.cost_model --thick-layer    # the 3D thick layer with the multigrid Stokes solver
 
 Nothing here runs MPI: it evaluates formulas. Two designs are projected side by side:
 ``today`` (the code as of this commit) and ``fixed`` (the same code with the O(P) paths replaced by
@@ -21,6 +21,9 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmarks.harness import Benchmark
+
+BENCHMARK = Benchmark(__doc__)
 RANKS = [12, 24, 48, 96, 192, 384, 768, 1536, 3072, 6144, 12288]
 
 
@@ -263,7 +266,7 @@ def thick_layer_table(t: ThickLayer, sizes: tuple[int, ...] = (32, 64, 128),
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = BENCHMARK.parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--thick-layer", action="store_true",
                     help="only the projection of the 3D thick layer with the multigrid Stokes solver")
     ap.add_argument("--strong-cells", type=float, default=3 * 2 ** 20, help="ASSUMED strong-scaling cells")

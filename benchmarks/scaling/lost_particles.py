@@ -3,7 +3,7 @@ Rayleigh-Taylor setup (configs/vankeken_1a.yaml) for Euler and RK2 at CFL 1 and 
 
 Usage::
 
-    python benchmarks/scaling/lost_particles.py [--steps 1000] [--ranks 2] [--out DIR]
+    python -m benchmarks.scaling.lost_particles [--steps 1000] [--ranks 2] [--out DIR]
 
 Runs the four combinations with the CLI under mpirun, reads ``n_particles`` and ``n_lost`` from
 each statistics.csv and writes ``<out>/lost_particles.md``. The seed paper reports < 0.002 % per
@@ -12,24 +12,23 @@ each statistics.csv and writes ``<out>/lost_particles.md``. The seed paper repor
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "lost_particles", ranks=2)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--steps", type=int, default=1000)
-    parser.add_argument("--ranks", type=int, default=2)
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "lost_particles"))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     rows = ["| integrator | CFL | steps | end time | particles | lost | lost per 1000 steps |", "|---|---|---|---|---|---|---|"]
     for integrator in ("euler", "rk2"):

@@ -25,30 +25,28 @@ of ``--repeat`` rounds of ``--applications`` products.
 
 Usage (the machine otherwise idle)::
 
-    python benchmarks/scaling/matrix_free.py --sizes 8 16 24 32 [--out benchmarks/scaling/matrix_free.md]
+    python -m benchmarks.scaling.matrix_free --sizes 8 16 24 32 [--out benchmarks/scaling/matrix_free.md]
 """
 
 from __future__ import annotations
 
-import argparse
-import os
-import sys
 import time
 from pathlib import Path
 
+import basix
+import dolfinx
+import dolfinx.fem.petsc
+import numba
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from benchmarks.harness import Benchmark, Load
+from fembase.dolfinx_compat import cell_dofmap, function_space, geometry_dofmap
+
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-
-import basix  # noqa: E402
-import dolfinx  # noqa: E402
-import dolfinx.fem.petsc  # noqa: E402
-import numba  # noqa: E402
-import numpy as np  # noqa: E402
-import ufl  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-from petsc4py import PETSc  # noqa: E402
-
-from fembase.dolfinx_compat import cell_dofmap, function_space, geometry_dofmap  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out_option=True)
 
 QUADRATURE_DEGREE = 2
 """grad(P2) . grad(P2) is of degree 2 on an affine cell: the 4-point rule is exact."""
@@ -191,13 +189,12 @@ def measure(n: int, *, repeat: int, applications: int, eta: float = 1.0) -> list
 
 
 def main(argv: list[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[8, 16])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--applications", type=int, default=10)
-    parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
-    load = " ".join(f"{value:.2f}" for value in os.getloadavg())
+    load = " ".join(f"{value:.2f}" for value in Load.now().averages)
     lines = [
         "# The P2 velocity block's action: assembled (PETSc) against matrix-free (numba), one core",
         "",

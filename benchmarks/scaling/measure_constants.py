@@ -2,12 +2,12 @@
 
 Subcommands (each prints JSON lines; run from the repository root):
 
-    mpirun -n 2 python benchmarks/scaling/measure_constants.py mpi          # allreduce / neighbour / allgather latency
-    mpirun -n 2 python benchmarks/scaling/measure_constants.py migration    # Migrator.migrate: fixed + per-particle cost
-    python benchmarks/scaling/measure_constants.py loops                    # O(P) Python/numpy code paths at fake P
-    python benchmarks/scaling/measure_constants.py serialmesh               # rank-0 gather_cell_layout + create_mesh per cell
-    python benchmarks/scaling/measure_constants.py stokes                   # Stokes: 2D direct, 3D iterative, per dof
-    python benchmarks/scaling/measure_constants.py vortex -- <vortex.py args>   # vortex.py with Swarm.sort timed apart
+    mpirun -n 2 python -m benchmarks.scaling.measure_constants mpi          # allreduce / neighbour / allgather latency
+    mpirun -n 2 python -m benchmarks.scaling.measure_constants migration    # Migrator.migrate: fixed + per-particle cost
+    python -m benchmarks.scaling.measure_constants loops                    # O(P) Python/numpy code paths at fake P
+    python -m benchmarks.scaling.measure_constants serialmesh               # rank-0 gather_cell_layout + create_mesh per cell
+    python -m benchmarks.scaling.measure_constants stokes                   # Stokes: 2D direct, 3D iterative, per dof
+    python -m benchmarks.scaling.measure_constants vortex -- <vortex.py args>   # vortex.py with Swarm.sort timed apart
 
 Every number is wall time (``time.perf_counter``) on whatever the machine gives the process; the
 machine is shared, so repeat and take the best.
@@ -28,7 +28,6 @@ from mpi4py import MPI
 from fembase.dolfinx_compat import function_space, geometry_dofmap
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
 
 
 def _best(fn, repeat: int) -> float:
@@ -396,7 +395,6 @@ def advect3d(n: int = 12, per_cell: int = 20, steps: int = 10, integrator: str =
     advector.step(uh, uh, dt)  # warm-up (numba)
     Swarm.sort, Migrator.migrate = timed_sort, timed_migrate
     ev = rel = com = 0.0
-    changed = 0
     comm.Barrier()
     t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(steps):
@@ -437,8 +435,8 @@ def vortex(argv: list[str]) -> None:
         return out
 
     Swarm.sort, Migrator.migrate = timed_sort, timed_migrate
-    sys.argv = [str(ROOT / "benchmarks/performance/vortex.py"), *argv]
-    runpy.run_path(sys.argv[0], run_name="__main__")
+    sys.argv = ["vortex.py", *argv]
+    runpy.run_module("benchmarks.performance.vortex", run_name="__main__")
     comm = MPI.COMM_WORLD
     big = {k: [(n, t) for n, t in v if n > 20000] for k, v in calls.items()}
     rec = {k: {"calls": len(v), "seconds": sum(t for _, t in v), "mean_particles": float(np.mean([n for n, _ in v])) if v else 0}

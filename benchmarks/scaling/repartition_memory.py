@@ -1,9 +1,9 @@
 """Rank memory of a repartition: the gathered path (every cell through rank 0) against the
 distributed one (every rank hands ``create_mesh`` its own cells).
 
-    mpirun -n 2 python benchmarks/scaling/repartition_memory.py gathered --cells 224
-    mpirun -n 2 python benchmarks/scaling/repartition_memory.py distributed --cells 224
-    mpirun -n 2 python benchmarks/scaling/repartition_memory.py distributed --dim 3 --cells 26
+    mpirun -n 2 python -m benchmarks.scaling.repartition_memory gathered --cells 224
+    mpirun -n 2 python -m benchmarks.scaling.repartition_memory distributed --cells 224
+    mpirun -n 2 python -m benchmarks.scaling.repartition_memory distributed --dim 3 --cells 26
 
 A unit square of 2 n^2 triangles (or a unit cube of 6 n^3 tetrahedra) is redistributed to diagonal
 bands. Per rank it prints the
@@ -23,7 +23,10 @@ from mpi4py import MPI
 import dolfinx.mesh
 import ufl
 
+from benchmarks.harness import Benchmark
 from fembase.distribute import create_partitioned_mesh, gather_cell_layout, redistribute
+
+BENCHMARK = Benchmark(__doc__)
 
 
 def _status(key: str) -> int:
@@ -35,7 +38,7 @@ def _status(key: str) -> int:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = BENCHMARK.parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("path", choices=["gathered", "distributed"])
     parser.add_argument("--cells", type=int, default=224, help="cells per side n")
     parser.add_argument("--dim", type=int, choices=[2, 3], default=2)

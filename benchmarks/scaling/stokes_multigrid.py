@@ -15,7 +15,7 @@ it cleanly, as the peak only grows.
 
 Usage (the machine otherwise idle)::
 
-    mpirun -n 2 python benchmarks/scaling/stokes_multigrid.py --dim 3 --sizes 8 16 24 32 \\
+    mpirun -n 2 python -m benchmarks.scaling.stokes_multigrid --dim 3 --sizes 8 16 24 32 \\
         --contrast 1 1e4 --solvers multigrid iterative --header
 
 Prints one markdown row per size, contrast and solver (``--header`` first prints the header).
@@ -23,26 +23,26 @@ Prints one markdown row per size, contrast and solver (``--header`` first prints
 
 from __future__ import annotations
 
-import argparse
 import gc
 import os
 import resource
 import sys
 from pathlib import Path
 
+import numpy as np
+from mpi4py import MPI
+
+import dolfinx
+
+from benchmarks.harness import Benchmark
+from convection.geometry.boundary import VelocityBC
+from convection.geometry.box import SIDES_2D, SIDES_3D, BoxDomain, BoxSpec
+from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.solvers.stokes.solver import StokesSolver
+from fembase.dolfinx_compat import function_space
+
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
-import dolfinx  # noqa: E402
-
-from convection.geometry.boundary import VelocityBC  # noqa: E402
-from convection.geometry.box import SIDES_2D, SIDES_3D, BoxDomain, BoxSpec  # noqa: E402
-from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw  # noqa: E402
-from convection.solvers.stokes.solver import StokesSolver  # noqa: E402
-from fembase.dolfinx_compat import function_space  # noqa: E402
+BENCHMARK = Benchmark(__doc__)
 
 HEADER = ("| dim | cells per side | Stokes unknowns | viscosity contrast | solver | levels | iterations | "
           "setup + solve [s] | assembly [s] | memory [bytes / unknown] |\n|---|---|---|---|---|---|---|---|---|---|")
@@ -86,7 +86,7 @@ def measure(comm: MPI.Comm, dim: int, n: int, contrast: float, solver: str,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--dim", type=int, default=3)
     parser.add_argument("--sizes", type=int, nargs="+", default=[8, 16])
     parser.add_argument("--contrast", type=float, nargs="+", default=[1.0, 1e4])

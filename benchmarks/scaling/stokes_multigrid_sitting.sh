@@ -17,7 +17,7 @@ logs="$here/benchmarks/scaling/log/stokes_multigrid"
 mkdir -p "$logs"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 python="$here/.venv/bin/python"
-script="$here/benchmarks/scaling/stokes_multigrid.py"
+cd "$here"  # the script runs as a module of the benchmarks package
 sizes_3d="${SIZES_3D:-8 16 24 32}"
 sizes_2d="${SIZES_2D:-128 256 512}"
 amg_max_3d="${AMG_MAX_3D:-24}"
@@ -27,7 +27,7 @@ load_before=$(cut -d' ' -f1-3 /proc/loadavg)
 rows="$logs/rows.md"
 : > "$rows"
 row() {  # row DIM N CONTRAST SOLVER
-  mpirun -n 2 "$python" "$script" --dim "$1" --sizes "$2" --contrast "$3" --solvers "$4" 2>>"$logs/stderr.log" \
+  mpirun -n 2 "$python" -m benchmarks.scaling.stokes_multigrid --dim "$1" --sizes "$2" --contrast "$3" --solvers "$4" 2>>"$logs/stderr.log" \
     | grep '^| ' | tee -a "$rows"
 }
 for dim in 3 2; do

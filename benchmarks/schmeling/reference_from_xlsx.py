@@ -7,7 +7,7 @@ column triple per code and viscosity mixing; the sheet "zslabmodel5" holds FDCON
 geometric mixing. This script reads the spreadsheet with the standard library only (an .xlsx is
 a zip of XML) and writes one row per (code, time)::
 
-    python benchmarks/schmeling/reference_from_xlsx.py zslab-case1-best-reformatted.xlsx
+    python -m benchmarks.schmeling.reference_from_xlsx zslab-case1-best-reformatted.xlsx
 
 The result is committed; the script says how it was made.
 """

@@ -15,8 +15,8 @@ geometric mixing (and, for context, arithmetic/harmonic mixing and LAPEX2D).
 
 Usage::
 
-    python benchmarks/schmeling/run.py [--cells 120x30 ...] [--end 60] [--ranks 2] [--out DIR]
-    python benchmarks/schmeling/run.py --collect RUN_DIR [RUN_DIR ...] [--out DIR]
+    python -m benchmarks.schmeling.run [--cells 120x30 ...] [--end 60] [--ranks 2] [--out DIR]
+    python -m benchmarks.schmeling.run --collect RUN_DIR [RUN_DIR ...] [--out DIR]
 
 Each run writes ``<out>/run_<cells>/``; ``<out>/results.md`` gets the tip depth every 10 Myr beside
 the geometric-mixing codes and the times at which the tip passes 400 and 600 km, and
@@ -32,13 +32,14 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from benchmarks.common import read_reference, start_cli_run
+from benchmarks.harness import Benchmark
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-
-from benchmarks.common import read_reference, start_cli_run  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=HERE, ranks=2)
 
 AIR = 50.0
 """Sticky-air thickness [km]: the undisturbed surface lies this far below the box's top."""
@@ -172,13 +173,12 @@ def _picture(png: Path, ours: dict[str, tuple], published: dict[str, tuple]) -> 
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cells", nargs="+", default=["120x30"], help="meshes, NXxNY (default 120x30: 25 km cells)")
     parser.add_argument("--end", type=float, default=60.0, help="end time [Myr]")
-    parser.add_argument("--ranks", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=HERE)
     parser.add_argument("--collect", nargs="+", type=Path, help="only tabulate these run directories")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     if args.collect:
         runs = args.collect
     else:

@@ -22,10 +22,10 @@ delta cases, each cell taking its side of ``r'``). Level ``i`` meshes with gmsh 
 
 Usage (ranks via mpirun; prints one JSON document on rank 0)::
 
-    python benchmarks/shell/analytical.py --kind smooth_free_slip --dim 2 --n 2 --k 3 --levels 0 1 2 3
-    mpirun -n 2 python benchmarks/shell/analytical.py --kind smooth_zero_slip --dim 2 --levels 0 1 2
-    python benchmarks/shell/analytical.py --kind smooth_free_slip --dim 3 --n 2 --m 1 --levels 0 1 --resolution 0.5
-    python benchmarks/shell/analytical.py --kind smooth_free_slip --adaptive 3 --resolution 0.4
+    python -m benchmarks.shell.analytical --kind smooth_free_slip --dim 2 --n 2 --k 3 --levels 0 1 2 3
+    mpirun -n 2 python -m benchmarks.shell.analytical --kind smooth_zero_slip --dim 2 --levels 0 1 2
+    python -m benchmarks.shell.analytical --kind smooth_free_slip --dim 3 --n 2 --m 1 --levels 0 1 --resolution 0.5
+    python -m benchmarks.shell.analytical --kind smooth_free_slip --adaptive 3 --resolution 0.4
 
 ``--adaptive ROUNDS``: the meshes of a :class:`convection.adapt.hierarchy.MeshHierarchy` with the shell
 manifold (:mod:`fembase.manifold`; for the delta cases it also keeps the surface ``r'`` the force
@@ -37,9 +37,7 @@ base uniformly ``--levels`` times (the adaptive code path's meshes, uniformly re
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -51,18 +49,18 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.harness import Benchmark
+from convection.adapt.adaptivity import AdaptivitySettings, kelly_indicator, wanted_levels
 
-from convection.adapt.adaptivity import AdaptivitySettings, kelly_indicator, wanted_levels  # noqa: E402
+from convection.adapt.hierarchy import MeshHierarchy
+from convection.physics.approximation import BoussinesqApproximation
+from convection.geometry.boundary import VelocityBC
+from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_domain
+from convection.solvers.stokes.solver import StokesSolver
+from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells
+from fembase.manifold import ShellManifold
 
-from convection.adapt.hierarchy import MeshHierarchy  # noqa: E402
-from convection.physics.approximation import BoussinesqApproximation  # noqa: E402
-from convection.geometry.boundary import VelocityBC  # noqa: E402
-from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_domain  # noqa: E402
-from convection.solvers.stokes.solver import StokesSolver  # noqa: E402
-from fembase.dolfinx_compat import atan2, function_space, interpolate_on_cells  # noqa: E402
-from fembase.manifold import ShellManifold  # noqa: E402
-
+BENCHMARK = Benchmark(__doc__)
 KINDS = ("smooth_free_slip", "smooth_zero_slip", "delta_free_slip", "delta_zero_slip")
 R_INNER, R_OUTER, R_DELTA = 1.22, 2.22, 1.72
 
@@ -288,7 +286,7 @@ def fitted_order(h: list[float], errors: list[float]) -> float | None:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kind", choices=KINDS, default="smooth_free_slip")
     parser.add_argument("--dim", type=int, choices=(2, 3), default=2)
     parser.add_argument("--n", type=int, default=2, help="wave number (2D) or harmonic degree l (3D)")

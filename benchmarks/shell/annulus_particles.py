@@ -13,24 +13,22 @@ for ``--steps`` steps on each rank count, writing the particles every ``--every`
 
 Prints a JSON summary and writes ``results_annulus_particles.md``.
 
-Usage: ``python benchmarks/shell/annulus_particles.py --steps 100 --every 20 --ranks 1 2``
+Usage: ``python -m benchmarks.shell.annulus_particles --steps 100 --every 20 --ranks 1 2``
 """
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-sys.path.insert(0, str(HERE.parent))
+from benchmarks.common import start_cli_run
+from benchmarks.harness import Benchmark
+from convection.io.pictures import read_statistics
 
-from common import start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
+BENCHMARK = Benchmark(__doc__, ranks=(1, 2), overrides=True)
 
 RANK_DEPENDENT = ("wall_time", "cell_imbalance", "particle_imbalance")
 CONFIG = HERE.parents[1] / "configs" / "annulus_layer.yaml"
@@ -52,16 +50,15 @@ def particle_radii(directory: Path) -> dict[int, tuple[np.ndarray, np.ndarray]]:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=100)
     parser.add_argument("--every", type=int, default=20)
-    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--output", type=Path, default=Path("output/shell_annulus_particles"))
-    parser.add_argument("--set", dest="overrides", action="append", default=[])
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     radii = (1.22, 2.22)
     overrides = [f"time.max_steps={args.steps}", "time.end=1e9", f"particles.output.every_steps={args.every}",
-                 "particles.output.properties=[composition]", *args.overrides]
+                 "particles.output.properties=[composition]", *args.set]
     runs = {}
     for ranks in args.ranks:
         out = args.output / f"np{ranks}"

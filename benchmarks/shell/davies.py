@@ -19,9 +19,9 @@ The Nusselt numbers are the heat flow through a surface over the conductive heat
 
 Usage::
 
-    python benchmarks/shell/davies.py --cases 2.1 1.1 --resolutions 0.1 0.07 0.05
-    python benchmarks/shell/davies.py --cases 2.1 --resolutions 0.14 --adaptive 1   # adaptive mesh
-    python benchmarks/shell/davies.py --table          # the table from measured/davies.json only
+    python -m benchmarks.shell.davies --cases 2.1 1.1 --resolutions 0.1 0.07 0.05
+    python -m benchmarks.shell.davies --cases 2.1 --resolutions 0.14 --adaptive 1   # adaptive mesh
+    python -m benchmarks.shell.davies --table          # the table from measured/davies.json only
 
 Writes ``measured/davies.json`` (merged with earlier runs: one record per case and resolution) and
 prints the markdown table of ``README.md``.
@@ -29,7 +29,6 @@ prints the markdown table of ``README.md``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -37,12 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-sys.path.insert(0, str(HERE.parent))
+from benchmarks.common import start_cli_run
+from benchmarks.harness import Benchmark
+from convection.io.pictures import read_statistics
 
-from common import start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
+BENCHMARK = Benchmark(__doc__, ranks=1, overrides=True)
 
 CONFIG = HERE.parents[1] / "configs" / "annulus_davies.yaml"
 MEASURED = HERE / "measured" / "davies.json"
@@ -136,21 +135,20 @@ def table(records: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", nargs="+", default=["2.1"], choices=sorted(CASES))
     parser.add_argument("--resolutions", type=float, nargs="+", default=[0.1, 0.07])
-    parser.add_argument("--ranks", type=int, default=1)
     parser.add_argument("--output", type=Path, default=Path("output/shell_davies"))
-    parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--adaptive", type=int, default=0, metavar="LEVELS",
                         help="adapt the mesh by the temperature, up to LEVELS refinements of the base")
     parser.add_argument("--table", action="store_true", help="only print the table of measured/davies.json")
     args = parser.parse_args(argv)
     records = load_measured()
     if not args.table:
+        BENCHMARK.log_load("start")
         for case in args.cases:
             for resolution in args.resolutions:
-                record = run_case(case, resolution, output=args.output, ranks=args.ranks, extra=args.overrides,
+                record = run_case(case, resolution, output=args.output, ranks=args.ranks, extra=args.set,
                                   adaptive=args.adaptive)
                 print(json.dumps(record), flush=True)
                 # measured again: another run of this script may have added a record meanwhile

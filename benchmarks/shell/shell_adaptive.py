@@ -4,8 +4,8 @@ weighted repartition, and its pictures.
 
 Usage::
 
-    python benchmarks/shell/shell_adaptive.py [--ranks 2] [--steps 40] [--reuse]   # the comparison
-    python benchmarks/shell/shell_adaptive.py --picture RUN_DIR              # the seed's figure 5
+    python -m benchmarks.shell.shell_adaptive [--ranks 2] [--steps 40] [--reuse]   # the comparison
+    python -m benchmarks.shell.shell_adaptive --picture RUN_DIR              # the seed's figure 5
 
 The comparison runs the config on ``--ranks`` ranks for ``--steps`` steps in five ways:
 
@@ -38,7 +38,6 @@ initial radius (right).
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 import subprocess
@@ -47,12 +46,13 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
-sys.path.insert(0, str(HERE.parent))
+from benchmarks.common import ROOT, start_cli_run
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.io.pictures import read_statistics
 
-from common import ROOT, start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "shell_adaptive", ranks=2, overrides=True,
+                      helps={"set": "extra config override key=value"})
 
 CONFIG = ROOT / "configs" / "shell_adaptive.yaml"
 VARIANTS = {
@@ -143,11 +143,8 @@ def picture(run_dir: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--ranks", type=int, default=2)
+    parser = BENCHMARK.parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=40)
-    parser.add_argument("--out", type=Path, default=ROOT / "output" / "benchmarks" / "shell_adaptive")
-    parser.add_argument("--set", action="append", default=[], help="extra config override key=value")
     parser.add_argument("--reuse", action="store_true",
                         help="keep the variants that already have a finished run in --out (run only the others)")
     parser.add_argument("--picture", type=Path, default=None, metavar="RUN_DIR", help="draw a finished run")
@@ -155,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.picture is not None:
         picture(args.picture)
         return 0
+    BENCHMARK.log_load("start")
     args.out.mkdir(parents=True, exist_ok=True)
     summary = compare(args.out, ranks=args.ranks, steps=args.steps, extra=args.set, reuse=args.reuse)
     print((HERE / "imbalance.md").read_text())

@@ -1,6 +1,6 @@
 """Markdown tables of the JSON results of ``analytical.py`` (``measured/*.json``), for the README.
 
-Usage: ``python benchmarks/shell/tables.py [measured/*.json ...]`` (default: every file in measured/).
+Usage: ``python -m benchmarks.shell.tables [measured/*.json ...]`` (default: every file in measured/).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ mantle's resistance.
 
 Usage::
 
-    python benchmarks/sinking_block/run.py [--cells 64 128] [--out DIR]
+    python -m benchmarks.sinking_block.run [--cells 64 128] [--out DIR]
 
 Writes ``<out>/results.md`` (a table per resolution, and the change of the scaled velocity between
 eta2/eta1 = 1e3 and 1e6) and ``<out>/results.png`` (scaled velocity against eta*); the committed
@@ -20,21 +20,21 @@ copies are beside this script.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
+from mpi4py import MPI
+
+from benchmarks.harness import Benchmark
+from convection import build_model, load_config
+from convection.config.units import scaling_of
+from convection.postprocess import create_postprocessors
+from convection.postprocess.base import DiagnosticsSettings
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from mpi4py import MPI  # noqa: E402
-
-from convection import build_model, load_config  # noqa: E402
-from convection.config.units import scaling_of  # noqa: E402
-from convection.postprocess import create_postprocessors  # noqa: E402
-from convection.postprocess.base import DiagnosticsSettings  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=HERE)
 
 ETA1 = 1e21
 RATIOS = [10.0**k for k in range(-4, 7)]
@@ -133,10 +133,10 @@ def _picture(path: Path, results: dict[int, list[dict[str, float]]]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--cells", type=int, nargs="+", default=[64, 128])
-    parser.add_argument("--out", default=str(HERE))
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {cells: table(cells) for cells in args.cells}

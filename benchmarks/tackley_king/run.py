@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/tackley_king/run.py --case 2d 3d [--quick] [--ranks 1] [--jobs 2] [--end 0.02]
+    python -m benchmarks.tackley_king.run --case 2d 3d [--quick] [--ranks 1] [--jobs 2] [--end 0.02]
         [--series 40x10 80x10] [--time-limit 3900] [--reuse] [--out DIR] [--results DIR]
 
 Runs ``configs/thick_layer_<case>.yaml`` with the CLI: in 2D a series of uniform meshes
@@ -25,19 +25,19 @@ results go to ``--out``, not to the benchmark folder.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
+from collections.abc import Sequence
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
+from benchmarks.common import ROOT, read_reference, sample, start_cli_run
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.io.pictures import read_statistics
 
-from benchmarks.common import ROOT, read_reference, sample, start_cli_run  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 RB = 1.0e6
 DT_FACTOR = 0.25
@@ -48,6 +48,9 @@ DEFAULT_SERIES = {
     "3d": ("20x10",),
 }
 QUICK_SERIES = {"2d": ("20x5", "20x10"), "3d": ("6x5",)}
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "tackley_king", results_option=True, ranks=1, quick="",
+                      helps={"ranks": "MPI ranks per run",
+                             "results": "folder of the tables and plots (default: this folder; --out with --quick)"})
 QUICK_END = {"2d": 0.003, "3d": 0.0003}
 
 
@@ -58,7 +61,7 @@ class Member(NamedTuple):
     ppc: int
 
     @classmethod
-    def parse(cls, text: str) -> "Member":
+    def parse(cls, text: str) -> Member:
         n, p = text.lower().split("x")
         return cls(int(n), int(p))
 
@@ -182,20 +185,16 @@ def plot(case: str, results: dict[Member, dict[str, np.ndarray]], key: str, ylab
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--case", nargs="+", default=["2d"], choices=["2d", "3d"])
+    parser = BENCHMARK.parser(cases=DEFAULT_SERIES, default_cases=["2d"])
     parser.add_argument("--series", nargs="+", default=None, help="members NxP (N cells per side, P particles per cell)")
-    parser.add_argument("--ranks", type=int, default=1, help="MPI ranks per run")
     parser.add_argument("--jobs", type=int, default=1, help="runs at the same time")
-    parser.add_argument("--quick", action="store_true")
     parser.add_argument("--end", type=float, default=None, help="end time (default: the config's, 0.02)")
     parser.add_argument("--time-limit", type=float, default=None, help="wall seconds per run (stops cleanly)")
     parser.add_argument("--reuse", action="store_true", help="read runs that already finished instead of rerunning")
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "tackley_king"))
-    parser.add_argument("--results", default=None, help="folder of the tables and plots (default: this folder; --out with --quick)")
     args = parser.parse_args(argv)
-    out = Path(args.out)
-    results_dir = Path(args.results) if args.results else (out if args.quick else HERE)
+    BENCHMARK.log_load("start")
+    out = args.out
+    results_dir = args.results or (out if args.quick else HERE)
     results_dir.mkdir(parents=True, exist_ok=True)
     for case in args.case:
         names = args.series or (QUICK_SERIES if args.quick else DEFAULT_SERIES)[case]
@@ -203,12 +202,12 @@ def main(argv: list[str] | None = None) -> int:
         results = run_series(case, [Member.parse(n) for n in names], out / case, ranks=args.ranks, jobs=args.jobs,
                              end=end, time_limit=args.time_limit, reuse=args.reuse)
         text = table(case, results, out / case)
-        (results_dir / f"results_{case}.md").write_text(text)
-        print(text)
+        BENCHMARK.publish(results_dir / f"results_{case}.md", text)
         plot(case, results, "entrainment", "e = dense volume above z = 0.5 / initial dense volume",
              results_dir / f"entrainment_{case}.png")
         plot(case, results, "vrms", "vrms", results_dir / f"vrms_{case}.png")
-        print(f"wrote {results_dir}/results_{case}.md, entrainment_{case}.png, vrms_{case}.png")
+        print(f"wrote {results_dir}/entrainment_{case}.png, vrms_{case}.png")
+    BENCHMARK.log_load("end")
     return 0
 
 

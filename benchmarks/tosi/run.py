@@ -2,10 +2,10 @@
 
 Usage::
 
-    python benchmarks/tosi/run.py --case N [--cells 48] [--ranks 1] [--method newton] [--out DIR]
-    python benchmarks/tosi/run.py --methods [--cells 24] [--steps 40]    # Picard vs Newton per step
-    python benchmarks/tosi/run.py --cost [--cells 32]                     # case 2 on 1 and 2 ranks
-    python benchmarks/tosi/run.py --table                                 # results.md, results.png
+    python -m benchmarks.tosi.run --case N [--cells 48] [--ranks 1] [--method newton] [--out DIR]
+    python -m benchmarks.tosi.run --methods [--cells 24] [--steps 40]    # Picard vs Newton per step
+    python -m benchmarks.tosi.run --cost [--cells 32]                     # case 2 on 1 and 2 ranks
+    python -m benchmarks.tosi.run --table                                 # results.md, results.png
 
 ``--case N`` runs case N with the CLI to steady state (case 5a: to ``--end``, default 6, and the
 last full period of its oscillation is measured) and prints one JSON line last: the steady-state (5a: last-cycle
@@ -41,7 +41,6 @@ residual, MUMPS factorisation and solve) and the machine's load before and after
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
@@ -50,12 +49,16 @@ import sys
 import time
 from pathlib import Path
 
+from benchmarks.common import iterations_figure
+from benchmarks.harness import OUTPUT, Benchmark
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "tosi", results_option=True, ranks=1, overrides=True,
+                      helps={"set": "extra config override key=value", "out": "run folders",
+                             "results": "where case<N>.json goes (default: data/<cells>x<cells>; --table: data)"})
 
 GAMMA_T = math.log(1e5)
 CASES = {  # case -> (Delta eta_z, sigma_y or None)
@@ -266,43 +269,25 @@ def methods(out: Path, *, cells: int, steps: int, ranks: int) -> None:
     lines += ["", f"Load average at the end: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; the wall times are what "
               "these runs took, not a timing measurement."]
     (HERE / "methods.md").write_text("\n".join(lines) + "\n")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for method in ("picard", "newton"):
-        ax.plot(range(len(counts[method])), counts[method], "o-", ms=3, label=method)
-    ax.set_xlabel("time step")
-    ax.set_ylabel("nonlinear iterations to |F|/|b| <= 1e-8")
-    ax.set_yscale("log")
-    ax.legend()
-    ax.set_title(f"Tosi case 2, {cells}x{cells}")
-    fig.tight_layout()
-    fig.savefig(HERE / "methods.png", dpi=110)
+    iterations_figure(HERE / "methods.png", counts, title=f"Tosi case 2, {cells}x{cells}")
     print(json.dumps({m: sum(counts[m]) for m in ("picard", "newton")}))
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--case", choices=list(CASES))
     parser.add_argument("--cells", type=int, default=48)
-    parser.add_argument("--ranks", type=int, default=1)
     parser.add_argument("--method", default="newton", choices=["newton", "picard"])
     parser.add_argument("--end", type=float, default=None, help="end time (default: 4; 5a: 6)")
     parser.add_argument("--cfl", type=float, default=16.0)
-    parser.add_argument("--set", action="append", default=[], help="extra config override key=value")
     parser.add_argument("--methods", action="store_true", help="Picard vs Newton iterations per step (case 2)")
     parser.add_argument("--cost", action="store_true", help="case 2 to steady state on 1 and 2 ranks (cost.md)")
     parser.add_argument("--repeat", type=int, default=0, help="--cost: time the first --steps steps this often")
     parser.add_argument("--no-steady", action="store_true", help="--cost: only the --repeat timings")
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--table", action="store_true", help="write results.md and results.png")
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "tosi"), help="run folders")
-    parser.add_argument("--results", default=None,
-                        help="where case<N>.json goes (default: data/<cells>x<cells>; --table: data)")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.methods:

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/vanKeken/convergence.py [--case 1a|1b|1c] [--cells 16 24 32] [--ppc 10 20 40]
+    python -m benchmarks.vanKeken.convergence [--case 1a|1b|1c] [--cells 16 24 32] [--ppc 10 20 40]
         [--zip] [--min-ppc M ...] [--max-level L] [--cfl C ...] [--end T] [--fit-half-width W]
         [--ranks 2] [--out DIR] [--no-run | --skip-existing] [--name NAME]
         [--publish [--section TITLE]] [--publish-plot] [--set KEY=VALUE ...]
@@ -37,7 +37,6 @@ Wall times depend on the load.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -50,15 +49,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parents[1]))
+from convection.config.loader import load_config
+from convection.io.pictures import read_statistics
+from benchmarks.harness import Benchmark
+from benchmarks.vanKeken.run import CONFIGS, ROOT, fitted_peak, peak, reference, run_case
 
-from convection.config.loader import load_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
-from run import CONFIGS, ROOT, fitted_peak, peak, reference, run_case  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 CASES = ("1a", "1b", "1c")
+BENCHMARK = Benchmark(__doc__, ranks=2, overrides=True, no_run="")
 DEFAULT_END = {"1a": 300.0, "1b": 120.0, "1c": 80.0}
 DEFAULT_HALF_WIDTH = {"1a": 20.0, "1b": 2.0, "1c": 2.0}
 
@@ -261,7 +260,7 @@ def _finished(folder: Path, end: float) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = BENCHMARK.parser()
     parser.add_argument("--case", default="1a", choices=CASES)
     parser.add_argument("--cells", type=int, nargs="+", default=[16, 24, 32])
     parser.add_argument("--ppc", type=int, nargs="+", default=[10, 20, 40])
@@ -273,9 +272,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="CFL number (default: the config's; one per run with --zip)")
     parser.add_argument("--end", type=float, default=None, help="end time (default: just past the first peak)")
     parser.add_argument("--fit-half-width", type=float, default=None, help="time window of the peak fit (each side)")
-    parser.add_argument("--ranks", type=int, default=2)
     parser.add_argument("--out", default=None, help="default: output/benchmarks/vanKeken/convergence[_<case>]")
-    parser.add_argument("--no-run", action="store_true")
     parser.add_argument("--skip-existing", action="store_true",
                         help="re-measure runs whose statistics.csv already reaches --end instead of running them")
     parser.add_argument("--name", default=None, help="basename of the table and plot (default: convergence[_<case>])")
@@ -284,8 +281,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="with --publish: write the table as the section '## SECTION' of "
                              "benchmarks/vanKeken/convergence[_<case>].md (replacing a section of that title)")
     parser.add_argument("--publish-plot", action="store_true", help="copy the plot into benchmarks/vanKeken/")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="extra config override")
     args = parser.parse_args(argv)
+    BENCHMARK.log_load("start")
     case = args.case
     suffix = "" if case == "1a" else f"_{case}"
     out = Path(args.out or ROOT / "output" / "benchmarks" / "vanKeken" / f"convergence{suffix}")

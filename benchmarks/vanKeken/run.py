@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/vanKeken/run.py [--case 1a 1b 1c 2] [--ranks 2] [--quick] [--end T] [--out DIR] [--no-run]
+    python -m benchmarks.vanKeken.run [--case 1a 1b 1c 2] [--ranks 2] [--quick] [--end T] [--out DIR] [--no-run]
 
 Runs ``configs/vankeken_<case>.yaml`` (case 2: ``configs/vankeken_case2.yaml``) with the CLI under
 mpirun, then from each statistics.csv:
@@ -24,7 +24,6 @@ re-measures existing ``<out>/<case>/statistics.csv`` files. The default end time
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import sys
@@ -33,16 +32,20 @@ from typing import NamedTuple
 
 import numpy as np
 
+from benchmarks.harness import OUTPUT, Benchmark, Case, cases
+from convection.launch import run_config
+from convection.io.pictures import read_statistics
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT))
-
-from convection.launch import run_config  # noqa: E402
-from convection.io.pictures import read_statistics  # noqa: E402
 
 QUICK = ["mesh.cells=[16,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=10"]
 QUICK_2 = ["mesh.cells=[32,16]", "adaptivity.max_level=1", "particles.generator.particles_per_cell=10"]
-CONFIGS = {"1a": "vankeken_1a.yaml", "1b": "vankeken_1b.yaml", "1c": "vankeken_1c.yaml", "2": "vankeken_case2.yaml"}
+CASES = cases(Case("1a", "vankeken_1a.yaml"), Case("1b", "vankeken_1b.yaml"), Case("1c", "vankeken_1c.yaml"),
+              Case("2", "vankeken_case2.yaml"))
+CONFIGS = {name: case.config for name, case in CASES.items()}
+BENCHMARK = Benchmark(__doc__, out=OUTPUT / "vanKeken", ranks=2, quick="", overrides=True,
+                      no_run="only measure existing <out>/<case>/statistics.csv")
 DEFAULT_END = {"1a": 300.0, "1b": 300.0, "1c": 300.0, "2": 0.02}
 ENTRAINMENT_TIMES_1 = (100.0, 200.0, 300.0, 500.0, 1000.0, 2000.0)
 SECOND_PEAK_WINDOW_1 = (500.0, 1500.0)
@@ -276,17 +279,12 @@ def table_case2(stats: dict[str, np.ndarray]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--case", nargs="+", default=["1a"], choices=sorted(CONFIGS))
-    parser.add_argument("--ranks", type=int, default=2)
-    parser.add_argument("--quick", action="store_true")
+    parser = BENCHMARK.parser(cases=CASES, default_cases=["1a"])
     parser.add_argument("--end", type=float, default=None, help="end time (default: 300 for 1x, 0.02 for 2)")
-    parser.add_argument("--out", default=str(ROOT / "output" / "benchmarks" / "vanKeken"))
-    parser.add_argument("--no-run", action="store_true", help="only measure existing <out>/<case>/statistics.csv")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="extra config override")
     args = parser.parse_args(argv)
-    out = Path(args.out)
+    out = args.out
     out.mkdir(parents=True, exist_ok=True)
+    BENCHMARK.log_load("start")
     curves = {}
     for case in args.case:
         if args.no_run:
@@ -298,16 +296,15 @@ def main(argv: list[str] | None = None) -> int:
     rt_cases = {c: s for c, s in curves.items() if c != "2"}
     if rt_cases:
         table = table_case1(rt_cases)
-        (out / "results.md").write_text(table)
-        print(table)
+        BENCHMARK.publish(out / "results.md", table)
         _plot_case1(rt_cases, out / "vrms.png")
-        print(f"wrote {out / 'results.md'} and {out / 'vrms.png'}")
+        print(f"wrote {out / 'vrms.png'}")
     if "2" in curves:
         table = table_case2(curves["2"])
-        (out / "results_2.md").write_text(table)
-        print(table)
+        BENCHMARK.publish(out / "results_2.md", table)
         _plot_case2(curves["2"], out / "case2.png")
-        print(f"wrote {out / 'results_2.md'} and {out / 'case2.png'}")
+        print(f"wrote {out / 'case2.png'}")
+    BENCHMARK.log_load("end")
     return 0
 
 

@@ -7,18 +7,13 @@ the test was written stand in the comments."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
-
-from benchmarks.rigid_shear.report import convergence, series  # noqa: E402
-from benchmarks.rigid_shear.rigid_shear import parse, sweep  # noqa: E402
+from benchmarks.rigid_shear.report import convergence, series
+from benchmarks.rigid_shear.rigid_shear import parse, sweep
 
 CELLS = ("4", "8", "16")
 

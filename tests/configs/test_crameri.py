@@ -4,19 +4,9 @@ rate (the full-size runs and their errors: benchmarks/crameri/README.md)."""
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
 
-from _runs import CONFIGS
-
-
-def _benchmark():
-    spec = importlib.util.spec_from_file_location("crameri_run", CONFIGS.parent / "benchmarks" / "crameri" / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture
@@ -25,7 +15,9 @@ def bench():
     registry (and the config reference made from it) is the package's again."""
     from convection.postprocess import POSTPROCESSORS
 
-    yield _benchmark()
+    from benchmarks.crameri import run
+
+    yield run
     POSTPROCESSORS.pop("cosine_topography", None)
 
 

@@ -7,7 +7,6 @@ mesh from the checkpoint)."""
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
 
 import numpy as np
@@ -23,20 +22,14 @@ SMALL = ["mesh.cells=[56,14]", "time.dt_max=1 kyr", "time.max_steps=8", "output.
          "particles.population.max_per_cell=16"]
 
 
-def _benchmark():
-    path = CONFIGS.parent / "benchmarks" / "free_surface" / "crameri_case1.py"
-    spec = importlib.util.spec_from_file_location("crameri_free_surface", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture
 def bench():
     """The benchmark's module; its postprocessor is removed afterwards (the registry is the package's again)."""
     from convection.postprocess import POSTPROCESSORS
 
-    yield _benchmark()
+    from benchmarks.free_surface import crameri_case1
+
+    yield crameri_case1
     POSTPROCESSORS.pop("cosine_surface", None)
     POSTPROCESSORS.pop("cosine_topography", None)
 

@@ -8,20 +8,15 @@
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 
 import numpy as np
 import pytest
 
-from _runs import CONFIGS
 
 
 def _script(name: str):
-    path = CONFIGS.parent / "benchmarks" / "free_surface" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(f"free_surface_{name}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return importlib.import_module(f"benchmarks.free_surface.{name}")
 
 
 def test_kaus_stabilisation_keeps_large_steps_stable(tmp_path):

@@ -98,7 +98,7 @@ def test_killed_run_resumes_bit_for_bit(runs, tmp_path):
 
 
 def test_benchmark_script_prints_its_json_line(tmp_path):
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "localisation" / "run.py"), "--methods",
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.localisation.run", "--methods",
                            "--cells", "16x4", "--steps", "3", "--out", str(tmp_path), "--results", str(tmp_path)],
                           cwd=ROOT, env=env(), capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr

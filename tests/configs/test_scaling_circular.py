@@ -3,8 +3,6 @@ flow and its Stokes solve, and short collective runs (annulus, spherical shell) 
 particle."""
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,9 +12,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks" / "scaling"))
-
-import circular  # noqa: E402
+from benchmarks.scaling import circular
 
 from fembase.dolfinx_compat import geometry_dofmap
 from _helpers import needs_hypre

@@ -63,21 +63,12 @@ def test_one_and_two_ranks_agree_and_resume_continues(tmp_path):
     assert [r["step"] for r in rows(two)] == [str(i) for i in range(10)]
 
 
-def _benchmark():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("sinking_block_run", CONFIGS.parent / "benchmarks" / "sinking_block"
-                                                  / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_benchmark_at_ci_size():
     """benchmarks/sinking_block/run.py's measurement at 32 x 32 cells: the scaled velocity
     |v| eta1 / delta_rho is the same for every delta_rho (a linear problem), grows as the block
     weakens, and no longer depends on eta2 for a stiff block (< 1 % from eta2/eta1 = 1e3 to 1e6)."""
-    bench = _benchmark()
+    from benchmarks.sinking_block import run as bench
+
     scaled = {(ratio, rho): bench.scaled(bench.block_velocity(32, rho, ratio), rho)
               for ratio in (1e-2, 1.0, 1e3, 1e6) for rho in (8.0, 128.0)}
     for ratio in (1e-2, 1.0, 1e3, 1e6):

@@ -12,6 +12,8 @@ import pytest
 
 from _runs import CONFIGS, run_cli, sets
 
+from benchmarks.schmeling import run as bench
+
 SMALL = ["mesh.cells=[120,30]", "particles.generator.particles_per_cell=8", "time.max_steps=4",
          "output.progress=lines", "output.progress_every=1", "output.fields_every=0"]
 
@@ -33,27 +35,15 @@ def test_subduction_in_units(tmp_path):
     assert all(float(r["vup_lithosphere [cm/yr]"]) < 0.0 for r in rows)  # the plate and slab sink on average
     assert float(rows[0]["topography_max [km]"]) == pytest.approx(0.0, abs=1e-6)  # the surface starts flat
     # the benchmark's table and picture from this run (benchmarks/schmeling/run.py --collect)
-    bench = _benchmark()
     text = bench.write(tmp_path / "bench", [out])
     ours = next(line for line in text.splitlines() if line.startswith("| this project 120x30 |"))
     assert ours.split("|")[2].strip() == "-"  # 4 steps do not reach 10 Myr
     assert (tmp_path / "bench" / "results.png").stat().st_size > 10_000
 
 
-def _benchmark():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("schmeling_run",
-                                                  CONFIGS.parent / "benchmarks" / "schmeling" / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_published_curves():
     """reference.csv holds the paper's five geometric-mixing curves: each starts at the initial 200 km
     and they reach 400 km between 35 and 42 Myr (Schmeling et al. 2008, Fig. 5)."""
-    bench = _benchmark()
     curves = {name: c for name, c in bench.reference().items() if name.endswith("geom")}
     assert len(curves) == 5
     for name, curve in curves.items():

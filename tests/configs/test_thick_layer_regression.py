@@ -10,7 +10,6 @@ the physics checks hold for any correct discretisation. The slow test runs the b
 """
 
 import csv
-import importlib.util
 from pathlib import Path
 
 import dolfinx.fem
@@ -23,11 +22,9 @@ from convection.config.loader import load_config
 from convection.io.pictures import read_statistics
 from convection.app.factory import build_model, run_config
 from convection.model.model import Model
+from benchmarks.tackley_king import run as tk
 
 ROOT = Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location("tackley_king_run", ROOT / "benchmarks" / "tackley_king" / "run.py")
-tk = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(tk)
 
 QUICK_TIMES = (0.0005, 0.001, 0.0015, 0.002)
 

@@ -83,7 +83,7 @@ def test_not_converging_is_a_one_line_run_failure(tmp_path):
 
 
 def test_benchmark_script_prints_its_json_line(tmp_path):
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "tosi" / "run.py"), "--case", "2", "--cells", "6",
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.tosi.run", "--case", "2", "--cells", "6",
                            "--end", "0.02", "--out", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
                           cwd=ROOT, env=env(), capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr

@@ -1,6 +1,5 @@
 """benchmarks/vanKeken/convergence.py: case selection, resolution knobs and the fitted peak (no runs)."""
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -8,12 +7,12 @@ import pytest
 
 from convection.config.loader import load_config
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks" / "vanKeken"))
-from convergence import (  # noqa: E402
+from benchmarks.vanKeken.convergence import (
     DEFAULT_END, DEFAULT_HALF_WIDTH, Resolution, jitter, publish_section, resolutions, run_overrides,
 )
-from run import CONFIGS, fitted_peak, peak, reference  # noqa: E402
+from benchmarks.vanKeken.run import CONFIGS, fitted_peak, peak, reference
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("case, ratio", [("1b", 0.1), ("1c", 0.01)])

@@ -6,7 +6,6 @@ the published values is benchmarks/vanKeken/run.py.
 """
 
 import csv
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,9 +16,9 @@ from convection.config.loader import load_config
 from convection.io.pictures import read_statistics
 from convection.app.factory import run_config
 
+from benchmarks.vanKeken.run import QUICK, measure
+
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks" / "vanKeken"))
-from run import QUICK, measure  # noqa: E402
 
 
 def _stored():

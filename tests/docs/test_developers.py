@@ -14,7 +14,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "developers.md"
 BLOCKS = re.findall(r"^```python\n(.*?)^```", PAGE.read_text(), re.S | re.M)
-TOPICS = ("viscosity law", "particle property", "output format", "geometry", "postprocessor", "composition source")
+TOPICS = ("viscosity law", "particle property", "output format", "geometry", "postprocessor", "composition source",
+          "benchmark")
 
 
 def test_every_topic_has_an_example():

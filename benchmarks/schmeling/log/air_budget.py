@@ -1,9 +1,11 @@
 """Lab-note helper: air below the initial surface (z < 700 km) and rock above it, per km of width, in three
 x ranges (mantle side, trench, plate), from fields_000.h5 of a DG0 run.
 
-    python benchmarks/schmeling/log/air_budget.py RUN_DIR
+    python -m benchmarks.schmeling.log.air_budget RUN_DIR
 """
-import sys, h5py, numpy as np
+import sys
+import h5py
+import numpy as np
 run = sys.argv[1]
 with h5py.File(f"{run}/fields_000.h5") as f:
     xy = f["Mesh/mesh/geometry"][:]; cells = f["Mesh/mesh/topology"][:]

@@ -2,9 +2,11 @@
 fields_000.h5 of a DG0 run: how many cells hold > 1 % air, their mean air and lithosphere fractions
 and mean log10 viscosity (23 for intact plate).
 
-    python benchmarks/schmeling/log/air_film.py RUN_DIR
+    python -m benchmarks.schmeling.log.air_film RUN_DIR
 """
-import sys, h5py, numpy as np
+import sys
+import h5py
+import numpy as np
 run = sys.argv[1]
 with h5py.File(f"{run}/fields_000.h5") as f:
     xy = f["Mesh/mesh/geometry"][:]; cells = f["Mesh/mesh/topology"][:]

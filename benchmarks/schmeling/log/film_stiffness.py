@@ -2,7 +2,7 @@
 plate's bending stiffness int eta (z - z_n)^2 dz, with the film sharp or spread over the plate's
 top cell by the geometric mean of the cell fraction (DG0), for several cell sizes.
 
-    python benchmarks/schmeling/log/film_stiffness.py
+    python -m benchmarks.schmeling.log.film_stiffness
 """
 
 import numpy as np

@@ -1,6 +1,6 @@
 """Lab-note helper: the slab tip from the particles, independent of the particle-to-mesh interpolation.
 
-    python benchmarks/schmeling/log/particle_tip.py RUN_DIR [RUN_DIR ...]
+    python -m benchmarks.schmeling.log.particle_tip RUN_DIR [RUN_DIR ...]
 
 Reads RUN_DIR/particles/particles_*.h5 (positions in km, property ``lithosphere`` in 0..1), bins the
 particles in boxes of 10 km (x) by 5 km (depth) and reports, per output time, the deepest box whose

@@ -1,7 +1,7 @@
 """Lab-note helper: when the tip passes 300 / 400 km, by the cell measure (statistics) and by the
 particle measure (log/particle_tip.py), for run folders.
 
-    python benchmarks/schmeling/log/passing.py RUN_DIR [RUN_DIR ...]
+    python -m benchmarks.schmeling.log.passing RUN_DIR [RUN_DIR ...]
 """
 
 import sys
@@ -9,12 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parents[2]))
+from benchmarks.schmeling.run import passing, tip_curve
+from benchmarks.schmeling.log.particle_tip import tip
 
-from benchmarks.schmeling.run import passing, tip_curve  # noqa: E402
-from particle_tip import tip  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 for run in map(Path, sys.argv[1:]):
     cells = tip_curve(run)

@@ -1,6 +1,6 @@
 """Lab-note helper: log10 viscosity and the lithosphere's 0.5 contour near the trench, from fields_000.h5.
 
-    python benchmarks/schmeling/log/snapshot.py OUT.png RUN_DIR:TIME [RUN_DIR:TIME ...]
+    python -m benchmarks.schmeling.log.snapshot OUT.png RUN_DIR:TIME [RUN_DIR:TIME ...]
 
 TIME is the output time key nearest the wanted Myr. Positions in the file are in km.
 """

@@ -1,6 +1,6 @@
 """Lab-note helper: tip depth at 10/20/30/40 Myr, volume drift and cost of diagnostic run folders.
 
-    python benchmarks/schmeling/log/tabulate.py RUN_DIR [RUN_DIR ...]
+    python -m benchmarks.schmeling.log.tabulate RUN_DIR [RUN_DIR ...]
 
 Tip = depth_lithosphere - 50 km (linear between steps); drift = volume at the last step over the
 first, minus 1; wall = the last step's wall_time column summed (per-step seconds) or the log's.

@@ -5,8 +5,6 @@ for bit as the one that wrote it (without the preconditioner's state it does not
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import dolfinx
 import numpy as np
@@ -21,8 +19,7 @@ from convection.solvers.stokes.lagged import LaggedPreconditioner
 from convection.solvers.stokes.multigrid import MultigridSettings
 from convection.solvers.stokes.solver import StokesSolver
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "benchmarks" / "performance"))
-import stokes3d  # noqa: E402
+from benchmarks.performance import stokes3d
 
 FREE_SLIP = {side: VelocityBC("free_slip") for side in SIDES_3D}
 # The steps of the solves: the first (dt = 0) and the second (the term appears) set up; the next

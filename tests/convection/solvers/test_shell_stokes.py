@@ -1,8 +1,6 @@
 """Stokes in an annulus with curved (P2) cells: convergence orders against Kramer et al.'s analytical
 solutions (``assess``), free-slip null spaces (constant pressure, rigid rotation), rank independence."""
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,9 +12,7 @@ import dolfinx.fem
 pytest.importorskip("gmsh")
 pytest.importorskip("assess")
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "benchmarks" / "shell"))
-
-from analytical import Case, fitted_order, run_level  # noqa: E402
+from benchmarks.shell.analytical import Case, fitted_order, run_level  # noqa: E402
 from convection.physics.approximation import BoussinesqApproximation  # noqa: E402
 from convection.geometry.boundary import VelocityBC  # noqa: E402
 from convection.geometry.shell import ShellSpec, create_shell_mesh, shell_domain  # noqa: E402
@@ -196,7 +192,7 @@ def test_orders_on_the_adaptive_path():
     uniformly refined, keep Taylor-Hood's orders (measured 2.95 velocity, 1.97 pressure; the gmsh
     meshes of test_p2p1_orders_in_curved_annulus give 3.08, 2.06), and adaptive rounds by the
     velocity's Kelly indicator lower the error in every round."""
-    from analytical import run_hierarchy
+    from benchmarks.shell.analytical import run_hierarchy
 
     case = Case("smooth_free_slip", dim=2, n=2, k=3)
     uniform = run_hierarchy(case, 2, COARSE, comm=MPI.COMM_WORLD, adaptive=False)

@@ -4,8 +4,6 @@ start; the rigid-body near-null space; the "auto" choice."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,8 +21,7 @@ from convection.solvers.petsc_options import HAS_HYPRE
 from fembase.dolfinx_compat import function_space
 from _helpers import ITERATIVE, needs_hypre
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "benchmarks" / "performance"))
-import stokes3d  # noqa: E402  (the benchmark's problem)
+from benchmarks.performance import stokes3d  # the benchmark's problem
 
 FREE_SLIP_3D = {side: VelocityBC("free_slip") for side in SIDES_3D}
 

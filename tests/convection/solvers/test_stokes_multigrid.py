@@ -5,7 +5,6 @@ multigrid hierarchy set up once while the viscosity is constant, and the config'
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +23,7 @@ from convection.physics.approximation import BoussinesqApproximation, ViscosityL
 from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "benchmarks" / "performance"))
-import stokes3d  # noqa: E402  (the 3D problem of the iterative solvers' tests)
+from benchmarks.performance import stokes3d  # the 3D problem of the iterative solvers' tests
 
 ROOT = Path(__file__).resolve().parents[3]
 FREE_SLIP_3D = {side: VelocityBC("free_slip") for side in SIDES_3D}

@@ -206,8 +206,7 @@ def test_killed_writer_leaves_only_complete_files(tmp_path):
     """A writer SIGKILLed while publishing step 1 leaves step 0 complete and no step-1 file."""
     script = textwrap.dedent(
         f"""
-        import os, signal, sys
-        sys.path.insert(0, {str(Path(__file__).resolve().parents[3])!r})
+        import os, signal
         from mpi4py import MPI
         import dolfinx.mesh
         from particles import Swarm
@@ -227,7 +226,8 @@ def test_killed_writer_leaves_only_complete_files(tmp_path):
         writer.write(swarm, 1.0, 1)
         """
     )
-    proc = subprocess.run([sys.executable, "-c", script], timeout=120, capture_output=True)
+    proc = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).resolve().parents[3], timeout=120,
+                          capture_output=True)
     assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()[-2000:]
     final = sorted(n for n in os.listdir(tmp_path) if not n.startswith("."))
     assert final == ["particles.xdmf", "particles_000000.h5"]

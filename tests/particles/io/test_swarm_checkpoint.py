@@ -242,8 +242,6 @@ def test_damaged_checkpoint_under_mpirun_does_not_hang(tmp_path):
     (tmp_path / "garbage.h5").write_bytes(b"\x00garbage" * 100)
     script = textwrap.dedent(
         f"""
-        import sys
-        sys.path.insert(0, {str(ROOT)!r})
         from mpi4py import MPI
         import dolfinx.mesh
         from particles.io.swarm_checkpoint import CheckpointError, load_checkpoint
@@ -260,7 +258,7 @@ def test_damaged_checkpoint_under_mpirun_does_not_hang(tmp_path):
     )
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     cmd = [*mpirun(2), sys.executable, "-c", script]
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     for rank in (0, 1):
         lines = (tmp_path / f"rank{rank}.txt").read_text().splitlines()

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/blankenbach/ (README.md there): ``python -m benchmarks.blankenbach.<script>``."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/crameri/ (README.md there): ``python -m benchmarks.crameri.<script>``."""

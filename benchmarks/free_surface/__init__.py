@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/free_surface/ (README.md there): ``python -m benchmarks.free_surface.<script>``."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/localisation/ (README.md there): ``python -m benchmarks.localisation.<script>``."""

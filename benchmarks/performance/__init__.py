@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/performance/ (README.md there): ``python -m benchmarks.performance.<script>``."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/releases/ (README.md there): ``python -m benchmarks.releases.<script>``."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/scaling/ (README.md there): ``python -m benchmarks.scaling.<script>``."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/schmeling/ (README.md there): ``python -m benchmarks.schmeling.<script>``."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/shell/ (README.md there): ``python -m benchmarks.shell.<script>``."""

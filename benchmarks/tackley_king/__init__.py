@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/tackley_king/ (README.md there): ``python -m benchmarks.tackley_king.<script>``."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/vanKeken/ (README.md there): ``python -m benchmarks.vanKeken.<script>``."""

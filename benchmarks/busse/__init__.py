@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/busse/ (README.md there): ``python -m benchmarks.busse.<script>``."""

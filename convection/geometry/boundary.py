@@ -11,7 +11,7 @@ prescribed velocities are strong (nodal) conditions everywhere.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -24,9 +24,9 @@ from convection.geometry.domain import Domain
 from convection.geometry.mesh import cell_diameter
 from fembase.dolfinx_compat import DirichletBC
 
-__all__ = ["TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS", "NitscheTerms", "TemperatureBC", "VelocityBC",
-           "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs", "velocity_dirichlet_bcs",
-           "weak_free_slip_boundaries"]
+__all__ = ["TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS", "BoundarySettings", "NitscheTerms", "TemperatureBC",
+           "VelocityBC", "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs",
+           "velocity_dirichlet_bcs", "weak_free_slip_boundaries"]
 
 VELOCITY_BC_KINDS: dict[str, str] = {
     "free_slip": "zero normal velocity, zero tangential traction",
@@ -41,6 +41,22 @@ TEMPERATURE_BC_KINDS: dict[str, str] = {
     "insulating": "zero heat flux (natural condition)",
 }
 """Registry of temperature boundary condition kinds (name -> one-line description)."""
+
+
+@dataclass(frozen=True)
+class BoundarySettings:
+    """The ``boundary`` config section of a run: for each boundary of its geometry, the velocity and
+    the temperature condition as written (a kind name, ``{kind: ..., ...}`` or ``{dirichlet: T}``;
+    null: traction free / insulating)."""
+
+    velocity: Mapping[str, Any]
+    temperature: Mapping[str, Any]
+
+    @property
+    def free_surfaces(self) -> tuple[str, ...]:
+        """The boundaries whose velocity condition is ``free_surface``."""
+        return tuple(name for name, value in self.velocity.items()
+                     if value == "free_surface" or (isinstance(value, dict) and value.get("kind") == "free_surface"))
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from convection.io.checkpoint import (CheckpointError, block, fill_functions, inspect_checkpoint, latest_checkpoint,
                                       read_checkpoint)
-from convection.geometry.registry import domain_from_config
+from convection.geometry.domain import Domain
 from convection.schema import ConfigError
 from fembase.distribute import MeshPiece, create_mesh_from_piece
 from fembase.dolfinx_compat import coordinate_element_from, function_space, mesh_domain
@@ -74,9 +74,9 @@ def _extent(config: dict[str, Any], key: str) -> Any:
     return [float(v) for v in value]
 
 
-def check_source(config: dict[str, Any], /) -> None:
-    """Check ``initial.from_run`` of a resolved config (nothing to do when it is null); reads the
-    source's checkpoint (not collective).
+def check_source(config: dict[str, Any], domain: Domain, /) -> None:
+    """Check ``initial.from_run`` of a resolved config (nothing to do when it is null) whose domain
+    is ``domain``; reads the source's checkpoint (not collective).
 
     Raises:
         ConfigError: One line naming ``initial.from_run``: no checkpoint there, a damaged one, one
@@ -96,7 +96,7 @@ def check_source(config: dict[str, Any], /) -> None:
         raise ConfigError(f"config key '{KEY}': not with adaptivity.enabled (the initial mesh is adapted to "
                           "initial.temperature)")
     other = saved.config
-    if domain_from_config(config).manifold() is not None:
+    if domain.manifold() is not None:
         raise ConfigError(f"config key '{KEY}': only a domain meshed with straight cells continues another run "
                           f"(mesh.geometry {config['mesh']['geometry']} is curved)")
     if len(other["mesh"].get("cells") or ()) != len(config["mesh"]["cells"]):

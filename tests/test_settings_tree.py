@@ -31,10 +31,7 @@ SECTIONS = frozenset(SCHEMA) - {"name"}  # "name" is every registry entry's too
 SECTION_READS = {
     ("convection/app/cli.py", "initial"): "the command line checks initial.from_run of the loaded document",
     ("convection/app/cli.py", "output"): "the command line finds the run folder of --resume in the document",
-    ("convection/io/continuation.py", "mesh"): "compares with the source run's saved config (a checkpoint's file)",
-    ("convection/io/continuation.py", "initial"): "compares with the source run's saved config (a checkpoint's file)",
-    ("convection/io/continuation.py", "adaptivity"): "compares with the source run's saved config",
-    ("convection/io/continuation.py", "energy"): "reads the source run's saved config (a checkpoint's file)",
+    ("convection/io/continuation.py", "energy"): "the degree of the source run's temperature, from its checkpoint",
 }
 """(module, section) -> why it is read there."""
 
@@ -43,8 +40,6 @@ CONFIG_PARAMETERS = {
     ("convection/app/factory.py", "run_config"): "the public door: makes the RunSettings; writes the document",
     ("convection/io/checkpoint.py", "write_checkpoint"): "a checkpoint keeps the resolved document, unread",
     ("convection/io/checkpoint.py", "__init__"): "the Checkpointer keeps the resolved document, unread",
-    ("convection/io/continuation.py", "_extent"): "reads the source run's saved config",
-    ("convection/io/continuation.py", "check_source"): "compares the config with the source run's saved one",
 }
 """(module, function) -> why it takes the config mapping."""
 

@@ -192,10 +192,9 @@ def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
             overrides.append(_literal("initial.from_run", args.initial_from))
         config = _local(load_config, args.config, overrides)
         if config["initial"]["from_run"] is not None and not (args.command == "run" and args.resume):
-            from convection.config.loader import config_domain
-            from convection.io.continuation import check_source
+            from convection.config.continuation import check_source
 
-            _local(check_source, config, config_domain(config))
+            _local(check_source, config)
         if args.command == "check":
             if comm.rank == 0:
                 from convection.config.loader import dump_config

@@ -29,8 +29,6 @@ SECTIONS = frozenset(SCHEMA) - {"name"}  # "name" is every registry entry's too
 """The config's sections: a string key among these indexes a config mapping."""
 
 SECTION_READS = {
-    ("convection/app/cli.py", "initial"): "the command line checks initial.from_run of the loaded document",
-    ("convection/app/cli.py", "output"): "the command line finds the run folder of --resume in the document",
     ("convection/io/continuation.py", "energy"): "the degree of the source run's temperature, from its checkpoint",
 }
 """(module, section) -> why it is read there."""

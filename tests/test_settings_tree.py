@@ -16,9 +16,8 @@ again, and each is checked in every module of ``convection/`` but ``config/``:
 
 What still does, is listed below with the reason; the lists only shrink. Not covered by this scan
 (issue 47, what remains of "one way to declare a parameter"): the viscosity laws validate their
-parameters with their own ``law_param``/``_parse_value`` (physics/rheology.py), the particle
-plugins' help is scraped from their docstrings (config/reference.py, ``_docstring_attributes``),
-and ``particles/`` reads its sections raw (``ParticleManager.from_config`` takes ``ParticleSettings``
+parameters with their own ``law_param``/``_parse_value`` (physics/rheology.py), and ``particles/``
+reads its sections raw (``ParticleManager.from_config`` takes ``ParticleSettings``
 from the RunSettings, but the loader's particle checks build the plugins from the mappings).
 """
 
@@ -151,3 +150,18 @@ def test_the_checks_catch_a_raw_read():
     keys = [_section_key(node) for node in ast.walk(tree)]
     assert {"adaptivity", "balance", "stokes", "mesh"} <= set(keys) and "time" not in keys
     assert _takes_config(next(n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)))
+
+
+def test_particle_plugins_declare_their_parameters_once():
+    """A particle plugin's parameters are fields made by :func:`fembase.params.param`, with their
+    help (the config reference reads it there; nothing is scraped from a docstring)."""
+    import dataclasses
+
+    from particles.generation import GENERATORS
+    from particles.interpolation import INTERPOLATORS
+    from particles.properties import PROPERTIES
+
+    wrong = [f"{name}.{f.name}" for registry in (GENERATORS, PROPERTIES, INTERPOLATORS)
+             for name, cls in registry.items() for f in dataclasses.fields(cls)
+             if f.init and not f.name.startswith("_") and not f.metadata.get("schema", {}).get("help")]
+    assert not wrong, wrong

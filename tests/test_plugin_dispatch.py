@@ -51,14 +51,8 @@ FAMILIES: dict[str, tuple[str, ...]] = {
 
 ALLOWED: dict[tuple[str, str], str] = {
     # (module path, comparison as ast.unparse writes it) -> why it stays, for now
-    ("convection/geometry/shell.py", "mesh_config['geometry'] == 'annulus'"):
+    ("convection/geometry/shell.py", "mesh.geometry == 'annulus'"):
         "geometry/ may compare a geometry's name (tests/test_layers.py); the annulus and the shell share a class",
-    ("convection/geometry/shell.py", "mesh['geometry'] == 'annulus'"):
-        "geometry/ may compare a geometry's name (tests/test_layers.py); the annulus and the shell share a class",
-    ("convection/geometry/box.py", "config['balance']['strategy'] != 'none'"):
-        "geometry/ is below adapt/ (BALANCE_STRATEGIES): the loader should pass whether the mesh is repartitioned",
-    ("convection/geometry/shell.py", "config['balance']['strategy'] != 'none'"):
-        "geometry/ is below adapt/ (BALANCE_STRATEGIES): the loader should pass whether the mesh is repartitioned",
 }
 
 

@@ -191,20 +191,22 @@ def _run(args: argparse.Namespace, comm: MPI.Comm) -> int:
         if args.initial_from is not None:
             overrides.append(_literal("initial.from_run", args.initial_from))
         config = _local(load_config, args.config, overrides)
-        if config["initial"]["from_run"] is not None and not (args.command == "run" and args.resume):
-            from convection.io.continuation import check_source
+        if not (args.command == "run" and args.resume):  # a resumed run continues its own temperature
+            from convection.config.continuation import check_source
 
-            _local(check_source, config)
+            _local(check_source, config)  # initial.from_run, if given
         if args.command == "check":
             if comm.rank == 0:
                 from convection.config.loader import dump_config
 
                 print(dump_config(config), end="")
             return 0
+        from convection.config.settings import run_settings
         from convection.io.checkpoint import latest_checkpoint, read_checkpoint
 
-        if args.resume and latest_checkpoint(config["output"]["directory"]) is not None:
-            saved = read_checkpoint(latest_checkpoint(config["output"]["directory"]), comm)
+        directory = run_settings(config).output.directory
+        if args.resume and latest_checkpoint(directory) is not None:
+            saved = read_checkpoint(latest_checkpoint(directory), comm)
             changed = [key for key in SAME_MODEL if saved.config.get(key) != config.get(key)]
             if changed:
                 raise ConfigError(f"config key '{changed[0]}': differs from the checkpoint's; only "

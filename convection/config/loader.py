@@ -40,6 +40,7 @@ import yaml
 
 from convection.expressions import Expression, ExpressionError
 from convection.config.files import read_document, safe_load
+from convection.config.sections import InitialSettings, boundary_settings, mesh_section
 from convection.config.particle_systems import (
     carries_particles, check_primary, listed_systems, override_target, particle_sections, primary_system,
     resolve_systems,
@@ -48,10 +49,10 @@ from convection.config.units import apply_scaling, in_written_terms, scaling_of,
 from convection.geometry.boundary import VELOCITY_BC_KINDS
 from convection.geometry.domain import Domain, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
-from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_config, mesh_section_schema
+from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_settings, mesh_section_schema
 from convection.adapt.adaptivity import AdaptivitySettings
 from convection.adapt.rebalance import BALANCE_STRATEGIES, BalanceSettings
-from convection.deform.surface import FreeSurfaceSettings, check_free_surface, free_surface_boundaries
+from convection.deform.surface import FreeSurfaceSettings, check_free_surface
 from convection.model.composition import COMPOSITION_SOURCES, CompositionSettings
 from convection.postprocess.postprocessors import DiagnosticsSettings, ModelFeatures, check_statistics
 from convection.run.loop import BlowUp, OutputSettings, TimeSettings
@@ -134,19 +135,7 @@ SCHEMA: dict[str, Any] = {
                            "rate}, ...]}"),
         "temperature": _sides(_check_temperature_bc, "insulating", "insulating or {dirichlet: <number>}"),
     },
-    "initial": {
-        "temperature": Field("str", "1 - z", help="expression in x, y, z (z vertical), r, phi, theta"),
-        "temperature_bounded": Field("bool", False, help="set the initial temperature by its linear interpolant at "
-                                     "the vertices, within the expression's values everywhere (P2 at every node "
-                                     "overshoots a sharp anomaly by up to 1/8 of its jump between the nodes)"),
-        "composition": Field("str", None, nullable=True,
-                             help="expression in x, y, z (1 = dense/second material), or null for none"),
-        "constants": Field("mapping", {}, max_items=MAX_ENTRIES, help="named constants usable in the expressions"),
-        "from_run": Field("str", None, nullable=True,
-                          help="start from another run's temperature instead of initial.temperature: its run folder "
-                               "(newest checkpoint) or a checkpoint folder; interpolated onto this mesh, on any rank "
-                               "count (a box of the same extent; command line: run --initial-from PATH)"),
-    },
+    "initial": section_schema(InitialSettings),
     "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(MaterialSettings),
                        help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "stokes": section_schema(StokesSettings),
@@ -175,13 +164,13 @@ def domain_class(config: dict[str, Any]) -> type[Domain]:
 
 
 def config_domain(config: dict[str, Any]) -> Domain:
-    """The domain of a checked config (:func:`convection.geometry.registry.domain_from_config`)."""
-    return domain_from_config(config)
+    """The domain of a checked config (:func:`convection.geometry.registry.domain_from_settings`)."""
+    return domain_from_settings(mesh_section(config["mesh"]))
 
 
 def config_gdim(config: dict[str, Any]) -> int:
     """Geometric dimension of a resolved config's domain."""
-    return domain_class(config).config_gdim(config["mesh"])
+    return domain_class(config).config_gdim(mesh_section(config["mesh"]))
 
 
 def probe_level(config: dict[str, Any]) -> int:
@@ -228,7 +217,9 @@ def _check_mesh(config: dict[str, Any], document: dict[str, Any]) -> None:
                 and config["mesh"][key] != field.default:
             raise ConfigError(f"config key 'mesh.{key}': not a key of mesh.geometry {cls.name}, which reads "
                               f"{list(cls.config_keys)}")
-    cls.check_config(config)
+    adapt, balance = config["adaptivity"]["enabled"], BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions
+    cls.check_config(mesh_section(config["mesh"]),
+                     changed_by="adaptivity.enabled" if adapt else "balance.strategy" if balance else None)
 
 
 AUTO_MULTIGRID_LEVELS = 3
@@ -236,9 +227,25 @@ AUTO_MULTIGRID_LEVELS = 3
 (16^3 and 20^3 cubes do: 16 -> 8 -> 4 -> 2, 20 -> 10 -> 5)."""
 
 
+def free_surface_boundaries(config: dict[str, Any], /) -> tuple[str, ...]:
+    """The boundaries of a resolved config whose velocity condition is ``free_surface``."""
+    return boundary_settings(config["boundary"]).free_surfaces
+
+
 def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ranks: int = 1) -> int:
     """The number of nested meshes the Stokes solver of a checked config uses, the run's mesh
-    included; 1: no multigrid.
+    included (:func:`nested_levels`); 1: no multigrid."""
+    stokes = config["stokes"]
+    fixed = (not config["adaptivity"]["enabled"] and not BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions
+             and not free_surface_boundaries(config))
+    return nested_levels(stokes["solver"], stokes["multigrid"]["levels"],
+                         domain if domain is not None else config_domain(config), fixed=fixed, ranks=ranks)
+
+
+def nested_levels(solver: str, wanted: int, domain: Domain, /, *, fixed: bool, ranks: int = 1) -> int:
+    """The number of nested meshes a Stokes ``solver`` (``stokes.solver``) uses on ``domain``, the
+    run's mesh included, for ``wanted`` levels (``stokes.multigrid.levels``); 1: no multigrid.
+    ``fixed``: the mesh neither adapts, nor is repartitioned, nor moves.
 
     ``stokes.solver: multigrid`` uses the domain's levels for ``stokes.multigrid.levels``.
     ``auto`` picks the multigrid on a fixed 3D mesh that nests in at least
@@ -247,14 +254,9 @@ def multigrid_levels(config: dict[str, Any], domain: Domain | None = None, *, ra
     and 2.03 (32^3) times as fast as ASPECT's GMG (benchmarks/scaling/aspect_thick_layer.md,
     aspect_thick_layer_32.md); elsewhere ``auto`` is what
     :func:`convection.solvers.stokes.solver.resolve_solver` says."""
-    stokes = config["stokes"]
-    domain = domain if domain is not None else config_domain(config)
-    wanted = stokes["multigrid"]["levels"]
-    if STOKES_SOLVER_CHOICES[stokes["solver"]].nested:
+    if STOKES_SOLVER_CHOICES[solver].nested:
         return domain.mesh_levels(wanted)
-    fixed = (not config["adaptivity"]["enabled"] and not BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions
-             and not free_surface_boundaries(config))
-    if STOKES_SOLVER_CHOICES[stokes["solver"]].by_mesh and fixed and config_gdim(config) == 3:
+    if STOKES_SOLVER_CHOICES[solver].by_mesh and fixed and domain.gdim == 3:
         levels = domain.mesh_levels(wanted)
         coarsest = domain.estimated_cells() / 8 ** (levels - 1)
         return levels if levels >= AUTO_MULTIGRID_LEVELS and coarsest >= ranks else 1
@@ -301,8 +303,8 @@ def _check_multigrid(config: dict[str, Any]) -> None:
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:
     _check_mesh(config, document)
     _check_multigrid(config)
-    check_free_surface(config, document, domain_class(config),
-                       multigrid=STOKES_SOLVER_CHOICES[config["stokes"]["solver"]].nested)
+    check_free_surface(settings_from(FreeSurfaceSettings, config["free_surface"]), free_surface_boundaries(config),
+                       domain_class(config), multigrid=STOKES_SOLVER_CHOICES[config["stokes"]["solver"]].nested)
     if config["free_surface"]["initial_topography"] is not None:
         _check_initial_topography(config)
     adapt = config["adaptivity"]
@@ -317,7 +319,7 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
                                   "repartition yet")
     check_primary(config)
     _check_materials(config)
-    cls.check_boundaries(config)
+    cls.check_boundaries(mesh_section(config["mesh"]), boundary_settings(config["boundary"]))
     for name, value in config["initial"]["constants"].items():
         if _finite_number(value) is None:
             raise ConfigError(f"config key 'initial.constants.{key_text(name)}': expected a finite number, "
@@ -423,8 +425,8 @@ def _check_size(config: dict[str, Any]) -> None:
     """Refuse meshes (and particle counts) that would exhaust the machine, naming the estimate."""
     mesh, adapt = config["mesh"], config["adaptivity"]
     cls = domain_class(config)
-    gdim = cls.config_gdim(mesh)
-    base = cls.base_cells_bound(mesh)
+    gdim = cls.config_gdim(mesh_section(mesh))
+    base = cls.base_cells_bound(mesh_section(mesh))
     level = adapt["max_level"] if adapt["enabled"] else 0
     most = safe_product(base, *[2.0] * min(gdim * level, 2048))
     if most > mesh["max_cells"]:

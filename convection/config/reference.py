@@ -6,7 +6,7 @@ fails when they differ, so the reference cannot fall behind the code). Two rende
 - :func:`render_markdown`: every section and key of :data:`convection.config.loader.SCHEMA` with type,
   default, allowed values and help; every name a registry offers, with its one-line description;
   every plugin's parameters from its dataclass (particle generators, properties and interpolators,
-  viscosity laws) with type, default and the help of its docstring or field metadata;
+  viscosity laws) with type, default and the help declared with the field;
 - :func:`render_yaml`: a YAML document holding every key at its default, help and allowed values
   as comments (``null  # required`` where the user must give a value) — a config to start from.
 
@@ -122,40 +122,9 @@ def _describe(entry: Any) -> str:
     return doc.split("\n\n")[0].replace("\n", " ").replace("``", "`")
 
 
-def _docstring_attributes(cls: type) -> dict[str, str]:
-    """``name: help`` of the ``Attributes:`` and ``Args:`` sections of the docstrings of ``cls``
-    and its bases (Google style, continuation lines indented further)."""
-    found: dict[str, str] = {}
-    for klass in reversed(cls.__mro__):
-        doc = inspect.getdoc(klass) if "__doc__" in vars(klass) else None
-        if not doc:
-            continue
-        section, name, indent = False, None, 0
-        for line in doc.splitlines():
-            stripped = line.strip()
-            if stripped in ("Attributes:", "Args:", "Parameters:"):
-                section, name = True, None
-                continue
-            if not section:
-                continue
-            if not stripped:
-                continue
-            depth = len(line) - len(line.lstrip())
-            match = re.match(r"(\w+)(?: \([^)]*\))?: (.*)", stripped)
-            if match and (name is None or depth <= indent):
-                name, indent = match.group(1), depth
-                found[name] = match.group(2)
-            elif name is not None and depth > indent:
-                found[name] += " " + stripped
-            else:
-                section, name = False, None
-    return {k: v.replace("``", "`") for k, v in found.items()}
-
-
 def _dataclass_parameters(cls: type, *, skip: tuple[str, ...] = ()) -> list[Parameter]:
-    """The init parameters of a dataclass plugin: name, annotated type, default, help (from the
-    field's ``help`` metadata, else the class docstring's Attributes/Args)."""
-    docs = _docstring_attributes(cls)
+    """The init parameters of a dataclass plugin: name, annotated type, default, help (declared with
+    the field: :func:`fembase.params.param`'s, or a viscosity law's ``law_param``)."""
     out = []
     for f in dataclasses.fields(cls):
         if not f.init or f.name in skip or f.name.startswith("_"):
@@ -168,7 +137,7 @@ def _dataclass_parameters(cls: type, *, skip: tuple[str, ...] = ()) -> list[Para
             default = "required"
         meta = dict(f.metadata)
         kind = meta.get("kind", f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type)))
-        help_text = meta.get("help") or docs.get(f.name, "")
+        help_text = meta.get("help") or meta.get("schema", {}).get("help", "")
         checks = [f"{text} {meta[key]:g}" for key, text in (("minimum", ">="), ("exclusive_minimum", ">"),
                                                               ("maximum", "<="), ("exclusive_maximum", "<"))
                   if isinstance(meta.get(key), (int, float))]

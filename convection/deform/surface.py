@@ -32,7 +32,6 @@ step: :meth:`convection.model.model.Model.step`).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,11 +39,10 @@ import dolfinx
 import ufl
 from petsc4py import PETSc
 
-from convection.geometry.boundary import VELOCITY_BC_KINDS
 from convection.geometry.domain import Domain
 from convection.schema import ConfigError, param
 
-__all__ = ["FreeSurfaceSettings", "SurfaceTerms", "check_free_surface", "free_surface_boundaries", "surface_terms"]
+__all__ = ["FreeSurfaceSettings", "SurfaceTerms", "check_free_surface", "surface_terms"]
 
 
 @dataclass(frozen=True)
@@ -121,22 +119,13 @@ def surface_terms(names: tuple[str, ...], settings: FreeSurfaceSettings, /) -> S
 
 
 
-def free_surface_boundaries(config: dict[str, Any], /) -> tuple[str, ...]:
-    """The boundaries of a resolved config whose velocity condition is ``free_surface``."""
-    kinds = {name: value.get("kind") if isinstance(value, dict) else value
-             for name, value in config["boundary"]["velocity"].items()}
-    return tuple(name for name, kind in kinds.items() if isinstance(kind, str) and kind in VELOCITY_BC_KINDS
-                 and VELOCITY_BC_KINDS[kind].moves)
-
-
-def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain: type[Domain], /, *,
+def check_free_surface(settings: FreeSurfaceSettings, names: tuple[str, ...], domain: type[Domain], /, *,
                        multigrid: bool) -> None:
-    """The cross-key checks of a free surface (ConfigError naming the key): the top of a box or the
-    annulus's outer circle; not yet with the multigrid (``multigrid``: ``stokes.solver`` names it);
-    ``buoyancy`` known."""
-    names = free_surface_boundaries(config)
+    """The cross-key checks of a free surface (ConfigError naming the key): ``names``, the boundaries
+    whose velocity condition is a free surface, are the top of a box or the annulus's outer circle;
+    not yet with the multigrid (``multigrid``: ``stokes.solver`` names it); ``buoyancy`` known."""
     if not names:
-        if config["free_surface"] != dataclasses.asdict(FreeSurfaceSettings()):  # set, but for nothing
+        if settings != FreeSurfaceSettings():  # set, but for nothing
             raise ConfigError("config key 'free_surface': no boundary is a free surface (boundary.velocity.<side>: "
                               "free_surface)")
         return
@@ -148,7 +137,7 @@ def check_free_surface(config: dict[str, Any], document: dict[str, Any], domain:
     if multigrid:
         raise ConfigError("config key 'stokes.solver': the multigrid is not with a free surface yet (its mesh moves; "
                           "the coarser levels do not follow it)")
-    if config["free_surface"]["buoyancy"] is None:
+    if settings.buoyancy is None:
         raise ConfigError("config key 'free_surface.buoyancy': required with a free surface in a model without units "
                           "(B = rho0 g L^3 / (eta0 kappa), the reference density's weight; in a model with units it "
                           "follows from scaling.density and scaling.gravity)")

@@ -11,7 +11,7 @@ prescribed velocities are strong (nodal) conditions everywhere.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, NamedTuple
 
@@ -28,9 +28,9 @@ from convection.schema import finite_number, short_repr
 from fembase.dolfinx_compat import DirichletBC
 from fembase.registry import Registry
 
-__all__ = ["TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS", "NitscheTerms", "VelocityKind", "TemperatureBC", "VelocityBC",
-           "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs", "velocity_dirichlet_bcs",
-           "weak_free_slip_boundaries"]
+__all__ = ["TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS", "BoundarySettings", "NitscheTerms", "TemperatureBC",
+           "VelocityBC", "VelocityKind", "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs",
+           "velocity_dirichlet_bcs", "weak_free_slip_boundaries"]
 
 class VelocityKind:
     """One kind of velocity condition, as ``boundary.velocity.<side>`` names it (an entry of
@@ -172,6 +172,23 @@ TEMPERATURE_BC_KINDS: dict[str, str] = {
     "insulating": "zero heat flux (natural condition)",
 }
 """Registry of temperature boundary condition kinds (name -> one-line description)."""
+
+
+@dataclass(frozen=True)
+class BoundarySettings:
+    """The ``boundary`` config section of a run: for each boundary of its geometry, the velocity and
+    the temperature condition as written (a kind name, ``{kind: ..., ...}`` or ``{dirichlet: T}``;
+    null: traction free / insulating)."""
+
+    velocity: Mapping[str, Any]
+    temperature: Mapping[str, Any]
+
+    @property
+    def free_surfaces(self) -> tuple[str, ...]:
+        """The boundaries whose velocity condition moves with the flow (a free surface)."""
+        kinds = {name: value.get("kind") if isinstance(value, dict) else value for name, value in self.velocity.items()}
+        return tuple(name for name, kind in kinds.items()
+                     if isinstance(kind, str) and kind in VELOCITY_BC_KINDS and VELOCITY_BC_KINDS[kind].moves)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, NamedTuple
 
@@ -23,7 +23,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from convection.geometry.domain import Columns, Domain, kept_facets, safe_product
+from convection.geometry.domain import Columns, Domain, MeshSection, kept_facets, safe_product
 from convection.geometry.gravity import VerticalGravity
 from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
 from convection.schema import ConfigError, param
@@ -116,13 +116,14 @@ class BoxSpec:
     grading: tuple[float, ...] | None = None
 
     @classmethod
-    def from_config(cls, mesh_config: Mapping[str, Any]) -> BoxSpec:
-        cells = tuple(int(n) for n in mesh_config["cells"])
+    def from_settings(cls, keys: BoxMeshSettings, /) -> BoxSpec:
+        """The box of a checked ``mesh`` section's keys."""
+        cells = tuple(int(n) for n in keys.cells or ())
         gdim = len(cells)
-        lower = tuple(mesh_config["lower"] or [0.0] * gdim)
-        upper = tuple(mesh_config["upper"] or [1.0] * gdim)
-        grading = mesh_config.get("grading")
-        return cls(cells, lower, upper, mesh_config["cell_type"], mesh_config["diagonal"],
+        lower = tuple(keys.lower or [0.0] * gdim)
+        upper = tuple(keys.upper or [1.0] * gdim)
+        grading = keys.grading
+        return cls(cells, lower, upper, keys.cell_type, keys.diagonal,
                    tuple(float(g) for g in grading) if grading is not None and any(grading) else None)
 
     @property
@@ -237,49 +238,48 @@ class BoxDomain(Domain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> BoxDomain:
-        return cls.from_spec(BoxSpec.from_config(mesh))
+    def from_settings(cls, mesh: MeshSection, /) -> BoxDomain:
+        return cls.from_spec(BoxSpec.from_settings(mesh.keys))
 
     @classmethod
-    def config_gdim(cls, mesh: Mapping[str, Any], /) -> int:
-        return len(mesh["cells"])
+    def config_gdim(cls, mesh: MeshSection, /) -> int:
+        return len(mesh.keys.cells)
 
     @classmethod
-    def check_config(cls, config: Mapping[str, Any], /) -> None:
-        mesh, adapt = config["mesh"], config["adaptivity"]
-        if mesh["cells"] is None:
+    def check_config(cls, mesh: MeshSection, /, *, changed_by: str | None) -> None:
+        keys = mesh.keys
+        if keys.cells is None:
             raise ConfigError("config key 'mesh.cells': required value missing (cells per direction, e.g. [32, 32])")
-        gdim = len(mesh["cells"])
+        gdim = len(keys.cells)
         for key in ("lower", "upper", "grading"):
-            if mesh.get(key) is not None and len(mesh[key]) != gdim:
+            corner = getattr(keys, key)
+            if corner is not None and len(corner) != gdim:
                 raise ConfigError(f"config key 'mesh.{key}': needs {gdim} entries like mesh.cells")
-        lower = mesh["lower"] or [0.0] * gdim
-        upper = mesh["upper"] or [1.0] * gdim
+        lower = list(keys.lower or [0.0] * gdim)
+        upper = list(keys.upper or [1.0] * gdim)
         if any(u <= lo for lo, u in zip(lower, upper)):
             raise ConfigError(f"config key 'mesh.upper': must exceed mesh.lower in every direction, got {upper} vs "
                               f"{lower}")
         if not all(math.isfinite(u - lo) for lo, u in zip(lower, upper)):
             raise ConfigError(f"config key 'mesh.upper': the box size upper - lower must be a finite number, got "
                               f"{upper} vs {lower}")
-        needs_simplices = adapt["enabled"] or config["balance"]["strategy"] != "none"
-        if needs_simplices and mesh["cell_type"] != "simplex":
-            what = "adaptivity.enabled" if adapt["enabled"] else "balance.strategy"
-            raise ConfigError(f"config key '{what}': needs mesh.cell_type: simplex (triangles/tetrahedra)")
+        if changed_by is not None and keys.cell_type != "simplex":
+            raise ConfigError(f"config key '{changed_by}': needs mesh.cell_type: simplex (triangles/tetrahedra)")
 
     @classmethod
-    def check_boundaries(cls, config: Mapping[str, Any], /) -> None:
+    def check_boundaries(cls, mesh: MeshSection, boundary: Any, /) -> None:
         """A 2D box has no front and back: conditions there must be the defaults."""
-        if len(config["mesh"]["cells"]) != 2:
+        if len(mesh.keys.cells) != 2:
             return
-        for section in ("velocity", "temperature"):
+        for section, conditions in (("velocity", boundary.velocity), ("temperature", boundary.temperature)):
             for side in ("front", "back"):
-                if config["boundary"][section][side] not in (None, "free_slip", "insulating"):
+                if conditions[side] not in (None, "free_slip", "insulating"):
                     raise ConfigError(f"config key 'boundary.{section}.{side}': only exists in 3D")
 
     @classmethod
-    def base_cells_bound(cls, mesh: Mapping[str, Any], /) -> float:
-        gdim = len(mesh["cells"])
-        return safe_product(*mesh["cells"], SIMPLICES_PER_BOX[gdim] if mesh["cell_type"] == "simplex" else 1)
+    def base_cells_bound(cls, mesh: MeshSection, /) -> float:
+        cells = mesh.keys.cells
+        return safe_product(*cells, SIMPLICES_PER_BOX[len(cells)] if mesh.keys.cell_type == "simplex" else 1)
 
     def probe_axes(self, level: int, /) -> tuple[list[npt.NDArray[np.float64]], Callable]:
         """A lattice of ``6 cells 2**level`` intervals per direction, boundary and corners included

@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import dolfinx
@@ -31,7 +31,7 @@ from petsc4py import PETSc
 from convection.geometry.gravity import Gravity
 from fembase.dolfinx_compat import DirichletBC
 
-__all__ = ["Columns", "Domain", "keep_boundary_facets", "kept_facets", "safe_product"]
+__all__ = ["Columns", "Domain", "MeshSection", "keep_boundary_facets", "kept_facets", "safe_product"]
 
 _KEPT_FACETS = "_convection_kept_facets"
 _FACET_TAGS = "_convection_facet_tags"
@@ -76,6 +76,21 @@ class Columns:
     points: npt.NDArray[np.float64]
     length: float
     top: float
+
+
+@dataclasses.dataclass(frozen=True)
+class MeshSection:
+    """A checked ``mesh`` config section, typed.
+
+    Attributes:
+        geometry: The geometry's name (a key of :data:`convection.geometry.registry.DOMAINS`).
+        keys: The geometry's own keys: an instance of its :attr:`Domain.mesh_settings`.
+        max_cells: The most cells a run's mesh may reach.
+    """
+
+    geometry: str
+    keys: Any
+    max_cells: int
 
 
 class Domain(ABC):
@@ -124,27 +139,27 @@ class Domain(ABC):
     # ------------------------------------------------------------------ config
     @classmethod
     @abstractmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> Domain:
-        """The domain of a resolved ``mesh`` config section (checked by :meth:`check_config`)."""
+    def from_settings(cls, mesh: MeshSection, /) -> Domain:
+        """The domain of a checked ``mesh`` section (checked by :meth:`check_config`)."""
 
     @classmethod
     @abstractmethod
-    def config_gdim(cls, mesh: Mapping[str, Any], /) -> int:
-        """The dimension of a ``mesh`` config section of this geometry."""
+    def config_gdim(cls, mesh: MeshSection, /) -> int:
+        """The dimension of a ``mesh`` section of this geometry."""
 
     @classmethod
-    def check_config(cls, config: Mapping[str, Any], /) -> None:
-        """Refuse a resolved config whose ``mesh`` section (or what depends on it) this geometry
-        cannot take (raises :class:`convection.schema.ConfigError`, naming the key)."""
+    def check_config(cls, mesh: MeshSection, /, *, changed_by: str | None) -> None:
+        """Refuse a ``mesh`` section this geometry cannot take (ConfigError naming the key);
+        ``changed_by``: the config key that makes the mesh change during the run
+        (``adaptivity.enabled``, ``balance.strategy``), None for a fixed mesh."""
 
     @classmethod
-    def check_boundaries(cls, config: Mapping[str, Any], /) -> None:
-        """Refuse boundary conditions of a resolved config that this geometry cannot take (raises
-        :class:`convection.schema.ConfigError`)."""
+    def check_boundaries(cls, mesh: MeshSection, boundary: Any, /) -> None:
+        """Refuse conditions (``boundary``: a ``BoundarySettings``) this geometry cannot take."""
 
     @classmethod
     @abstractmethod
-    def base_cells_bound(cls, mesh: Mapping[str, Any], /) -> float:
+    def base_cells_bound(cls, mesh: MeshSection, /) -> float:
         """Cells of the base mesh of a checked ``mesh`` section, estimated for the size check:
         a float, ``inf`` rather than an overflow."""
 

@@ -12,7 +12,7 @@ points of their configs are a polar grid; particles are kept inside radially
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from convection.geometry.domain import Domain, kept_facets
+from convection.geometry.domain import Domain, MeshSection, kept_facets
 from convection.geometry.gravity import RadialGravity
 from convection.geometry.probes import MAX_PROBES, bounded
 from convection.schema import ConfigError, param
@@ -74,18 +74,19 @@ def polar_points(grid: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     return points
 
 
-def check_radial_section(config: Mapping[str, Any], /) -> None:
+def check_radial_section(mesh: MeshSection, /) -> None:
     """The checks every geometry between two radii makes: a resolution, ordered radii, a geometry
     degree of 1 or 2."""
-    mesh = config["mesh"]
-    if mesh["resolution"] is None:
-        raise ConfigError(f"config key 'mesh.resolution': required for mesh.geometry {mesh['geometry']} "
+    keys = mesh.keys
+    if keys.resolution is None:
+        raise ConfigError(f"config key 'mesh.resolution': required for mesh.geometry {mesh.geometry} "
                           "(target cell size)")
-    inner, outer = mesh["radii"]
+    inner, outer = keys.radii
     if not inner < outer:
-        raise ConfigError(f"config key 'mesh.radii': the inner radius must be below the outer one, got {mesh['radii']}")
-    if mesh["geometry_degree"] not in (1, 2):
-        raise ConfigError(f"config key 'mesh.geometry_degree': must be 1 or 2, got {mesh['geometry_degree']}")
+        raise ConfigError(f"config key 'mesh.radii': the inner radius must be below the outer one, got "
+                          f"{list(keys.radii)}")
+    if keys.geometry_degree not in (1, 2):
+        raise ConfigError(f"config key 'mesh.geometry_degree': must be 1 or 2, got {keys.geometry_degree}")
 
 
 def shell_confinement(mesh: dolfinx.mesh.Mesh, spec: Any, /, *, outer: bool = True

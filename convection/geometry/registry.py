@@ -3,18 +3,17 @@ subclass. A new geometry is one class registered here."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from convection.geometry.box import BoxDomain
-from convection.geometry.domain import Domain
+from convection.geometry.domain import Domain, MeshSection
 from convection.geometry.sector import Sector
 from convection.geometry.shell import Annulus, SphericalShell
 from convection.schema import Names, param, section_schema
 from fembase.registry import Registry
 
-__all__ = ["DOMAINS", "MeshSettings", "boundary_descriptions", "domain_from_config", "mesh_section_schema"]
+__all__ = ["DOMAINS", "MeshSettings", "boundary_descriptions", "domain_from_settings", "mesh_section_schema"]
 
 DOMAINS: Registry[type[Domain]] = Registry("geometry", (BoxDomain, Annulus, SphericalShell, Sector))
 """Every geometry by its ``mesh.geometry`` name."""
@@ -49,10 +48,9 @@ def mesh_section_schema() -> dict[str, Any]:
     return out
 
 
-def domain_from_config(config: Mapping[str, Any], /) -> Domain:
-    """The domain of a resolved config (its ``mesh`` section)."""
-    mesh = config["mesh"]
-    return DOMAINS.lookup(mesh["geometry"]).from_config(mesh)
+def domain_from_settings(mesh: MeshSection, /) -> Domain:
+    """The domain of a typed ``mesh`` section."""
+    return DOMAINS.lookup(mesh.geometry).from_settings(mesh)
 
 
 def boundary_descriptions() -> dict[str, str]:

@@ -15,7 +15,7 @@ and sides).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from convection.geometry.domain import kept_facets, safe_product
+from convection.geometry.domain import MeshSection, kept_facets, safe_product
 from convection.geometry.mesh import gmsh_mesh, mesh_uniformly
 from convection.geometry.radial import RadialDomain, RadialMeshSettings, check_radial_section, shell_radii
 from convection.schema import ConfigError, param
@@ -74,10 +74,13 @@ class SectorSpec:
             raise ValueError(f"geometry_degree must be 1 or 2, got {self.geometry_degree}")
 
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any]) -> SectorSpec:
-        inner, outer = (float(r) for r in mesh["radii"])
-        west, east = (float(a) for a in mesh["angles"])
-        return cls(inner, outer, (west, east), float(mesh["resolution"]), int(mesh["geometry_degree"]))
+    def from_settings(cls, keys: SectorMeshSettings, /) -> SectorSpec:
+        """The sector of a checked ``mesh`` section's keys."""
+        if keys.resolution is None:
+            raise ValueError("a sector needs a resolution (mesh.resolution)")
+        inner, outer = (float(r) for r in keys.radii)
+        west, east = (float(a) for a in keys.angles)
+        return cls(inner, outer, (west, east), float(keys.resolution), int(keys.geometry_degree))
 
     @property
     def radians(self) -> tuple[float, float]:
@@ -146,27 +149,28 @@ class Sector(RadialDomain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> Sector:
-        return cls(SectorSpec.from_config(mesh))
+    def from_settings(cls, mesh: MeshSection, /) -> Sector:
+        return cls(SectorSpec.from_settings(mesh.keys))
 
     @classmethod
-    def config_gdim(cls, mesh: Mapping[str, Any], /) -> int:
+    def config_gdim(cls, mesh: MeshSection, /) -> int:
         return 2
 
     @classmethod
-    def check_config(cls, config: Mapping[str, Any], /) -> None:
-        check_radial_section(config)
-        west, east = config["mesh"]["angles"]
+    def check_config(cls, mesh: MeshSection, /, *, changed_by: str | None) -> None:
+        check_radial_section(mesh)
+        west, east = mesh.keys.angles
         if not 0.0 < east - west < 180.0:
             raise ConfigError(f"config key 'mesh.angles': [west, east] in degrees with 0 < east - west < 180, got "
-                              f"{config['mesh']['angles']}")
+                              f"{list(mesh.keys.angles)}")
 
     @classmethod
-    def base_cells_bound(cls, mesh: Mapping[str, Any], /) -> float:
-        inner, outer = mesh["radii"]
-        west, east = mesh["angles"]
+    def base_cells_bound(cls, mesh: MeshSection, /) -> float:
+        keys = mesh.keys
+        inner, outer = keys.radii
+        west, east = keys.angles
         area = 0.5 * math.radians(east - west) * (outer - inner) * (outer + inner)
-        return safe_product(area / 0.4330127, 1.0 / mesh["resolution"], 1.0 / mesh["resolution"]) + 1.0
+        return safe_product(area / 0.4330127, 1.0 / keys.resolution, 1.0 / keys.resolution) + 1.0
 
     def angle_limits(self) -> list[tuple[float, float]]:
         return [self.spec.radians]

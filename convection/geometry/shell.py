@@ -17,17 +17,16 @@ concentrated on a surface ``r = r'``. Refined meshes are curved by :class:`femba
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import dolfinx
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from convection.geometry.domain import safe_product
+from convection.geometry.domain import MeshSection, safe_product
 from convection.geometry.mesh import gmsh_mesh, mesh_uniformly
 from convection.geometry.radial import (
     RadialDomain, RadialMeshSettings, check_radial_section, shell_confinement, shell_radii,
@@ -78,10 +77,12 @@ class ShellSpec:
                 raise ValueError(f"interface radius {r} is not between the inner and outer radii")
 
     @classmethod
-    def from_config(cls, mesh_config: Mapping[str, Any]) -> ShellSpec:
-        gdim = 2 if mesh_config["geometry"] == "annulus" else 3
-        inner, outer = (float(r) for r in mesh_config["radii"])
-        return cls(gdim, inner, outer, float(mesh_config["resolution"]), int(mesh_config["geometry_degree"]))
+    def from_settings(cls, mesh: MeshSection, /) -> ShellSpec:
+        """The shell of a checked ``mesh`` section."""
+        keys = mesh.keys
+        gdim = 2 if mesh.geometry == "annulus" else 3
+        inner, outer = (float(r) for r in keys.radii)
+        return cls(gdim, inner, outer, float(keys.resolution), int(keys.geometry_degree))
 
     @property
     def name(self) -> str:
@@ -147,33 +148,30 @@ class ShellDomain(RadialDomain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, mesh: Mapping[str, Any], /) -> ShellDomain:
-        return cls(ShellSpec.from_config(mesh))
+    def from_settings(cls, mesh: MeshSection, /) -> ShellDomain:
+        return cls(ShellSpec.from_settings(mesh))
 
     @classmethod
-    def config_gdim(cls, mesh: Mapping[str, Any], /) -> int:
-        return _DIMENSIONS[mesh["geometry"]]
+    def config_gdim(cls, mesh: MeshSection, /) -> int:
+        return _DIMENSIONS[mesh.geometry]
 
     @classmethod
-    def check_config(cls, config: Mapping[str, Any], /) -> None:
-        mesh = config["mesh"]
-        check_radial_section(config)
-        for key, enabled in (("adaptivity.enabled", config["adaptivity"]["enabled"]),
-                             ("balance.strategy", config["balance"]["strategy"] != "none")):
-            if enabled and mesh["geometry_degree"] != 2:
-                surfaces = "circles" if mesh["geometry"] == "annulus" else "spheres"
-                raise ConfigError(f"config key '{key}': on mesh.geometry {mesh['geometry']} needs "
-                                  f"mesh.geometry_degree 2 (the refined cells are curved onto the {surfaces})")
+    def check_config(cls, mesh: MeshSection, /, *, changed_by: str | None) -> None:
+        check_radial_section(mesh)
+        if changed_by is not None and mesh.keys.geometry_degree != 2:
+            surfaces = "circles" if mesh.geometry == "annulus" else "spheres"
+            raise ConfigError(f"config key '{changed_by}': on mesh.geometry {mesh.geometry} needs "
+                              f"mesh.geometry_degree 2 (the refined cells are curved onto the {surfaces})")
 
     @classmethod
-    def base_cells_bound(cls, mesh: Mapping[str, Any], /) -> float:
+    def base_cells_bound(cls, mesh: MeshSection, /) -> float:
         """Shell volume over the volume of an equilateral cell of edge ``resolution``."""
-        inner, outer = mesh["radii"]
+        inner, outer = mesh.keys.radii
         # products, not powers: a float power raises OverflowError where a product gives inf
         volume, cell = ((math.pi * (outer - inner) * (outer + inner), 0.4330127) if cls.config_gdim(mesh) == 2
                         else (4.18879020 * (outer - inner) * (outer * outer + outer * inner + inner * inner),
                               0.11785113))
-        return safe_product(volume / cell, *[1.0 / mesh["resolution"]] * cls.config_gdim(mesh)) + 1.0
+        return safe_product(volume / cell, *[1.0 / mesh.keys.resolution] * cls.config_gdim(mesh)) + 1.0
 
     def angle_limits(self) -> list[tuple[float, float]]:
         """Longitude (poles included: -pi and pi) and, in 3D, colatitude."""

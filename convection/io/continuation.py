@@ -22,15 +22,14 @@ materials and particles start from the new run's own initial condition. The time
 The source must be a domain meshed with straight cells (a box) of the same ``mesh.geometry``,
 extent, dimension and cell type, with a temperature; a run
 that adapts its mesh to its initial condition (``adaptivity.enabled``) cannot continue one (it
-adapts to ``initial.temperature``). :func:`check_source` says what is wrong in one line naming the
-key.
+adapts to ``initial.temperature``). :func:`convection.config.continuation.check_source` says what
+is wrong in one line naming the key.
 """
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 import dolfinx.fem
 import dolfinx.mesh
@@ -41,21 +40,15 @@ from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 from convection.adapt.transfer import PointEvaluator, transfer_function
-from convection.io.checkpoint import (CheckpointError, block, fill_functions, inspect_checkpoint, latest_checkpoint,
+from convection.io.checkpoint import (CheckpointError, block, fill_functions, latest_checkpoint,
                                       read_checkpoint)
-from convection.geometry.registry import domain_from_config
-from convection.schema import ConfigError
 from fembase.distribute import MeshPiece, create_mesh_from_piece
 from fembase.dolfinx_compat import coordinate_element_from, function_space, mesh_domain
 
-__all__ = ["KEY", "check_source", "initial_temperature", "source_checkpoint"]
+__all__ = ["KEY", "initial_temperature", "source_checkpoint"]
 
 KEY = "initial.from_run"
 """The config key naming the source."""
-
-_SAME = (("mesh", "geometry"), ("mesh", "cell_type"), ("mesh", "lower"), ("mesh", "upper"))
-"""The source's config values that must equal the new run's (besides the dimension)."""
-
 
 def source_checkpoint(path: str | os.PathLike[str], /) -> Path | None:
     """The checkpoint folder ``path`` names: the newest of a run folder, or ``path`` itself when it
@@ -64,52 +57,6 @@ def source_checkpoint(path: str | os.PathLike[str], /) -> Path | None:
     if (folder / "state.h5").is_file():
         return folder
     return latest_checkpoint(folder) if folder.is_dir() else None
-
-
-def _extent(config: dict[str, Any], key: str) -> Any:
-    mesh = config["mesh"]
-    value = mesh.get(key)
-    if value is None:  # a box's defaults: the unit square or cube
-        return [0.0 if key == "lower" else 1.0] * len(mesh["cells"] or ())
-    return [float(v) for v in value]
-
-
-def check_source(config: dict[str, Any], /) -> None:
-    """Check ``initial.from_run`` of a resolved config (nothing to do when it is null); reads the
-    source's checkpoint (not collective).
-
-    Raises:
-        ConfigError: One line naming ``initial.from_run``: no checkpoint there, a damaged one, one
-            without a temperature, or a domain the new run's is not.
-    """
-    source = config["initial"]["from_run"]
-    if source is None:
-        return
-    path = source_checkpoint(source)
-    if path is None:
-        raise ConfigError(f"config key '{KEY}': '{source}' is neither a run folder with a checkpoint "
-                          "(checkpoints/checkpoint_*) nor a checkpoint folder")
-    saved = inspect_checkpoint(path)
-    if isinstance(saved, str):
-        raise ConfigError(f"config key '{KEY}': checkpoint {path}: {saved}")
-    if config["adaptivity"]["enabled"]:
-        raise ConfigError(f"config key '{KEY}': not with adaptivity.enabled (the initial mesh is adapted to "
-                          "initial.temperature)")
-    other = saved.config
-    if domain_from_config(config).manifold() is not None:
-        raise ConfigError(f"config key '{KEY}': only a domain meshed with straight cells continues another run "
-                          f"(mesh.geometry {config['mesh']['geometry']} is curved)")
-    if len(other["mesh"].get("cells") or ()) != len(config["mesh"]["cells"]):
-        raise ConfigError(f"config key '{KEY}': the source {path} is a {len(other['mesh'].get('cells') or ())}D "
-                          f"run, this one is {len(config['mesh']['cells'])}D")
-    for section, key in _SAME:
-        mine = _extent(config, key) if key in ("lower", "upper") else config[section][key]
-        theirs = _extent(other, key) if key in ("lower", "upper") else other[section].get(key)
-        if theirs != mine:
-            raise ConfigError(f"config key '{KEY}': the source {path} has {section}.{key} = {theirs}, this run "
-                              f"{mine}")
-    if not other["energy"]["enabled"]:
-        raise ConfigError(f"config key '{KEY}': the source {path} has no temperature (energy.enabled: false)")
 
 
 def _saved_temperature(path: Path) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:

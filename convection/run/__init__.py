@@ -2,6 +2,6 @@
 checkpoints and the stops (end time, step limit, steady state, blow-up, a stop request), and the
 settings of the ``time``, ``output`` and ``blowup`` config sections."""
 
-from convection.run.loop import BlowUp, OutputSettings, RunSettings, RunSummary, TimeSettings, run
+from convection.run.loop import BlowUp, LoopSettings, OutputSettings, RunSummary, TimeSettings, run
 
-__all__ = ["BlowUp", "OutputSettings", "RunSettings", "RunSummary", "TimeSettings", "run"]
+__all__ = ["BlowUp", "LoopSettings", "OutputSettings", "RunSummary", "TimeSettings", "run"]

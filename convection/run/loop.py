@@ -36,7 +36,7 @@ from convection.io.run_folder import RunFolderError
 from particles.io.swarm_checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
-__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "RunSettings", "TimeSettings", "RunSummary",
+__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "LoopSettings", "TimeSettings", "RunSummary",
            "SteadyRate", "SteadyState", "Watch", "Watched", "run"]
 
 
@@ -90,7 +90,7 @@ class OutputSettings:
 
 
 @dataclass(frozen=True)
-class RunSettings:
+class LoopSettings:
     """How long and how a run goes: the ``time`` and ``output`` sections."""
 
     time: TimeSettings
@@ -118,7 +118,7 @@ class RunSummary:
         return dict(self.__dict__)
 
 
-def _timestep(model: Model, settings: RunSettings) -> float:
+def _timestep(model: Model, settings: LoopSettings) -> float:
     dt = model.cfl_dt(settings.time.cfl, dt_max=settings.time.dt_max)
     if not np.isfinite(dt) or dt <= 0.0:
         dt = settings.time.dt_initial or settings.time.dt_max or 0.0
@@ -307,7 +307,7 @@ class _Outputs:
             file cannot be written.
     """
 
-    def __init__(self, model: Model, settings: RunSettings, columns: list[str], resume: bool,
+    def __init__(self, model: Model, settings: LoopSettings, columns: list[str], resume: bool,
                  kinds: Mapping[str, str] | None = None, profiles: Sequence[Any] = ()) -> None:
         output = settings.output
         directory = Path(output.directory)
@@ -384,7 +384,7 @@ def _with_time_columns(postprocessors: Sequence[Postprocessor]) -> list[Postproc
     return [TimeColumns(), *postprocessors]
 
 
-def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postprocessor], /, *,
+def run(model: Model, settings: LoopSettings, postprocessors: Sequence[Postprocessor], /, *,
         should_stop: Callable[[], bool] = lambda: False, start: float | None = None,
         checkpoints: Any = None, blowup: BlowUp = BlowUp(), resume: Resume | None = None) -> RunSummary:
     """Run ``model`` to ``settings.time.end`` (or max_steps, steady state, or a stop request). Collective.
@@ -418,7 +418,7 @@ def run(model: Model, settings: RunSettings, postprocessors: Sequence[Postproces
 class _RunLoop:
     """The state of one :func:`run`: its outputs, the watched quantities and the stop tests."""
 
-    def __init__(self, model: Model, settings: RunSettings, postprocessors: Sequence[Postprocessor], /, *,
+    def __init__(self, model: Model, settings: LoopSettings, postprocessors: Sequence[Postprocessor], /, *,
                  start: float | None, checkpoints: Any, blowup: BlowUp) -> None:
         self.model = model
         self.settings = settings

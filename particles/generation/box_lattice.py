@@ -14,6 +14,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from fembase.geometry import owned_box
 from particles.generation._listed import insert_listed_points
 from particles.generation.base import GenerationResult
@@ -24,20 +25,14 @@ __all__ = ["BoxLattice"]
 
 @dataclass(frozen=True)
 class BoxLattice:
-    """Lattice parameters (each a tuple of length gdim).
-
-    Attributes:
-        lower: Lower corner of the box.
-        upper: Upper corner of the box.
-        counts: Points per direction (>= 1).
-    """
+    """Lattice parameters (each a tuple of length gdim)."""
 
     name: ClassVar[str] = "box_lattice"
     description: ClassVar[str] = "regular lattice of points in a box with a given count per direction"
 
-    lower: tuple[float, ...]
-    upper: tuple[float, ...]
-    counts: tuple[int, ...]
+    lower: tuple[float, ...] = param(help="Lower corner of the box.")
+    upper: tuple[float, ...] = param(help="Upper corner of the box.")
+    counts: tuple[int, ...] = param(help="Points per direction (>= 1).")
 
     def axis(self, d: int) -> npt.NDArray[np.float64]:
         """Coordinates of the lattice planes along direction ``d``, shape=(counts[d],)."""

@@ -15,6 +15,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from fembase.geometry import owned_box
 from particles.generation._listed import in_box, insert_listed_points
 from particles.generation.base import GenerationResult
@@ -25,16 +26,12 @@ __all__ = ["FromFile"]
 
 @dataclass(frozen=True)
 class FromFile:
-    """File parameters.
-
-    Attributes:
-        path: Text file with one point per row.
-    """
+    """File parameters."""
 
     name: ClassVar[str] = "from_file"
     description: ClassVar[str] = "positions read from a text file, one point per row"
 
-    path: str | Path
+    path: str | Path = param(help="Text file with one point per row.")
 
     def read(self, gdim: int) -> npt.NDArray[np.float64]:
         """All points of the file, shape=(n, gdim), float64."""

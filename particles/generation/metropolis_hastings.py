@@ -20,6 +20,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from fembase.streams import cell_streams, uniforms
 from particles.generation._allocation import allocate_counts
 from particles.generation.base import Density, GenerationResult, evaluate_density, first_free_id, insert_in_cells
@@ -37,26 +38,17 @@ _START_COUNTER = 1 << 40  # stream positions of the start search, far from the c
 
 @dataclass(frozen=True)
 class MetropolisHastings:
-    """Metropolis-Hastings sampling of ``rho`` (callable on points shape=(n, gdim) -> (n,)).
-
-    Attributes:
-        num_particles: Global number of particles.
-        density: Non-negative, non-normalised density; None means uniform.
-        seed: Random seed.
-        thinning: Keep every ``thinning``-th chain state (J in the seed paper).
-        burn_in: Chain steps discarded before the first kept state.
-        quadrature_degree: Degree of the quadrature rule for the cell integrals.
-    """
+    """Metropolis-Hastings sampling of ``rho`` (callable on points shape=(n, gdim) -> (n,))."""
 
     name: ClassVar[str] = "metropolis_hastings"
     description: ClassVar[str] = "density-following positions by a Metropolis-Hastings chain in each cell"
 
-    num_particles: int
-    density: Density | None = None
-    seed: int = 0
-    thinning: int = 10
-    burn_in: int = 20
-    quadrature_degree: int = 4
+    num_particles: int = param(help="Global number of particles.")
+    density: Density | None = param(None, help="Non-negative, non-normalised density; None means uniform.")
+    seed: int = param(0, help="Random seed.")
+    thinning: int = param(10, help="Keep every `thinning`-th chain state (J in the seed paper).")
+    burn_in: int = param(20, help="Chain steps discarded before the first kept state.")
+    quadrature_degree: int = param(4, help="Degree of the quadrature rule for the cell integrals.")
 
     def _target(self, maps: CellMaps, idx: npt.NDArray[np.int64], xhat: npt.NDArray[np.float64]
                 ) -> npt.NDArray[np.float64]:

@@ -17,6 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from fembase.params import param
 from fembase.streams import cell_streams, uniforms
 from particles.generation._allocation import allocate_counts
 from particles.generation.base import Density, GenerationResult, first_free_id, insert_in_cells
@@ -32,23 +33,16 @@ _STREAM = 1
 
 @dataclass(frozen=True)
 class RandomDensity:
-    """Random positions with density ``rho`` (callable on points shape=(n, gdim) -> (n,)).
-
-    Attributes:
-        num_particles: Global number of particles.
-        seed: Random seed.
-        density: Non-negative, non-normalised density; None means uniform.
-        quadrature_degree: Degree of the quadrature rule for the cell integrals of the density.
-    """
+    """Random positions with density ``rho`` (callable on points shape=(n, gdim) -> (n,))."""
 
     name: ClassVar[str] = "random_density"
     description: ClassVar[str] = "random positions with probability proportional to a density function"
     affine_cells_only: ClassVar[bool] = True
 
-    num_particles: int
-    seed: int = 0
-    density: Density | None = None
-    quadrature_degree: int = 4
+    num_particles: int = param(help="Global number of particles.")
+    seed: int = param(0, help="Random seed.")
+    density: Density | None = param(None, help="Non-negative, non-normalised density; None means uniform.")
+    quadrature_degree: int = param(4, help="Degree of the quadrature rule for the cell integrals of the density.")
 
     def generate(self, swarm: Swarm, /) -> GenerationResult:
         """Insert the particles into ``swarm`` (collective)."""
@@ -72,19 +66,14 @@ class RandomDensity:
 
 @dataclass(frozen=True)
 class RandomUniform:
-    """Uniformly distributed random positions (``random_density`` with a constant density).
-
-    Attributes:
-        num_particles: Global number of particles.
-        seed: Random seed.
-    """
+    """Uniformly distributed random positions (``random_density`` with a constant density)."""
 
     name: ClassVar[str] = "random_uniform"
     description: ClassVar[str] = "uniformly distributed random positions"
     affine_cells_only: ClassVar[bool] = True
 
-    num_particles: int
-    seed: int = 0
+    num_particles: int = param(help="Global number of particles.")
+    seed: int = param(0, help="Random seed.")
 
     def generate(self, swarm: Swarm, /) -> GenerationResult:
         """Insert the particles into ``swarm`` (collective)."""

@@ -14,6 +14,7 @@ import basix
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from particles.generation.base import GenerationResult, first_free_id, insert_in_cells
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
@@ -26,19 +27,15 @@ _KINDS = ("quadrature", "lattice")
 
 @dataclass(frozen=True)
 class ReferencePoints:
-    """Per-cell reference points.
-
-    Attributes:
-        kind: "quadrature" (the points of basix's default rule of ``degree``) or "lattice" (the
-            interior points of basix's equispaced lattice with ``degree`` intervals per edge).
-        degree: Quadrature degree, or number of lattice intervals per reference edge.
-    """
+    """Per-cell reference points."""
 
     name: ClassVar[str] = "reference_points"
     description: ClassVar[str] = "the same reference points (quadrature points or a sub-lattice) in every cell"
 
-    kind: str = "quadrature"
-    degree: int = 2
+    kind: str = param("quadrature", help="\"quadrature\" (the points of basix's default rule of `degree`) or "
+                                         "\"lattice\" (the interior points of basix's equispaced lattice with "
+                                         "`degree` intervals per edge).")
+    degree: int = param(2, help="Quadrature degree, or number of lattice intervals per reference edge.")
 
     def reference_points(self, cell: basix.CellType) -> npt.NDArray[np.float64]:
         """The points in the reference cell, shape=(q, tdim)."""

@@ -13,6 +13,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from fembase.geometry import owned_box
 from particles.generation._listed import in_box, insert_listed_points
 from particles.generation.base import GenerationResult
@@ -23,20 +24,14 @@ __all__ = ["Shell"]
 
 @dataclass(frozen=True)
 class Shell:
-    """Shell parameters.
-
-    Attributes:
-        center: Centre, length gdim (2 or 3).
-        radii: Radius of each shell.
-        counts: Points on each shell.
-    """
+    """Shell parameters."""
 
     name: ClassVar[str] = "shell"
     description: ClassVar[str] = "points on circles or spheres: given radii and points per shell"
 
-    center: tuple[float, ...]
-    radii: tuple[float, ...]
-    counts: tuple[int, ...]
+    center: tuple[float, ...] = param(help="Centre, length gdim (2 or 3).")
+    radii: tuple[float, ...] = param(help="Radius of each shell.")
+    counts: tuple[int, ...] = param(help="Points on each shell.")
 
     def points(self) -> npt.NDArray[np.float64]:
         """All points of all shells, shape=(sum(counts), gdim)."""

@@ -20,6 +20,7 @@ from mpi4py import MPI
 
 import dolfinx.fem
 
+from fembase.params import param
 from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_result
 from particles.storage.swarm import Swarm
 
@@ -30,17 +31,13 @@ _MEANS = ("arithmetic", "geometric", "harmonic")
 
 @dataclass(frozen=True)
 class CellAverage:
-    """Mean of the particle values in each cell.
-
-    Attributes:
-        mean: "arithmetic", "geometric" or "harmonic".
-    """
+    """Mean of the particle values in each cell."""
 
     name: ClassVar[str] = "cell_average"
     discontinuous: ClassVar[bool] = True
     description: ClassVar[str] = "arithmetic, geometric or harmonic mean of the particles in each cell (DG)"
 
-    mean: str = "arithmetic"
+    mean: str = param("arithmetic", help='"arithmetic", "geometric" or "harmonic".')
 
     def __post_init__(self) -> None:
         if self.mean not in _MEANS:

@@ -24,6 +24,7 @@ import numpy as np
 
 import dolfinx.fem
 
+from fembase.params import param
 from particles.interpolation._base import InterpolationStats, TargetSpace, gather_samples, write_with_cell_means
 from particles.interpolation._cell_kernels import idw_accumulate
 from particles.storage.swarm import Swarm
@@ -41,23 +42,17 @@ def cell_diameters(swarm: Swarm) -> np.ndarray:
 
 @dataclass(frozen=True)
 class DistanceWeighted:
-    """Inverse-distance weighted average at the dof points.
-
-    Attributes:
-        power: Exponent of the inverse distance (> 0).
-        use_neighbours: Also use the particles of vertex-neighbour cells (DG targets; collective
-            ghost exchange).
-        eps: Distance floor relative to the cell diameter.
-    """
+    """Inverse-distance weighted average at the dof points."""
 
     name: ClassVar[str] = "distance_weighted"
     discontinuous: ClassVar[bool] = False
     description: ClassVar[str] = ("inverse-distance weighted average of the particles in the cell (and neighbours) at "
                                   "the dof points")
 
-    power: float = 2.0
-    use_neighbours: bool = False
-    eps: float = 1e-9
+    power: float = param(2.0, help="Exponent of the inverse distance (> 0).")
+    use_neighbours: bool = param(False, help="Also use the particles of vertex-neighbour cells (DG targets; "
+                                             "collective ghost exchange).")
+    eps: float = param(1e-9, help="Distance floor relative to the cell diameter.")
 
     def __post_init__(self) -> None:
         if not self.power > 0 or not self.eps > 0:

@@ -30,6 +30,7 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
+from fembase.params import param
 from particles.interpolation._base import (
     InterpolationStats,
     Samples,
@@ -72,23 +73,17 @@ class _Fit:
 
 @dataclass(frozen=True)
 class LeastSquares:
-    """Linear least-squares fit per cell into a DG1 target.
-
-    Attributes:
-        limit: Keep the values within the range of the particle values used (slope limiter).
-        use_neighbours: Use vertex-neighbour cells' particles for cells that cannot be fitted alone
-            (collective ghost exchange).
-        rcond: Smallest accepted reciprocal condition number of the (scaled) normal matrix.
-    """
+    """Linear least-squares fit per cell into a DG1 target."""
 
     name: ClassVar[str] = "least_squares"
     discontinuous: ClassVar[bool] = True
     description: ClassVar[str] = "linear least-squares fit per cell into DG1, optional bound-preserving limiter"
     target_degree: ClassVar[int] = 1
 
-    limit: bool = False
-    use_neighbours: bool = True
-    rcond: float = 1e-10
+    limit: bool = param(False, help="Keep the values within the range of the particle values used (slope limiter).")
+    use_neighbours: bool = param(True, help="Use vertex-neighbour cells' particles for cells that cannot be fitted "
+                                            "alone (collective ghost exchange).")
+    rcond: float = param(1e-10, help="Smallest accepted reciprocal condition number of the (scaled) normal matrix.")
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:

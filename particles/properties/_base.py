@@ -20,6 +20,7 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
+from fembase.params import param
 from fembase.evaluation import Evaluator
 from particles.storage.swarm import Swarm
 
@@ -145,10 +146,6 @@ class ParticleProperty:
             particle (``dv/dt = f(x_p)``, :attr:`rate_field`), advanced once per step by
             :meth:`particles.properties.PropertyManager.accumulate` (explicit Euler, the field of
             the step's start).
-
-    Attributes:
-        update: Override of ``default_update`` (None keeps the default).
-        new_particles: Override of ``default_new_particles`` (None keeps the default).
     """
 
     name: ClassVar[str] = ""
@@ -158,8 +155,8 @@ class ParticleProperty:
     integrated: ClassVar[bool] = False
     accumulating: ClassVar[bool] = False
 
-    update: str | None = None
-    new_particles: str | None = None
+    update: str | None = param(None, help="Override of `default_update` (None keeps the default).")
+    new_particles: str | None = param(None, help="Override of `default_new_particles` (None keeps the default).")
 
     def __post_init__(self) -> None:
         if self.update is not None and self.update not in UPDATE_POLICIES:

@@ -12,6 +12,7 @@ import numpy.typing as npt
 
 import dolfinx.fem
 
+from fembase.params import param
 from particles.properties._base import ParticleProperty, PropertyContext, evaluate_at, write_rows
 from particles.storage.swarm import Swarm
 
@@ -51,18 +52,14 @@ class SourceValue(ParticleProperty):
 
     Class attributes:
         source_field: Name of the subclass's dataclass field that holds the source.
-
-    Attributes:
-        label: Swarm property name.
-        components: Columns produced by a callable (a Function's value size is used otherwise).
     """
 
     source_field: ClassVar[str] = "source"
     default_update: ClassVar[str] = "never"
     default_new_particles: ClassVar[str] = "reinitialise"
 
-    label: str
-    components: int = 1
+    label: str = param(help="Swarm property name.")
+    components: int = param(1, help="Columns produced by a callable (a Function's value size is used otherwise).")
 
     @property
     def column(self) -> str:

@@ -8,6 +8,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from particles.properties._base import ParticleProperty, PropertyContext, write_rows
 from particles.properties._tensor import strain_rate_invariant
 from particles.storage.swarm import Swarm
@@ -20,11 +21,6 @@ class Damage(ParticleProperty):
     """Damage ``d`` with ``dd/dt = alpha |eps| - beta d``, ``|eps| = sqrt(eps:eps / 2)`` the second
     invariant of the strain rate; integrated by the Advector with the positions' scheme. For a
     constant strain rate, ``d(t) = (alpha |eps| / beta)(1 - exp(-beta t)) + d(0) exp(-beta t)``.
-
-    Attributes:
-        alpha: Growth per unit strain, >= 0.
-        beta: Healing rate, >= 0.
-        initial: Damage at creation.
     """
 
     name: ClassVar[str] = "damage"
@@ -32,9 +28,9 @@ class Damage(ParticleProperty):
     default_new_particles: ClassVar[str] = "interpolate"
     integrated: ClassVar[bool] = True
 
-    alpha: float = 1.0
-    beta: float = 0.0
-    initial: float = 0.0
+    alpha: float = param(1.0, help="Growth per unit strain, >= 0.")
+    beta: float = param(0.0, help="Healing rate, >= 0.")
+    initial: float = param(0.0, help="Damage at creation.")
 
     def __post_init__(self) -> None:
         super().__post_init__()

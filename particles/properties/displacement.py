@@ -8,6 +8,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from particles.properties._base import ParticleProperty, PropertyContext, write_rows
 from particles.properties.initial_position import InitialPosition
 from particles.storage.swarm import Swarm
@@ -22,9 +23,6 @@ class Displacement(ParticleProperty):
     Needs the ``initial_position`` property on the same particles (list it too). Particles added
     later get the distance to the initial position they were given (by default the mean of their
     cell's), so they carry the history of the material they stand for.
-
-    Attributes:
-        reference: Swarm property holding the start positions (gdim columns).
     """
 
     name: ClassVar[str] = "displacement"
@@ -32,7 +30,7 @@ class Displacement(ParticleProperty):
     default_update: ClassVar[str] = "every_step"
     default_new_particles: ClassVar[str] = "reinitialise"
 
-    reference: str = InitialPosition.name
+    reference: str = param(InitialPosition.name, help="Swarm property holding the start positions (gdim columns).")
 
     def requires(self) -> tuple[str, ...]:
         return (self.reference,)

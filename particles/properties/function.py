@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from fembase.params import param
 from particles.properties._callable import PointFunction, SourceValue
 
 __all__ = ["FunctionProperty"]
@@ -13,17 +14,12 @@ __all__ = ["FunctionProperty"]
 @dataclass(frozen=True, kw_only=True)
 class FunctionProperty(SourceValue):
     """Values of a callable ``f(x)`` at the particle (at creation; at the current position when
-    updated, if the update policy says so).
-
-    Attributes:
-        function: ``f(x)``, x shape=(m, gdim) -> shape=(m,) or (m, components).
-        label: Swarm property name.
-        components: Number of columns.
-    """
+    updated, if the update policy says so)."""
 
     name: ClassVar[str] = "function"
     description: ClassVar[str] = "any Python callable of the position"
     source_field: ClassVar[str] = "function"
 
-    function: PointFunction
-    label: str = "function"
+    function: PointFunction = param(help="`f(x)`, x shape=(m, gdim) -> shape=(m,) or (m, components).")
+    label: str = param("function", help="Swarm property name.")
+    components: int = param(1, help="Number of columns.")

@@ -8,6 +8,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from particles.properties._base import ParticleProperty, PropertyContext, write_rows
 from particles.properties._tensor import strain_rate_invariant
 from particles.storage.swarm import Swarm
@@ -19,9 +20,6 @@ __all__ = ["IntegratedStrain"]
 class IntegratedStrain(ParticleProperty):
     """Time integral of the second invariant of the strain rate, ``s(0) = initial``; integrated by
     the Advector with the positions' Runge-Kutta scheme.
-
-    Attributes:
-        initial: Value at creation (and for reinitialised new particles).
     """
 
     name: ClassVar[str] = "integrated_strain"
@@ -29,7 +27,7 @@ class IntegratedStrain(ParticleProperty):
     default_new_particles: ClassVar[str] = "interpolate"
     integrated: ClassVar[bool] = True
 
-    initial: float = 0.0
+    initial: float = param(0.0, help="Value at creation (and for reinitialised new particles).")
 
     def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
         write_rows(swarm, self.column, rows, self.initial)

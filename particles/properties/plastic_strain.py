@@ -8,6 +8,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fembase.params import param
 from particles.properties._base import ParticleProperty, PropertyContext, write_rows
 from particles.storage.swarm import Swarm
 
@@ -21,10 +22,6 @@ class PlasticStrain(ParticleProperty):
     yields and 0 elsewhere (ASPECT's convention; ``integrated_strain`` is the total-strain
     variant). Advanced once per step before the particles move, with the field of the step's start
     (explicit Euler): a particle in a steady yielding shear of rate ``eps_II`` has ``e = e0 + eps_II t``.
-
-    Attributes:
-        initial: Value at creation (new particles later take the mean of their neighbours).
-        rate_field: Name of the mesh field integrated.
     """
 
     name: ClassVar[str] = "plastic_strain"
@@ -32,8 +29,8 @@ class PlasticStrain(ParticleProperty):
     default_new_particles: ClassVar[str] = "interpolate"
     accumulating: ClassVar[bool] = True
 
-    initial: float = 0.0
-    rate_field: str = "plastic_strain_rate"
+    initial: float = param(0.0, help="Value at creation (new particles later take the mean of their neighbours).")
+    rate_field: str = param("plastic_strain_rate", help="Name of the mesh field integrated.")
 
     def __post_init__(self) -> None:
         super().__post_init__()

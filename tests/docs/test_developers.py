@@ -16,16 +16,20 @@ PAGE = ROOT / "docs" / "developers.md"
 BLOCKS = re.findall(r"^```python\n(.*?)^```", PAGE.read_text(), re.S | re.M)
 TOPICS = ("viscosity law", "particle property", "output format", "geometry", "postprocessor", "composition source",
           "benchmark")
+READINGS = ("run's settings",)
+"""The examples before the topics: what a contributor reads (## Read a ...)."""
 
 
 def test_every_topic_has_an_example():
     text = PAGE.read_text()
     for topic in TOPICS:
         assert re.search(rf"^## Add an? {topic}$", text, re.M), topic
-    assert len(BLOCKS) == len(TOPICS)
+    for reading in READINGS:
+        assert re.search(rf"^## Read an? {reading}$", text, re.M), reading
+    assert len(BLOCKS) == len(READINGS) + len(TOPICS)
 
 
-@pytest.mark.parametrize("block", BLOCKS, ids=TOPICS)
+@pytest.mark.parametrize("block", BLOCKS, ids=[*READINGS, *TOPICS])
 def test_example_runs(block, tmp_path):
     proc = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "PYTHONDONTWRITEBYTECODE": "1",

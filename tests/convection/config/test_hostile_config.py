@@ -27,7 +27,7 @@ from convection.config.loader import load_config
 from convection.expressions import MAX_LENGTH, Expression, ExpressionError
 from convection.launch import RANK_SHELL, mpi_environment, mpirun
 from convection.geometry.probes import MAX_PROBES, boundary_probes, domain_probes
-from convection.geometry.registry import domain_from_config
+from convection.config.loader import config_domain as domain_from_config
 from convection.schema import ConfigError, check_document_shape, short_repr
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -14,14 +14,15 @@ from convection.adapt.adaptivity import Adaptivity, AdaptivitySettings
 
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.rebalance import BalanceSettings, Balancer
-from convection.app.factory import build_model, run_settings
+from convection.app.factory import build_model
+from convection.config.settings import run_settings
 from convection.config.loader import SCHEMA, load_config
 from convection.io.checkpoint import CheckpointSettings
 from convection.model.composition import CompositionSettings
 from convection.physics.approximation import PhysicsSettings, ViscosityLaw, ViscositySettings
 from convection.physics.materials import Materials
 from convection.postprocess.postprocessors import DiagnosticsSettings
-from convection.run.loop import BlowUp, OutputSettings, RunSettings, TimeSettings
+from convection.run.loop import BlowUp, LoopSettings, OutputSettings, TimeSettings
 from convection.schema import Field, section_schema, settings_as_section, settings_from
 from convection.solvers.stokes.nonlinear import NonlinearSettings
 from convection.solvers.stokes.solver import StokesSettings, StokesSolver
@@ -82,8 +83,8 @@ def test_components_built_from_empty_sections_equal_those_built_without_argument
     hierarchy = MeshHierarchy(dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 2, 2))
     assert model.adaptivity.params == dataclasses.replace(Adaptivity(hierarchy).params, enabled=True)
     assert model.balancer.settings == dataclasses.replace(Balancer(hierarchy).settings, strategy="every")
-    settings = run_settings(config)
-    assert settings == RunSettings(TimeSettings(end=0.1), OutputSettings(directory="unused"))
+    settings = run_settings(config).loop
+    assert settings == LoopSettings(TimeSettings(end=0.1), OutputSettings(directory="unused"))
     assert settings.output.checkpoint == CheckpointSettings()
     for solver in (python_stokes, python_temperature, stokes, temperature):
         solver.destroy()

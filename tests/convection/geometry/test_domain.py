@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from convection.config.loader import expression_constants, load_config
-from convection.geometry import DOMAINS, Annulus, BoxDomain, Sector, ShellDomain, SphericalShell, domain_from_config
+from convection.config.loader import config_domain as domain_from_config
+from convection.geometry import DOMAINS, Annulus, BoxDomain, Sector, ShellDomain, SphericalShell
 from convection.geometry.gravity import RadialGravity, VerticalGravity
 from convection.geometry.probes import MAX_PROBES, boundary_probes, domain_probes
 from convection.schema import ConfigError

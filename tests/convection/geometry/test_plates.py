@@ -7,7 +7,7 @@ import pytest
 
 from convection.config.loader import ConfigError, load_config
 from convection.app.factory import velocity_bcs_from_config
-from convection.geometry.registry import domain_from_config
+from convection.config.loader import config_domain as domain_from_config
 from convection.geometry.plates import Plate, PlateVelocity, unit_vector
 
 PLATES = (Plate((0.0, 0.0), 2.0, (90.0, 30.0)), Plate((180.0, 0.0), -1.0, (0.0, 90.0)),

@@ -11,6 +11,8 @@ import dolfinx.fem
 pytest.importorskip("gmsh")
 
 from convection.geometry.registry import DOMAINS  # noqa: E402
+from convection.geometry.domain import MeshSection  # noqa: E402
+from convection.geometry.radial import RadialMeshSettings  # noqa: E402
 from convection.geometry.shell import (  # noqa: E402
     SHELL_BOUNDARIES, ShellSpec, SphericalShell, create_shell_mesh, shell_domain, shell_radii,
 )
@@ -58,8 +60,8 @@ def test_straight_cells_and_interfaces():
 
 
 def test_spec_from_config_and_checks():
-    domain = DOMAINS.lookup("spherical_shell").from_config(
-        {"geometry": "spherical_shell", "radii": [1.0, 2.0], "resolution": 0.4, "geometry_degree": 2})
+    keys = RadialMeshSettings(radii=(1.0, 2.0), resolution=0.4, geometry_degree=2)
+    domain = DOMAINS.lookup("spherical_shell").from_settings(MeshSection("spherical_shell", keys, 2_000_000))
     assert isinstance(domain, SphericalShell) and domain.spec.gdim == 3 and domain.spec.name == "spherical_shell"
     assert domain.gravity.name == "radial" and domain.gravity.outer_radius == 2.0
     with pytest.raises(ValueError, match="inner_radius"):

@@ -1,0 +1,169 @@
+"""Below the loader, code takes typed settings: no module of ``convection/`` outside ``config/``
+reads a raw config mapping (issue 47, item 1; docs/developers.md, "Declare a parameter once").
+
+``config/`` turns a resolved config into one frozen :class:`convection.config.settings.RunSettings`;
+the factory and the rooms receive its fields. Three things would mean a room reads the mapping
+again, and each is checked in every module of ``convection/`` but ``config/``:
+
+- a config section read by its name: a subscript or ``.get``/``.pop``/``.setdefault`` with a
+  section's name as the key, on something named like a config (``config["adaptivity"]``,
+  ``saved.config.get("mesh")``, ``cfg["balance"]``), or followed by a key of the section on
+  anything (``x["adaptivity"]["enabled"]``, ``x["stokes"].get("solver")``); a component or state
+  named like a section (``components["free_surface"]``) is not a config read;
+- a parameter named ``config``, ``cfg`` or ``*_config`` that is a mapping (annotated with ``dict``,
+  ``Mapping`` or ``Any``, or not annotated; a config file's path is not);
+- a function named ``from_config`` or ``*_from_config`` (a builder from raw config values).
+
+What still does, is listed below with the reason; the lists only shrink. Not covered by this scan
+(issue 47, what remains of "one way to declare a parameter"): the viscosity laws validate their
+parameters with their own ``law_param``/``_parse_value`` (physics/rheology.py), and ``particles/``
+reads its sections raw (``ParticleManager.from_config`` takes ``ParticleSettings``
+from the RunSettings, but the loader's particle checks build the plugins from the mappings).
+"""
+
+import ast
+from pathlib import Path
+
+from convection.config.loader import SCHEMA
+
+ROOT = Path(__file__).resolve().parents[1]
+FRONT_END = ROOT / "convection" / "config"
+
+SECTIONS = frozenset(SCHEMA) - {"name"}  # "name" is every registry entry's too
+"""The config's sections: a string key among these indexes a config mapping."""
+
+SECTION_READS = {
+    ("convection/io/continuation.py", "energy"): "the degree of the source run's temperature, from its checkpoint",
+}
+"""(module, section) -> why it is read there."""
+
+CONFIG_PARAMETERS = {
+    ("convection/app/factory.py", "build_model"): "the public door: makes the RunSettings (config.settings)",
+    ("convection/app/factory.py", "run_config"): "the public door: makes the RunSettings; writes the document",
+    ("convection/io/checkpoint.py", "write_checkpoint"): "a checkpoint keeps the resolved document, unread",
+    ("convection/io/checkpoint.py", "__init__"): "the Checkpointer keeps the resolved document, unread",
+}
+"""(module, function) -> why it takes the config mapping."""
+
+FROM_CONFIG = {
+    ("convection/app/factory.py", "velocity_bcs_from_config"): "boundary conditions as written (boundary kinds)",
+    ("convection/app/factory.py", "temperature_bcs_from_config"): "boundary conditions as written",
+    ("convection/geometry/plates.py", "from_config"): "a plates condition as written (boundary kinds)",
+    ("convection/geometry/boundary.py", "from_config"): "a velocity kind's condition from its value as written "
+                                                         "(BoundarySettings keeps the boundary section as written)",
+    ("convection/physics/rheology.py", "from_config"): "viscosity laws: their own validator (law_param)",
+}
+"""(module, function) -> why it builds from raw config values (item 4 of issue 47: one way to
+declare a parameter)."""
+
+
+def _modules():
+    for path in sorted((ROOT / "convection").rglob("*.py")):
+        if FRONT_END not in path.parents:
+            yield path.relative_to(ROOT).as_posix(), ast.parse(path.read_text())
+
+
+def _read(node: ast.AST) -> tuple[ast.AST, str] | None:
+    """(What is read from, the constant text key) of a subscript or ``.get``-like call, else None."""
+    if isinstance(node, ast.Subscript):
+        target, key = node.value, node.slice
+    elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+          and node.func.attr in ("get", "pop", "setdefault") and node.args):
+        target, key = node.func.value, node.args[0]
+    else:
+        return None
+    return (target, key.value) if isinstance(key, ast.Constant) and isinstance(key.value, str) else None
+
+
+def _config_like(node: ast.AST) -> bool:
+    name = node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else ""
+    return "config" in name or "cfg" in name or name == "document"
+
+
+def _section_key(node: ast.AST) -> str | None:
+    """The section ``node`` reads as a config section, if any (see the module docstring)."""
+    outer = _read(node)
+    if outer is None:
+        return None
+    target, key = outer
+    if key in SECTIONS and _config_like(target):
+        return key
+    inner = _read(target)  # x["section"]["key"], x["section"].get("key")
+    return inner[1] if inner is not None and inner[1] in SECTIONS else None
+
+
+def _section_reads():
+    for module, tree in _modules():
+        for node in ast.walk(tree):
+            key = _section_key(node)
+            if key is not None:
+                yield module, key, node.lineno
+
+
+def _functions():
+    for module, tree in _modules():
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                yield module, node
+
+
+def _takes_config(function: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
+    arguments = function.args
+    for argument in (*arguments.posonlyargs, *arguments.args, *arguments.kwonlyargs):
+        annotation = argument.annotation
+        mapping = annotation is None or any(word in ast.unparse(annotation) for word in ("dict", "Mapping", "Any"))
+        if mapping and (argument.arg in ("config", "cfg") or argument.arg.endswith("_config")):
+            return True
+    return False
+
+
+def test_no_room_reads_a_config_section():
+    wrong = [f"{module}:{line} reads config section {key!r}" for module, key, line in _section_reads()
+             if (module, key) not in SECTION_READS]
+    assert not wrong, wrong
+
+
+def test_no_room_takes_the_config_mapping():
+    wrong = [f"{module}:{f.lineno} {f.name}() takes a config mapping" for module, f in _functions()
+             if _takes_config(f) and (module, f.name) not in CONFIG_PARAMETERS]
+    assert not wrong, wrong
+
+
+def test_no_room_builds_from_raw_config_values():
+    wrong = [f"{module}:{f.lineno} {f.name}()" for module, f in _functions()
+             if (f.name == "from_config" or f.name.endswith("_from_config")) and (module, f.name) not in FROM_CONFIG]
+    assert not wrong, wrong
+
+
+def test_the_allow_lists_hold_only_what_is_still_there():
+    """A module converted leaves the lists: an entry that no longer matches is an error."""
+    reads = {(module, key) for module, key, _ in _section_reads()}
+    functions = {(module, f.name) for module, f in _functions()}
+    takes = {(module, f.name) for module, f in _functions() if _takes_config(f)}
+    assert set(SECTION_READS) <= reads, sorted(set(SECTION_READS) - reads)
+    assert set(CONFIG_PARAMETERS) <= takes, sorted(set(CONFIG_PARAMETERS) - takes)
+    assert set(FROM_CONFIG) <= functions, sorted(set(FROM_CONFIG) - functions)
+
+
+def test_the_checks_catch_a_raw_read():
+    """The scan sees the forms a regression would take."""
+    tree = ast.parse("def f(run_config):\n    a = config['adaptivity']\n    b = cfg.get('balance')\n"
+                     "    c = x['stokes']['solver']\n    d = x['mesh'].get('cells')\n    e = parts['time']\n")
+    keys = [_section_key(node) for node in ast.walk(tree)]
+    assert {"adaptivity", "balance", "stokes", "mesh"} <= set(keys) and "time" not in keys
+    assert _takes_config(next(n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)))
+
+
+def test_particle_plugins_declare_their_parameters_once():
+    """A particle plugin's parameters are fields made by :func:`fembase.params.param`, with their
+    help (the config reference reads it there; nothing is scraped from a docstring)."""
+    import dataclasses
+
+    from particles.generation import GENERATORS
+    from particles.interpolation import INTERPOLATORS
+    from particles.properties import PROPERTIES
+
+    wrong = [f"{name}.{f.name}" for registry in (GENERATORS, PROPERTIES, INTERPOLATORS)
+             for name, cls in registry.items() for f in dataclasses.fields(cls)
+             if f.init and not f.name.startswith("_") and not f.metadata.get("schema", {}).get("help")]
+    assert not wrong, wrong

@@ -93,7 +93,7 @@ def _picture(fine: Path, stats: dict, png: Path) -> None:
         axes[2].plot(stats["time"], stats[key] / PUBLISHED[key], color=colour, label=f"{key} / published")
     axes[2].axhline(1.0, color="k", lw=0.8)
     axes[2].axhspan(0.99, 1.01, color="0.9")
-    axes[2].set(xlabel="time (from the coarse steady state)", ylim=(0.95, 1.05), title="fine run against Busse et al.")
+    axes[2].set(xlabel="time of the continued run", ylim=(0.95, 1.05), title="fine run against Busse et al.")
     axes[2].legend()
     fig.savefig(png, dpi=110)
     plt.close(fig)

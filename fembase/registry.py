@@ -2,8 +2,9 @@
 roles of :mod:`particles` and the roles of :mod:`convection`: domains, viscosity laws,
 postprocessors, writers, ...).
 
-Every entry carries ``name`` and ``description`` attributes: an implementation class (a frozen
-dataclass of its parameters, with class attributes) or a ready object such as a Butcher tableau.
+Every entry carries ``name`` and ``description`` attributes: an implementation class (with its
+``Settings``, or still a frozen dataclass of its parameters) or a ready object such as a Butcher
+tableau.
 A :class:`Registry` is a ``dict[name, entry]`` that also knows its role, so ``name in REGISTRY``,
 ``sorted(REGISTRY)`` and ``REGISTRY[name]`` work as on a plain dict, and an unknown name is an
 error naming the role and listing the valid names::

@@ -106,7 +106,8 @@ def build(cells: int, particles_per_cell: int, max_level: int, comm: MPI.Comm) -
     # the integrator advances with the positions (RK2).
     num_cells = mesh.topology.index_map(2).size_global
     manager = ParticleManager(
-        mesh, generator=RandomUniform(num_particles=particles_per_cell * num_cells, seed=1), integrator="rk2",
+        mesh, generator=RandomUniform(RandomUniform.Settings(num_particles=particles_per_cell * num_cells, seed=1)),
+        integrator="rk2",
         properties=[*particle_properties(materials, 2), "integrated_strain"],
         context=PropertyContext(u_new=stokes.u),
     )

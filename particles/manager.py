@@ -37,6 +37,7 @@ This module never imports ``convection``; it works on any DOLFINx mesh.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -57,14 +58,14 @@ from fembase.state import State, Stateful
 from particles.interpolation.tracked_fields import TrackedFields
 from particles.relocation.new_mesh import move_to_mesh
 from particles.advection import Advector, get_integrator
-from particles.generation import GENERATORS, GenerationResult, Generator, create_generator, generate
-from particles.interpolation import CellAverage, Interpolator, get_interpolator
+from particles.generation import GENERATORS, GenerationResult, Generator, GeneratorContext, MakeFunction, generate
+from particles.interpolation import INTERPOLATORS, CellAverage, Interpolator, InterpolatorContext
 from particles.parallel.migration import migrate
 from particles.relocation.moving_mesh import FollowStats, follow_mesh
 from particles.io.output import PARTICLE_WRITERS, OutputRecord, OutputUnits, ParticleWriter
 from particles.population.control import PopulationControl, PopulationStats, copy_nearest
 from particles.settings import ParticleSettings, particle_settings
-from particles.properties import PROPERTIES, ParticleProperty, PropertyContext, PropertyManager, create_property
+from particles.properties import PROPERTIES, ParticleProperty, PropertyBuildContext, PropertyContext, PropertyManager
 from particles.storage.swarm import Swarm
 from particles.relocation.between_cells import relocate
 
@@ -74,6 +75,7 @@ __all__ = [
     "ParticleManager",
     "PointFunction",
     "build_generator",
+    "build_interpolator",
     "build_properties",
     "particles_per_cell_summary",
 ]
@@ -81,14 +83,8 @@ __all__ = [
 PointFunction = Callable[[npt.NDArray[np.float64]], npt.ArrayLike]
 """``f(x)``: points shape=(m, gdim) -> values shape=(m,): a property source or generator density."""
 
-MakeFunction = Callable[[str], PointFunction]
-"""Turns a text (e.g. a config expression such as ``"z > 0.5"``) into a :data:`PointFunction`."""
-
 Confine = Callable[[npt.NDArray[np.float64]], None]
 """``confine(x)``: moves positions (shape=(n, gdim), in place) that left the domain back inside."""
-
-# Parameters that take a callable of the position; a config may give them as text.
-_FUNCTION_PARAMETERS = ("function", "source", "density")
 
 TIMING_PHASES: tuple[str, ...] = (
     "particle_advection", "particle_sort", "particle_migration", "particle_mesh_change", "particle_mesh_motion",
@@ -143,20 +139,17 @@ class AdvanceReport:
     population: PopulationStats | None
 
 
-def _with_functions(params: dict[str, Any], make_function: MakeFunction | None, where: str) -> dict[str, Any]:
-    """``params`` with text values of callable parameters turned into functions."""
-    out = dict(params)
-    for key in _FUNCTION_PARAMETERS:
-        if isinstance(out.get(key), str):
-            if make_function is None:
-                raise ValueError(f"{where}: {key!r} is text but no expression parser was given")
-            out[key] = make_function(out[key])
-    return out
+def _choice(spec: Mapping[str, Any], /) -> tuple[Any, dict[str, Any]]:
+    """(name, parameters) of a ``{name: ..., **parameters}`` mapping."""
+    parameters = dict(spec)
+    return parameters.pop("name", None), parameters
 
 
 def build_properties(specs: Sequence[str | Mapping[str, Any] | ParticleProperty], /, *,
                      make_function: MakeFunction | None = None) -> list[ParticleProperty]:
-    """Property objects from registry names, ``{name: ..., **parameters}`` mappings or objects.
+    """Property objects from registry names, ``{name: ..., **parameters}`` mappings or objects: each
+    the :data:`~particles.properties.PROPERTIES` entry's ``build`` of the ``Settings`` made of the
+    parameters (text sources made functions by ``make_function``).
 
     Raises:
         ValueError: ``"item N: ..."`` naming the first bad entry (unknown name, with the valid
@@ -172,34 +165,21 @@ def build_properties(specs: Sequence[str | Mapping[str, Any] | ParticleProperty]
                 spec = {"name": spec}
             if not isinstance(spec, Mapping) or "name" not in spec:
                 raise ValueError(f"expected a property name or {{name: ..., parameters}}, got {spec!r}")
-            params = dict(spec)
-            name = params.pop("name")
-            if name not in PROPERTIES:
-                raise ValueError(f"unknown particle property {name!r}; valid: {sorted(PROPERTIES)}")
-            built.append(create_property(name, **_with_functions(params, make_function, str(name))))
+            name, parameters = _choice(spec)
+            settings = PROPERTIES.settings(name, **parameters)
+            built.append(PROPERTIES.build(name, settings, PropertyBuildContext(make_function)))
         except (TypeError, ValueError) as err:
             raise ValueError(f"item {i}: {err}") from None
     return built
 
 
-def _check_point_file(path: Path, gdim: int | None) -> None:
-    """A ``from_file`` point list must exist and have gdim (or 3, padded with zeros) columns."""
-    if not path.is_file():
-        raise ValueError(f"particle file {str(path)!r} not found")
-    if gdim is None:
-        return
-    try:
-        data = np.loadtxt(path, comments="#", ndmin=2)
-    except ValueError as err:
-        raise ValueError(f"particle file {str(path)!r}: {err}") from None
-    if data.size and data.shape[1] not in (gdim, 3):
-        raise ValueError(f"particle file {str(path)!r}: expected {gdim} columns, found {data.shape[1]}")
-
-
 def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
                     make_function: MakeFunction | None = None, gdim: int | None = None) -> Generator:
-    """A generator from ``{name: ..., **parameters}``; ``particles_per_cell`` (> 0) may replace
-    ``num_particles`` (times ``num_cells``, the global cell count).
+    """A generator from ``{name: ..., **parameters}``: the :data:`~particles.generation.GENERATORS`
+    entry's ``build`` of the ``Settings`` made of the parameters, in a
+    :class:`~particles.generation.GeneratorContext` of ``gdim`` and ``make_function``;
+    ``particles_per_cell`` (> 0) may replace ``num_particles`` (times ``num_cells``, the global
+    cell count).
 
     Raises:
         ValueError: Unknown name (listing :data:`particles.generation.GENERATORS`), bad
@@ -208,11 +188,9 @@ def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
     """
     if not isinstance(spec, Mapping):
         return spec
-    params = dict(spec)
-    name = params.pop("name", None)
-    if name not in GENERATORS:
-        raise ValueError(f"unknown particle generator {name!r}; valid: {sorted(GENERATORS)}")
-    per_cell = params.pop("particles_per_cell", None)
+    name, params = _choice(spec)
+    counted = "num_particles" in {f.name for f in dataclasses.fields(GENERATORS.lookup(name).Settings)}
+    per_cell = params.pop("particles_per_cell", None) if counted else None  # else named as a parameter it lacks
     if isinstance(per_cell, str):  # YAML reads 1e6 as text
         try:
             per_cell = float(per_cell)
@@ -224,9 +202,21 @@ def build_generator(spec: Mapping[str, Any] | Generator, /, *, num_cells: int,
         if isinstance(per_cell, bool) or not isinstance(per_cell, (int, float)) or not per_cell > 0:
             raise ValueError(f"particles_per_cell must be a number > 0, got {per_cell!r}")
         params["num_particles"] = int(round(per_cell * num_cells))
-    if name == "from_file" and "path" in params:
-        _check_point_file(Path(str(params["path"])), gdim)
-    return create_generator(name, **_with_functions(params, make_function, str(name)))
+    return GENERATORS.build(name, GENERATORS.settings(name, **params), GeneratorContext(gdim, make_function))
+
+
+def build_interpolator(spec: Mapping[str, Any] | Interpolator, /) -> Interpolator:
+    """An interpolator from ``{name: ..., **parameters}``: the
+    :data:`~particles.interpolation.INTERPOLATORS` entry's ``build`` of the ``Settings`` made of
+    the parameters.
+
+    Raises:
+        ValueError: Unknown name (listing the valid ones), an unknown or missing parameter, or a bad value.
+    """
+    if not isinstance(spec, Mapping):
+        return spec
+    name, params = _choice(spec)
+    return INTERPOLATORS.build(name, INTERPOLATORS.settings(name, **params), InterpolatorContext())
 
 
 def particles_per_cell_summary(swarm: Swarm, /) -> tuple[int, float, int]:
@@ -250,8 +240,7 @@ def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfi
     num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
     generator = build_generator(settings.generator, num_cells=num_cells, make_function=make_function)
     properties = [*extra_properties, *build_properties(settings.properties, make_function=make_function)]
-    interp = dict(settings.interpolator)
-    interpolator = get_interpolator(interp.pop("name"), **interp)
+    interpolator = build_interpolator(settings.interpolator)
     pop = settings.population
     population = PopulationControl(pop.min_per_cell, pop.max_per_cell, pop.seed, pop.method,
                                    pop.bandwidth) if pop.enabled else None

@@ -48,3 +48,9 @@ def gathered(swarm: Swarm) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float6
     order = np.argsort(ids)
     return ids[order], x[order], props[order]
 
+
+
+def plugin(cls, *args, **parameters):
+    """The particle plugin ``cls`` made of ``cls.Settings(*args, **parameters)`` (a generator,
+    interpolator or property needing nothing of a build context)."""
+    return cls(cls.Settings(*args, **parameters))

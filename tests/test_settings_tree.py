@@ -16,9 +16,11 @@ again, and each is checked in every module of ``convection/`` but ``config/``:
 
 What still does, is listed below with the reason; the lists only shrink. Not covered by this scan
 (issue 47, what remains of "one way to declare a parameter"): the viscosity laws validate their
-parameters with their own ``law_param``/``_parse_value`` (physics/rheology.py), and ``particles/``
-reads its sections raw (``ParticleManager.from_config`` takes ``ParticleSettings``
-from the RunSettings, but the loader's particle checks build the plugins from the mappings).
+parameters with their own ``law_param``/``_parse_value`` (physics/rheology.py). ``particles/``
+takes typed settings: ``ParticleManager.from_config`` and the loader's particle checks read each
+system's ``ParticleSettings``, and its generators, interpolators and properties are made through
+their registries from their own ``Settings`` (``REGISTRY.settings(name, **parameters)``, then
+``REGISTRY.build(name, settings, context)``), the way the last test below checks.
 """
 
 import ast
@@ -155,15 +157,22 @@ def test_the_checks_catch_a_raw_read():
 
 
 def test_particle_plugins_declare_their_parameters_once():
-    """A particle plugin's parameters are fields made by :func:`fembase.params.param`, with their
-    help (the config reference reads it there; nothing is scraped from a docstring)."""
+    """A particle plugin's parameters are the fields of its frozen ``Settings``, made by
+    :func:`fembase.params.param` with their help (the config reference reads it there; nothing is
+    scraped from a docstring), and the plugin itself holds no parameter of its own: it is made by
+    ``build(settings, context)`` and keeps the settings."""
     import dataclasses
 
     from particles.generation import GENERATORS
     from particles.interpolation import INTERPOLATORS
     from particles.properties import PROPERTIES
 
-    wrong = [f"{name}.{f.name}" for registry in (GENERATORS, PROPERTIES, INTERPOLATORS)
-             for name, cls in registry.items() for f in dataclasses.fields(cls)
+    plugins = [(name, cls) for registry in (GENERATORS, PROPERTIES, INTERPOLATORS) for name, cls in registry.items()]
+    assert len(plugins) == len(GENERATORS) + len(PROPERTIES) + len(INTERPOLATORS) >= 27
+    wrong = [f"{name}.{f.name}" for name, cls in plugins for f in dataclasses.fields(cls.Settings)
              if f.init and not f.name.startswith("_") and not f.metadata.get("schema", {}).get("help")]
     assert not wrong, wrong
+    not_frozen = [name for name, cls in plugins if not cls.Settings.__dataclass_params__.frozen]
+    assert not not_frozen, not_frozen
+    own = [name for name, cls in plugins if dataclasses.is_dataclass(cls) or "build" not in dir(cls)]
+    assert not own, f"a plugin that is a dataclass of its own parameters, or has no build: {own}"

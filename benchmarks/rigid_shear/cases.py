@@ -43,9 +43,9 @@ INTERPOLATORS: dict[str, tuple[Interpolator | None, int]] = {
     "exact": (None, 0),
     "cell_average": (CellAverage(), 0),
     "least_squares": (LeastSquares(), 1),
-    "least_squares_limited": (LeastSquares(limit=True), 1),
+    "least_squares_limited": (LeastSquares(LeastSquares.Settings(limit=True)), 1),
     "quadratic_least_squares": (QuadraticLeastSquares(), 2),
-    "quadratic_least_squares_limited": (QuadraticLeastSquares(limit=True), 2),
+    "quadratic_least_squares_limited": (QuadraticLeastSquares(QuadraticLeastSquares.Settings(limit=True)), 2),
 }
 """Interpolator choices: (interpolator, degree of the DG density field)."""
 
@@ -102,9 +102,9 @@ def _manager(case: Case, solver: StokesSolver) -> ParticleManager:
     mesh = solver.mesh
     num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
     manager = ParticleManager(
-        mesh, generator=RandomUniform(case.ppc * num_cells, case.seed),
+        mesh, generator=RandomUniform(RandomUniform.Settings(case.ppc * num_cells, case.seed)),
         integrator=case.integrator if case.integrator != "none" else "rk2",
-        properties=[FunctionProperty(function=exact_density, label="density")],
+        properties=[FunctionProperty(FunctionProperty.Settings(function=exact_density, label="density"))],
         interpolator=interpolator, field_degree=degree)
     manager.track("density")
     return manager

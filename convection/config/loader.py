@@ -67,7 +67,7 @@ from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
-from particles.settings import ParticleSettings
+from particles.settings import ParticleSettings, particle_settings
 
 __all__ = ["SCHEMA", "ConfigError", "config_gdim", "dump_config", "expression_constants", "load_config",
            "parse_overrides"]
@@ -647,7 +647,8 @@ def point_function(config: dict[str, Any], *, probe: bool = False) -> Callable[[
 
 
 def _check_particles(config: dict[str, Any]) -> None:
-    """Every particle system's section (the one mapping also when the run carries no particles)."""
+    """Every particle system's settings (the one mapping's also when the run carries no particles):
+    its plugins made through their registries from their typed ``Settings``, as a run makes them."""
     section = config["particles"]
     carried = COMPOSITION_SOURCES[config["composition"]["source"]].carried_by_particles
     if isinstance(section, dict) and section["enabled"] is False and carried:
@@ -656,38 +657,38 @@ def _check_particles(config: dict[str, Any]) -> None:
     make = point_function(config, probe=True)
     for (name, section), where in zip(particle_sections(config, carried=False).items(), _system_keys(config)):
         feeds = name == primary  # the system whose fields the model reads
-        _check_system_components(config, section, where, make, feeds=feeds)
-        _check_system_properties(config, section, where, make, feeds=feeds)
+        settings = particle_settings(section)
+        _check_system_components(config, settings, where, make, feeds=feeds)
+        _check_system_properties(config, settings, where, make, feeds=feeds)
 
 
-def _check_system_components(config: dict[str, Any], section: dict[str, Any], where: str, make: Callable, *,
+def _check_system_components(config: dict[str, Any], settings: ParticleSettings, where: str, make: Callable, *,
                              feeds: bool) -> None:
     """A system's generator and interpolator (``where``: its config key; ``feeds``: the model reads
     its fields, whose degree the interpolator decides)."""
-    from particles.manager import build_generator
     from particles.interpolation import INTERPOLATORS
+    from particles.manager import build_generator, build_interpolator
 
     try:
-        generator = build_generator(section["generator"], num_cells=1, make_function=make, gdim=config_gdim(config))
+        generator = build_generator(settings.generator, num_cells=1, make_function=make, gdim=config_gdim(config))
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key '{where}.generator': {err}") from None
-    density = getattr(generator, "density", None)
+    density = getattr(generator.settings, "density", None)
     if density is not None:
-        _check_generator_density(config, f"{where}.generator.density", section["generator"].get("density"), density)
-    if config_domain(config).curved and particles_enabled(config) and getattr(generator, "affine_cells_only", False):
+        _check_generator_density(config, f"{where}.generator.density", settings.generator.get("density"), density)
+    if config_domain(config).curved and particles_enabled(config) and generator.affine_cells_only:
         raise ConfigError(f"config key '{where}.generator.name': {generator.name} needs straight-sided cells; the "
                           f"{config['mesh']['geometry']} has curved ones (mesh.geometry_degree 2): use "
                           "metropolis_hastings (with a density, e.g. \"r < r_inner + 0.15\", or none for uniform)")
-    params = dict(section["interpolator"])
-    name = params.pop("name", None)
+    name = settings.interpolator.get("name")
     if not isinstance(name, str) or name not in INTERPOLATORS:
         raise ConfigError(f"config key '{where}.interpolator.name': {short_repr(name)} is not one of "
                           f"{sorted(INTERPOLATORS)}")
     try:
-        INTERPOLATORS[name](**params)
+        interpolator = build_interpolator(settings.interpolator)
     except (TypeError, ValueError) as err:
         raise ConfigError(f"config key '{where}.interpolator': {err}") from None
-    wanted = getattr(INTERPOLATORS[name], "target_degree", None)  # the fields it writes: DG of this degree
+    wanted = interpolator.target_degree  # the fields it writes: DG of this degree
     if wanted is not None and feeds and particles_enabled(config) and config["composition"]["degree"] != wanted:
         raise ConfigError(f"config key 'composition.degree': {name} writes DG{wanted} fields; set composition.degree: "
                           f"{wanted} (is {config['composition']['degree']})")
@@ -713,7 +714,7 @@ def _check_generator_density(config: dict[str, Any], key: str, text: Any, densit
                           "be placed")
 
 
-def _check_system_properties(config: dict[str, Any], section: dict[str, Any], where: str, make: Callable, *,
+def _check_system_properties(config: dict[str, Any], settings: ParticleSettings, where: str, make: Callable, *,
                              feeds: bool) -> None:
     """A system's properties (the materials' fractions besides, for the system that carries them),
     population bounds and output properties."""
@@ -723,7 +724,7 @@ def _check_system_properties(config: dict[str, Any], section: dict[str, Any], wh
     materials = feeds and COMPOSITION_SOURCES[config["composition"]["source"]].carried_by_particles
     columns = [m["name"] for m in material_table(config)[0]] if materials else []
     built = []
-    for i, spec in enumerate(section["properties"]):
+    for i, spec in enumerate(settings.properties):
         try:
             built.append(build_properties([spec], make_function=make)[0])
         except (TypeError, ValueError) as err:
@@ -738,12 +739,12 @@ def _check_system_properties(config: dict[str, Any], section: dict[str, Any], wh
     if repeated:
         raise ConfigError(f"config key '{where}.properties': more than one property (or material) named "
                           f"{repeated[0]!r}; give properties distinct labels")
-    pop = section["population"]
+    pop = settings.population
     try:
-        PopulationControl(pop["min_per_cell"], pop["max_per_cell"], pop["seed"], pop["method"], pop["bandwidth"])
+        PopulationControl(pop.min_per_cell, pop.max_per_cell, pop.seed, pop.method, pop.bandwidth)
     except ValueError as err:
         raise ConfigError(f"config key '{where}.population': {err}") from None
-    for name in section["output"]["properties"] or ():
+    for name in settings.output.properties or ():
         if name not in columns:
             raise ConfigError(f"config key '{where}.output.properties': {name!r} is not carried; carried: {columns}")
 

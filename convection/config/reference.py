@@ -149,16 +149,21 @@ def _dataclass_parameters(cls: type, *, skip: tuple[str, ...] = ()) -> list[Para
     return out
 
 
+def _settings_parameters(plugin: Any) -> list[Parameter]:
+    """The parameters of a plugin of the one shape: its ``Settings``' fields."""
+    return _dataclass_parameters(plugin.Settings)
+
+
 def _property_parameters(cls: type[ParticleProperty]) -> list[Parameter]:
-    """A particle property's parameters, its update policies with their allowed values and this
-    property's defaults."""
+    """A particle property's parameters (its ``Settings``), its update policies with their allowed
+    values and this property's defaults."""
     from particles.properties import NEW_PARTICLE_POLICIES, UPDATE_POLICIES
 
     policies = {"update": ("when the value is recomputed", UPDATE_POLICIES, cls.default_update),
                 "new_particles": ("what particles added later (population control) get", NEW_PARTICLE_POLICIES,
                                   cls.default_new_particles)}
     out = []
-    for p in _dataclass_parameters(cls):
+    for p in _dataclass_parameters(cls.Settings):
         if p.name in policies:
             text, allowed, default = policies[p.name]
             p = Parameter(p.name, "str or null", "null", f"{text}: one of {', '.join(allowed)} (null: {default})")
@@ -180,14 +185,14 @@ def plugin_roles() -> list[PluginRole]:
 
     bounds = _dataclass_parameters(Bounded)
     return [
-        role("Particle generators", ("particles.generator",), GENERATORS, _dataclass_parameters,
+        role("Particle generators", ("particles.generator",), GENERATORS, _settings_parameters,
              "`{name: <generator>, <parameter>: ...}`; `particles_per_cell: N` may replace `num_particles` "
              "(N times the global cell count). A `density` is an expression in x, y, z, r, phi, theta "
              "(0 outside, e.g. `\"r < r_inner + 0.15\"`)."),
         role("Particle properties", ("particles.properties",), PROPERTIES, _property_parameters,
              "each item a name or `{name: <property>, <parameter>: ...}`; `update` and `new_particles` "
              "override when a property is recomputed and how particles added later get their value."),
-        role("Particle interpolators", ("particles.interpolator",), INTERPOLATORS, _dataclass_parameters,
+        role("Particle interpolators", ("particles.interpolator",), INTERPOLATORS, _settings_parameters,
              "`{name: <interpolator>, <parameter>: ...}`: how particle properties become mesh fields."),
         role("Viscosity laws", ("physics.viscosity.law", f"materials.{MATERIAL}.viscosity"), VISCOSITY_LAWS,
              lambda law: _dataclass_parameters(law) + bounds,

@@ -256,7 +256,8 @@ def particle_properties(materials: Materials, gdim: int, /) -> list[InitialCompo
             return material_initial(points)
         return at
 
-    return [InitialComposition(source=region(m.initial), label=m.name) for m in materials.materials]
+    return [InitialComposition(InitialComposition.Settings(source=region(m.initial), label=m.name))
+            for m in materials.materials]
 
 
 class ParticleComposition(Stateful):

@@ -1,22 +1,54 @@
-"""Shared pieces of the generators: result type, generator protocol, id base, insertion."""
+"""Shared pieces of the generators: result type, generator protocol and context, id base, insertion."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from collections.abc import Callable
-from typing import ClassVar, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fembase.registry import Configured
 from particles.generation.maps import CellMaps
 from particles.storage.swarm import Swarm
 
-__all__ = ["Density", "GenerationResult", "Generator", "evaluate_density", "first_free_id", "insert_in_cells"]
+__all__ = ["Density", "DensityGenerator", "GenerationResult", "Generator", "GeneratorContext", "MakeFunction",
+           "evaluate_density", "first_free_id", "insert_in_cells", "text_function"]
 
 Density = Callable[[npt.NDArray[np.float64]], npt.ArrayLike]
 """A non-normalised density: points shape=(n, gdim), float64 -> values shape=(n,), >= 0."""
+
+MakeFunction = Callable[[str], Callable[[npt.NDArray[np.float64]], npt.ArrayLike]]
+"""Turns a text (e.g. a config expression such as ``"z > 0.5"``) into a function of points shape=(m, gdim)."""
+
+
+def text_function(value: Any, make_function: MakeFunction | None, who: str, key: str, /) -> Any:
+    """``value``, or the function ``make_function`` makes of it if it is a text (a config expression).
+
+    Raises:
+        ValueError: A text without ``make_function``.
+    """
+    if not isinstance(value, str):
+        return value
+    if make_function is None:
+        raise ValueError(f"{who}: {key!r} is text but no expression parser was given")
+    return make_function(value)
+
+
+class GeneratorContext(NamedTuple):
+    """What a generator is made from, beside its settings (each takes what it needs).
+
+    Attributes:
+        gdim: The mesh's geometric dimension (a point file's columns are checked against it; None:
+            not checked).
+        make_function: Turns a text ``density`` into a function (None: a text is refused).
+    """
+
+    gdim: int | None = None
+    make_function: MakeFunction | None = None
 
 
 @dataclass(frozen=True)
@@ -39,14 +71,30 @@ class GenerationResult:
 
 
 class Generator(Protocol):
-    """A particle generator: a frozen dataclass of parameters with a collective ``generate``."""
+    """A particle generator (:class:`fembase.registry.Plugin`): made by ``build(settings, context)``
+    from its ``Settings`` and a :class:`GeneratorContext`, with a collective ``generate``."""
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type]
     affine_cells_only: ClassVar[bool]
-    """True for a generator that needs straight-sided (affine) simplex cells (optional; default False)."""
+    """True for a generator that needs straight-sided (affine) simplex cells."""
+    settings: Any
+
+    @classmethod
+    def build(cls, settings: Any, context: GeneratorContext, /) -> Generator: ...
 
     def generate(self, swarm: Swarm, /) -> GenerationResult: ...
+
+
+class DensityGenerator(Configured):
+    """Base of a generator whose settings have a ``density``: :meth:`build` makes a text density
+    (a config expression) a function with the context's ``make_function``."""
+
+    @classmethod
+    def build(cls, settings: Any, context: GeneratorContext, /) -> Any:
+        density = text_function(settings.density, context.make_function, cls.name, "density")
+        return cls(dataclasses.replace(settings, density=density))
 
 
 def evaluate_density(density: Density, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -23,7 +23,8 @@ import numpy.typing as npt
 from fembase.params import param
 from fembase.streams import cell_streams, uniforms
 from particles.generation._allocation import allocate_counts
-from particles.generation.base import Density, GenerationResult, evaluate_density, first_free_id, insert_in_cells
+from particles.generation.base import (
+    Density, DensityGenerator, GenerationResult, evaluate_density, first_free_id, insert_in_cells)
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
 from particles.generation.sampling import cell_weights, uniform_reference_points
@@ -36,36 +37,44 @@ _START_TRIES = 1000
 _START_COUNTER = 1 << 40  # stream positions of the start search, far from the chain's own
 
 
-@dataclass(frozen=True)
-class MetropolisHastings:
-    """Metropolis-Hastings sampling of ``rho`` (callable on points shape=(n, gdim) -> (n,))."""
+class MetropolisHastings(DensityGenerator):
+    """Metropolis-Hastings sampling of the density of its settings."""
 
     name: ClassVar[str] = "metropolis_hastings"
     description: ClassVar[str] = "density-following positions by a Metropolis-Hastings chain in each cell"
+    affine_cells_only: ClassVar[bool] = False
 
-    num_particles: int = param(help="Global number of particles.")
-    density: Density | None = param(None, help="Non-negative, non-normalised density; None means uniform.")
-    seed: int = param(0, help="Random seed.")
-    thinning: int = param(10, help="Keep every `thinning`-th chain state (J in the seed paper).")
-    burn_in: int = param(20, help="Chain steps discarded before the first kept state.")
-    quadrature_degree: int = param(4, help="Degree of the quadrature rule for the cell integrals.")
+    @dataclass(frozen=True)
+    class Settings:
+        """Metropolis-Hastings sampling of ``rho`` (callable on points shape=(n, gdim) -> (n,), or a
+        text that the context makes one of)."""
+
+        num_particles: int = param(help="Global number of particles.")
+        density: Density | str | None = param(None, help="Non-negative, non-normalised density; None means uniform.")
+        seed: int = param(0, help="Random seed.")
+        thinning: int = param(10, help="Keep every `thinning`-th chain state (J in the seed paper).")
+        burn_in: int = param(20, help="Chain steps discarded before the first kept state.")
+        quadrature_degree: int = param(4, help="Degree of the quadrature rule for the cell integrals.")
+
+    settings: Settings
 
     def _target(self, maps: CellMaps, idx: npt.NDArray[np.int64], xhat: npt.NDArray[np.float64]
                 ) -> npt.NDArray[np.float64]:
         g = maps.abs_det(idx, xhat)
-        if self.density is not None:
-            g = g * evaluate_density(self.density, maps.push(idx, xhat))
+        if self.settings.density is not None:
+            g = g * evaluate_density(self.settings.density, maps.push(idx, xhat))
         return g
 
     def generate(self, swarm: Swarm, /) -> GenerationResult:
         """Insert the particles into ``swarm`` (collective)."""
-        if self.thinning < 1 or self.burn_in < 0 or self.num_particles < 0:
+        s = self.settings
+        if s.thinning < 1 or s.burn_in < 0 or s.num_particles < 0:
             raise ValueError("need thinning >= 1, burn_in >= 0, num_particles >= 0")
         comm = swarm.comm
         maps = CellMaps(swarm.mesh)
-        streams = cell_streams(maps.keys, self.seed, _STREAM)
-        weights = cell_weights(maps, self.density, self.quadrature_degree)
-        counts = allocate_counts(comm, weights, self.num_particles, uniforms(streams, np.zeros(len(streams)), 1)[:, 0])
+        streams = cell_streams(maps.keys, s.seed, _STREAM)
+        weights = cell_weights(maps, s.density, s.quadrature_degree)
+        counts = allocate_counts(comm, weights, s.num_particles, uniforms(streams, np.zeros(len(streams)), 1)[:, 0])
         offsets = key_order_offsets(comm, maps.keys, counts)
         base = first_free_id(swarm)
         chains = np.flatnonzero(counts > 0)
@@ -83,7 +92,7 @@ class MetropolisHastings:
             state[outside[hit]] = proposal[hit]
             g[outside[hit]] = g_new[hit]
             outside = outside[~hit]
-        steps = self.burn_in + counts[chains] * self.thinning
+        steps = s.burn_in + counts[chains] * s.thinning
         samples = np.empty((int(counts.sum()), tdim))
         start = (np.cumsum(counts) - counts)[chains]
         for t in range(1, int(steps.max(initial=0)) + 1):
@@ -94,10 +103,10 @@ class MetropolisHastings:
             accept = (u[:, tdim] * g[active] < g_new) | (g[active] <= 0)
             state[active[accept]] = proposal[accept]
             g[active[accept]] = g_new[accept]
-            kept = t - self.burn_in
-            if kept > 0 and kept % self.thinning == 0:
-                samples[start[active] + kept // self.thinning - 1] = state[active]
+            kept = t - s.burn_in
+            if kept > 0 and kept % s.thinning == 0:
+                samples[start[active] + kept // s.thinning - 1] = state[active]
         idx = np.repeat(np.arange(counts.shape[0]), counts)
         within = np.arange(idx.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
         insert_in_cells(swarm, maps, idx, samples, base + offsets[idx] + within)
-        return GenerationResult(int(idx.shape[0]), self.num_particles, base)
+        return GenerationResult(int(idx.shape[0]), s.num_particles, base)

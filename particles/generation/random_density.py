@@ -18,9 +18,10 @@ from typing import ClassVar
 import numpy as np
 
 from fembase.params import param
+from fembase.registry import Configured
 from fembase.streams import cell_streams, uniforms
 from particles.generation._allocation import allocate_counts
-from particles.generation.base import Density, GenerationResult, first_free_id, insert_in_cells
+from particles.generation.base import Density, DensityGenerator, GenerationResult, first_free_id, insert_in_cells
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
 from particles.generation.sampling import cell_weights, uniform_reference_points
@@ -31,50 +32,63 @@ __all__ = ["RandomDensity", "RandomUniform"]
 _STREAM = 1
 
 
-@dataclass(frozen=True)
-class RandomDensity:
-    """Random positions with density ``rho`` (callable on points shape=(n, gdim) -> (n,))."""
+class RandomDensity(DensityGenerator):
+    """Random positions with the density of its settings."""
 
     name: ClassVar[str] = "random_density"
     description: ClassVar[str] = "random positions with probability proportional to a density function"
     affine_cells_only: ClassVar[bool] = True
 
-    num_particles: int = param(help="Global number of particles.")
-    seed: int = param(0, help="Random seed.")
-    density: Density | None = param(None, help="Non-negative, non-normalised density; None means uniform.")
-    quadrature_degree: int = param(4, help="Degree of the quadrature rule for the cell integrals of the density.")
+    @dataclass(frozen=True)
+    class Settings:
+        """Random positions with density ``rho`` (callable on points shape=(n, gdim) -> (n,), or a text
+        that the context makes one of)."""
+
+        num_particles: int = param(help="Global number of particles.")
+        seed: int = param(0, help="Random seed.")
+        density: Density | str | None = param(None, help="Non-negative, non-normalised density; None means uniform.")
+        quadrature_degree: int = param(4, help="Degree of the quadrature rule for the cell integrals of the density.")
+
+    settings: Settings
 
     def generate(self, swarm: Swarm, /) -> GenerationResult:
         """Insert the particles into ``swarm`` (collective)."""
-        if self.num_particles < 0:
+        s = self.settings
+        if s.num_particles < 0:
             raise ValueError("num_particles must be >= 0")
         maps = CellMaps(swarm.mesh)
         if not maps.affine:
             raise ValueError(f"{self.name} needs affine simplex cells; use metropolis_hastings for other cells")
         comm = swarm.comm
-        streams = cell_streams(maps.keys, self.seed, _STREAM)
-        weights = cell_weights(maps, self.density, self.quadrature_degree)
-        counts = allocate_counts(comm, weights, self.num_particles, uniforms(streams, np.zeros(len(streams)), 1)[:, 0])
+        streams = cell_streams(maps.keys, s.seed, _STREAM)
+        weights = cell_weights(maps, s.density, s.quadrature_degree)
+        counts = allocate_counts(comm, weights, s.num_particles, uniforms(streams, np.zeros(len(streams)), 1)[:, 0])
         offsets = key_order_offsets(comm, maps.keys, counts)
         base = first_free_id(swarm)
         idx = np.repeat(np.arange(counts.shape[0]), counts)
         within = np.arange(idx.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
         xhat = uniform_reference_points(maps.basix_cell, uniforms(streams[idx], 1 + within, maps.tdim))
         insert_in_cells(swarm, maps, idx, xhat, base + offsets[idx] + within)
-        return GenerationResult(int(idx.shape[0]), self.num_particles, base)
+        return GenerationResult(int(idx.shape[0]), s.num_particles, base)
 
 
-@dataclass(frozen=True)
-class RandomUniform:
+class RandomUniform(Configured):
     """Uniformly distributed random positions (``random_density`` with a constant density)."""
 
     name: ClassVar[str] = "random_uniform"
     description: ClassVar[str] = "uniformly distributed random positions"
     affine_cells_only: ClassVar[bool] = True
 
-    num_particles: int = param(help="Global number of particles.")
-    seed: int = param(0, help="Random seed.")
+    @dataclass(frozen=True)
+    class Settings:
+        """Uniformly distributed random positions."""
+
+        num_particles: int = param(help="Global number of particles.")
+        seed: int = param(0, help="Random seed.")
+
+    settings: Settings
 
     def generate(self, swarm: Swarm, /) -> GenerationResult:
         """Insert the particles into ``swarm`` (collective)."""
-        return RandomDensity(self.num_particles, self.seed).generate(swarm)
+        s = self.settings
+        return RandomDensity(RandomDensity.Settings(s.num_particles, s.seed)).generate(swarm)

@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fembase.params import param
+from fembase.registry import Configured
 from particles.generation.base import GenerationResult, first_free_id, insert_in_cells
 from particles.generation.maps import CellMaps
 from particles.generation.ordering import key_order_offsets
@@ -25,25 +26,32 @@ __all__ = ["ReferencePoints"]
 _KINDS = ("quadrature", "lattice")
 
 
-@dataclass(frozen=True)
-class ReferencePoints:
-    """Per-cell reference points."""
+class ReferencePoints(Configured):
+    """The reference points of its settings in every owned cell."""
 
     name: ClassVar[str] = "reference_points"
     description: ClassVar[str] = "the same reference points (quadrature points or a sub-lattice) in every cell"
+    affine_cells_only: ClassVar[bool] = False
 
-    kind: str = param("quadrature", help="\"quadrature\" (the points of basix's default rule of `degree`) or "
-                                         "\"lattice\" (the interior points of basix's equispaced lattice with "
-                                         "`degree` intervals per edge).")
-    degree: int = param(2, help="Quadrature degree, or number of lattice intervals per reference edge.")
+    @dataclass(frozen=True)
+    class Settings:
+        """Per-cell reference points."""
+
+        kind: str = param("quadrature", help="\"quadrature\" (the points of basix's default rule of `degree`) or "
+                                             "\"lattice\" (the interior points of basix's equispaced lattice with "
+                                             "`degree` intervals per edge).")
+        degree: int = param(2, help="Quadrature degree, or number of lattice intervals per reference edge.")
+
+    settings: Settings
 
     def reference_points(self, cell: basix.CellType) -> npt.NDArray[np.float64]:
         """The points in the reference cell, shape=(q, tdim)."""
-        if self.kind == "quadrature":
-            return np.asarray(basix.make_quadrature(cell, self.degree)[0], dtype=np.float64)
-        if self.kind == "lattice":
-            return np.asarray(basix.create_lattice(cell, self.degree, basix.LatticeType.equispaced, False))
-        raise ValueError(f"unknown reference point kind {self.kind!r}; valid: {list(_KINDS)}")
+        kind, degree = self.settings.kind, self.settings.degree
+        if kind == "quadrature":
+            return np.asarray(basix.make_quadrature(cell, degree)[0], dtype=np.float64)
+        if kind == "lattice":
+            return np.asarray(basix.create_lattice(cell, degree, basix.LatticeType.equispaced, False))
+        raise ValueError(f"unknown reference point kind {kind!r}; valid: {list(_KINDS)}")
 
     def generate(self, swarm: Swarm, /) -> GenerationResult:
         """Insert the particles into ``swarm`` (collective)."""

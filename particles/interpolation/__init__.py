@@ -1,6 +1,7 @@
 """Particle-to-mesh interpolation (seed paper section 2.7), one module per interpolator.
 
-Every interpolator is a frozen dataclass of its parameters, registered under a lowercase name,
+Every interpolator has the one plugin shape (:class:`fembase.registry.Plugin`): a ``Settings``
+dataclass of its parameters, made by ``INTERPOLATORS.build(name, settings, InterpolatorContext())``,
 with a collective ``interpolate(swarm, property_name, target, /, *, component=None)`` that writes
 a scalar DOLFINx Function and returns :class:`InterpolationStats`. A property of size 1 is
 interpolated directly; for a multi-column property pass the column as ``component``.
@@ -18,7 +19,7 @@ from typing import Any
 
 import dolfinx.fem
 
-from particles.interpolation._base import InterpolationStats, Interpolator
+from particles.interpolation._base import InterpolationStats, Interpolator, InterpolatorContext
 from particles.interpolation.cell_average import CellAverage
 from particles.interpolation.distance_weighted import DistanceWeighted
 from particles.interpolation.least_squares import LeastSquares
@@ -34,12 +35,12 @@ __all__ = [
     "DistanceWeighted",
     "InterpolationStats",
     "Interpolator",
+    "InterpolatorContext",
     "LeastSquares",
     "Nearest",
     "QuadraticLeastSquares",
     "ShapeFunction",
     "describe_interpolators",
-    "get_interpolator",
     "interpolate_to_mesh",
 ]
 
@@ -49,7 +50,6 @@ INTERPOLATORS: Registry[type[Interpolator]] = Registry(
 )
 """Interpolator classes by their lowercase config name."""
 
-get_interpolator = INTERPOLATORS.create
 describe_interpolators = INTERPOLATORS.describe
 
 
@@ -64,8 +64,9 @@ def interpolate_to_mesh(swarm: Swarm, property_name: str, target: dolfinx.fem.Fu
         target: Scalar Lagrange / DG Function on ``swarm.mesh``; overwritten (ghosts updated).
         method: Registered interpolator name (see :func:`describe_interpolators`).
         component: Column of a multi-column property.
-        parameters: Parameters of the interpolator.
+        parameters: Parameters of the interpolator (its ``Settings``).
     """
     if target.function_space.mesh is not swarm.mesh:
         raise ValueError("the target Function lives on a different mesh than the swarm")
-    return get_interpolator(method, **parameters).interpolate(swarm, property_name, target, component=component)
+    interpolator = INTERPOLATORS.build(method, INTERPOLATORS.settings(method, **parameters), InterpolatorContext())
+    return interpolator.interpolate(swarm, property_name, target, component=component)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import basix
 import numpy as np
@@ -21,6 +21,7 @@ from particles.storage.swarm import Swarm
 __all__ = [
     "InterpolationStats",
     "Interpolator",
+    "InterpolatorContext",
     "Samples",
     "TargetSpace",
     "cell_means",
@@ -54,13 +55,27 @@ class InterpolationStats:
     global_ghost_particles: int
 
 
+class InterpolatorContext(NamedTuple):
+    """What an interpolator is made from beside its settings: nothing yet (the swarm, the property
+    and the target come with every call); the family's ``build(settings, context)`` takes it so that
+    an interpolator that needs more (the mesh, a dimension) adds a field here."""
+
+
 class Interpolator(Protocol):
-    """A particle-to-mesh interpolator: a frozen dataclass of parameters with a collective call."""
+    """A particle-to-mesh interpolator (:class:`fembase.registry.Plugin`): made by
+    ``build(settings, context)`` from its ``Settings``, with a collective call."""
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type]
     discontinuous: ClassVar[bool]
     """Its fields are cell-wise (a DG space of the tracked fields' degree), not continuous."""
+    target_degree: ClassVar[int | None]
+    """The degree its (DG) targets must have (None: any it supports)."""
+    settings: Any
+
+    @classmethod
+    def build(cls, settings: Any, context: InterpolatorContext, /) -> Interpolator: ...
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats: ...

@@ -21,6 +21,7 @@ from mpi4py import MPI
 import dolfinx.fem
 
 from fembase.params import param
+from fembase.registry import Configured
 from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_result
 from particles.storage.swarm import Swarm
 
@@ -29,19 +30,25 @@ __all__ = ["CellAverage"]
 _MEANS = ("arithmetic", "geometric", "harmonic")
 
 
-@dataclass(frozen=True)
-class CellAverage:
-    """Mean of the particle values in each cell."""
+class CellAverage(Configured):
+    """The mean of its settings of the particle values in each cell."""
 
     name: ClassVar[str] = "cell_average"
     discontinuous: ClassVar[bool] = True
+    target_degree: ClassVar[int | None] = None
     description: ClassVar[str] = "arithmetic, geometric or harmonic mean of the particles in each cell (DG)"
 
-    mean: str = param("arithmetic", help='"arithmetic", "geometric" or "harmonic".')
+    @dataclass(frozen=True)
+    class Settings:
+        """Mean of the particle values in each cell."""
 
-    def __post_init__(self) -> None:
-        if self.mean not in _MEANS:
-            raise ValueError(f"unknown mean {self.mean!r}; valid: {list(_MEANS)}")
+        mean: str = param("arithmetic", help='"arithmetic", "geometric" or "harmonic".')
+
+        def __post_init__(self) -> None:
+            if self.mean not in _MEANS:
+                raise ValueError(f"unknown mean {self.mean!r}; valid: {list(_MEANS)}")
+
+    settings: Settings
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:
@@ -53,17 +60,18 @@ class CellAverage:
         space = TargetSpace(target, swarm.num_owned_cells)
         space.require(self.name, continuous=False)
         v = property_values(swarm, property_name, component)
-        if self.mean != "arithmetic":
+        mean = self.settings.mean
+        if mean != "arithmetic":
             bad = bool(swarm.comm.allreduce(bool(np.any(~(v > 0))), op=MPI.LOR))
             if bad:
-                raise ValueError(f"the {self.mean} mean needs positive values of {property_name!r}")
-        f = v if self.mean == "arithmetic" else (np.log(v) if self.mean == "geometric" else 1.0 / v)
+                raise ValueError(f"the {mean} mean needs positive values of {property_name!r}")
+        f = v if mean == "arithmetic" else (np.log(v) if mean == "geometric" else 1.0 / v)
         counts = np.diff(swarm.offsets)
         known = counts > 0
         m = np.bincount(swarm.cells, weights=f, minlength=swarm.num_owned_cells) / np.where(known, counts, 1)
-        if self.mean == "geometric":
+        if mean == "geometric":
             m = np.exp(m)
-        elif self.mean == "harmonic":
+        elif mean == "harmonic":
             m = 1.0 / np.where(known, m, 1.0)
         m = np.where(known, m, 0.0)
         num = np.zeros(space.num_local_dofs)

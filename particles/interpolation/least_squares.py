@@ -31,6 +31,7 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from fembase.params import param
+from fembase.registry import Configured
 from particles.interpolation._base import (
     InterpolationStats,
     Samples,
@@ -71,38 +72,46 @@ class _Fit:
             self.coef[self.ok] = np.linalg.solve(self.A[self.ok], self.b[self.ok][:, :, None])[:, :, 0]
 
 
-@dataclass(frozen=True)
-class LeastSquares:
-    """Linear least-squares fit per cell into a DG1 target."""
+class LeastSquares(Configured):
+    """Linear least-squares fit per cell into a DG1 target, as its settings say."""
 
     name: ClassVar[str] = "least_squares"
     discontinuous: ClassVar[bool] = True
     description: ClassVar[str] = "linear least-squares fit per cell into DG1, optional bound-preserving limiter"
-    target_degree: ClassVar[int] = 1
+    target_degree: ClassVar[int | None] = 1
 
-    limit: bool = param(False, help="Keep the values within the range of the particle values used (slope limiter).")
-    use_neighbours: bool = param(True, help="Use vertex-neighbour cells' particles for cells that cannot be fitted "
-                                            "alone (collective ghost exchange).")
-    rcond: float = param(1e-10, help="Smallest accepted reciprocal condition number of the (scaled) normal matrix.")
+    @dataclass(frozen=True)
+    class Settings:
+        """Linear least-squares fit per cell into a DG1 target."""
+
+        limit: bool = param(False, help="Keep the values within the range of the particle values used (slope "
+                                        "limiter).")
+        use_neighbours: bool = param(True, help="Use vertex-neighbour cells' particles for cells that cannot be "
+                                                "fitted alone (collective ghost exchange).")
+        rcond: float = param(1e-10, help="Smallest accepted reciprocal condition number of the (scaled) normal "
+                                         "matrix.")
+
+    settings: Settings
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:
         """Write the per-cell linear fits of ``property_name`` into ``target`` (collective)."""
-        space = fit_target(self.name, swarm, target, self.target_degree)
+        s = self.settings
+        space = fit_target(self.name, swarm, target, 1)
         n_owned = swarm.num_owned_cells
-        samples = gather_samples(swarm, property_name, component, ghosts=self.use_neighbours)
+        samples = gather_samples(swarm, property_name, component, ghosts=s.use_neighbours)
         geo = swarm.geometry
         centres = np.ascontiguousarray(geo.centres[:n_owned])
         h = cell_diameters(swarm)
         cells = np.arange(n_owned, dtype=np.int32)
-        own = _Fit(samples, cells, False, centres, h, self.rcond)
+        own = _Fit(samples, cells, False, centres, h, s.rcond)
         coef, lo, hi = own.coef, own.vmin, own.vmax
         fitted = own.ok.copy()
         constant = np.where(own.count > 0, own.vsum / np.maximum(own.count, 1), 0.0)
         has = own.count > 0
-        if self.use_neighbours:
+        if s.use_neighbours:
             need = np.flatnonzero(~own.ok).astype(np.int32)
-            nb = _Fit(samples, need, True, centres, h, self.rcond)
+            nb = _Fit(samples, need, True, centres, h, s.rcond)
             coef[need[nb.ok]] = nb.coef[nb.ok]
             lo[need[nb.ok]], hi[need[nb.ok]] = nb.vmin[nb.ok], nb.vmax[nb.ok]
             fitted[need[nb.ok]] = True
@@ -113,7 +122,7 @@ class LeastSquares:
         dof_x = space.dof_points()[space.dofs]
         xi = (dof_x - centres[:, None, :]) / h[:, None, None]
         values = coef[:, :1] + np.einsum("kjg,kg->kj", xi, coef[:, 1:])
-        if self.limit:
+        if s.limit:
             values = _limit(values, coef[:, 0], lo, hi, fitted)
         values = np.where(fitted[:, None], values, constant[:, None])
         num = np.zeros(space.num_local_dofs)

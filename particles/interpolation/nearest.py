@@ -15,6 +15,7 @@ import numpy as np
 
 import dolfinx.fem
 
+from fembase.registry import Configured
 from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_with_cell_means
 from particles.interpolation._cell_kernels import nearest_values
 from particles.storage.swarm import Swarm
@@ -22,13 +23,17 @@ from particles.storage.swarm import Swarm
 __all__ = ["Nearest"]
 
 
-@dataclass(frozen=True)
-class Nearest:
+class Nearest(Configured):
     """Value of the nearest particle of the cell at each dof point (no parameters)."""
 
     name: ClassVar[str] = "nearest"
     discontinuous: ClassVar[bool] = False
+    target_degree: ClassVar[int | None] = None
     description: ClassVar[str] = "value of the particle of the cell nearest to each dof point (DG)"
+
+    @dataclass(frozen=True)
+    class Settings:
+        """No parameters."""
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:

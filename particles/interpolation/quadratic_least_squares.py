@@ -20,7 +20,6 @@ cell's particle values (the linear fallback uses its own limiter), so no new ext
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -46,7 +45,6 @@ def monomials(xi: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
     return np.stack(columns, axis=-1)
 
 
-@dataclass(frozen=True)
 class QuadraticLeastSquares(LeastSquares):
     """Quadratic least-squares fit per cell into a DG2 target (see the module docstring); the
     parameters are :class:`LeastSquares`'s (``limit``: clip to the particles' range;
@@ -56,16 +54,17 @@ class QuadraticLeastSquares(LeastSquares):
     discontinuous: ClassVar[bool] = True
     description: ClassVar[str] = ("quadratic least-squares fit per cell into DG2 (linear least squares where a cell "
                                   "has too few particles), optional limiter")
-    target_degree: ClassVar[int] = 2
+    target_degree: ClassVar[int | None] = 2
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:
         """Write the per-cell quadratic fits of ``property_name`` into ``target`` (collective)."""
-        space = fit_target(self.name, swarm, target, self.target_degree)
+        s = self.settings
+        space = fit_target(self.name, swarm, target, 2)
         # Everywhere first the linear fit with its fallbacks (the statistics are its: which cells
         # had particles in reach), then the quadratic where a cell's own particles determine one.
         linear = dolfinx.fem.Function(function_space(swarm.mesh, "DG", 1))
-        stats = LeastSquares(self.limit, self.use_neighbours, self.rcond).interpolate(
+        stats = LeastSquares(s).interpolate(
             swarm, property_name, linear, component=component)
         target.interpolate(linear)
         n = swarm.num_owned_cells
@@ -87,12 +86,12 @@ class QuadraticLeastSquares(LeastSquares):
         ok = counts >= nb
         if np.any(ok):
             eig = np.linalg.eigvalsh(A[ok])
-            ok[ok] = eig[:, 0] > self.rcond * eig[:, -1]
+            ok[ok] = eig[:, 0] > s.rcond * eig[:, -1]
         if np.any(ok):
             coef = np.linalg.solve(A[ok], b[ok][:, :, None])[:, :, 0]
             xi = (space.dof_points()[space.dofs[ok]] - centres[ok][:, None, :]) / h[ok][:, None, None]
             fitted = mean[ok][:, None] + np.einsum("kjm,km->kj", monomials(xi), coef)
-            if self.limit:
+            if s.limit:
                 lo = np.full(n, np.inf)
                 hi = np.full(n, -np.inf)
                 np.minimum.at(lo, cells, values)

@@ -24,20 +24,25 @@ import numpy as np
 
 import dolfinx.fem
 
+from fembase.registry import Configured
 from particles.interpolation._base import InterpolationStats, TargetSpace, property_values, write_with_cell_means
 from particles.storage.swarm import Swarm
 
 __all__ = ["ShapeFunction"]
 
 
-@dataclass(frozen=True)
-class ShapeFunction:
+class ShapeFunction(Configured):
     """Weighting by the target's basis functions at the particles (no parameters)."""
 
     name: ClassVar[str] = "shape_function"
     discontinuous: ClassVar[bool] = False
+    target_degree: ClassVar[int | None] = None
     description: ClassVar[str] = ("u_i = sum phi_i(x_p) v_p / sum phi_i(x_p) into P1/Q1 (continuous, across ranks) "
                                   "or DG0/DG1")
+
+    @dataclass(frozen=True)
+    class Settings:
+        """No parameters."""
 
     def interpolate(self, swarm: Swarm, property_name: str, target: dolfinx.fem.Function, /, *,
                     component: int | None = None) -> InterpolationStats:

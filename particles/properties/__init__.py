@@ -1,14 +1,16 @@
 """Particle properties (seed paper section 2.6): registry, one module per property, and a manager.
 
 All particles of a swarm carry the same named properties, stored as scalar columns of the swarm's
-property table (a vector takes gdim columns, a tensor gdim*gdim, row-major). Every property is a
-frozen dataclass of its parameters registered under a lowercase name; it declares its size, its
+property table (a vector takes gdim columns, a tensor gdim*gdim, row-major). Every property has the
+one plugin shape: a ``Settings`` dataclass of its parameters, made by
+``PROPERTIES.build(name, settings, PropertyBuildContext(...))`` (the module of ``damage`` shows one
+with parameters, that of ``rank`` one without). It declares its size, its
 initialiser, the policy for particles added later (``"reinitialise"``: the initialiser at the new
 position; ``"interpolate"``: from the older particles nearby) and when it updates (``"never"``,
 ``"every_step"``, ``"output_only"``). Properties obeying an ODE along the path (deformation
 gradient, integrated strain, damage) are advanced by the Advector together with the positions:
 
-    >>> manager = PropertyManager(swarm, ["initial_position", DeformationGradient(), "integrated_strain"])
+    >>> manager = PropertyManager(swarm, ["initial_position", Damage(Damage.Settings(alpha=2.0)), "integrated_strain"])
     >>> manager.initialise(PropertyContext(u_new=u))
     >>> advector = Advector(swarm, integrator="rk2", odes=manager.odes())
     >>> advector.step(u_old, u_new, dt)
@@ -31,6 +33,7 @@ from particles.properties._base import (
     UPDATE_POLICIES,
     EvaluatorCache,
     ParticleProperty,
+    PropertyBuildContext,
     PropertyContext,
     evaluate_at,
 )
@@ -66,6 +69,7 @@ __all__ = [
     "ParticleProperty",
     "PlasticStrain",
     "Pressure",
+    "PropertyBuildContext",
     "PropertyContext",
     "PropertyManager",
     "Rank",
@@ -73,7 +77,6 @@ __all__ = [
     "Temperature",
     "TimeSinceCreation",
     "Velocity",
-    "create_property",
     "dependency_order",
 ]
 
@@ -85,8 +88,6 @@ PROPERTIES: Registry[type[ParticleProperty]] = Registry(
     ),
 )
 """Property classes by their lowercase config name."""
-
-create_property = PROPERTIES.create
 
 PropertySpec = ParticleProperty | str
 
@@ -128,7 +129,7 @@ class PropertyManager:
 
     Args:
         swarm: The swarm.
-        properties: Property objects or registered names (built with default parameters).
+        properties: Property objects or registered names (built with their default settings).
 
     Raises:
         ValueError: Two properties with the same column name, an unknown name, or a property whose
@@ -137,7 +138,8 @@ class PropertyManager:
 
     def __init__(self, swarm: Swarm, properties: Sequence[PropertySpec], /) -> None:
         self.swarm = swarm
-        built = [create_property(p) if isinstance(p, str) else p for p in properties]
+        built = [PROPERTIES.build(p, PROPERTIES.settings(p), PropertyBuildContext()) if isinstance(p, str) else p
+                 for p in properties]
         columns = [p.column for p in built]
         duplicates = sorted({c for c in columns if columns.count(c) > 1})
         if duplicates:

@@ -1,10 +1,12 @@
-"""Shared pieces of the particle properties: context, policies, the property base class.
+"""Shared pieces of the particle properties: contexts, policies, the property base class.
 
-A property owns ``size`` scalar columns of the swarm's property table (named by
-:attr:`ParticleProperty.column`). It says how its columns are filled when particles are created
-(:meth:`ParticleProperty.initialise`), what happens for particles added later (policy
-``"reinitialise"`` or ``"interpolate"``), and when the values change afterwards (``"never"``,
-``"every_step"``, ``"output_only"``). Properties that obey an ODE along the particle path
+A property has the one plugin shape (:class:`fembase.registry.Plugin`): a ``Settings`` dataclass
+of its parameters (the base's ``update`` and ``new_particles`` first), made by
+``PROPERTIES.build(name, settings, PropertyBuildContext(...))``. It owns ``size`` scalar columns
+of the swarm's property table (named by :attr:`ParticleProperty.column`). It says how its columns
+are filled when particles are created (:meth:`ParticleProperty.initialise`), what happens for
+particles added later (policy ``"reinitialise"`` or ``"interpolate"``), and when the values change
+afterwards (``"never"``, ``"every_step"``, ``"output_only"``). Properties that obey an ODE along the particle path
 (``integrated = True``) are advanced by :class:`particles.advection.Advector` with the same
 Runge-Kutta scheme as the positions, through :meth:`ParticleProperty.rhs`.
 """
@@ -13,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from collections.abc import Mapping
-from typing import ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -22,6 +24,8 @@ import dolfinx.fem
 
 from fembase.params import param
 from fembase.evaluation import Evaluator
+from fembase.registry import Configured
+from particles.generation.base import MakeFunction
 from particles.storage.swarm import Swarm
 
 __all__ = [
@@ -29,6 +33,7 @@ __all__ = [
     "UPDATE_POLICIES",
     "EvaluatorCache",
     "ParticleProperty",
+    "PropertyBuildContext",
     "PropertyContext",
     "evaluate_at",
     "gradient_at",
@@ -40,6 +45,18 @@ UPDATE_POLICIES: tuple[str, ...] = ("never", "every_step", "output_only")
 
 NEW_PARTICLE_POLICIES: tuple[str, ...] = ("reinitialise", "interpolate")
 """How particles added after the start get their values."""
+
+
+class PropertyBuildContext(NamedTuple):
+    """What a property is made from, beside its settings (the fields it reads at run time come in
+    a :class:`PropertyContext`).
+
+    Attributes:
+        make_function: Turns a text source (a config expression of the position) into a function
+            (None: a text is refused).
+    """
+
+    make_function: MakeFunction | None = None
 
 
 class EvaluatorCache:
@@ -130,9 +147,8 @@ def write_rows(swarm: Swarm, column: str, rows: npt.NDArray[np.integer], values:
     swarm.properties[rows, lay.start : lay.start + lay.size] = data
 
 
-@dataclass(frozen=True, kw_only=True)
-class ParticleProperty:
-    """Base of all particle properties: a frozen dataclass of the property's parameters.
+class ParticleProperty(Configured):
+    """Base of all particle properties: made from its ``Settings`` (checked when made).
 
     Class attributes (declared by each property):
         name: Registry name (lowercase).
@@ -155,20 +171,33 @@ class ParticleProperty:
     integrated: ClassVar[bool] = False
     accumulating: ClassVar[bool] = False
 
-    update: str | None = param(None, help="Override of `default_update` (None keeps the default).")
-    new_particles: str | None = param(None, help="Override of `default_new_particles` (None keeps the default).")
+    @dataclass(frozen=True, kw_only=True)
+    class Settings:
+        """The parameters every property has (a property's ``Settings`` derive from these)."""
 
-    def __post_init__(self) -> None:
-        if self.update is not None and self.update not in UPDATE_POLICIES:
+        update: str | None = param(None, help="Override of `default_update` (None keeps the default).")
+        new_particles: str | None = param(None, help="Override of `default_new_particles` (None keeps the default).")
+
+    settings: Settings
+
+    def __init__(self, settings: Any = None, /) -> None:
+        super().__init__(settings)
+        self.check()
+
+    def check(self) -> None:
+        """Raise ValueError for settings this property refuses (a property with more to check
+        extends this)."""
+        update, new_particles = self.settings.update, self.settings.new_particles
+        if update is not None and update not in UPDATE_POLICIES:
             raise ValueError(
-                f"property {self.name!r}: unknown update policy {self.update!r}; valid: {list(UPDATE_POLICIES)}"
+                f"property {self.name!r}: unknown update policy {update!r}; valid: {list(UPDATE_POLICIES)}"
             )
-        if self.new_particles is not None and self.new_particles not in NEW_PARTICLE_POLICIES:
+        if new_particles is not None and new_particles not in NEW_PARTICLE_POLICIES:
             raise ValueError(
-                f"property {self.name!r}: unknown new-particle policy {self.new_particles!r}; "
+                f"property {self.name!r}: unknown new-particle policy {new_particles!r}; "
                 f"valid: {list(NEW_PARTICLE_POLICIES)}"
             )
-        if self.integrated and self.update not in (None, "every_step"):
+        if self.integrated and update not in (None, "every_step"):
             raise ValueError(f"property {self.name!r} is integrated along the path; its update policy is every_step")
 
     @property
@@ -176,12 +205,14 @@ class ParticleProperty:
         """When the values change: ``"never"``, ``"every_step"`` or ``"output_only"``."""
         if self.integrated:
             return "every_step"
-        return self.update if self.update is not None else self.default_update
+        update = self.settings.update
+        return update if update is not None else self.default_update
 
     @property
     def new_particles_policy(self) -> str:
         """``"reinitialise"`` or ``"interpolate"``."""
-        return self.new_particles if self.new_particles is not None else self.default_new_particles
+        new_particles = self.settings.new_particles
+        return new_particles if new_particles is not None else self.default_new_particles
 
     @property
     def column(self) -> str:

@@ -3,9 +3,10 @@ common base of the properties that store such a source's value under a label."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from collections.abc import Callable
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -13,7 +14,8 @@ import numpy.typing as npt
 import dolfinx.fem
 
 from fembase.params import param
-from particles.properties._base import ParticleProperty, PropertyContext, evaluate_at, write_rows
+from particles.generation.base import text_function
+from particles.properties._base import ParticleProperty, PropertyBuildContext, PropertyContext, evaluate_at, write_rows
 from particles.storage.swarm import Swarm
 
 __all__ = ["PointFunction", "Source", "SourceValue", "evaluate_source", "source_size"]
@@ -45,30 +47,47 @@ def evaluate_source(
     return values.reshape(m, size)
 
 
-@dataclass(frozen=True, kw_only=True)
 class SourceValue(ParticleProperty):
     """Value of a user source at the particle, stored as swarm property ``label``; by default set
-    at creation only, and evaluated at the position of a particle added later.
+    at creation only, and evaluated at the position of a particle added later. A text source (a
+    config expression) is made a function by the build context.
 
     Class attributes:
-        source_field: Name of the subclass's dataclass field that holds the source.
+        source_field: Name of the field of the subclass's ``Settings`` that holds the source.
     """
 
     source_field: ClassVar[str] = "source"
     default_update: ClassVar[str] = "never"
     default_new_particles: ClassVar[str] = "reinitialise"
 
-    label: str = param(help="Swarm property name.")
-    components: int = param(1, help="Columns produced by a callable (a Function's value size is used otherwise).")
+    @dataclass(frozen=True, kw_only=True)
+    class Settings(ParticleProperty.Settings):
+        """A source's value stored under a label."""
+
+        label: str = param(help="Swarm property name.")
+        components: int = param(1, help="Columns produced by a callable (a Function's value size is used "
+                                        "otherwise).")
+
+    settings: Any
+
+    @classmethod
+    def build(cls, settings: Any, context: PropertyBuildContext, /) -> SourceValue:
+        """The property of ``settings``, a text source made a function by the context."""
+        source = text_function(getattr(settings, cls.source_field), context.make_function, cls.name, cls.source_field)
+        return cls(dataclasses.replace(settings, **{cls.source_field: source}))
+
+    @property
+    def source(self) -> Source:
+        """The source (the ``Settings`` field named by :attr:`source_field`)."""
+        return getattr(self.settings, self.source_field)
 
     @property
     def column(self) -> str:
-        return self.label
+        return self.settings.label
 
     def size(self, gdim: int) -> int:
-        return source_size(getattr(self, self.source_field), self.components)
+        return source_size(self.source, self.settings.components)
 
     def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
-        values = evaluate_source(getattr(self, self.source_field), swarm, rows, self.size(swarm.gdim), context,
-                                 self.label)
+        values = evaluate_source(self.source, swarm, rows, self.size(swarm.gdim), context, self.settings.label)
         write_rows(swarm, self.column, rows, values)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -14,7 +13,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["FieldValue"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class FieldValue(ParticleProperty):
     """Value of the context field ``context_field`` at the particle, from its stored cell and xref."""
 

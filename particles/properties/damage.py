@@ -16,7 +16,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["Damage"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class Damage(ParticleProperty):
     """Damage ``d`` with ``dd/dt = alpha |eps| - beta d``, ``|eps| = sqrt(eps:eps / 2)`` the second
     invariant of the strain rate; integrated by the Advector with the positions' scheme. For a
@@ -28,19 +27,26 @@ class Damage(ParticleProperty):
     default_new_particles: ClassVar[str] = "interpolate"
     integrated: ClassVar[bool] = True
 
-    alpha: float = param(1.0, help="Growth per unit strain, >= 0.")
-    beta: float = param(0.0, help="Healing rate, >= 0.")
-    initial: float = param(0.0, help="Damage at creation.")
+    @dataclass(frozen=True, kw_only=True)
+    class Settings(ParticleProperty.Settings):
+        """Growth, healing and the value at creation."""
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.alpha < 0 or self.beta < 0:
-            raise ValueError(f"damage: alpha and beta must be >= 0, got {self.alpha}, {self.beta}")
+        alpha: float = param(1.0, help="Growth per unit strain, >= 0.")
+        beta: float = param(0.0, help="Healing rate, >= 0.")
+        initial: float = param(0.0, help="Damage at creation.")
+
+    settings: Settings
+
+    def check(self) -> None:
+        super().check()
+        alpha, beta = self.settings.alpha, self.settings.beta
+        if alpha < 0 or beta < 0:
+            raise ValueError(f"damage: alpha and beta must be >= 0, got {alpha}, {beta}")
 
     def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
-        write_rows(swarm, self.column, rows, self.initial)
+        write_rows(swarm, self.column, rows, self.settings.initial)
 
     def rhs(
         self, swarm: Swarm, c: float, y: npt.NDArray[np.float64], grad_u: npt.NDArray[np.float64]
     ) -> npt.NDArray[np.float64]:
-        return self.alpha * strain_rate_invariant(grad_u)[:, None] - self.beta * y
+        return self.settings.alpha * strain_rate_invariant(grad_u)[:, None] - self.settings.beta * y

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -14,7 +13,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["DeformationGradient"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class DeformationGradient(ParticleProperty):
     """The deformation gradient ``F = dx/dX`` of the flow map, integrated along the path with the
     positions' Runge-Kutta scheme; column ``i * gdim + j`` holds ``F_ij``."""

@@ -16,7 +16,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["Displacement"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class Displacement(ParticleProperty):
     """Distance between the particle's position and its ``initial_position`` property (the straight
     line from where the material started, not the length of the path), refreshed after every step.
@@ -30,16 +29,24 @@ class Displacement(ParticleProperty):
     default_update: ClassVar[str] = "every_step"
     default_new_particles: ClassVar[str] = "reinitialise"
 
-    reference: str = param(InitialPosition.name, help="Swarm property holding the start positions (gdim columns).")
+    @dataclass(frozen=True, kw_only=True)
+    class Settings(ParticleProperty.Settings):
+        """Where the start positions are."""
+
+        reference: str = param(InitialPosition.name, help="Swarm property holding the start positions (gdim "
+                                                          "columns).")
+
+    settings: Settings
 
     def requires(self) -> tuple[str, ...]:
-        return (self.reference,)
+        return (self.settings.reference,)
 
     def _start(self, swarm: Swarm, rows: npt.NDArray[np.integer]) -> npt.NDArray[np.float64]:
-        if not swarm.has_property(self.reference) or swarm.layout(self.reference).size != swarm.gdim:
+        reference = self.settings.reference
+        if not swarm.has_property(reference) or swarm.layout(reference).size != swarm.gdim:
             raise ValueError(f"particle property 'displacement' needs the {swarm.gdim}-column property "
-                             f"{self.reference!r} on the same particles; add it to the properties")
-        return swarm.property(self.reference)[rows]
+                             f"{reference!r} on the same particles; add it to the properties")
+        return swarm.property(reference)[rows]
 
     def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
         rows = np.asarray(rows, dtype=np.int64)

@@ -11,7 +11,6 @@ from particles.properties._callable import Source, SourceValue
 __all__ = ["InitialComposition"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class InitialComposition(SourceValue):
     """Initial value of a composition field, from a callable of x or a mesh Function."""
 
@@ -19,6 +18,11 @@ class InitialComposition(SourceValue):
     description: ClassVar[str] = "named composition from a callable of x or a mesh Function, set at creation"
     default_new_particles: ClassVar[str] = "interpolate"
 
-    source: Source = param(help="`f(x)` (x shape=(m, gdim) -> shape=(m,) or (m, components)) or a Function on the "
-                                "swarm's mesh (evaluated from the particle's cell and reference position).")
-    label: str = param("composition", help='Swarm property name (one per material, e.g. `"basalt"`).')
+    @dataclass(frozen=True, kw_only=True)
+    class Settings(SourceValue.Settings):
+        """A composition's source and label."""
+
+        source: Source | str = param(help="`f(x)` (x shape=(m, gdim) -> shape=(m,) or (m, components)) or a "
+                                          "Function on the swarm's mesh (evaluated from the particle's cell and "
+                                          "reference position).")
+        label: str = param("composition", help='Swarm property name (one per material, e.g. `"basalt"`).')

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -14,7 +13,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["InitialPosition"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class InitialPosition(ParticleProperty):
     """The particle's position at creation. Particles added later take the mean initial position
     of the other particles in their cell by default (the material they stand for came from there)."""

@@ -16,7 +16,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["IntegratedStrain"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class IntegratedStrain(ParticleProperty):
     """Time integral of the second invariant of the strain rate, ``s(0) = initial``; integrated by
     the Advector with the positions' Runge-Kutta scheme.
@@ -27,10 +26,16 @@ class IntegratedStrain(ParticleProperty):
     default_new_particles: ClassVar[str] = "interpolate"
     integrated: ClassVar[bool] = True
 
-    initial: float = param(0.0, help="Value at creation (and for reinitialised new particles).")
+    @dataclass(frozen=True, kw_only=True)
+    class Settings(ParticleProperty.Settings):
+        """The value at creation."""
+
+        initial: float = param(0.0, help="Value at creation (and for reinitialised new particles).")
+
+    settings: Settings
 
     def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
-        write_rows(swarm, self.column, rows, self.initial)
+        write_rows(swarm, self.column, rows, self.settings.initial)
 
     def rhs(
         self, swarm: Swarm, c: float, y: npt.NDArray[np.float64], grad_u: npt.NDArray[np.float64]

@@ -15,7 +15,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["PlasticStrain"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class PlasticStrain(ParticleProperty):
     """Accumulated plastic strain ``e``: the time integral of a mesh field ``rate_field`` sampled
     at the particle, ``de/dt = f(x_p)``. The model supplies ``f = eps_II`` where the material
@@ -29,15 +28,28 @@ class PlasticStrain(ParticleProperty):
     default_new_particles: ClassVar[str] = "interpolate"
     accumulating: ClassVar[bool] = True
 
-    initial: float = param(0.0, help="Value at creation (new particles later take the mean of their neighbours).")
-    rate_field: str = param("plastic_strain_rate", help="Name of the mesh field integrated.")
+    @dataclass(frozen=True, kw_only=True)
+    class Settings(ParticleProperty.Settings):
+        """The value at creation and the field integrated."""
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not np.isfinite(self.initial) or self.initial < 0:
-            raise ValueError(f"plastic_strain: initial must be a finite number >= 0, got {self.initial}")
-        if not isinstance(self.rate_field, str) or not self.rate_field.isidentifier():
-            raise ValueError(f"plastic_strain: rate_field must be a field name, got {self.rate_field!r}")
+        initial: float = param(0.0, help="Value at creation (new particles later take the mean of their "
+                                         "neighbours).")
+        rate_field: str = param("plastic_strain_rate", help="Name of the mesh field integrated.")
+
+    settings: Settings
+
+    def check(self) -> None:
+        super().check()
+        initial, rate_field = self.settings.initial, self.settings.rate_field
+        if not np.isfinite(initial) or initial < 0:
+            raise ValueError(f"plastic_strain: initial must be a finite number >= 0, got {initial}")
+        if not isinstance(rate_field, str) or not rate_field.isidentifier():
+            raise ValueError(f"plastic_strain: rate_field must be a field name, got {rate_field!r}")
+
+    @property
+    def rate_field(self) -> str:
+        """The mesh field integrated."""
+        return self.settings.rate_field
 
     def initialise(self, swarm: Swarm, rows: npt.NDArray[np.integer], context: PropertyContext) -> None:
-        write_rows(swarm, self.column, rows, self.initial)
+        write_rows(swarm, self.column, rows, self.settings.initial)

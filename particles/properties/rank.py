@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -14,7 +13,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["Rank"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class Rank(ParticleProperty):
     """The rank of the swarm's communicator that holds the particle (refreshed at output by default)."""
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -15,7 +14,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["StrainRate"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class StrainRate(ParticleProperty):
     """``eps = (grad u + grad u^T) / 2`` of the current velocity at the particle; column
     ``i * gdim + j`` holds ``eps_ij``."""

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import ClassVar
 
 from particles.properties._field import FieldValue
@@ -10,7 +9,6 @@ from particles.properties._field import FieldValue
 __all__ = ["Temperature"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class Temperature(FieldValue):
     """The context's temperature evaluated at the particle (from its cell and reference position)."""
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -14,7 +13,6 @@ from particles.storage.swarm import Swarm
 __all__ = ["TimeSinceCreation"]
 
 
-@dataclass(frozen=True, kw_only=True)
 class TimeSinceCreation(ParticleProperty):
     """Age: 0 at creation, increased by ``context.dt`` at each update (call the manager's update
     once per time step)."""

@@ -12,12 +12,13 @@ import ufl
 
 from fembase.distribute import refine_on_ranks
 from fembase.dolfinx_compat import function_space
+from particles.generation import RandomUniform
 from particles.manager import OutputSchedule, ParticleManager, build_generator, build_properties
 from particles.io.output import ParticleWriter
 from particles.population.control import PopulationControl
 from particles.properties import InitialComposition, PropertyContext
 
-from _helpers import gathered
+from _helpers import gathered, plugin
 
 
 def _mesh(comm, n=8):
@@ -43,7 +44,7 @@ def _rotation(mesh):
 
 
 def _manager(mesh, tmp=None, **kwargs):
-    dense = InitialComposition(source=lambda x: (x[:, 1] > 0.5).astype(float), label="dense")
+    dense = plugin(InitialComposition, source=lambda x: (x[:, 1] > 0.5).astype(float), label="dense")
     kwargs.setdefault("properties", ["initial_position", "integrated_strain", "velocity"])
     kwargs["properties"] = [dense, *build_properties(kwargs["properties"])]
     generator = build_generator({"name": "random_uniform", "particles_per_cell": 10, "seed": 3},
@@ -175,6 +176,10 @@ def test_config_errors_name_the_entry():
         build_generator({"name": "from_file", "path": "/nonexistent/points.txt"}, num_cells=10)
     with pytest.raises(ValueError, match="valid: .*random_uniform"):
         build_generator({"name": "magic"}, num_cells=10)
+    assert build_generator({"name": "random_uniform", "particles_per_cell": 2.5, "seed": 4}, num_cells=10) \
+        == plugin(RandomUniform, 25, seed=4)
+    with pytest.raises(ValueError, match=r"^particle generator 'box_lattice' has no parameter 'particles_per_cell'"):
+        build_generator({"name": "box_lattice", "particles_per_cell": 2, "lower": [0, 0], "upper": [1, 1]}, num_cells=1)
     with pytest.raises(ValueError, match="item 1: unknown particle property 'strain'; valid: .*integrated_strain"):
         build_properties(["velocity", "strain"])
     with pytest.raises(ValueError, match="item 0: .*bogus"):

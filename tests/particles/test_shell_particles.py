@@ -10,7 +10,7 @@ import dolfinx.fem
 
 pytest.importorskip("gmsh")
 
-from _helpers import gathered, swarm_at  # noqa: E402
+from _helpers import gathered, plugin, swarm_at  # noqa: E402
 from convection.geometry.shell import ShellSpec, create_shell_mesh  # noqa: E402
 from fembase.dolfinx_compat import function_space
 from fembase.geometry import locate_owned  # noqa: E402
@@ -60,7 +60,7 @@ def test_curved_cells_located_by_pull_back(world):
 def test_generated_particles_inside_the_shell(world):
     mesh = _annulus(world)
     swarm = Swarm(mesh)
-    generate(swarm, MetropolisHastings(2000, seed=3))  # random_uniform needs affine cells
+    generate(swarm, plugin(MetropolisHastings, 2000, seed=3))  # random_uniform needs affine cells
     r = np.linalg.norm(swarm.x, axis=1)
     assert _count(world, (r < RI - 1e-12) | (r > RO + 1e-12)) == 0
     assert world.allreduce(swarm.num_particles) == 2000
@@ -158,11 +158,11 @@ def test_generated_particles_are_confined_on_straight_cells(world):
 
     spec = ShellSpec(2, RI, RO, resolution=0.3, geometry_degree=1)
     mesh = create_shell_mesh(world, spec)
-    unconfined = ParticleManager(mesh, generator=RandomUniform(8000, seed=5))
+    unconfined = ParticleManager(mesh, generator=plugin(RandomUniform, 8000, seed=5))
     r = np.linalg.norm(unconfined.swarm.x, axis=1)
     below = _count(world, r < RI * (1 - 1e-9))
     assert below > 0  # the gap is real without confinement
-    manager = ParticleManager(mesh, generator=RandomUniform(8000, seed=5),
+    manager = ParticleManager(mesh, generator=plugin(RandomUniform, 8000, seed=5),
                               properties=["initial_position", "displacement"],
                               confine=shell_confinement(mesh, spec))
     ids, x, _ = gathered(manager.swarm)

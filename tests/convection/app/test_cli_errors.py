@@ -94,6 +94,15 @@ def test_invalid_yaml(tmp_path):
     (["composition.source=particles",
       "particles.generator={name: metropolis_hastings, num_particles: 100, density: '0*x', seed: 1}"],
      "config key 'particles.generator.density': '0*x' is 0 everywhere in the domain: no particle could be placed"),
+    # a plugin's parameters are its Settings' fields: one it lacks is named with those it has
+    (["composition.source=particles", "particles.generator={name: random_uniform, num_particles: 100, seeds: 1}"],
+     "config key 'particles.generator': particle generator 'random_uniform' has no parameter 'seeds'; its "
+     "parameters: ['num_particles', 'seed']"),
+    (["composition.source=particles", "particles.interpolator={name: cell_average, mean: median}"],
+     "config key 'particles.interpolator': unknown mean 'median'; valid: ['arithmetic', 'geometric', 'harmonic']"),
+    (["composition.source=particles", "particles.properties=[{name: damage}, {name: damage, alpha: -1, label: d}]"],
+     "config key 'particles.properties[1]': particle property 'damage' has no parameter 'label'; its parameters: "
+     "['alpha', 'beta', 'initial', 'new_particles', 'update']"),
 ])
 def test_check_refuses_in_the_users_terms(overrides, message):
     config = ROOT / "configs" / "sinking_block.yaml"

@@ -7,6 +7,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
+from _helpers import plugin
 from fembase.dolfinx_compat import function_space
 from particles import Swarm
 from particles.advection import Advector
@@ -30,7 +31,7 @@ def _advect(comm):
     u = dolfinx.fem.Function(V)
     u.interpolate(_cellular_flow)
     swarm = Swarm(mesh)
-    generate(swarm, RandomUniform(N_PARTICLES, seed=17))
+    generate(swarm, plugin(RandomUniform, N_PARTICLES, seed=17))
     ids0 = np.sort(np.concatenate(comm.allgather(swarm.ids)))
     umax = 1.0  # max |u| of the cellular flow
     dt = 0.5 * (1.0 / N_CELLS) / umax  # CFL 0.5
@@ -65,5 +66,5 @@ def test_rk2_rotation_conserves_particles_and_matches_serial():
 def _initial_positions(comm):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, N_CELLS, N_CELLS)
     swarm = Swarm(mesh)
-    generate(swarm, RandomUniform(N_PARTICLES, seed=17))
+    generate(swarm, plugin(RandomUniform, N_PARTICLES, seed=17))
     return swarm.x[np.argsort(swarm.ids)]

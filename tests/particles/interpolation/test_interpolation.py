@@ -12,8 +12,9 @@ from particles import Swarm
 from particles.generation import generate
 from particles.interpolation import (
     INTERPOLATORS,
+    InterpolatorContext,
+    LeastSquares,
     describe_interpolators,
-    get_interpolator,
     interpolate_to_mesh,
 )
 
@@ -76,9 +77,14 @@ def test_registry_and_errors():
                                   "quadratic_least_squares"}
     assert all(name == name.lower() and text for name, text in describe_interpolators().items())
     with pytest.raises(ValueError, match="cell_average"):
-        get_interpolator("bilinear")
+        INTERPOLATORS.lookup("bilinear")
     with pytest.raises(ValueError, match="arithmetic"):
-        get_interpolator("cell_average", mean="median")
+        INTERPOLATORS.settings("cell_average", mean="median")
+    with pytest.raises(ValueError, match="^particle interpolator 'nearest' has no parameter 'mean'"):
+        INTERPOLATORS.settings("nearest", mean="harmonic")
+    made = INTERPOLATORS.build("least_squares", INTERPOLATORS.settings("least_squares", limit=True),
+                               InterpolatorContext())
+    assert made == LeastSquares(LeastSquares.Settings(limit=True)) and made.target_degree == 1
     mesh = _mesh(MPI.COMM_SELF, 2)
     swarm = _swarm(mesh, 40)
     swarm.add_property("vec", 2, 1.0)

@@ -10,7 +10,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 
-from _helpers import swarm_at
+from _helpers import plugin, swarm_at
 from fembase.dolfinx_compat import function_space, geometry_dofmap
 from fembase.evaluation import locate
 from particles import Swarm
@@ -26,6 +26,7 @@ from particles.properties import (
     InitialPosition,
     IntegratedStrain,
     Pressure,
+    PropertyBuildContext,
     PropertyContext,
     PropertyManager,
     Rank,
@@ -33,10 +34,14 @@ from particles.properties import (
     Temperature,
     TimeSinceCreation,
     Velocity,
-    create_property,
 )
 
 GAMMA = 0.8
+
+
+def _build(name, make=None, **parameters):
+    """The property ``name`` made through the registry, as a config makes it."""
+    return PROPERTIES.build(name, PROPERTIES.settings(name, **parameters), PropertyBuildContext(make))
 
 
 def _vector_function(mesh, degree, f):
@@ -84,20 +89,26 @@ def test_registry_lists_names_and_rejects_bad_policies():
     }
     assert all(cls.description for cls in PROPERTIES.values())
     with pytest.raises(ValueError, match="damage.*deformation_gradient.*velocity"):
-        create_property("strain")
+        _build("strain")
     with pytest.raises(ValueError, match="every_step"):
-        create_property("velocity", update="sometimes")
+        _build("velocity", update="sometimes")
     with pytest.raises(ValueError, match="interpolate"):
-        create_property("rank", new_particles="copy")
+        _build("rank", new_particles="copy")
+    with pytest.raises(ValueError, match="^particle property 'rank' has no parameter 'label'"):
+        _build("rank", label="r")
     with pytest.raises(ValueError, match="every_step"):
-        DeformationGradient(update="never")
+        plugin(DeformationGradient, update="never")
     with pytest.raises(ValueError, match="alpha"):
-        Damage(alpha=-1.0)
-    assert create_property("damage", alpha=2.0, beta=0.5) == Damage(alpha=2.0, beta=0.5)
+        plugin(Damage, alpha=-1.0)
+    assert _build("damage", alpha=2.0, beta=0.5) == plugin(Damage, alpha=2.0, beta=0.5)
+    text = _build("function", function="x", label="f", make=lambda text: (lambda x: np.full(x.shape[0], 3.0)))
+    assert callable(text.source) and text.column == "f" and text.size(2) == 1
+    with pytest.raises(ValueError, match="^function: 'function' is text but no expression parser was given$"):
+        _build("function", function="x")
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
     swarm = Swarm(mesh)
     with pytest.raises(ValueError, match="distinct labels"):
-        PropertyManager(swarm, [FunctionProperty(function=np.sin), FunctionProperty(function=np.cos)])
+        PropertyManager(swarm, [plugin(FunctionProperty, function=np.sin), plugin(FunctionProperty, function=np.cos)])
     manager = PropertyManager(swarm, ["deformation_gradient", "velocity", "rank", "initial_position"])
     assert [manager.layout(n).size for n in manager.names] == [4, 2, 1, 2]
     assert swarm.property_names == manager.names
@@ -179,7 +190,7 @@ def _damage(integrator, steps, alpha=1.5, beta=2.0, t_end=1.0):
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
     u = _shear(mesh)
     swarm = swarm_at(mesh, [[0.2, 0.3], [0.1, 0.6]])
-    manager = PropertyManager(swarm, [Damage(alpha=alpha, beta=beta)])
+    manager = PropertyManager(swarm, [plugin(Damage, alpha=alpha, beta=beta)])
     manager.initialise()
     _run(swarm, manager, integrator, u, t_end / steps, steps)
     d = manager.values("damage")[:, 0]
@@ -269,7 +280,7 @@ def test_field_properties_equal_functions_at_particles():
     T = _scalar_function(mesh, 2, lambda x: np.exp(x[0]) * np.sin(4 * x[1]))
     p = _scalar_function(mesh, 1, lambda x: x[0] * x[1] + np.cos(x[0]))
     swarm = Swarm(mesh)
-    generate(swarm, RandomUniform(60, seed=3))
+    generate(swarm, plugin(RandomUniform, 60, seed=3))
     manager = PropertyManager(swarm, [Velocity(), Temperature(), Pressure()])
     with pytest.raises(ValueError, match="temperature"):
         manager.initialise(PropertyContext(u_new=u))
@@ -291,7 +302,7 @@ def test_strain_rate_of_linear_field_is_exact():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 5, 5)
     u = _vector_function(mesh, 1, lambda x: np.stack([a * x[0] + b * x[1], c * x[0] - a * x[1]]))
     swarm = Swarm(mesh)
-    generate(swarm, RandomUniform(40, seed=8))
+    generate(swarm, plugin(RandomUniform, 40, seed=8))
     manager = PropertyManager(swarm, ["strain_rate"])
     manager.initialise(PropertyContext(u_new=u))
     eps = manager.values("strain_rate").reshape(-1, 2, 2)
@@ -303,11 +314,11 @@ def test_initial_composition_from_callable_and_function():
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
     phi = _scalar_function(mesh, 1, lambda x: 2.0 * x[0] - x[1])  # linear: exact in P1
     swarm = Swarm(mesh)
-    generate(swarm, RandomUniform(30, seed=2))
+    generate(swarm, plugin(RandomUniform, 30, seed=2))
     manager = PropertyManager(swarm, [
-        InitialComposition(source=lambda x: (x[:, 0] > 0.5).astype(float), label="basalt"),
-        InitialComposition(source=phi, label="harzburgite"),
-        FunctionProperty(function=lambda x: np.stack([x[:, 0] ** 2, x[:, 1]], axis=1), label="f", components=2),
+        plugin(InitialComposition, source=lambda x: (x[:, 0] > 0.5).astype(float), label="basalt"),
+        plugin(InitialComposition, source=phi, label="harzburgite"),
+        plugin(FunctionProperty, function=lambda x: np.stack([x[:, 0] ** 2, x[:, 1]], axis=1), label="f", components=2),
         Rank(),
     ])
     manager.initialise()
@@ -317,9 +328,9 @@ def test_initial_composition_from_callable_and_function():
     np.testing.assert_array_equal(manager.values("f"), np.stack([x[:, 0] ** 2, x[:, 1]], axis=1))
     assert np.all(manager.values("rank") == 0)
     other = Swarm(mesh)
-    generate(other, RandomUniform(3, seed=2))
+    generate(other, plugin(RandomUniform, 3, seed=2))
     with pytest.raises(ValueError, match="callable returned"):
-        PropertyManager(other, [FunctionProperty(function=lambda x: x, label="g")]).initialise()
+        PropertyManager(other, [plugin(FunctionProperty, function=lambda x: x, label="g")]).initialise()
 
 
 # ----------------------------------------------------------------------------- new particles
@@ -339,9 +350,9 @@ def test_initialise_new_interpolates_cell_mean_and_reinitialises():
     u = _vector_function(mesh, 1, lambda x: np.stack([x[1], -x[0]]))
     f = lambda x: x[:, 0] + 2.0 * x[:, 1] ** 2  # noqa: E731
     manager = PropertyManager(swarm, [
-        FunctionProperty(function=f, label="f"),                                      # reinitialise
-        InitialComposition(source=lambda x: np.ones(x.shape[0]), label="comp"),     # interpolate
-        InitialComposition(source=lambda x: 5.0 + 0 * x[:, 0], label="reset", new_particles="reinitialise"),
+        plugin(FunctionProperty, function=f, label="f"),                                      # reinitialise
+        plugin(InitialComposition, source=lambda x: np.ones(x.shape[0]), label="comp"),     # interpolate
+        plugin(InitialComposition, source=lambda x: 5.0 + 0 * x[:, 0], label="reset", new_particles="reinitialise"),
         TimeSinceCreation(), InitialPosition(), Velocity(),
     ])
     manager.initialise(PropertyContext(u_new=u))
@@ -387,7 +398,7 @@ def test_rank_property_after_migration():
     mesh = dolfinx.mesh.create_unit_square(comm, 12, 12)
     u = _vector_function(mesh, 2, _cellular_flow)
     swarm = Swarm(mesh)
-    generate(swarm, RandomUniform(300, seed=5))
+    generate(swarm, plugin(RandomUniform, 300, seed=5))
     manager = PropertyManager(swarm, [Rank(), InitialPosition()])
     manager.initialise(PropertyContext(u_new=u))
     ok_start = bool(np.all(manager.values("rank") == comm.rank))
@@ -404,8 +415,8 @@ def _ode_run(comm, integrator):
     mesh = dolfinx.mesh.create_unit_square(comm, 12, 12)
     u = _vector_function(mesh, 2, _cellular_flow)
     swarm = Swarm(mesh)
-    generate(swarm, RandomUniform(200, seed=11))
-    manager = PropertyManager(swarm, [DeformationGradient(), IntegratedStrain(), Damage(alpha=1.0, beta=0.5)])
+    generate(swarm, plugin(RandomUniform, 200, seed=11))
+    manager = PropertyManager(swarm, [DeformationGradient(), IntegratedStrain(), plugin(Damage, alpha=1.0, beta=0.5)])
     manager.initialise(PropertyContext(u_new=u))
     adv = Advector(swarm, integrator=integrator, odes=manager.odes())
     sent = 0

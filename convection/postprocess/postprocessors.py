@@ -425,9 +425,8 @@ class Heating(Column):
 
     @classmethod
     def missing(cls, features: ModelFeatures) -> str | None:
-        if not features.energy:
-            return NEEDS_ENERGY
-        return None if features.dissipation else "needs adiabatic and shear heating (physics.approximation eba, tala)"
+        heating = None if features.dissipation else "needs adiabatic and shear heating (physics.approximation)"
+        return heating if features.energy else NEEDS_ENERGY
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         stokes = model.stokes

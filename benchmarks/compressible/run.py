@@ -11,7 +11,9 @@ under mpirun to its steady state, and reads the last row of its statistics: Nu (
 energy statistics W (work against gravity) and Phi (shear heating). Writes ``<out>/results.md`` (each
 value beside the range of the codes King et al. compare, UM, VT and CU, and its deviation from their
 mean; ``reference.csv``) and ``<out>/results.png`` (Nu, vrms and Phi, W over the published mean against
-Di, the published codes as markers). ``--quick`` runs 12 x 12 cells to a loose steady state (a smoke run).
+Di, the published codes as markers). ``--quick`` runs 12 x 12 cells to a loose steady state (a smoke run);
+``--no-run`` tabulates the run folders already in ``--out`` (e.g. a run continued from a coarser one with
+``--set initial.from_run=DIR``).
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ from convection.launch import run_config
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 BENCHMARK = Benchmark(__doc__, out=OUTPUT / "compressible", ranks=2, quick="12 x 12 cells, loose steady state",
-                      overrides=True, helps={"set": "a config override for every run (repeatable)"})
+                      overrides=True, no_run="tabulate the runs already in --out",
+                      helps={"set": "a config override for every run (repeatable)"})
 CASES = cases(*(Case(f"tala_{di}", "king_tala.yaml", (f"physics.reference.Di={di}",)) for di in ("0.25", "0.5", "1")))
 PUBLISHED_CODES = ("UM", "VT", "CU")
 """The codes of King et al. (2010) in ``reference.csv`` (ASPECT's values are listed beside them)."""
@@ -86,14 +89,15 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.case:
         case = CASES[name]
         out = args.out / name
-        run_config(case.path, out, ranks=args.ranks, cwd=ROOT,
-                   overrides=["output.progress=lines", "output.progress_every=200", *case.overrides, *sized, *args.set])
+        if not args.no_run:
+            run_config(case.path, out, ranks=args.ranks, cwd=ROOT, overrides=[
+                "output.progress=lines", "output.progress_every=200", *case.overrides, *sized, *args.set])
         summary = json.loads((out / "summary.json").read_text())
         statistics = read_statistics(out / "statistics.csv")
         di = case_di(case)
         ours = final(statistics)
         curves[di] = ours
-        mesh = f"{summary['cells']} cells ({sized[0].split('=')[1]})"
+        mesh = f"{summary['cells']} cells ({_config_value(out, 'cells')}), from {_start(out)}"
         rows.append(row(name, mesh, ours, ref[("tala", di)], summary["wall_time"]))
     header = ["case", "mesh", "steps", *(f"{q} (published range; vs mean)" for q in QUANTITIES), "abs(Phi-W)/W",
               "wall time [s]"]
@@ -102,6 +106,18 @@ def main(argv: list[str] | None = None) -> int:
     _plot(curves, ref, args.out / "results.png")
     print(f"wrote {args.out / 'results.png'}")
     return 0
+
+
+def _config_value(run: Path, key: str) -> str:
+    """A key's value as the run folder's config.yaml writes it (the first line ``key: ...``)."""
+    lines = (run / "config.yaml").read_text().splitlines()
+    return next(line.split(":", 1)[1].strip() for line in lines if line.strip().startswith(f"{key}:"))
+
+
+def _start(run: Path) -> str:
+    """Where the run started: the config's initial temperature, or the run it continued."""
+    source = _config_value(run, "from_run")
+    return "the initial temperature" if source in ("null", "") else f"the steady state of {Path(source).name} ({source})"
 
 
 def _plot(curves: dict[float, dict[str, float]], ref: dict, png: Path) -> None:
@@ -121,6 +137,7 @@ def _plot(curves: dict[float, dict[str, float]], ref: dict, png: Path) -> None:
         ax.plot(dis, [curves[di][quantity] / published(ref[("tala", di)], quantity)[2] for di in dis], "o-",
                 color="tab:red", label="this code")
         ax.axhline(1.0, color="k", lw=0.6)
+        ax.ticklabel_format(axis="y", useOffset=False)
         ax.set_xlabel("Di")
         ax.set_title(f"{quantity} / published mean")
     axes[0].legend(fontsize=7)

@@ -60,6 +60,7 @@ from convection.config.loader import dump_config
 from convection.config.settings import RunSettings, run_settings
 from convection.geometry.registry import domain_from_settings
 from convection.physics.materials import Material, Materials
+from convection.physics.compressible import ReferenceState
 from convection.model.model import Model
 from convection.postprocess.postprocessors import create_postprocessors
 from convection.adapt.rebalance import BALANCE_STRATEGIES, Balancer
@@ -299,8 +300,10 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     physics = settings.physics
     materials = materials_from_settings(settings)
     visc = physics.viscosity
+    reference = ReferenceState(**vars(physics.reference))
     approximation = materials.approximation(Ra=physics.Ra, H=physics.H, temperature_law=visc.temperature_law,
-                                            gamma=visc.gamma, gravity=domain.gravity)
+                                            gamma=visc.gamma, gravity=domain.gravity,
+                                            formulation=physics.approximation, reference=reference)
     velocity_bcs = velocity_bcs_from_config(settings.boundary.velocity, domain)
     temperature_bcs = temperature_bcs_from_config(settings.boundary.temperature, domain)
     meshes = _meshes(settings, domain, materials, temperature_bcs, comm, restore)

@@ -61,7 +61,8 @@ from convection.schema import (
     settings_from, short_repr, validate,
 )
 from convection.schema import finite_number as _finite_number
-from convection.physics.approximation import TEMPERATURE_LAWS, PhysicsSettings
+from convection.physics.approximation import HEATING_VISCOSITY, TEMPERATURE_LAWS, PhysicsSettings
+from convection.physics.compressible import APPROXIMATIONS
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
@@ -319,6 +320,7 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
                                   "repartition yet")
     check_primary(config)
     _check_materials(config)
+    _check_approximation(config)
     cls.check_boundaries(mesh_section(config["mesh"]), boundary_settings(config["boundary"]))
     for name, value in config["initial"]["constants"].items():
         if _finite_number(value) is None:
@@ -350,7 +352,8 @@ def _check_statistics(config: dict[str, Any]) -> None:
                              Ra=config["physics"]["Ra"], points=bool(config["diagnostics"]["points"]),
                              topography_material=config["diagnostics"]["topography_material"],
                              columns=config_domain(config).columns(1, 1) is not None,
-                             free_surface=bool(free_surface_boundaries(config)))
+                             free_surface=bool(free_surface_boundaries(config)),
+                             dissipation=APPROXIMATIONS[config["physics"]["approximation"]].dissipation)
     material = config["diagnostics"]["topography_material"]
     if material is not None and material not in features.materials:
         raise ConfigError(f"config key 'diagnostics.topography_material': {material!r} is not one of the materials "
@@ -569,6 +572,37 @@ def _check_rheology(config: dict[str, Any]) -> None:
             raise ConfigError(f"config key 'particles.properties': the viscosity laws read the field {missing[0]!r}, "
                               "which comes from a particle property of that name (e.g. plastic_strain); carry it "
                               f"(particles carry {carried})")
+
+
+def _check_approximation(config: dict[str, Any]) -> None:
+    """``physics.approximation`` and ``physics.reference`` agree, and the model has what the
+    approximation needs (:mod:`convection.physics.compressible`)."""
+    physics = config["physics"]
+    name, Di = physics["approximation"], physics["reference"]["Di"]
+    formulation = APPROXIMATIONS[name]
+    dissipating = [n for n, f in APPROXIMATIONS.items() if f.dissipation]
+    if not formulation.dissipation:
+        if Di != 0.0:
+            raise ConfigError(f"config key 'physics.reference.Di': only with physics.approximation "
+                              f"{' or '.join(dissipating)} (the {name} approximation has no dissipation number)")
+        return
+    if Di == 0.0:
+        raise ConfigError(f"config key 'physics.reference.Di': physics.approximation {name} needs a dissipation "
+                          "number Di > 0")
+    if not config["energy"]["enabled"]:
+        raise ConfigError(f"config key 'energy.enabled': physics.approximation {name} heats by adiabatic compression "
+                          "and shear, so it needs the energy equation")
+    if not physics["Ra"] > 0.0:
+        raise ConfigError(f"config key 'physics.Ra': physics.approximation {name} needs Ra > 0 (its shear heating "
+                          "is Di / Ra Phi)")
+    table, _ = material_table(config)
+    law0 = viscosity_laws(config)[0] if laws_given(config) else None
+    if table or (law0 is not None and not law0.depends_on <= HEATING_VISCOSITY):
+        raise ConfigError(f"config key 'physics.approximation': {name}'s shear heating takes a viscosity of "
+                          "temperature and depth only for now (no materials, no strain-rate, pressure or field laws)")
+    if formulation.reference_density and config["stokes"]["buoyancy_theta"] != 0.0:
+        raise ConfigError(f"config key 'stokes.buoyancy_theta': not with physics.approximation {name} (the "
+                          "semi-implicit buoyancy has no reference density yet)")
 
 
 def _property_names(config: dict[str, Any]) -> list[str]:

@@ -23,6 +23,9 @@ import ufl
 
 from fembase.registry import Registry
 from convection.geometry.gravity import Gravity, VerticalGravity
+from convection.physics.compressible import (
+    APPROXIMATIONS, EnergyTerms, Formulation, ReferenceSettings, ReferenceState, shear_heating,
+)
 from convection.schema import Names, param, subsection
 from convection.physics.rheology import (
     Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
@@ -144,6 +147,10 @@ class PhysicsSettings:
     Rb: float = param(0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_up)")
     H: float = param(0.0, help="internal heating")
     viscosity: ViscositySettings = subsection(ViscositySettings)
+    approximation: str = param("boussinesq", choices=Names(APPROXIMATIONS),
+                               help="the equations: boussinesq, eba (adiabatic and shear heating) or tala (also a "
+                                    "reference density; docs/compressible.md)")
+    reference: ReferenceSettings = subsection(ReferenceSettings)
 
 
 VISCOSITY_DEFAULTS = ViscositySettings()
@@ -363,6 +370,10 @@ class BoussinesqApproximation:
         viscosity: viscosity law ``eta(T, C)``.
         gravity: which way is up (:mod:`convection.geometry.gravity`; the domain's
             :attr:`~convection.geometry.domain.Domain.gravity`).
+        formulation: a name in :data:`~convection.physics.compressible.APPROXIMATIONS`
+            (``"boussinesq"``, ``"eba"``, ``"tala"``): the terms the solvers ask for
+            (:meth:`continuity_density`, :meth:`buoyancy`, :meth:`energy_terms`).
+        reference: the reference state of ``eba`` and ``tala`` (``Di > 0``; ``Di = 0`` for ``boussinesq``).
     """
 
     def __init__(
@@ -374,12 +385,17 @@ class BoussinesqApproximation:
         H: float = 0.0,
         viscosity: ViscosityLaw = ViscosityLaw(),
         gravity: Gravity = VerticalGravity(),
+        formulation: str = "boussinesq",
+        reference: ReferenceState = ReferenceState(),
     ) -> None:
         self.gravity = gravity
         self.Ra = float(Ra)
         self.Rb: float | tuple[float, ...] = tuple(float(r) for r in Rb) if isinstance(Rb, (list, tuple)) else float(Rb)
         self.H = float(H)
         self.viscosity_law = viscosity
+        self.formulation: Formulation = APPROXIMATIONS.lookup(formulation)
+        self.reference = reference
+        _check_formulation(self)
 
     @property
     def is_variable_viscosity(self) -> bool:
@@ -421,10 +437,69 @@ class BoussinesqApproximation:
             raise ValueError("the buoyancy needs the spatial coordinate x")
         if x.ufl_shape[0] != gdim:
             raise ValueError(f"x has {x.ufl_shape[0]} components, the buoyancy {gdim}")
-        return self.gravity.along_up(self.density(T, C), x)
+        magnitude = self.density(T, C)
+        if self.formulation.reference_density:
+            magnitude = self.reference.density(self.gravity.depth(x)) * magnitude
+        return self.gravity.along_up(magnitude, x)
+
+    @property
+    def dissipates(self) -> bool:
+        """Whether the energy equation has adiabatic and shear heating (EBA, TALA)."""
+        return self.formulation.dissipation
+
+    def continuity_density(self, x: Any, /) -> Any | None:
+        """UFL ``rho_r`` of the continuity equation ``div(rho_r u) = 0`` at the points ``x``, or None
+        for ``div u = 0``."""
+        return self.reference.density(self.gravity.depth(x)) if self.formulation.reference_density else None
+
+    def energy_terms(self, T_new: Any, T: Any, u: Any, x: Any, /) -> EnergyTerms | None:
+        """The energy equation's heat capacity and heating (:class:`~convection.physics.compressible.EnergyTerms`)
+        for the unknown temperature ``T_new``, the last temperature ``T`` (the shear heating's viscosity)
+        and the velocity ``u``, or None for the Boussinesq ``dT/dt + u . grad T - lap T = H``."""
+        if not self.formulation.dissipation:
+            return None
+        capacity = self.reference.density(self.gravity.depth(x)) if self.formulation.reference_density else 1.0
+        adiabatic, shear = self.heating_rates(T_new, T, u, x)
+        heating = shear - adiabatic
+        if self.H != 0.0:
+            heating = heating + capacity * self.H
+        return EnergyTerms(capacity, heating)
+
+    def heating_rates(self, T: Any, T_eta: Any, u: Any, x: Any, /) -> tuple[Any, Any]:
+        """UFL ``(Di rho_r w (T + T0), (Di / Ra) Phi)``: the adiabatic cooling (the work against
+        gravity ``W`` per volume) and the shear heating, ``Phi`` with the viscosity at ``T_eta``."""
+        reference = self.reference
+        rho = reference.density(self.gravity.depth(x)) if self.formulation.reference_density else 1.0
+        w = ufl.dot(u, self.up(x))
+        adiabatic = reference.Di * rho * w * (T + reference.surface_temperature)
+        shear = reference.Di / self.Ra * shear_heating(self.viscosity(T_eta, None, x=x), u)
+        return adiabatic, shear
 
     def __repr__(self) -> str:
         return (
             f"BoussinesqApproximation(Ra={self.Ra}, Rb={self.Rb}, H={self.H}, "
-            f"viscosity={self.viscosity_law}, gravity={self.gravity!r})"
+            f"viscosity={self.viscosity_law}, gravity={self.gravity!r}"
+            + (f", formulation={self.formulation.name!r}, reference={self.reference})" if self.dissipates else ")")
         )
+
+
+HEATING_VISCOSITY = frozenset({"temperature", "depth"})
+"""What the viscosity may depend on in the shear heating of this version (no materials, no flow)."""
+
+
+def _check_formulation(approximation: BoussinesqApproximation) -> None:
+    """Refuse an approximation whose reference state or viscosity does not fit its formulation."""
+    formulation, Di = approximation.formulation, approximation.reference.Di
+    if not formulation.dissipation:
+        if Di != 0.0:
+            raise ValueError(f"the {formulation.name} approximation has no dissipation number (Di = {Di}); "
+                             "use eba or tala")
+        return
+    if Di == 0.0:
+        raise ValueError(f"the {formulation.name} approximation needs a dissipation number Di > 0")
+    if approximation.Ra <= 0.0:
+        raise ValueError(f"the {formulation.name} approximation needs Ra > 0 (its shear heating is Di / Ra Phi)")
+    law = approximation.viscosity_law
+    if len(law.laws or ()) > 1 or not law.depends_on <= HEATING_VISCOSITY:
+        raise ValueError(f"the {formulation.name} approximation's shear heating needs a viscosity of temperature "
+                         "and depth only (no materials, no strain-rate, pressure or field dependence)")

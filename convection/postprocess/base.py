@@ -85,6 +85,7 @@ class ModelFeatures:
         topography_material: ``diagnostics.topography_material``.
         columns: The geometry has lines along ``up`` through it (a box).
         free_surface: A boundary is a free surface (:mod:`convection.deform`).
+        dissipation: The approximation heats adiabatically and by shear (EBA, TALA).
     """
 
     energy: bool
@@ -96,6 +97,7 @@ class ModelFeatures:
     topography_material: str | None = None
     columns: bool = True
     free_surface: bool = False
+    dissipation: bool = False
 
     @classmethod
     def of_model(cls, model: Model, diagnostics: DiagnosticsSettings | None = None) -> ModelFeatures:
@@ -104,7 +106,8 @@ class ModelFeatures:
                    materials=tuple(f.name for f in model.fractions),
                    entrainment_material=diagnostics.entrainment_material, Ra=model.stokes.approximation.Ra,
                    points=bool(diagnostics.points), topography_material=diagnostics.topography_material,
-                   columns=model.domain.columns(1, 1) is not None, free_surface=model.free_surface is not None)
+                   columns=model.domain.columns(1, 1) is not None, free_surface=model.free_surface is not None,
+                   dissipation=model.stokes.approximation.dissipates)
 
 
 class Column(Stateful):

@@ -27,6 +27,9 @@ name            columns
 ``rheology``    eta_min, eta_max: the viscosity's extremes at the velocity nodes of every cell
 ``energy``      W = <T u . e_up>, Phi_over_Ra = <2 eta eps(u):eps(u)> / Ra (volume averages) and
                 delta = |W - Phi/Ra| / max(W, Phi/Ra): the energy balance of steady convection
+``heating``     heating_W = <Di rho_r (T + T0) u . e_up>, the work against gravity (adiabatic cooling),
+                heating_Phi = <(Di / Ra) Phi>, the shear heating, and heating_misfit = |Phi - W| / W
+                (EBA, TALA: :mod:`convection.physics.compressible`; by default there only)
 ``surface``     vrms_surface = sqrt(int_top |u|^2 ds / |top|), vmax_surface (largest nodal |u| on
                 the top; shells: the outer surface)
 ``materials``   per material ``<m>``: volume_<m>, centroid x_<m>, y_<m> (, z_<m>), vup_<m> (mean
@@ -411,6 +414,34 @@ class EnergyBalance(_Rheology):
         return {"W": W, "Phi_over_Ra": phi, "delta": abs(W - phi) / scale if scale > 0 else 0.0}
 
 
+class Heating(Column):
+    name: ClassVar[str] = "heating"
+    description: ClassVar[str] = ("work against gravity W (adiabatic cooling), shear heating Phi (volume averages) and "
+                                  "|Phi - W| / W")
+    columns = ("heating_W", "heating_Phi", "heating_misfit")
+
+    def __init__(self) -> None:
+        self._forms = Forms()
+
+    @classmethod
+    def missing(cls, features: ModelFeatures) -> str | None:
+        heating = None if features.dissipation else "needs adiabatic and shear heating (physics.approximation)"
+        return heating if features.energy else NEEDS_ENERGY
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        stokes = model.stokes
+
+        def build() -> dict[str, Any]:
+            W, Phi = stokes.approximation.heating_rates(model.T, model.T, stokes.u, ufl.SpatialCoordinate(model.mesh))
+            dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 3 * stokes.degree})
+            return {"W": dolfinx.fem.form(W * dx), "Phi": dolfinx.fem.form(Phi * dx),
+                    "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
+        forms = self._forms.get(model, build)
+        volume = integral(model, forms["volume"])
+        W, phi = integral(model, forms["W"]) / volume, integral(model, forms["Phi"]) / volume
+        return {"heating_W": W, "heating_Phi": phi, "heating_misfit": abs(phi - W) / abs(W) if W else 0.0}
+
+
 class SurfaceVelocity(_Rheology):
     name: ClassVar[str] = "surface"
     description: ClassVar[str] = "rms and largest nodal speed on the top (shells: outer) surface"
@@ -464,7 +495,7 @@ def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelF
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
     ParticleDistribution, LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance,
-    SurfaceVelocity, MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics))
+    Heating, SurfaceVelocity, MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

@@ -13,7 +13,10 @@ and ``omega = dt_n / dt_{n-1}``::
     (a0 T^{n+1} + a1 T^n + a2 T^{n-1}) / dt_n + u* . grad T^{n+1} - lap T^{n+1} - H = 0,
     a0 = (1 + 2 omega) / (1 + omega),   a1 = -(1 + omega),   a2 = omega^2 / (1 + omega),
 
-which is second order for any step ratio. The velocity ``u`` passed to :meth:`TransportSolver.step`
+which is second order for any step ratio. An approximation with adiabatic and shear heating
+(:mod:`convection.physics.compressible`: EBA, TALA) gives the equation a heat capacity ``c`` and a
+heating ``q`` instead, ``c (dT/dt + u . grad T) = lap T + q``, discretised alike
+(:meth:`TransportSolver.residual`). The velocity ``u`` passed to :meth:`TransportSolver.step`
 is the latest one (``u^n``, computed from ``T^n``); to keep the coupled scheme second order it is
 extrapolated to the new time level, ``u* = (1 + omega) u^n - omega u^{n-1}``, when the previous
 velocity is known (``velocity_extrapolation=True``, the default); otherwise ``u* = u^n``.
@@ -48,6 +51,7 @@ import ufl
 from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation
+from convection.physics.compressible import EnergyTerms
 from convection.geometry.boundary import TemperatureBC, temperature_dirichlet_bcs
 from convection.geometry.box import BoxDomain
 from convection.geometry.domain import Domain
@@ -134,6 +138,25 @@ def interpolate_initial(f: dolfinx.fem.Function, expression: Callable[[np.ndarra
     linear = dolfinx.fem.Function(function_space(f.function_space.mesh, "Lagrange", 1))
     linear.interpolate(expression)
     f.interpolate(linear)
+
+
+def heated_residual(solver: TransportSolver, terms: EnergyTerms, T_new: Any, dtT: Any, u: Any, w: Any, dt: Any,
+                    coef: Any, dx: Any) -> Any:
+    """The residual of ``c (d_t T + u . grad T) - kappa lap T - q = 0`` with an approximation's heat
+    capacity ``c`` and heating ``q`` (:meth:`TransportSolver.residual` of ``solver``; ``d_t T`` is
+    ``dtT``); SUPG weighs the equation divided by ``c``."""
+    capacity, heating = terms
+    kappa, degree = solver.diffusivity, solver.degree
+    transport = capacity * (dtT + ufl.dot(u, ufl.grad(T_new)))
+    F = (transport * w + kappa * ufl.inner(ufl.grad(T_new), ufl.grad(w)) - heating * w) * dx
+    if solver.stabilisation == "supg":
+        h = cell_diameter(solver.mesh) / degree
+        u_norm = ufl.sqrt(ufl.dot(u, u) + 1e-30)
+        diffusion = 4.0 * kappa / (capacity * h**2)
+        tau = ((2.0 * coef[0] / dt) ** 2 + (2.0 * u_norm / h) ** 2 + 9.0 * diffusion ** 2) ** -0.5
+        strong = transport - kappa * ufl.div(ufl.grad(T_new)) - heating
+        F += tau * ufl.dot(u, ufl.grad(w)) * strong / capacity * dx
+    return F
 
 
 class TransportSolver(PetscSolver):
@@ -229,6 +252,9 @@ class TransportSolver(PetscSolver):
         kappa = self.diffusivity
         dx = ufl.dx(domain=self.mesh, metadata={"quadrature_degree": 3 * self.degree})
         dtT = (coef[0] * T_new + coef[1] * T_n + coef[2] * T_nm1) / dt
+        terms = self.heating and self.approximation.energy_terms(T_new, T_n, u, ufl.SpatialCoordinate(self.mesh))
+        if terms:  # EBA, TALA (convection.physics.compressible)
+            return heated_residual(self, terms, T_new, dtT, u, w, dt, coef, dx)
         F = (dtT * w + ufl.dot(u, ufl.grad(T_new)) * w) * dx
         if kappa != 0.0:
             F += kappa * ufl.inner(ufl.grad(T_new), ufl.grad(w)) * dx

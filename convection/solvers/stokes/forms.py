@@ -5,6 +5,9 @@ Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in 
     (2 eta eps(u), eps(v)) - (p, div v) = ((Ra T - Rb C) e_z, v)
                             -(q, div u) = 0
 
+(the truncated anelastic liquid approximation, :mod:`convection.physics.compressible`: ``-(q, div(rho_r u))``
+and ``rho_r`` in the body force)
+
 on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1), ``eta = eta(T, C)`` and the
 body force from :class:`~convection.physics.approximation.BoussinesqApproximation`. With a variable
 viscosity the cell integrals use a quadrature of degree ``3 k`` (UFL's estimate for ``exp`` or
@@ -133,6 +136,12 @@ class StokesDiscretisation:
         metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
         return ufl.dx(domain=self.mesh, metadata=metadata), metadata
 
+    def _mass_flux(self, u: Any, /) -> Any:
+        """The continuity equation's ``div u``, or ``div(rho_r u)`` when the approximation weighs it by
+        a reference density (:meth:`~convection.physics.approximation.BoussinesqApproximation.continuity_density`)."""
+        rho = self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
+        return ufl.div(u) if rho is None else ufl.div(rho * u)
+
     def component_space(self, axis: int, /) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
         """``V.sub(axis).collapse()`` (made once): the scalar space and its map into ``V``'s
         unrolled local dofs, shape=(owned + ghosts,). Collective."""
@@ -157,7 +166,7 @@ class StokesDiscretisation:
         dx, metadata = self._dx()
         F_u = (2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
                - ufl.inner(p, ufl.div(v)) * dx - ufl.inner(f, v) * dx)
-        F_p = -ufl.inner(ufl.div(u), q) * dx
+        F_p = -ufl.inner(self._mass_flux(u), q) * dx
         curved = weak_free_slip_boundaries(self.bcs, self.domain)
         if curved:
             nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
@@ -198,7 +207,7 @@ class StokesDiscretisation:
         a = [
             [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
              -ufl.inner(p, ufl.div(v)) * dx],
-            [-ufl.inner(ufl.div(u), q) * dx, None],
+            [-ufl.inner(self._mass_flux(u), q) * dx, None],
         ]
         curved = weak_free_slip_boundaries(self.bcs, self.domain)
         if curved:

@@ -55,6 +55,7 @@ CASES = {
                            "adaptivity.max_level"),
     "too many particles": (["run", str(GOOD), "--set", "particles.enabled=true",
                             "--set", "particles.generator.particles_per_cell=1e7"], "particles_per_cell"),
+    "compressible without Di": (["run", str(GOOD), "--set", "physics.approximation=tala"], "physics.reference.Di"),
 }
 
 

@@ -24,6 +24,7 @@ import ufl
 from fembase.registry import Registry
 from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.schema import Names, param, subsection
+from convection.physics.elasticity import Elasticity, ElasticitySettings
 from convection.physics.rheology import (
     Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
 )
@@ -144,6 +145,7 @@ class PhysicsSettings:
     Rb: float = param(0.0, help="compositional Rayleigh number (body force (Ra T - Rb C) e_up)")
     H: float = param(0.0, help="internal heating")
     viscosity: ViscositySettings = subsection(ViscositySettings)
+    elasticity: ElasticitySettings = subsection(ElasticitySettings)  # issue 48
 
 
 VISCOSITY_DEFAULTS = ViscositySettings()
@@ -364,6 +366,9 @@ class BoussinesqApproximation:
         gravity: which way is up (:mod:`convection.geometry.gravity`; the domain's
             :attr:`~convection.geometry.domain.Domain.gravity`).
     """
+
+    elasticity: Elasticity | None = None
+    """Maxwell visco-elasticity (:mod:`convection.physics.elasticity`, issue 48): set by the model's builder."""
 
     def __init__(
         self,

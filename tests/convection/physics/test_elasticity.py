@@ -9,6 +9,7 @@ from mpi4py import MPI
 import dolfinx.fem
 import dolfinx.mesh
 import ufl
+import yaml
 
 from convection.config.loader import load_config
 from convection.config.units import scaling_of
@@ -44,27 +45,32 @@ def test_moduli_mix_as_compliances():
     assert mesh.comm.allreduce(value) == pytest.approx(1 / (0.25 + 0.125 + 0.25), rel=1e-12)
 
 
-def test_elastic_rebound_of_a_free_block():
-    """A block prestressed by tau_xx = -tau_yy = s, free slip on the left and bottom, free on the right
-    and top: the stress's load drives u = (e x, -e z) with e = -s / (2 G dt_e), and the new stress
-    2 eta_ve e + chi s is zero (the elastic strain -s / (2 G) recovered in one step)."""
-    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 3, 3)
+@pytest.mark.parametrize("gdim", [2, 3])
+def test_elastic_rebound_of_a_free_block(gdim):
+    """A block prestressed by tau_xx = -tau_yy = s, free slip on the faces through the origin, free
+    on the others: the stress's load drives u = e (x, -y, 0) with e = -s / (2 G dt_e), and the new
+    stress 2 eta_ve eps + chi tau is zero (the elastic strain -tau / (2 G) recovered in one step)."""
+    if gdim == 2:
+        mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 3, 3)
+        slip, prestress = ("left", "bottom"), (1.0, -1.0, 0.0)
+    else:
+        mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 2, 2, 2)
+        slip, prestress = ("left", "front", "bottom"), (1.0, -1.0, 0.0, 0.0, 0.0, 0.0)
     approximation = BoussinesqApproximation(Ra=0.0)
     approximation.elasticity = Elasticity(shear_modulus=2.0)
-    stokes = StokesSolver(mesh, approximation, bcs={"left": VelocityBC("free_slip"), "bottom": VelocityBC("free_slip")},
-                          solver="direct")
+    stokes = StokesSolver(mesh, approximation, bcs={name: VelocityBC("free_slip") for name in slip}, solver="direct")
     D = function_space(mesh, "DG", 0)
     s, dt = 0.3, 0.5
     fields = {}
-    for label, value in zip(stress_labels(2), (s, -s, 0.0)):
+    for label, value in zip(stress_labels(gdim), prestress):
         fields[label] = dolfinx.fem.Function(D)
-        fields[label].x.array[:] = value
+        fields[label].x.array[:] = s * value
     stokes.solve(0.0, None, dt=0.0, fields=fields)  # no step yet: the viscous flow, no load
     assert np.abs(stokes.u.x.array).max() < 1e-12
     stokes.solve(0.0, None, dt=dt, fields=fields)
     e = -s / (2 * 2.0 * dt)
     exact = dolfinx.fem.Function(stokes.u.function_space)
-    exact.interpolate(lambda x: np.stack([e * x[0], -e * x[1]]))
+    exact.interpolate(lambda x: np.stack([e * x[0], -e * x[1], *([0 * x[2]] if gdim == 3 else [])]))
     assert np.abs(stokes.u.x.array - exact.x.array).max() < 1e-10 * abs(e)
     rate = 1 / dt
     law = approximation.elasticity
@@ -114,3 +120,12 @@ def test_shear_modulus_has_units():
     document["physics"]["elasticity"]["shear_modulus"] = "1e10 m"
     with pytest.raises(ConfigError, match="shear_modulus"):
         load_config(None, document=document)
+
+
+def test_check_refuses_in_one_line(tmp_path):
+    from _runs import error_line, run_cli
+
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(_with(physics__elasticity={"enabled": True, "shear_modulus": -3.0})))
+    line = error_line(run_cli(["check", str(path)]), 2, "physics.elasticity.shear_modulus")
+    assert "> 0" in line

@@ -92,4 +92,5 @@ def test_initial_values_and_their_checks():
     with pytest.raises(ValueError, match="3 .2D. or 6"):
         ElasticStress(initial=(1.0, 2.0))
     with pytest.raises(ValueError, match="needs 3 numbers in 2D"):
-        PropertyManager(swarm_at(mesh, np.array([[0.5, 0.5]])), [ElasticStress(initial=(0.0,) * 6)]).initialise(PropertyContext())
+        too_many = PropertyManager(swarm_at(mesh, np.array([[0.5, 0.5]])), [ElasticStress(initial=(0.0,) * 6)])
+        too_many.initialise(PropertyContext())

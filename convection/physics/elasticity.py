@@ -24,6 +24,7 @@ The materials' shear moduli mix by volume fraction as compliances (springs in se
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -46,9 +47,11 @@ STRESS_PROPERTY = "elastic_stress"
 """The particle property that carries the stress (:mod:`particles.properties.elastic_stress`)."""
 
 
+@functools.cache
 def stress_labels(gdim: int, /) -> tuple[str, ...]:
     """The mesh fields of the stress components: ``elastic_stress_xx``, ``elastic_stress_yy``, ``elastic_stress_xy``
-    in 2D (and ``_zz``, ``_xz``, ``_yz`` in 3D)."""
+    in 2D (and ``_zz``, ``_xz``, ``_yz`` in 3D). Made once: the Stokes solver keeps its forms while
+    the fields' names and Functions are the very same objects."""
     return tuple(f"{STRESS_PROPERTY}_{_AXES[i]}{_AXES[j]}" for i, j in STRESS_COMPONENTS[gdim])
 
 

@@ -61,6 +61,7 @@ from convection.config.settings import RunSettings, run_settings
 from convection.geometry.registry import domain_from_settings
 from convection.physics.materials import Material, Materials
 from convection.physics.compressible import ReferenceState
+from convection.physics.elasticity import STRESS_PROPERTY, Elasticity, stress_labels
 from convection.model.model import Model
 from convection.postprocess.postprocessors import create_postprocessors
 from convection.adapt.rebalance import BALANCE_STRATEGIES, Balancer
@@ -111,6 +112,13 @@ def materials_from_settings(settings: RunSettings, /) -> Materials:
     viscosity = settings.physics.viscosity
     return Materials(materials, mixing=viscosity.mixing, background_law=settings.background_law,
                      sharp=tuple(viscosity.sharp or ()))
+
+
+def _elasticity(settings: RunSettings, /) -> Elasticity | None:
+    """The Maxwell visco-elasticity of ``physics.elasticity`` with each material's shear modulus (issue 48)."""
+    moduli = [settings.materials[m.name].shear_modulus if m.name in settings.materials else None
+              for m in settings.material_table]
+    return Elasticity.from_settings(settings.physics.elasticity, moduli)
 
 
 def _initial_fields(settings: RunSettings, materials: Materials, temperature_bcs: dict[str, TemperatureBC],
@@ -304,6 +312,7 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     approximation = materials.approximation(Ra=physics.Ra, H=physics.H, temperature_law=visc.temperature_law,
                                             gamma=visc.gamma, gravity=domain.gravity,
                                             formulation=physics.approximation, reference=reference)
+    approximation.elasticity = _elasticity(settings)  # issue 48
     velocity_bcs = velocity_bcs_from_config(settings.boundary.velocity, domain)
     temperature_bcs = temperature_bcs_from_config(settings.boundary.temperature, domain)
     meshes = _meshes(settings, domain, materials, temperature_bcs, comm, restore)
@@ -332,6 +341,9 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
         # with the particles' interpolator after every step.
         for name in approximation.viscosity_law.field_names:
             particles.primary.track(name)
+        if stokes.discretisation.elasticity is not None:  # the old stress of the forms (issue 48)
+            for component, label in enumerate(stress_labels(mesh.geometry.dim)):
+                particles.primary.track(STRESS_PROPERTY, component=component, label=label)
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
                   particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer,
                   free_surface=free_surface)

@@ -63,6 +63,7 @@ from convection.schema import (
 from convection.schema import finite_number as _finite_number
 from convection.physics.approximation import HEATING_VISCOSITY, TEMPERATURE_LAWS, PhysicsSettings
 from convection.physics.compressible import APPROXIMATIONS
+from convection.physics.elasticity import ElasticitySettings, check_elasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
@@ -339,6 +340,8 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
                 raise ConfigError(f"config key 'adaptivity.{key}': only with adaptivity.enabled: true")
             _check_expression(config, f"adaptivity.{key}", text, extra={"t": 0.0})
     _check_particles(config)
+    check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]),  # issue 48
+                     _property_names(config) if particles_enabled(config) else ())
     _check_statistics(config)
 
 

@@ -48,7 +48,7 @@ EXPECTED: dict[str, str] = {
     **dict.fromkeys(("dirichlet", "T_ref", "T_offset"), "[temperature]"),
     **dict.fromkeys(("background", "viscosity", "eta0", "eta_star", "min_viscosity", "max_viscosity",
                      "material_viscosities"), _VISCOSITY),
-    **dict.fromkeys(("yield_stress", "cohesion"), _STRESS),
+    **dict.fromkeys(("yield_stress", "cohesion", "shear_modulus"), _STRESS),
     **dict.fromkeys(("reference_strain_rate", "steady_state_rate"), "1 / [time]"),
     "steady_state_time_window": "[time]",
     "H": "[temperature] / [time]",

@@ -197,9 +197,9 @@ class Model(Stateful):
         return self.rheology.rate_functions(self.flow() if self.flow_result is not None else None)
 
     def property_context(self) -> PropertyContext:
-        """The current fields and time, for particle properties."""
+        """The current fields and time, for particle properties (with elasticity: the fields they read, issue 48)."""
         return PropertyContext(time=self.time, dt=self.dt_previous, u_new=self.stokes.u, temperature=self.T,
-                               pressure=self.stokes.p)
+                               pressure=self.stokes.p, fields=self.rheology.property_fields(self.particle_fields))
 
     # ------------------------------------------------------------------ checkpoints
     def components(self) -> dict[str, Stateful]:

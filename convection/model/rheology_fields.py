@@ -8,7 +8,9 @@ read, the rates the particles integrate, and the viscosity (for output).
   the strain rate where a visco-plastic law yields, weighted by the volume fractions. Each is
   interpolated into the discontinuous space of degree ``k - 1`` of a P(k) velocity (where
   ``eps(u)`` lives) after every Stokes solve; the particles integrate it over the next step
-  (explicit Euler).
+  (explicit Euler). With elasticity (:mod:`convection.physics.elasticity`) the particles' ``elastic_stress``
+  reads ``elastic_viscosity`` (``eta_ve``) and ``elastic_memory`` (``chi``) the same way, and the laws'
+  fields include the stress components ``elastic_stress_xx``, ... (the old stress of the forms).
 - ``viscosity``: the viscosity of the current flow (all laws, mixing and bounds), cell by cell at
   the cell midpoints (DG0, cell data in ParaView), written with the fields;
 - ``strain_rate_II = sqrt(eps : eps / 2)`` and ``stress_II = 2 eta strain_rate_II``, the second
@@ -28,6 +30,7 @@ from typing import Any
 import dolfinx.fem
 import ufl
 
+from convection.physics.elasticity import stress_labels
 from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space, interpolation_points
 from particles.systems import ParticleSystems
@@ -113,13 +116,14 @@ class RheologyFields:
     def __init__(self, stokes: StokesSolver, particles: ParticleSystems | None, /) -> None:
         self.particles = particles
         law = stokes.approximation.viscosity_law
-        declared = law.rate_fields()
+        declared = {**{name: _rate(name, builder) for name, builder in law.rate_fields().items()},
+                    **_elastic_rates(stokes)}
         wanted = particles.rate_fields if particles is not None else ()
         unknown = [name for name in wanted if name not in declared]
         if unknown:
             raise ValueError(f"no mesh field {unknown[0]!r} for the particles to integrate; the rheology provides "
                              f"{', '.join(sorted(declared))}")
-        self.rates = {name: ExpressionField(name, _rate(name, declared[name]), lambda s: max(s.degree - 1, 0))
+        self.rates = {name: ExpressionField(name, declared[name], lambda s: max(s.degree - 1, 0))
                       for name in wanted}
         self._viscosity = ExpressionField("viscosity", flow_viscosity, lambda s: 0)
         self._density = ExpressionField("density", _density_anomaly, lambda s: 0)
@@ -130,12 +134,18 @@ class RheologyFields:
     def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
         """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
         mesh (the particles' tracked fields, e.g. ``plastic_strain``)."""
-        names = stokes.approximation.viscosity_law.field_names
+        names = (*stokes.approximation.viscosity_law.field_names, *_elastic_stress_fields(stokes))
         if not names:
             return {}
         if self.particles is None:
             raise ValueError(f"the viscosity laws read the fields {list(names)}, which come from particles")
         return {name: self.particles.field(name) for name in names}
+
+    def property_fields(self, rates: Callable[[], dict[str, dolfinx.fem.Function]], /
+                        ) -> dict[str, dolfinx.fem.Function]:
+        """The mesh fields for the particle properties' context: ``rates()`` with elasticity (what
+        ``elastic_stress`` reads), else none (issue 48)."""
+        return rates() if "elastic_memory" in self.rates else {}
 
     def update_rates(self, flow: Flow, /) -> None:
         """Interpolate the rates for the flow just solved (collective)."""
@@ -165,6 +175,27 @@ class RheologyFields:
     def invariants(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
         """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0; collective)."""
         return {field.name: field.update(flow) for field in self._invariants}
+
+
+def _elastic_stress_fields(stokes: StokesSolver, /) -> tuple[str, ...]:
+    """The stress components the elastic term reads (issue 48), or ()."""
+    return () if stokes.discretisation.elasticity is None else stress_labels(stokes.mesh.geometry.dim)
+
+
+def _elastic_rates(stokes: StokesSolver, /) -> dict[str, Callable[[Flow], Any]]:
+    """With elasticity, ``elastic_viscosity`` (``eta_ve``) and ``elastic_memory`` (``chi``) for the
+    particles' ``elastic_stress`` (:mod:`convection.physics.elasticity`), at the last solve's ``dt_e``."""
+    if stokes.discretisation.elasticity is None:
+        return {}
+
+    def factor(name: str) -> Callable[[Flow], Any]:
+        def expression(flow: Flow) -> Any:
+            discretisation = flow.stokes.discretisation
+            eta = discretisation.approximation.viscosity(flow.T, flow.fractions, u=flow.stokes.u, p=flow.stokes.p,
+                                                         fields=flow.fields, x=ufl.SpatialCoordinate(flow.stokes.mesh))
+            return getattr(discretisation.elasticity, name)(eta, flow.fractions, discretisation.elastic_rate)
+        return expression
+    return {"elastic_viscosity": factor("viscosity"), "elastic_memory": factor("memory")}
 
 
 def _density_anomaly(flow: Flow, /) -> Any:

@@ -27,6 +27,7 @@ from convection.physics.compressible import (
     APPROXIMATIONS, EnergyTerms, Formulation, ReferenceSettings, ReferenceState, shear_heating,
 )
 from convection.schema import Names, param, subsection
+from convection.physics.elasticity import Elasticity, ElasticitySettings
 from convection.physics.rheology import (
     Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
 )
@@ -151,6 +152,7 @@ class PhysicsSettings:
                                help="the equations: boussinesq, eba (adiabatic and shear heating) or tala (also a "
                                     "reference density; docs/compressible.md)")
     reference: ReferenceSettings = subsection(ReferenceSettings)
+    elasticity: ElasticitySettings = subsection(ElasticitySettings)  # issue 48
 
 
 VISCOSITY_DEFAULTS = ViscositySettings()
@@ -375,6 +377,9 @@ class BoussinesqApproximation:
             (:meth:`continuity_density`, :meth:`buoyancy`, :meth:`energy_terms`).
         reference: the reference state of ``eba`` and ``tala`` (``Di > 0``; ``Di = 0`` for ``boussinesq``).
     """
+
+    elasticity: Elasticity | None = None
+    """Maxwell visco-elasticity (:mod:`convection.physics.elasticity`, issue 48): set by the model's builder."""
 
     def __init__(
         self,

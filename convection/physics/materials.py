@@ -45,6 +45,9 @@ class MaterialSettings:
                                            "gives Rb = (rho - scaling.density) g L^3 / (eta0 kappa)")
     viscosity: Any | None = param(None, help="viscosity of the pure material: a number or a law as "
                                              "physics.viscosity.law (null: the background's)")
+    shear_modulus: float | None = param(None, exclusive_minimum=0.0,
+                                        help="shear modulus G of the pure material (a stress, e.g. 3e10 Pa), with "
+                                             "physics.elasticity (null: the background's)")
 
 
 _MATERIAL_DEFAULTS = MaterialSettings(initial="0")

@@ -41,6 +41,7 @@ from particles.properties._interpolate import interpolate_from_neighbours
 from particles.properties.damage import Damage
 from particles.properties.deformation_gradient import DeformationGradient
 from particles.properties.displacement import Displacement
+from particles.properties.elastic_stress import ElasticStress
 from particles.properties.function import FunctionProperty
 from particles.properties.initial_composition import InitialComposition
 from particles.properties.initial_position import InitialPosition
@@ -62,6 +63,7 @@ __all__ = [
     "Damage",
     "DeformationGradient",
     "Displacement",
+    "ElasticStress",
     "FunctionProperty",
     "InitialComposition",
     "InitialPosition",
@@ -85,6 +87,7 @@ PROPERTIES: Registry[type[ParticleProperty]] = Registry(
     (
         InitialPosition, InitialComposition, FunctionProperty, Velocity, Temperature, Pressure, StrainRate,
         IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank, Displacement, PlasticStrain,
+        ElasticStress,  # elasticity (issue 48)
     ),
 )
 """Property classes by their lowercase config name."""
@@ -245,8 +248,10 @@ class PropertyManager:
 
     @property
     def rate_fields(self) -> tuple[str, ...]:
-        """The mesh fields the accumulating properties integrate (names, each once)."""
-        return tuple(dict.fromkeys(p.rate_field for p in self.properties if p.accumulating))
+        """The mesh fields the accumulating properties integrate, and those the others read when they
+        refresh (``elastic_stress``: ``mesh_fields``), names each once."""
+        read = (name for p in self.properties for name in getattr(p, "mesh_fields", ()))  # elasticity (issue 48)
+        return tuple(dict.fromkeys([*(p.rate_field for p in self.properties if p.accumulating), *read]))
 
     def accumulate(self, fields: Mapping[str, dolfinx.fem.Function], dt: float, /) -> None:
         """Advance the accumulating properties by one step: ``v += dt f(x_p)`` with ``f`` the

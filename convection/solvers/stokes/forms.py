@@ -29,6 +29,8 @@ builds what a linear solver asks for:
   block diagonal: 20 instead of 13 multigrid iterations at 16^3, 54 instead of 40 with AMG);
 - with a free surface (:mod:`convection.deform.surface`), its load ``-(B h n, v)`` on the right-hand
   side and its stabilisation ``theta dt B (u . n, v . e_up)`` in ``A``;
+- with elasticity (:mod:`convection.physics.elasticity`), the visco-elastic viscosity ``eta_ve`` in
+  place of ``eta`` and the old stress's load ``-(chi tau^n, eps(v))`` on the right-hand side;
 - with a semi-implicit buoyancy (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`), its
   velocity-velocity term on its own (added to ``A`` every solve) and the whole operator
   ``K + term`` that lifts the boundary values into the right-hand side.
@@ -49,6 +51,7 @@ from convection.geometry.boundary import (
 )
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
+from convection.physics.elasticity import Elasticity
 from convection.deform.surface import SurfaceTerms
 from fembase.dolfinx_compat import function_space
 
@@ -113,6 +116,9 @@ class StokesDiscretisation:
         self.dirichlet = velocity_dirichlet_bcs(self.V, bcs, domain)
         self.surface = surface
         self.surface_dt = SurfaceTerms.step_constant(mesh) if surface is not None else None
+        # Elasticity (issue 48): eta -> eta_ve and the old stress's load; 1 / dt_e (0: the viscous flow).
+        self.elasticity: Elasticity | None = getattr(approximation, "elasticity", None)
+        self.elastic_rate = dolfinx.fem.Constant(mesh, PETSc.ScalarType(0.0)) if self.elasticity is not None else None
 
     @property
     def anticipates_step(self) -> bool:
@@ -126,10 +132,35 @@ class StokesDiscretisation:
         self.surface_dt.value = dt
         return True
 
+    def set_steps(self, dt: float, /) -> bool:
+        """Set the step of the free surface's stabilisation and the elastic time step; whether the operator changed."""
+        surface = self.set_surface_step(dt)
+        return self.set_elastic_step(dt) or surface
+
+    def set_elastic_step(self, dt: float, /) -> bool:
+        """Set the elastic time step ``dt_e = dt`` (``dt = 0``: no step yet, the viscous flow); whether the
+        operator changed (:mod:`convection.physics.elasticity`; always where ``G`` moves with the materials)."""
+        rate = 1.0 / dt if dt > 0.0 else 0.0
+        if self.elasticity is None or self.elastic_rate is None:
+            return False
+        changed = self.elastic_rate.value != rate
+        self.elastic_rate.value = rate
+        return changed or self.elasticity.is_variable
+
     def viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
         """The viscosity (UFL) for ``T``, ``C`` and, for :mod:`convection.physics.rheology` laws, the flow:
-        ``flow = {"u": ..., "p": ..., "fields": {...}}`` (the current iterate's Functions)."""
-        return self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **(flow or {}))
+        ``flow = {"u": ..., "p": ..., "fields": {...}}`` (the current iterate's Functions); with
+        elasticity the visco-elastic ``eta_ve``."""
+        eta = self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **(flow or {}))
+        return eta if self.elasticity is None else self.elasticity.viscosity(eta, C, self.elastic_rate)
+
+    def elastic_load(self, T: Any, C: Any, flow: dict[str, Any] | None, v: Any, dx: Any, /) -> Any:
+        """The old stress's load ``-(chi tau^n, eps(v))`` (:mod:`convection.physics.elasticity`), or None."""
+        if self.elasticity is None:
+            return None
+        flow = flow or {}
+        eta = self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **flow)
+        return self.elasticity.load(eta, C, self.elastic_rate, flow.get("fields") or {}, v, dx)
 
     def _dx(self) -> Any:
         # A variable viscosity (exp, quotients) would inflate UFL's quadrature degree estimate.
@@ -167,6 +198,9 @@ class StokesDiscretisation:
         F_u = (2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
                - ufl.inner(p, ufl.div(v)) * dx - ufl.inner(f, v) * dx)
         F_p = -ufl.inner(self._mass_flux(u), q) * dx
+        elastic = self.elastic_load(T, C, {"u": u, "p": p, "fields": fields or {}}, v, dx)
+        if elastic is not None:
+            F_u = F_u - elastic
         curved = weak_free_slip_boundaries(self.bcs, self.domain)
         if curved:
             nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
@@ -242,6 +276,9 @@ class StokesDiscretisation:
         L_u = ufl.inner(f, v) * dx + ufl.inner(zero_vec, v) * dx
         if self.surface is not None:
             L_u = L_u + self.surface.rhs(self.mesh, self.domain, v, metadata=metadata)
+        elastic = self.elastic_load(T, C, flow, v, dx)
+        if elastic is not None:
+            L_u = L_u + elastic
         L = dolfinx.fem.form([L_u, ufl.inner(zero, q) * dx])
         a_pc = None
         if preconditioner:

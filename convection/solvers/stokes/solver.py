@@ -523,8 +523,8 @@ class StokesSolver(PetscSolver):
             C: composition: ``None``, one material fraction (Function of any degree, UFL
                 expression or number) or a tuple of them, one per material (see
                 :func:`convection.physics.approximation.fractions`).
-            dt: the coming step, for a semi-implicit buoyancy (``buoyancy_theta > 0``); ignored
-                otherwise.
+            dt: the coming step, for a semi-implicit buoyancy (``buoyancy_theta > 0``), and elasticity's
+                ``dt_e`` (0: the viscous flow); ignored otherwise.
             fields: named mesh fields the viscosity laws read (e.g. ``{"plastic_strain": f}``).
 
         Returns:
@@ -533,7 +533,7 @@ class StokesSolver(PetscSolver):
         """
         forms = self.prepare(T, C, fields=fields)
         t0 = time.perf_counter()
-        if self.discretisation.set_surface_step(dt):  # the free surface's stabilisation is for dt
+        if self.discretisation.set_steps(dt):  # a free surface's stabilisation, elasticity's dt_e (issue 48)
             self._operator_current = False
         if self._nonlinear is not None:
             result = self._nonlinear.solve(forms, self._forms_key, T, C, fields)

@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/viscoelastic/ (README.md there): ``python -m benchmarks.viscoelastic.<script>``."""

@@ -1,0 +1,149 @@
+"""Maxwell visco-elasticity (Moresi et al. 2003, as ASPECT uses it): the effective viscosity and the
+old stress's term of the Stokes forms, and the config section ``physics.elasticity``.
+
+A Maxwell material has the deviatoric stress ``tau`` with ``eps = tau / (2 eta) + tau_J' / (2 G)``
+(``tau_J'``: an objective rate of ``tau``, here Jaumann's). Backward Euler over the elastic time
+step ``dt_e`` gives::
+
+    tau^{n+1} = 2 eta_ve eps(u^{n+1}) + chi tau_J^n
+    eta_ve = eta G dt_e / (eta + G dt_e)            chi = eta_ve / (G dt_e) = eta / (eta + G dt_e)
+
+(``tau_J^n``: the old stress carried to the new position and rotated, on the particles). The
+Stokes problem keeps its form with ``eta -> eta_ve`` and the old stress as a load::
+
+    (2 eta_ve eps(u), eps(v)) - (p, div v) = (f, v) - (chi tau^n, eps(v))
+
+Both factors are written with ``r = 1 / dt_e`` and the Maxwell time over ``dt_e``,
+``De = eta r / G``: ``eta_ve = eta / (1 + De)``, ``chi = De / (1 + De)``, so ``r = 0`` (the flow
+solved before the first step, when no time has passed) is the viscous flow, without the stress
+term. docs/rheology.md ("Elasticity") has the time discretisation and its error.
+
+The materials' shear moduli mix by volume fraction as compliances (springs in series, Reuss):
+``1 / G = C_0 / G_0 + sum_i C_i / G_i``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import ufl
+
+from convection.schema import ConfigError, param
+
+__all__ = ["STRESS_COMPONENTS", "STRESS_PROPERTY", "Elasticity", "ElasticitySettings", "check_elasticity",
+           "stress_labels"]
+
+STRESS_COMPONENTS: dict[int, tuple[tuple[int, int], ...]] = {
+    2: ((0, 0), (1, 1), (0, 1)),
+    3: ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)),
+}
+"""The stored components of the symmetric stress tensor by dimension (Voigt order: xx, yy, (zz,) xy, ...)."""
+
+_AXES = "xyz"
+STRESS_PROPERTY = "elastic_stress"
+"""The particle property that carries the stress (:mod:`particles.properties.elastic_stress`)."""
+
+
+@functools.cache
+def stress_labels(gdim: int, /) -> tuple[str, ...]:
+    """The mesh fields of the stress components: ``elastic_stress_xx``, ``elastic_stress_yy``, ``elastic_stress_xy``
+    in 2D (and ``_zz``, ``_xz``, ``_yz`` in 3D). Made once: the Stokes solver keeps its forms while
+    the fields' names and Functions are the very same objects."""
+    return tuple(f"{STRESS_PROPERTY}_{_AXES[i]}{_AXES[j]}" for i, j in STRESS_COMPONENTS[gdim])
+
+
+@dataclass(frozen=True)
+class ElasticitySettings:
+    """The ``physics.elasticity`` config section (off by default)."""
+
+    enabled: bool = param(False, help="Maxwell visco-elasticity (Moresi et al. 2003): needs particles carrying "
+                                      "elastic_stress")
+    shear_modulus: float = param(1.0, exclusive_minimum=0.0, help="shear modulus G of the background material (a "
+                                                                  "stress: e.g. 1e10 Pa with the scaling section)")
+
+
+@dataclass(frozen=True)
+class Elasticity:
+    """The elastic part of the rheology (module docstring).
+
+    Attributes:
+        shear_modulus: ``G`` of the background material.
+        material_moduli: ``G`` of each material (None: the background's), in the materials' order.
+    """
+
+    shear_modulus: float
+    material_moduli: tuple[float | None, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not all(g is None or g > 0.0 for g in (self.shear_modulus, *self.material_moduli)):
+            raise ValueError(f"shear moduli must be > 0, got {self.shear_modulus}, {self.material_moduli}")
+
+    @property
+    def is_variable(self) -> bool:
+        """Whether ``G`` differs between the materials (then it moves with them)."""
+        return any(g is not None and g != self.shear_modulus for g in self.material_moduli)
+
+    @classmethod
+    def from_settings(cls, settings: ElasticitySettings, material_moduli: Sequence[float | None] = (), /
+                      ) -> Elasticity | None:
+        """The elasticity of a run (None when not enabled)."""
+        return cls(settings.shear_modulus, tuple(material_moduli)) if settings.enabled else None
+
+    def modulus(self, C: Any, /) -> Any:
+        """``G`` at the material fractions ``C`` (a number where every material has the background's)."""
+        if not self.is_variable:
+            return self.shear_modulus
+        moduli = [self.shear_modulus if g is None else g for g in self.material_moduli]
+        parts = C if isinstance(C, (list, tuple)) else (C,)
+        clipped = [ufl.min_value(ufl.max_value(c, 0.0), 1.0) for c in parts]
+        compliance = (1.0 - sum(clipped)) / self.shear_modulus + sum(c / g for c, g in zip(clipped, moduli))
+        return 1.0 / compliance
+
+    def deborah(self, eta: Any, C: Any, rate: Any, /) -> Any:
+        """``De = eta r / G``: the Maxwell time over ``dt_e`` (``rate``: ``r = 1 / dt_e``, a Constant)."""
+        return eta * rate / self.modulus(C)
+
+    def viscosity(self, eta: Any, C: Any, rate: Any, /) -> Any:
+        """``eta_ve = eta / (1 + De) = eta G dt_e / (eta + G dt_e)``."""
+        return eta / (1.0 + self.deborah(eta, C, rate))
+
+    def memory(self, eta: Any, C: Any, rate: Any, /) -> Any:
+        """``chi = De / (1 + De) = eta_ve / (G dt_e)``: the share of the old stress the new one keeps."""
+        de = self.deborah(eta, C, rate)
+        return de / (1.0 + de)
+
+    @staticmethod
+    def stress(fields: Mapping[str, Any], gdim: int, /) -> Any:
+        """The old deviatoric stress as a UFL tensor from its component fields (:func:`stress_labels`)."""
+        labels = stress_labels(gdim)
+        missing = [name for name in labels if name not in fields]
+        if missing:
+            raise ValueError(f"the elastic stress needs the mesh fields {missing} (the particles' elastic_stress)")
+        entries: list[list[Any]] = [[0.0] * gdim for _ in range(gdim)]
+        for (i, j), name in zip(STRESS_COMPONENTS[gdim], labels):
+            entries[i][j] = entries[j][i] = fields[name]
+        return ufl.as_matrix(entries)
+
+    def load(self, eta: Any, C: Any, rate: Any, fields: Mapping[str, Any], v: Any, dx: Any, /) -> Any:
+        """The old stress's term of the momentum equation's right-hand side, ``-(chi tau^n, eps(v))``."""
+        tau = self.stress(fields, v.ufl_shape[0])
+        return -self.memory(eta, C, rate) * ufl.inner(tau, ufl.sym(ufl.grad(v))) * dx
+
+
+def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], /) -> None:
+    """The cross-key checks of ``physics.elasticity`` (``carried``: the property names of the primary
+    particle system, empty without particles).
+
+    Raises:
+        ConfigError: elasticity without the particles' ``elastic_stress``, or that property without
+            elasticity.
+    """
+    if settings.enabled and STRESS_PROPERTY not in carried:
+        raise ConfigError("config key 'physics.elasticity.enabled': the stress history is carried by particles; set "
+                          f"particles.enabled: true and carry {STRESS_PROPERTY!r} in particles.properties")
+    if not settings.enabled and STRESS_PROPERTY in carried:
+        raise ConfigError(f"config key 'particles.properties': {STRESS_PROPERTY!r} needs physics.elasticity.enabled: "
+                          "true")

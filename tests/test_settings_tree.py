@@ -15,10 +15,9 @@ again, and each is checked in every module of ``convection/`` but ``config/``:
 - a function named ``from_config`` or ``*_from_config`` (a builder from raw config values).
 
 What still does, is listed below with the reason; the lists only shrink. Not covered by this scan
-(issue 47, what remains of "one way to declare a parameter"): the viscosity laws validate their
-parameters with their own ``law_param``/``_parse_value`` (physics/rheology.py), and ``particles/``
-reads its sections raw (``ParticleManager.from_config`` takes ``ParticleSettings``
-from the RunSettings, but the loader's particle checks build the plugins from the mappings).
+(issue 47, what remains of "one way to declare a parameter"): ``particles/`` reads its sections
+raw (``ParticleManager.from_config`` takes ``ParticleSettings`` from the RunSettings, but the
+loader's particle checks build the plugins from the mappings).
 """
 
 import ast
@@ -51,7 +50,6 @@ FROM_CONFIG = {
     ("convection/geometry/plates.py", "from_config"): "a plates condition as written (boundary kinds)",
     ("convection/geometry/boundary.py", "from_config"): "a velocity kind's condition from its value as written "
                                                          "(BoundarySettings keeps the boundary section as written)",
-    ("convection/physics/rheology.py", "from_config"): "viscosity laws: their own validator (law_param)",
 }
 """(module, function) -> why it builds from raw config values (item 4 of issue 47: one way to
 declare a parameter)."""

@@ -558,6 +558,19 @@ class Composite(ViscosityLawBase):
         return 1.0 / inverse
 
 
+class _OfOneLaw(ViscosityLawBase):
+    """A law that changes another one: its settings' ``law``, built as its ``law``."""
+
+    law: ViscosityLawBase
+
+    @classmethod
+    def build(cls, settings: Any, context: LawContext, /) -> ViscosityLawBase:
+        return cls(settings=settings, law=make_law(settings.law, context.at("law")))  # type: ignore[call-arg]
+
+    def children(self) -> tuple[ViscosityLawBase, ...]:
+        return (self.law,)
+
+
 @dataclass(frozen=True)
 class WeakenedSettings:
     law: LawSettings = param(kind="law", help="the law weakened")
@@ -565,19 +578,12 @@ class WeakenedSettings:
 
 
 @dataclass(frozen=True)
-class Weakened(ViscosityLawBase):
+class Weakened(_OfOneLaw):
     name: ClassVar[str] = "weakened"
     description: ClassVar[str] = "eta = w(e) eta_law: a viscous law weakened linearly by an accumulated strain e"
     Settings: ClassVar[type] = WeakenedSettings
     settings: WeakenedSettings
     law: ViscosityLawBase
-
-    @classmethod
-    def build(cls, settings: WeakenedSettings, context: LawContext, /) -> Weakened:
-        return cls(settings, make_law(settings.law, context.at("law")))
-
-    def children(self) -> tuple[ViscosityLawBase, ...]:
-        return (self.law,)
 
     def field_names(self) -> tuple[str, ...]:
         return (self.settings.weakening.field,)
@@ -594,19 +600,12 @@ class DamagedSettings:
 
 
 @dataclass(frozen=True)
-class Damaged(ViscosityLawBase):
+class Damaged(_OfOneLaw):
     name: ClassVar[str] = "damaged"
     description: ClassVar[str] = "eta = max(1 - D, residual) eta_law: damage D in [0, 1] (a named field) weakens"
     Settings: ClassVar[type] = DamagedSettings
     settings: DamagedSettings
     law: ViscosityLawBase
-
-    @classmethod
-    def build(cls, settings: DamagedSettings, context: LawContext, /) -> Damaged:
-        return cls(settings, make_law(settings.law, context.at("law")))
-
-    def children(self) -> tuple[ViscosityLawBase, ...]:
-        return (self.law,)
 
     def field_names(self) -> tuple[str, ...]:
         return (self.settings.field,)

@@ -315,6 +315,12 @@ class ViscosityLawBase:
     uses: ClassVar[frozenset[str]] = frozenset()
     """What the law itself reads: a subset of {"temperature", "depth", "strain_rate", "pressure"}."""
 
+    def __post_init__(self) -> None:
+        settings_class = getattr(type(self), "Settings", None)
+        if settings_class is not None and not isinstance(getattr(self, "settings", None), settings_class):
+            raise TypeError(f"{type(self).__name__} takes a {settings_class.__name__}, got "
+                            f"{type(getattr(self, 'settings', None)).__name__}")
+
     @classmethod
     def build(cls, settings: Any, context: LawContext, /) -> ViscosityLawBase:
         """The law of ``settings`` (a ``Settings``) at ``context``: by default ``cls(settings)``;

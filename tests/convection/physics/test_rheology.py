@@ -130,6 +130,8 @@ def test_every_law_is_a_plugin_of_the_one_shape():
     built = make_law(settings, LawContext("law"))
     assert built == build_law(spec, "law") and yield_law(built) is not None
     assert built.is_nonlinear and built.depends_on == {"strain_rate"}
+    with pytest.raises(TypeError, match="Constant takes a ConstantSettings, got float"):
+        VISCOSITY_LAWS["constant"](5.0)
     assert VISCOSITY_LAWS.build("constant", settings.settings.viscous.settings.laws[0].settings,
                                 LawContext("x")).constant_value() == 2.0
 

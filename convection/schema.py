@@ -44,7 +44,7 @@ from fembase.params import (  # re-exported: the declaration helpers live in the
 )
 
 __all__ = ["MAX_DEGREE", "MAX_DEPTH", "MAX_ENTRIES", "MAX_MESSAGE", "MAX_VALUES", "REQUIRED", "ConfigError", "Field",
-           "Names", "check_document_shape", "check_finite_values", "key_text", "param", "section_schema",
+           "Names", "check_document_shape", "check_finite_values", "check_value", "key_text", "param", "section_schema",
            "settings_as_section", "settings_from", "short_repr", "subsection", "validate"]
 
 MAX_MESSAGE = 400
@@ -114,6 +114,7 @@ class Field:
         minimum: Lower bound (inclusive) for numbers / each number of a list.
         exclusive_minimum: Lower bound (exclusive) for numbers.
         maximum: Upper bound (inclusive) for numbers / each number of a list.
+        exclusive_maximum: Upper bound (exclusive) for numbers.
         length: Allowed list lengths.
         check: Extra validation ``check(value) -> str | None`` returning a message on error.
         help: One-line description.
@@ -130,6 +131,7 @@ class Field:
     minimum: float | None = None
     exclusive_minimum: float | None = None
     maximum: float | None = None
+    exclusive_maximum: float | None = None
     length: tuple[int, ...] | None = None
     check: Callable[[Any], str | None] | None = None
     help: str = ""
@@ -312,6 +314,15 @@ def _check_leaf(spec: Field, value: Any, key: str) -> Any:
     return value
 
 
+def check_value(spec: Field, value: Any, key: str, /) -> Any:
+    """One value checked against ``spec`` as a key's value is (coerced, bounds, names, ``check``).
+
+    Raises:
+        ConfigError: naming ``key``.
+    """
+    return _check_leaf(spec, value, key)
+
+
 def _check_bounds(spec: Field, value: Any, key: str) -> None:
     if not isinstance(value, (int, float)):
         return
@@ -321,6 +332,8 @@ def _check_bounds(spec: Field, value: Any, key: str) -> None:
         raise ConfigError(f"config key '{key}': must be > {spec.exclusive_minimum}, got {value}")
     if spec.maximum is not None and value > spec.maximum:
         raise ConfigError(f"config key '{key}': must be <= {spec.maximum}, got {value}")
+    if spec.exclusive_maximum is not None and value >= spec.exclusive_maximum:
+        raise ConfigError(f"config key '{key}': must be < {spec.exclusive_maximum}, got {value}")
 
 
 def validate(schema: Mapping[str, Any], document: Any, prefix: str = "") -> dict[str, Any]:

@@ -83,7 +83,8 @@ _SCALAR_KINDS = {int: "int", float: "float", str: "str", bool: "bool"}
 
 def param(default: Any = REQUIRED, /, *, help: str, kind: str | None = None, choices: Choices | None = None,
           minimum: float | None = None, exclusive_minimum: float | None = None, maximum: float | None = None,
-          length: tuple[int, ...] | None = None, check: Callable[[Any], str | None] | None = None,
+          exclusive_maximum: float | None = None, length: tuple[int, ...] | None = None,
+          check: Callable[[Any], str | None] | None = None,
           items: Mapping[str, Any] | None = None, max_items: int | None = None) -> Any:
     """A field of a settings dataclass that is a key of its config section (see the module
     docstring): the default (``REQUIRED``: none), the checks of :class:`Field` and a one-line help.
@@ -91,8 +92,8 @@ def param(default: Any = REQUIRED, /, *, help: str, kind: str | None = None, cho
     ``int``, ``float``, ``str``, ``bool``, ``tuple[int, ...]`` (a list in YAML), ``Mapping``, ``Any``,
     each ``| None`` for nullable."""
     spec = {"kind": kind, "default": default, "choices": choices, "minimum": minimum,
-            "exclusive_minimum": exclusive_minimum, "maximum": maximum, "length": length, "check": check,
-            "help": help, "items": items, "max_items": max_items}
+            "exclusive_minimum": exclusive_minimum, "maximum": maximum, "exclusive_maximum": exclusive_maximum,
+            "length": length, "check": check, "help": help, "items": items, "max_items": max_items}
     metadata = {"schema": spec}
     if default is REQUIRED:
         return dataclasses.field(metadata=metadata)

@@ -15,8 +15,8 @@ again, and each is checked in every module of ``convection/`` but ``config/``:
 - a function named ``from_config`` or ``*_from_config`` (a builder from raw config values).
 
 What still does, is listed below with the reason; the lists only shrink. Not covered by this scan
-(issue 47, what remains of "one way to declare a parameter"): the viscosity laws validate their
-parameters with their own ``law_param``/``_parse_value`` (physics/rheology.py). ``particles/``
+(issue 47, what remains of "one way to declare a parameter"): none of the rooms' own validators remain;
+the viscosity laws declare their parameters with ``param`` (physics/rheology.py). ``particles/``
 takes typed settings: ``ParticleManager.from_config`` and the loader's particle checks read each
 system's ``ParticleSettings``, and its generators, interpolators and properties are made through
 their registries from their own ``Settings`` (``REGISTRY.settings(name, **parameters)``, then
@@ -53,7 +53,6 @@ FROM_CONFIG = {
     ("convection/geometry/plates.py", "from_config"): "a plates condition as written (boundary kinds)",
     ("convection/geometry/boundary.py", "from_config"): "a velocity kind's condition from its value as written "
                                                          "(BoundarySettings keeps the boundary section as written)",
-    ("convection/physics/rheology.py", "from_config"): "viscosity laws: their own validator (law_param)",
 }
 """(module, function) -> why it builds from raw config values (item 4 of issue 47: one way to
 declare a parameter)."""

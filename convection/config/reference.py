@@ -63,6 +63,7 @@ class KeyDoc:
         parts = [f">= {f.minimum:g}" if f.minimum is not None else "",
                  f"> {f.exclusive_minimum:g}" if f.exclusive_minimum is not None else "",
                  f"<= {f.maximum:g}" if f.maximum is not None else "",
+                 f"< {f.exclusive_maximum:g}" if f.exclusive_maximum is not None else "",
                  f"at most {f.max_items} entries" if f.max_items is not None else ""]
         return ", ".join(p for p in parts if p)
 
@@ -123,8 +124,8 @@ def _describe(entry: Any) -> str:
 
 
 def _dataclass_parameters(cls: type, *, skip: tuple[str, ...] = ()) -> list[Parameter]:
-    """The init parameters of a dataclass plugin: name, annotated type, default, help (declared with
-    the field: :func:`fembase.params.param`'s, or a viscosity law's ``law_param``)."""
+    """The init parameters of a dataclass plugin (its ``Settings``): name, type, default, help and
+    checks, as declared with the field by :func:`fembase.params.param`."""
     out = []
     for f in dataclasses.fields(cls):
         if not f.init or f.name in skip or f.name.startswith("_"):
@@ -135,14 +136,15 @@ def _dataclass_parameters(cls: type, *, skip: tuple[str, ...] = ()) -> list[Para
             default = _value(f.default_factory())  # type: ignore[misc]
         else:
             default = "required"
-        meta = dict(f.metadata)
-        kind = meta.get("kind", f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type)))
-        help_text = meta.get("help") or meta.get("schema", {}).get("help", "")
-        checks = [f"{text} {meta[key]:g}" for key, text in (("minimum", ">="), ("exclusive_minimum", ">"),
+        spec = f.metadata.get("schema", {})
+        kind = spec.get("kind") or (f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type)))
+        help_text = spec.get("help", "")
+        checks = [f"{text} {spec[key]:g}" for key, text in (("minimum", ">="), ("exclusive_minimum", ">"),
                                                               ("maximum", "<="), ("exclusive_maximum", "<"))
-                  if isinstance(meta.get(key), (int, float))]
-        if meta.get("choices"):
-            checks.append("one of " + ", ".join(map(str, meta["choices"])))
+                  if isinstance(spec.get(key), (int, float))]
+        choices = spec.get("choices")
+        if choices:
+            checks.append("one of " + ", ".join(map(str, choices() if callable(choices) else choices)))
         if checks:
             help_text = (help_text + " " if help_text else "") + f"({'; '.join(checks)})"
         out.append(Parameter(f.name, str(kind), default, help_text))
@@ -173,7 +175,7 @@ def _property_parameters(cls: type[ParticleProperty]) -> list[Parameter]:
 
 def plugin_roles() -> list[PluginRole]:
     """The plugin registries a config chooses from, each entry with its parameters."""
-    from convection.physics.rheology import COMBINATIONS, STRAIN_RATE_MEASURES, VISCOSITY_LAWS, Bounded
+    from convection.physics.rheology import COMBINATIONS, STRAIN_RATE_MEASURES, VISCOSITY_LAWS, LawSettings
     from particles.generation import GENERATORS
     from particles.interpolation import INTERPOLATORS
     from particles.properties import PROPERTIES
@@ -183,7 +185,7 @@ def plugin_roles() -> list[PluginRole]:
         return PluginRole(title, keys, {name: (_describe(entry), parameters(entry)) for name, entry in
                                         registry.items()}, note)
 
-    bounds = _dataclass_parameters(Bounded)
+    bounds = _dataclass_parameters(LawSettings, skip=("name", "settings"))
     return [
         role("Particle generators", ("particles.generator",), GENERATORS, _settings_parameters,
              "`{name: <generator>, <parameter>: ...}`; `particles_per_cell: N` may replace `num_particles` "
@@ -195,7 +197,7 @@ def plugin_roles() -> list[PluginRole]:
         role("Particle interpolators", ("particles.interpolator",), INTERPOLATORS, _settings_parameters,
              "`{name: <interpolator>, <parameter>: ...}`: how particle properties become mesh fields."),
         role("Viscosity laws", ("physics.viscosity.law", f"materials.{MATERIAL}.viscosity"), VISCOSITY_LAWS,
-             lambda law: _dataclass_parameters(law) + bounds,
+             lambda law: _dataclass_parameters(law.Settings) + bounds,
              "a positive number (constant viscosity) or `{name: <law>, <parameter>: ...}`; a parameter of kind "
              "`law`/`laws` is itself a law (or a list of laws); every law may add `min_viscosity` and "
              "`max_viscosity` (the result is clipped to them)."),

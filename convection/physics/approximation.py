@@ -214,9 +214,9 @@ class ViscosityLaw:
                 raise ValueError("material_viscosities must be at least two positive numbers (eta_0, eta_1, ...)")
             if self.laws is not None:
                 raise ValueError("give either material_viscosities or laws, not both")
-            object.__setattr__(self, "laws", tuple(Constant(float(v)) for v in self.material_viscosities))
+            object.__setattr__(self, "laws", tuple(Constant.of(v) for v in self.material_viscosities))
         elif self.laws is None:
-            object.__setattr__(self, "laws", (Constant(1.0),))
+            object.__setattr__(self, "laws", (Constant.of(1.0),))
         if not self.laws:
             raise ValueError("laws needs at least the background material's law")
         if any(not 1 <= i < len(self.laws) for i in self.sharp) or len(set(self.sharp)) != len(self.sharp):
@@ -247,7 +247,7 @@ class ViscosityLaw:
     def numbers(self) -> tuple[float, ...] | None:
         """The viscosities when every law is a plain number (:class:`Constant`), else None."""
         if all(type(law) is Constant for law in self.laws):
-            return tuple(law.eta0 for law in self.laws)
+            return tuple(law.settings.eta0 for law in self.laws)
         return None
 
     @property

@@ -121,12 +121,12 @@ class Materials:
         background's law (or its number) and each material's (a number is a
         :class:`~convection.physics.rheology.Constant`; none: the background's), mixed; ``gravity``:
         along which the laws' depth is measured (:class:`convection.physics.approximation.ViscosityLaw`)."""
-        law0 = self.background_law if self.background_law is not None else Constant(self.background_viscosity)
+        law0 = self.background_law if self.background_law is not None else Constant.of(self.background_viscosity)
 
         def law(value: Any) -> ViscosityLawBase:
             if value is None:
                 return law0
-            return value if isinstance(value, ViscosityLawBase) else Constant(float(value))
+            return value if isinstance(value, ViscosityLawBase) else Constant.of(value)
         return ViscosityLaw(mixing=self.mixing, temperature_law=temperature_law, gamma=gamma,
                             laws=(law0, *(law(m.viscosity) for m in self.materials)), gravity=gravity,
                             sharp=tuple(self.names.index(n) + 1 for n in self.sharp))

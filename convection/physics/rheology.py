@@ -42,13 +42,19 @@ strain ``e`` (a named mesh field, e.g. ``plastic_strain`` averaged from the part
 ``e <= start`` to ``factor`` at ``e >= end``; a viscous law can be weakened the same way by the
 ``weakened`` law.
 
-Every parameter is checked when the config is read: :func:`build_law` turns a config value into a
-law or raises :class:`convection.schema.ConfigError` naming the key, in one line.
+Each law is a plugin of the one shape (``fembase.registry.Plugin``): its parameters are a frozen
+``Settings`` dataclass whose fields are made by :func:`convection.schema.param` (default, bounds,
+allowed names, help: the config reference and ``check`` read them there), and
+``build(settings, context)`` makes the law; it is registered once in :data:`VISCOSITY_LAWS` and
+made only through it. A config value becomes a law in two steps: :func:`law_settings` checks it
+(a :class:`LawSettings`: the law's name, its ``Settings`` and the bounds; nested laws, tables and
+weakenings checked the same way) and :func:`make_law` builds it (``VISCOSITY_LAWS.build``);
+:func:`build_law` does both and raises :class:`convection.schema.ConfigError` naming the key, in
+one line.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from collections.abc import Callable, Mapping, Sequence
@@ -56,11 +62,14 @@ from typing import Any, ClassVar, NamedTuple
 
 import ufl
 
-from convection.schema import ConfigError, short_repr
+from convection.schema import (
+    REQUIRED, ConfigError, Field, Names, check_value, param, section_schema, settings_from, short_repr, validate,
+)
 from fembase.registry import Registry
 
-__all__ = ["FlowState", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase", "build_law", "law_param",
-           "laws_field_names", "strain_rate_measure", "weakening_factor", "yield_law"]
+__all__ = ["FlowState", "LawContext", "LawSettings", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase",
+           "build_law", "law_settings", "laws_field_names", "make_law", "strain_rate_measure", "weakening_factor",
+           "yield_law"]
 
 @dataclass(frozen=True)
 class StrainRateMeasure:
@@ -154,113 +163,170 @@ def weakening_factor(e: Any, start: float, end: float, factor: float) -> Any:
     return 1.0 + (factor - 1.0) * s
 
 
-# ---------------------------------------------------------------------- parameter parsing
-def law_param(kind: str = "float", default: Any = dataclasses.MISSING, **checks: Any) -> Any:
-    """A dataclass field of a law: ``kind`` (float | int | str | law | laws | table | list[str]),
-    a default and checks (minimum, exclusive_minimum, maximum, exclusive_maximum, choices, help)."""
-    metadata = {"kind": kind, **checks}
-    if isinstance(default, list):
-        return dataclasses.field(default_factory=lambda d=default: list(d), metadata=metadata)
-    return dataclasses.field(default=default, metadata=metadata)
+# ---------------------------------------------------------------------- settings and building
+class LawContext(NamedTuple):
+    """What a law is built in besides its settings: ``key``, the config key it is written at (a
+    ``build`` that refuses its settings raises ``ConfigError`` naming it; a nested law is built at
+    :meth:`at` its key). A law that needs more to be built adds a field here."""
+
+    key: str
+
+    def at(self, name: str) -> LawContext:
+        """The context of the nested law (or value) ``name`` of this one."""
+        return self._replace(key=f"{self.key}.{name}")
 
 
-def _number(value: Any, key: str, checks: Mapping[str, Any], *, integer: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"config key '{key}': expected a number, got {short_repr(value)}")
-    if integer and int(value) != value:
-        raise ConfigError(f"config key '{key}': expected an integer, got {short_repr(value)}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ConfigError(f"config key '{key}': expected a finite number, got {short_repr(value)}")
-    for name, op, text in (("minimum", float.__ge__, ">="), ("exclusive_minimum", float.__gt__, ">"),
-                           ("maximum", float.__le__, "<="), ("exclusive_maximum", float.__lt__, "<")):
-        bound = checks.get(name)
-        if bound is not None and not op(number, float(bound)):
-            raise ConfigError(f"config key '{key}': must be {text} {bound}, got {short_repr(value)}")
-    return int(number) if integer else number
+@dataclass(frozen=True)
+class LawSettings:
+    """A viscosity law as written: its registered ``name``, its ``settings`` (that law's
+    ``Settings``) and the bounds every law may add (the result is clipped to them)."""
+
+    name: str
+    settings: Any
+    min_viscosity: float | None = param(None, exclusive_minimum=0.0, help="the viscosity is at least this")
+    max_viscosity: float | None = param(None, exclusive_minimum=0.0, help="the viscosity is at most this")
 
 
-def _parse_value(kind: str, value: Any, key: str, checks: Mapping[str, Any]) -> Any:
-    if kind in ("float", "int"):
-        return _number(value, key, checks, integer=kind == "int")
-    if kind == "str":
-        if not isinstance(value, str):
-            raise ConfigError(f"config key '{key}': expected a name, got {short_repr(value)}")
-        choices = checks.get("choices")
-        if choices is not None and value not in choices:
-            raise ConfigError(f"config key '{key}': {value!r} is not one of {sorted(choices)}")
-        return value
-    if kind == "list[str]":
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise ConfigError(f"config key '{key}': expected a list of names, got {short_repr(value)}")
-        choices = checks.get("choices")
-        for v in value:
-            if choices is not None and v not in choices:
-                raise ConfigError(f"config key '{key}': {v!r} is not one of {sorted(choices)}")
-        return tuple(value)
-    if kind == "law":
-        return build_law(value, key)
-    if kind == "laws":
-        if not isinstance(value, list) or len(value) < 1:
-            raise ConfigError(f"config key '{key}': expected a list of viscosity laws, got {short_repr(value)}")
-        return tuple(build_law(v, f"{key}[{i}]") for i, v in enumerate(value))
-    if kind == "table":
-        if not isinstance(value, list) or len(value) < 2:
-            raise ConfigError(f"config key '{key}': expected a list of at least two [depth, factor] rows, "
-                              f"got {short_repr(value)}")
-        rows = []
-        for i, row in enumerate(value):
-            if not isinstance(row, list) or len(row) != 2:
-                raise ConfigError(f"config key '{key}[{i}]': expected [depth, factor], got {short_repr(row)}")
-            d = _number(row[0], f"{key}[{i}][0]", {})
-            f = _number(row[1], f"{key}[{i}][1]", {"exclusive_minimum": 0.0})
-            rows.append((d, f))
-        depths = [d for d, _ in rows]
-        if any(b <= a for a, b in zip(depths, depths[1:])):
-            raise ConfigError(f"config key '{key}': the depths must increase, got {depths}")
-        return tuple(rows)
-    if kind == "weakening":  # null: no weakening (the default)
-        return None if value is None else Weakening.from_config(value, key)
-    raise AssertionError(kind)
+_POSITIVE = Field("float", exclusive_minimum=0.0)
+
+
+def law_settings(spec: Any, key: str) -> LawSettings:
+    """The checked settings of the config value ``spec`` at config key ``key``: a positive number
+    (a constant viscosity) or a mapping ``{name, parameters..., min_viscosity?, max_viscosity?}``.
+
+    Raises:
+        ConfigError: anything wrong, in one line naming the key.
+    """
+    if isinstance(spec, (int, float)) and not isinstance(spec, bool):
+        return LawSettings("constant", ConstantSettings(eta0=check_value(_POSITIVE, spec, key)))
+    if not isinstance(spec, dict):
+        raise ConfigError(f"config key '{key}': expected a viscosity (number) or a law {{name: ..., ...}}, "
+                          f"got {short_repr(spec)}")
+    if "name" not in spec:
+        raise ConfigError(f"config key '{key}.name': a viscosity law needs a name; valid: {sorted(VISCOSITY_LAWS)}")
+    name = spec["name"]
+    if not isinstance(name, str) or name not in VISCOSITY_LAWS:
+        raise ConfigError(f"config key '{key}.name': unknown viscosity law {short_repr(name)}; "
+                          f"valid: {sorted(VISCOSITY_LAWS)}")
+    bound_keys = ("min_viscosity", "max_viscosity")
+    settings_class = VISCOSITY_LAWS[name].Settings
+    params = {k: v for k, v in spec.items() if k not in ("name", *bound_keys)}
+    settings = _checked(settings_class, params, key, f"a parameter of viscosity law {name!r}",
+                        [*sorted(section_schema(settings_class)), *sorted(bound_keys), "name"],
+                        f"required by viscosity law {name!r}")
+    bounds = validate(section_schema(LawSettings), {k: spec[k] for k in bound_keys if k in spec}, prefix=f"{key}.")
+    lo, hi = bounds["min_viscosity"], bounds["max_viscosity"]
+    if lo is not None and hi is not None and not lo < hi:
+        raise ConfigError(f"config key '{key}.max_viscosity': must exceed min_viscosity, got {hi} <= {lo}")
+    return LawSettings(name, settings, lo, hi)
+
+
+def _checked(cls: type, spec: Mapping[str, Any], key: str, what: str, valid: list[str], required: str) -> Any:
+    """The settings dataclass ``cls`` of the mapping ``spec`` at ``key``: its ``param`` fields
+    checked as a config section's keys, its nested values (:data:`_NESTED`, by the field's kind)
+    checked at their own keys."""
+    schema = section_schema(cls)
+    unknown = [k for k in spec if k not in schema]
+    if unknown:
+        raise ConfigError(f"config key '{key}.{unknown[0]}': not {what}; valid: {valid}")
+    for name, field in schema.items():
+        if name not in spec and field.default is REQUIRED:
+            raise ConfigError(f"config key '{key}.{name}': {required} ({field.help})")
+    values = validate(schema, spec, prefix=f"{key}.")
+    for name, field in schema.items():
+        if field.kind in _NESTED and values[name] is not None:
+            values[name] = _NESTED[field.kind](values[name], f"{key}.{name}")
+    return settings_from(cls, values)
+
+
+def _laws(value: Any, key: str) -> tuple[LawSettings, ...]:
+    if not isinstance(value, list) or len(value) < 1:
+        raise ConfigError(f"config key '{key}': expected a list of viscosity laws, got {short_repr(value)}")
+    return tuple(law_settings(v, f"{key}[{i}]") for i, v in enumerate(value))
+
+
+_ROW = Field("list[float]", length=(2,))
+
+
+def _table(value: Any, key: str) -> tuple[tuple[float, float], ...]:
+    if not isinstance(value, list) or len(value) < 2:
+        raise ConfigError(f"config key '{key}': expected a list of at least two [depth, factor] rows, "
+                          f"got {short_repr(value)}")
+    rows = []
+    for i, row in enumerate(value):
+        if not isinstance(row, list) or len(row) != 2:
+            raise ConfigError(f"config key '{key}[{i}]': expected [depth, factor], got {short_repr(row)}")
+        depth, factor = check_value(_ROW, row, f"{key}[{i}]")
+        rows.append((depth, check_value(_POSITIVE, factor, f"{key}[{i}][1]")))
+    depths = [d for d, _ in rows]
+    if any(b <= a for a, b in zip(depths, depths[1:])):
+        raise ConfigError(f"config key '{key}': the depths must increase, got {depths}")
+    return tuple(rows)
+
+
+def _weakening(value: Any, key: str) -> Weakening:
+    if not isinstance(value, dict):
+        raise ConfigError(f"config key '{key}': expected {{field, start, end, factor}}, got {short_repr(value)}")
+    weakening = _checked(Weakening, value, key, "a weakening parameter", sorted(section_schema(Weakening)), "required")
+    if not weakening.end > weakening.start:
+        raise ConfigError(f"config key '{key}.end': must be > {weakening.start}, got {weakening.end}")
+    return weakening
+
+
+_NESTED: dict[str, Callable[[Any, str], Any]] = {
+    "law": law_settings, "laws": _laws, "table": _table, "weakening": _weakening}
+"""Parameter kinds whose values are checked by their own function (at their own key), by kind."""
+
+
+def make_law(settings: LawSettings, context: LawContext) -> ViscosityLawBase:
+    """The law of ``settings``, built by its registry entry (clipped when it has bounds).
+
+    Raises:
+        ConfigError: settings the law refuses together (one line naming ``context.key``).
+    """
+    law = VISCOSITY_LAWS.build(settings.name, settings.settings, context)
+    if settings.min_viscosity is None and settings.max_viscosity is None:
+        return law
+    return Bounded(law, settings.min_viscosity, settings.max_viscosity)
+
+
+def build_law(spec: Any, key: str) -> ViscosityLawBase:
+    """The law of the config value ``spec`` at config key ``key`` (:func:`law_settings`, then
+    :func:`make_law`).
+
+    Raises:
+        ConfigError: anything wrong, in one line naming the key.
+    """
+    return make_law(law_settings(spec, key), LawContext(key))
 
 
 class ViscosityLawBase:
-    """Base of every law: parsing from a config mapping, and what the law depends on.
+    """Base of every law: how it is built and what it depends on.
 
-    Subclasses are frozen dataclasses whose fields are made by :func:`law_param`; they set the class
-    attributes ``name`` and ``description`` and implement ``__call__(state) -> UFL expression``.
+    A registered law is a frozen dataclass holding its ``settings`` (and the laws it is built from)
+    with the class attributes ``name``, ``description`` and ``Settings`` (the frozen dataclass of
+    its parameters, fields made by :func:`convection.schema.param`); it implements
+    ``__call__(state) -> UFL expression``.
     """
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type]
     uses: ClassVar[frozenset[str]] = frozenset()
     """What the law itself reads: a subset of {"temperature", "depth", "strain_rate", "pressure"}."""
 
+    def __post_init__(self) -> None:
+        settings_class = getattr(type(self), "Settings", None)
+        if settings_class is not None and not isinstance(getattr(self, "settings", None), settings_class):
+            raise TypeError(f"{type(self).__name__} takes a {settings_class.__name__}, got "
+                            f"{type(getattr(self, 'settings', None)).__name__}")
+
     @classmethod
-    def from_config(cls, spec: Mapping[str, Any], key: str) -> ViscosityLawBase:
-        """The law for the mapping ``spec`` (without ``name``) of config key ``key``.
-
-        Raises:
-            ConfigError: an unknown or missing parameter, or a value out of range (one line).
-        """
-        fields = {f.name: f for f in dataclasses.fields(cls)}
-        unknown = [k for k in spec if k not in fields]
-        if unknown:
-            raise ConfigError(f"config key '{key}.{unknown[0]}': not a parameter of viscosity law {cls.name!r}; "
-                              f"valid: {sorted(fields) + ['max_viscosity', 'min_viscosity', 'name']}")
-        values = {}
-        for name, f in fields.items():
-            if name in spec:
-                values[name] = _parse_value(f.metadata["kind"], spec[name], f"{key}.{name}", f.metadata)
-            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ConfigError(f"config key '{key}.{name}': required by viscosity law {cls.name!r} "
-                                  f"({f.metadata.get('help', name)})")
-        law = cls(**values)
-        law.check(key)
-        return law
-
-    def check(self, key: str) -> None:
-        """Checks across parameters (raise ConfigError naming ``key``); none by default."""
+    def build(cls, settings: Any, context: LawContext, /) -> ViscosityLawBase:
+        """The law of ``settings`` (a ``Settings``) at ``context``: by default ``cls(settings)``;
+        a law made of other laws builds them (:func:`make_law`), a law with checks across its
+        parameters raises ``ConfigError`` naming ``context.key``."""
+        return cls(settings)  # type: ignore[call-arg]
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
         """The laws this one is built from."""
@@ -297,30 +363,18 @@ class ViscosityLawBase:
         raise NotImplementedError
 
 
+def _field_name(value: str) -> str | None:
+    return None if value.isidentifier() else f"expected a field name, got {short_repr(value)}"
+
+
 @dataclass(frozen=True)
 class Weakening:
     """Linear strain weakening: a factor ``w(e)`` (:func:`weakening_factor`) of a named field ``e``."""
 
-    field: str = "plastic_strain"
-    start: float = 0.5
-    end: float = 1.5
-    factor: float = 0.25
-
-    @classmethod
-    def from_config(cls, spec: Any, key: str) -> Weakening:
-        if not isinstance(spec, dict):
-            raise ConfigError(f"config key '{key}': expected {{field, start, end, factor}}, got {short_repr(spec)}")
-        unknown = [k for k in spec if k not in ("field", "start", "end", "factor")]
-        if unknown:
-            raise ConfigError(f"config key '{key}.{unknown[0]}': not a weakening parameter; valid: "
-                              "['end', 'factor', 'field', 'start']")
-        field = spec.get("field", cls.field)
-        if not isinstance(field, str) or not field.isidentifier():
-            raise ConfigError(f"config key '{key}.field': expected a field name, got {short_repr(field)}")
-        start = _number(spec.get("start", cls.start), f"{key}.start", {"minimum": 0.0})
-        end = _number(spec.get("end", cls.end), f"{key}.end", {"exclusive_minimum": start})
-        factor = _number(spec.get("factor", cls.factor), f"{key}.factor", {"exclusive_minimum": 0.0, "maximum": 1.0})
-        return cls(field, start, end, factor)
+    field: str = param("plastic_strain", check=_field_name, help="the accumulated strain e (a mesh field)")
+    start: float = param(0.5, minimum=0.0, help="w = 1 for e <= start")
+    end: float = param(1.5, help="w = factor for e >= end (> start)")
+    factor: float = param(0.25, exclusive_minimum=0.0, maximum=1.0, help="the factor at e >= end")
 
     def __call__(self, state: FlowState) -> Any:
         if self.field not in state.fields:
@@ -328,39 +382,71 @@ class Weakening:
         return weakening_factor(state.fields[self.field], self.start, self.end, self.factor)
 
 
+WEAKENING_HELP = "{field, start, end, factor}: a linear strain weakening (null: none)"
+
+
 # ---------------------------------------------------------------------- viscous laws
+@dataclass(frozen=True)
+class ConstantSettings:
+    eta0: float = param(1.0, exclusive_minimum=0.0, help="viscosity")
+
+
 @dataclass(frozen=True)
 class Constant(ViscosityLawBase):
     name: ClassVar[str] = "constant"
     description: ClassVar[str] = "eta = eta0"
-    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity")
+    Settings: ClassVar[type] = ConstantSettings
+    settings: ConstantSettings
+
+    @classmethod
+    def of(cls, eta0: float) -> Constant:
+        """The constant viscosity ``eta0``."""
+        return cls(ConstantSettings(float(eta0)))
 
     def __call__(self, state: FlowState) -> Any:
-        return ufl.as_ufl(self.eta0)
+        return ufl.as_ufl(self.settings.eta0)
 
     def constant_value(self) -> float | None:
-        return self.eta0
+        return self.settings.eta0
+
+
+@dataclass(frozen=True)
+class ExponentialSettings:
+    eta0: float = param(1.0, exclusive_minimum=0.0, help="viscosity at T = 0, depth 0")
+    gamma_T: float = param(0.0, minimum=0.0, help="ln of the thermal viscosity contrast")
+    gamma_z: float = param(0.0, minimum=0.0, help="ln of the viscosity contrast over unit depth")
 
 
 @dataclass(frozen=True)
 class Exponential(ViscosityLawBase):
     name: ClassVar[str] = "exponential"
     description: ClassVar[str] = "eta = eta0 exp(-gamma_T T + gamma_z depth) (Frank-Kamenetskii, linear in depth)"
-    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity at T = 0, depth 0")
-    gamma_T: float = law_param(default=0.0, minimum=0.0, help="ln of the thermal viscosity contrast")
-    gamma_z: float = law_param(default=0.0, minimum=0.0, help="ln of the viscosity contrast over unit depth")
+    Settings: ClassVar[type] = ExponentialSettings
+    settings: ExponentialSettings
 
     @property
     def uses(self) -> frozenset[str]:  # type: ignore[override]
-        return frozenset(({"temperature"} if self.gamma_T else set()) | ({"depth"} if self.gamma_z else set()))
+        s = self.settings
+        return frozenset(({"temperature"} if s.gamma_T else set()) | ({"depth"} if s.gamma_z else set()))
 
     def __call__(self, state: FlowState) -> Any:
+        s = self.settings
         exponent = 0.0
-        if self.gamma_T:
-            exponent = -self.gamma_T * state.T
-        if self.gamma_z:
-            exponent = exponent + self.gamma_z * state.depth
-        return self.eta0 * ufl.exp(exponent) if not isinstance(exponent, float) else ufl.as_ufl(self.eta0)
+        if s.gamma_T:
+            exponent = -s.gamma_T * state.T
+        if s.gamma_z:
+            exponent = exponent + s.gamma_z * state.depth
+        return s.eta0 * ufl.exp(exponent) if not isinstance(exponent, float) else ufl.as_ufl(s.eta0)
+
+
+@dataclass(frozen=True)
+class ArrheniusSettings:
+    E: float = param(minimum=0.0, help="nondimensional activation energy E*/(R Delta T)")
+    V: float = param(0.0, minimum=0.0, help="nondimensional activation volume per unit depth")
+    eta0: float = param(1.0, exclusive_minimum=0.0, help="viscosity at T_ref, d_ref")
+    T_offset: float = param(0.0, minimum=0.0, help="surface temperature / Delta T (keeps T + T_offset > 0)")
+    T_ref: float = param(1.0, help="reference temperature")
+    depth_ref: float = param(0.0, help="reference depth")
 
 
 @dataclass(frozen=True)
@@ -368,42 +454,57 @@ class Arrhenius(ViscosityLawBase):
     name: ClassVar[str] = "arrhenius"
     description: ClassVar[str] = ("eta = eta0 exp((E + V d)/(T + T_offset) - (E + V d_ref)/(T_ref + T_offset)) "
                                   "(nondimensional activation energy and volume)")
+    Settings: ClassVar[type] = ArrheniusSettings
     uses: ClassVar[frozenset[str]] = frozenset({"temperature", "depth"})
-    E: float = law_param(minimum=0.0, help="nondimensional activation energy E*/(R Delta T)")
-    V: float = law_param(default=0.0, minimum=0.0, help="nondimensional activation volume per unit depth")
-    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity at T_ref, d_ref")
-    T_offset: float = law_param(default=0.0, minimum=0.0, help="surface temperature / Delta T (keeps T + T_offset > 0)")
-    T_ref: float = law_param(default=1.0, help="reference temperature")
-    depth_ref: float = law_param(default=0.0, help="reference depth")
+    settings: ArrheniusSettings
 
-    def check(self, key: str) -> None:
-        if not self.T_ref + self.T_offset > 0.0:
-            raise ConfigError(f"config key '{key}.T_offset': T_ref + T_offset must be > 0, got "
-                              f"{self.T_ref + self.T_offset}")
+    @classmethod
+    def build(cls, settings: ArrheniusSettings, context: LawContext, /) -> Arrhenius:
+        if not settings.T_ref + settings.T_offset > 0.0:
+            raise ConfigError(f"config key '{context.key}.T_offset': T_ref + T_offset must be > 0, got "
+                              f"{settings.T_ref + settings.T_offset}")
+        return cls(settings)
 
     def __call__(self, state: FlowState) -> Any:
-        reference = (self.E + self.V * self.depth_ref) / (self.T_ref + self.T_offset)
+        s = self.settings
+        reference = (s.E + s.V * s.depth_ref) / (s.T_ref + s.T_offset)
         # T below -T_offset (undershoots) would flip the sign: floor the absolute temperature.
-        absolute = ufl.max_value(state.T + self.T_offset, 1e-3 * (self.T_ref + self.T_offset))
-        return self.eta0 * ufl.exp((self.E + self.V * state.depth) / absolute - reference)
+        absolute = ufl.max_value(state.T + s.T_offset, 1e-3 * (s.T_ref + s.T_offset))
+        return s.eta0 * ufl.exp((s.E + s.V * state.depth) / absolute - reference)
+
+
+@dataclass(frozen=True)
+class DepthTableSettings:
+    table: tuple[tuple[float, float], ...] = param(kind="table", help="[[depth, factor], ...] with increasing depths")
+    eta0: float = param(1.0, exclusive_minimum=0.0, help="viscosity scale")
 
 
 @dataclass(frozen=True)
 class DepthTable(ViscosityLawBase):
     name: ClassVar[str] = "depth_table"
     description: ClassVar[str] = "eta = eta0 f(depth), f piecewise linear through [[depth, factor], ...]"
+    Settings: ClassVar[type] = DepthTableSettings
     uses: ClassVar[frozenset[str]] = frozenset({"depth"})
-    table: tuple = law_param("table", help="[[depth, factor], ...] with increasing depths")
-    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity scale")
+    settings: DepthTableSettings
 
     def __call__(self, state: FlowState) -> Any:
-        d = state.depth
-        f0 = self.table[0][1]
+        d, table = state.depth, self.settings.table
+        f0 = table[0][1]
         value: Any = ufl.as_ufl(f0)  # constant above the first row, linear between rows, constant below
-        for (da, fa), (db, fb) in zip(self.table, self.table[1:]):
+        for (da, fa), (db, fb) in zip(table, table[1:]):
             s = ufl.min_value(ufl.max_value((d - da) / (db - da), 0.0), 1.0)
             value = value + (fb - fa) * s
-        return self.eta0 * value
+        return self.settings.eta0 * value
+
+
+@dataclass(frozen=True)
+class PowerLawSettings:
+    n: float = param(exclusive_minimum=0.0, help="stress exponent (1: linear)")
+    eta0: float = param(1.0, exclusive_minimum=0.0, help="viscosity at the reference strain rate")
+    reference_strain_rate: float = param(1.0, exclusive_minimum=0.0, help="eps_ref")
+    gamma_T: float = param(0.0, minimum=0.0, help="ln of the thermal contrast of the prefactor")
+    gamma_z: float = param(0.0, minimum=0.0, help="ln of the depth contrast of the prefactor")
+    strain_rate_floor: float = param(DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0, help="eps_II is at least this")
 
 
 @dataclass(frozen=True)
@@ -411,39 +512,47 @@ class PowerLaw(ViscosityLawBase):
     name: ClassVar[str] = "power_law"
     description: ClassVar[str] = ("eta = eta0 (eps_II/eps_ref)^((1-n)/n) exp((-gamma_T T + gamma_z d)/n) "
                                   "(dislocation creep)")
-    n: float = law_param(exclusive_minimum=0.0, help="stress exponent (1: linear)")
-    eta0: float = law_param(default=1.0, exclusive_minimum=0.0, help="viscosity at the reference strain rate")
-    reference_strain_rate: float = law_param(default=1.0, exclusive_minimum=0.0, help="eps_ref")
-    gamma_T: float = law_param(default=0.0, minimum=0.0, help="ln of the thermal contrast of the prefactor")
-    gamma_z: float = law_param(default=0.0, minimum=0.0, help="ln of the depth contrast of the prefactor")
-    strain_rate_floor: float = law_param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0,
-                                      help="eps_II is at least this")
+    Settings: ClassVar[type] = PowerLawSettings
+    settings: PowerLawSettings
 
     @property
     def uses(self) -> frozenset[str]:  # type: ignore[override]
-        out = {"strain_rate"} if self.n != 1.0 else set()
-        return frozenset(out | ({"temperature"} if self.gamma_T else set()) | ({"depth"} if self.gamma_z else set()))
+        s = self.settings
+        out = {"strain_rate"} if s.n != 1.0 else set()
+        return frozenset(out | ({"temperature"} if s.gamma_T else set()) | ({"depth"} if s.gamma_z else set()))
 
     def __call__(self, state: FlowState) -> Any:
-        eta: Any = ufl.as_ufl(self.eta0)
-        if self.n != 1.0:
-            e = strain_rate_measure(state, "second_invariant", self.strain_rate_floor)
-            eta = eta * (e / self.reference_strain_rate) ** ((1.0 - self.n) / self.n)
+        s = self.settings
+        eta: Any = ufl.as_ufl(s.eta0)
+        if s.n != 1.0:
+            e = strain_rate_measure(state, "second_invariant", s.strain_rate_floor)
+            eta = eta * (e / s.reference_strain_rate) ** ((1.0 - s.n) / s.n)
         exponent: Any = 0.0
-        if self.gamma_T:
-            exponent = -self.gamma_T * state.T
-        if self.gamma_z:
-            exponent = exponent + self.gamma_z * state.depth
+        if s.gamma_T:
+            exponent = -s.gamma_T * state.T
+        if s.gamma_z:
+            exponent = exponent + s.gamma_z * state.depth
         if not isinstance(exponent, float):
-            eta = eta * ufl.exp(exponent / self.n)
+            eta = eta * ufl.exp(exponent / s.n)
         return eta
+
+
+@dataclass(frozen=True)
+class CompositeSettings:
+    laws: tuple[LawSettings, ...] = param(kind="laws", help="the creep laws combined")
 
 
 @dataclass(frozen=True)
 class Composite(ViscosityLawBase):
     name: ClassVar[str] = "composite"
     description: ClassVar[str] = "1/eta = sum_i 1/eta_i (e.g. diffusion + dislocation creep)"
-    laws: tuple = law_param("laws", help="the creep laws combined")
+    Settings: ClassVar[type] = CompositeSettings
+    settings: CompositeSettings
+    laws: tuple[ViscosityLawBase, ...]
+
+    @classmethod
+    def build(cls, settings: CompositeSettings, context: LawContext, /) -> Composite:
+        return cls(settings, tuple(make_law(law, context.at(f"laws[{i}]")) for i, law in enumerate(settings.laws)))
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
         return self.laws
@@ -455,83 +564,133 @@ class Composite(ViscosityLawBase):
         return 1.0 / inverse
 
 
+class _OfOneLaw(ViscosityLawBase):
+    """A law that changes another one: its settings' ``law``, built as its ``law``."""
+
+    law: ViscosityLawBase
+
+    @classmethod
+    def build(cls, settings: Any, context: LawContext, /) -> ViscosityLawBase:
+        return cls(settings=settings, law=make_law(settings.law, context.at("law")))  # type: ignore[call-arg]
+
+    def children(self) -> tuple[ViscosityLawBase, ...]:
+        return (self.law,)
+
+
 @dataclass(frozen=True)
-class Weakened(ViscosityLawBase):
+class WeakenedSettings:
+    law: LawSettings = param(kind="law", help="the law weakened")
+    weakening: Weakening = param(kind="weakening", help="{field, start, end, factor}")
+
+
+@dataclass(frozen=True)
+class Weakened(_OfOneLaw):
     name: ClassVar[str] = "weakened"
     description: ClassVar[str] = "eta = w(e) eta_law: a viscous law weakened linearly by an accumulated strain e"
-    law: Any = law_param("law", help="the law weakened")
-    weakening: Any = law_param("weakening", help="{field, start, end, factor}")
-
-    def children(self) -> tuple[ViscosityLawBase, ...]:
-        return (self.law,)
+    Settings: ClassVar[type] = WeakenedSettings
+    settings: WeakenedSettings
+    law: ViscosityLawBase
 
     def field_names(self) -> tuple[str, ...]:
-        return (self.weakening.field,)
+        return (self.settings.weakening.field,)
 
     def __call__(self, state: FlowState) -> Any:
-        return self.weakening(state) * self.law(state)
+        return self.settings.weakening(state) * self.law(state)
 
 
 @dataclass(frozen=True)
-class Damaged(ViscosityLawBase):
+class DamagedSettings:
+    law: LawSettings = param(kind="law", help="the law damaged")
+    field: str = param("damage", help="the damage field")
+    residual: float = param(1e-3, exclusive_minimum=0.0, maximum=1.0, help="the factor at full damage")
+
+
+@dataclass(frozen=True)
+class Damaged(_OfOneLaw):
     name: ClassVar[str] = "damaged"
     description: ClassVar[str] = "eta = max(1 - D, residual) eta_law: damage D in [0, 1] (a named field) weakens"
-    law: Any = law_param("law", help="the law damaged")
-    field: str = law_param("str", default="damage", help="the damage field")
-    residual: float = law_param(default=1e-3, exclusive_minimum=0.0, maximum=1.0,
-                             help="the factor at full damage")
-
-    def children(self) -> tuple[ViscosityLawBase, ...]:
-        return (self.law,)
+    Settings: ClassVar[type] = DamagedSettings
+    settings: DamagedSettings
+    law: ViscosityLawBase
 
     def field_names(self) -> tuple[str, ...]:
-        return (self.field,)
+        return (self.settings.field,)
 
     def __call__(self, state: FlowState) -> Any:
-        if self.field not in state.fields:
-            raise ValueError(f"viscosity law 'damaged' needs the mesh field {self.field!r}; "
-                             f"have {sorted(state.fields)}")
-        return ufl.max_value(1.0 - state.fields[self.field], self.residual) * self.law(state)
+        field = self.settings.field
+        if field not in state.fields:
+            raise ValueError(f"viscosity law 'damaged' needs the mesh field {field!r}; have {sorted(state.fields)}")
+        return ufl.max_value(1.0 - state.fields[field], self.settings.residual) * self.law(state)
 
 
 # ---------------------------------------------------------------------- yield laws
 class _Yield(ViscosityLawBase):
-    """A yield viscosity ``eta_star + sigma_y / (2 eps_II)`` (or ``/ |eps|``)."""
+    """A yield viscosity ``eta_star + sigma_y / (2 eps_II)`` (or ``/ |eps|``); its settings have
+    ``eta_star``, ``strain_rate_measure``, ``strain_rate_floor`` and ``weakening``."""
+
+    settings: Any
 
     def sigma_y(self, state: FlowState) -> Any:  # pragma: no cover - abstract
         raise NotImplementedError
 
     def __call__(self, state: FlowState) -> Any:
-        e = strain_rate_measure(state, self.strain_rate_measure, self.strain_rate_floor)
-        scale = STRAIN_RATE_MEASURES[self.strain_rate_measure].yield_scale
-        return self.eta_star + self.sigma_y(state) / (scale * e)
+        s = self.settings
+        e = strain_rate_measure(state, s.strain_rate_measure, s.strain_rate_floor)
+        scale = STRAIN_RATE_MEASURES[s.strain_rate_measure].yield_scale
+        return s.eta_star + self.sigma_y(state) / (scale * e)
 
     def inverse(self, state: FlowState) -> Any:
         """``1 / eta_y``, written so that it is 0 (and smooth) at rest."""
-        e = strain_rate_measure(state, self.strain_rate_measure, self.strain_rate_floor)
-        scale = STRAIN_RATE_MEASURES[self.strain_rate_measure].yield_scale
-        return scale * e / (self.eta_star * scale * e + self.sigma_y(state))
+        s = self.settings
+        e = strain_rate_measure(state, s.strain_rate_measure, s.strain_rate_floor)
+        scale = STRAIN_RATE_MEASURES[s.strain_rate_measure].yield_scale
+        return scale * e / (s.eta_star * scale * e + self.sigma_y(state))
 
     def field_names(self) -> tuple[str, ...]:
-        return (self.weakening.field,) if self.weakening is not None else ()
+        return (self.settings.weakening.field,) if self.settings.weakening is not None else ()
+
+
+_MEASURES = Names(STRAIN_RATE_MEASURES)
+_ETA_STAR = "viscosity added to the yield viscosity"
+_FLOOR = "the strain-rate measure is at least this"
+
+
+@dataclass(frozen=True)
+class VonMisesSettings:
+    yield_stress: float = param(exclusive_minimum=0.0, help="yield stress sigma_y")
+    eta_star: float = param(0.0, minimum=0.0, help=_ETA_STAR)
+    strain_rate_measure: str = param("second_invariant", choices=_MEASURES, help="eps_II or |eps|")
+    strain_rate_floor: float = param(DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0, help=_FLOOR)
+    weakening: Weakening | None = param(None, kind="weakening", help=WEAKENING_HELP + "; weakens the yield stress")
 
 
 @dataclass(frozen=True)
 class VonMises(_Yield):
     name: ClassVar[str] = "von_mises"
     description: ClassVar[str] = "eta_y = eta_star + sigma_y / (2 eps_II) (or / |eps|): a constant yield stress"
+    Settings: ClassVar[type] = VonMisesSettings
     uses: ClassVar[frozenset[str]] = frozenset({"strain_rate"})
-    yield_stress: float = law_param(exclusive_minimum=0.0, help="yield stress sigma_y")
-    eta_star: float = law_param(default=0.0, minimum=0.0, help="viscosity added to the yield viscosity")
-    strain_rate_measure: str = law_param("str", default="second_invariant", choices=tuple(STRAIN_RATE_MEASURES))
-    strain_rate_floor: float = law_param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0)
-    weakening: Any = law_param("weakening", default=None, help="{field, start, end, factor}: weakens the yield stress")
+    settings: VonMisesSettings
 
     def sigma_y(self, state: FlowState) -> Any:
-        sigma: Any = ufl.as_ufl(self.yield_stress)
-        if self.weakening is not None:
-            sigma = self.weakening(state) * sigma
+        sigma: Any = ufl.as_ufl(self.settings.yield_stress)
+        if self.settings.weakening is not None:
+            sigma = self.settings.weakening(state) * sigma
         return sigma
+
+
+@dataclass(frozen=True)
+class DruckerPragerSettings:
+    cohesion: float = param(minimum=0.0, help="cohesion C")
+    friction_angle: float = param(minimum=0.0, exclusive_maximum=90.0, help="friction angle phi in degrees")
+    lithostatic_gradient: float = param(0.0, minimum=0.0,
+                                        help="p' = p + this x depth: the lithostatic part of the pressure")
+    eta_star: float = param(0.0, minimum=0.0, help=_ETA_STAR)
+    strain_rate_measure: str = param("second_invariant", choices=_MEASURES, help="eps_II or |eps|")
+    strain_rate_floor: float = param(DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0, help=_FLOOR)
+    weakening: Weakening | None = param(None, kind="weakening", help=WEAKENING_HELP)
+    weaken: tuple[str, ...] = param(("cohesion", "friction_angle"), choices=("cohesion", "friction_angle"),
+                                    help="what the weakening scales")
 
 
 @dataclass(frozen=True)
@@ -539,35 +698,30 @@ class DruckerPrager(_Yield):
     name: ClassVar[str] = "drucker_prager"
     description: ClassVar[str] = ("eta_y = eta_star + sigma_y / (2 eps_II), sigma_y = C cos(phi) + max(p, 0) "
                                   "sin(phi) (2D; ASPECT's 3D form)")
+    Settings: ClassVar[type] = DruckerPragerSettings
     uses: ClassVar[frozenset[str]] = frozenset({"strain_rate", "pressure", "depth"})
-    cohesion: float = law_param(minimum=0.0, help="cohesion C")
-    friction_angle: float = law_param(minimum=0.0, exclusive_maximum=90.0, help="friction angle phi in degrees")
-    lithostatic_gradient: float = law_param(default=0.0, minimum=0.0,
-                                         help="p' = p + this x depth: the lithostatic part of the pressure")
-    eta_star: float = law_param(default=0.0, minimum=0.0, help="viscosity added to the yield viscosity")
-    strain_rate_measure: str = law_param("str", default="second_invariant", choices=tuple(STRAIN_RATE_MEASURES))
-    strain_rate_floor: float = law_param(default=DEFAULT_STRAIN_RATE_FLOOR, exclusive_minimum=0.0)
-    weakening: Any = law_param("weakening", default=None, help="{field, start, end, factor}")
-    weaken: tuple = law_param("list[str]", default=["cohesion", "friction_angle"],
-                           choices=("cohesion", "friction_angle"), help="what the weakening scales")
+    settings: DruckerPragerSettings
 
-    def check(self, key: str) -> None:
-        if self.cohesion == 0.0 and self.friction_angle == 0.0:
-            raise ConfigError(f"config key '{key}.cohesion': a zero cohesion needs a friction angle > 0")
+    @classmethod
+    def build(cls, settings: DruckerPragerSettings, context: LawContext, /) -> DruckerPrager:
+        if settings.cohesion == 0.0 and settings.friction_angle == 0.0:
+            raise ConfigError(f"config key '{context.key}.cohesion': a zero cohesion needs a friction angle > 0")
+        return cls(settings)
 
     def sigma_y(self, state: FlowState) -> Any:
         if state.pressure is None:
             raise ValueError("viscosity law 'drucker_prager' needs the pressure, which the caller did not provide")
-        w = self.weakening(state) if self.weakening is not None else None
-        cohesion: Any = ufl.as_ufl(self.cohesion)
-        phi: Any = ufl.as_ufl(math.radians(self.friction_angle))
-        if w is not None and "cohesion" in self.weaken:
+        s = self.settings
+        w = s.weakening(state) if s.weakening is not None else None
+        cohesion: Any = ufl.as_ufl(s.cohesion)
+        phi: Any = ufl.as_ufl(math.radians(s.friction_angle))
+        if w is not None and "cohesion" in s.weaken:
             cohesion = w * cohesion
-        if w is not None and "friction_angle" in self.weaken:
+        if w is not None and "friction_angle" in s.weaken:
             phi = w * phi
         pressure = state.pressure
-        if self.lithostatic_gradient:
-            pressure = pressure + self.lithostatic_gradient * state.depth
+        if s.lithostatic_gradient:
+            pressure = pressure + s.lithostatic_gradient * state.depth
         pressure = ufl.max_value(pressure, 0.0)
         if state.gdim == 3:
             return 6.0 * (cohesion * ufl.cos(phi) + pressure * ufl.sin(phi)) / (math.sqrt(3.0) * (3.0 + ufl.sin(phi)))
@@ -575,35 +729,47 @@ class DruckerPrager(_Yield):
 
 
 @dataclass(frozen=True)
+class ViscoPlasticSettings:
+    viscous: LawSettings = param(kind="law", help="the viscous law")
+    plastic: LawSettings = param(kind="law", help="a yield law: von_mises or drucker_prager")
+    combination: str = param("tosi", choices=Names(COMBINATIONS), help="how the two are combined")
+
+
+@dataclass(frozen=True)
 class ViscoPlastic(ViscosityLawBase):
     name: ClassVar[str] = "viscoplastic"
     description: ClassVar[str] = "a viscous law and a yield law combined: tosi (2/(1/a+1/b)), minimum or harmonic"
-    viscous: Any = law_param("law", help="the viscous law")
-    plastic: Any = law_param("law", help="a yield law: von_mises or drucker_prager")
-    combination: str = law_param("str", default="tosi", choices=tuple(COMBINATIONS))
+    Settings: ClassVar[type] = ViscoPlasticSettings
+    settings: ViscoPlasticSettings
+    viscous: ViscosityLawBase
+    plastic: ViscosityLawBase
 
-    def check(self, key: str) -> None:
-        if not isinstance(self.plastic, (_Yield, Bounded)) or (
-                isinstance(self.plastic, Bounded) and not isinstance(self.plastic.law, _Yield)):
-            raise ConfigError(f"config key '{key}.plastic': must be a yield law (von_mises or drucker_prager), "
-                              f"got {self.plastic.name!r}")
+    @classmethod
+    def build(cls, settings: ViscoPlasticSettings, context: LawContext, /) -> ViscoPlastic:
+        viscous = make_law(settings.viscous, context.at("viscous"))
+        plastic = make_law(settings.plastic, context.at("plastic"))
+        if not isinstance(plastic.law if isinstance(plastic, Bounded) else plastic, _Yield):
+            raise ConfigError(f"config key '{context.key}.plastic': must be a yield law (von_mises or "
+                              f"drucker_prager), got {plastic.name!r}")
+        return cls(settings, viscous, plastic)
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
         return (self.viscous, self.plastic)
 
     def __call__(self, state: FlowState) -> Any:
-        return COMBINATIONS[self.combination].combine(self.viscous(state), self.plastic, state)
+        return COMBINATIONS[self.settings.combination].combine(self.viscous(state), self.plastic, state)
 
 
 @dataclass(frozen=True)
 class Bounded(ViscosityLawBase):
-    """A law clipped to ``[min_viscosity, max_viscosity]`` (either may be None)."""
+    """A law clipped to ``[min_viscosity, max_viscosity]`` (either may be None): what
+    :func:`make_law` makes of a law with bounds (:class:`LawSettings`)."""
 
     name: ClassVar[str] = "bounded"
     description: ClassVar[str] = "a law clipped to [min_viscosity, max_viscosity] (any law's min_/max_viscosity keys)"
-    law: Any = law_param("law")
-    min_viscosity: Any = law_param(default=None, exclusive_minimum=0.0)
-    max_viscosity: Any = law_param(default=None, exclusive_minimum=0.0)
+    law: ViscosityLawBase
+    min_viscosity: float | None = None
+    max_viscosity: float | None = None
 
     def children(self) -> tuple[ViscosityLawBase, ...]:
         return (self.law,)
@@ -623,37 +789,7 @@ class Bounded(ViscosityLawBase):
 VISCOSITY_LAWS: Registry[type[ViscosityLawBase]] = Registry("viscosity law", (
     Constant, Exponential, Arrhenius, DepthTable, PowerLaw, Composite, VonMises, DruckerPrager, ViscoPlastic,
     Weakened, Damaged))
-"""Registry of viscosity laws (config name -> law class)."""
-
-
-def build_law(spec: Any, key: str) -> ViscosityLawBase:
-    """The law of the config value ``spec`` at config key ``key``: a positive number (constant
-    viscosity) or a mapping ``{name, parameters..., min_viscosity?, max_viscosity?}``.
-
-    Raises:
-        ConfigError: anything wrong, in one line naming the key.
-    """
-    if isinstance(spec, (int, float)) and not isinstance(spec, bool):
-        return Constant(eta0=_number(spec, key, {"exclusive_minimum": 0.0}))
-    if not isinstance(spec, dict):
-        raise ConfigError(f"config key '{key}': expected a viscosity (number) or a law {{name: ..., ...}}, "
-                          f"got {short_repr(spec)}")
-    if "name" not in spec:
-        raise ConfigError(f"config key '{key}.name': a viscosity law needs a name; valid: {sorted(VISCOSITY_LAWS)}")
-    name = spec["name"]
-    if not isinstance(name, str) or name not in VISCOSITY_LAWS:
-        raise ConfigError(f"config key '{key}.name': unknown viscosity law {short_repr(name)}; "
-                          f"valid: {sorted(VISCOSITY_LAWS)}")
-    params = {k: v for k, v in spec.items() if k not in ("name", "min_viscosity", "max_viscosity")}
-    law = VISCOSITY_LAWS[name].from_config(params, key)
-    bounds = {k: _number(spec[k], f"{key}.{k}", {"exclusive_minimum": 0.0})
-              for k in ("min_viscosity", "max_viscosity") if spec.get(k) is not None}
-    if bounds:
-        lo, hi = bounds.get("min_viscosity"), bounds.get("max_viscosity")
-        if lo is not None and hi is not None and not lo < hi:
-            raise ConfigError(f"config key '{key}.max_viscosity': must exceed min_viscosity, got {hi} <= {lo}")
-        law = Bounded(law=law, min_viscosity=lo, max_viscosity=hi)
-    return law
+"""Registry of viscosity laws (config name -> law class): ``VISCOSITY_LAWS.build(name, settings, context)``."""
 
 
 def yield_law(law: ViscosityLawBase) -> ViscoPlastic | None:

@@ -87,6 +87,12 @@ def test_invalid_yaml(tmp_path):
     (["materials.block.viscosity=-1e23 Pa s"],
      "config key 'materials.block.viscosity': expected a positive number or a law {name: ..., ...}, got -1e23 Pa s"),
     (["time.end=-3 Myr"], "config key 'time.end': must be > 0.0, got -3 Myr"),
+    # a viscosity law's parameter, nested laws included, at its key as written
+    (["materials.block.viscosity={name: power_law, n: 3, eta0: -1e23 Pa s}"],
+     "config key 'materials.block.viscosity.eta0': must be > 0.0, got -1e23 Pa s"),
+    (["materials.block.viscosity={name: composite, laws: [1e23 Pa s, {name: von_mises, yield_stress: 1 MPa, "
+      "weakening: {end: 0}}]}"],
+     "config key 'materials.block.viscosity.laws[1].weakening.end': must be > 0.5, got 0.0"),
     # a negative particle density is refused where it is, in the model's units (the run failed with exit 1)
     (["composition.source=particles",
       "particles.generator={name: random_density, num_particles: 100, density: 'z - 300*km', seed: 1}"],

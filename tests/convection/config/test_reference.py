@@ -92,7 +92,7 @@ def test_every_plugin_and_parameter_is_listed(markdown):
         for name, cls in registry.items():
             entry = _section(text, f"#### `{name}`")
             assert cls.description[1:] in entry
-            for f in dataclasses.fields(getattr(cls, "Settings", cls)):  # the one shape, or a law's dataclass
+            for f in dataclasses.fields(getattr(cls, "Settings", cls)):  # a plugin's parameters: its Settings
                 if f.init and not f.name.startswith("_"):
                     assert re.search(rf"^\| `{f.name}` \|", entry, re.M), f"{title} {name}: {f.name} missing"
         if title == "Viscosity laws":

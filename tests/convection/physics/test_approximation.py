@@ -96,7 +96,7 @@ def test_numbers_are_constant_laws_of_one_path(mesh):
 
     region = lambda x: x[0] < 0.5  # noqa: E731
     alone = Materials((Material("a", region),), background_viscosity=5.0).viscosity_law()
-    assert alone.laws == (Constant(5.0), Constant(5.0)) and alone.numbers == (5.0, 5.0) and alone.is_constant
+    assert alone.laws == (Constant.of(5.0), Constant.of(5.0)) and alone.numbers == (5.0, 5.0) and alone.is_constant
     assert _value(mesh, alone(0.0, 0.5)) == pytest.approx(5.0, rel=1e-14)
     law = ViscosityLaw((0.1, 1.0))
     assert law.numbers == (0.1, 1.0) and not law.is_constant

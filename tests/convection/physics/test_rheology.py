@@ -3,7 +3,9 @@ nonlinear Stokes solve (Picard and Newton) on a Tosi-like viscoplastic problem."
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import types
 
 import numpy as np
 import pytest
@@ -16,7 +18,9 @@ import dolfinx.mesh
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.geometry.boundary import VelocityBC
 from convection.config.loader import load_config
-from convection.physics.rheology import VISCOSITY_LAWS, FlowState, build_law, weakening_factor
+from convection.physics.rheology import (
+    VISCOSITY_LAWS, FlowState, LawContext, build_law, law_settings, make_law, weakening_factor, yield_law,
+)
 from convection.schema import ConfigError
 from convection.solvers.stokes.solver import StokesSolver
 from convection.solvers.stokes.nonlinear import NonlinearSettings, NonlinearSolveError
@@ -110,6 +114,28 @@ def test_every_law_is_registered_with_a_description():
         assert cls.description and "\n" not in cls.description
 
 
+def test_every_law_is_a_plugin_of_the_one_shape():
+    """A law declares its parameters once (``Settings``, fields made by ``param`` with their help:
+    the config reference and ``check`` read them there) and is built through the registry."""
+    for name, cls in VISCOSITY_LAWS.items():
+        fields = dataclasses.fields(cls.Settings)
+        assert fields and cls.Settings.__dataclass_params__.frozen, name
+        assert all(f.metadata["schema"]["help"] for f in fields), name
+        assert isinstance(cls.build, types.MethodType) and cls.build.__self__ is cls, name
+    spec = {"name": "viscoplastic", "viscous": {"name": "composite", "laws": [2.0, {"name": "power_law", "n": 3}]},
+            "plastic": {"name": "von_mises", "yield_stress": 1.0, "max_viscosity": 5.0}, "min_viscosity": 0.1}
+    settings = law_settings(spec, "law")
+    assert settings.settings.plastic.max_viscosity == 5.0 and settings.min_viscosity == 0.1
+    assert settings.settings.viscous.settings.laws[1].settings.n == 3.0  # checked, nested, typed
+    built = make_law(settings, LawContext("law"))
+    assert built == build_law(spec, "law") and yield_law(built) is not None
+    assert built.is_nonlinear and built.depends_on == {"strain_rate"}
+    with pytest.raises(TypeError, match="Constant takes a ConstantSettings, got float"):
+        VISCOSITY_LAWS["constant"](5.0)
+    assert VISCOSITY_LAWS.build("constant", settings.settings.viscous.settings.laws[0].settings,
+                                LawContext("x")).constant_value() == 2.0
+
+
 TOSI = {"name": "viscoplastic", "viscous": {"name": "exponential", "gamma_T": 11.5},
         "plastic": {"name": "von_mises", "yield_stress": 1.0, "eta_star": 1e-3}}
 
@@ -126,6 +152,25 @@ TOSI = {"name": "viscoplastic", "viscous": {"name": "exponential", "gamma_T": 11
     ("physics.viscosity.law.plastic={name: exponential}", "physics.viscosity.law.plastic", "must be a yield law"),
     ("physics.viscosity.law.combination=mean", "physics.viscosity.law.combination", "is not one of"),
     ("physics.viscosity.temperature_law=frank_kamenetskii", "physics.viscosity.temperature_law", "not with"),
+    ("physics.viscosity.law.plastic={name: drucker_prager, cohesion: 1, friction_angle: 90}",
+     "physics.viscosity.law.plastic.friction_angle", "must be < 90"),
+    ("physics.viscosity.law.plastic={name: drucker_prager, cohesion: 1}",
+     "physics.viscosity.law.plastic.friction_angle", "required by viscosity law 'drucker_prager' (friction angle"),
+    ("physics.viscosity.law={name: composite, laws: [1, {name: power_law, n: -1}]}",
+     "physics.viscosity.law.laws[1].n", "must be > 0"),
+    ("physics.viscosity.law={name: weakened, law: 1, weakening: null}", "physics.viscosity.law.weakening",
+     "must not be null"),
+    ("physics.viscosity.law.plastic.weakening={start: 1, end: 0.5}", "physics.viscosity.law.plastic.weakening.end",
+     "must be > 1.0"),
+    ("physics.viscosity.law.plastic.weakening={foo: 1}", "physics.viscosity.law.plastic.weakening.foo",
+     "not a weakening parameter"),
+    ("physics.viscosity.law={name: depth_table, table: [[0, 1], [a, 2]]}", "physics.viscosity.law.table[1][0]",
+     "expected a number"),
+    ("physics.viscosity.law.viscous={name: arrhenius, E: 1, T_ref: -1}", "physics.viscosity.law.viscous.T_offset",
+     "T_ref + T_offset must be > 0"),
+    ("physics.viscosity.law.max_viscosity=-1", "physics.viscosity.law.max_viscosity", "must be > 0"),
+    ("physics.viscosity.law={name: constant, min_viscosity: 2, max_viscosity: 1}",
+     "physics.viscosity.law.max_viscosity", "must exceed min_viscosity"),
     ("stokes.nonlinear.method=quasi", "stokes.nonlinear.method", ""),
 ])
 def test_bad_rheology_parameters_fail_at_config_time_in_one_line(override, key, words):

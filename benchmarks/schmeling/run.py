@@ -90,13 +90,17 @@ def _fmt(value: float, digits: int = 0) -> str:
 
 
 def _label(run_dir: Path) -> str:
+    """``this project NXxNZ``, with ``+L`` for a mesh adapted up to L levels finer."""
+    import yaml
+
     config = run_dir / "config.yaml"
-    cells = ""
-    if config.exists():
-        for line in config.read_text().splitlines():
-            if line.strip().startswith("cells:"):
-                cells = line.split(":", 1)[1].strip().strip("[]").replace(", ", "x").replace(",", "x")
-    return f"this project {cells or run_dir.name}"
+    if not config.exists():
+        return f"this project {run_dir.name}"
+    data = yaml.safe_load(config.read_text())
+    cells = "x".join(str(n) for n in data["mesh"]["cells"])
+    adaptivity = data.get("adaptivity") or {}
+    levels = f"+{adaptivity['max_level']}" if adaptivity.get("enabled") else ""
+    return f"this project {cells}{levels}"
 
 
 def _cost(run_dir: Path) -> str:

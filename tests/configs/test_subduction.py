@@ -31,7 +31,13 @@ def test_subduction_in_units(tmp_path):
     times = [float(r["time [Myr]"]) for r in rows]
     assert times == sorted(times) and times[-1] > 0.0
     tip = [float(r["depth_lithosphere [km]"]) - 50.0 for r in rows]
-    assert tip[0] == pytest.approx(200.0, abs=25.0)  # 25 km cells
+    # The slab's end (200 km) lies on a cell row's edge at 25 km cells: the deepest cell the
+    # lithosphere fills at least half is a triangle whose centroid is a third of a cell higher.
+    assert tip[0] == pytest.approx(200.0 - 25.0 / 3.0, abs=1e-6)
+    # Every cell is one material at the start (the edges lie on the mesh's lines): the linear fits
+    # are the constants 0 and 1, and the volumes are the polygons' areas.
+    assert float(rows[0]["volume_lithosphere [km^2]"]) == pytest.approx(2000 * 100 + 100 * 100, rel=1e-9)
+    assert float(rows[0]["volume_air [km^2]"]) == pytest.approx(3000 * 50, rel=1e-9)
     assert all(float(r["vup_lithosphere [cm/yr]"]) < 0.0 for r in rows)  # the plate and slab sink on average
     assert float(rows[0]["topography_max [km]"]) == pytest.approx(0.0, abs=1e-6)  # the surface starts flat
     # the benchmark's table and picture from this run (benchmarks/schmeling/run.py --collect)

@@ -62,7 +62,7 @@ from particles.generation import GENERATORS, GenerationResult, Generator, Genera
 from particles.interpolation import INTERPOLATORS, CellAverage, Interpolator, InterpolatorContext
 from particles.parallel.migration import migrate
 from particles.relocation.moving_mesh import FollowStats, follow_mesh
-from particles.io.output import PARTICLE_WRITERS, OutputRecord, OutputUnits, ParticleWriter
+from particles.io.output import PARTICLE_WRITERS, OutputRecord, OutputUnits, ParticleWriter, ParticleWriterContext
 from particles.population.control import PopulationControl, PopulationStats, copy_nearest
 from particles.settings import ParticleSettings, particle_settings
 from particles.properties import PROPERTIES, ParticleProperty, PropertyBuildContext, PropertyContext, PropertyManager
@@ -250,9 +250,7 @@ def _config_arguments(section: Mapping[str, Any] | ParticleSettings, mesh: dolfi
     if schedule.enabled:
         if directory is None:
             raise ValueError("particle output needs an output directory")
-        writer = PARTICLE_WRITERS.lookup(out.format)(
-            directory, name=name, properties=None if out.properties is None else list(out.properties),
-            every_nth=out.every_nth, units=output_units)
+        writer = PARTICLE_WRITERS.build(out.format, out, ParticleWriterContext(directory, name, output_units))
     return {"generator": generator, "integrator": settings.integrator, "properties": properties,
             "interpolator": interpolator, "population": population, "writer": writer, "output": schedule}
 

@@ -5,7 +5,8 @@ defaults of :meth:`particles.manager.ParticleManager.from_config`, and ``convect
 loader turns them into the schema of its ``particles`` section (and its config reference), so
 the two cannot drift apart. Names are checked against the registries
 (:data:`particles.advection.INTEGRATORS`, :data:`particles.io.output.PARTICLE_WRITERS`), read when a
-config is checked.
+config is checked. The ``output`` subsection is the particle writers' settings, declared with them
+(:class:`particles.io.output.ParticleOutputSettings`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from fembase.params import MAX_ENTRIES, Names, param, settings_from, short_repr, subsection
+from particles.io.output import ParticleOutputSettings
 
 __all__ = ["ParticleOutputSettings", "ParticleSettings", "PopulationSettings", "particle_settings"]
 
@@ -46,19 +48,6 @@ class PopulationSettings:
     def enabled(self) -> bool:
         """Whether the bounds ask for anything (a minimum above 0 or a maximum)."""
         return bool(self.min_per_cell) or self.max_per_cell is not None
-
-
-@dataclass(frozen=True)
-class ParticleOutputSettings:
-    """When and what particle output is written (:mod:`particles.io.output`)."""
-
-    every_steps: int | None = param(None, minimum=1, help="write particles every N steps")
-    every_time: float | None = param(None, exclusive_minimum=0.0,
-                                     help="write particles at the first step after every multiple of this time")
-    properties: tuple[str, ...] | None = param(None, help="properties written (null: all)")
-    every_nth: int = param(1, minimum=1, help="write only particles with id % every_nth == 0")
-    format: str = param("xdmf", choices=_names("particles.io.output", "PARTICLE_WRITERS"),
-                        help="the particles' file format")
 
 
 @dataclass(frozen=True)

@@ -154,3 +154,35 @@ if name == "multigrid" or bc.value == "free_slip" or bc.kind == "traction":
     pass
 '''
     assert sorted(line for line, _ in dispatch_outside_registries(source, registries)) == [2, 4, 7]
+
+
+SHAPED = ("convection.model.composition:COMPOSITION_SOURCES", "convection.postprocess.postprocessors:POSTPROCESSORS",
+          "convection.io.fields:FIELD_WRITERS", "particles.io.output:PARTICLE_WRITERS",
+          "convection.geometry.registry:DOMAINS", "convection.physics.rheology:VISCOSITY_LAWS",
+          "particles.generation:GENERATORS", "particles.interpolation:INTERPOLATORS",
+          "particles.properties:PROPERTIES")
+"""The registries whose families have the one plugin shape (docs/developers.md, "The one plugin
+shape"): a family that gets it joins the list, none leaves it."""
+
+
+def test_shaped_families_have_settings_and_build():
+    """Every entry of a shaped family has a frozen ``Settings`` dataclass whose fields are made by
+    ``param`` (or ``subsection``) and a classmethod ``build(settings, context)``, and none keeps an
+    older constructor (``create``, ``from_settings``) beside it."""
+    import dataclasses
+    import inspect
+
+    wrong = []
+    for where in SHAPED:
+        module, name = where.split(":")
+        for entry_name, entry in getattr(importlib.import_module(module), name).items():
+            settings = getattr(entry, "Settings", None)
+            if not (dataclasses.is_dataclass(settings) and settings.__dataclass_params__.frozen):
+                wrong.append(f"{name}[{entry_name!r}].Settings is not a frozen dataclass")
+            elif any(not ({"schema", "section"} & set(f.metadata)) for f in dataclasses.fields(settings)):
+                wrong.append(f"{name}[{entry_name!r}].Settings has fields not made by param")
+            if not isinstance(inspect.getattr_static(entry, "build", None), classmethod):
+                wrong.append(f"{name}[{entry_name!r}] has no classmethod build(settings, context)")
+            wrong += [f"{name}[{entry_name!r}] keeps {old}()" for old in ("create", "from_settings")
+                      if hasattr(entry, old)]
+    assert not wrong, wrong

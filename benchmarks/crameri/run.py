@@ -38,7 +38,7 @@ from mpi4py import MPI
 from benchmarks.harness import Benchmark
 from convection import load_config, run_config
 from convection.postprocess import POSTPROCESSORS
-from convection.postprocess.base import DiagnosticsSettings
+from convection.postprocess.base import DiagnosticsSettings, PostprocessorContext
 from convection.postprocess.geodynamics import Topography
 
 HERE = Path(__file__).resolve().parent
@@ -61,9 +61,8 @@ class CosineTopography(Topography):
     quantities: ClassVar[dict[str, str]] = {"topography_cos1": "length"}
 
     @classmethod
-    def create(cls, model: Any, options: Any) -> CosineTopography | None:
-        settings = options.get("diagnostics") or DiagnosticsSettings()
-        names = [f.name for f in model.fractions]
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> CosineTopography | None:
+        names = [f.name for f in context.model.fractions]
         return cls(names.index(settings.topography_material)) if settings.topography_material in names else None
 
     def __call__(self, model: Any, /) -> dict[str, float]:

@@ -38,6 +38,7 @@ from benchmarks.harness import Benchmark
 from benchmarks.crameri import run as STICKY  # the sticky-air runs, the published rate and the fit
 from convection import load_config, run_config
 from convection.postprocess import POSTPROCESSORS
+from convection.postprocess.base import DiagnosticsSettings, PostprocessorContext
 from convection.postprocess.geodynamics import FreeSurfaceTopography
 
 HERE = Path(__file__).resolve().parent
@@ -56,8 +57,8 @@ class CosineSurface(FreeSurfaceTopography):
     quantities: ClassVar[dict[str, str]] = {"topography_cos1": "length"}
 
     @classmethod
-    def create(cls, model: Any, options: Any) -> CosineSurface | None:
-        return cls(0) if model.free_surface is not None else None
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> CosineSurface | None:
+        return cls(0) if context.model.free_surface is not None else None
 
     def __call__(self, model: Any, /) -> dict[str, float]:
         x, h = self._surface(model)

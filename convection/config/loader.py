@@ -55,7 +55,8 @@ from convection.adapt.rebalance import BALANCE_STRATEGIES, BalanceSettings
 from convection.deform.surface import FreeSurfaceSettings, check_free_surface
 from convection.model.composition import COMPOSITION_SOURCES, CompositionSettings
 from convection.postprocess.postprocessors import DiagnosticsSettings, ModelFeatures, check_statistics
-from convection.run.loop import BlowUp, OutputSettings, TimeSettings
+from convection.io.fields import OutputSettings
+from convection.run.loop import BlowUp, TimeSettings
 from convection.schema import (
     MAX_ENTRIES, ConfigError, Field, Names, check_document_shape, key_text, section_schema,
     settings_from, short_repr, validate,

@@ -35,9 +35,9 @@ class InitialSettings:
 
 def mesh_section(section: Mapping[str, Any], /) -> MeshSection:
     """The typed ``mesh`` section of a resolved config: its geometry's keys as that geometry's
-    :attr:`~convection.geometry.domain.Domain.mesh_settings` (the other geometries' keys left out)."""
+    :attr:`~convection.geometry.domain.Domain.Settings` (the other geometries' keys left out)."""
     geometry = section["geometry"]
-    return MeshSection(geometry, settings_from(DOMAINS.lookup(geometry).mesh_settings, section), section["max_cells"])
+    return MeshSection(geometry, settings_from(DOMAINS.lookup(geometry).Settings, section), section["max_cells"])
 
 
 def boundary_settings(section: Mapping[str, Any], /) -> BoundarySettings:

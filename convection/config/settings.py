@@ -35,7 +35,8 @@ from convection.physics.approximation import PhysicsSettings
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import Scaling, ScalingSettings
 from convection.postprocess.base import DiagnosticsSettings
-from convection.run.loop import BlowUp, LoopSettings, OutputSettings, TimeSettings
+from convection.io.fields import OutputSettings
+from convection.run.loop import BlowUp, LoopSettings, TimeSettings
 from convection.schema import settings_from
 from convection.solvers.stokes.solver import StokesSettings
 from convection.solvers.transport import EnergySettings

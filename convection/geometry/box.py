@@ -23,7 +23,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from convection.geometry.domain import Columns, Domain, MeshSection, kept_facets, safe_product
+from convection.geometry.domain import Columns, Domain, DomainContext, MeshSection, kept_facets, safe_product
 from convection.geometry.gravity import VerticalGravity
 from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
 from convection.schema import ConfigError, param
@@ -204,7 +204,7 @@ class BoxDomain(Domain):
 
     name: ClassVar[str] = "box"
     description: ClassVar[str] = "axis-aligned box [lower, upper] with `cells` per direction (2D or 3D)"
-    mesh_settings: ClassVar[type] = BoxMeshSettings
+    Settings: ClassVar[type] = BoxMeshSettings
     config_boundaries: ClassVar[tuple[str, ...]] = SIDES_3D
     size_key: ClassVar[str] = "cells"
     boundary_descriptions: ClassVar[dict[str, str]] = {
@@ -238,8 +238,8 @@ class BoxDomain(Domain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_settings(cls, mesh: MeshSection, /) -> BoxDomain:
-        return cls.from_spec(BoxSpec.from_settings(mesh.keys))
+    def build(cls, settings: BoxMeshSettings, context: DomainContext, /) -> BoxDomain:
+        return cls.from_spec(BoxSpec.from_settings(settings))
 
     @classmethod
     def config_gdim(cls, mesh: MeshSection, /) -> int:

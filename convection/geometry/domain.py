@@ -9,8 +9,9 @@ cells), how particles are kept inside, the probe points at which a config's expr
 checked, and the checks and the cell estimate of its config section.
 
 A geometry is one subclass registered in :data:`convection.geometry.registry.DOMAINS` (box,
-annulus, spherical shell, sector). ``mesh.geometry`` in a config names it; its
-:meth:`Domain.from_config` reads the ``mesh`` section.
+annulus, spherical shell, sector), in the one plugin shape (docs/developers.md): its ``Settings``
+declare its keys of the ``mesh`` section, and ``build(settings, context)`` makes the domain (with a
+:class:`DomainContext`). ``mesh.geometry`` in a config names it.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import dolfinx
 import numpy as np
@@ -31,7 +32,7 @@ from petsc4py import PETSc
 from convection.geometry.gravity import Gravity
 from fembase.dolfinx_compat import DirichletBC
 
-__all__ = ["Columns", "Domain", "MeshSection", "keep_boundary_facets", "kept_facets", "safe_product"]
+__all__ = ["Columns", "Domain", "DomainContext", "MeshSection", "keep_boundary_facets", "kept_facets", "safe_product"]
 
 _KEPT_FACETS = "_convection_kept_facets"
 _FACET_TAGS = "_convection_facet_tags"
@@ -84,7 +85,7 @@ class MeshSection:
 
     Attributes:
         geometry: The geometry's name (a key of :data:`convection.geometry.registry.DOMAINS`).
-        keys: The geometry's own keys: an instance of its :attr:`Domain.mesh_settings`.
+        keys: The geometry's own keys: an instance of its :attr:`Domain.Settings`.
         max_cells: The most cells a run's mesh may reach.
     """
 
@@ -93,16 +94,21 @@ class MeshSection:
     max_cells: int
 
 
+class DomainContext(NamedTuple):
+    """What a domain is made from beside its settings: nothing yet (a geometry is made from its
+    ``mesh`` keys alone; one that needs more, such as the folder of a mesh file, adds it here)."""
+
+
 class Domain(ABC):
     """What a run needs to know about its domain (see the module docstring).
 
     Class attributes:
         name: The ``mesh.geometry`` name.
         description: One line for the config reference.
-        mesh_settings: The settings dataclass declaring the ``mesh`` section keys this geometry
+        Settings: The settings dataclass declaring the ``mesh`` section keys this geometry
             reads besides ``geometry`` and ``max_cells`` (:func:`convection.schema.param` fields;
             the config schema is made from it).
-        config_keys: Their names (from ``mesh_settings``); a config's other keys are refused.
+        config_keys: Their names (from ``Settings``); a config's other keys are refused.
         config_boundaries: The boundary names the ``boundary`` sections of its configs hold.
         size_key: The ``mesh`` key that sets the base mesh's size (named when a mesh is too large).
         boundary_descriptions: Where each of ``config_boundaries`` is (config reference).
@@ -118,7 +124,7 @@ class Domain(ABC):
 
     name: ClassVar[str]
     description: ClassVar[str]
-    mesh_settings: ClassVar[type]
+    Settings: ClassVar[type]
     config_keys: ClassVar[tuple[str, ...]]
     config_boundaries: ClassVar[tuple[str, ...]]
     size_key: ClassVar[str] = "resolution"
@@ -130,8 +136,8 @@ class Domain(ABC):
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        if "mesh_settings" in cls.__dict__:
-            cls.config_keys = tuple(f.name for f in dataclasses.fields(cls.mesh_settings))
+        if "Settings" in cls.__dict__:
+            cls.config_keys = tuple(f.name for f in dataclasses.fields(cls.Settings))
 
     gdim: int
     boundaries: tuple[str, ...]
@@ -139,8 +145,9 @@ class Domain(ABC):
     # ------------------------------------------------------------------ config
     @classmethod
     @abstractmethod
-    def from_settings(cls, mesh: MeshSection, /) -> Domain:
-        """The domain of a checked ``mesh`` section (checked by :meth:`check_config`)."""
+    def build(cls, settings: Any, context: DomainContext, /) -> Domain:
+        """The domain of a checked ``mesh`` section's keys (a ``Settings``, checked by
+        :meth:`check_config`)."""
 
     @classmethod
     @abstractmethod

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from convection.geometry.box import BoxDomain
-from convection.geometry.domain import Domain, MeshSection
+from convection.geometry.domain import Domain, DomainContext, MeshSection
 from convection.geometry.sector import Sector
 from convection.geometry.shell import Annulus, SphericalShell
 from convection.schema import Names, param, section_schema
@@ -32,7 +32,7 @@ class MeshSettings:
 
 def mesh_section_schema() -> dict[str, Any]:
     """The ``mesh`` config section: ``geometry``, every geometry's keys
-    (:attr:`~convection.geometry.domain.Domain.mesh_settings`, in the order of :data:`DOMAINS`,
+    (:attr:`~convection.geometry.domain.Domain.Settings`, in the order of :data:`DOMAINS`,
     a key shared by several geometries once), then ``max_cells``.
 
     Raises:
@@ -41,7 +41,7 @@ def mesh_section_schema() -> dict[str, Any]:
     common = section_schema(MeshSettings)
     out = {"geometry": common["geometry"]}
     for cls in DOMAINS.values():
-        for key, field in section_schema(cls.mesh_settings).items():
+        for key, field in section_schema(cls.Settings).items():
             if out.setdefault(key, field) != field:
                 raise ValueError(f"mesh key {key!r} is declared differently by the {cls.name!r} geometry")
     out["max_cells"] = common["max_cells"]
@@ -49,8 +49,8 @@ def mesh_section_schema() -> dict[str, Any]:
 
 
 def domain_from_settings(mesh: MeshSection, /) -> Domain:
-    """The domain of a typed ``mesh`` section."""
-    return DOMAINS.lookup(mesh.geometry).from_settings(mesh)
+    """The domain of a typed ``mesh`` section, built through :data:`DOMAINS`."""
+    return DOMAINS.build(mesh.geometry, mesh.keys, DomainContext())
 
 
 def boundary_descriptions() -> dict[str, str]:

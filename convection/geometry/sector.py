@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from convection.geometry.domain import MeshSection, kept_facets, safe_product
+from convection.geometry.domain import DomainContext, MeshSection, kept_facets, safe_product
 from convection.geometry.mesh import gmsh_mesh, mesh_uniformly
 from convection.geometry.radial import RadialDomain, RadialMeshSettings, check_radial_section, shell_radii
 from convection.schema import ConfigError, param
@@ -139,7 +139,7 @@ class Sector(RadialDomain):
     name: ClassVar[str] = "sector"
     description: ClassVar[str] = ("2D cylindrical sector (ASPECT's 2D chunk) between two radii and two angles "
                                   "(gmsh, curved cells)")
-    mesh_settings: ClassVar[type] = SectorMeshSettings
+    Settings: ClassVar[type] = SectorMeshSettings
     config_boundaries: ClassVar[tuple[str, ...]] = SECTOR_BOUNDARIES
     boundary_descriptions: ClassVar[dict[str, str]] = {
         "inner": "the inner surface r = r_inner", "outer": "the outer surface r = r_outer",
@@ -149,8 +149,8 @@ class Sector(RadialDomain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_settings(cls, mesh: MeshSection, /) -> Sector:
-        return cls(SectorSpec.from_settings(mesh.keys))
+    def build(cls, settings: SectorMeshSettings, context: DomainContext, /) -> Sector:
+        return cls(SectorSpec.from_settings(settings))
 
     @classmethod
     def config_gdim(cls, mesh: MeshSection, /) -> int:

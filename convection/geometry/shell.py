@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from convection.geometry.domain import MeshSection, safe_product
+from convection.geometry.domain import DomainContext, MeshSection, safe_product
 from convection.geometry.mesh import gmsh_mesh, mesh_uniformly
 from convection.geometry.radial import (
     RadialDomain, RadialMeshSettings, check_radial_section, shell_confinement, shell_radii,
@@ -77,10 +77,10 @@ class ShellSpec:
                 raise ValueError(f"interface radius {r} is not between the inner and outer radii")
 
     @classmethod
-    def from_settings(cls, mesh: MeshSection, /) -> ShellSpec:
-        """The shell of a checked ``mesh`` section."""
-        keys = mesh.keys
-        gdim = 2 if mesh.geometry == "annulus" else 3
+    def from_settings(cls, keys: RadialMeshSettings, gdim: int, /) -> ShellSpec:
+        """The shell of dimension ``gdim`` of a checked ``mesh`` section's keys."""
+        if keys.resolution is None:
+            raise ValueError("a shell needs a resolution (mesh.resolution)")
         inner, outer = (float(r) for r in keys.radii)
         return cls(gdim, inner, outer, float(keys.resolution), int(keys.geometry_degree))
 
@@ -140,7 +140,7 @@ class ShellDomain(RadialDomain):
 
     name: ClassVar[str] = "shell"
     description: ClassVar[str] = "annulus or spherical shell r_inner <= |x| <= r_outer around the origin (gmsh)"
-    mesh_settings: ClassVar[type] = RadialMeshSettings
+    Settings: ClassVar[type] = RadialMeshSettings
     config_boundaries: ClassVar[tuple[str, ...]] = SHELL_BOUNDARIES
     boundary_descriptions: ClassVar[dict[str, str]] = {"inner": "the inner surface r = r_inner",
                                                          "outer": "the outer surface r = r_outer"}
@@ -148,8 +148,8 @@ class ShellDomain(RadialDomain):
 
     # ------------------------------------------------------------------ config
     @classmethod
-    def from_settings(cls, mesh: MeshSection, /) -> ShellDomain:
-        return cls(ShellSpec.from_settings(mesh))
+    def build(cls, settings: RadialMeshSettings, context: DomainContext, /) -> ShellDomain:
+        return cls(ShellSpec.from_settings(settings, _DIMENSIONS[cls.name]))
 
     @classmethod
     def config_gdim(cls, mesh: MeshSection, /) -> int:

@@ -17,6 +17,11 @@ locks a file that is open for writing, and only a closed file is complete on dis
 
 A model in physical units writes coordinates, times and fields in its output units
 (:mod:`convection.io.output_units`) and names them in ``fields_units.json``.
+
+A field output format has the one plugin shape (docs/developers.md): its ``Settings`` are the
+``output`` section (:class:`OutputSettings`, which names it in ``output.fields_format``), and
+``build(settings, context)`` makes it with a :class:`FieldWriterContext`; it is made only through
+:data:`FIELD_WRITERS`.
 """
 
 from __future__ import annotations
@@ -24,7 +29,8 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from collections.abc import Mapping
-from typing import ClassVar, Protocol
+from dataclasses import dataclass
+from typing import ClassVar, NamedTuple, Protocol
 
 import dolfinx.fem
 import dolfinx.io
@@ -32,22 +38,64 @@ import dolfinx.mesh
 import numpy as np
 from mpi4py import MPI
 
+from convection.io.checkpoint import CheckpointSettings
 from convection.io.output_units import OutputUnits
+from convection.io.run_folder import check_output_directory
+from convection.postprocess.postprocessors import POSTPROCESSORS
+from convection.schema import REQUIRED, Names, param, subsection
 from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
 from fembase.registry import Registry
 from fembase.xdmf import XdmfSeries, declare_types, grid_time
 
-__all__ = ["FIELD_WRITERS", "FieldOutput", "FieldWriter"]
+__all__ = ["FIELD_WRITERS", "PROGRESS_MODES", "FieldOutput", "FieldWriter", "FieldWriterContext", "OutputSettings"]
+
+PROGRESS_MODES = ("auto", "bar", "lines", "none")
+"""The ``output.progress`` displays (:class:`convection.run.progress.Progress`)."""
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """The ``output`` config section: the run folder and what is written into it, when."""
+
+    directory: str = param(REQUIRED, check=check_output_directory,
+                           help="output folder (statistics.csv, fields, config)")
+    fields_every: int = param(10, minimum=0, help="write the fields every K steps (0 = only at the end)")
+    fields_format: str = param("xdmf", choices=Names(lambda: FIELD_WRITERS), help="the fields' file format")
+    statistics: tuple[str, ...] | None = param(None, choices=Names(POSTPROCESSORS),
+                                               help="postprocessors whose columns statistics.csv holds (null: all "
+                                                    "that apply)")
+    checkpoint: CheckpointSettings = subsection(CheckpointSettings)
+    progress: str = param("auto", choices=PROGRESS_MODES,
+                          help="progress display: a bar on a terminal, lines in a log (auto: by stdout), or none")
+    progress_every: int = param(10, minimum=1, help="steps between progress lines")
+
+
+class FieldWriterContext(NamedTuple):
+    """What a field writer is made from, beside its settings (the ``output`` section, whose
+    ``directory`` it writes into).
+
+    Attributes:
+        resume_after: Continue the series already in the directory after this time (a resumed
+            run); None: a new series.
+        units: Write in these units (a model in physical units); None: the solver's numbers.
+    """
+
+    resume_after: float | None = None
+    units: OutputUnits | None = None
 
 
 class FieldWriter(Protocol):
     """A field output format (collective): writes named Functions of one mesh at a time (the mesh
-    may change between calls) and closes its files. An implementation is a class with ``name`` and
-    ``description``, made with ``(directory, /, *, resume_after, units)`` (see :class:`FieldOutput`)
-    and registered in :data:`FIELD_WRITERS`."""
+    may change between calls) and closes its files. An implementation is a class with ``name``,
+    ``description``, ``Settings`` (:class:`OutputSettings`) and ``build(settings, context)`` (see
+    :class:`FieldOutput`), registered in :data:`FIELD_WRITERS`."""
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type]
+
+    @classmethod
+    def build(cls, settings: OutputSettings, context: FieldWriterContext, /) -> FieldWriter: ...
 
     def write(self, functions: Mapping[str, dolfinx.fem.Function], t: float) -> None: ...
 
@@ -83,6 +131,12 @@ class FieldOutput:
     name: ClassVar[str] = "xdmf"
     description: ClassVar[str] = ("XDMF/HDF5 per mesh and one time series over all meshes (fields.xdmf; what the "
                                   "pictures read)")
+    Settings: ClassVar[type] = OutputSettings
+
+    @classmethod
+    def build(cls, settings: OutputSettings, context: FieldWriterContext, /) -> FieldOutput:
+        """The output into ``settings.directory`` (``fields*.xdmf``)."""
+        return cls(settings.directory, resume_after=context.resume_after, units=context.units)
 
     def __init__(self, directory: str | Path, /, *, prefix: str = "fields", resume_after: float | None = None,
                  units: OutputUnits | None = None) -> None:

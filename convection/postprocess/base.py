@@ -1,13 +1,14 @@
 """What every postprocessor is made of: the protocol, the features of a model that decide which
 apply (:class:`ModelFeatures`, also made from a config so that ``check`` refuses a statistic that
-cannot be measured), the options section (:class:`DiagnosticsSettings`) and the helpers of the
-column classes (:class:`Column`, :class:`Forms`, :func:`integral`)."""
+cannot be measured), its settings (the ``diagnostics`` section, :class:`DiagnosticsSettings`) and
+context (:class:`PostprocessorContext`), and the helpers of the column classes (:class:`Column`,
+:class:`Forms`, :func:`integral`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from collections.abc import Mapping
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import dolfinx.fem
 from mpi4py import MPI
@@ -16,7 +17,8 @@ from convection.model.model import Model
 from convection.schema import param
 from fembase.state import State, Stateful
 
-__all__ = ["NEEDS_ENERGY", "Column", "DiagnosticsSettings", "Forms", "ModelFeatures", "Postprocessor", "integral"]
+__all__ = ["NEEDS_ENERGY", "Column", "DiagnosticsSettings", "Forms", "ModelFeatures", "Postprocessor",
+           "PostprocessorContext", "integral"]
 
 NEEDS_ENERGY = "needs the energy equation (energy.enabled: true)"
 
@@ -35,12 +37,30 @@ class DiagnosticsSettings:
                                                "statistic reports (coordinates may have units: [100 km, 600 km])")
 
 
+class PostprocessorContext(NamedTuple):
+    """What a postprocessor is made from, beside its settings (each takes what it needs).
+
+    Attributes:
+        model: The model it measures.
+        start: When the run started, on :func:`time.monotonic`'s clock (the ``wall_time`` column).
+    """
+
+    model: Model
+    start: float
+
+
 class Postprocessor(Protocol):
-    """Computes some statistics columns of a model (collective)."""
+    """Computes some statistics columns of a model (collective); made by ``build(settings,
+    context)`` with the ``diagnostics`` section and a :class:`PostprocessorContext` (None: it does
+    not apply to the model)."""
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type]
     columns: tuple[str, ...]
+
+    @classmethod
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> Postprocessor | None: ...
 
     def __call__(self, model: Model, /) -> dict[str, float]: ...
 
@@ -111,11 +131,12 @@ class ModelFeatures:
 
 
 class Column(Stateful):
-    """Default construction: no options; applies to every model unless :meth:`missing` says otherwise;
+    """Default construction: no parameters; applies to every model unless :meth:`missing` says otherwise;
     nothing to keep in a checkpoint (the columns are measured afresh every step)."""
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type] = DiagnosticsSettings
     columns: tuple[str, ...]
     quantities: ClassVar[Mapping[str, str]] = {}
     """Column -> what it measures (a kind of :data:`convection.physics.scaling.UNIT_KINDS`: a model with
@@ -137,6 +158,7 @@ class Column(Stateful):
         return True
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> Any:
-        return cls() if cls.applies(model) else None
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> Any:
+        """The postprocessor for ``context.model`` (None when it does not apply)."""
+        return cls() if cls.applies(context.model) else None
 

@@ -50,7 +50,7 @@ import dolfinx.fem.petsc
 
 from convection.model.model import Model
 from convection.physics.scaling import FIELD_KINDS
-from convection.postprocess.base import DiagnosticsSettings, Forms, ModelFeatures, integral
+from convection.postprocess.base import DiagnosticsSettings, Forms, ModelFeatures, PostprocessorContext, integral
 from convection.schema import ConfigError
 from fembase.dolfinx_compat import function_space, value_size
 from fembase.geometry import locate_owned
@@ -67,6 +67,7 @@ class MaterialStatistics(Stateful):
     name: ClassVar[str] = "materials"
     description: ClassVar[str] = ("per material: volume, centroid, mean upward velocity, rms and largest speed, "
                                   "deepest point")
+    Settings: ClassVar[type] = DiagnosticsSettings
 
     def __init__(self, names: list[str], gdim: int) -> None:
         self.names = names
@@ -91,7 +92,8 @@ class MaterialStatistics(Stateful):
         return False
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> MaterialStatistics | None:
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> MaterialStatistics | None:
+        model = context.model
         names = [f.name for f in model.fractions]
         return cls(names, model.domain.gdim) if names else None
 
@@ -149,6 +151,7 @@ class PointValues(Stateful):
 
     name: ClassVar[str] = "points"
     description: ClassVar[str] = "every output field at the points of diagnostics.points"
+    Settings: ClassVar[type] = DiagnosticsSettings
 
     def __init__(self, points: Mapping[str, list[float]], fields: Mapping[str, int], gdim: int) -> None:
         self.points = {name: np.asarray(x, dtype=np.float64) for name, x in points.items()}
@@ -176,8 +179,8 @@ class PointValues(Stateful):
         return False
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> PointValues | None:
-        settings = options.get("diagnostics") or DiagnosticsSettings()
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> PointValues | None:
+        model = context.model
         if not settings.points:
             return None
         fields = {name: value_size(f.function_space) for name, f in model.fields().items()}
@@ -232,6 +235,7 @@ class Topography(Stateful):
 
     name: ClassVar[str] = "topography"
     description: ClassVar[str] = "max, min and rms height of the surface under diagnostics.topography_material"
+    Settings: ClassVar[type] = DiagnosticsSettings
     columns = ("topography_max", "topography_min", "topography_rms")
     quantities: ClassVar[Mapping[str, str]] = dict.fromkeys(columns, "length")
 
@@ -256,10 +260,10 @@ class Topography(Stateful):
         return False
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> Topography | None:
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> Topography | None:
+        model = context.model
         if model.free_surface is not None:
             return FreeSurfaceTopography(0)
-        settings = options.get("diagnostics") or DiagnosticsSettings()
         names = [f.name for f in model.fractions]
         if settings.topography_material not in names or model.domain.columns(1, 1) is None:
             return None
@@ -344,6 +348,7 @@ class FreeSurfaceStatistics(Stateful):
     name: ClassVar[str] = "free_surface"
     description: ClassVar[str] = ("mesh_quality_min (the worst cell's shape, 1: equilateral) and particles_pulled_in "
                                   "(particles moved back under the surface, so far)")
+    Settings: ClassVar[type] = DiagnosticsSettings
     columns = ("mesh_quality_min", "particles_pulled_in")
 
     @classmethod
@@ -355,8 +360,8 @@ class FreeSurfaceStatistics(Stateful):
         return model.free_surface is not None
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> FreeSurfaceStatistics | None:
-        return cls() if model.free_surface is not None else None
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> FreeSurfaceStatistics | None:
+        return cls() if context.model.free_surface is not None else None
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         pulled = model.particles.pulled_in if model.particles is not None else 0

@@ -51,9 +51,12 @@ a config that asks for one its model lacks is refused when it is checked. Column
 are named in ``quantities`` (column -> ``time``, ``velocity``, ``temperature``, ...): a model with
 units (:mod:`convection.physics.scaling`) writes them converted to ``statistics_physical.csv``.
 
-A postprocessor is built by ``create(model, options)`` (None when it does not apply, e.g.
-``nusselt`` without a temperature equation) and called with the model after every step; all
-calls are collective.
+A postprocessor has the one plugin shape (docs/developers.md): its ``Settings`` are the
+``diagnostics`` section (:class:`DiagnosticsSettings`, shared by every postprocessor) and
+``build(settings, context)`` makes it for the model of a :class:`PostprocessorContext` (None when
+it does not apply, e.g. ``nusselt`` without a temperature equation). It is made only through
+:data:`POSTPROCESSORS` (:func:`create_postprocessors`) and called with the model after every step;
+all calls are collective.
 """
 
 from __future__ import annotations
@@ -74,15 +77,15 @@ from convection.model.model import Model
 from convection.adapt.rebalance import RankLoads
 from convection.model.rheology_fields import flow_viscosity
 from convection.postprocess.base import (
-    NEEDS_ENERGY, Column, DiagnosticsSettings, Forms, ModelFeatures, Postprocessor, integral,
+    NEEDS_ENERGY, Column, DiagnosticsSettings, Forms, ModelFeatures, Postprocessor, PostprocessorContext, integral,
 )
 from convection.postprocess.geodynamics import FreeSurfaceStatistics, MaterialStatistics, PointValues, Topography
 from fembase.registry import Registry
 from particles.manager import ParticleManager
 from fembase.state import State, Stateful
 
-__all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "ModelFeatures", "Postprocessor", "check_statistics",
-           "create_postprocessors"]
+__all__ = ["POSTPROCESSORS", "DiagnosticsSettings", "ModelFeatures", "Postprocessor", "PostprocessorContext",
+           "check_statistics", "create_postprocessors"]
 
 
 class TimeColumns(Column):
@@ -188,7 +191,8 @@ class ParticleStatistics(Column):
         return None if features.particles else "needs particles (particles.enabled: true)"
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> ParticleStatistics | None:
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> ParticleStatistics | None:
+        model = context.model
         if not cls.applies(model):
             return None
         systems = model.particles
@@ -258,6 +262,7 @@ class Entrainment:
 
     name: ClassVar[str] = "entrainment"
     description: ClassVar[str] = "fraction of a material's initial volume above a height"
+    Settings: ClassVar[type] = DiagnosticsSettings
 
     def __init__(self, amounts: dict[str, tuple[int, bool]], height: float) -> None:
         self.amounts = amounts  # column -> (material index, background instead)
@@ -274,8 +279,8 @@ class Entrainment:
             "needs diagnostics.entrainment_material (a material name, all, dense or light)"
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> Entrainment | None:
-        settings = options.get("diagnostics") or DiagnosticsSettings()
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> Entrainment | None:
+        model = context.model
         material = settings.entrainment_material
         names = [f.name for f in model.fractions]
         if cls.missing(ModelFeatures.of_model(model, settings)) is not None:
@@ -323,14 +328,15 @@ class WallTime(Stateful):
 
     name: ClassVar[str] = "wall_time"
     description: ClassVar[str] = "wall seconds since the run started"
+    Settings: ClassVar[type] = DiagnosticsSettings
     columns = ("wall_time",)
 
     def __init__(self, start: float) -> None:
         self.start = start
 
     @classmethod
-    def create(cls, model: Model, options: Mapping[str, Any]) -> WallTime:
-        return cls(float(options.get("start", time.monotonic())))
+    def build(cls, settings: DiagnosticsSettings, context: PostprocessorContext, /) -> WallTime:
+        return cls(context.start)
 
     def __call__(self, model: Model, /) -> dict[str, float]:
         return {"wall_time": time.monotonic() - self.start}
@@ -499,10 +505,13 @@ POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 
-def create_postprocessors(model: Model, names: list[str] | None = None, /, **options: Any) -> list[Postprocessor]:
-    """The postprocessors ``names`` (default: all that apply to ``model``), in registry order;
-    ``options``: ``start`` (the run's start on ``time.monotonic``'s clock, for the wall time) and
-    ``diagnostics`` (:class:`DiagnosticsSettings`).
+def create_postprocessors(model: Model, names: list[str] | tuple[str, ...] | None = None, /, *,
+                          start: float | None = None, diagnostics: DiagnosticsSettings | None = None
+                          ) -> list[Postprocessor]:
+    """The postprocessors ``names`` (default: all that apply to ``model``), in registry order, each
+    built through :data:`POSTPROCESSORS` with ``diagnostics`` (default: the section's defaults) and a
+    :class:`PostprocessorContext` (``start``: the run's start on ``time.monotonic``'s clock, for the
+    wall time; default: now).
 
     A name asked for explicitly that does not apply to the model is an error.
 
@@ -513,15 +522,17 @@ def create_postprocessors(model: Model, names: list[str] | None = None, /, **opt
         unknown = [n for n in names if n not in POSTPROCESSORS]
         if unknown:
             raise ValueError(f"unknown postprocessor {unknown[0]!r}; valid: {list(POSTPROCESSORS)}")
+    settings = diagnostics or DiagnosticsSettings()
+    context = PostprocessorContext(model, time.monotonic() if start is None else start)
     out = []
     for name, cls in POSTPROCESSORS.items():
         if names is not None and name not in names:
             continue
         if names is None and hasattr(cls, "by_default") and not cls.by_default(model):
             continue
-        pp = cls.create(model, options)
+        pp = POSTPROCESSORS.build(name, settings, context)
         if pp is None and names is not None:
-            problem = getattr(cls, "missing", lambda _: None)(ModelFeatures.of_model(model, options.get("diagnostics")))
+            problem = getattr(cls, "missing", lambda _: None)(ModelFeatures.of_model(model, settings))
             raise ValueError(f"postprocessor {name!r} does not apply to this model: {problem or 'not measurable'}")
         if pp is not None:
             out.append(pp)

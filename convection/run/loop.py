@@ -20,15 +20,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.model.model import Model, StepReport
-from convection.io.fields import FIELD_WRITERS
+from convection.io.fields import FIELD_WRITERS, FieldWriterContext, OutputSettings
 from convection.io.output_units import output_units
 from convection.io.profiles import ProfileFile
-from convection.io.run_folder import check_output_directory
-from convection.io.checkpoint import CheckpointSettings
 from convection.postprocess.postprocessors import (
-    POSTPROCESSORS, Nusselt, ParticleStatistics, Postprocessor, TemperatureStatistics, TimeColumns, Velocity,
+    Nusselt, ParticleStatistics, Postprocessor, TemperatureStatistics, TimeColumns, Velocity,
 )
-from convection.schema import REQUIRED, Names, param, subsection
+from convection.schema import REQUIRED, param
 from convection.run.progress import Progress
 from convection.run.steady import SteadyRate, SteadyState
 from convection.physics.scaling import ColumnUnits, Scaling
@@ -36,11 +34,8 @@ from convection.io.run_folder import RunFolderError
 from particles.io.swarm_checkpoint import CheckpointError
 from convection.io.statistics import BalanceLog, StatisticsFileError, StatisticsWriter
 
-__all__ = ["BlowUp", "OutputSettings", "Resume", "RunFailure", "LoopSettings", "TimeSettings", "RunSummary",
+__all__ = ["BlowUp", "Resume", "RunFailure", "LoopSettings", "TimeSettings", "RunSummary",
            "SteadyRate", "SteadyState", "Watch", "Watched", "run"]
-
-
-PROGRESS_MODES = ("auto", "bar", "lines", "none")
 
 
 @dataclass(frozen=True)
@@ -70,23 +65,6 @@ class TimeSettings:
     steady_state_time_window: float = param(0.01, exclusive_minimum=0.0,
                                             help="tau: the model time over which steady_state_rate's change is "
                                                  "measured")
-
-
-@dataclass(frozen=True)
-class OutputSettings:
-    """The ``output`` config section: the run folder and what is written into it, when."""
-
-    directory: str = param(REQUIRED, check=check_output_directory,
-                           help="output folder (statistics.csv, fields, config)")
-    fields_every: int = param(10, minimum=0, help="write the fields every K steps (0 = only at the end)")
-    fields_format: str = param("xdmf", choices=Names(FIELD_WRITERS), help="the fields' file format")
-    statistics: tuple[str, ...] | None = param(None, choices=Names(POSTPROCESSORS),
-                                               help="postprocessors whose columns statistics.csv holds (null: all "
-                                                    "that apply)")
-    checkpoint: CheckpointSettings = subsection(CheckpointSettings)
-    progress: str = param("auto", choices=PROGRESS_MODES,
-                          help="progress display: a bar on a terminal, lines in a log (auto: by stdout), or none")
-    progress_every: int = param(10, minimum=1, help="steps between progress lines")
 
 
 @dataclass(frozen=True)
@@ -326,9 +304,8 @@ class _Outputs:
             self.balance = BalanceLog(directory / "balance.csv", comm=model.comm, resume_after_step=after)
         except StatisticsFileError as err:
             raise RunFolderError(str(err)) from None
-        writer = FIELD_WRITERS.lookup(output.fields_format)
-        self.fields = writer(directory, resume_after=model.time if resume else None,
-                             units=output_units(scaling) if scaling is not None else None)
+        self.fields = FIELD_WRITERS.build(output.fields_format, output, FieldWriterContext(
+            resume_after=model.time if resume else None, units=output_units(scaling) if scaling is not None else None))
         units = None if scaling is None else (scaling.factor("time"), scaling.unit_label("time"),
                                               scaling.factor("velocity"), scaling.unit_label("velocity"))
         self.progress = Progress(settings.time.end, mode=output.progress, every=output.progress_every,

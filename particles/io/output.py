@@ -19,6 +19,11 @@ the final names (at worst a stray hidden temporary file).
 If the h5py build is serial and more than one rank writes, the data are gathered to rank 0, which
 writes alone (a :class:`RuntimeWarning` says so).
 
+A particle output format has the one plugin shape (docs/developers.md): its ``Settings`` are a
+particle system's ``output`` section (:class:`ParticleOutputSettings`, which names it in
+``format``), and ``build(settings, context)`` makes it with a :class:`ParticleWriterContext`; it is
+made only through :data:`PARTICLE_WRITERS`.
+
 Mesh fields (e.g. a DG0 or P1 Function interpolated from particles) go through
 :func:`write_mesh_fields`, a thin wrapper of :class:`dolfinx.io.XDMFFile`.
 """
@@ -27,6 +32,7 @@ from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 from collections.abc import Sequence
 from typing import ClassVar, NamedTuple, Protocol
@@ -40,11 +46,13 @@ import dolfinx.mesh
 
 from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
 from fembase.files import H5Sink, exclusive_offset
+from fembase.params import Names, param
 from fembase.registry import Registry
 from fembase.xdmf import XdmfSeries, data_item
 from particles.storage.swarm import Swarm
 
-__all__ = ["PARTICLE_WRITERS", "OutputRecord", "ParticleOutput", "ParticleWriter", "write_mesh_fields"]
+__all__ = ["PARTICLE_WRITERS", "OutputRecord", "ParticleOutput", "ParticleOutputSettings", "ParticleWriter",
+           "ParticleWriterContext", "write_mesh_fields"]
 
 
 class OutputRecord(NamedTuple):
@@ -71,11 +79,16 @@ def _attribute_type(k: int) -> str:
 
 class ParticleOutput(Protocol):
     """A particle output format: writes the selected particles of a swarm at an output step
-    (collective). An implementation is a class with ``name`` and ``description``, made with the
-    keywords of :class:`ParticleWriter`'s constructor and registered in :data:`PARTICLE_WRITERS`."""
+    (collective). An implementation is a class with ``name``, ``description``, ``Settings``
+    (:class:`ParticleOutputSettings`) and ``build(settings, context)`` (see :class:`ParticleWriter`),
+    registered in :data:`PARTICLE_WRITERS`."""
 
     name: ClassVar[str]
     description: ClassVar[str]
+    Settings: ClassVar[type]
+
+    @classmethod
+    def build(cls, settings: ParticleOutputSettings, context: ParticleWriterContext, /) -> ParticleOutput: ...
 
     def write(self, swarm: Swarm, t: float, step: int) -> OutputRecord: ...
 
@@ -99,6 +112,33 @@ class OutputUnits(Protocol):
     def of(self, name: str, /) -> Conversion | None: ...
 
     def write_json(self, path: Path, names: Sequence[str], /) -> None: ...
+
+
+@dataclass(frozen=True)
+class ParticleOutputSettings:
+    """When and what particle output is written: a particle system's ``output`` section."""
+
+    every_steps: int | None = param(None, minimum=1, help="write particles every N steps")
+    every_time: float | None = param(None, exclusive_minimum=0.0,
+                                     help="write particles at the first step after every multiple of this time")
+    properties: tuple[str, ...] | None = param(None, help="properties written (null: all)")
+    every_nth: int = param(1, minimum=1, help="write only particles with id % every_nth == 0")
+    format: str = param("xdmf", choices=Names(lambda: PARTICLE_WRITERS),
+                        help="the particles' file format")
+
+
+class ParticleWriterContext(NamedTuple):
+    """What a particle writer is made from, beside its settings.
+
+    Attributes:
+        directory: The output directory.
+        name: The file name stem (a particle system's name).
+        units: Write in these units (:class:`OutputUnits`); None: as they are.
+    """
+
+    directory: str | os.PathLike[str]
+    name: str = "particles"
+    units: OutputUnits | None = None
 
 
 class ParticleWriter:
@@ -125,6 +165,15 @@ class ParticleWriter:
 
     name: ClassVar[str] = "xdmf"
     description: ClassVar[str] = "one HDF5 file per output step and one XDMF time series (particles.xdmf)"
+    Settings: ClassVar[type] = ParticleOutputSettings
+
+    @classmethod
+    def build(cls, settings: ParticleOutputSettings, context: ParticleWriterContext, /) -> ParticleWriter:
+        """The writer of ``settings.properties`` (every ``settings.every_nth``-th particle) into
+        ``context.directory``."""
+        return cls(context.directory, name=context.name,
+                   properties=None if settings.properties is None else list(settings.properties),
+                   every_nth=settings.every_nth, units=context.units)
 
     def __init__(
         self,

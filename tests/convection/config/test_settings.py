@@ -22,7 +22,8 @@ from convection.model.composition import CompositionSettings
 from convection.physics.approximation import PhysicsSettings, ViscosityLaw, ViscositySettings
 from convection.physics.materials import Materials
 from convection.postprocess.postprocessors import DiagnosticsSettings
-from convection.run.loop import BlowUp, LoopSettings, OutputSettings, TimeSettings
+from convection.io.fields import OutputSettings
+from convection.run.loop import BlowUp, LoopSettings, TimeSettings
 from convection.schema import Field, section_schema, settings_as_section, settings_from
 from convection.solvers.stokes.nonlinear import NonlinearSettings
 from convection.solvers.stokes.solver import StokesSettings, StokesSolver
@@ -132,16 +133,16 @@ def test_the_degree_a_composition_source_needs_is_one_check():
 
 
 def test_the_mesh_section_is_declared_by_the_geometries():
-    """``mesh`` is ``geometry``, each geometry's own keys (its ``mesh_settings``), ``max_cells``;
+    """``mesh`` is ``geometry``, each geometry's own keys (its ``Settings``), ``max_cells``;
     a geometry's config_keys are its declared keys."""
     from convection.geometry.registry import DOMAINS, MeshSettings, mesh_section_schema
 
     assert SCHEMA["mesh"] == mesh_section_schema()
     declared = {"geometry", "max_cells"}
     for cls in DOMAINS.values():
-        keys = tuple(section_schema(cls.mesh_settings))
+        keys = tuple(section_schema(cls.Settings))
         assert cls.config_keys == keys and keys
-        assert all(SCHEMA["mesh"][k] == f for k, f in section_schema(cls.mesh_settings).items())
+        assert all(SCHEMA["mesh"][k] == f for k, f in section_schema(cls.Settings).items())
         declared |= set(keys)
     assert set(SCHEMA["mesh"]) == declared
     assert _minimal()["mesh"]["geometry"] == MeshSettings().geometry

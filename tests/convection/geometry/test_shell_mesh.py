@@ -10,7 +10,7 @@ import dolfinx.fem
 
 pytest.importorskip("gmsh")
 
-from convection.geometry.registry import DOMAINS  # noqa: E402
+from convection.geometry.registry import DOMAINS, domain_from_settings  # noqa: E402
 from convection.geometry.domain import MeshSection  # noqa: E402
 from convection.geometry.radial import RadialMeshSettings  # noqa: E402
 from convection.geometry.shell import (  # noqa: E402
@@ -61,7 +61,7 @@ def test_straight_cells_and_interfaces():
 
 def test_spec_from_config_and_checks():
     keys = RadialMeshSettings(radii=(1.0, 2.0), resolution=0.4, geometry_degree=2)
-    domain = DOMAINS.lookup("spherical_shell").from_settings(MeshSection("spherical_shell", keys, 2_000_000))
+    domain = domain_from_settings(MeshSection("spherical_shell", keys, 2_000_000))
     assert isinstance(domain, SphericalShell) and domain.spec.gdim == 3 and domain.spec.name == "spherical_shell"
     assert domain.gravity.name == "radial" and domain.gravity.outer_radius == 2.0
     with pytest.raises(ValueError, match="inner_radius"):

@@ -311,8 +311,8 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     reference = ReferenceState(**vars(physics.reference))
     approximation = materials.approximation(Ra=physics.Ra, H=physics.H, temperature_law=visc.temperature_law,
                                             gamma=visc.gamma, gravity=domain.gravity,
-                                            formulation=physics.approximation, reference=reference)
-    approximation.elasticity = _elasticity(settings)  # issue 48
+                                            formulation=physics.approximation, reference=reference,
+                                            elasticity=_elasticity(settings))
     velocity_bcs = velocity_bcs_from_config(settings.boundary.velocity, domain)
     temperature_bcs = temperature_bcs_from_config(settings.boundary.temperature, domain)
     meshes = _meshes(settings, domain, materials, temperature_bcs, comm, restore)

@@ -376,10 +376,8 @@ class BoussinesqApproximation:
             (``"boussinesq"``, ``"eba"``, ``"tala"``): the terms the solvers ask for
             (:meth:`continuity_density`, :meth:`buoyancy`, :meth:`energy_terms`).
         reference: the reference state of ``eba`` and ``tala`` (``Di > 0``; ``Di = 0`` for ``boussinesq``).
+        elasticity: Maxwell visco-elasticity (:mod:`convection.physics.elasticity`, issue 48), or None.
     """
-
-    elasticity: Elasticity | None = None
-    """Maxwell visco-elasticity (:mod:`convection.physics.elasticity`, issue 48): set by the model's builder."""
 
     def __init__(
         self,
@@ -392,8 +390,10 @@ class BoussinesqApproximation:
         gravity: Gravity = VerticalGravity(),
         formulation: str = "boussinesq",
         reference: ReferenceState = ReferenceState(),
+        elasticity: Elasticity | None = None,
     ) -> None:
         self.gravity = gravity
+        self.elasticity = elasticity
         self.Ra = float(Ra)
         self.Rb: float | tuple[float, ...] = tuple(float(r) for r in Rb) if isinstance(Rb, (list, tuple)) else float(Rb)
         self.H = float(H)

@@ -25,6 +25,7 @@ import dolfinx.fem
 from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.physics.approximation import VISCOSITY_DEFAULTS, BoussinesqApproximation, ViscosityLaw
 from convection.physics.compressible import ReferenceState
+from convection.physics.elasticity import Elasticity
 from convection.physics.rheology import Constant, ViscosityLawBase
 from convection.schema import REQUIRED, param
 
@@ -133,14 +134,15 @@ class Materials:
 
     def approximation(self, *, Ra: float, H: float = 0.0, temperature_law: str = "none",
                       gamma: float = 0.0, gravity: Gravity = VerticalGravity(), formulation: str = "boussinesq",
-                      reference: ReferenceState = ReferenceState()) -> BoussinesqApproximation:
+                      reference: ReferenceState = ReferenceState(),
+                      elasticity: Elasticity | None = None) -> BoussinesqApproximation:
         """The approximation ``formulation`` (:mod:`convection.physics.compressible`; Boussinesq by
         default) with these materials' buoyancy and viscosity."""
         rb = tuple(m.Rb for m in self.materials)
         return BoussinesqApproximation(Ra=Ra, Rb=rb if rb else 0.0, H=H, gravity=gravity,
                                        viscosity=self.viscosity_law(temperature_law=temperature_law, gamma=gamma,
                                                                     gravity=gravity),
-                                       formulation=formulation, reference=reference)
+                                       formulation=formulation, reference=reference, elasticity=elasticity)
 
 
 def material_index(fractions: Sequence[dolfinx.fem.Function], /, *, name: str = "material") -> dolfinx.fem.Function:

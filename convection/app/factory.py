@@ -67,6 +67,7 @@ from convection.postprocess.postprocessors import create_postprocessors
 from convection.adapt.rebalance import BALANCE_STRATEGIES, Balancer
 from convection.run.loop import Resume, RunSummary, run
 from convection.io.run_folder import RunFolderLock
+from convection.solvers.steady import solve_steady
 from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSolver
 from convection.solvers.petsc_options import PetscSolver
 from convection.solvers.transport import TransportSolver, interpolate_initial
@@ -334,6 +335,11 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
         continued = dolfinx.fem.Function(temperature.T.function_space)
         initial_temperature(initial.from_run, continued)
         temperature.set_initial(continued)
+    if restore is None and initial.steady:
+        steady = solve_steady(stokes, temperature)
+        if comm.rank == 0:
+            print(f"steady start: {steady.pseudo_steps} pseudo-time steps, {steady.contrast_steps} contrast steps, "
+                  f"{steady.newton_iterations} Newton iterations", file=sys.stderr, flush=True)
     particles = _particles(settings, meshes, domain, materials, stokes, temperature, restore, free_surface)
     composition = _composition(settings, mesh, approximation, materials, particles, energy.stabilisation)
     if particles is not None:

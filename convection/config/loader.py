@@ -68,6 +68,7 @@ from convection.physics.elasticity import ElasticitySettings, check_elasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
+from convection.solvers.steady import check_steady_start
 from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings, particle_settings
@@ -343,7 +344,23 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     _check_particles(config)
     check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]),  # issue 48
                      _property_names(config) if particles_enabled(config) else ())
+    if config["initial"]["steady"]:
+        _check_steady_start(config)
     _check_statistics(config)
+
+
+def _check_steady_start(config: dict[str, Any]) -> None:
+    """``initial.steady`` only where its equations are the model's
+    (:func:`convection.solvers.steady.check_steady_start`)."""
+    law0, others = viscosity_laws(config) if laws_given(config) else (None, [])
+    depends_on = frozenset().union(*(law.depends_on for law in (law0, *others))) if law0 is not None else (
+        frozenset() if TEMPERATURE_LAWS[config["physics"]["viscosity"]["temperature_law"]].factor is None
+        else frozenset({"temperature"}))
+    check_steady_start(approximation=config["physics"]["approximation"],
+                       composition=config["initial"]["composition"] is not None or bool(config["materials"]),
+                       particles=particles_enabled(config), energy=config["energy"]["enabled"],
+                       free_surface=bool(free_surface_boundaries(config)), box=domain_class(config).axis_aligned,
+                       viscosity_depends_on=depends_on, elasticity=config["physics"]["elasticity"]["enabled"])
 
 
 def _check_statistics(config: dict[str, Any]) -> None:

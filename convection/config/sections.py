@@ -31,6 +31,10 @@ class InitialSettings:
                                  "its run folder (newest checkpoint) or a checkpoint folder; interpolated onto this "
                                  "mesh, on any rank count (a box of the same extent; command line: run --initial-from "
                                  "PATH)")
+    steady: bool = param(False, help="before the first step, solve the steady equations for flow and temperature "
+                         "by Newton's method (from initial.temperature or initial.from_run, via the isoviscous flow "
+                         "and a continuation in the viscosity contrast; boxes, Boussinesq, no composition); the "
+                         "run then steps on from that state (docs/configs.md, 'Steady start')")
 
 
 def mesh_section(section: Mapping[str, Any], /) -> MeshSection:

@@ -213,6 +213,7 @@ class BoxDomain(Domain):
     top: ClassVar[str] = "top"
     free_surfaces: ClassVar[tuple[str, ...]] = ("top",)
     bottom: ClassVar[str] = "bottom"
+    axis_aligned: ClassVar[bool] = True
 
     def __init__(self, lower: Sequence[float] | npt.NDArray[np.float64],
                  upper: Sequence[float] | npt.NDArray[np.float64], /, *, spec: BoxSpec | None = None) -> None:

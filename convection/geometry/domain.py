@@ -132,6 +132,7 @@ class Domain(ABC):
     top: ClassVar[str]
     bottom: ClassVar[str]
     refinable: ClassVar[bool] = True
+    axis_aligned: ClassVar[bool] = False  # every boundary a plane normal to an axis (normal_axis never None)
     free_surfaces: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -156,9 +157,8 @@ class Domain(ABC):
 
     @classmethod
     def check_config(cls, mesh: MeshSection, /, *, changed_by: str | None) -> None:
-        """Refuse a ``mesh`` section this geometry cannot take (ConfigError naming the key);
-        ``changed_by``: the config key that makes the mesh change during the run
-        (``adaptivity.enabled``, ``balance.strategy``), None for a fixed mesh."""
+        """Refuse a ``mesh`` section this geometry cannot take (ConfigError naming the key); ``changed_by``: the
+        key that changes the mesh in the run (``adaptivity.enabled``, ``balance.strategy``), None for a fixed mesh."""
 
     @classmethod
     def check_boundaries(cls, mesh: MeshSection, boundary: Any, /) -> None:

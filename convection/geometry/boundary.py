@@ -29,7 +29,7 @@ from fembase.dolfinx_compat import DirichletBC
 from fembase.registry import Registry
 
 __all__ = ["DEFAULT_TEMPERATURE", "DEFAULT_VELOCITY", "TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS",
-           "BoundarySettings", "NitscheTerms", "PlatesSettings", "PrescribedSettings", "TemperatureBC",
+           "BoundarySettings", "ConditionKind", "NitscheTerms", "PlatesSettings", "PrescribedSettings", "TemperatureBC",
            "TemperatureKind", "VelocityBC", "VelocityCondition", "VelocityContext", "VelocityKind",
            "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs", "velocity_dirichlet_bcs",
            "weak_free_slip_boundaries"]
@@ -65,7 +65,27 @@ def _components_problem(value: Any, /) -> str | None:
     return None
 
 
-class VelocityKind:
+class ConditionKind:
+    """What a kind of boundary condition has (the velocity's :class:`VelocityKind`, the
+    temperature's :class:`TemperatureKind`): a config name, one line, the entries a config gives it
+    (:attr:`Settings`, none by default) and the strong conditions that impose it (none by default).
+
+    Attributes:
+        name, description: The config name and one line.
+        needs_value: The condition it builds has a value.
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    Settings: ClassVar[type] = _NoEntries
+    needs_value: ClassVar[bool] = False
+
+    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
+        """The strong conditions on the boundary ``name`` (none: a natural or weak condition). Collective."""
+        return []
+
+
+class VelocityKind(ConditionKind):
     """One kind of velocity condition, as ``boundary.velocity.<side>`` names it (an entry of
     :data:`VELOCITY_BC_KINDS`): its entries (:attr:`Settings`), the :class:`VelocityBC` it builds
     and the Dirichlet conditions that impose it. Subclasses override what differs.
@@ -75,35 +95,26 @@ class VelocityKind:
     ``check`` says, in the user's terms, what is wrong with an entry as written, and what a
     required entry that is missing lacks (given None).
 
-    Attributes:
-        name, description: The config name and one line.
+    Attributes (beyond :class:`ConditionKind`'s):
         form: How a config writes a kind with required entries (for the message when it is
             written by its name alone).
         condition: A :class:`VelocityBC` of this kind exists (False: a config form of another kind).
-        needs_value: :class:`VelocityBC` of this kind has a value.
         rotations_free: Lets the flow slide along the boundary (a shell's rigid rotations cross it nowhere).
         weak_without_axis: Imposed weakly (:func:`nitsche_free_slip`) where the boundary has no normal axis.
         moves: The boundary moves with the flow (:mod:`convection.deform`), a natural condition here.
     """
 
-    name: ClassVar[str]
-    description: ClassVar[str]
     form: ClassVar[str] = ""
-    Settings: ClassVar[type] = _NoEntries
     condition: ClassVar[bool] = True
-    needs_value: ClassVar[bool] = False
     rotations_free: ClassVar[bool] = False
     weak_without_axis: ClassVar[bool] = False
     moves: ClassVar[bool] = False
 
     @classmethod
     def build(cls, settings: Any, context: VelocityContext, /) -> VelocityBC:
-        """The condition of this kind's ``settings`` (a :attr:`Settings`) in ``context``."""
-        return VelocityBC(cls.name)
-
-    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
-        """The strong conditions on the boundary ``name`` (none: a natural or weak condition). Collective."""
-        return []
+        """The condition of this kind's ``settings`` (a :attr:`Settings`) in ``context``: with the
+        settings' ``value`` where the kind :attr:`needs_value`."""
+        return VelocityBC(cls.name, settings.value if cls.needs_value else None)
 
     def homogeneous(self, bc: VelocityBC, /) -> VelocityBC:
         """``bc`` with zero values on the same dofs."""
@@ -143,10 +154,6 @@ class Prescribed(VelocityKind):
     Settings: ClassVar[type] = PrescribedSettings
     needs_value = True
 
-    @classmethod
-    def build(cls, settings: Any, context: VelocityContext, /) -> VelocityBC:
-        return VelocityBC(cls.name, settings.value)
-
     def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
         """Every component fixed: a constant vector, or the interpolated expressions or callable."""
         facets = domain.locate_facets(V.mesh, name)
@@ -170,10 +177,6 @@ class NoSlip(Prescribed):
     form = ""
     Settings = _NoEntries
     needs_value = False
-
-    @classmethod
-    def build(cls, settings: Any, context: VelocityContext, /) -> VelocityBC:
-        return VelocityBC(cls.name)
 
     def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
         return super().dirichlet(V, domain, name, (0.0,) * V.mesh.geometry.dim)
@@ -227,28 +230,15 @@ def _temperature_problem(value: Any, /) -> str | None:
     return None
 
 
-class TemperatureKind:
+class TemperatureKind(ConditionKind):
     """One kind of temperature condition, as ``boundary.temperature.<side>`` names it (an entry of
-    :data:`TEMPERATURE_BC_KINDS`): written by its name, or ``{<name>: <its one entry>}``.
-
-    Attributes:
-        name, description: The config name and one line.
-        needs_value: :class:`TemperatureBC` of this kind has a value.
-    """
-
-    name: ClassVar[str]
-    description: ClassVar[str]
-    Settings: ClassVar[type] = _NoEntries
-    needs_value: ClassVar[bool] = False
+    :data:`TEMPERATURE_BC_KINDS`): written by its name, or ``{<name>: <its one entry>}``."""
 
     @classmethod
     def build(cls, settings: Any, context: Any, /) -> TemperatureBC:
-        """The condition of this kind's ``settings`` (``context``: not needed)."""
-        return TemperatureBC(cls.name)
-
-    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
-        """The strong conditions on the boundary ``name`` (none: a natural condition). Collective."""
-        return []
+        """The condition of this kind's ``settings`` (``context``: not needed): with the settings'
+        ``value`` where the kind :attr:`needs_value`."""
+        return TemperatureBC(cls.name, settings.value if cls.needs_value else None)
 
 
 @dataclass(frozen=True)
@@ -261,12 +251,8 @@ class DirichletSettings:
 class Dirichlet(TemperatureKind):
     name = "dirichlet"
     description = "temperature equal to the constant `value`"
-    Settings = DirichletSettings
+    Settings: ClassVar[type] = DirichletSettings
     needs_value = True
-
-    @classmethod
-    def build(cls, settings: Any, context: Any, /) -> TemperatureBC:
-        return TemperatureBC(cls.name, settings.value)
 
     def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
         return [dolfinx.fem.dirichletbc(PETSc.ScalarType(value), domain.locate_dofs(V, name), V)]

@@ -66,8 +66,10 @@ def plate_table_problem(items: Any, /) -> str | None:
 def plate_width_problem(width: Any, /) -> str | None:
     """What is wrong with a plates velocity's ``width`` as written, or None."""
     try:
-        number = float(width)
+        number = float(width) if not isinstance(width, bool) else None
     except (TypeError, ValueError):
+        number = None
+    if number is None:
         return f"plates width must be a number, got {width!r}"
     return None if number > 0.0 else f"plates width must be positive (radians), got {number}"
 

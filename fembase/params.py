@@ -127,7 +127,8 @@ def annotation_kind(annotation: Any) -> tuple[str, bool]:
 
 def settings_from(cls: type, section: Mapping[str, Any], /) -> Any:
     """The settings dataclass ``cls`` from a checked config section (lists become tuples where the
-    field is a tuple; nested sections become their dataclasses)."""
+    field is a tuple; nested sections become their dataclasses, and so do the mappings of a list
+    whose field is a tuple of settings dataclasses, ``tuple[Plate, ...]``)."""
     hints = typing.get_type_hints(cls)
     values = {}
     for f in dataclasses.fields(cls):
@@ -137,9 +138,23 @@ def settings_from(cls: type, section: Mapping[str, Any], /) -> Any:
         if "section" in f.metadata:
             value = settings_from(f.metadata["section"], value)
         elif isinstance(value, list) and _is_tuple(hints[f.name]):
-            value = tuple(value)
+            item = _tuple_item(hints[f.name])
+            value = tuple(settings_from(item, v) if _is_settings(item) and isinstance(v, Mapping) else v
+                          for v in value)
         values[f.name] = value
     return cls(**values)
+
+
+def _is_settings(item: Any) -> bool:
+    return isinstance(item, type) and dataclasses.is_dataclass(item)
+
+
+def _tuple_item(annotation: Any) -> Any:
+    """The item type of the tuple in ``annotation`` (``tuple[X, ...]``, possibly ``| None``), or None."""
+    if typing.get_origin(annotation) in (Union, types.UnionType):
+        items = [_tuple_item(a) for a in typing.get_args(annotation)]
+        return next((i for i in items if i is not None), None)
+    return typing.get_args(annotation)[0] if typing.get_origin(annotation) is tuple else None
 
 
 def _is_tuple(annotation: Any) -> bool:

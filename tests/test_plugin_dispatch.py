@@ -1,7 +1,7 @@
 """Plugins are chosen through their registry only: no code compares a plugin-name setting with a
 registered name (``if solver == "multigrid":``, ``bc.kind in ("free_slip", ...)``, ``match law:
 case "constant":``). What differs between implementations is asked of the registry's entry
-(``STOKES_SOLVERS[name].nested``, ``VELOCITY_BC_KINDS[kind].moves``, ``bc.spec.dirichlet(...)``).
+(``STOKES_SOLVER_CHOICES[name].nested``, ``VELOCITY_BC_KINDS[kind].moves``, ``bc.spec.dirichlet(...)``).
 
 The scan: every module of fembase/, particles/ and convection/ is parsed; a comparison (``==``,
 ``!=``, ``in``, ``not in``) or a ``match``/``case`` whose one side reads a plugin-name setting and
@@ -27,7 +27,7 @@ PACKAGES = ("fembase", "particles", "convection")
 
 FAMILIES: dict[str, tuple[str, ...]] = {
     # the words a plugin-name setting is read by -> the registries (by variable name) of its names
-    "kind": ("VELOCITY_BC_KINDS",),
+    "kind": ("VELOCITY_BC_KINDS", "TEMPERATURE_BC_KINDS"),
     "solver": ("STOKES_SOLVER_CHOICES", "STOKES_SOLVERS", "TRANSPORT_SOLVERS"),
     "geometry": ("DOMAINS",),
     "law": ("VISCOSITY_LAWS",),
@@ -126,7 +126,8 @@ def dispatch_outside_registries(source: str, registries: dict[str, set[str]]) ->
 
 def test_plugins_dispatch_through_their_registries():
     registries = _registries()
-    assert {"STOKES_SOLVERS", "VELOCITY_BC_KINDS", "DOMAINS", "VISCOSITY_LAWS", "GENERATORS"} <= set(registries)
+    assert {"STOKES_SOLVERS", "STOKES_SOLVER_CHOICES", "VELOCITY_BC_KINDS", "TEMPERATURE_BC_KINDS", "DOMAINS",
+            "VISCOSITY_LAWS", "GENERATORS"} <= set(registries)
     wrong, used = [], set()
     for package in PACKAGES:
         for path in sorted((ROOT / package).rglob("*.py")):
@@ -160,7 +161,8 @@ SHAPED = ("convection.model.composition:COMPOSITION_SOURCES", "convection.postpr
           "convection.io.fields:FIELD_WRITERS", "particles.io.output:PARTICLE_WRITERS",
           "convection.geometry.registry:DOMAINS", "convection.physics.rheology:VISCOSITY_LAWS",
           "particles.generation:GENERATORS", "particles.interpolation:INTERPOLATORS",
-          "particles.properties:PROPERTIES")
+          "particles.properties:PROPERTIES", "convection.geometry.boundary:VELOCITY_BC_KINDS",
+          "convection.geometry.boundary:TEMPERATURE_BC_KINDS", "convection.solvers.stokes.solver:STOKES_SOLVER_CHOICES")
 """The registries whose families have the one plugin shape (docs/developers.md, "The one plugin
 shape"): a family that gets it joins the list, none leaves it."""
 

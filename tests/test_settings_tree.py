@@ -47,13 +47,7 @@ CONFIG_PARAMETERS = {
 }
 """(module, function) -> why it takes the config mapping."""
 
-FROM_CONFIG = {
-    ("convection/app/factory.py", "velocity_bcs_from_config"): "boundary conditions as written (boundary kinds)",
-    ("convection/app/factory.py", "temperature_bcs_from_config"): "boundary conditions as written",
-    ("convection/geometry/plates.py", "from_config"): "a plates condition as written (boundary kinds)",
-    ("convection/geometry/boundary.py", "from_config"): "a velocity kind's condition from its value as written "
-                                                         "(BoundarySettings keeps the boundary section as written)",
-}
+FROM_CONFIG: dict[tuple[str, str], str] = {}
 """(module, function) -> why it builds from raw config values (item 4 of issue 47: one way to
 declare a parameter)."""
 
@@ -153,6 +147,54 @@ def test_the_checks_catch_a_raw_read():
     keys = [_section_key(node) for node in ast.walk(tree)]
     assert {"adaptivity", "balance", "stokes", "mesh"} <= set(keys) and "time" not in keys
     assert _takes_config(next(n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)))
+
+
+def _raw_values(value, where: str):
+    """Where a mapping or a list sits in ``value`` (dataclasses, tuples and mappings searched)."""
+    import dataclasses
+    from collections.abc import Mapping
+
+    if isinstance(value, (dict, list)):
+        yield where
+    if dataclasses.is_dataclass(value):
+        for f in dataclasses.fields(value):
+            yield from _raw_values(getattr(value, f.name), f"{where}.{f.name}")
+    elif isinstance(value, Mapping):
+        for key, item in value.items():
+            yield from _raw_values(item, f"{where}.{key}")
+    elif isinstance(value, tuple):
+        for i, item in enumerate(value):
+            yield from _raw_values(item, f"{where}[{i}]")
+
+
+def test_the_boundary_section_is_typed(tmp_path):
+    """The ``boundary`` section reaches the rooms typed: each velocity condition its kind's name
+    and its kind's ``Settings`` (None: traction free), each temperature condition a
+    ``TemperatureBC``; no mapping or list of the document is left in it, and the conditions are
+    built through the registry."""
+    from convection.config.loader import config_domain, load_config
+    from convection.config.settings import run_settings
+    from convection.geometry.boundary import (
+        DEFAULT_TEMPERATURE, DEFAULT_VELOCITY, VELOCITY_BC_KINDS, PrescribedSettings, TemperatureBC, VelocityBC,
+        VelocityCondition,
+    )
+
+    config = load_config(None, document={
+        "mesh": {"cells": [4, 4]}, "physics": {"Ra": 1e4}, "time": {"end": 1}, "output": {"directory": str(tmp_path)},
+        "boundary": {"velocity": {"top": {"kind": "prescribed", "value": [1, "x"]}, "bottom": "no_slip", "left": None},
+                     "temperature": {"top": {"dirichlet": 0}, "bottom": {"dirichlet": "1"}}}})
+    boundary = run_settings(config).boundary
+    assert not list(_raw_values(boundary, "boundary"))
+    velocity = boundary.velocity
+    assert velocity["top"] == VelocityCondition("prescribed", PrescribedSettings((1.0, "x")))
+    assert isinstance(velocity["top"].settings.value[0], float)
+    assert velocity["bottom"].kind == "no_slip" and velocity["left"] is None and velocity["right"] == DEFAULT_VELOCITY
+    assert all(isinstance(c.settings, VELOCITY_BC_KINDS[c.kind].Settings) for c in velocity.values() if c is not None)
+    assert boundary.temperature == {"left": DEFAULT_TEMPERATURE, "right": DEFAULT_TEMPERATURE,
+                                    "bottom": TemperatureBC("dirichlet", 1.0), "top": TemperatureBC("dirichlet", 0.0),
+                                    "front": DEFAULT_TEMPERATURE, "back": DEFAULT_TEMPERATURE}
+    assert boundary.velocity_bcs(config_domain(config)) == {
+        "right": VelocityBC("free_slip"), "bottom": VelocityBC("no_slip"), "top": VelocityBC("prescribed", (1.0, "x"))}
 
 
 def test_particle_plugins_declare_their_parameters_once():

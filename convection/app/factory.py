@@ -34,7 +34,6 @@ import time
 from pathlib import Path
 from collections.abc import Callable
 from typing import Any, NamedTuple
-from collections.abc import Mapping
 
 import dolfinx.fem
 import dolfinx.fem.petsc
@@ -45,7 +44,7 @@ from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, LevelBound
 
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.levels import MeshLevels
-from convection.geometry.boundary import VELOCITY_BC_KINDS, TemperatureBC, VelocityBC, temperature_dirichlet_bcs
+from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
 from convection.geometry.domain import Domain
 from convection.deform.motion import FreeSurface
 from convection.deform.surface import surface_terms
@@ -77,33 +76,7 @@ from particles.manager import ParticleManager
 from particles.systems import ParticleSystems, file_stem
 from particles.properties import PropertyContext
 
-__all__ = ["build_model", "build_model_from_settings", "materials_from_settings", "run_config",
-           "temperature_bcs_from_config", "velocity_bcs_from_config"]
-
-
-def velocity_bcs_from_config(section: Mapping[str, Any], domain: Domain) -> dict[str, VelocityBC]:
-    """Velocity conditions per boundary of ``domain`` from the ``boundary.velocity`` conditions
-    (:attr:`convection.geometry.boundary.BoundarySettings.velocity`; null: traction free)."""
-    result = {}
-    for side in domain.boundaries:
-        value = section[side]
-        if value is None:
-            continue
-        kind = value["kind"] if isinstance(value, dict) else value
-        result[side] = VELOCITY_BC_KINDS[kind].from_config(value, domain.gdim)
-    return result
-
-
-def temperature_bcs_from_config(section: Mapping[str, Any], domain: Domain) -> dict[str, TemperatureBC]:
-    """Temperature conditions per boundary of ``domain`` from the ``boundary.temperature`` conditions."""
-    result = {}
-    for side in domain.boundaries:
-        value = section[side]
-        if value is None or value == "insulating":
-            result[side] = TemperatureBC("insulating")
-        else:
-            result[side] = TemperatureBC("dirichlet", float(value["dirichlet"]))
-    return result
+__all__ = ["build_model", "build_model_from_settings", "materials_from_settings", "run_config"]
 
 
 def materials_from_settings(settings: RunSettings, /) -> Materials:
@@ -314,8 +287,8 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
                                             gamma=visc.gamma, gravity=domain.gravity,
                                             formulation=physics.approximation, reference=reference,
                                             elasticity=_elasticity(settings))
-    velocity_bcs = velocity_bcs_from_config(settings.boundary.velocity, domain)
-    temperature_bcs = temperature_bcs_from_config(settings.boundary.temperature, domain)
+    velocity_bcs = settings.boundary.velocity_bcs(domain)
+    temperature_bcs = settings.boundary.temperature_bcs(domain)
     meshes = _meshes(settings, domain, materials, temperature_bcs, comm, restore)
     mesh = meshes.mesh
     free_surface = _free_surface(settings, domain, mesh, velocity_bcs, restore, exact=meshes.exact)

@@ -40,7 +40,9 @@ import yaml
 
 from convection.expressions import Expression, ExpressionError
 from convection.config.files import read_document, safe_load
-from convection.config.sections import InitialSettings, boundary_settings, mesh_section
+from convection.config.sections import (
+    InitialSettings, boundary_settings, mesh_section, temperature_condition, velocity_condition,
+)
 from convection.config.particle_systems import (
     carries_particles, check_primary, listed_systems, override_target, particle_sections, primary_system,
     resolve_systems,
@@ -80,31 +82,22 @@ MAX_PARTICLES = 1e8
 """Most particles a config may ask for (about 100 bytes each, with properties several GB)."""
 MAX_STEPS = 1e9
 """Most time steps ``time.end / time.dt_max`` may imply (without ``time.max_steps``)."""
-VELOCITY_KINDS = tuple(VELOCITY_BC_KINDS)
 
 
 def _check_velocity_bc(value: Any) -> str | None:
-    kind = value.get("kind") if isinstance(value, dict) else value
-    if not isinstance(kind, str) or kind not in VELOCITY_KINDS:
-        return (f"velocity condition {short_repr(value)} is not one of {list(VELOCITY_KINDS)} "
-                "(or {kind: prescribed, value: [..]})")
-    return VELOCITY_BC_KINDS[kind].check_config(value)
+    try:
+        velocity_condition(value)
+    except ValueError as err:
+        return str(err)
+    return None
 
 
 def _check_temperature_bc(value: Any) -> str | None:
-    if value == "insulating":
-        return None
-    if isinstance(value, dict) and list(value) == ["dirichlet"]:
-        number = value["dirichlet"]
-        if isinstance(number, str):
-            try:
-                number = float(number)
-            except ValueError:
-                pass
-        if _finite_number(number) is None:
-            return f"dirichlet value must be a finite number, got {short_repr(value['dirichlet'])}"
-        return None
-    return f"temperature condition {short_repr(value)} must be 'insulating' or {{dirichlet: <number>}}"
+    try:
+        temperature_condition(value)
+    except ValueError as err:
+        return str(err)
+    return None
 
 
 def _names(module: str, name: str) -> Names:

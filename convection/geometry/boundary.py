@@ -23,67 +23,98 @@ from petsc4py import PETSc
 from convection.geometry.domain import Domain
 from convection.expressions import Expression, ExpressionError
 from convection.geometry.mesh import cell_diameter
-from convection.geometry.plates import PlateVelocity
-from convection.schema import finite_number, short_repr
+from convection.geometry.plates import Plate, PlateVelocity, plate_table_problem, plate_width_problem
+from convection.schema import finite_number, param, short_repr
 from fembase.dolfinx_compat import DirichletBC
 from fembase.registry import Registry
 
-__all__ = ["TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS", "BoundarySettings", "NitscheTerms", "TemperatureBC",
-           "VelocityBC", "VelocityKind", "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs",
-           "velocity_dirichlet_bcs", "weak_free_slip_boundaries"]
+__all__ = ["DEFAULT_TEMPERATURE", "DEFAULT_VELOCITY", "TEMPERATURE_BC_KINDS", "VELOCITY_BC_KINDS",
+           "BoundarySettings", "ConditionKind", "NitscheTerms", "PlatesSettings", "PrescribedSettings", "TemperatureBC",
+           "TemperatureKind", "VelocityBC", "VelocityCondition", "VelocityContext", "VelocityKind",
+           "has_rotation_null_space", "nitsche_free_slip", "temperature_dirichlet_bcs", "velocity_dirichlet_bcs",
+           "weak_free_slip_boundaries"]
 
-class VelocityKind:
-    """One kind of velocity condition, as ``boundary.velocity.<side>`` names it (an entry of
-    :data:`VELOCITY_BC_KINDS`): how a config gives it, the :class:`VelocityBC` it makes and the
-    Dirichlet conditions that impose it. Subclasses override what differs.
+@dataclass(frozen=True)
+class VelocityContext:
+    """What a velocity condition is made in (:meth:`VelocityKind.build`).
+
+    Attributes:
+        gdim: The dimension of the domain.
+    """
+
+    gdim: int
+
+
+@dataclass(frozen=True)
+class _NoEntries:
+    """The settings of a kind written by its name alone (``top: free_slip``): none."""
+
+
+def _components_problem(value: Any, /) -> str | None:
+    """What is wrong with a prescribed velocity's ``value`` as written (None: missing), or None."""
+    if not isinstance(value, (list, tuple)):
+        return "a prescribed velocity needs 'value: [vx, vy(, vz)]'"
+    for i, component in enumerate(value):
+        if isinstance(component, str):
+            try:
+                Expression(component, gdim=3)
+            except ExpressionError as err:
+                return f"value[{i}]: {err}"
+        elif finite_number(component) is None:
+            return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
+    return None
+
+
+class ConditionKind:
+    """What a kind of boundary condition has (the velocity's :class:`VelocityKind`, the
+    temperature's :class:`TemperatureKind`): a config name, one line, the entries a config gives it
+    (:attr:`Settings`, none by default) and the strong conditions that impose it (none by default).
 
     Attributes:
         name, description: The config name and one line.
+        needs_value: The condition it builds has a value.
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    Settings: ClassVar[type] = _NoEntries
+    needs_value: ClassVar[bool] = False
+
+    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
+        """The strong conditions on the boundary ``name`` (none: a natural or weak condition). Collective."""
+        return []
+
+
+class VelocityKind(ConditionKind):
+    """One kind of velocity condition, as ``boundary.velocity.<side>`` names it (an entry of
+    :data:`VELOCITY_BC_KINDS`): its entries (:attr:`Settings`), the :class:`VelocityBC` it builds
+    and the Dirichlet conditions that impose it. Subclasses override what differs.
+
+    A config writes a kind by its name (``free_slip``) or as ``{kind: <name>, <entry>: ...}``; the
+    entries are the fields of its ``Settings`` (made by :func:`fembase.params.param`), whose
+    ``check`` says, in the user's terms, what is wrong with an entry as written, and what a
+    required entry that is missing lacks (given None).
+
+    Attributes (beyond :class:`ConditionKind`'s):
+        form: How a config writes a kind with required entries (for the message when it is
+            written by its name alone).
         condition: A :class:`VelocityBC` of this kind exists (False: a config form of another kind).
-        needs_value: The config gives ``{kind: <name>, value: [...]}`` and :class:`VelocityBC` a value.
         rotations_free: Lets the flow slide along the boundary (a shell's rigid rotations cross it nowhere).
         weak_without_axis: Imposed weakly (:func:`nitsche_free_slip`) where the boundary has no normal axis.
         moves: The boundary moves with the flow (:mod:`convection.deform`), a natural condition here.
     """
 
-    name: ClassVar[str]
-    description: ClassVar[str]
+    form: ClassVar[str] = ""
     condition: ClassVar[bool] = True
-    needs_value: ClassVar[bool] = False
     rotations_free: ClassVar[bool] = False
     weak_without_axis: ClassVar[bool] = False
     moves: ClassVar[bool] = False
 
-    def check_config(self, value: Any, /) -> str | None:
-        """What is wrong with the config's ``value`` of this kind (a name or a mapping), or None."""
-        if not isinstance(value, dict):
-            return (f"a {self.name} velocity needs the form {{kind: {self.name}, value: [vx, vy(, vz)]}}"
-                    if self.needs_value else None)
-        extra = [name for name in value if name not in ("kind", "value")]
-        if extra:
-            return f"unknown entry {short_repr(extra[0])}; allowed: ['kind', 'value']"
-        if self.needs_value and not isinstance(value.get("value"), list):
-            return f"a {self.name} velocity needs 'value: [vx, vy(, vz)]'"
-        for i, component in enumerate(value.get("value") or ()):
-            if isinstance(component, str):
-                try:
-                    Expression(component, gdim=3)
-                except ExpressionError as err:
-                    return f"value[{i}]: {err}"
-            elif finite_number(component) is None:
-                return f"value[{i}]: {short_repr(component)} must be a finite number or an expression"
-        return None
-
-    def from_config(self, value: Any, gdim: int, /) -> VelocityBC:
-        """The condition the config's checked ``value`` of this kind gives in ``gdim`` dimensions."""
-        if not isinstance(value, dict):
-            return VelocityBC(self.name)
-        components = tuple(v if isinstance(v, str) else float(v) for v in value.get("value") or ())
-        return VelocityBC(self.name, components or None)
-
-    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
-        """The strong conditions on the boundary ``name`` (none: a natural or weak condition). Collective."""
-        return []
+    @classmethod
+    def build(cls, settings: Any, context: VelocityContext, /) -> VelocityBC:
+        """The condition of this kind's ``settings`` (a :attr:`Settings`) in ``context``: with the
+        settings' ``value`` where the kind :attr:`needs_value`."""
+        return VelocityBC(cls.name, settings.value if cls.needs_value else None)
 
     def homogeneous(self, bc: VelocityBC, /) -> VelocityBC:
         """``bc`` with zero values on the same dofs."""
@@ -105,9 +136,22 @@ class FreeSlip(VelocityKind):
         return [dolfinx.fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(axis))]
 
 
+@dataclass(frozen=True)
+class PrescribedSettings:
+    """The entries of a prescribed velocity."""
+
+    value: tuple[float | str, ...] = param(check=_components_problem, help="the velocity: per component a number or "
+                                           "an expression in x, y, z, r, ... (as many as the domain's dimension)")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "value", tuple(c if isinstance(c, str) else float(c) for c in self.value))
+
+
 class Prescribed(VelocityKind):
     name = "prescribed"
     description = "velocity equal to `value`: a constant vector, or expressions in x, y, z, r, ... per component"
+    form = "{kind: prescribed, value: [vx, vy(, vz)]}"
+    Settings: ClassVar[type] = PrescribedSettings
     needs_value = True
 
     def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
@@ -130,6 +174,8 @@ class Prescribed(VelocityKind):
 class NoSlip(Prescribed):
     name = "no_slip"
     description = "zero velocity"
+    form = ""
+    Settings = _NoEntries
     needs_value = False
 
     def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
@@ -139,22 +185,25 @@ class NoSlip(Prescribed):
         return bc
 
 
+@dataclass(frozen=True)
+class PlatesSettings:
+    """The entries of a plates velocity (:mod:`convection.geometry.plates`)."""
+
+    plates: tuple[Plate, ...] = param(check=plate_table_problem, help="the plates: [{centre: [lon, lat], pole: [lon, "
+                                      "lat], rate: omega}, ...] (degrees; 2D: centre [lon], no pole)")
+    width: float = param(0.1, check=plate_width_problem, help="angular width of the plate boundaries (radians)")
+
+
 class Plates(VelocityKind):
     name = "plates"
     description = "rigid plates on a spherical shell's outer surface: a prescribed velocity"
+    form = "{kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
+    Settings = PlatesSettings
     condition = False
 
-    def check_config(self, value: Any, /) -> str | None:
-        if not isinstance(value, dict):
-            return "a plates velocity needs the form {kind: plates, width: w, plates: [{centre, pole, rate}, ...]}"
-        try:
-            PlateVelocity.from_config(value, 3)
-        except (TypeError, ValueError, OverflowError) as err:  # TypeError: e.g. keys of mixed types
-            return str(err)
-        return None
-
-    def from_config(self, value: Any, gdim: int, /) -> VelocityBC:
-        return VelocityBC(Prescribed.name, PlateVelocity.from_config(value, gdim))
+    @classmethod
+    def build(cls, settings: Any, context: VelocityContext, /) -> VelocityBC:
+        return VelocityBC(Prescribed.name, PlateVelocity(settings.plates, settings.width, context.gdim))
 
 
 class FreeSurface(VelocityKind):
@@ -167,28 +216,92 @@ VELOCITY_BC_KINDS: Registry[VelocityKind] = Registry("velocity condition", (
     FreeSlip(), NoSlip(), Prescribed(), Plates(), FreeSurface()))
 """Registry of the velocity condition kinds a config names (the order of the config's messages)."""
 
-TEMPERATURE_BC_KINDS: dict[str, str] = {
-    "dirichlet": "temperature equal to the constant `value`",
-    "insulating": "zero heat flux (natural condition)",
-}
-"""Registry of temperature boundary condition kinds (name -> one-line description)."""
+
+def _temperature_problem(value: Any, /) -> str | None:
+    """What is wrong with a fixed temperature as written (a number, or its text), or None."""
+    number = value
+    if isinstance(number, str):
+        try:
+            number = float(number)
+        except ValueError:
+            pass
+    if finite_number(number) is None:
+        return f"dirichlet value must be a finite number, got {short_repr(value)}"
+    return None
+
+
+class TemperatureKind(ConditionKind):
+    """One kind of temperature condition, as ``boundary.temperature.<side>`` names it (an entry of
+    :data:`TEMPERATURE_BC_KINDS`): written by its name, or ``{<name>: <its one entry>}``."""
+
+    @classmethod
+    def build(cls, settings: Any, context: Any, /) -> TemperatureBC:
+        """The condition of this kind's ``settings`` (``context``: not needed): with the settings'
+        ``value`` where the kind :attr:`needs_value`."""
+        return TemperatureBC(cls.name, settings.value if cls.needs_value else None)
+
+
+@dataclass(frozen=True)
+class DirichletSettings:
+    """The entry of a fixed temperature."""
+
+    value: float = param(check=_temperature_problem, help="the temperature")
+
+
+class Dirichlet(TemperatureKind):
+    name = "dirichlet"
+    description = "temperature equal to the constant `value`"
+    Settings: ClassVar[type] = DirichletSettings
+    needs_value = True
+
+    def dirichlet(self, V: dolfinx.fem.FunctionSpace, domain: Domain, name: str, value: Any, /) -> list[DirichletBC]:
+        return [dolfinx.fem.dirichletbc(PETSc.ScalarType(value), domain.locate_dofs(V, name), V)]
+
+
+class Insulating(TemperatureKind):
+    name = "insulating"
+    description = "zero heat flux (natural condition)"
+
+
+TEMPERATURE_BC_KINDS: Registry[TemperatureKind] = Registry("temperature condition", (Dirichlet(), Insulating()))
+"""Registry of temperature boundary condition kinds."""
+
+
+@dataclass(frozen=True)
+class VelocityCondition:
+    """One boundary's velocity condition as configured: the name of its kind
+    (:data:`VELOCITY_BC_KINDS`) and the kind's settings."""
+
+    kind: str
+    settings: Any
+
+    def build(self, context: VelocityContext, /) -> VelocityBC:
+        """The :class:`VelocityBC` it gives in ``context`` (through the registry)."""
+        return VELOCITY_BC_KINDS.build(self.kind, self.settings, context)
 
 
 @dataclass(frozen=True)
 class BoundarySettings:
-    """The ``boundary`` config section of a run: for each boundary of its geometry, the velocity and
-    the temperature condition as written (a kind name, ``{kind: ..., ...}`` or ``{dirichlet: T}``;
-    null: traction free / insulating)."""
+    """The ``boundary`` config section of a run, typed: for each boundary of its geometry, the
+    velocity condition (None: traction free) and the temperature condition."""
 
-    velocity: Mapping[str, Any]
-    temperature: Mapping[str, Any]
+    velocity: Mapping[str, VelocityCondition | None]
+    temperature: Mapping[str, TemperatureBC]
 
     @property
     def free_surfaces(self) -> tuple[str, ...]:
         """The boundaries whose velocity condition moves with the flow (a free surface)."""
-        kinds = {name: value.get("kind") if isinstance(value, dict) else value for name, value in self.velocity.items()}
-        return tuple(name for name, kind in kinds.items()
-                     if isinstance(kind, str) and kind in VELOCITY_BC_KINDS and VELOCITY_BC_KINDS[kind].moves)
+        return tuple(name for name, c in self.velocity.items() if c is not None and VELOCITY_BC_KINDS[c.kind].moves)
+
+    def velocity_bcs(self, domain: Domain, /) -> dict[str, VelocityBC]:
+        """The velocity conditions on the boundaries of ``domain`` (the traction-free ones left out)."""
+        context = VelocityContext(domain.gdim)
+        conditions = {side: self.velocity[side] for side in domain.boundaries}
+        return {side: c.build(context) for side, c in conditions.items() if c is not None}
+
+    def temperature_bcs(self, domain: Domain, /) -> dict[str, TemperatureBC]:
+        """The temperature conditions on the boundaries of ``domain``."""
+        return {side: self.temperature[side] for side in domain.boundaries}
 
 
 @dataclass(frozen=True)
@@ -238,8 +351,19 @@ class TemperatureBC:
                 f"Unknown temperature BC kind {self.kind!r}; "
                 f"valid names: {sorted(TEMPERATURE_BC_KINDS)}"
             )
-        if self.kind == "dirichlet" and self.value is None:
-            raise ValueError("A 'dirichlet' temperature BC needs a value")
+        if self.spec.needs_value and self.value is None:
+            raise ValueError(f"A {self.kind!r} temperature BC needs a value")
+
+    @property
+    def spec(self) -> TemperatureKind:
+        """The kind's entry of :data:`TEMPERATURE_BC_KINDS`."""
+        return TEMPERATURE_BC_KINDS[self.kind]
+
+
+DEFAULT_VELOCITY = VelocityCondition(FreeSlip.name, FreeSlip.Settings())
+"""The velocity condition of a boundary the config does not name."""
+DEFAULT_TEMPERATURE = TemperatureBC(Insulating.name)
+"""The temperature condition of a boundary the config does not name."""
 
 
 def velocity_dirichlet_bcs(V: dolfinx.fem.FunctionSpace, bcs: dict[str, VelocityBC], domain: Domain, /
@@ -359,6 +483,6 @@ def temperature_dirichlet_bcs(V: dolfinx.fem.FunctionSpace, bcs: dict[str, Tempe
     out = []
     for name in domain.boundaries:
         bc = bcs.get(name)
-        if bc is not None and bc.kind == "dirichlet":
-            out.append(dolfinx.fem.dirichletbc(PETSc.ScalarType(bc.value), domain.locate_dofs(V, name), V))
+        if bc is not None:
+            out.extend(bc.spec.dirichlet(V, domain, name, bc.value))
     return out

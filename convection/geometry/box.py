@@ -23,6 +23,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from convection.geometry.boundary import DEFAULT_TEMPERATURE, DEFAULT_VELOCITY
 from convection.geometry.domain import Columns, Domain, DomainContext, MeshSection, kept_facets, safe_product
 from convection.geometry.gravity import VerticalGravity
 from convection.geometry.probes import MAX_PROBES, NODES_PER_CELL, bounded
@@ -272,9 +273,10 @@ class BoxDomain(Domain):
         """A 2D box has no front and back: conditions there must be the defaults."""
         if len(mesh.keys.cells) != 2:
             return
-        for section, conditions in (("velocity", boundary.velocity), ("temperature", boundary.temperature)):
+        for section, conditions, defaults in (("velocity", boundary.velocity, (None, DEFAULT_VELOCITY)),
+                                              ("temperature", boundary.temperature, (DEFAULT_TEMPERATURE,))):
             for side in ("front", "back"):
-                if conditions[side] not in (None, "free_slip", "insulating"):
+                if conditions[side] not in defaults:
                     raise ConfigError(f"config key 'boundary.{section}.{side}': only exists in 3D")
 
     @classmethod

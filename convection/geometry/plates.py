@@ -30,7 +30,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Plate", "PlateVelocity", "unit_vector"]
+from fembase.params import param
+
+__all__ = ["Plate", "PlateVelocity", "plate_table_problem", "plate_width_problem", "unit_vector"]
+
+_ENTRIES = ("centre", "pole", "rate")
 
 
 def unit_vector(longitude: float, latitude: float = 0.0) -> npt.NDArray[np.float64]:
@@ -38,6 +42,36 @@ def unit_vector(longitude: float, latitude: float = 0.0) -> npt.NDArray[np.float
     shape=(3,)."""
     lon, lat = np.radians(longitude), np.radians(latitude)
     return np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+
+
+def plate_table_problem(items: Any, /) -> str | None:
+    """What is wrong with a plates velocity's ``plates: [{centre, pole, rate}, ...]`` as written
+    (None: missing), naming the plate; None if nothing."""
+    if not isinstance(items, (list, tuple)) or not items:
+        return "a plates velocity needs 'plates: [{centre: [lon, lat], pole: [lon, lat], rate: r}, ...]'"
+    for i, item in enumerate(items):
+        if not isinstance(item, Mapping):
+            return f"plates[{i}]: expected {{centre, pole, rate}}, got {item!r}"
+        unknown = set(item) - set(_ENTRIES)
+        if unknown or "centre" not in item or "rate" not in item:
+            what = f"unknown entry {sorted(unknown)[0]!r}" if unknown else "needs centre and rate"
+            return f"plates[{i}]: {what} (entries: centre, pole, rate)"
+        try:
+            Plate(tuple(item["centre"]), item["rate"], tuple(item.get("pole", (0.0, 90.0))))
+        except (TypeError, ValueError, OverflowError) as err:  # TypeError: e.g. keys of mixed types
+            return f"plates[{i}]: {err}"
+    return None
+
+
+def plate_width_problem(width: Any, /) -> str | None:
+    """What is wrong with a plates velocity's ``width`` as written, or None."""
+    try:
+        number = float(width) if not isinstance(width, bool) else None
+    except (TypeError, ValueError):
+        number = None
+    if number is None:
+        return f"plates width must be a number, got {width!r}"
+    return None if number > 0.0 else f"plates width must be positive (radians), got {number}"
 
 
 @dataclass(frozen=True)
@@ -51,11 +85,16 @@ class Plate:
         pole: ``(longitude, latitude)`` of the Euler pole in degrees (2D: the z axis, ignored).
     """
 
-    centre: tuple[float, ...]
-    rate: float
-    pole: tuple[float, ...] = (0.0, 90.0)
+    centre: tuple[float, ...] = param(help="longitude, latitude of the plate's centre in degrees (2D: [longitude])")
+    rate: float = param(help="rotation rate about the pole (radians per time unit; positive: counter-clockwise seen "
+                        "from above the pole)")
+    pole: tuple[float, ...] = param((0.0, 90.0), help="longitude, latitude of the Euler pole in degrees (2D: the z "
+                                    "axis, ignored)")
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", tuple(float(c) for c in self.centre))
+        object.__setattr__(self, "pole", tuple(float(c) for c in self.pole))
+        object.__setattr__(self, "rate", float(self.rate))
         if len(self.centre) not in (1, 2) or len(self.pole) != 2:
             raise ValueError(f"a plate needs centre [lon, lat] (2D: [lon]) and pole [lon, lat], got {self}")
         if not np.isfinite(self.rate):
@@ -91,39 +130,6 @@ class PlateVelocity:
             raise ValueError(f"plates width must be positive (radians), got {self.width}")
         if self.gdim not in (2, 3):
             raise ValueError(f"plates need gdim 2 or 3, got {self.gdim}")
-
-    @classmethod
-    def from_config(cls, section: Mapping[str, Any], gdim: int, /) -> PlateVelocity:
-        """From ``{kind: plates, width: w, plates: [{centre: [...], pole: [...], rate: r}, ...]}``.
-
-        Raises:
-            ValueError: Missing or malformed entries, naming the plate.
-        """
-        extra = set(section) - {"kind", "plates", "width"}
-        if extra:
-            raise ValueError(f"unknown entry {sorted(extra)[0]!r}; allowed: ['kind', 'plates', 'width']")
-        items = section.get("plates")
-        if not isinstance(items, list) or not items:
-            raise ValueError("a plates velocity needs 'plates: [{centre: [lon, lat], pole: [lon, lat], rate: r}, ...]'")
-        plates = []
-        for i, item in enumerate(items):
-            if not isinstance(item, Mapping):
-                raise ValueError(f"plates[{i}]: expected {{centre, pole, rate}}, got {item!r}")
-            unknown = set(item) - {"centre", "pole", "rate"}
-            if unknown or "centre" not in item or "rate" not in item:
-                what = f"unknown entry {sorted(unknown)[0]!r}" if unknown else "needs centre and rate"
-                raise ValueError(f"plates[{i}]: {what} (entries: centre, pole, rate)")
-            try:
-                centre = tuple(float(c) for c in item["centre"])
-                pole = tuple(float(c) for c in item.get("pole", (0.0, 90.0)))
-                plates.append(Plate(centre, float(item["rate"]), pole))
-            except (TypeError, ValueError) as err:
-                raise ValueError(f"plates[{i}]: {err}") from None
-        try:
-            width = float(section.get("width", 0.1))
-        except (TypeError, ValueError):
-            raise ValueError(f"plates width must be a number, got {section.get('width')!r}") from None
-        return cls(tuple(plates), width, gdim)
 
     def weights(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Plate weights ``w_k`` at points x (shape=(3, n)), shape=(num_plates, n); columns sum to 1."""

@@ -61,10 +61,11 @@ changes every step).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import dolfinx
 
@@ -156,14 +157,6 @@ class StokesLinearSolver(LinearSolver):
 
     nested: bool = False
     needs_hypre: bool = False
-    by_mesh = False  # the name itself, never picked by the mesh (AutoStokesSolver is)
-
-    def resolve(self, gdim: int, /, *, rotations: bool = False) -> str:
-        """This solver's name (see :func:`resolve_solver`)."""
-        if self.needs_hypre and not HAS_HYPRE:
-            raise ValueError(f"Stokes solver {self.name!r} uses hypre's BoomerAMG, which this PETSc does not have; "
-                             "use 'iterative_gamg' or 'direct'")
-        return self.name
 
 
 STOKES_SOLVERS: Registry[StokesLinearSolver] = linear_solvers(
@@ -191,36 +184,12 @@ STOKES_SOLVERS: Registry[StokesLinearSolver] = linear_solvers(
         {**block_schur_options(GEOMETRIC_MULTIGRID), "fieldsplit_p_pc_sor_its": 3}, nested=True,
     ),
 )
-"""Registry of Stokes solver kinds (lowercase name -> description and default PETSc options)."""
+"""Registry of the linear-solver setups of :class:`StokesSolver` (lowercase name -> description and
+default PETSc options): ready entries, asked. A ``stokes.solver`` choice (:data:`STOKES_SOLVER_CHOICES`)
+is built into one of them."""
 
 AUTO = "auto"
 """Solver name resolved by the mesh: ``"iterative"`` in 3D, ``"direct"`` in 2D (see :func:`resolve_solver`)."""
-
-
-@dataclass(frozen=True)
-class AutoStokesSolver:
-    """The choice ``"auto"``: a solver of :data:`STOKES_SOLVERS` picked by the mesh (:func:`resolve_solver`)."""
-
-    name = AUTO
-    description = ("multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D "
-                   "(iterative_gamg for a shell with free slip on both surfaces), direct in 2D")
-    nested = False
-    by_mesh = True  # a run of a config may pick the multigrid (convection.config.loader.multigrid_levels)
-
-    def resolve(self, gdim: int, /, *, rotations: bool = False) -> str:
-        """``"iterative"`` in 3D (``"iterative_gamg"`` with ``rotations`` or without hypre), ``"direct"`` in 2D."""
-        if gdim == 3:
-            return "iterative_gamg" if rotations or not HAS_HYPRE else "iterative"
-        return "direct"
-
-
-STOKES_SOLVER_CHOICES: Registry[StokesLinearSolver | AutoStokesSolver] = Registry(
-    "Stokes solver", (AutoStokesSolver(), *STOKES_SOLVERS.values()))
-"""What ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept: ``"auto"`` and the
-:data:`STOKES_SOLVERS`; each ``resolve``s to a name of :data:`STOKES_SOLVERS`."""
-
-STOKES_SOLVER_NAMES: tuple[str, ...] = tuple(STOKES_SOLVER_CHOICES)
-"""Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
 
 
 @dataclass(frozen=True)
@@ -229,7 +198,7 @@ class StokesSettings:
     of the same names take their defaults from here)."""
 
     degree: int = param(2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)")
-    solver: str = param(AUTO, choices=Names(STOKES_SOLVER_CHOICES.describe()),
+    solver: str = param(AUTO, choices=Names(lambda: STOKES_SOLVER_CHOICES),
                         help="auto: multigrid (FGMRES + block preconditioner, geometric multigrid) on a fixed 3D box "
                              "whose cells halve twice, else iterative (AMG) in 3D (iterative_gamg for a shell free "
                              "slip on both surfaces), direct (MUMPS) in 2D")
@@ -244,6 +213,86 @@ class StokesSettings:
                                        "(semi-implicit, stabilises dense interfaces against the 'drunken sailor' "
                                        "oscillation; 0.5: second order in time; 1: no swinging at steps far above an "
                                        "interface's relaxation time, e.g. sticky air under a slow slab)")
+
+
+@dataclass(frozen=True)
+class StokesSolverContext:
+    """What a ``stokes.solver`` choice is built for (:meth:`StokesSolverChoice.build`).
+
+    Attributes:
+        gdim: The dimension of the mesh.
+        rotations: The velocity has the rigid rotations as near-null modes (a shell free slip on
+            both surfaces: :func:`convection.geometry.boundary.has_rotation_null_space`).
+    """
+
+    gdim: int
+    rotations: bool = False
+
+
+class StokesSolverChoice:
+    """A ``stokes.solver`` choice (an entry of :data:`STOKES_SOLVER_CHOICES`): built from the
+    ``stokes`` section (:class:`StokesSettings`, its ``Settings``) in a :class:`StokesSolverContext`
+    into the linear-solver setup of :data:`STOKES_SOLVERS` that runs.
+
+    Attributes:
+        name, description: The config name and one line.
+        nested: Geometric multigrid over the meshes the mesh is nested in (the run makes them).
+        by_mesh: Picked by the mesh: a run of a config may make it the multigrid
+            (:func:`convection.config.loader.nested_levels`).
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+    Settings: ClassVar[type] = StokesSettings
+    nested: ClassVar[bool] = False
+    by_mesh: ClassVar[bool] = False
+
+    @classmethod
+    def build(cls, settings: StokesSettings, context: StokesSolverContext, /) -> StokesLinearSolver:
+        """The setup of :data:`STOKES_SOLVERS` of the same name.
+
+        Raises:
+            ValueError: It uses hypre's BoomerAMG, which this PETSc does not have.
+        """
+        setup = STOKES_SOLVERS[cls.name]
+        if setup.needs_hypre and not HAS_HYPRE:
+            raise ValueError(f"Stokes solver {cls.name!r} uses hypre's BoomerAMG, which this PETSc does not have; "
+                             "use 'iterative_gamg' or 'direct'")
+        return setup
+
+
+def _choice(setup: StokesLinearSolver, /) -> type[StokesSolverChoice]:
+    """The choice of the setup ``setup`` itself."""
+    return type(f"StokesSolver_{setup.name}", (StokesSolverChoice,), {
+        "__doc__": f"``stokes.solver: {setup.name}``: {setup.description}.", "name": setup.name,
+        "description": setup.description, "nested": setup.nested})
+
+
+class AutoStokesSolver(StokesSolverChoice):
+    """The choice ``"auto"``: a solver of :data:`STOKES_SOLVERS` picked by the mesh (:func:`resolve_solver`)."""
+
+    name = AUTO
+    description = ("multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D "
+                   "(iterative_gamg for a shell with free slip on both surfaces), direct in 2D")
+    by_mesh = True
+
+    @classmethod
+    def build(cls, settings: StokesSettings, context: StokesSolverContext, /) -> StokesLinearSolver:
+        """``"iterative"`` in 3D (``"iterative_gamg"`` with rotations or without hypre), ``"direct"`` in 2D."""
+        if context.gdim == 3:
+            picked = "iterative_gamg" if context.rotations or not HAS_HYPRE else "iterative"
+        else:
+            picked = "direct"
+        return STOKES_SOLVER_CHOICES.build(picked, dataclasses.replace(settings, solver=picked), context)
+
+
+STOKES_SOLVER_CHOICES: Registry[type[StokesSolverChoice]] = Registry(
+    "Stokes solver", (AutoStokesSolver, *(_choice(setup) for setup in STOKES_SOLVERS.values())))
+"""What ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept: ``"auto"`` and one
+choice per entry of :data:`STOKES_SOLVERS`; each builds a setup of :data:`STOKES_SOLVERS`."""
+
+STOKES_SOLVER_NAMES: tuple[str, ...] = tuple(STOKES_SOLVER_CHOICES)
+"""Every name ``StokesSolver(solver=...)`` and the config's ``stokes.solver`` accept."""
 
 
 _DEFAULTS = StokesSettings()
@@ -329,7 +378,8 @@ def resolve_solver(name: str, gdim: int, /, *, rotations: bool = False) -> str:
     """
     if name not in STOKES_SOLVER_CHOICES:
         raise ValueError(f"Unknown Stokes solver {name!r}; valid names: {list(STOKES_SOLVER_NAMES)}")
-    return STOKES_SOLVER_CHOICES[name].resolve(gdim, rotations=rotations)
+    settings = dataclasses.replace(_DEFAULTS, solver=name)
+    return STOKES_SOLVER_CHOICES.build(name, settings, StokesSolverContext(gdim, rotations)).name
 
 
 def _same_objects(a: Any, b: Any) -> bool:

@@ -143,6 +143,20 @@ CASES = [
     Case("plate entries of mixed types", ("boundary.velocity.outer={kind: plates, plates: [{centre: [0], rate: 1, "
                                           "1: 2, b: 3}]}",), config=SHELL,
          needle="'boundary.velocity.outer.plates[0].1': keys must be names"),
+    Case("velocity kind unknown", ("boundary.velocity.top=slip",),
+         needle="'boundary.velocity.top': velocity condition 'slip' is not one of ['free_slip', 'no_slip', "),
+    Case("prescribed by name alone", ("boundary.velocity.top=prescribed",),
+         needle="'boundary.velocity.top': a prescribed velocity needs the form {kind: prescribed, value: [vx, vy("
+                ", vz)]}"),
+    Case("prescribed without value", ("boundary.velocity.top={kind: prescribed}",),
+         needle="'boundary.velocity.top': a prescribed velocity needs 'value: [vx, vy(, vz)]'"),
+    Case("prescribed component a list", ("boundary.velocity.top={kind: prescribed, value: [[1], 0]}",),
+         needle="'boundary.velocity.top': value[0]: [1] must be a finite number or an expression"),
+    Case("entry of a kind without entries", ("boundary.velocity.top={kind: no_slip, value: [0, 0]}",),
+         needle="'boundary.velocity.top': unknown entry 'value'; allowed: ['kind']"),
+    Case("plates width a text", ("boundary.velocity.outer={kind: plates, width: wide, plates: [{centre: [0], "
+                                 "rate: 1}]}",), config=SHELL,
+         needle="'boundary.velocity.outer': plates width must be a number, got 'wide'"),
     Case("interpolator name a list", ("particles.interpolator={name: [1]}",),
          needle="'particles.interpolator.name': [1] is not one of"),
     Case("cells 1.0e+308", ("mesh.cells=[1.0e+308, 4]",), needle="'mesh.cells[0]': must be an integer within +-2**63",

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from convection.config.loader import ConfigError, load_config
-from convection.app.factory import velocity_bcs_from_config
 from convection.config.loader import config_domain as domain_from_config
+from convection.config.settings import run_settings
 from convection.geometry.plates import Plate, PlateVelocity, unit_vector
 
 PLATES = (Plate((0.0, 0.0), 2.0, (90.0, 30.0)), Plate((180.0, 0.0), -1.0, (0.0, 90.0)),
@@ -62,9 +62,11 @@ def test_plates_config_section_builds_a_prescribed_callable(tmp_path):
     outer = {"kind": "plates", "width": 0.1, "plates": [{"centre": [0, 0], "pole": [90, 30], "rate": 2.0},
                                                       {"centre": [180, 0], "rate": -1}]}
     config = _shell_config(outer, tmp_path)
-    bcs = velocity_bcs_from_config(config["boundary"]["velocity"], domain_from_config(config))
+    bcs = run_settings(config).boundary.velocity_bcs(domain_from_config(config))
     assert bcs["inner"].kind == "free_slip" and bcs["outer"].kind == "prescribed"
-    assert isinstance(bcs["outer"].value, PlateVelocity) and len(bcs["outer"].value.plates) == 2
+    field = bcs["outer"].value
+    assert isinstance(field, PlateVelocity) and field.gdim == 3 and field.width == 0.1
+    assert field.plates == (Plate((0.0, 0.0), 2.0, (90.0, 30.0)), Plate((180.0, 0.0), -1.0, (0.0, 90.0)))
     for bad, needle in (({"kind": "plates"}, "needs 'plates"),
                         ({"kind": "plates", "plates": [{"centre": [0, 0]}]}, r"plates\[0\]: needs centre and rate"),
                         ({"kind": "plates", "plates": [{"centre": [0, 0], "rate": 1, "speed": 2}]}, "'speed'"),

@@ -154,7 +154,7 @@ class _SteadyProblem:
         # Strong conditions: the unknowns take their values; Newton's corrections are zero there.
         velocity = velocity_dirichlet_bcs(d.V, d.bcs, d.domain)
         thermal = temperature_dirichlet_bcs(temperature.V, temperature.bcs, temperature.domain)
-        zero_T = {side: TemperatureBC(bc.kind, 0.0 if bc.kind == "dirichlet" else None)
+        zero_T = {side: TemperatureBC(bc.kind, 0.0 if bc.spec.needs_value else None)
                   for side, bc in temperature.bcs.items()}
         self.homogeneous = (velocity_dirichlet_bcs(d.V, homogeneous(d.bcs), d.domain)
                             + temperature_dirichlet_bcs(temperature.V, zero_T, temperature.domain))

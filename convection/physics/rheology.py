@@ -67,9 +67,9 @@ from convection.schema import (
 )
 from fembase.registry import Registry
 
-__all__ = ["FlowState", "LawContext", "LawSettings", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase",
-           "build_law", "law_settings", "laws_field_names", "make_law", "strain_rate_measure", "weakening_factor",
-           "yield_law"]
+__all__ = ["ElasticTrial", "FlowState", "LawContext", "LawSettings", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS",
+           "ViscosityLawBase", "build_law", "law_settings", "laws_field_names", "make_law", "strain_rate_measure",
+           "weakening_factor", "yield_law"]
 
 @dataclass(frozen=True)
 class StrainRateMeasure:
@@ -119,6 +119,10 @@ COMBINATIONS: Registry[CombinationRule] = Registry("visco-plastic combination ru
 ))
 """Registry of the visco-plastic combination rules."""
 
+MAXWELL_FLOOR = 1.0e-12
+"""Floor of ``1 - eta_y r / G`` in :meth:`ViscoPlastic.maxwell_yield` (where the yield viscosity reaches
+``G dt_e`` the stress cannot reach the yield stress in one step: ``eta_p`` is then huge, not infinite)."""
+
 DEFAULT_STRAIN_RATE_FLOOR = 1.0e-20
 """Floor of the strain-rate measures (nondimensional): keeps a fluid at rest finite and differentiable."""
 
@@ -142,6 +146,22 @@ class FlowState(NamedTuple):
     depth: Any
     fields: Mapping[str, Any]
     gdim: int
+    elastic: ElasticTrial | None = None
+
+
+class ElasticTrial(NamedTuple):
+    """What a visco-plastic law needs of Maxwell elasticity to limit the visco-elastic stress
+    (:meth:`ViscoPlastic.maxwell_yield`; :mod:`convection.physics.elasticity`), as UFL.
+
+    Attributes:
+        modulus: the shear modulus ``G`` (mixed over the materials).
+        rate: ``r = 1 / dt_e`` (0: the viscous flow before the first step).
+        stress: the old deviatoric stress ``tau^n``, shape (gdim, gdim).
+    """
+
+    modulus: Any
+    rate: Any
+    stress: Any
 
 
 def strain_rate_measure(state: FlowState, measure: str, floor: float) -> Any:
@@ -757,7 +777,27 @@ class ViscoPlastic(ViscosityLawBase):
         return (self.viscous, self.plastic)
 
     def __call__(self, state: FlowState) -> Any:
+        if state.elastic is not None:  # visco-elasto-plastic (only the minimum combination is accepted then)
+            return ufl.min_value(self.viscous(state), self.maxwell_yield(state))
         return COMBINATIONS[self.settings.combination].combine(self.viscous(state), self.plastic, state)
+
+    def maxwell_yield(self, state: FlowState) -> Any:
+        """With elasticity (``state.elastic``): the viscosity ``eta_p`` whose visco-elastic viscosity
+        ``eta_p / (1 + eta_p r / G)`` is the yield viscosity ``eta_y`` at the effective strain rate
+        ``eps_eff = eps + r tau^n / (2 G)``, i.e. ``eta_p = eta_y / (1 - eta_y r / G)`` (the
+        denominator floored; docs/rheology.md, "Visco-elasto-plasticity")."""
+        trial = state.elastic
+        if trial is None:
+            raise ValueError("maxwell_yield needs the elastic trial state")
+        effective = state._replace(strain_rate=state.strain_rate + (trial.rate / (2.0 * trial.modulus)) * trial.stress)
+        eta_y = self.plastic(effective)
+        return eta_y / ufl.max_value(1.0 - eta_y * trial.rate / trial.modulus, MAXWELL_FLOOR)
+
+    def yielding(self, state: FlowState) -> Any:
+        """UFL condition: the yield law limits the stress here (with elasticity: the visco-elastic one)."""
+        if state.elastic is not None:
+            return ufl.lt(self.maxwell_yield(state), self.viscous(state))
+        return ufl.lt(self.plastic(state), self.viscous(state))
 
 
 @dataclass(frozen=True)

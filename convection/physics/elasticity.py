@@ -31,7 +31,7 @@ from typing import Any
 
 import ufl
 
-from convection.physics.rheology import ElasticTrial, ViscoPlastic, ViscosityLawBase, yield_law
+from convection.physics.rheology import COMBINATIONS, ElasticTrial, ViscoPlastic, ViscosityLawBase, yield_law
 from convection.schema import ConfigError, param
 
 __all__ = ["STRESS_COMPONENTS", "STRESS_PROPERTY", "Elasticity", "ElasticitySettings", "check_elasticity",
@@ -167,9 +167,10 @@ def check_plasticity(settings: ElasticitySettings, laws: Mapping[str, ViscosityL
         return
     for key, law in laws.items():
         top = yield_law(law)
-        if top is not None and top.settings.combination != "minimum":
+        if top is not None and not COMBINATIONS[top.settings.combination].exact:
+            exact = [name for name, rule in COMBINATIONS.items() if rule.exact]
             raise ConfigError(f"config key '{key}.combination': with physics.elasticity the stress is limited to the "
-                              f"yield stress (combination: minimum), not {top.settings.combination!r}")
+                              f"yield stress (combination: {' or '.join(exact)}), not {top.settings.combination!r}")
         nested = [child for child in _descendants(law) if isinstance(child, ViscoPlastic) and child is not top]
         if nested:
             raise ConfigError(f"config key '{key}': with physics.elasticity a viscoplastic law must be the material's "

@@ -98,6 +98,8 @@ class CombinationRule:
     name: str
     description: str
     combine: Callable[[Any, Any, FlowState], Any]
+    exact: bool = False
+    """Whether the stress where it yields is the yield stress (what visco-elasto-plasticity needs)."""
 
 
 def _minimum(eta_v: Any, plastic: Any, state: FlowState) -> Any:
@@ -114,7 +116,7 @@ def _scaled_harmonic(scale: float) -> Callable[[Any, Any, FlowState], Any]:
 
 COMBINATIONS: Registry[CombinationRule] = Registry("visco-plastic combination rule", (
     CombinationRule("tosi", "eta = 2 / (1/eta_viscous + 1/eta_yield) (Tosi et al. 2015)", _scaled_harmonic(2.0)),
-    CombinationRule("minimum", "eta = min(eta_viscous, eta_yield) (ASPECT)", _minimum),
+    CombinationRule("minimum", "eta = min(eta_viscous, eta_yield) (ASPECT)", _minimum, exact=True),
     CombinationRule("harmonic", "eta = 1 / (1/eta_viscous + 1/eta_yield)", _scaled_harmonic(1.0)),
 ))
 """Registry of the visco-plastic combination rules."""
@@ -778,25 +780,35 @@ class ViscoPlastic(ViscosityLawBase):
 
     def __call__(self, state: FlowState) -> Any:
         if state.elastic is not None:  # visco-elasto-plastic (only the minimum combination is accepted then)
-            return ufl.min_value(self.viscous(state), self.maxwell_yield(state))
+            eta_v = self.viscous(state)
+            return ufl.min_value(eta_v, self.maxwell_yield(state, eta_v))
         return COMBINATIONS[self.settings.combination].combine(self.viscous(state), self.plastic, state)
 
-    def maxwell_yield(self, state: FlowState) -> Any:
+    def maxwell_yield(self, state: FlowState, eta_v: Any, /) -> Any:
         """With elasticity (``state.elastic``): the viscosity ``eta_p`` whose visco-elastic viscosity
-        ``eta_p / (1 + eta_p r / G)`` is the yield viscosity ``eta_y`` at the effective strain rate
-        ``eps_eff = eps + r tau^n / (2 G)``, i.e. ``eta_p = eta_y / (1 - eta_y r / G)`` (the
-        denominator floored; docs/rheology.md, "Visco-elasto-plasticity")."""
+        ``eta_p / (1 + eta_p r / G)`` gives the yield stress at the effective strain rate ``eps_eff =
+        eps + r tau^n / (2 G)``: ``eta_vep = sigma_y / (2 eps_eff)``, or with ``eta_star > 0`` (a
+        viscoplastic regularisation of the plastic strain rate, ``tau_II = sigma_y + 2 eta_star
+        eps_pl``) ``eta_vep = eta_ve eta_y / (eta_ve + eta_star)`` with ``eta_y = eta_star + sigma_y /
+        (2 eps_eff)``; then ``eta_p = eta_vep / (1 - eta_vep r / G)`` (the denominator floored;
+        docs/rheology.md, "Visco-elasto-plasticity")."""
         trial = state.elastic
         if trial is None:
             raise ValueError("maxwell_yield needs the elastic trial state")
         effective = state._replace(strain_rate=state.strain_rate + (trial.rate / (2.0 * trial.modulus)) * trial.stress)
-        eta_y = self.plastic(effective)
-        return eta_y / ufl.max_value(1.0 - eta_y * trial.rate / trial.modulus, MAXWELL_FLOOR)
+        eta_vep = self.plastic(effective)
+        plastic = self.plastic.law if isinstance(self.plastic, Bounded) else self.plastic
+        star = getattr(plastic.settings, "eta_star", 0.0)
+        if star:
+            eta_ve = eta_v / (1.0 + eta_v * trial.rate / trial.modulus)
+            eta_vep = eta_ve * eta_vep / (eta_ve + star)
+        return eta_vep / ufl.max_value(1.0 - eta_vep * trial.rate / trial.modulus, MAXWELL_FLOOR)
 
     def yielding(self, state: FlowState) -> Any:
         """UFL condition: the yield law limits the stress here (with elasticity: the visco-elastic one)."""
         if state.elastic is not None:
-            return ufl.lt(self.maxwell_yield(state), self.viscous(state))
+            eta_v = self.viscous(state)
+            return ufl.lt(self.maxwell_yield(state, eta_v), eta_v)
         return ufl.lt(self.plastic(state), self.viscous(state))
 
 

@@ -21,21 +21,21 @@ SIGMA_Y, DT, STEPS = 0.015, 0.1, 20
 """Yield stress (below the Maxwell plateau 2 eta eps = 0.02), the step and the steps run."""
 
 
-def _document(out: Path, *, method: str = "picard", combination: str = "minimum") -> dict:
+def _document(out: Path, *, method: str = "picard", combination: str = "minimum", eta_star: float = 0.0) -> dict:
     document = stress.document(cells=2, dt=DT, end=STEPS * DT, out=out)
     document["physics"]["viscosity"] = {"law": {
         "name": "viscoplastic", "combination": combination, "viscous": stress.ETA,
-        "plastic": {"name": "von_mises", "yield_stress": SIGMA_Y}}}
+        "plastic": {"name": "von_mises", "yield_stress": SIGMA_Y, "eta_star": eta_star}}}
     document["stokes"]["nonlinear"] = {"method": method, "rtol": 1e-10, "max_iterations": 30}
     document["particles"]["properties"] = ["elastic_stress", "plastic_strain"]
     return document
 
 
-def _run(out: Path, method: str) -> tuple[np.ndarray, np.ndarray, list[tuple[float, ...]]]:
+def _run(out: Path, method: str, eta_star: float = 0.0) -> tuple[np.ndarray, np.ndarray, list[tuple[float, ...]]]:
     """The particles' tau_II and plastic strain after every step, and the residual histories."""
     logging.getLogger().addFilter(lambda record: record.levelno >= logging.WARNING)
     comm = MPI.COMM_WORLD
-    model = build_model(load_config(None, document=_document(out, method=method)), comm=comm)
+    model = build_model(load_config(None, document=_document(out, method=method, eta_star=eta_star)), comm=comm)
     model.start()
     taus, strains, histories = [], [], []
     for _ in range(STEPS):
@@ -72,6 +72,19 @@ def test_stress_builds_up_then_holds_at_the_yield_stress(tmp_path, method):
     # The boundaries fix the (uniform) flow: one iteration each; the shear band's benchmark
     # (tests/benchmarks_viscoelastic/test_shear_band.py) has the nonlinear convergence.
     assert all(len(h) == 2 for h in histories)
+
+
+def test_regularised_yield_adds_eta_star_times_the_plastic_strain_rate(tmp_path):
+    """With eta_star: |tau|_II = sigma_y + 2 eta_star |eps_pl|_II, eps_pl = eps_eff - tau / (2 eta_ve); the
+    steady stress of the discrete law, T = eta_ve (sigma_y + 2 eta_star eps) / (eta_ve + eta_star (1 - chi))."""
+    eta_star = 0.05
+    taus, _, _ = _run(tmp_path, "newton", eta_star)
+    eta_ve = stress.ETA * stress.G * DT / (stress.ETA + stress.G * DT)
+    chi = eta_ve / (stress.G * DT)
+    steady = eta_ve * (SIGMA_Y + 2 * eta_star * stress.EPS) / (eta_ve + eta_star * (1 - chi))
+    assert steady > SIGMA_Y * 1.01
+    np.testing.assert_allclose(taus[-1], steady, rtol=1e-4)  # approached geometrically, step by step
+    assert abs(taus[-1, 0] - steady) < 0.5 * abs(taus[-3, 0] - steady)
 
 
 def test_invalid_combinations_are_refused(tmp_path):

@@ -288,17 +288,26 @@ def picture(runs: list[Run], path: Path) -> None:
         curve.plot(r.strain[yielded], r.at_yield[yielded], "s--", ms=3, label=f"{r.cells[0]} x {r.cells[1]}: "
                    "yielding tau_II / sigma_y")
     curve.axhspan(0.98, 1.02, color="0.85", label="yield stress +- 2 %")
-    curve.set_xlabel("shortening eps t")
-    curve.set_ylabel("stress / yield stress")
+    curve.set(xlabel="shortening eps t", ylabel="stress / yield stress")
     curve.legend(fontsize=7)
     for r in runs:
         residual.semilogy(range(len(r.history)), r.history, "o-", ms=3, label=f"{r.cells[0]} x {r.cells[1]}")
     residual.axhline(1e-6, color="k", lw=0.8, ls=":", label="rtol")
-    residual.set_xlabel("nonlinear iteration (last step)")
-    residual.set_ylabel("|F| / |b|")
+    residual.set(xlabel="nonlinear iteration (last step)", ylabel="|F| / |b|")
     residual.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
+
+
+def _publish(runs: list[Run], results: Path, *, steps: int, ranks: int) -> None:
+    """Write the table and the picture into ``results``, log the load, print the JSON line."""
+    summary = f"{ranks} rank(s), {steps} steps of t_yield / 10; tau_y = {TAU_Y:.4f}\n\n{table(runs)}"
+    BENCHMARK.publish(results / "shear_band.md", summary)
+    picture(runs, results / "shear_band.png")
+    BENCHMARK.log_load("end")
+    print(json.dumps({"cells": [list(r.cells) for r in runs], "angle": [r.angle for r in runs],
+                      "plateau_error": [r.plateau_error for r in runs],
+                      "iterations": [r.iterations.tolist() for r in runs], "history": [list(r.history) for r in runs]}))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -312,14 +321,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = [run_case(cells, out=args.out / f"{cells[0]}x{cells[1]}", steps=args.steps, comm=comm)
             for cells in (QUICK if args.quick else RESOLUTIONS)]
     if comm.rank == 0:
-        text = table(runs)
-        BENCHMARK.publish(args.results / "shear_band.md", f"{comm.size} rank(s), {args.steps} steps of t_yield / 10; "
-                          f"tau_y = {TAU_Y:.4f}\n\n{text}")
-        picture(runs, args.results / "shear_band.png")
-        BENCHMARK.log_load("end")
-        print(json.dumps({"cells": [list(r.cells) for r in runs], "angle": [r.angle for r in runs],
-                          "plateau_error": [r.plateau_error for r in runs],
-                          "iterations": [r.iterations.tolist() for r in runs], "history": [list(r.history) for r in runs]}))
+        _publish(runs, args.results, steps=args.steps, ranks=comm.size)
     return 0
 
 

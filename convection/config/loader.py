@@ -66,7 +66,7 @@ from convection.schema import (
 from convection.schema import finite_number as _finite_number
 from convection.physics.approximation import HEATING_VISCOSITY, TEMPERATURE_LAWS, PhysicsSettings
 from convection.physics.compressible import APPROXIMATIONS
-from convection.physics.elasticity import ElasticitySettings, check_elasticity
+from convection.physics.elasticity import ElasticitySettings, check_elasticity, check_plasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
@@ -337,6 +337,8 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     _check_particles(config)
     check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]),  # issue 48
                      _property_names(config) if particles_enabled(config) else ())
+    if laws_given(config):  # visco-elasto-plastic: the yield limits the visco-elastic stress (issue 48)
+        check_plasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), _keyed_laws(config))
     if config["initial"]["steady"]:
         _check_steady_start(config)
     _check_statistics(config)
@@ -550,6 +552,14 @@ def viscosity_laws(config: dict[str, Any]) -> tuple[Any, list[Any]]:
         key = f"materials.{m['name']}.viscosity" if keyed else "physics.viscosity.material_viscosities"
         laws.append(law0 if m["viscosity"] is None else build_law(m["viscosity"], key))
     return law0, laws
+
+
+def _keyed_laws(config: dict[str, Any]) -> dict[str, Any]:
+    """The background's law and each material's own law by their config keys."""
+    law0, laws = viscosity_laws(config)
+    table, _ = material_table(config)
+    return {"physics.viscosity.law": law0, **{f"materials.{m['name']}.viscosity": law
+                                              for m, law in zip(table, laws) if m["viscosity"] is not None}}
 
 
 def _check_rheology(config: dict[str, Any]) -> None:

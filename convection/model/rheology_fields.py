@@ -96,8 +96,9 @@ def flow_viscosity(flow: Flow, /) -> Any:
 def _rate(name: str, builder: Callable[..., Any]) -> Callable[[Flow], Any]:
     def expression(flow: Flow) -> Any:
         stokes = flow.stokes
+        trial = stokes.discretisation.elastic_trial(flow.fractions, flow.fields)  # visco-elasto-plastic (issue 48)
         return builder(flow.T, flow.fractions, u=stokes.u, p=stokes.p, fields=flow.fields,
-                       x=ufl.SpatialCoordinate(stokes.mesh))
+                       x=ufl.SpatialCoordinate(stokes.mesh), **({} if trial is None else {"elastic": trial}))
     return expression
 
 
@@ -191,8 +192,8 @@ def _elastic_rates(stokes: StokesSolver, /) -> dict[str, Callable[[Flow], Any]]:
     def factor(name: str) -> Callable[[Flow], Any]:
         def expression(flow: Flow) -> Any:
             discretisation = flow.stokes.discretisation
-            eta = discretisation.approximation.viscosity(flow.T, flow.fractions, u=flow.stokes.u, p=flow.stokes.p,
-                                                         fields=flow.fields, x=ufl.SpatialCoordinate(flow.stokes.mesh))
+            eta = discretisation.maxwell_viscosity(flow.T, flow.fractions, {"u": flow.stokes.u, "p": flow.stokes.p,
+                                                                             "fields": flow.fields})
             return getattr(discretisation.elasticity, name)(eta, flow.fractions, discretisation.elastic_rate)
         return expression
     return {"elastic_viscosity": factor("viscosity"), "elastic_memory": factor("memory")}

@@ -29,7 +29,7 @@ from convection.physics.compressible import (
 from convection.schema import Names, param, subsection
 from convection.physics.elasticity import Elasticity, ElasticitySettings
 from convection.physics.rheology import (
-    Constant, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
+    Constant, ElasticTrial, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
 )
 
 
@@ -259,17 +259,18 @@ class ViscosityLaw:
         return None not in values and len(values) == 1 and temperature_free
 
     def __call__(self, T: Any, C: Any, /, *, u: Any = None, p: Any = None,
-                 fields: Mapping[str, Any] | None = None, x: Any = None) -> Any:
+                 fields: Mapping[str, Any] | None = None, x: Any = None, elastic: ElasticTrial | None = None) -> Any:
         """UFL expression of the viscosity for temperature ``T`` and composition ``C``
         (see :func:`fractions`; one fraction per material after the background), and of the
         velocity ``u`` (its strain rate), the pressure ``p``, the named ``fields`` and the position
         ``x`` (``ufl.SpatialCoordinate``, for the depth) for the laws that read them (a law that
-        needs one fails without it)."""
+        needs one fails without it). ``elastic``: with Maxwell elasticity, what the visco-plastic
+        laws need to limit the visco-elastic stress (:meth:`ViscoPlastic.maxwell_yield`), or None."""
         numbers = self.numbers
         if numbers is not None:
             eta = self._mixed_numbers(numbers, C)
         else:
-            eta = self._mixed_laws(T, C, u=u, p=p, fields=fields or {}, x=x)
+            eta = self._mixed_laws(T, C, u=u, p=p, fields=fields or {}, x=x, elastic=elastic)
         factor = TEMPERATURE_LAWS[self.temperature_law].factor
         if factor is not None and self.gamma != 0.0:
             eta = eta * factor(self.gamma, _as_ufl(T))
@@ -292,18 +293,20 @@ class ViscosityLaw:
         that can yield; it refuses one that cannot when evaluated)."""
         return {"plastic_strain_rate": self._yielding_rate}
 
-    def _yielding_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+    def _yielding_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any,
+                       elastic: ElasticTrial | None = None) -> Any:
         if not self.yields:
             raise ValueError("particle property plastic_strain needs a material with a viscoplastic law "
                              "(it accumulates strain where the material yields)")
-        return self.plastic_strain_rate(T, C, u=u, p=p, fields=fields, x=x)
+        return self.plastic_strain_rate(T, C, u=u, p=p, fields=fields, x=x, elastic=elastic)
 
-    def plastic_strain_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
+    def plastic_strain_rate(self, T: Any, C: Any, /, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any,
+                            elastic: ElasticTrial | None = None) -> Any:
         """UFL ``eps_II sum_l C_l [eta_yield,l < eta_viscous,l]``: the strain rate where the
         visco-plastic laws yield (their yield viscosity below the viscous one), weighted by the
         volume fractions ``C_l`` (background ``C_0 = 1 - sum_i C_i``); what ``plastic_strain``
-        particles integrate."""
-        state = self._state(T, u, p, fields, x)
+        particles integrate (with ``elastic``, where the visco-elastic stress yields)."""
+        state = self._state(T, u, p, fields, x, elastic)
         cs = [ufl.min_value(ufl.max_value(_as_ufl(c), 0.0), 1.0) for c in fractions(C)]
         weights = [1.0 - _sum(cs) if cs else ufl.as_ufl(1.0), *cs]
         if len(weights) != len(self.laws):
@@ -312,17 +315,19 @@ class ViscosityLaw:
         for weight, law in zip(weights, self.laws):
             vp = yield_law(law)
             if vp is not None:
-                rate = rate + weight * ufl.conditional(ufl.lt(vp.plastic(state), vp.viscous(state)), 1.0, 0.0)
+                rate = rate + weight * ufl.conditional(vp.yielding(state), 1.0, 0.0)
         return rate * strain_rate_measure(state, "second_invariant", 0.0)
 
-    def _state(self, T: Any, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> FlowState:
+    def _state(self, T: Any, u: Any, p: Any, fields: Mapping[str, Any], x: Any,
+               elastic: ElasticTrial | None = None) -> FlowState:
         if x is None:
             raise ValueError("viscosity laws need the spatial coordinate x (for the depth)")
         return FlowState(T=_as_ufl(T), strain_rate=ufl.sym(ufl.grad(u)) if u is not None else None,
-                         pressure=p, depth=self.depth(x), fields=fields, gdim=x.ufl_shape[0])
+                         pressure=p, depth=self.depth(x), fields=fields, gdim=x.ufl_shape[0], elastic=elastic)
 
-    def _mixed_laws(self, T: Any, C: Any, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any) -> Any:
-        state = self._state(T, u, p, fields, x)
+    def _mixed_laws(self, T: Any, C: Any, *, u: Any, p: Any, fields: Mapping[str, Any], x: Any,
+                    elastic: ElasticTrial | None) -> Any:
+        state = self._state(T, u, p, fields, x, elastic)
         law0, *others = self.laws
         eta0 = law0(state)
         if not others:

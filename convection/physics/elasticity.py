@@ -31,10 +31,11 @@ from typing import Any
 
 import ufl
 
+from convection.physics.rheology import COMBINATIONS, ElasticTrial, ViscoPlastic, ViscosityLawBase, yield_law
 from convection.schema import ConfigError, param
 
 __all__ = ["STRESS_COMPONENTS", "STRESS_PROPERTY", "Elasticity", "ElasticitySettings", "check_elasticity",
-           "stress_labels"]
+           "check_plasticity", "stress_labels"]
 
 STRESS_COMPONENTS: dict[int, tuple[tuple[int, int], ...]] = {
     2: ((0, 0), (1, 1), (0, 1)),
@@ -127,6 +128,11 @@ class Elasticity:
             entries[i][j] = entries[j][i] = fields[name]
         return ufl.as_matrix(entries)
 
+    def trial(self, C: Any, rate: Any, fields: Mapping[str, Any], gdim: int, /) -> ElasticTrial:
+        """What the visco-plastic laws need to limit the visco-elastic stress to the yield stress
+        (:meth:`convection.physics.rheology.ViscoPlastic.maxwell_yield`): ``G``, ``r`` and ``tau^n``."""
+        return ElasticTrial(self.modulus(C), rate, self.stress(fields, gdim))
+
     def load(self, eta: Any, C: Any, rate: Any, fields: Mapping[str, Any], v: Any, dx: Any, /) -> Any:
         """The old stress's term of the momentum equation's right-hand side, ``-(chi tau^n, eps(v))``."""
         tau = self.stress(fields, v.ufl_shape[0])
@@ -147,3 +153,32 @@ def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], /) ->
     if not settings.enabled and STRESS_PROPERTY in carried:
         raise ConfigError(f"config key 'particles.properties': {STRESS_PROPERTY!r} needs physics.elasticity.enabled: "
                           "true")
+
+
+def check_plasticity(settings: ElasticitySettings, laws: Mapping[str, ViscosityLawBase], /) -> None:
+    """With elasticity, the visco-plastic laws (``laws``: each material's law by its config key) must
+    limit the visco-elastic stress to the yield stress: ``combination: minimum``, at the top of the
+    material's law (or under its bounds), where the yield acts on the whole visco-elastic stress.
+
+    Raises:
+        ConfigError: another combination, or a visco-plastic law inside another law.
+    """
+    if not settings.enabled:
+        return
+    for key, law in laws.items():
+        top = yield_law(law)
+        if top is not None and not COMBINATIONS[top.settings.combination].exact:
+            exact = [name for name, rule in COMBINATIONS.items() if rule.exact]
+            raise ConfigError(f"config key '{key}.combination': with physics.elasticity the stress is limited to the "
+                              f"yield stress (combination: {' or '.join(exact)}), not {top.settings.combination!r}")
+        nested = [child for child in _descendants(law) if isinstance(child, ViscoPlastic) and child is not top]
+        if nested:
+            raise ConfigError(f"config key '{key}': with physics.elasticity a viscoplastic law must be the material's "
+                              f"law itself (the yield limits the visco-elastic stress), not inside a {law.name!r} law")
+
+
+def _descendants(law: ViscosityLawBase, /) -> list[ViscosityLawBase]:
+    out = [law]
+    for child in law.children():
+        out.extend(_descendants(child))
+    return out

@@ -67,9 +67,9 @@ from convection.schema import (
 )
 from fembase.registry import Registry
 
-__all__ = ["FlowState", "LawContext", "LawSettings", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS", "ViscosityLawBase",
-           "build_law", "law_settings", "laws_field_names", "make_law", "strain_rate_measure", "weakening_factor",
-           "yield_law"]
+__all__ = ["ElasticTrial", "FlowState", "LawContext", "LawSettings", "STRAIN_RATE_MEASURES", "VISCOSITY_LAWS",
+           "ViscosityLawBase", "build_law", "law_settings", "laws_field_names", "make_law", "strain_rate_measure",
+           "weakening_factor", "yield_law"]
 
 @dataclass(frozen=True)
 class StrainRateMeasure:
@@ -98,6 +98,8 @@ class CombinationRule:
     name: str
     description: str
     combine: Callable[[Any, Any, FlowState], Any]
+    exact: bool = False
+    """Whether the stress where it yields is the yield stress (what visco-elasto-plasticity needs)."""
 
 
 def _minimum(eta_v: Any, plastic: Any, state: FlowState) -> Any:
@@ -114,10 +116,14 @@ def _scaled_harmonic(scale: float) -> Callable[[Any, Any, FlowState], Any]:
 
 COMBINATIONS: Registry[CombinationRule] = Registry("visco-plastic combination rule", (
     CombinationRule("tosi", "eta = 2 / (1/eta_viscous + 1/eta_yield) (Tosi et al. 2015)", _scaled_harmonic(2.0)),
-    CombinationRule("minimum", "eta = min(eta_viscous, eta_yield) (ASPECT)", _minimum),
+    CombinationRule("minimum", "eta = min(eta_viscous, eta_yield) (ASPECT)", _minimum, exact=True),
     CombinationRule("harmonic", "eta = 1 / (1/eta_viscous + 1/eta_yield)", _scaled_harmonic(1.0)),
 ))
 """Registry of the visco-plastic combination rules."""
+
+MAXWELL_FLOOR = 1.0e-12
+"""Floor of ``1 - eta_y r / G`` in :meth:`ViscoPlastic.maxwell_yield` (where the yield viscosity reaches
+``G dt_e`` the stress cannot reach the yield stress in one step: ``eta_p`` is then huge, not infinite)."""
 
 DEFAULT_STRAIN_RATE_FLOOR = 1.0e-20
 """Floor of the strain-rate measures (nondimensional): keeps a fluid at rest finite and differentiable."""
@@ -142,6 +148,22 @@ class FlowState(NamedTuple):
     depth: Any
     fields: Mapping[str, Any]
     gdim: int
+    elastic: ElasticTrial | None = None
+
+
+class ElasticTrial(NamedTuple):
+    """What a visco-plastic law needs of Maxwell elasticity to limit the visco-elastic stress
+    (:meth:`ViscoPlastic.maxwell_yield`; :mod:`convection.physics.elasticity`), as UFL.
+
+    Attributes:
+        modulus: the shear modulus ``G`` (mixed over the materials).
+        rate: ``r = 1 / dt_e`` (0: the viscous flow before the first step).
+        stress: the old deviatoric stress ``tau^n``, shape (gdim, gdim).
+    """
+
+    modulus: Any
+    rate: Any
+    stress: Any
 
 
 def strain_rate_measure(state: FlowState, measure: str, floor: float) -> Any:
@@ -757,7 +779,37 @@ class ViscoPlastic(ViscosityLawBase):
         return (self.viscous, self.plastic)
 
     def __call__(self, state: FlowState) -> Any:
+        if state.elastic is not None:  # visco-elasto-plastic (only the minimum combination is accepted then)
+            eta_v = self.viscous(state)
+            return ufl.min_value(eta_v, self.maxwell_yield(state, eta_v))
         return COMBINATIONS[self.settings.combination].combine(self.viscous(state), self.plastic, state)
+
+    def maxwell_yield(self, state: FlowState, eta_v: Any, /) -> Any:
+        """With elasticity (``state.elastic``): the viscosity ``eta_p`` whose visco-elastic viscosity
+        ``eta_p / (1 + eta_p r / G)`` gives the yield stress at the effective strain rate ``eps_eff =
+        eps + r tau^n / (2 G)``: ``eta_vep = sigma_y / (2 eps_eff)``, or with ``eta_star > 0`` (a
+        viscoplastic regularisation of the plastic strain rate, ``tau_II = sigma_y + 2 eta_star
+        eps_pl``) ``eta_vep = eta_ve eta_y / (eta_ve + eta_star)`` with ``eta_y = eta_star + sigma_y /
+        (2 eps_eff)``; then ``eta_p = eta_vep / (1 - eta_vep r / G)`` (the denominator floored;
+        docs/rheology.md, "Visco-elasto-plasticity")."""
+        trial = state.elastic
+        if trial is None:
+            raise ValueError("maxwell_yield needs the elastic trial state")
+        effective = state._replace(strain_rate=state.strain_rate + (trial.rate / (2.0 * trial.modulus)) * trial.stress)
+        eta_vep = self.plastic(effective)
+        plastic = self.plastic.law if isinstance(self.plastic, Bounded) else self.plastic
+        star = getattr(plastic.settings, "eta_star", 0.0)
+        if star:
+            eta_ve = eta_v / (1.0 + eta_v * trial.rate / trial.modulus)
+            eta_vep = eta_ve * eta_vep / (eta_ve + star)
+        return eta_vep / ufl.max_value(1.0 - eta_vep * trial.rate / trial.modulus, MAXWELL_FLOOR)
+
+    def yielding(self, state: FlowState) -> Any:
+        """UFL condition: the yield law limits the stress here (with elasticity: the visco-elastic one)."""
+        if state.elastic is not None:
+            eta_v = self.viscous(state)
+            return ufl.lt(self.maxwell_yield(state, eta_v), eta_v)
+        return ufl.lt(self.plastic(state), self.viscous(state))
 
 
 @dataclass(frozen=True)

@@ -150,16 +150,32 @@ class StokesDiscretisation:
     def viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
         """The viscosity (UFL) for ``T``, ``C`` and, for :mod:`convection.physics.rheology` laws, the flow:
         ``flow = {"u": ..., "p": ..., "fields": {...}}`` (the current iterate's Functions); with
-        elasticity the visco-elastic ``eta_ve``."""
-        eta = self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **(flow or {}))
+        elasticity the visco-elastic ``eta_ve`` (visco-elasto-plastic where a yield law limits it)."""
+        eta = self.maxwell_viscosity(T, C, flow)
         return eta if self.elasticity is None else self.elasticity.viscosity(eta, C, self.elastic_rate)
+
+    def maxwell_viscosity(self, T: Any, C: Any, flow: dict[str, Any] | None = None, /) -> Any:
+        """The laws' viscosity ``eta`` that :meth:`viscosity` makes visco-elastic; with elasticity and a
+        law that yields, its yield laws see the elastic trial state (:meth:`elastic_trial`), so that the
+        visco-elastic stress is limited to the yield stress (docs/rheology.md, "Visco-elasto-plasticity")."""
+        flow = flow or {}
+        trial = self.elastic_trial(C, flow.get("fields") or {})
+        extra = {} if trial is None else {"elastic": trial}
+        return self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **flow, **extra)
+
+    def elastic_trial(self, C: Any, fields: dict[str, Any], /) -> Any:
+        """``G``, ``1 / dt_e`` and the old stress for the yield laws, with elasticity and a law that
+        yields (:meth:`convection.physics.elasticity.Elasticity.trial`); else None."""
+        if self.elasticity is None or not self.approximation.viscosity_law.yields:
+            return None
+        return self.elasticity.trial(C, self.elastic_rate, fields, self.mesh.geometry.dim)
 
     def elastic_load(self, T: Any, C: Any, flow: dict[str, Any] | None, v: Any, dx: Any, /) -> Any:
         """The old stress's load ``-(chi tau^n, eps(v))`` (:mod:`convection.physics.elasticity`), or None."""
         if self.elasticity is None:
             return None
         flow = flow or {}
-        eta = self.approximation.viscosity(T, C, x=ufl.SpatialCoordinate(self.mesh), **flow)
+        eta = self.maxwell_viscosity(T, C, flow)
         return self.elasticity.load(eta, C, self.elastic_rate, flow.get("fields") or {}, v, dx)
 
     def _dx(self) -> Any:

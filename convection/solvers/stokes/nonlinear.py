@@ -14,7 +14,9 @@ the Stokes problem ``F(x) = 0``, ``x = (u, p)``, is nonlinear::
   search (``bt``: backtracking on ``|F|``). Newton starts after Picard has brought the residual below
   ``switch_tolerance`` (from rest, Newton's first steps are far outside its basin); converges
   quadratically near the solution. An iterative linear solver is preconditioned with the Picard
-  operator's blocks (symmetric positive definite), as ASPECT does.
+  operator's blocks (symmetric positive definite), as ASPECT does. Where the line search fails (SNES
+  diverges before ``max_iterations``, e.g. at the kinks of a yield law), :data:`RESTART_PICARD`
+  Picard iterations are made and Newton starts again.
 
 Both stop when the **relative residual** ``|F(x_k)| / |b|`` is at most ``rtol``, with ``b`` the
 right-hand side of the first linearised system of the solve (forcing and lifted boundary
@@ -61,6 +63,10 @@ LINE_SEARCHES: dict[str, str] = {
     "cp": "critical point (for problems with an energy)",
 }
 """Registry of SNES line searches for Newton (name -> one-line description)."""
+
+
+RESTART_PICARD = 3
+"""Picard iterations between two Newton solves when Newton's line search fails."""
 
 
 class NonlinearSolveError(RuntimeError):
@@ -188,16 +194,49 @@ class NonlinearStokes:
         if reference == 0.0 or not math.isfinite(reference):
             reference = 1.0
         history = [self._residual_norm(F_forms, J_forms) / reference]
-        picard = 0
-        linear = 0
         newton = settings.method == "newton"
+        switch = settings.switch_tolerance if newton else 0.0  # 0: no switch
         # Picard until converged, or (Newton) until the switch tolerance; at least once, as the
         # residual is measured with homogeneous boundary values and cannot see an iterate that
         # misses prescribed velocities (a sheared box at rest has residual 0).
-        while picard == 0 or (history[-1] > settings.rtol and picard < settings.max_iterations):
-            if newton and history[-1] <= settings.switch_tolerance and picard > 0:
+        picard, linear = self._picard(forms, F_forms, J_forms, reference, history, switch,
+                                      budget=settings.max_iterations, first=True)
+        iterations = picard
+        while newton and history[-1] > settings.rtol and math.isfinite(history[-1]) and \
+                iterations < settings.max_iterations:
+            its, lin, residuals, diverged = self._newton(forms, F_forms, J_forms, reference,
+                                                         settings.max_iterations - iterations)
+            iterations += its
+            linear += lin
+            history.extend(residuals)
+            if not diverged or history[-1] <= settings.rtol:
                 break
-            if picard > 0:
+            # The line search failed (e.g. at a yield law's kink): a few Picard iterations, then Newton again.
+            more, lin = self._picard(forms, F_forms, J_forms, reference, history, 0.0,
+                                     budget=min(RESTART_PICARD, settings.max_iterations - iterations), first=False)
+            picard += more
+            iterations += more
+            linear += lin
+        self._normalise()
+        if not history[-1] <= settings.rtol:
+            raise NonlinearSolveError(
+                f"nonlinear Stokes solve ({settings.method}) did not reach the relative residual "
+                f"{settings.rtol:g} in {iterations} iterations (reached {history[-1]:.3g}); try more "
+                "stokes.nonlinear.max_iterations, picard, or viscosity bounds")
+        return NonlinearResult(iterations, picard, history[-1], tuple(history), linear)
+
+    def _picard(self, forms: Any, F_forms: Any, J_forms: Any, reference: float, history: list[float], switch: float,
+                *, budget: int, first: bool) -> tuple[int, int]:
+        """Picard iterations until the relative residual is at most ``rtol`` or (``switch > 0``) ``switch``,
+        at most ``budget``; ``first``: the operator and the right-hand side are assembled at the
+        iterate, and one iteration is made in any case. Appends the residuals to ``history``; returns
+        (iterations, linear iterations)."""
+        system = self.system
+        picard = linear = 0
+        while (first and picard == 0) or (history[-1] > self.settings.rtol and picard < budget):
+            if history[-1] <= switch and (picard > 0 or not first):
+                break
+            if picard > 0 or not first:
                 system.assemble_operator(forms, refresh=True)
                 system.assemble_rhs(forms)
             system.solve()
@@ -207,25 +246,12 @@ class NonlinearStokes:
             history.append(self._residual_norm(F_forms, J_forms) / reference)
             if not math.isfinite(history[-1]):
                 break
-        iterations = picard
-        if newton and history[-1] > settings.rtol and math.isfinite(history[-1]) and picard < settings.max_iterations:
-            its, lin, residuals = self._newton(forms, F_forms, J_forms, reference,
-                                               settings.max_iterations - picard)
-            iterations += its
-            linear += lin
-            history.extend(residuals)
-        self._normalise()
-        if not history[-1] <= settings.rtol:
-            raise NonlinearSolveError(
-                f"nonlinear Stokes solve ({settings.method}) did not reach the relative residual "
-                f"{settings.rtol:g} in {iterations} iterations (reached {history[-1]:.3g}); try more "
-                "stokes.nonlinear.max_iterations, picard, or viscosity bounds")
-        return NonlinearResult(iterations, picard, history[-1], tuple(history), linear)
+        return picard, linear
 
     def _newton(self, forms: Any, F_forms: Any, J_forms: Any, reference: float,
-                max_iterations: int) -> tuple[int, int, list[float]]:
+                max_iterations: int) -> tuple[int, int, list[float], bool]:
         """SNES Newton from the current iterate; returns (iterations, linear iterations, relative
-        residuals after each iteration)."""
+        residuals after each iteration, whether SNES diverged: its line search failed)."""
         system = self.system
         residuals: list[float] = []
 
@@ -277,7 +303,8 @@ class NonlinearStokes:
         finally:
             system.ksp.setInitialGuessNonzero(guess)
         system.unpack(x)
-        return int(snes.getIterationNumber()), int(snes.getLinearSolveIterations()), residuals
+        diverged = snes.getConvergedReason() < 0 and snes.getIterationNumber() < max_iterations
+        return int(snes.getIterationNumber()), int(snes.getLinearSolveIterations()), residuals, diverged
 
     def destroy(self) -> None:
         """Free the SNES and the residual vector (collective)."""

@@ -148,6 +148,20 @@ def kill_run(config: Path, run_dir: Path, ranks: int, extra: list[str], *, when:
     return proc.returncode
 
 
+def kill_and_resume(config: Path, run_dir: Path, ranks: int, extra: list[str], *, after_rows: int) -> None:
+    """Run ``config`` into ``run_dir``, SIGKILL it once its statistics have more than ``after_rows``
+    lines and resume it from its newest checkpoint on as many ranks, asserting each stage (it was
+    killed, had a checkpoint, and the resumed run ended well without a note)."""
+    from convection.io.checkpoint import latest_checkpoint
+
+    code = kill_run(config, run_dir, ranks, extra, when=lambda d: rows_written(d, after_rows))
+    assert code != 0, "the run ended before it was killed"
+    assert latest_checkpoint(run_dir) is not None
+    proc = run_cli(["resume", str(run_dir)], ranks)
+    assert proc.returncode == 0, proc.stderr
+    assert "note:" not in proc.stderr, proc.stderr
+
+
 def rows_written(run_dir: Path, n: int) -> bool:
     """Whether statistics.csv has more than ``n`` lines."""
     path = run_dir / "statistics.csv"

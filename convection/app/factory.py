@@ -60,6 +60,7 @@ from convection.config.settings import RunSettings, run_settings
 from convection.geometry.registry import domain_from_settings
 from convection.physics.materials import Material, Materials
 from convection.physics.compressible import ReferenceState
+from convection.model.elastic_fields import ElasticFields
 from convection.physics.elasticity import STRESS_PROPERTY, Elasticity, stress_labels
 from convection.model.model import Model
 from convection.postprocess.postprocessors import create_postprocessors
@@ -326,6 +327,8 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
                   particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer,
                   free_surface=free_surface)
+    if stokes.discretisation.elasticity is not None:  # the elastic outputs of the field output (issue 48)
+        model.rheology.elastic = ElasticFields(settings.output.extra_fields).update
     if restore is not None:
         restore_state(model, restore, exact=meshes.exact)
     return model

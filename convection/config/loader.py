@@ -66,6 +66,7 @@ from convection.schema import (
 from convection.schema import finite_number as _finite_number
 from convection.physics.approximation import HEATING_VISCOSITY, TEMPERATURE_LAWS, PhysicsSettings
 from convection.physics.compressible import APPROXIMATIONS
+from convection.physics.elastic_outputs import check_elastic_outputs
 from convection.physics.elasticity import ElasticitySettings, check_elasticity, check_plasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
@@ -334,9 +335,10 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
             if not adapt["enabled"]:
                 raise ConfigError(f"config key 'adaptivity.{key}': only with adaptivity.enabled: true")
             _check_expression(config, f"adaptivity.{key}", text, extra={"t": 0.0})
+    carried = _property_names(config) if particles_enabled(config) else ()
+    check_elastic_outputs(config["physics"]["elasticity"]["enabled"], carried, config["output"]["extra_fields"])
     _check_particles(config)
-    check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]),  # issue 48
-                     _property_names(config) if particles_enabled(config) else ())
+    check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), carried)  # issue 48
     if laws_given(config):  # visco-elasto-plastic: the yield limits the visco-elastic stress (issue 48)
         check_plasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), _keyed_laws(config))
     if config["initial"]["steady"]:
@@ -369,7 +371,8 @@ def _check_statistics(config: dict[str, Any]) -> None:
                              topography_material=config["diagnostics"]["topography_material"],
                              columns=config_domain(config).columns(1, 1) is not None,
                              free_surface=bool(free_surface_boundaries(config)),
-                             dissipation=APPROXIMATIONS[config["physics"]["approximation"]].dissipation)
+                             dissipation=APPROXIMATIONS[config["physics"]["approximation"]].dissipation,
+                             elasticity=config["physics"]["elasticity"]["enabled"])
     material = config["diagnostics"]["topography_material"]
     if material is not None and material not in features.materials:
         raise ConfigError(f"config key 'diagnostics.topography_material': {material!r} is not one of the materials "

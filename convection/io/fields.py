@@ -41,6 +41,7 @@ from mpi4py import MPI
 from convection.io.checkpoint import CheckpointSettings
 from convection.io.output_units import OutputUnits
 from convection.io.run_folder import check_output_directory
+from convection.physics.elastic_outputs import ELASTIC_OUTPUTS
 from convection.postprocess.postprocessors import POSTPROCESSORS
 from convection.schema import REQUIRED, Names, param, subsection
 from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
@@ -64,6 +65,9 @@ class OutputSettings:
     statistics: tuple[str, ...] | None = param(None, choices=Names(POSTPROCESSORS),
                                                help="postprocessors whose columns statistics.csv holds (null: all "
                                                     "that apply)")
+    extra_fields: tuple[str, ...] | None = param(None, choices=ELASTIC_OUTPUTS,
+                                                 help="optional fields beside the standard ones: the elastic outputs "
+                                                      "(with physics.elasticity; null: all that apply)")
     checkpoint: CheckpointSettings = subsection(CheckpointSettings)
     progress: str = param("auto", choices=PROGRESS_MODES,
                           help="progress display: a bar on a terminal, lines in a log (auto: by stdout), or none")
@@ -186,11 +190,9 @@ class FieldOutput:
         if out is None:
             mesh = f.function_space.mesh
             if is_discontinuous(f.function_space) and element_degree(f.function_space) == 0:
-                space = function_space(mesh, "DG", 0) if not f.ufl_shape else \
-                    function_space(mesh, "DG", 0, shape=(mesh.geometry.dim,))
+                space = function_space(mesh, "DG", 0, shape=tuple(f.ufl_shape) or None)  # scalar, vector, tensor
             else:
-                space = function_space(mesh, "Lagrange", xdmf_lagrange_degree(mesh),
-                                       shape=(mesh.geometry.dim,) if f.ufl_shape else None)
+                space = function_space(mesh, "Lagrange", xdmf_lagrange_degree(mesh), shape=tuple(f.ufl_shape) or None)
             out = dolfinx.fem.Function(space, name=name)
             self._out[name] = out
         out.interpolate(f)

@@ -15,7 +15,8 @@ read, the rates the particles integrate, and the viscosity (for output).
   the cell midpoints (DG0, cell data in ParaView), written with the fields;
 - ``strain_rate_II = sqrt(eps : eps / 2)`` and ``stress_II = 2 eta strain_rate_II``, the second
   invariants of the strain rate and of the deviatoric stress (ASPECT's convention), at the cell
-  midpoints too;
+  midpoints too, and with elasticity the outputs of ``output.extra_fields``
+  (:mod:`convection.model.elastic_fields`);
 - ``density``: the density anomaly ``rho' = sum_i Rb_i C_i - Ra T`` (in units of ``eta0 kappa /
   (g L^3)``: a model in physical units writes ``rho0 + rho' eta0 kappa / (g L^3)`` in kg/m^3,
   :mod:`convection.io.output_units`), at the cell midpoints.
@@ -35,7 +36,7 @@ from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space, interpolation_points
 from particles.systems import ParticleSystems
 
-__all__ = ["ExpressionField", "Flow", "RheologyFields", "flow_viscosity"]
+__all__ = ["ExpressionField", "Flow", "RheologyFields", "flow_viscosity", "law_viscosity"]
 
 
 @dataclass(frozen=True)
@@ -63,10 +64,13 @@ class ExpressionField:
         name: The Function's name.
         expression: ``f(flow) -> UFL`` on the flow's current mesh.
         degree: ``f(stokes) -> int``, the DG degree.
+        shape: The value shape (a tensor: ``(gdim, gdim)``); None: a scalar.
     """
 
-    def __init__(self, name: str, expression: Callable[[Flow], Any], degree: Callable[[StokesSolver], int]) -> None:
+    def __init__(self, name: str, expression: Callable[[Flow], Any], degree: Callable[[StokesSolver], int],
+                 shape: Callable[[StokesSolver], tuple[int, ...] | None] = lambda s: None) -> None:
         self.name = name
+        self._shape = shape
         self.function: dolfinx.fem.Function | None = None
         self._make = expression
         self._degree = degree
@@ -77,7 +81,7 @@ class ExpressionField:
         """Interpolate the field for ``flow`` (collective); returns it."""
         stokes = flow.stokes
         if self._stokes is not stokes or self.function is None:
-            space = function_space(stokes.mesh, "DG", self._degree(stokes))
+            space = function_space(stokes.mesh, "DG", self._degree(stokes), shape=self._shape(stokes))
             self.function = dolfinx.fem.Function(space, name=self.name)
             self._expression = dolfinx.fem.Expression(self._make(flow), interpolation_points(space))
             self._stokes = stokes
@@ -131,6 +135,8 @@ class RheologyFields:
         self._invariants = (ExpressionField("strain_rate_II", _strain_rate_II, lambda s: 0),
                             ExpressionField("stress_II", lambda f: 2.0 * flow_viscosity(f) * _strain_rate_II(f),
                                             lambda s: 0))
+        # the elastic outputs of a flow (issue 48; the factory sets ElasticFields.update)
+        self.elastic: Callable[[Flow], dict[str, dolfinx.fem.Function]] | None = None
 
     def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
         """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
@@ -174,8 +180,10 @@ class RheologyFields:
         return self._viscosity.update(flow)
 
     def invariants(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
-        """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0; collective)."""
-        return {field.name: field.update(flow) for field in self._invariants}
+        """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0), and the elastic
+        outputs of :attr:`elastic` (collective)."""
+        out = {field.name: field.update(flow) for field in self._invariants}
+        return out if self.elastic is None else out | self.elastic(flow)
 
 
 def _elastic_stress_fields(stokes: StokesSolver, /) -> tuple[str, ...]:
@@ -197,6 +205,12 @@ def _elastic_rates(stokes: StokesSolver, /) -> dict[str, Callable[[Flow], Any]]:
             return getattr(discretisation.elasticity, name)(eta, flow.fractions, discretisation.elastic_rate)
         return expression
     return {"elastic_viscosity": factor("viscosity"), "elastic_memory": factor("memory")}
+
+
+def law_viscosity(flow: Flow, /) -> Any:
+    """The viscosity of the laws (mixed and bounded; before elasticity's ``eta -> eta_ve``) as UFL."""
+    return flow.stokes.approximation.viscosity(flow.T, flow.fractions, u=flow.stokes.u, p=flow.stokes.p,
+                                               fields=flow.fields, x=ufl.SpatialCoordinate(flow.stokes.mesh))
 
 
 def _density_anomaly(flow: Flow, /) -> Any:

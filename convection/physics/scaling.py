@@ -112,6 +112,10 @@ FIELD_KINDS: dict[str, str] = {
     "viscosity": "viscosity", "strain_rate_II": "strain_rate", "plastic_strain_rate": "strain_rate",
     "strain_rate": "strain_rate", "density": "density_anomaly", "initial_position": "length",
     "displacement": "length", "time_since_creation": "time",
+    # elasticity (issue 48): the stress history, its fields in the forms, and the outputs
+    "elastic_stress": "stress", "elastic_stress_invariant": "stress", "elastic_strain_rate": "strain_rate",
+    "viscous_strain_rate": "strain_rate", "elastic_viscosity": "viscosity",
+    **{f"elastic_stress_{c}": "stress" for c in ("xx", "yy", "zz", "xy", "xz", "yz")},
 }
 """The unit kind of each output field or particle property by name (a name not here is
 dimensionless): a kind of :data:`UNIT_KINDS`, or ``density_anomaly`` for the ``density`` field

@@ -106,6 +106,7 @@ class ModelFeatures:
         columns: The geometry has lines along ``up`` through it (a box).
         free_surface: A boundary is a free surface (:mod:`convection.deform`).
         dissipation: The approximation heats adiabatically and by shear (EBA, TALA).
+        elasticity: The rheology is visco-elastic (``physics.elasticity``).
     """
 
     energy: bool
@@ -118,6 +119,7 @@ class ModelFeatures:
     columns: bool = True
     free_surface: bool = False
     dissipation: bool = False
+    elasticity: bool = False
 
     @classmethod
     def of_model(cls, model: Model, diagnostics: DiagnosticsSettings | None = None) -> ModelFeatures:
@@ -127,7 +129,8 @@ class ModelFeatures:
                    entrainment_material=diagnostics.entrainment_material, Ra=model.stokes.approximation.Ra,
                    points=bool(diagnostics.points), topography_material=diagnostics.topography_material,
                    columns=model.domain.columns(1, 1) is not None, free_surface=model.free_surface is not None,
-                   dissipation=model.stokes.approximation.dissipates)
+                   dissipation=model.stokes.approximation.dissipates,
+                   elasticity=model.stokes.discretisation.elasticity is not None)
 
 
 class Column(Stateful):

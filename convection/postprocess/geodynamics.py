@@ -168,6 +168,9 @@ class PointValues(Stateful):
         if size == 1:
             return [f"{'T' if field == 'temperature' else 'p' if field == 'pressure' else field}_{point}"]
         prefix = "v" if field == "velocity" else f"{field}_"
+        if size > len(_AXES):  # a tensor (the elastic stress): xx, xy, yx, yy (3D: xx, ..., zz)
+            axes = _AXES[:round(size ** 0.5)]
+            return [f"{prefix}{a}{b}_{point}" for a in axes for b in axes]
         return [f"{prefix}{a}_{point}" for a in _AXES[:size]]
 
     @classmethod

@@ -42,6 +42,10 @@ name            columns
                 ``diagnostics.topography_material`` (sticky air), about its mean level
 ``free_surface`` mesh_quality_min, particles_pulled_in: the deforming mesh's worst cell and the
                 particles the sinking surface passed (:mod:`convection.deform`)
+``elasticity``  elastic_stress_invariant_max, elastic_stress_invariant_mean, elastic_strain_rate_mean,
+                viscous_strain_rate_mean, elastic_share: the deviatoric stress and the split of the
+                deformation of a visco-elastic run (:mod:`convection.postprocess.elasticity`; by
+                default there only)
 =============== =======================================================================
 
 ``nonlinear``, ``rheology``, ``energy`` and ``surface`` apply by default to a model whose viscosity
@@ -79,6 +83,7 @@ from convection.model.rheology_fields import flow_viscosity
 from convection.postprocess.base import (
     NEEDS_ENERGY, Column, DiagnosticsSettings, Forms, ModelFeatures, Postprocessor, PostprocessorContext, integral,
 )
+from convection.postprocess.elasticity import ElasticityStatistics
 from convection.postprocess.geodynamics import FreeSurfaceStatistics, MaterialStatistics, PointValues, Topography
 from fembase.registry import Registry
 from particles.manager import ParticleManager
@@ -501,7 +506,7 @@ def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelF
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
     ParticleDistribution, LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance,
-    Heating, SurfaceVelocity, MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics))
+    Heating, SurfaceVelocity, MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics, ElasticityStatistics))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

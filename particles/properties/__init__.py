@@ -41,6 +41,8 @@ from particles.properties._interpolate import interpolate_from_neighbours
 from particles.properties.damage import Damage
 from particles.properties.deformation_gradient import DeformationGradient
 from particles.properties.displacement import Displacement
+from particles.properties.elastic_outputs import (ElasticShare, ElasticStrainRate, ElasticStressInvariant,
+                                                  ViscousStrainRate)
 from particles.properties.elastic_stress import ElasticStress
 from particles.properties.function import FunctionProperty
 from particles.properties.initial_composition import InitialComposition
@@ -63,7 +65,10 @@ __all__ = [
     "Damage",
     "DeformationGradient",
     "Displacement",
+    "ElasticShare",
+    "ElasticStrainRate",
     "ElasticStress",
+    "ElasticStressInvariant",
     "FunctionProperty",
     "InitialComposition",
     "InitialPosition",
@@ -79,6 +84,7 @@ __all__ = [
     "Temperature",
     "TimeSinceCreation",
     "Velocity",
+    "ViscousStrainRate",
     "dependency_order",
 ]
 
@@ -87,7 +93,7 @@ PROPERTIES: Registry[type[ParticleProperty]] = Registry(
     (
         InitialPosition, InitialComposition, FunctionProperty, Velocity, Temperature, Pressure, StrainRate,
         IntegratedStrain, DeformationGradient, Damage, TimeSinceCreation, Rank, Displacement, PlasticStrain,
-        ElasticStress,  # elasticity (issue 48)
+        ElasticStress, ElasticStressInvariant, ElasticStrainRate, ViscousStrainRate, ElasticShare,  # elasticity
     ),
 )
 """Property classes by their lowercase config name."""

@@ -96,3 +96,39 @@ def test_initial_values_and_their_checks():
         six = ElasticStress(ElasticStress.Settings(initial=(0.0,) * 6))
         too_many = PropertyManager(swarm_at(mesh, np.array([[0.5, 0.5]])), [six])
         too_many.initialise(PropertyContext())
+
+
+@pytest.mark.parametrize("degree", [0, 1])
+def test_compiled_update_gives_the_vectorised_numbers(degree, monkeypatch):
+    """The compiled loop (particles/properties/elastic_kernel.py) against the vectorised path on a
+    distorted mesh, a P2 flow with spin and strain, eta_ve and chi varying in space (DG0 or DG1), a
+    random stress and a large step: equal to round-off."""
+    import particles.properties.elastic_stress as module
+
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 5, 4)
+    mesh.geometry.x[:, 0] += 0.05 * np.sin(3.0 * mesh.geometry.x[:, 1])  # cells of different shapes
+    points = RNG.uniform(0.05, 0.95, size=(200, 2))
+    V = function_space(mesh, "Lagrange", 2, shape=(2,))
+    u = dolfinx.fem.Function(V)
+    u.interpolate(lambda x: np.stack([np.sin(2 * x[1]) + x[0] ** 2, np.cos(3 * x[0]) - x[0] * x[1]]))
+    D = function_space(mesh, "DG", degree)
+    fields = {name: dolfinx.fem.Function(D) for name in ElasticStress.mesh_fields}
+    fields["elastic_viscosity"].interpolate(lambda x: 1.0 + x[0] * x[1])
+    fields["elastic_memory"].interpolate(lambda x: 0.3 + 0.5 * x[0])
+    results, ran = [], []
+    compiled_update = module.fast_update
+    monkeypatch.setattr(module, "fast_update", lambda *args: ran.append(compiled_update(*args)) or ran[-1])
+    for fast in (True, False):
+        swarm = swarm_at(mesh, points)
+        manager = PropertyManager(swarm, [ElasticStress()])
+        manager.initialise(PropertyContext())
+        swarm.properties[:] = RNG.normal(size=swarm.properties.shape) if fast else results[0][1]
+        start = swarm.properties.copy()
+        if not fast:
+            monkeypatch.setattr(module, "fast_update", lambda *args: False)
+        manager.update(PropertyContext(time=0.7, dt=0.7, u_new=u, fields=fields))
+        results.append((manager.values("elastic_stress").copy(), start))
+    (compiled, start), (vectorised, _) = results
+    assert ran == [True]  # the first update took the compiled loop
+    assert np.abs(compiled - start).max() > 0.1  # the update did something
+    assert np.allclose(compiled, vectorised, rtol=0.0, atol=1e-13 * np.abs(vectorised).max())

@@ -85,7 +85,8 @@ def test_registry_lists_names_and_rejects_bad_policies():
     assert set(PROPERTIES) == {
         "initial_position", "initial_composition", "function", "velocity", "temperature", "pressure",
         "strain_rate", "integrated_strain", "deformation_gradient", "damage", "time_since_creation", "rank",
-        "displacement", "plastic_strain", "elastic_stress",
+        "displacement", "plastic_strain", "elastic_stress", "elastic_stress_invariant", "elastic_strain_rate",
+        "viscous_strain_rate", "elastic_share",
     }
     assert all(cls.description for cls in PROPERTIES.values())
     with pytest.raises(ValueError, match="damage.*deformation_gradient.*velocity"):

@@ -607,6 +607,22 @@ def _check_approximation(config: dict[str, Any]) -> None:
     if formulation.reference_density and config["stokes"]["buoyancy_theta"] != 0.0:
         raise ConfigError(f"config key 'stokes.buoyancy_theta': not with physics.approximation {name} (the "
                           "semi-implicit buoyancy has no reference density yet)")
+    _check_pressure_buoyancy(config, formulation)
+
+
+def _check_pressure_buoyancy(config: dict[str, Any], formulation: Any) -> None:
+    """``physics.reference.heat_capacity_ratio`` only with the ALA, and the ALA with the direct Stokes
+    solver (:class:`convection.solvers.stokes.nullspace.PressureMode`)."""
+    ratio = config["physics"]["reference"]["heat_capacity_ratio"]
+    if not formulation.pressure_buoyancy:
+        if ratio != 1.0:
+            raise ConfigError("config key 'physics.reference.heat_capacity_ratio': only with physics.approximation "
+                              f"ala (the {formulation.name} approximation has no pressure buoyancy)")
+        return
+    solver = config["stokes"]["solver"]
+    if solver != "direct" and not (solver == "auto" and config_gdim(config) == 2):
+        raise ConfigError(f"config key 'stokes.solver': physics.approximation {formulation.name} needs the direct "
+                          f"solver for now (its pressure's buoyancy changes the pressure null space), got {solver!r}")
 
 
 def _property_names(config: dict[str, Any]) -> list[str]:

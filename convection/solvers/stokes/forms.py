@@ -7,7 +7,8 @@ Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in 
 
 (the truncated anelastic liquid approximation, :mod:`convection.physics.compressible`: ``-(q, div(rho_r u))``
 and ``rho_r`` in the body force; the anelastic liquid approximation also ``+(c p e_up, v)`` in the
-momentum equation's pressure block, the pressure's buoyancy, ``c = (Di / gamma) (cp / cv) rho_r``)
+momentum equation's pressure block, the pressure's buoyancy, ``c = (Di / gamma) (cp / cv) rho_r``,
+and the compressible stress's ``-(2/3) (eta div u, div v)``)
 
 on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1), ``eta = eta(T, C)`` and the
 body force from :class:`~convection.physics.approximation.BoussinesqApproximation`. With a variable
@@ -174,6 +175,15 @@ class StokesDiscretisation:
         rho = self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
         return ufl.div(u) if rho is None else ufl.div(rho * u)
 
+    def _viscous(self, eta: Any, u: Any, v: Any, dx: Any, /) -> Any:
+        """``(2 eta eps(u), eps(v))``; with the ALA's pressure buoyancy the compressible stress's
+        ``-(2/3) eta div u I`` too, ``-(2/3) (eta div u, div v)`` (else the pressure would hold it and
+        weigh it in the buoyancy)."""
+        term = 2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
+        if not self.approximation.formulation.pressure_buoyancy:
+            return term
+        return term - 2.0 / 3.0 * eta * ufl.div(u) * ufl.div(v) * dx
+
     def _pressure_block(self, p: Any, v: Any, dx: Any, /) -> Any:
         """The momentum equation's pressure term ``-(p, div v)``, with the ALA's pressure buoyancy
         ``+(c p e_up, v)`` (:meth:`~convection.physics.approximation.BoussinesqApproximation.pressure_buoyancy`)."""
@@ -211,8 +221,7 @@ class StokesDiscretisation:
         eta = self.viscosity(T, C, {"u": u, "p": p, "fields": fields or {}})
         f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
         dx, metadata = self._dx()
-        F_u = (2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
-               + self._pressure_block(p, v, dx) - ufl.inner(f, v) * dx)
+        F_u = self._viscous(eta, u, v, dx) + self._pressure_block(p, v, dx) - ufl.inner(f, v) * dx
         F_p = -ufl.inner(self._mass_flux(u), q) * dx
         elastic = self.elastic_load(T, C, {"u": u, "p": p, "fields": fields or {}}, v, dx)
         if elastic is not None:
@@ -255,8 +264,7 @@ class StokesDiscretisation:
         zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
         dx, metadata = self._dx()
         a = [
-            [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
-             self._pressure_block(p, v, dx)],
+            [self._viscous(eta, u, v, dx), self._pressure_block(p, v, dx)],
             [-ufl.inner(self._mass_flux(u), q) * dx, None],
         ]
         curved = weak_free_slip_boundaries(self.bcs, self.domain)

@@ -17,9 +17,11 @@ COLUMNS = ("vrms", "nusselt", "T_mean", "heating_W", "heating_Phi")
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """``{formulation: {ranks: run folder}}``."""
-    return {formulation: run_on_ranks(CONFIG, {ranks: tmp_path_factory.mktemp(f"{formulation}_{ranks}_ranks")
-                                               for ranks in (1, 2, 3)}, [*SMALL, f"physics.approximation={formulation}"])
-            for formulation in FORMULATIONS}
+    out = {}
+    for formulation in FORMULATIONS:
+        folders = {ranks: tmp_path_factory.mktemp(f"{formulation}_{ranks}_ranks") for ranks in (1, 2, 3)}
+        out[formulation] = run_on_ranks(CONFIG, folders, [*SMALL, f"physics.approximation={formulation}"])
+    return out
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)

@@ -68,7 +68,9 @@ from convection.physics.elasticity import ElasticitySettings, check_elasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
-from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
+from convection.solvers.stokes.solver import (
+    STOKES_SOLVER_CHOICES, STOKES_SOLVERS, StokesSettings, check_viscosity_rules,
+)
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings, particle_settings
 
@@ -620,7 +622,7 @@ def _check_pressure_buoyancy(config: dict[str, Any], formulation: Any) -> None:
                               f"ala (the {formulation.name} approximation has no pressure buoyancy)")
         return
     solver = config["stokes"]["solver"]
-    if solver != "direct" and not (solver == "auto" and config_gdim(config) == 2):
+    if STOKES_SOLVERS[STOKES_SOLVER_CHOICES[solver].resolve(config_gdim(config))].iterative:
         raise ConfigError(f"config key 'stokes.solver': physics.approximation {formulation.name} needs the direct "
                           f"solver for now (its pressure's buoyancy changes the pressure null space), got {solver!r}")
 

@@ -99,6 +99,7 @@ class PressureMode:
         self._column = column(self._pin)
         self._mean = PressureMean(system.p)
         self._mean0 = dolfinx.fem.form(self.p0 * ufl.dx)
+        self._state: int | None = None  # the operator's PETSc state at the last update
 
     def update(self) -> None:
         """Solve for ``x_0`` with the operator as factorised now. Collective."""
@@ -127,8 +128,12 @@ class PressureMode:
         x0.destroy()
 
     def normalise(self) -> None:
-        """``x -= (mean p / mean p_0) x_0`` with ``x_0`` of the operator now (:meth:`update`). Collective."""
-        self.update()
+        """``x -= (mean p / mean p_0) x_0`` with ``x_0`` of the operator now (:meth:`update` when the
+        operator changed: its PETSc state). Collective."""
+        state = self.system.A.stateGet()
+        if state != self._state:
+            self.update()
+            self._state = state
         comm = self.p0.function_space.mesh.comm
         mean, mean0 = (comm.allreduce(dolfinx.fem.assemble_scalar(f), op=MPI.SUM)
                        for f in (self._mean._integral, self._mean0))

@@ -12,19 +12,12 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from convection.geometry.boundary import VelocityBC
 from convection.physics.approximation import BoussinesqApproximation
 from convection.physics.compressible import APPROXIMATIONS, ReferenceState, shear_heating
 from convection.solvers.stokes.nullspace import PressureMode
 from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space
-
-FREE_SLIP = {side: VelocityBC("free_slip") for side in ("left", "right", "bottom", "top")}
-
-
-def _integral(mesh, expr) -> float:
-    local = dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr * ufl.dx(domain=mesh, metadata={"quadrature_degree": 8})))
-    return mesh.comm.allreduce(local, op=MPI.SUM)
+from test_compressible import FREE_SLIP, _integral
 
 
 @pytest.fixture(scope="module")

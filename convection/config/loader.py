@@ -586,6 +586,7 @@ def _check_approximation(config: dict[str, Any]) -> None:
     physics = config["physics"]
     name, Di = physics["approximation"], physics["reference"]["Di"]
     formulation = APPROXIMATIONS[name]
+    _check_pressure_buoyancy(config, formulation)
     dissipating = [n for n, f in APPROXIMATIONS.items() if f.dissipation]
     if not formulation.dissipation:
         if Di != 0.0:
@@ -609,7 +610,6 @@ def _check_approximation(config: dict[str, Any]) -> None:
     if formulation.reference_density and config["stokes"]["buoyancy_theta"] != 0.0:
         raise ConfigError(f"config key 'stokes.buoyancy_theta': not with physics.approximation {name} (the "
                           "semi-implicit buoyancy has no reference density yet)")
-    _check_pressure_buoyancy(config, formulation)
 
 
 def _check_pressure_buoyancy(config: dict[str, Any], formulation: Any) -> None:

@@ -31,6 +31,7 @@ def test_king_config_is_tala():
     (KING, ["physics.approximation=ala", "physics.reference.Di=0"], "physics.reference.Di': physics.approximation ala"),
     (KING, ["physics.reference.heat_capacity_ratio=1.1"], "physics.reference.heat_capacity_ratio': only with "
                                                           "physics.approximation ala"),
+    (BLANKENBACH, ["physics.reference.heat_capacity_ratio=1.2"], "physics.reference.heat_capacity_ratio': only"),
     (KING, ["physics.approximation=ala", "physics.reference.heat_capacity_ratio=0.5"],
      "physics.reference.heat_capacity_ratio"),
     (KING, ["physics.approximation=ala", "stokes.solver=iterative"], "stokes.solver': physics.approximation ala "

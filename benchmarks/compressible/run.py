@@ -1,12 +1,14 @@
-"""King et al. (2010) compressible convection: TALA at Ra = 1e4, Di = 0.25, 0.5, 1, against the published codes.
+"""King et al. (2010) compressible convection: TALA and ALA at Ra = 1e4 and 1e5, Di = 0.25, 0.5, 1, against
+the published codes.
 
 Usage::
 
-    python -m benchmarks.compressible.run [--case tala_0.25 tala_0.5 tala_1] [--cells 32] [--ranks 2]
+    python -m benchmarks.compressible.run [--case tala_0.25 ... ala_1e5_1] [--cells 32] [--ranks 2]
                                           [--set KEY=VALUE ...] [--quick] [--out DIR]
 
-Each case runs ``configs/king_tala.yaml`` (unit square, free slip, T = 1 bottom, 0 top, the truncated
-anelastic liquid approximation with gamma = 1 and T0 = 0.091) with its dissipation number, with the CLI
+Each case runs ``configs/king_tala.yaml`` (unit square, free slip, T = 1 bottom, 0 top, gamma = 1 and
+T0 = 0.091) with its approximation (``tala``, the truncated anelastic liquid, or ``ala``, the anelastic
+liquid approximation), Rayleigh number (``_1e5``; else 1e4) and dissipation number, with the CLI
 under mpirun to its steady state, and reads the last row of its statistics: Nu (top), vrms, <T> and the
 energy statistics W (work against gravity) and Phi (shear heating). Writes ``<out>/results.md`` (each
 value beside the range of the codes King et al. compare, UM, VT and CU, and its deviation from their
@@ -32,7 +34,9 @@ ROOT = HERE.parents[1]
 BENCHMARK = Benchmark(__doc__, out=OUTPUT / "compressible", ranks=2, quick="12 x 12 cells, loose steady state",
                       overrides=True, no_run="tabulate the runs already in --out",
                       helps={"set": "a config override for every run (repeatable)"})
-CASES = cases(*(Case(f"tala_{di}", "king_tala.yaml", (f"physics.reference.Di={di}",)) for di in ("0.25", "0.5", "1")))
+CASES = cases(*(Case(f"{form}{'' if ra == '1e4' else '_' + ra}_{di}", "king_tala.yaml",
+                     (f"physics.reference.Di={di}", f"physics.approximation={form}", f"physics.Ra={ra}"))
+                for form in ("tala", "ala") for ra in ("1e4", "1e5") for di in ("0.25", "0.5", "1")))
 PUBLISHED_CODES = ("UM", "VT", "CU")
 """The codes of King et al. (2010) in ``reference.csv`` (ASPECT's values are listed beside them)."""
 QUANTITIES = {"nusselt": "nusselt", "vrms": "vrms", "T_mean": "T_mean", "W": "heating_W", "Phi": "heating_Phi"}
@@ -40,13 +44,13 @@ QUANTITIES = {"nusselt": "nusselt", "vrms": "vrms", "T_mean": "T_mean", "W": "he
 QUICK = ["mesh.cells=[12,12]", "time.steady_state_tolerance=1e-4"]
 
 
-def reference() -> dict[tuple[str, float], dict[str, dict[str, float]]]:
-    """``{(formulation, Di): {code: {quantity: value}}}`` of ``reference.csv``."""
-    out: dict[tuple[str, float], dict[str, dict[str, float]]] = {}
+def reference() -> dict[tuple[str, float, float], dict[str, dict[str, float]]]:
+    """``{(formulation, Ra, Di): {code: {quantity: value}}}`` of ``reference.csv``."""
+    out: dict[tuple[str, float, float], dict[str, dict[str, float]]] = {}
     with open(HERE / "reference.csv", newline="") as f:
         for row in csv.DictReader(line for line in f if not line.startswith("#")):
             values = {k: float(row[k]) for k in QUANTITIES}
-            out.setdefault((row["formulation"], float(row["Di"])), {})[row["code"]] = values
+            out.setdefault((row["formulation"], float(row["Ra"]), float(row["Di"])), {})[row["code"]] = values
     return out
 
 
@@ -63,8 +67,10 @@ def final(statistics: dict) -> dict[str, float]:
     return values
 
 
-def case_di(case: Case) -> float:
-    return float(case.overrides[0].split("=", 1)[1])
+def case_key(case: Case) -> tuple[str, float, float]:
+    """``(formulation, Ra, Di)`` of a case, its key in :func:`reference`."""
+    values = dict(item.split("=", 1) for item in case.overrides)
+    return values["physics.approximation"], float(values["physics.Ra"]), float(values["physics.reference.Di"])
 
 
 def row(name: str, mesh: str, ours: dict[str, float], ref: dict[str, dict[str, float]], wall: float) -> list[str]:
@@ -94,11 +100,11 @@ def main(argv: list[str] | None = None) -> int:
                 "output.progress=lines", "output.progress_every=200", *case.overrides, *sized, *args.set])
         summary = json.loads((out / "summary.json").read_text())
         statistics = read_statistics(out / "statistics.csv")
-        di = case_di(case)
+        key = case_key(case)
         ours = final(statistics)
-        curves[di] = ours
+        curves[key] = ours
         mesh = f"{summary['cells']} cells ({_config_value(out, 'cells')}), from {_start(out)}"
-        rows.append(row(name, mesh, ours, ref[("tala", di)], summary["wall_time"]))
+        rows.append(row(name, mesh, ours, ref[key], summary["wall_time"]))
     header = ["case", "mesh", "steps", *(f"{q} (published range; vs mean)" for q in QUANTITIES), "abs(Phi-W)/W",
               "wall time [s]"]
     BENCHMARK.log_load("end")
@@ -120,28 +126,32 @@ def _start(run: Path) -> str:
     return "the initial temperature" if source in ("null", "") else f"the steady state of {Path(source).name} ({source})"
 
 
-def _plot(curves: dict[float, dict[str, float]], ref: dict, png: Path) -> None:
+def _plot(curves: dict[tuple[str, float, float], dict[str, float]], ref: dict, png: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(QUANTITIES), figsize=(15, 3.6), constrained_layout=True)
-    dis = sorted(curves)
+    fig, axes = plt.subplots(1, len(QUANTITIES), figsize=(15, 3.8), constrained_layout=True)
+    series = sorted({key[:2] for key in curves})
     for ax, quantity in zip(axes, QUANTITIES):
-        for marker, code in zip("v^s", PUBLISHED_CODES):
-            ax.plot(dis, [ref[("tala", di)][code][quantity] / published(ref[("tala", di)], quantity)[2] for di in dis],
-                    marker, color="0.5", label=f"King et al. {code}")
-        ax.plot(dis, [ref[("tala", di)]["ASPECT"][quantity] / published(ref[("tala", di)], quantity)[2]
-                      for di in dis], "x", color="tab:green", label="ASPECT")
-        ax.plot(dis, [curves[di][quantity] / published(ref[("tala", di)], quantity)[2] for di in dis], "o-",
-                color="tab:red", label="this code")
+        for k, (form, ra) in enumerate(series):
+            keys = sorted(key for key in curves if key[:2] == (form, ra))
+            dis = [key[2] + 0.02 * (k - len(series) / 2) for key in keys]  # side by side
+            spread = [published(ref[key], quantity) for key in keys]
+            ax.errorbar(dis, [1.0] * len(keys), yerr=[[1 - lo / mean for lo, _, mean in spread],
+                                                       [hi / mean - 1 for _, hi, mean in spread]],
+                        fmt="none", ecolor="0.6", capsize=2)
+            ax.plot(dis, [ref[key]["ASPECT"][quantity] / published(ref[key], quantity)[2] for key in keys], "x",
+                    color=f"C{k}", alpha=0.6)
+            ax.plot(dis, [curves[key][quantity] / published(ref[key], quantity)[2] for key in keys], "o",
+                    color=f"C{k}", label=f"{form.upper()} Ra {ra:.0e}")
         ax.axhline(1.0, color="k", lw=0.6)
         ax.ticklabel_format(axis="y", useOffset=False)
         ax.set_xlabel("Di")
         ax.set_title(f"{quantity} / published mean")
     axes[0].legend(fontsize=7)
-    fig.suptitle("King et al. (2010), TALA, Ra = 1e4")
+    fig.suptitle("King et al. (2010): this code (o), ASPECT (x), the range of the paper's codes (bars)")
     fig.savefig(png, dpi=110)
     plt.close(fig)
 

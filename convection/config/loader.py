@@ -72,7 +72,9 @@ from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.steady import check_steady_start
-from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
+from convection.solvers.stokes.solver import (
+    STOKES_SOLVER_CHOICES, STOKES_SOLVERS, StokesSettings, check_viscosity_rules,
+)
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings, particle_settings
 
@@ -607,6 +609,7 @@ def _check_approximation(config: dict[str, Any]) -> None:
     physics = config["physics"]
     name, Di = physics["approximation"], physics["reference"]["Di"]
     formulation = APPROXIMATIONS[name]
+    _check_pressure_buoyancy(config, formulation)
     dissipating = [n for n, f in APPROXIMATIONS.items() if f.dissipation]
     if not formulation.dissipation:
         if Di != 0.0:
@@ -630,6 +633,21 @@ def _check_approximation(config: dict[str, Any]) -> None:
     if formulation.reference_density and config["stokes"]["buoyancy_theta"] != 0.0:
         raise ConfigError(f"config key 'stokes.buoyancy_theta': not with physics.approximation {name} (the "
                           "semi-implicit buoyancy has no reference density yet)")
+
+
+def _check_pressure_buoyancy(config: dict[str, Any], formulation: Any) -> None:
+    """``physics.reference.heat_capacity_ratio`` only with the ALA, and the ALA with the direct Stokes
+    solver (:class:`convection.solvers.stokes.nullspace.PressureMode`)."""
+    ratio = config["physics"]["reference"]["heat_capacity_ratio"]
+    if not formulation.pressure_buoyancy:
+        if ratio != 1.0:
+            raise ConfigError("config key 'physics.reference.heat_capacity_ratio': only with physics.approximation "
+                              f"ala (the {formulation.name} approximation has no pressure buoyancy)")
+        return
+    solver = config["stokes"]["solver"]
+    if STOKES_SOLVERS[STOKES_SOLVER_CHOICES[solver].resolve(config_gdim(config))].iterative:
+        raise ConfigError(f"config key 'stokes.solver': physics.approximation {formulation.name} needs the direct "
+                          f"solver for now (its pressure's buoyancy changes the pressure null space), got {solver!r}")
 
 
 def _property_names(config: dict[str, Any]) -> list[str]:

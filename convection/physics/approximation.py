@@ -149,8 +149,8 @@ class PhysicsSettings:
     H: float = param(0.0, help="internal heating")
     viscosity: ViscositySettings = subsection(ViscositySettings)
     approximation: str = param("boussinesq", choices=Names(APPROXIMATIONS),
-                               help="the equations: boussinesq, eba (adiabatic and shear heating) or tala (also a "
-                                    "reference density; docs/compressible.md)")
+                               help="the equations: boussinesq, eba (adiabatic and shear heating), tala (also a "
+                                    "reference density) or ala (also the pressure's buoyancy; docs/compressible.md)")
     reference: ReferenceSettings = subsection(ReferenceSettings)
     elasticity: ElasticitySettings = subsection(ElasticitySettings)  # issue 48
 
@@ -378,9 +378,9 @@ class BoussinesqApproximation:
         gravity: which way is up (:mod:`convection.geometry.gravity`; the domain's
             :attr:`~convection.geometry.domain.Domain.gravity`).
         formulation: a name in :data:`~convection.physics.compressible.APPROXIMATIONS`
-            (``"boussinesq"``, ``"eba"``, ``"tala"``): the terms the solvers ask for
-            (:meth:`continuity_density`, :meth:`buoyancy`, :meth:`energy_terms`).
-        reference: the reference state of ``eba`` and ``tala`` (``Di > 0``; ``Di = 0`` for ``boussinesq``).
+            (``"boussinesq"``, ``"eba"``, ``"tala"``, ``"ala"``): the terms the solvers ask for
+            (:meth:`continuity_density`, :meth:`buoyancy`, :meth:`pressure_buoyancy`, :meth:`energy_terms`).
+        reference: the reference state of ``eba``, ``tala`` and ``ala`` (``Di > 0``; ``Di = 0`` for ``boussinesq``).
         elasticity: Maxwell visco-elasticity (:mod:`convection.physics.elasticity`, issue 48), or None.
     """
 
@@ -454,13 +454,18 @@ class BoussinesqApproximation:
 
     @property
     def dissipates(self) -> bool:
-        """Whether the energy equation has adiabatic and shear heating (EBA, TALA)."""
+        """Whether the energy equation has adiabatic and shear heating (EBA, TALA, ALA)."""
         return self.formulation.dissipation
 
     def continuity_density(self, x: Any, /) -> Any | None:
         """UFL ``rho_r`` of the continuity equation ``div(rho_r u) = 0`` at the points ``x``, or None
         for ``div u = 0``."""
         return self.reference.density(self.gravity.depth(x)) if self.formulation.reference_density else None
+
+    def pressure_buoyancy(self, x: Any, /) -> Any | None:
+        """UFL ``c`` of the ALA's pressure buoyancy ``-c p e_up``, ``c = (Di / gamma) (cp / cv) rho_r``
+        at the points ``x``, or None without it."""
+        return self.reference.compressibility(self.gravity.depth(x)) if self.formulation.pressure_buoyancy else None
 
     def energy_terms(self, T_new: Any, T: Any, u: Any, x: Any, /) -> EnergyTerms | None:
         """The energy equation's heat capacity and heating (:class:`~convection.physics.compressible.EnergyTerms`)
@@ -503,7 +508,7 @@ def _check_formulation(approximation: BoussinesqApproximation) -> None:
     if not formulation.dissipation:
         if Di != 0.0:
             raise ValueError(f"the {formulation.name} approximation has no dissipation number (Di = {Di}); "
-                             "use eba or tala")
+                             "use eba, tala or ala")
         return
     if Di == 0.0:
         raise ValueError(f"the {formulation.name} approximation needs a dissipation number Di > 0")

@@ -1,5 +1,6 @@
-"""Approximations beyond Boussinesq: the extended Boussinesq (EBA) and the truncated anelastic
-liquid (TALA) approximations, on the nondimensional reference state of King et al. (2010).
+"""Approximations beyond Boussinesq: the extended Boussinesq (EBA), the truncated anelastic liquid
+(TALA) and the anelastic liquid (ALA) approximations, on the nondimensional reference state of King
+et al. (2010).
 
 Reference state (``d`` the depth below the top, ``Di = alpha0 g0 h / cp0`` the dissipation number,
 ``gamma`` the Grueneisen parameter, ``T0 = T_surface / Delta T`` the surface temperature)::
@@ -14,6 +15,8 @@ the Boussinesq ones; ``eta`` the viscosity, ``H`` the internal heating)::
            DT/Dt + Di w (T + T0) = lap T + (Di / Ra) Phi + H
     TALA:  div(rho_r u) = 0,                 -div(2 eta eps(u)) + grad p = Ra rho_r T e_up,
            rho_r DT/Dt + Di rho_r w (T + T0) = lap T + (Di / Ra) Phi + rho_r H
+    ALA:   as TALA, with the dynamic pressure's effect on the density in the buoyancy:
+           -div(2 eta eps(u)) + grad p = (Ra rho_r T - (Di / gamma) (cp / cv) rho_r p) e_up
 
 with the shear heating ``Phi = 2 eta (eps(u) : eps(u) - (div u)^2 / 3)`` (the deviatoric stress
 times the strain rate). The momentum equation keeps ``2 eta eps(u)``: the compressible stress's
@@ -41,12 +44,15 @@ class ReferenceSettings:
     """The ``physics.reference`` config section: the nondimensional reference state of the
     compressible approximations (King et al. 2010)."""
 
-    Di: float = param(0.0, minimum=0.0, help="dissipation number alpha g h / cp (with physics.approximation eba "
-                                             "or tala; 0 for boussinesq)")
+    Di: float = param(0.0, minimum=0.0, help="dissipation number alpha g h / cp (with physics.approximation eba, "
+                                             "tala or ala; 0 for boussinesq)")
     gruneisen: float = param(1.0, exclusive_minimum=0.0, help="Grueneisen parameter gamma: reference density "
-                                                              "exp(Di depth / gamma) (tala)")
+                                                              "exp(Di depth / gamma) (tala, ala)")
     surface_temperature: float = param(0.0, minimum=0.0, help="T0 = T_surface / Delta T: the adiabatic heating "
                                                               "is Di rho w (T + T0) (King et al. 2010: 0.091)")
+    heat_capacity_ratio: float = param(1.0, minimum=1.0, help="cp / cv of the pressure's buoyancy "
+                                                              "-(Di / gamma) (cp / cv) rho p (ala only; King et al. "
+                                                              "2010: 1)")
 
 
 @dataclass(frozen=True)
@@ -57,11 +63,13 @@ class ReferenceState:
         Di: Dissipation number.
         gruneisen: Grueneisen parameter ``gamma`` of the reference density ``exp(Di d / gamma)``.
         surface_temperature: ``T0``, the surface temperature over the temperature scale.
+        heat_capacity_ratio: ``cp / cv`` in the ALA's pressure buoyancy (0 leaves it out: TALA).
     """
 
     Di: float = 0.0
     gruneisen: float = 1.0
     surface_temperature: float = 0.0
+    heat_capacity_ratio: float = 1.0
 
     def __post_init__(self) -> None:
         if not self.Di >= 0.0:
@@ -70,6 +78,8 @@ class ReferenceState:
             raise ValueError(f"the Grueneisen parameter must be positive, got {self.gruneisen}")
         if not self.surface_temperature >= 0.0:
             raise ValueError(f"the surface temperature must not be negative, got {self.surface_temperature}")
+        if not self.heat_capacity_ratio >= 0.0:
+            raise ValueError(f"the heat capacity ratio cp / cv must not be negative, got {self.heat_capacity_ratio}")
 
     def density(self, depth: Any, /) -> Any:
         """``rho_r = exp(Di depth / gamma)`` (UFL or numbers)."""
@@ -78,6 +88,10 @@ class ReferenceState:
     def adiabat(self, depth: Any, /) -> Any:
         """``T_ad = T0 (exp(Di depth) - 1)``: the adiabat's rise above the surface (UFL)."""
         return self.surface_temperature * (ufl.exp(self.Di * depth) - 1.0)
+
+    def compressibility(self, depth: Any, /) -> Any:
+        """``(Di / gamma) (cp / cv) rho_r``: the ALA's buoyancy loses this times the dynamic pressure (UFL)."""
+        return self.Di / self.gruneisen * self.heat_capacity_ratio * self.density(depth)
 
 
 @dataclass(frozen=True)
@@ -90,12 +104,15 @@ class Formulation:
         dissipation: Adiabatic and shear heating enter the energy equation (needs ``Di > 0``).
         reference_density: The reference density weighs the continuity equation (``div(rho_r u)``),
             the buoyancy and the energy equation's heat capacity and internal heating.
+        pressure_buoyancy: The dynamic pressure compresses: the buoyancy has the ALA's
+            ``-(Di / gamma) (cp / cv) rho_r p e_up`` (:meth:`ReferenceState.compressibility`).
     """
 
     name: str
     description: str
     dissipation: bool
     reference_density: bool
+    pressure_buoyancy: bool = False
 
 
 APPROXIMATIONS: Registry[Formulation] = Registry("approximation", (
@@ -103,6 +120,8 @@ APPROXIMATIONS: Registry[Formulation] = Registry("approximation", (
     Formulation("eba", "extended Boussinesq: div u = 0, with adiabatic and shear heating", True, False),
     Formulation("tala", "truncated anelastic liquid: div(rho_r u) = 0, rho_r in the buoyancy and the energy "
                         "equation, with adiabatic and shear heating", True, True),
+    Formulation("ala", "anelastic liquid: tala, and the dynamic pressure's effect on the density in the buoyancy",
+                True, True, True),
 ))
 """The approximations by config name."""
 

@@ -6,7 +6,9 @@ Weak form (find ``u in V_D``, ``p in Q`` such that for all ``v in V_0``, ``q in 
                             -(q, div u) = 0
 
 (the truncated anelastic liquid approximation, :mod:`convection.physics.compressible`: ``-(q, div(rho_r u))``
-and ``rho_r`` in the body force)
+and ``rho_r`` in the body force; the anelastic liquid approximation also ``+(c p e_up, v)`` in the
+momentum equation's pressure block, the pressure's buoyancy, ``c = (Di / gamma) (cp / cv) rho_r``,
+and the compressible stress's ``-(2/3) (eta div u, div v)``)
 
 on a vector P(k) / scalar P(k-1) pair (k = 2: Taylor-Hood P2-P1), ``eta = eta(T, C)`` and the
 body force from :class:`~convection.physics.approximation.BoussinesqApproximation`. With a variable
@@ -189,6 +191,30 @@ class StokesDiscretisation:
         rho = self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
         return ufl.div(u) if rho is None else ufl.div(rho * u)
 
+    def _viscous(self, eta: Any, u: Any, v: Any, dx: Any, /) -> Any:
+        """``(2 eta eps(u), eps(v))``; with the ALA's pressure buoyancy the compressible stress's
+        ``-(2/3) eta div u I`` too, ``-(2/3) (eta div u, div v)`` (else the pressure would hold it and
+        weigh it in the buoyancy)."""
+        term = 2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
+        if not self.approximation.formulation.pressure_buoyancy:
+            return term
+        return term - 2.0 / 3.0 * eta * ufl.div(u) * ufl.div(v) * dx
+
+    def _pressure_block(self, p: Any, v: Any, dx: Any, /) -> Any:
+        """The momentum equation's pressure term ``-(p, div v)``, with the ALA's pressure buoyancy
+        ``+(c p e_up, v)`` (:meth:`~convection.physics.approximation.BoussinesqApproximation.pressure_buoyancy`)."""
+        x = ufl.SpatialCoordinate(self.mesh)
+        c = self.approximation.pressure_buoyancy(x)
+        term = -ufl.inner(p, ufl.div(v)) * dx
+        if c is None:
+            return term
+        return term + ufl.inner(self.approximation.gravity.along_up(c * p, x), v) * dx
+
+    def pressure_column(self, p: Any, /) -> Any:
+        """The compiled linear form ``v -> `` the momentum equation's pressure term of the pressure ``p``
+        (:class:`convection.solvers.stokes.nullspace.PressureMode`). Collective."""
+        return dolfinx.fem.form(self._pressure_block(p, ufl.TestFunction(self.V), self._dx()[0]))
+
     def component_space(self, axis: int, /) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
         """``V.sub(axis).collapse()`` (made once): the scalar space and its map into ``V``'s
         unrolled local dofs, shape=(owned + ghosts,). Collective."""
@@ -211,8 +237,7 @@ class StokesDiscretisation:
         eta = self.viscosity(T, C, {"u": u, "p": p, "fields": fields or {}})
         f = self.approximation.buoyancy(T, C, self.mesh.geometry.dim, x=ufl.SpatialCoordinate(self.mesh))
         dx, metadata = self._dx()
-        F_u = (2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx
-               - ufl.inner(p, ufl.div(v)) * dx - ufl.inner(f, v) * dx)
+        F_u = self._viscous(eta, u, v, dx) + self._pressure_block(p, v, dx) - ufl.inner(f, v) * dx
         F_p = -ufl.inner(self._mass_flux(u), q) * dx
         elastic = self.elastic_load(T, C, {"u": u, "p": p, "fields": fields or {}}, v, dx)
         if elastic is not None:
@@ -255,8 +280,7 @@ class StokesDiscretisation:
         zero = dolfinx.fem.Constant(self.mesh, PETSc.ScalarType(0.0))
         dx, metadata = self._dx()
         a = [
-            [2.0 * eta * ufl.inner(ufl.sym(ufl.grad(u)), ufl.sym(ufl.grad(v))) * dx,
-             -ufl.inner(p, ufl.div(v)) * dx],
+            [self._viscous(eta, u, v, dx), self._pressure_block(p, v, dx)],
             [-ufl.inner(self._mass_flux(u), q) * dx, None],
         ]
         curved = weak_free_slip_boundaries(self.bcs, self.domain)

@@ -5,6 +5,11 @@
   direct solver (one pressure dof set to zero, exact because the system is consistent),
   :func:`constant_pressure_null_space` hands it to a Krylov solver, and :class:`PressureMean`
   normalises the pressure to ``int p dx = 0`` after every solve.
+- Under the anelastic liquid approximation (:mod:`convection.physics.compressible`) the pressure's
+  buoyancy ``-c p e_up`` turns the constant into a mode ``(u_0, p_0)`` with ``p_0 ~ exp((cp / cv)
+  rho_r)`` and a small ``u_0`` (the discretisation's): :class:`PressureMode` finds it exactly, one
+  solve with the pinned operator, and shifts the solution along it to ``int p dx = 0``, so that
+  neither the velocity nor the pressure depends on which dof was pinned (on the partition).
 - **Rigid rotations** about the origin solve the homogeneous problem when both shell boundaries
   are free slip; they are only nearly in the discrete null space (the Nitsche penalty pins them
   weakly), so they are not given to PETSc: :class:`RigidRotations` removes the solution's L2
@@ -15,8 +20,11 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import dolfinx
 import dolfinx.fem
+import dolfinx.fem.petsc
 import dolfinx.la
 import numpy as np
 import ufl
@@ -25,7 +33,8 @@ from petsc4py import PETSc
 
 from fembase.dolfinx_compat import orthonormalize
 
-__all__ = ["PressureMean", "RigidRotations", "constant_pressure_null_space", "rigid_body_modes"]
+__all__ = ["PressureMean", "PressureMode", "RigidRotations", "constant_pressure_null_space", "pressure_normaliser",
+           "rigid_body_modes"]
 
 
 def constant_pressure_null_space(template: PETSc.Vec, num_owned_velocity: int, /) -> PETSc.NullSpace:
@@ -59,6 +68,94 @@ class PressureMean:
         comm = self.p.function_space.mesh.comm
         mean = comm.allreduce(dolfinx.fem.assemble_scalar(self._integral), op=MPI.SUM) / self.volume
         self.p.x.array[:] -= mean
+
+
+class PressureMode:
+    """The null vector ``x_0 = (u_0, p_0)`` of a direct solve's operator ``K`` whose pressure is
+    pinned (:meth:`~convection.geometry.domain.Domain.pressure_pin`), and the shift of the solution
+    along it to ``int p dx = 0``.
+
+    The pin zeroes its dof's row and column of ``K`` (unit diagonal), so ``x_0`` with ``p_0 = 1`` at
+    the pin solves ``K_pin x_0 = e_pin - k_pin`` (``k_pin``: the pin's column of ``K``, its
+    velocity rows, the strong conditions' rows zero): every row of ``K`` but the pin's then holds
+    ``K x_0 = 0``, and the pin's continuity row is minus the sum of the others (the constant
+    pressure test function is ``K``'s left null vector). Boussinesq and TALA: ``x_0 = (0, 1)``
+    (the :class:`PressureMean`); ALA: ``p_0 > 0`` varies with depth and ``u_0 != 0``.
+
+    Args:
+        system: The linear system (:class:`~convection.solvers.stokes.linear.StokesLinearSystem`,
+            pinned): its solution Functions ``u``, ``p``, KSP, vectors and the pin.
+        column: ``p -> `` the momentum equation's pressure term as a linear form in the velocity
+            test function (:meth:`~convection.solvers.stokes.forms.StokesDiscretisation.pressure_column`).
+    """
+
+    def __init__(self, system: Any, column: Any, /) -> None:
+        self.system = system
+        self.u0 = dolfinx.fem.Function(system.u.function_space)
+        self.p0 = dolfinx.fem.Function(system.p.function_space)
+        self._pin = dolfinx.fem.Function(system.p.function_space)
+        pinned = system.bcs[-1].dof_indices()[0]
+        self._pin.x.array[pinned] = 1.0
+        self._column = column(self._pin)
+        self._mean = PressureMean(system.p)
+        self._mean0 = dolfinx.fem.form(self.p0 * ufl.dx)
+        self._state: int | None = None  # the operator's PETSc state at the last update
+
+    def update(self) -> None:
+        """Solve for ``x_0`` with the operator as factorised now. Collective."""
+        system = self.system
+        n_u = system.V.dofmap.index_map.size_local * system.V.dofmap.index_map_bs
+        n_p = system.Q.dofmap.index_map.size_local
+        k = dolfinx.fem.petsc.assemble_vector(self._column)
+        k.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        column = k.array_r[:n_u].copy()
+        k.destroy()
+        for bc in system.bcs[:-1]:
+            dofs = bc.dof_indices()[0]
+            column[dofs[dofs < n_u]] = 0.0
+        b0 = system.b.duplicate()
+        b0.set(0.0)
+        b0.array[:n_u] = -column
+        pinned = system.bcs[-1].dof_indices()[0]
+        b0.array[n_u + pinned[pinned < n_p]] = 1.0
+        x0 = b0.duplicate()
+        system.ksp.solve(b0, x0)
+        self.u0.x.array[:n_u] = x0.array_r[:n_u]
+        self.p0.x.array[:n_p] = x0.array_r[n_u:n_u + n_p]
+        self.u0.x.scatter_forward()
+        self.p0.x.scatter_forward()
+        b0.destroy()
+        x0.destroy()
+
+    def normalise(self) -> None:
+        """``x -= (mean p / mean p_0) x_0`` with ``x_0`` of the operator now (:meth:`update` when the
+        operator changed: its PETSc state). Collective."""
+        state = self.system.A.stateGet()
+        if state != self._state:
+            self.update()
+            self._state = state
+        comm = self.p0.function_space.mesh.comm
+        mean, mean0 = (comm.allreduce(dolfinx.fem.assemble_scalar(f), op=MPI.SUM)
+                       for f in (self._mean._integral, self._mean0))
+        shift = mean / mean0
+        self.system.u.x.array[:] -= shift * self.u0.x.array
+        self.system.p.x.array[:] -= shift * self.p0.x.array
+
+
+def pressure_normaliser(system: Any, discretisation: Any, /) -> PressureMean | PressureMode | None:
+    """What fixes the pressure after a solve of the linear system ``system`` (module docstring):
+    None without a pressure null space, a :class:`PressureMode` with the ALA's pressure buoyancy
+    (``discretisation``'s approximation; a direct solver only), else a :class:`PressureMean`.
+
+    Raises:
+        ValueError: the ALA with an iterative solver (its null space is not the constant pressure)."""
+    if not system.pressure_null_space:
+        return None
+    if not discretisation.approximation.formulation.pressure_buoyancy:
+        return PressureMean(system.p)
+    if system.iterative:
+        raise ValueError("the anelastic liquid approximation (its pressure buoyancy) needs the direct Stokes solver")
+    return PressureMode(system, discretisation.pressure_column)
 
 
 class RigidRotations:

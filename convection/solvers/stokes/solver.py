@@ -75,7 +75,9 @@ from convection.geometry.boundary import VelocityBC, has_rotation_null_space
 from convection.geometry.box import BoxDomain
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
-from convection.solvers.stokes.nullspace import PressureMean, RigidRotations, rigid_body_modes  # noqa: F401 (imported from here)
+from convection.solvers.stokes.nullspace import (  # noqa: F401 (imported from here)
+    PressureMean, RigidRotations, pressure_normaliser, rigid_body_modes,
+)
 from convection.schema import MAX_DEGREE, MAX_ENTRIES, ConfigError, Names, param, subsection
 from convection.solvers.petsc_options import (
     HAS_HYPRE, MUMPS_LU, LinearSolver, PetscSolver, check_petsc_options, krylov_options, linear_solvers,
@@ -514,11 +516,11 @@ class StokesSolver(PetscSolver):
 
         self.has_pressure_null_space = all(s in self.bcs for s in self.domain.boundaries)
         self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
-        self._pressure_mean = PressureMean(self.p) if self.has_pressure_null_space else None
         self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
             self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, domain=self.domain,
             iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space, multigrid=hierarchy,
             term_in_preconditioner=kind.nested, operator_preconditions=kind.nested and not self.is_nonlinear)
+        self._pressure_mean = pressure_normaliser(self.linear_system, self.discretisation)
 
         lags = (kind.nested and not self.is_nonlinear and self._semi_implicit is not None
                 and not approximation.is_variable_viscosity and multigrid.rebuild_steps > 1)
@@ -631,7 +633,7 @@ class StokesSolver(PetscSolver):
         return self._lag
 
     def _normalise_pressure(self) -> None:
-        """Shift the pressure to zero mean where the constant pressure is free (collective)."""
+        """Shift the pressure to zero mean where the constant pressure (ALA: its mode) is free (collective)."""
         if self._pressure_mean is not None:
             self._pressure_mean.normalise()
 

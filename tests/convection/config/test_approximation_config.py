@@ -27,9 +27,18 @@ def test_king_config_is_tala():
 @pytest.mark.parametrize("config, overrides, key", [
     (KING, ["physics.reference.Di=-0.5"], "physics.reference.Di"),
     (KING, ["physics.reference.gruneisen=0"], "physics.reference.gruneisen"),
-    (KING, ["physics.approximation=ala"], "physics.approximation"),
+    (KING, ["physics.approximation=bla"], "physics.approximation"),
+    (KING, ["physics.approximation=ala", "physics.reference.Di=0"], "physics.reference.Di': physics.approximation ala"),
+    (KING, ["physics.reference.heat_capacity_ratio=1.1"], "physics.reference.heat_capacity_ratio': only with "
+                                                          "physics.approximation ala"),
+    (BLANKENBACH, ["physics.reference.heat_capacity_ratio=1.2"], "physics.reference.heat_capacity_ratio': only"),
+    (KING, ["physics.approximation=ala", "physics.reference.heat_capacity_ratio=0.5"],
+     "physics.reference.heat_capacity_ratio"),
+    (KING, ["physics.approximation=ala", "stokes.solver=iterative"], "stokes.solver': physics.approximation ala "
+                                                                     "needs the direct"),
     (KING, ["physics.reference.Di=0"], "physics.reference.Di': physics.approximation tala needs"),
-    (BLANKENBACH, ["physics.reference.Di=0.5"], "physics.reference.Di': only with physics.approximation eba or tala"),
+    (BLANKENBACH, ["physics.reference.Di=0.5"],
+     "physics.reference.Di': only with physics.approximation eba or tala or ala"),
     (KING, ["energy.enabled=false"], "energy.enabled"),
     (KING, ["stokes.buoyancy_theta=0.5"], "stokes.buoyancy_theta"),
     (KING, ["materials={lid: {initial: 'z > 0.8', Rb: 1}}"], "physics.approximation': tala's shear heating"),
@@ -43,3 +52,9 @@ def test_inconsistent_configs_are_refused(config, overrides, key):
 def test_a_temperature_dependent_viscosity_is_taken():
     load_config(KING, ["physics.approximation=eba", "physics.viscosity.temperature_law=frank_kamenetskii",
                        "physics.viscosity.gamma=2"])
+
+
+def test_ala_is_taken_with_the_direct_solver():
+    physics = run_settings(load_config(KING, ["physics.approximation=ala", "physics.reference.heat_capacity_ratio=1.2",
+                                              "stokes.solver=auto"])).physics
+    assert (physics.approximation, physics.reference.heat_capacity_ratio) == ("ala", 1.2)

@@ -44,7 +44,7 @@ def test_reference_state_of_king_et_al(mesh):
 
 def test_each_approximation_says_what_it_changes():
     assert [(f.name, f.dissipation, f.reference_density) for f in APPROXIMATIONS.values()] == [
-        ("boussinesq", False, False), ("eba", True, False), ("tala", True, True)]
+        ("boussinesq", False, False), ("eba", True, False), ("tala", True, True), ("ala", True, True)]
     boussinesq = BoussinesqApproximation(Ra=1e4)
     x = ufl.SpatialCoordinate(dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 1, 1))
     assert boussinesq.continuity_density(x) is None and boussinesq.energy_terms(0.0, 0.0, None, x) is None
@@ -60,7 +60,8 @@ def test_each_approximation_says_what_it_changes():
     ({"formulation": "eba", "reference": ReferenceState(Di=0.5), "Ra": 0.0}, "needs Ra > 0"),
     ({"formulation": "tala", "reference": ReferenceState(Di=0.5),
       "viscosity": ViscosityLaw(material_viscosities=(1, 2))}, "temperature and depth only"),
-    ({"formulation": "ala", "reference": ReferenceState(Di=0.5)}, "ala"),
+    ({"formulation": "ala"}, "needs a dissipation number"),
+    ({"formulation": "bla", "reference": ReferenceState(Di=0.5)}, "bla"),
 ])
 def test_inconsistent_approximations_are_refused(kwargs, message):
     with pytest.raises((ValueError, KeyError), match=message):

@@ -73,7 +73,7 @@ from convection.physics.materials import MaterialSettings
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.steady import check_steady_start
 from convection.solvers.stokes.solver import (
-    STOKES_SOLVER_CHOICES, STOKES_SOLVERS, StokesSettings, check_viscosity_rules,
+    STOKES_SOLVER_CHOICES, STOKES_SOLVERS, StokesSettings, check_viscosity_rules, resolve_solver,
 )
 from convection.solvers.transport import EnergySettings
 from particles.settings import ParticleSettings, particle_settings
@@ -645,7 +645,7 @@ def _check_pressure_buoyancy(config: dict[str, Any], formulation: Any) -> None:
                               f"ala (the {formulation.name} approximation has no pressure buoyancy)")
         return
     solver = config["stokes"]["solver"]
-    if STOKES_SOLVERS[STOKES_SOLVER_CHOICES[solver].resolve(config_gdim(config))].iterative:
+    if STOKES_SOLVERS[resolve_solver(solver, config_gdim(config))].iterative:
         raise ConfigError(f"config key 'stokes.solver': physics.approximation {formulation.name} needs the direct "
                           f"solver for now (its pressure's buoyancy changes the pressure null space), got {solver!r}")
 

@@ -12,6 +12,8 @@ Every config has at least ``mesh.cells`` (or a shell ``mesh.geometry`` with ``me
   :mod:`convection.expressions`);
 - ``materials``: any number of named materials, each with an initial region, a compositional
   Rayleigh number and a viscosity (instead of ``initial.composition``);
+- ``phase_transitions``: named phase transitions (depth, Clapeyron slope, width, density jump,
+  latent heat, viscosity jump; :mod:`convection.physics.phases`);
 - ``composition``: where the material fractions come from (static, field, particles);
 - ``particles``: generator, integrator, interpolator, properties, population bounds, output; or a
   list of named particle systems, each with these keys (:mod:`convection.config.particle_systems`);
@@ -67,6 +69,7 @@ from convection.physics.compressible import APPROXIMATIONS
 from convection.physics.elasticity import ElasticitySettings, check_elasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
+from convection.physics.phases import PhaseTransitionSettings, check_phase_transitions
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.stokes.solver import STOKES_SOLVER_CHOICES, StokesSettings, check_viscosity_rules
 from convection.solvers.transport import EnergySettings
@@ -141,6 +144,9 @@ SCHEMA: dict[str, Any] = {
     "initial": section_schema(InitialSettings),
     "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(MaterialSettings),
                        help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
+    "phase_transitions": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(PhaseTransitionSettings),
+                               help="named phase transitions {name: {depth, width, temperature, clapeyron, Rb or "
+                                    "density_jump, entropy_change, viscosity_jump}} (docs/phase_transitions.md)"),
     "stokes": section_schema(StokesSettings),
     "energy": section_schema(EnergySettings),
     "composition": section_schema(CompositionSettings),
@@ -344,6 +350,9 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]),  # issue 48
                      _property_names(config) if particles_enabled(config) else ())
     _check_statistics(config)
+    check_phase_transitions({name: settings_from(PhaseTransitionSettings, spec)
+                             for name, spec in config["phase_transitions"].items()},
+                            energy=config["energy"]["enabled"], buoyancy_theta=config["stokes"]["buoyancy_theta"])
 
 
 def _check_statistics(config: dict[str, Any]) -> None:

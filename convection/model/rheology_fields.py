@@ -93,6 +93,14 @@ def flow_viscosity(flow: Flow, /) -> Any:
                                                                      "fields": flow.fields})
 
 
+def _phase(transition: Any) -> Callable[[Flow], Any]:
+    def expression(flow: Flow) -> Any:
+        stokes = flow.stokes
+        depth = stokes.approximation.gravity.depth(ufl.SpatialCoordinate(stokes.mesh))
+        return transition.phase(flow.T if not isinstance(flow.T, (int, float)) else ufl.as_ufl(float(flow.T)), depth)
+    return expression
+
+
 def _rate(name: str, builder: Callable[..., Any]) -> Callable[[Flow], Any]:
     def expression(flow: Flow) -> Any:
         stokes = flow.stokes
@@ -130,6 +138,8 @@ class RheologyFields:
         self._invariants = (ExpressionField("strain_rate_II", _strain_rate_II, lambda s: 0),
                             ExpressionField("stress_II", lambda f: 2.0 * flow_viscosity(f) * _strain_rate_II(f),
                                             lambda s: 0))
+        self._phases = tuple(ExpressionField(f"phase_{t.name}", _phase(t), lambda s: s.degree)
+                             for t in stokes.approximation.phases.transitions)
 
     def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
         """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
@@ -171,6 +181,11 @@ class RheologyFields:
     def viscosity(self, flow: Flow, /) -> dolfinx.fem.Function:
         """The viscosity of ``flow`` at the cell midpoints (DG0; collective)."""
         return self._viscosity.update(flow)
+
+    def phases(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
+        """``phase_<name>``: each phase transition's fraction of the deep phase ``Gamma`` for ``flow``
+        (:mod:`convection.physics.phases`; discontinuous, of the velocity's degree; collective)."""
+        return {field.name: field.update(flow) for field in self._phases}
 
     def invariants(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
         """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0; collective)."""

@@ -62,6 +62,7 @@ from convection.physics.materials import Material, Materials
 from convection.physics.compressible import ReferenceState
 from convection.model.elastic_fields import ElasticFields
 from convection.physics.elasticity import STRESS_PROPERTY, Elasticity, stress_labels
+from convection.physics.phases import PhaseTransitions
 from convection.model.model import Model
 from convection.postprocess.postprocessors import create_postprocessors
 from convection.adapt.rebalance import BALANCE_STRATEGIES, Balancer
@@ -287,7 +288,10 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     approximation = materials.approximation(Ra=physics.Ra, H=physics.H, temperature_law=visc.temperature_law,
                                             gamma=visc.gamma, gravity=domain.gravity,
                                             formulation=physics.approximation, reference=reference,
-                                            elasticity=_elasticity(settings))
+                                            elasticity=_elasticity(settings),
+                                            phases=PhaseTransitions.from_settings(
+                                                settings.phase_transitions,
+                                                surface_temperature=physics.reference.surface_temperature))
     velocity_bcs = settings.boundary.velocity_bcs(domain)
     temperature_bcs = settings.boundary.temperature_bcs(domain)
     meshes = _meshes(settings, domain, materials, temperature_bcs, comm, restore)

@@ -12,6 +12,8 @@ Every config has at least ``mesh.cells`` (or a shell ``mesh.geometry`` with ``me
   :mod:`convection.expressions`);
 - ``materials``: any number of named materials, each with an initial region, a compositional
   Rayleigh number and a viscosity (instead of ``initial.composition``);
+- ``phase_transitions``: named phase transitions (depth, Clapeyron slope, width, density jump,
+  latent heat, viscosity jump; :mod:`convection.physics.phases`);
 - ``composition``: where the material fractions come from (static, field, particles);
 - ``particles``: generator, integrator, interpolator, properties, population bounds, output; or a
   list of named particle systems, each with these keys (:mod:`convection.config.particle_systems`);
@@ -70,6 +72,7 @@ from convection.physics.elastic_outputs import check_elastic_outputs
 from convection.physics.elasticity import ElasticitySettings, check_elasticity, check_plasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
+from convection.physics.phases import PhaseTransitionSettings, check_phase_transitions
 from convection.physics.scaling import ScalingSettings
 from convection.solvers.steady import check_steady_start
 from convection.solvers.stokes.solver import (
@@ -138,6 +141,9 @@ SCHEMA: dict[str, Any] = {
     "initial": section_schema(InitialSettings),
     "materials": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(MaterialSettings),
                        help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
+    "phase_transitions": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(PhaseTransitionSettings),
+                               help="named phase transitions {name: {depth, width, temperature, clapeyron, Rb or "
+                                    "density_jump, entropy_change, viscosity_jump}} (docs/phase_transitions.md)"),
     "stokes": section_schema(StokesSettings),
     "energy": section_schema(EnergySettings),
     "composition": section_schema(CompositionSettings),
@@ -346,6 +352,9 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     if config["initial"]["steady"]:
         _check_steady_start(config)
     _check_statistics(config)
+    check_phase_transitions({name: settings_from(PhaseTransitionSettings, spec)
+                             for name, spec in config["phase_transitions"].items()},
+                            energy=config["energy"]["enabled"], buoyancy_theta=config["stokes"]["buoyancy_theta"])
 
 
 def _check_steady_start(config: dict[str, Any]) -> None:
@@ -359,7 +368,8 @@ def _check_steady_start(config: dict[str, Any]) -> None:
                        composition=config["initial"]["composition"] is not None or bool(config["materials"]),
                        particles=particles_enabled(config), energy=config["energy"]["enabled"],
                        free_surface=bool(free_surface_boundaries(config)), box=domain_class(config).axis_aligned,
-                       viscosity_depends_on=depends_on, elasticity=config["physics"]["elasticity"]["enabled"])
+                       viscosity_depends_on=depends_on, elasticity=config["physics"]["elasticity"]["enabled"],
+                       phases=bool(config["phase_transitions"]))
 
 
 def _check_statistics(config: dict[str, Any]) -> None:

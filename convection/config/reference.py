@@ -91,13 +91,13 @@ class PluginRole:
 
 def schema_keys(schema: Mapping[str, Any] = SCHEMA, prefix: str = "") -> Iterator[KeyDoc]:
     """Every leaf of ``schema`` in order, as dotted keys (a mapping of named items, such as
-    ``materials``, also yields ``materials.<material>.KEY`` for each item key)."""
+    ``materials``, also yields ``materials.<material>.KEY`` for each item key; others ``<name>``)."""
     for name, node in schema.items():
         key = f"{prefix}{name}"
         if isinstance(node, Field):
             yield KeyDoc(key, node)
             if node.items:
-                yield from schema_keys(node.items, f"{key}.{MATERIAL}.")
+                yield from schema_keys(node.items, f"{key}.{MATERIAL if name == 'materials' else '<name>'}.")
         else:
             yield from schema_keys(node, f"{key}.")
 

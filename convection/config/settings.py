@@ -33,6 +33,7 @@ from convection.geometry.domain import Domain, MeshSection
 from convection.model.composition import CompositionSettings
 from convection.physics.approximation import PhysicsSettings
 from convection.physics.materials import MaterialSettings
+from convection.physics.phases import PhaseTransitionSettings
 from convection.physics.scaling import Scaling, ScalingSettings
 from convection.postprocess.base import DiagnosticsSettings
 from convection.io.fields import OutputSettings
@@ -80,6 +81,7 @@ class RunSettings:
     boundary: BoundarySettings
     initial: InitialSettings
     materials: Mapping[str, MaterialSettings]
+    phase_transitions: Mapping[str, PhaseTransitionSettings]
     stokes: StokesSettings
     energy: EnergySettings
     composition: CompositionSettings
@@ -145,6 +147,8 @@ def run_settings(config: dict[str, Any], /) -> RunSettings:
         "boundary": boundary_settings(config["boundary"]),
         "materials": MappingProxyType({name: settings_from(MaterialSettings, spec)
                                        for name, spec in config["materials"].items()}),
+        "phase_transitions": MappingProxyType({name: settings_from(PhaseTransitionSettings, spec)
+                                               for name, spec in config["phase_transitions"].items()}),
         **{key: settings_from(cls, config[key]) for key, cls in _SECTIONS.items()},
     }
     return RunSettings(

@@ -15,6 +15,10 @@ any quantity as ``<number> <unit>`` (``3300 kg/m^3``, ``1e21 Pa s``, ``9.81 m/s^
   (``rho0``: scaling.density, the background's density);
 - ``physics.Ra`` follows from the scaling (``rho0 alpha dT g L^3 / (eta0 kappa)``) when
   ``scaling.thermal_expansivity`` is given; a model without the energy equation needs none;
+- ``phase_transitions.<name>``: the depth, width and temperature (a value) as any quantity, the
+  Clapeyron slope (a pressure per temperature) as ``clapeyron dT / (rho0 g L)``, the
+  ``density_jump`` (a fraction of rho0) as the transition's ``Rb``, the ``entropy_change`` in J/kg/K
+  over ``c_p`` (``clausius_clapeyron``: ``clapeyron density_jump / (rho0 c_p)``);
 - ``physics.H`` in W/kg becomes ``H t0 / (c_p dT)``; as a heating rate (K/s, K/Myr) it is scaled
   as any quantity;
 - expressions (initial conditions, material regions, particle densities and properties) stay
@@ -172,6 +176,67 @@ def _free_surface(document: dict[str, Any], scaling: Scaling) -> None:
         section["buoyancy"] = scaling.buoyancy_number(scaling.needed("density"))
 
 
+def _phase_transitions(document: dict[str, Any], scaling: Scaling) -> None:
+    """Each phase transition's values with units -> its nondimensional keys (module docstring; in place)."""
+    transitions = document.get("phase_transitions")
+    if not isinstance(transitions, dict):
+        return
+    for name, spec in transitions.items():
+        if not isinstance(spec, dict):
+            continue
+        key = f"phase_transitions.{key_text(name)}"
+        for item, dimension in (("depth", "[length]"), ("width", "[length]"), ("temperature", "[temperature]")):
+            quantity = _phase_quantity(spec, item, key, dimension)
+            if quantity is not None:
+                spec[item] = scaling.nondimensional(quantity, absolute=item == "temperature")
+        slope = _phase_quantity(spec, "clapeyron", key, "[mass] / [length] / [time] ** 2 / [temperature]")
+        jump = spec.get("density_jump")
+        if jump is not None:
+            quantity = parse_quantity(jump)
+            jump = float(quantity.to("").magnitude) if quantity is not None and quantity.dimensionless else jump
+            if not isinstance(jump, (int, float)) or isinstance(jump, bool):
+                raise ConfigError(f"config key '{key}.density_jump': expected a fraction (e.g. 0.08), got "
+                                  f"{short_repr(spec['density_jump'])}")
+            if "Rb" in spec:
+                raise ConfigError(f"config key '{key}.Rb': not with {key}.density_jump (the density jump gives Rb)")
+            spec["Rb"] = scaling.buoyancy_number(jump * scaling.needed("density"))
+            del spec["density_jump"]
+        slope_si = float(slope.to("Pa/K").magnitude) if slope is not None else None
+        if spec.get("entropy_change") == "clausius_clapeyron":
+            if slope_si is None or jump is None:
+                raise ConfigError(f"config key '{key}.entropy_change': clausius_clapeyron needs the clapeyron slope "
+                                  "with a unit (e.g. -2.5 MPa/K) and the density_jump")
+            spec["entropy_change"] = slope_si * jump / (scaling.needed("density") * scaling.needed("heat_capacity"))
+        else:
+            entropy = _phase_quantity(spec, "entropy_change", key, "[length] ** 2 / [time] ** 2 / [temperature]")
+            if entropy is not None:
+                spec["entropy_change"] = float(entropy.to("J/kg/K").magnitude) / scaling.needed("heat_capacity")
+        if slope_si is not None:
+            spec["clapeyron"] = slope_si * scaling.needed("temperature_difference") / (
+                scaling.needed("density") * scaling.needed("gravity") * scaling.length)
+    if any(isinstance(s, dict) and s.get("entropy_change") for s in transitions.values()):
+        physics = document.setdefault("physics", {})
+        reference = physics.setdefault("reference", {}) if isinstance(physics, dict) else None
+        if isinstance(reference, dict) and "surface_temperature" not in reference:
+            # the absolute temperature T + T_s of the latent heat: T_s = T0 / dT
+            reference["surface_temperature"] = scaling.reference_temperature / scaling.needed("temperature_difference")
+
+
+_PHASE_DIMENSIONS = {"[length]": "a length (e.g. 660 km)", "[temperature]": "a temperature (e.g. 1900 K)",
+                     "[mass] / [length] / [time] ** 2 / [temperature]": "a pressure per temperature (e.g. -2.5 MPa/K)",
+                     "[length] ** 2 / [time] ** 2 / [temperature]": "an entropy per mass (e.g. 60 J/kg/K)"}
+
+
+def _phase_quantity(spec: dict[str, Any], item: str, key: str, dimension: str) -> Any:
+    """The quantity of ``spec[item]`` when it has a unit (of ``dimension``, else refused), or None."""
+    quantity = parse_quantity(spec.get(item))
+    if quantity is None:
+        return None
+    if quantity.dimensionality != registry().get_dimensionality(dimension):
+        raise ConfigError(f"config key '{key}.{item}': {short_repr(spec[item])} is not {_PHASE_DIMENSIONS[dimension]}")
+    return quantity
+
+
 def _physics(document: dict[str, Any], scaling: Scaling) -> None:
     """physics.Ra from the scaling; physics.H in W/kg (in place)."""
     physics = document.get("physics")
@@ -214,6 +279,7 @@ def apply_scaling(document: dict[str, Any]) -> dict[str, Any]:
     _densities(result, scaling)
     _physics(result, scaling)
     _free_surface(result, scaling)
+    _phase_transitions(result, scaling)
     converted = {name: value if name == "scaling" else _convert(value, scaling, (key_text(name),))
                  for name, value in result.items()}
     return converted

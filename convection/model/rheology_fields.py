@@ -97,6 +97,14 @@ def flow_viscosity(flow: Flow, /) -> Any:
                                                                      "fields": flow.fields})
 
 
+def _phase(transition: Any) -> Callable[[Flow], Any]:
+    def expression(flow: Flow) -> Any:
+        stokes = flow.stokes
+        depth = stokes.approximation.gravity.depth(ufl.SpatialCoordinate(stokes.mesh))
+        return transition.phase(flow.T if not isinstance(flow.T, (int, float)) else ufl.as_ufl(float(flow.T)), depth)
+    return expression
+
+
 def _rate(name: str, builder: Callable[..., Any]) -> Callable[[Flow], Any]:
     def expression(flow: Flow) -> Any:
         stokes = flow.stokes
@@ -137,6 +145,8 @@ class RheologyFields:
                                             lambda s: 0))
         # the elastic outputs of a flow (issue 48; the factory sets ElasticFields.update)
         self.elastic: Callable[[Flow], dict[str, dolfinx.fem.Function]] | None = None
+        self._phases = tuple(ExpressionField(f"phase_{t.name}", _phase(t), lambda s: s.degree)
+                             for t in stokes.approximation.phases.transitions)
 
     def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
         """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
@@ -178,6 +188,11 @@ class RheologyFields:
     def viscosity(self, flow: Flow, /) -> dolfinx.fem.Function:
         """The viscosity of ``flow`` at the cell midpoints (DG0; collective)."""
         return self._viscosity.update(flow)
+
+    def phases(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
+        """``phase_<name>``: each phase transition's fraction of the deep phase ``Gamma`` for ``flow``
+        (:mod:`convection.physics.phases`; discontinuous, of the velocity's degree; collective)."""
+        return {field.name: field.update(flow) for field in self._phases}
 
     def invariants(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
         """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0), and the elastic

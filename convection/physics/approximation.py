@@ -28,6 +28,7 @@ from convection.physics.compressible import (
 )
 from convection.schema import Names, param, subsection
 from convection.physics.elasticity import Elasticity, ElasticitySettings
+from convection.physics.phases import PhaseTransitions
 from convection.physics.rheology import (
     Constant, ElasticTrial, FlowState, ViscosityLawBase, laws_field_names, strain_rate_measure, yield_law,
 )
@@ -382,6 +383,7 @@ class BoussinesqApproximation:
             (:meth:`continuity_density`, :meth:`buoyancy`, :meth:`pressure_buoyancy`, :meth:`energy_terms`).
         reference: the reference state of ``eba``, ``tala`` and ``ala`` (``Di > 0``; ``Di = 0`` for ``boussinesq``).
         elasticity: Maxwell visco-elasticity (:mod:`convection.physics.elasticity`, issue 48), or None.
+        phases: the phase transitions (:mod:`convection.physics.phases`: buoyancy, latent heat, viscosity).
     """
 
     def __init__(
@@ -396,8 +398,10 @@ class BoussinesqApproximation:
         formulation: str = "boussinesq",
         reference: ReferenceState = ReferenceState(),
         elasticity: Elasticity | None = None,
+        phases: PhaseTransitions = PhaseTransitions(),
     ) -> None:
         self.gravity = gravity
+        self.phases = phases
         self.elasticity = elasticity
         self.Ra = float(Ra)
         self.Rb: float | tuple[float, ...] = tuple(float(r) for r in Rb) if isinstance(Rb, (list, tuple)) else float(Rb)
@@ -410,7 +414,7 @@ class BoussinesqApproximation:
     @property
     def is_variable_viscosity(self) -> bool:
         """True when the viscosity depends on ``T`` or ``C``."""
-        return not self.viscosity_law.is_constant
+        return not self.viscosity_law.is_constant or self.phases.changes_viscosity
 
     @property
     def is_nonlinear(self) -> bool:
@@ -421,7 +425,10 @@ class BoussinesqApproximation:
         """UFL expression of ``eta(T, C)`` (``T``, ``C``: Functions, UFL expressions or numbers);
         ``flow``: ``u``, ``p``, ``fields``, ``x`` for :mod:`convection.physics.rheology` laws (see
         :meth:`ViscosityLaw.__call__`)."""
-        return self.viscosity_law(T, C, **flow)
+        eta = self.viscosity_law(T, C, **flow)
+        if self.phases.changes_viscosity:
+            eta = eta * self.phases.viscosity_factor(_as_ufl(T), self.gravity.depth(flow["x"]))
+        return eta
 
     def up(self, x: Any, /) -> Any:
         """UFL unit vector ``e_up`` against gravity at the points ``x`` (``ufl.SpatialCoordinate``)."""
@@ -450,6 +457,8 @@ class BoussinesqApproximation:
         magnitude = self.density(T, C)
         if self.formulation.reference_density:
             magnitude = self.reference.density(self.gravity.depth(x)) * magnitude
+        if self.phases.buoyant:
+            magnitude = magnitude - self.phases.density(_as_ufl(T), self.gravity.depth(x))
         return self.gravity.along_up(magnitude, x)
 
     @property
@@ -470,15 +479,24 @@ class BoussinesqApproximation:
     def energy_terms(self, T_new: Any, T: Any, u: Any, x: Any, /) -> EnergyTerms | None:
         """The energy equation's heat capacity and heating (:class:`~convection.physics.compressible.EnergyTerms`)
         for the unknown temperature ``T_new``, the last temperature ``T`` (the shear heating's viscosity)
-        and the velocity ``u``, or None for the Boussinesq ``dT/dt + u . grad T - lap T = H``."""
+        and the velocity ``u``, or None for the Boussinesq ``dT/dt + u . grad T - lap T = H`` (without latent heat)."""
         if not self.formulation.dissipation:
-            return None
+            return self._latent_heat(EnergyTerms(1.0, self.H), T_new, T, u, x) if self.phases.latent else None
         capacity = self.reference.density(self.gravity.depth(x)) if self.formulation.reference_density else 1.0
         adiabatic, shear = self.heating_rates(T_new, T, u, x)
         heating = shear - adiabatic
         if self.H != 0.0:
             heating = heating + capacity * self.H
-        return EnergyTerms(capacity, heating)
+        return self._latent_heat(EnergyTerms(capacity, heating), T_new, T, u, x)
+
+    def _latent_heat(self, terms: EnergyTerms, T_new: Any, T: Any, u: Any, x: Any, /) -> EnergyTerms:
+        """``terms`` with the phase transitions' latent heat (:mod:`convection.physics.phases`), the
+        reference density's weight when the approximation has one."""
+        if not self.phases.latent:
+            return terms
+        rho = self.reference.density(self.gravity.depth(x)) if self.formulation.reference_density else 1.0
+        capacity, heating = self.phases.latent_heat(T_new, T, ufl.dot(u, self.up(x)), self.gravity.depth(x), rho)
+        return EnergyTerms(terms.capacity + capacity, terms.heating + heating)
 
     def heating_rates(self, T: Any, T_eta: Any, u: Any, x: Any, /) -> tuple[Any, Any]:
         """UFL ``(Di rho_r w (T + T0), (Di / Ra) Phi)``: the adiabatic cooling (the work against

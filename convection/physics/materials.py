@@ -26,6 +26,7 @@ from convection.geometry.gravity import Gravity, VerticalGravity
 from convection.physics.approximation import VISCOSITY_DEFAULTS, BoussinesqApproximation, ViscosityLaw
 from convection.physics.compressible import ReferenceState
 from convection.physics.elasticity import Elasticity
+from convection.physics.phases import PhaseTransitions
 from convection.physics.rheology import Constant, ViscosityLawBase
 from convection.schema import REQUIRED, param
 
@@ -135,14 +136,16 @@ class Materials:
     def approximation(self, *, Ra: float, H: float = 0.0, temperature_law: str = "none",
                       gamma: float = 0.0, gravity: Gravity = VerticalGravity(), formulation: str = "boussinesq",
                       reference: ReferenceState = ReferenceState(),
-                      elasticity: Elasticity | None = None) -> BoussinesqApproximation:
+                      elasticity: Elasticity | None = None,
+                      phases: PhaseTransitions = PhaseTransitions()) -> BoussinesqApproximation:
         """The approximation ``formulation`` (:mod:`convection.physics.compressible`; Boussinesq by
-        default) with these materials' buoyancy and viscosity."""
+        default) with these materials' buoyancy and viscosity, and the phase transitions ``phases``."""
         rb = tuple(m.Rb for m in self.materials)
         return BoussinesqApproximation(Ra=Ra, Rb=rb if rb else 0.0, H=H, gravity=gravity,
                                        viscosity=self.viscosity_law(temperature_law=temperature_law, gamma=gamma,
                                                                     gravity=gravity),
-                                       formulation=formulation, reference=reference, elasticity=elasticity)
+                                       formulation=formulation, reference=reference, elasticity=elasticity,
+                                       phases=phases)
 
 
 def material_index(fractions: Sequence[dolfinx.fem.Function], /, *, name: str = "material") -> dolfinx.fem.Function:

@@ -75,7 +75,7 @@ class SteadyResult:
 
 
 def check_steady_start(*, approximation: str, composition: bool, particles: bool, energy: bool, free_surface: bool,
-                       box: bool, viscosity_depends_on: frozenset[str], elasticity: bool) -> None:
+                       box: bool, viscosity_depends_on: frozenset[str], elasticity: bool, phases: bool) -> None:
     """The cross-key checks of ``initial.steady: true`` (the model's traits as the config gives them).
 
     Raises:
@@ -91,6 +91,7 @@ def check_steady_start(*, approximation: str, composition: bool, particles: bool
         (not viscosity_depends_on <= {"temperature", "depth"},
          "a viscosity that depends on more than the temperature and the depth"),
         (elasticity, "physics.elasticity (it solves the viscous equations)"),
+        (phases, "phase_transitions (its energy equation has no latent heat)"),
     )
     for refused, why in reasons:
         if refused:

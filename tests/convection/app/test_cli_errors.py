@@ -56,6 +56,9 @@ CASES = {
     "too many particles": (["run", str(GOOD), "--set", "particles.enabled=true",
                             "--set", "particles.generator.particles_per_cell=1e7"], "particles_per_cell"),
     "compressible without Di": (["run", str(GOOD), "--set", "physics.approximation=tala"], "physics.reference.Di"),
+    "phase transition density jump without units": (["run", str(GOOD), "--set", "phase_transitions={p: {depth: 0.5, "
+                                                     "width: 0.05, density_jump: 0.08}}"],
+                                                     "phase_transitions.p.density_jump"),
 }
 
 

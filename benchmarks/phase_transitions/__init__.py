@@ -1,0 +1,1 @@
+"""Benchmark scripts of benchmarks/phase_transitions/ (README.md there): ``python -m benchmarks.phase_transitions.<script>``."""

@@ -458,7 +458,8 @@ class StokesSolver(PetscSolver):
         hierarchy = None
         if kind.nested:
             hierarchy = VelocityMultigrid(self.V, coarse, locate=getattr(coarse_meshes, "locate", None))
-            self._petsc_options = {**self._petsc_options, "fieldsplit_u_pc_mg_levels": hierarchy.levels}
+            smoother = {k: v for k, v in multigrid.petsc_options().items() if k not in self._user_options}
+            self._petsc_options = {**self._petsc_options, **smoother, "fieldsplit_u_pc_mg_levels": hierarchy.levels}
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 

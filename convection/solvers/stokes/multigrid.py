@@ -40,7 +40,7 @@ fieldsplit creates the velocity block's PC when the block preconditioner is firs
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -93,9 +93,11 @@ class MultigridSettings:
                           help="level smoother: jacobi (Chebyshev/point-Jacobi, the default) or sor (Chebyshev/SOR, "
                                "robust at viscosity contrasts of 1e4 and more, benchmarks/nsinker)")
 
-    def petsc_options(self) -> dict[str, Any]:
-        """The Stokes solver's PETSc options this section sets (the smoother's); ``stokes.petsc_options`` wins."""
-        return dict(_SMOOTHER_OPTIONS[self.smoother])
+    def petsc_options(self, user: Mapping[str, Any] | None = None, levels: int | None = None, /) -> dict[str, Any]:
+        """The Stokes solver's PETSc options this section sets: the smoother's, but for those the ``user``'s
+        options (``stokes.petsc_options``) set, and ``fieldsplit_u_pc_mg_levels`` when ``levels`` is given."""
+        options = {key: value for key, value in _SMOOTHER_OPTIONS[self.smoother].items() if key not in (user or {})}
+        return options if levels is None else {**options, "fieldsplit_u_pc_mg_levels": levels}
 
 GEOMETRIC_MULTIGRID: dict[str, Any] = {
     "pc_type": "mg",

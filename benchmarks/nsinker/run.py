@@ -151,6 +151,8 @@ def growth(rows: Sequence[dict[str, Any]], solver: str, cells: int, /) -> str:
     the largest ratio's solve stopped unconverged."""
     mine = sorted((r["ratio"], r["iterations"], r.get("converged", True)) for r in rows
                   if r["solver"] == solver and r["cells"] == cells)
+    if len(mine) < 2:
+        return ""
     return ("" if mine[-1][2] else "> ") + f"{mine[-1][1] / mine[0][1]:.2f}"
 
 

@@ -25,6 +25,10 @@ One V-cycle of PETSc's PCMG replaces the AMG cycle:
 - an exact solve on the coarsest level (``redundant``: every rank factorises the small coarsest
   operator, LU), the same on any rank count.
 
+At large viscosity contrasts (the nsinker problem, ``benchmarks/nsinker``: DR = 1e4 and more) point-Jacobi
+Chebyshev stalls; ``stokes.multigrid.smoother: sor`` smooths with Chebyshev on SOR (per rank) instead
+(:data:`MULTIGRID_SMOOTHERS`). The default stays Jacobi, whose runs it would change.
+
 PETSc options under ``fieldsplit_u_`` (``stokes.petsc_options``) change any of this, e.g.
 ``fieldsplit_u_mg_levels_ksp_max_it: 3``.
 
@@ -36,22 +40,38 @@ fieldsplit creates the velocity block's PC when the block preconditioner is firs
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import dolfinx
 from petsc4py import PETSc
 
-from convection.schema import param
+from convection.schema import Names, param
 from fembase.dolfinx_compat import element_degree, function_space
 from fembase.location import Located
 from fembase.multigrid import prolongation
 
-__all__ = ["GEOMETRIC_MULTIGRID", "MultigridSettings", "VelocityMultigrid"]
+__all__ = ["GEOMETRIC_MULTIGRID", "MULTIGRID_SMOOTHERS", "MultigridSettings", "VelocityMultigrid"]
 
 MAX_LEVELS = 12
 """Most multigrid levels a config may ask for (4096 times fewer cells per side on the coarsest)."""
+
+
+MULTIGRID_SMOOTHERS: dict[str, str] = {
+    "jacobi": "two Chebyshev steps with point-Jacobi on every level, lambda_max from 4 GMRES steps (the default)",
+    "sor": "two Chebyshev steps with SOR (on each rank) on every level: robust at large viscosity contrasts "
+           "(benchmarks/nsinker)",
+}
+"""The level smoothers of ``stokes.multigrid.smoother``."""
+
+_SMOOTHER_OPTIONS: dict[str, dict[str, Any]] = {
+    "jacobi": {},
+    # Point-Jacobi Chebyshev stalls on nsinker's contrasts (8^3, 4 sinkers: > 1000 outer iterations from
+    # DR = 1e4 on): its 4-step lambda_max estimate is too low there (20 steps: 220 at 1e6). Chebyshev on
+    # SOR-preconditioned levels needs 37 / 68 / 138 at DR 1e2 / 1e4 / 1e6 (an exact velocity solve: 30 / 56 / 89).
+    "sor": {"fieldsplit_u_mg_levels_pc_type": "sor"},
+}
 
 
 @dataclass(frozen=True)
@@ -69,6 +89,15 @@ class MultigridSettings:
     rebuild_dt_change: float = param(0.25, minimum=0.0,
                                      help="the kept preconditioner is set up again when the step changed by more than "
                                           "this fraction since its set-up")
+    smoother: str = param("jacobi", choices=Names(MULTIGRID_SMOOTHERS),
+                          help="level smoother: jacobi (Chebyshev/point-Jacobi, the default) or sor (Chebyshev/SOR, "
+                               "robust at viscosity contrasts of 1e4 and more, benchmarks/nsinker)")
+
+    def petsc_options(self, user: Mapping[str, Any] | None = None, levels: int | None = None, /) -> dict[str, Any]:
+        """The Stokes solver's PETSc options this section sets: the smoother's, but for those the ``user``'s
+        options (``stokes.petsc_options``) set, and ``fieldsplit_u_pc_mg_levels`` when ``levels`` is given."""
+        options = {key: value for key, value in _SMOOTHER_OPTIONS[self.smoother].items() if key not in (user or {})}
+        return options if levels is None else {**options, "fieldsplit_u_pc_mg_levels": levels}
 
 GEOMETRIC_MULTIGRID: dict[str, Any] = {
     "pc_type": "mg",

@@ -109,7 +109,7 @@ __all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD
            "gmsh_model_to_mesh", "incident_entities", "interpolate_on_cells", "interpolation_points",
            "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
            "refine_keeping_partition", "repartitioned_manifolds_nest", "topological_dimension", "value_size",
-           "xdmf_lagrange_degree"]
+           "xdmf_lagrange_degree", "xdmf_value_shape"]
 
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])  # type: ignore[assignment]
 """(major, minor) of the DOLFINx in use."""
@@ -390,6 +390,13 @@ def xdmf_lagrange_degree(mesh: dolfinx.mesh.Mesh, /) -> int:
     1 on DOLFINx 0.5 (node values at the vertices), the geometry's degree on 0.9 (which refuses any
     other, e.g. P1 fields on curved P2 shells)."""
     return int(coordinate_map(mesh).degree) if _NEW else 1
+
+
+def xdmf_value_shape(shape: tuple[int, ...], /) -> tuple[int, ...]:
+    """The value shape to write a field of ``shape`` with, so that ParaView reads it alike on every
+    version: a 2D tensor (2, 2) as VTK's 3 x 3 on DOLFINx 0.9, which would write its 2 x 2 values
+    flat and padded with zeros (0.5 embeds them in 3 x 3 itself)."""
+    return (3, 3) if _NEW and shape == (2, 2) else shape
 
 
 def petsc_vector(f: dolfinx.fem.Function, /) -> Any:

@@ -44,7 +44,8 @@ from convection.io.run_folder import check_output_directory
 from convection.physics.elastic_outputs import ELASTIC_OUTPUTS
 from convection.postprocess.postprocessors import POSTPROCESSORS
 from convection.schema import REQUIRED, Names, param, subsection
-from fembase.dolfinx_compat import element_degree, function_space, is_discontinuous, xdmf_lagrange_degree
+from fembase.dolfinx_compat import (element_degree, function_space, is_discontinuous, xdmf_lagrange_degree,
+                                    xdmf_value_shape)
 from fembase.registry import Registry
 from fembase.xdmf import XdmfSeries, declare_types, grid_time
 
@@ -152,7 +153,7 @@ class FieldOutput:
         self._names_written: list[str] = []
         self._mesh: dolfinx.mesh.Mesh | None = None
         self._file: dolfinx.io.XDMFFile | None = None
-        self._out: dict[str, dolfinx.fem.Function] = {}
+        self._out: dict[str, tuple[dolfinx.fem.Function, dolfinx.fem.Function | None]] = {}
         self.files: list[Path] = []
         self.series_path = self.directory / f"{prefix}.xdmf"
         self._series = XdmfSeries(self.series_path, prefix)
@@ -186,16 +187,25 @@ class FieldOutput:
         return bool(mesh.comm.allreduce(not np.array_equal(mesh.geometry.x, self._written_x), op=MPI.LOR))
 
     def _output_function(self, name: str, f: dolfinx.fem.Function) -> dolfinx.fem.Function:
-        out = self._out.get(name)
-        if out is None:
+        """``f`` in the written space (DG0 or the file's Lagrange degree), in the output's units; a 2D
+        tensor as VTK's 3 x 3 (:func:`fembase.dolfinx_compat.xdmf_value_shape`)."""
+        shape = tuple(f.ufl_shape)
+        written = xdmf_value_shape(shape)
+        if name not in self._out:
             mesh = f.function_space.mesh
             if is_discontinuous(f.function_space) and element_degree(f.function_space) == 0:
-                space = function_space(mesh, "DG", 0, shape=tuple(f.ufl_shape) or None)  # scalar, vector, tensor
+                family, degree = "DG", 0
             else:
-                space = function_space(mesh, "Lagrange", xdmf_lagrange_degree(mesh), shape=tuple(f.ufl_shape) or None)
-            out = dolfinx.fem.Function(space, name=name)
-            self._out[name] = out
-        out.interpolate(f)
+                family, degree = "Lagrange", xdmf_lagrange_degree(mesh)
+            out = dolfinx.fem.Function(function_space(mesh, family, degree, shape=written or None), name=name)
+            mid = None if written == shape else dolfinx.fem.Function(function_space(mesh, family, degree, shape=shape))
+            self._out[name] = (out, mid)
+        out, mid = self._out[name]
+        if mid is None:
+            out.interpolate(f)
+        else:
+            mid.interpolate(f)
+            out.x.array.reshape(-1, 9)[:, [0, 1, 3, 4]] = mid.x.array.reshape(-1, 4)
         conversion = None if self.units is None else self.units.of(name)
         if conversion is not None:
             conversion.apply(out.x.array)

@@ -168,7 +168,7 @@ class _SteadyProblem:
         self.blocks = _Blocks([u, p, T])
         self.A = create_block_matrix(self.J)
         self.b = create_block_vector(self.F)
-        self.dx = self.b.duplicate()
+        self.dx, self.x, self.saved = self.b.duplicate(), self.b.duplicate(), self.b.duplicate()
         self.ksp = PETSc.KSP().create(self.comm)
         self.ksp.setType("preonly")
         pc = self.ksp.getPC()
@@ -185,9 +185,9 @@ class _SteadyProblem:
     def newton(self) -> int | None:
         """Newton's method from the current unknowns; its iterations, or None if it failed (the
         unknowns then back where they started)."""
-        x = self.b.duplicate()
+        x = self.x
         self.blocks.from_functions(x)
-        saved = x.copy()
+        x.copy(self.saved)
         first = self.residual()
         norm = first
         for iteration in range(NEWTON_MAX_IT + 1):
@@ -205,11 +205,11 @@ class _SteadyProblem:
             x.axpy(-1.0, self.dx)
             self.blocks.to_functions(x)
             norm = self.residual()
-        self.blocks.to_functions(saved)
+        self.blocks.to_functions(self.saved)
         return None
 
     def destroy(self) -> None:
-        for obj in (self.A, self.b, self.dx, self.ksp):
+        for obj in (self.A, self.b, self.dx, self.x, self.saved, self.ksp):
             obj.destroy()
 
 

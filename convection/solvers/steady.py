@@ -29,11 +29,13 @@ it is reached in two stages:
    the exponents scaled by ``s``), Newton at each ``s`` from the previous solution; a failed
    Newton halves the step in ``s`` (down to 1/64).
 
-Each Newton iteration solves the Jacobian (UFL's derivative) by MUMPS LU; it stops when the
-residual's norm falls below ``1e-9`` times its first value, or ``1e-10``. The result's temperature
-becomes the run's initial temperature; the time steps then relax it to the time-stepper's own
-steady state (which has SUPG): for Blankenbach 2b at 50 x 20 graded cells the run's Nu and vrms
-then change by less than 0.1 % (benchmarks/blankenbach/README.md).
+Each Newton iteration solves the Jacobian (UFL's derivative) by MUMPS LU (on several ranks gathered
+on rank 0, :func:`~convection.solvers.petsc_options.reproducible_lu`, so that two runs give the
+same bits); it stops when the residual's norm falls below ``1e-9`` times its first value, or
+``1e-10``. The result's temperature becomes the run's initial temperature; the time steps then
+relax it to the time-stepper's own steady state (which has SUPG): for Blankenbach 2b at 50 x 20
+graded cells the run's Nu and vrms then change by less than 0.1 %
+(benchmarks/blankenbach/README.md).
 
 The steady start needs a Boussinesq energy equation without composition and a viscosity that
 depends on the temperature and depth only, in a box (:func:`check_steady_start` says what refuses it).
@@ -54,6 +56,7 @@ from petsc4py import PETSc
 
 from convection.schema import ConfigError
 from convection.geometry.boundary import TemperatureBC, temperature_dirichlet_bcs, velocity_dirichlet_bcs
+from convection.solvers.petsc_options import reproducible_lu, set_owned_options
 from convection.solvers.stokes.nonlinear import homogeneous
 from fembase.dolfinx_compat import (assemble_block_matrix, assemble_block_vector, create_block_matrix,
                                     create_block_vector, petsc_vector)
@@ -170,10 +173,16 @@ class _SteadyProblem:
         self.b = create_block_vector(self.F)
         self.dx, self.x, self.saved = self.b.duplicate(), self.b.duplicate(), self.b.duplicate()
         self.ksp = PETSc.KSP().create(self.comm)
-        self.ksp.setType("preonly")
-        pc = self.ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorSolverType("mumps")
+        if self.comm.size == 1:
+            self.ksp.setType("preonly")
+            pc = self.ksp.getPC()
+            pc.setType("lu")
+            pc.setFactorSolverType("mumps")
+        else:  # gathered on rank 0: a parallel MUMPS factorisation differs in the last bits from run to run
+            prefix = f"steady{id(self)}_"
+            self.ksp.setOptionsPrefix(prefix)
+            set_owned_options(self, prefix, reproducible_lu(self.comm.size))
+            self.ksp.setFromOptions()
 
     def residual(self) -> float:
         """Assemble ``F`` at the unknowns into :attr:`b` (zero on the strong conditions' rows); its norm."""

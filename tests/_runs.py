@@ -1,5 +1,10 @@
 """Runs of the command line in subprocesses, for tests (``from _runs import ...``): start, kill
-(SIGKILL of the whole process group), resume, and read back what a run wrote."""
+(SIGKILL of the whole process group), resume, and read back what a run wrote.
+
+A subprocess that hangs must not hang the test suite, and a machine that is merely busy must not
+fail a test. So no run here has a wall-clock deadline: each has a budget counted in an idle
+machine's seconds (:class:`Watchdog`), and a second of wall time counts only as much as the share
+of the machine's cores the load left free in it."""
 
 from __future__ import annotations
 
@@ -59,9 +64,48 @@ def sets(items: list[str]) -> list[str]:
     return [a for item in items for a in ("--set", item)]
 
 
-def run_cli(args: list[str], ranks: int = 1, timeout: float = 300) -> subprocess.CompletedProcess:
-    """Run the command line to the end; returns the finished process (text output captured)."""
-    return subprocess.run(command(args, ranks), cwd=ROOT, env=env(), capture_output=True, text=True, timeout=timeout)
+class Watchdog:
+    """A time budget in idle-machine seconds: each wall-clock second counts ``cores / load``
+    (at most 1), the share of the machine a run gets at the 1-minute load average. At a load of
+    30 on 2 cores a budget of 300 s lasts 75 minutes of wall time; on an idle machine, 5."""
+
+    def __init__(self, budget: float) -> None:
+        self.budget = budget
+        self.spent = 0.0
+        self._last = time.monotonic()
+
+    def expired(self) -> bool:
+        """Count the time since the last call; whether the budget is spent."""
+        now = time.monotonic()
+        cores = len(os.sched_getaffinity(0))
+        self.spent += (now - self._last) * min(1.0, cores / max(os.getloadavg()[0], 1e-9))
+        self._last = now
+        return self.spent > self.budget
+
+
+def guarded_run(argv: list[str], *, budget: float = 300, **kwargs) -> subprocess.CompletedProcess:
+    """``subprocess.run(argv, capture_output=True, text=True, **kwargs)`` that kills the process and
+    everything it started (its session) and raises ``subprocess.TimeoutExpired`` only once
+    ``budget`` idle-machine seconds are spent (:class:`Watchdog`)."""
+    watchdog = Watchdog(budget)
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                          **kwargs) as proc:
+        while True:
+            try:
+                out, err = proc.communicate(timeout=2)
+                break
+            except subprocess.TimeoutExpired:
+                if watchdog.expired():
+                    kill_session(proc.pid)
+                    out, err = proc.communicate()
+                    raise subprocess.TimeoutExpired(argv, budget, out, err) from None
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+def run_cli(args: list[str], ranks: int = 1, budget: float = 300) -> subprocess.CompletedProcess:
+    """Run the command line to the end; returns the finished process (text output captured).
+    ``budget``: idle-machine seconds before a hung run is killed (:func:`guarded_run`)."""
+    return guarded_run(command(args, ranks), budget=budget, cwd=ROOT, env=env())
 
 
 def run_on_ranks(config: Path, folders: dict[int, Path], extra: list[str] = ()) -> dict[int, Path]:
@@ -132,14 +176,15 @@ def kill_session(leader: int) -> None:
 
 
 def kill_run(config: Path, run_dir: Path, ranks: int, extra: list[str], *, when: Callable[[Path], bool],
-             timeout: float = 300) -> int:
-    """Start ``run CONFIG`` and SIGKILL it and all its ranks as soon as ``when(run_dir)``;
-    returns the exit code (negative: killed)."""
+             budget: float = 300) -> int:
+    """Start ``run CONFIG`` and SIGKILL it and all its ranks as soon as ``when(run_dir)`` (or once
+    ``budget`` idle-machine seconds are spent, :class:`Watchdog`); returns the exit code
+    (negative: killed)."""
     proc = subprocess.Popen(command(["run", str(config), "--output", str(run_dir), *sets(extra)], ranks),
                             cwd=ROOT, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
-    deadline = time.monotonic() + timeout
-    while proc.poll() is None and time.monotonic() < deadline:
+    watchdog = Watchdog(budget)
+    while proc.poll() is None and not watchdog.expired():
         if when(run_dir):
             kill_session(proc.pid)
             break

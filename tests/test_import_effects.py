@@ -2,9 +2,10 @@
 convection imported in a fresh interpreter leaves DOLFINx's JIT function and PETSc's options
 database as they were (the solvers set what they need when they are made)."""
 
-import subprocess
 import sys
 from pathlib import Path
+
+from _runs import guarded_run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,7 +31,7 @@ print(len(modules))
 
 
 def test_imports_have_no_side_effects():
-    proc = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    proc = guarded_run([sys.executable, "-c", SCRIPT], cwd=ROOT, budget=300)
     assert proc.returncode == 0, proc.stderr
     assert int(proc.stdout.split()[-1]) > 100  # every module was imported
 
@@ -50,5 +51,5 @@ TransportSolver(mesh, BoussinesqApproximation(Ra=1.0), bcs={"top": TemperatureBC
 assert dolfinx.jit.ffcx_jit is jit_cache._cached_ffcx_jit
 assert PETSc.Options().hasName("vec_mdot_use_gemv")
 """
-    proc = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    proc = guarded_run([sys.executable, "-c", script], cwd=ROOT, budget=300)
     assert proc.returncode == 0, proc.stderr

@@ -10,7 +10,6 @@ its JSON line.
 """
 
 import json
-import subprocess
 import sys
 
 import numpy as np
@@ -18,7 +17,7 @@ import pytest
 
 from _runs import (
     CONFIGS, ROOT, assert_same_statistics, env, final_particles, final_property, kill_run, rows, rows_written, run_cli,
-    sets,
+    guarded_run, sets,
 )
 
 CONFIG = CONFIGS / "localisation.yaml"
@@ -98,9 +97,9 @@ def test_killed_run_resumes_bit_for_bit(runs, tmp_path):
 
 
 def test_benchmark_script_prints_its_json_line(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.localisation.run", "--methods",
-                           "--cells", "16x4", "--steps", "3", "--out", str(tmp_path), "--results", str(tmp_path)],
-                          cwd=ROOT, env=env(), capture_output=True, text=True, timeout=300)
+    proc = guarded_run([sys.executable, "-m", "benchmarks.localisation.run", "--methods",
+                        "--cells", "16x4", "--steps", "3", "--out", str(tmp_path), "--results", str(tmp_path)],
+                       cwd=ROOT, env=env(), budget=300)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     assert summary["picard"] >= 3 and summary["newton"] >= 3

@@ -142,10 +142,10 @@ def test_default_job_killed_and_resumed_at_shipped_size(tmp_path):
     extra = ["time.end=300", "output.checkpoint.every_steps=10", "output.checkpoint.keep=100", "output.progress=none",
              "output.fields_every=10", "particles.output.every_time=100", "particles.output.properties=[composition]"]
     reference = tmp_path / "reference"
-    assert run_cli(["run", str(config), "--output", str(reference), *sets(extra)], 2, timeout=900).returncode == 0
+    assert run_cli(["run", str(config), "--output", str(reference), *sets(extra)], 2, budget=900).returncode == 0
     killed = tmp_path / "killed"
-    assert kill_run(config, killed, 2, extra, when=lambda d: rows_written(d, 150), timeout=900) != 0
-    proc = run_cli(["resume", str(killed)], 2, timeout=900)
+    assert kill_run(config, killed, 2, extra, when=lambda d: rows_written(d, 150), budget=900) != 0
+    proc = run_cli(["resume", str(killed)], 2, budget=900)
     assert proc.returncode == 0 and "note:" not in proc.stderr, proc.stderr
     assert_same_statistics(reference, killed)
     for a, b in zip(final_particles(reference), final_particles(killed)):

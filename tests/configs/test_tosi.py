@@ -6,12 +6,11 @@ prints its JSON line."""
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 
 import pytest
 
-from _runs import CONFIGS, ROOT, assert_same_statistics, env, kill_run, rows, rows_written, run_cli, sets
+from _runs import CONFIGS, ROOT, assert_same_statistics, env, guarded_run, kill_run, rows, rows_written, run_cli, sets
 
 CONFIG = CONFIGS / "tosi.yaml"
 SMALL = ["mesh.cells=[10,10]", "time.max_steps=8", "output.progress=none", "output.fields_every=0"]
@@ -83,9 +82,9 @@ def test_not_converging_is_a_one_line_run_failure(tmp_path):
 
 
 def test_benchmark_script_prints_its_json_line(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.tosi.run", "--case", "2", "--cells", "6",
-                           "--end", "0.02", "--out", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
-                          cwd=ROOT, env=env(), capture_output=True, text=True, timeout=300)
+    proc = guarded_run([sys.executable, "-m", "benchmarks.tosi.run", "--case", "2", "--cells", "6",
+                        "--end", "0.02", "--out", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
+                       cwd=ROOT, env=env(), budget=300)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     for key in ("T_mean", "nusselt_top", "nusselt_bottom", "vrms", "vrms_surface", "vmax_surface", "eta_min",

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from _runs import guarded_run
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "developers.md"
@@ -31,7 +32,7 @@ def test_every_topic_has_an_example():
 
 @pytest.mark.parametrize("block", BLOCKS, ids=[*READINGS, *TOPICS])
 def test_example_runs(block, tmp_path):
-    proc = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True, timeout=600,
-                          env={**os.environ, "PYTHONDONTWRITEBYTECODE": "1",
-                               "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])})
+    proc = guarded_run([sys.executable, "-c", block], cwd=tmp_path, budget=600,
+                       env={**os.environ, "PYTHONDONTWRITEBYTECODE": "1",
+                            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])})
     assert proc.returncode == 0, proc.stderr[-4000:]

@@ -8,14 +8,13 @@ import copy
 import os
 import re
 import shlex
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 import yaml
 
-from _runs import shrink
+from _runs import guarded_run, shrink
 from convection.config.loader import SCHEMA, load_config
 from convection.launch import mpi_environment, mpirun
 
@@ -81,8 +80,8 @@ def _tiny(command: str) -> tuple[list[str], str | None]:
 
 
 def test_site_builds_without_warnings(tmp_path):
-    proc = subprocess.run([str(MKDOCS), "build", "--strict", "-d", str(tmp_path / "site")], cwd=ROOT,
-                          capture_output=True, text=True, timeout=600)
+    proc = guarded_run([str(MKDOCS), "build", "--strict", "-d", str(tmp_path / "site")], cwd=ROOT,
+                       budget=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "WARNING" not in proc.stdout + proc.stderr
     site = tmp_path / "site"
@@ -121,7 +120,7 @@ def test_page_commands_run_in_tiny_form(page, tmp_path):
             argv, redirect, cwd = ["bash", "scripts/run.sh", "--end", "20"], None, ROOT
         else:
             (argv, redirect), cwd = _tiny(command), tmp_path
-        proc = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+        proc = guarded_run(argv, cwd=cwd, env=env, budget=900)
         assert proc.returncode == 0, f"{command}\n{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}"
         if redirect:
             (tmp_path / redirect).write_text(proc.stdout)
@@ -167,8 +166,8 @@ def test_python_snippets_run(tmp_path):
         for block in _blocks(page, "python"):
             if "model.step" not in block and "run_config" not in block:
                 continue
-            proc = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True,
-                                  timeout=600, env={**os.environ, "PYTHONDONTWRITEBYTECODE": "1"})
+            proc = guarded_run([sys.executable, "-c", block], cwd=tmp_path, budget=600,
+                               env={**os.environ, "PYTHONDONTWRITEBYTECODE": "1"})
             assert proc.returncode == 0, f"{page.name}\n{block}\n{proc.stderr[-3000:]}"
             checked += 1
     assert checked >= 1

@@ -4,7 +4,6 @@ Each case runs the real CLI under ``mpirun -n 2`` (and once serially) in a subpr
 """
 
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -13,16 +12,18 @@ import pytest
 from convection.config.loader import ConfigError, load_config
 from convection.launch import mpirun
 
+from _runs import guarded_run
+
 ROOT = Path(__file__).resolve().parents[3]
 GOOD = ROOT / "configs" / "blankenbach_1a.yaml"
 
 
-def _run(args, *, ranks=2, timeout=120):
+def _run(args, *, ranks=2, budget=120):
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     cmd = [sys.executable, "-m", "convection", *args]
     if ranks > 1:
         cmd = [*mpirun(ranks), *cmd]
-    return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
+    return guarded_run(cmd, cwd=ROOT, env=env, budget=budget)
 
 
 def _write(tmp_path, text):
@@ -176,7 +177,7 @@ def test_error_on_one_rank_stops_every_rank(tmp_path):
     cmd = [*mpirun(2), sys.executable, "-c", FAIL_ON_RANK_1, "run", str(GOOD), "--output", str(tmp_path / "run"),
            "--set", "mesh.cells=[8,8]", "--set", "time.max_steps=3", "--set", "output.fields_every=1",
            "--set", "output.progress=none"]
-    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    proc = guarded_run(cmd, cwd=ROOT, env=env, budget=120)
     assert proc.returncode != 0
     assert "error (rank 1): RuntimeError: injected failure on rank 1" in proc.stderr
 
@@ -189,7 +190,7 @@ def test_error_on_every_rank_prints_once(tmp_path):
     cmd = [*mpirun(2), sys.executable, "-c", script, "run", str(GOOD), "--output", str(tmp_path / "run"),
            "--set", "mesh.cells=[8,8]", "--set", "time.max_steps=3", "--set", "output.fields_every=1",
            "--set", "output.progress=none"]
-    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    proc = guarded_run(cmd, cwd=ROOT, env=env, budget=120)
     assert proc.returncode == 1, proc.stderr
     errors = [line for line in proc.stderr.splitlines() if "error" in line]
     assert errors[0] == ("error (every rank): RuntimeError: injected failure everywhere (--debug shows the "

@@ -25,8 +25,8 @@ SMALL = ["mesh.cells=[8,8]", "adaptivity.max_level=1", "adaptivity.every=4",
 PARALLEL = ["balance.strategy=every", "balance.every=5"]
 
 
-def _run(args, ranks=1, timeout=300):
-    return run_cli(args, ranks, timeout)
+def _run(args, ranks=1, budget=300):
+    return run_cli(args, ranks, budget)
 
 
 @pytest.mark.parametrize("moment", ["between steps", "during a checkpoint write"])

@@ -30,6 +30,8 @@ from convection.geometry.probes import MAX_PROBES, boundary_probes, domain_probe
 from convection.config.loader import config_domain as domain_from_config
 from convection.schema import ConfigError, check_document_shape, short_repr
 
+from _runs import guarded_run
+
 ROOT = Path(__file__).resolve().parents[3]
 BOX = "configs/blankenbach_1a.yaml"
 SHELL = "configs/annulus_layer.yaml"
@@ -315,8 +317,8 @@ def _answer(case: Case, command: str, tmp_path: Path, ranks: int = 1) -> None:
     exits = tmp_path / "rank_exits"
     exits.mkdir()
     env = dict(_env(), RANK_EXITS=str(exits))
-    proc = subprocess.run(_command(_arguments(case, command, tmp_path), ranks), cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=300)
+    proc = guarded_run(_command(_arguments(case, command, tmp_path), ranks), cwd=ROOT, env=env,
+                       budget=300)
     code = proc.returncode
     if ranks > 1:
         codes = {path.name: int(path.read_text()) for path in exits.iterdir()}
@@ -355,24 +357,24 @@ def test_mpirun_exit_code_and_one_line(tmp_path):
     case = _BY_ID["end nan"]
     command = [*mpirun(2), sys.executable, "-m", "convection",
                *_arguments(case, "check", tmp_path)]
-    proc = subprocess.run(command, cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=120)
+    proc = guarded_run(command, cwd=ROOT, env=_env(), budget=120)
     _assert_answer(case, proc, proc.returncode)
 
 
 def test_output_folder_is_taken_literally(tmp_path):
     """``--output`` is a folder name, not YAML: ``123`` and ``run #1`` stay text; ``''`` is refused."""
     for name in ("123", "run #1"):
-        proc = subprocess.run(_command(["check", str(ROOT / BOX), "--output", str(tmp_path / name)]), cwd=ROOT,
-                              env=_env(), capture_output=True, text=True, timeout=120)
+        proc = guarded_run(_command(["check", str(ROOT / BOX), "--output", str(tmp_path / name)]), cwd=ROOT,
+                           env=_env(), budget=120)
         assert proc.returncode == 0, proc.stderr
         assert yaml.safe_load(proc.stdout)["output"]["directory"] == str(tmp_path / name)
-    proc = subprocess.run(_command(["check", str(ROOT / BOX), "--output", ""]), cwd=ROOT, env=_env(),
-                          capture_output=True, text=True, timeout=120)
+    proc = guarded_run(_command(["check", str(ROOT / BOX), "--output", ""]), cwd=ROOT, env=_env(),
+                       budget=120)
     assert proc.returncode == 2 and proc.stderr.startswith("error: config key 'output.directory': must name a folder")
 
 
 def test_command_line_mistake_is_one_line():
-    proc = subprocess.run(_command(["run"]), cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=120)
+    proc = guarded_run(_command(["run"]), cwd=ROOT, env=_env(), budget=120)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "config" in lines[0], proc.stderr

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
 from convection.io.pictures import main
+
+from _runs import guarded_run
 
 ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "configs" / "vankeken_1a.yaml"
@@ -28,9 +29,8 @@ def good_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     sets = ["mesh.cells=[8,8]", "adaptivity.max_level=1", "adaptivity.every=2", "output.progress=none",
             "time.max_steps=4", "output.fields_every=2", "particles.output.every_steps=2"]
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    proc = subprocess.run([sys.executable, "-m", "convection", "run", str(CONFIG), "--output", str(run_dir),
-                           *[a for s in sets for a in ("--set", s)]], cwd=ROOT, env=env, capture_output=True,
-                          text=True, timeout=300)
+    proc = guarded_run([sys.executable, "-m", "convection", "run", str(CONFIG), "--output", str(run_dir),
+                        *[a for s in sets for a in ("--set", s)]], cwd=ROOT, env=env, budget=300)
     assert proc.returncode == 0, proc.stderr
     assert (run_dir / "fields_001.h5").is_file() and (run_dir / "particles_000004.h5").is_file()
     return run_dir

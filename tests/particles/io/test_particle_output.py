@@ -2,7 +2,6 @@
 
 import os
 import signal
-import subprocess
 import sys
 import textwrap
 import xml.etree.ElementTree as ET
@@ -22,6 +21,8 @@ from fembase.files import H5Sink
 from particles import Swarm
 from particles.generation import generate
 from particles.io.output import ParticleWriter, write_mesh_fields
+
+from _runs import guarded_run
 
 N_PARTICLES = 400
 
@@ -226,9 +227,8 @@ def test_killed_writer_leaves_only_complete_files(tmp_path):
         writer.write(swarm, 1.0, 1)
         """
     )
-    proc = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).resolve().parents[3], timeout=120,
-                          capture_output=True)
-    assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()[-2000:]
+    proc = guarded_run([sys.executable, "-c", script], cwd=Path(__file__).resolve().parents[3], budget=120)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr[-2000:]
     final = sorted(n for n in os.listdir(tmp_path) if not n.startswith("."))
     assert final == ["particles.xdmf", "particles_000000.h5"]
     temporary = [n for n in os.listdir(tmp_path) if n.startswith(".")]

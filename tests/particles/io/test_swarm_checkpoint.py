@@ -2,7 +2,6 @@
 
 import os
 import shutil
-import subprocess
 import sys
 import textwrap
 from pathlib import Path
@@ -21,6 +20,8 @@ from particles import Swarm
 from particles.advection import Advector
 from particles.io.swarm_checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from particles.generation import generate
+
+from _runs import guarded_run
 
 ROOT = Path(__file__).resolve().parents[3]
 N_CELLS = 10
@@ -258,7 +259,7 @@ def test_damaged_checkpoint_under_mpirun_does_not_hang(tmp_path):
     )
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     cmd = [*mpirun(2), sys.executable, "-c", script]
-    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    proc = guarded_run(cmd, cwd=ROOT, env=env, budget=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     for rank in (0, 1):
         lines = (tmp_path / f"rank{rank}.txt").read_text().splitlines()

@@ -124,8 +124,6 @@ class ReferenceProfile:
                 raise ValueError(f"the reference profile's {name.replace('_', ' ')} must be positive, got {column}")
         if n and not (self.thermal_expansivity or self.heat_capacity):
             raise ValueError("the reference profile has depths but neither thermal expansivity nor heat capacity")
-        if (self.thermal_expansivity or self.heat_capacity) and not n:
-            raise ValueError("the reference profile needs the depths of its values")
         if n and not self.depth[0] >= 0.0:
             raise ValueError(f"the reference profile's first depth must not be above the surface (< 0), got "
                              f"{self.depth[0]}")

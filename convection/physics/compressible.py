@@ -121,14 +121,13 @@ class ReferenceProfile:
                 raise ValueError(f"the reference profile has {n} depth(s) but {len(column)} {name.replace('_', ' ')} "
                                  "value(s); give one per depth")
             if any(not v > 0.0 for v in column):
-                raise ValueError(f"the reference profile's {name.replace('_', ' ')} must be positive, got {column}")
+                raise ValueError(f"the reference profile's {name.replace('_', ' ')} must be positive")
         if n and not (self.thermal_expansivity or self.heat_capacity):
             raise ValueError("the reference profile has depths but neither thermal expansivity nor heat capacity")
         if n and not self.depth[0] >= 0.0:
-            raise ValueError(f"the reference profile's first depth must not be above the surface (< 0), got "
-                             f"{self.depth[0]}")
+            raise ValueError("the reference profile's first depth must not be above the surface (< 0)")
         if any(not b > a for a, b in zip(self.depth, self.depth[1:])):
-            raise ValueError(f"the reference profile's depths must increase, got {self.depth}")
+            raise ValueError("the reference profile's depths must increase")
 
     @property
     def varies(self) -> bool:

@@ -78,7 +78,8 @@ def test_solvers_take_alpha_and_cp(mesh):
     x = ufl.SpatialCoordinate(mesh)
     depth = 1.0 - x[1]
     T, u = 1.0 - x[1], ufl.as_vector((x[1] * (1 - x[1]), x[0] * (1 - x[0])))
-    alpha, cp, rho = PROFILE.value("thermal_expansivity", depth), PROFILE.value("heat_capacity", depth), ref.density(depth)
+    alpha, cp = PROFILE.value("thermal_expansivity", depth), PROFILE.value("heat_capacity", depth)
+    rho = ref.density(depth)
     terms = approximation.energy_terms(T, T, u, x)
     adiabatic, _ = approximation.heating_rates(T, T, u, x)
     checks = [(approximation.buoyancy(T, None, 2, x=x)[1], 1e4 * rho * alpha * T), (terms.capacity, rho * cp),

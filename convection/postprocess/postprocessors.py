@@ -455,20 +455,14 @@ class Heating(Column):
         return {"heating_W": W, "heating_Phi": phi, "heating_misfit": abs(phi - W) / abs(W) if W else 0.0}
 
 
-class Adiabat(Column):
+class Adiabat(Heating):
+    """The reference state's temperatures (applies where :class:`Heating` does; only when asked for)."""
+
     name: ClassVar[str] = "adiabat"
     description: ClassVar[str] = "volume means of the adiabatic temperature T_ad and of the non-adiabatic T - T_ad"
     columns = ("T_adiabatic_mean", "T_nonadiabatic_mean")
     quantities: ClassVar[Mapping[str, str]] = {"T_adiabatic_mean": "temperature",
                                                "T_nonadiabatic_mean": "temperature_difference"}
-
-    def __init__(self) -> None:
-        self._forms = Forms()
-
-    @classmethod
-    def missing(cls, features: ModelFeatures) -> str | None:
-        adiabat = None if features.dissipation else "needs a reference state (physics.approximation eba, tala or ala)"
-        return adiabat if features.energy else NEEDS_ENERGY
 
     @classmethod
     def by_default(cls, model: Model) -> bool:

@@ -284,7 +284,7 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     physics = settings.physics
     materials = materials_from_settings(settings)
     visc = physics.viscosity
-    reference = ReferenceState(**vars(physics.reference))
+    reference = ReferenceState.from_settings(physics.reference)
     approximation = materials.approximation(Ra=physics.Ra, H=physics.H, temperature_law=visc.temperature_law,
                                             gamma=visc.gamma, gravity=domain.gravity,
                                             formulation=physics.approximation, reference=reference,

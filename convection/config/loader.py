@@ -67,7 +67,7 @@ from convection.schema import (
 )
 from convection.schema import finite_number as _finite_number
 from convection.physics.approximation import HEATING_VISCOSITY, TEMPERATURE_LAWS, PhysicsSettings
-from convection.physics.compressible import APPROXIMATIONS
+from convection.physics.compressible import APPROXIMATIONS, ReferenceProfile
 from convection.physics.elastic_outputs import check_elastic_outputs
 from convection.physics.elasticity import ElasticitySettings, check_elasticity, check_plasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
@@ -621,6 +621,7 @@ def _check_approximation(config: dict[str, Any]) -> None:
     formulation = APPROXIMATIONS[name]
     _check_pressure_buoyancy(config, formulation)
     dissipating = [n for n, f in APPROXIMATIONS.items() if f.dissipation]
+    _check_reference_profile(physics["reference"], name if not formulation.dissipation else None, dissipating)
     if not formulation.dissipation:
         if Di != 0.0:
             raise ConfigError(f"config key 'physics.reference.Di': only with physics.approximation "
@@ -643,6 +644,22 @@ def _check_approximation(config: dict[str, Any]) -> None:
     if formulation.reference_density and config["stokes"]["buoyancy_theta"] != 0.0:
         raise ConfigError(f"config key 'stokes.buoyancy_theta': not with physics.approximation {name} (the "
                           "semi-implicit buoyancy has no reference density yet)")
+
+
+def _check_reference_profile(reference: dict[str, Any], without: str | None, dissipating: list[str]) -> None:
+    """``physics.reference.profile`` is a table :class:`ReferenceProfile` takes, and it and the
+    potential temperature come with a compressible approximation (``without``: the approximation's
+    name when it has no reference state)."""
+    profile = reference["profile"]
+    try:
+        ReferenceProfile(**{k: tuple(v) for k, v in profile.items()})
+    except ValueError as err:
+        raise ConfigError(f"config key 'physics.reference.profile': {err}") from None
+    for key, unset in (("profile", not any(profile.values())), ("potential_temperature",
+                                                                reference["potential_temperature"] == 0.0)):
+        if without is not None and not unset:
+            raise ConfigError(f"config key 'physics.reference.{key}': only with physics.approximation "
+                              f"{' or '.join(dissipating)} (the {without} approximation has no adiabat)")
 
 
 def _check_pressure_buoyancy(config: dict[str, Any], formulation: Any) -> None:

@@ -19,6 +19,12 @@ any quantity as ``<number> <unit>`` (``3300 kg/m^3``, ``1e21 Pa s``, ``9.81 m/s^
   Clapeyron slope (a pressure per temperature) as ``clapeyron dT / (rho0 g L)``, the
   ``density_jump`` (a fraction of rho0) as the transition's ``Rb``, the ``entropy_change`` in J/kg/K
   over ``c_p`` (``clausius_clapeyron``: ``clapeyron density_jump / (rho0 c_p)``);
+- ``physics.reference`` of a compressible approximation (``eba``, ``tala``, ``ala``): ``Di = alpha g L /
+  c_p`` from the scaling (``thermal_expansivity``, ``gravity``, ``heat_capacity``) when not given, the
+  surface temperature ``T0 = T_ref / dT``, the ``potential_temperature`` as a temperature value, and
+  the ``profile``'s depths as lengths and its thermal expansivity and heat capacity (1/K, J/kg/K)
+  over the scaling's (``alpha0``, ``c_p0``): the reference state of physical parameters
+  (:class:`convection.physics.compressible.ReferenceProfile`);
 - ``physics.H`` in W/kg becomes ``H t0 / (c_p dT)``; as a heating rate (K/s, K/Myr) it is scaled
   as any quantity;
 - expressions (initial conditions, material regions, particle densities and properties) stay
@@ -36,6 +42,7 @@ import math
 import re
 from typing import Any
 
+from convection.physics.compressible import APPROXIMATIONS
 from convection.physics.scaling import Scaling, ScalingSettings, looks_like_quantity, parse_quantity, registry
 from convection.schema import ConfigError, key_text, section_schema, short_repr, validate
 
@@ -49,7 +56,7 @@ _VISCOSITY, _STRESS = "[mass] / [length] / [time]", "[mass] / [length] / [time] 
 EXPECTED: dict[str, str] = {
     **dict.fromkeys(("end", "dt_max", "dt_initial", "every_time"), "[time]"),
     **dict.fromkeys(("upper", "lower", "radii", "resolution", "entrainment_height", "depth_ref", "width"), "[length]"),
-    **dict.fromkeys(("dirichlet", "T_ref", "T_offset"), "[temperature]"),
+    **dict.fromkeys(("dirichlet", "T_ref", "T_offset", "potential_temperature"), "[temperature]"),
     **dict.fromkeys(("background", "viscosity", "eta0", "eta_star", "min_viscosity", "max_viscosity",
                      "material_viscosities"), _VISCOSITY),
     **dict.fromkeys(("yield_stress", "cohesion", "shear_modulus"), _STRESS),
@@ -63,7 +70,7 @@ any dimension)."""
 
 def _absolute(path: tuple[str, ...]) -> bool:
     """Whether the value at ``path`` is a temperature value (counted from T0), not a difference."""
-    return path[-1] in ("dirichlet", "T_ref") or path[:2] == ("initial", "constants") \
+    return path[-1] in ("dirichlet", "T_ref", "potential_temperature") or path[:2] == ("initial", "constants") \
         or path == ("initial", "temperature")
 
 
@@ -237,6 +244,73 @@ def _phase_quantity(spec: dict[str, Any], item: str, key: str, dimension: str) -
     return quantity
 
 
+_PROFILE = {"depth": ("[length]", None), "thermal_expansivity": ("1 / [temperature]", "thermal_expansivity"),
+            "heat_capacity": ("[length] ** 2 / [time] ** 2 / [temperature]", "heat_capacity")}
+"""The columns of ``physics.reference.profile``: their dimension and the scaling value they are taken over
+(None: the length scale)."""
+
+
+def _reference(document: dict[str, Any], scaling: Scaling) -> None:
+    """``physics.reference`` of a compressible approximation from the scaling (module docstring; in place)."""
+    physics = document.get("physics")
+    if not isinstance(physics, dict):
+        return  # _physics made it, or the schema reports it
+    reference = physics.get("reference")
+    if isinstance(reference, dict) and isinstance(reference.get("profile"), dict):
+        _reference_profile(reference["profile"], scaling)
+    name = str(physics.get("approximation", "boussinesq"))
+    if name not in APPROXIMATIONS or not APPROXIMATIONS[name].dissipation:
+        return
+    reference = physics.setdefault("reference", {})
+    if not isinstance(reference, dict):
+        return  # the schema reports it
+    given = reference.get("Di")
+    if None not in (scaling.thermal_expansivity, scaling.gravity, scaling.heat_capacity):
+        Di = scaling.dissipation_number()
+        if given is not None and not (isinstance(given, (int, float)) and math.isclose(given, Di, rel_tol=1e-12)):
+            raise ConfigError(f"config key 'physics.reference.Di': {short_repr(given)} given, but the scaling gives "
+                              f"Di = {Di:.6g} (alpha g L / c_p); give one or the other")
+        reference["Di"] = Di
+    elif given is None:
+        raise ConfigError(f"config key 'physics.reference.Di': physics.approximation {name} needs a dissipation "
+                          "number; give it, or scaling.thermal_expansivity, gravity and heat_capacity (Di = alpha g L "
+                          "/ c_p)")
+    T0 = scaling.reference_temperature / scaling.needed("temperature_difference")
+    surface = reference.get("surface_temperature", T0)
+    quantity = parse_quantity(surface)
+    if quantity is not None and quantity.dimensionality == registry().get_dimensionality("[temperature]"):
+        surface = float(quantity.to("K").magnitude) / scaling.needed("temperature_difference")
+    if not (isinstance(surface, (int, float)) and math.isclose(float(surface), T0, rel_tol=1e-12, abs_tol=1e-15)):
+        raise ConfigError(f"config key 'physics.reference.surface_temperature': {short_repr(surface)} given, but in a "
+                          f"model with units it is scaling.reference_temperature / temperature_difference = "
+                          f"{T0:.6g}; leave it out")
+    reference["surface_temperature"] = T0
+
+
+def _reference_profile(profile: dict[str, Any], scaling: Scaling) -> None:
+    """The profile's values with units -> nondimensional (over L, alpha0, c_p0; in place)."""
+    for column, (dimension, over) in _PROFILE.items():
+        values = profile.get(column)
+        if not isinstance(values, list):
+            continue
+        key = f"physics.reference.profile.{column}"
+        converted = []
+        for value in values:
+            quantity = parse_quantity(value)
+            if quantity is None:
+                converted.append(value)  # a number: nondimensional already (the schema checks it)
+                continue
+            if quantity.dimensionality != registry().get_dimensionality(dimension):
+                raise ConfigError(f"config key '{key}': {short_repr(value)} is not of {dimension} (e.g. "
+                                  f"{_PROFILE_EXAMPLES[column]})")
+            si = float(quantity.to_base_units().magnitude)
+            converted.append(si / (scaling.length if over is None else scaling.needed(over)))
+        profile[column] = converted
+
+
+_PROFILE_EXAMPLES = {"depth": "660 km", "thermal_expansivity": "2e-5 1/K", "heat_capacity": "1250 J/kg/K"}
+
+
 def _physics(document: dict[str, Any], scaling: Scaling) -> None:
     """physics.Ra from the scaling; physics.H in W/kg (in place)."""
     physics = document.get("physics")
@@ -280,6 +354,7 @@ def apply_scaling(document: dict[str, Any]) -> dict[str, Any]:
     _physics(result, scaling)
     _free_surface(result, scaling)
     _phase_transitions(result, scaling)
+    _reference(result, scaling)
     converted = {name: value if name == "scaling" else _convert(value, scaling, (key_text(name),))
                  for name, value in result.items()}
     return converted

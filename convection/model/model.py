@@ -159,7 +159,7 @@ class Model(Stateful):
     def fields(self) -> dict[str, dolfinx.fem.Function]:
         """Every field by name, for output: temperature, velocity, pressure, the material fractions, ``material``
         (two or more; :func:`convection.physics.materials.material_index`), the ``density`` anomaly, the viscosity where
-        it varies, ``strain_rate_II``, ``stress_II`` (these four at cell midpoints), ``phase_<name>`` (collective)."""
+        it varies, ``strain_rate_II``, ``stress_II`` (cell midpoints), ``phase_<name>``, the adiabat (collective)."""
         out = {"velocity": self.stokes.u, "pressure": self.stokes.p}
         if self.temperature is not None:
             out = {"temperature": self.temperature.T, **out}
@@ -179,7 +179,7 @@ class Model(Stateful):
             out.update(self.particle_fields())
         elif self.stokes.approximation.is_variable_viscosity:
             out["viscosity"] = self.rheology.viscosity(self.flow())
-        out.update({**self.rheology.invariants(flow := self.flow()), **self.rheology.phases(flow)})
+        out.update(self.rheology.outputs(self.flow()))
         return out
 
     def flow(self) -> Flow:

@@ -17,6 +17,8 @@ read, the rates the particles integrate, and the viscosity (for output).
   invariants of the strain rate and of the deviatoric stress (ASPECT's convention), at the cell
   midpoints too, and with elasticity the outputs of ``output.extra_fields``
   (:mod:`convection.model.elastic_fields`);
+- ``adiabatic_temperature`` and ``nonadiabatic_temperature`` (``T - T_ad``) of a compressible
+  approximation (:mod:`convection.physics.compressible`);
 - ``density``: the density anomaly ``rho' = sum_i Rb_i C_i - Ra T`` (in units of ``eta0 kappa /
   (g L^3)``: a model in physical units writes ``rho0 + rho' eta0 kappa / (g L^3)`` in kg/m^3,
   :mod:`convection.io.output_units`), at the cell midpoints.
@@ -147,6 +149,10 @@ class RheologyFields:
         self.elastic: Callable[[Flow], dict[str, dolfinx.fem.Function]] | None = None
         self._phases = tuple(ExpressionField(f"phase_{t.name}", _phase(t), lambda s: s.degree)
                              for t in stokes.approximation.phases.transitions)
+        self._adiabat = (ExpressionField("adiabatic_temperature", _adiabatic_temperature, lambda s: s.degree),
+                         ExpressionField("nonadiabatic_temperature",
+                                         lambda f: f.T - _adiabatic_temperature(f), lambda s: s.degree)
+                         ) if stokes.approximation.dissipates else ()
 
     def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
         """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
@@ -194,6 +200,16 @@ class RheologyFields:
         (:mod:`convection.physics.phases`; discontinuous, of the velocity's degree; collective)."""
         return {field.name: field.update(flow) for field in self._phases}
 
+    def outputs(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
+        """:meth:`invariants`, :meth:`phases` and :meth:`adiabat` of ``flow`` (collective)."""
+        return {**self.invariants(flow), **self.phases(flow), **self.adiabat(flow)}
+
+    def adiabat(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
+        """``adiabatic_temperature`` ``T_ad`` and ``nonadiabatic_temperature`` ``T - T_ad`` of a compressible
+        approximation (:meth:`~convection.physics.compressible.ReferenceState.adiabat`; discontinuous, of the
+        velocity's degree; none under Boussinesq; collective)."""
+        return {field.name: field.update(flow) for field in self._adiabat}
+
     def invariants(self, flow: Flow, /) -> dict[str, dolfinx.fem.Function]:
         """``strain_rate_II`` and ``stress_II`` of ``flow`` at the cell midpoints (DG0), and the elastic
         outputs of :attr:`elastic` (collective)."""
@@ -226,6 +242,11 @@ def law_viscosity(flow: Flow, /) -> Any:
     """The viscosity of the laws (mixed and bounded; before elasticity's ``eta -> eta_ve``) as UFL."""
     return flow.stokes.approximation.viscosity(flow.T, flow.fractions, u=flow.stokes.u, p=flow.stokes.p,
                                                fields=flow.fields, x=ufl.SpatialCoordinate(flow.stokes.mesh))
+
+
+def _adiabatic_temperature(flow: Flow, /) -> Any:
+    approximation = flow.stokes.approximation
+    return approximation.reference.adiabat(approximation.gravity.depth(ufl.SpatialCoordinate(flow.stokes.mesh)))
 
 
 def _density_anomaly(flow: Flow, /) -> Any:

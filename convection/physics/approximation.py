@@ -454,7 +454,8 @@ class BoussinesqApproximation:
             raise ValueError("the buoyancy needs the spatial coordinate x")
         if x.ufl_shape[0] != gdim:
             raise ValueError(f"x has {x.ufl_shape[0]} components, the buoyancy {gdim}")
-        magnitude = self.density(T, C)
+        alpha = self.reference.expansivity(self.gravity.depth(x)) if self.formulation.dissipation else None
+        magnitude = self.density(T if alpha is None else alpha * _as_ufl(T), C)  # Ra alpha_r T - sum_i Rb_i C_i
         if self.formulation.reference_density:
             magnitude = self.reference.density(self.gravity.depth(x)) * magnitude
         if self.phases.buoyant:
@@ -482,11 +483,13 @@ class BoussinesqApproximation:
         and the velocity ``u``, or None for the Boussinesq ``dT/dt + u . grad T - lap T = H`` (without latent heat)."""
         if not self.formulation.dissipation:
             return self._latent_heat(EnergyTerms(1.0, self.H), T_new, T, u, x) if self.phases.latent else None
-        capacity = self.reference.density(self.gravity.depth(x)) if self.formulation.reference_density else 1.0
+        density = self.reference.density(self.gravity.depth(x)) if self.formulation.reference_density else 1.0
         adiabatic, shear = self.heating_rates(T_new, T, u, x)
         heating = shear - adiabatic
         if self.H != 0.0:
-            heating = heating + capacity * self.H
+            heating = heating + density * self.H
+        cp = self.reference.heat_capacity(self.gravity.depth(x))  # None: cp_r = 1
+        capacity = density if cp is None else density * cp
         return self._latent_heat(EnergyTerms(capacity, heating), T_new, T, u, x)
 
     def _latent_heat(self, terms: EnergyTerms, T_new: Any, T: Any, u: Any, x: Any, /) -> EnergyTerms:
@@ -499,12 +502,15 @@ class BoussinesqApproximation:
         return EnergyTerms(terms.capacity + capacity, terms.heating + heating)
 
     def heating_rates(self, T: Any, T_eta: Any, u: Any, x: Any, /) -> tuple[Any, Any]:
-        """UFL ``(Di rho_r w (T + T0), (Di / Ra) Phi)``: the adiabatic cooling (the work against
+        """UFL ``(Di alpha_r rho_r w (T + T0), (Di / Ra) Phi)``: the adiabatic cooling (the work against
         gravity ``W`` per volume) and the shear heating, ``Phi`` with the viscosity at ``T_eta``."""
         reference = self.reference
         rho = reference.density(self.gravity.depth(x)) if self.formulation.reference_density else 1.0
         w = ufl.dot(u, self.up(x))
         adiabatic = reference.Di * rho * w * (T + reference.surface_temperature)
+        alpha = reference.expansivity(self.gravity.depth(x))  # None: alpha_r = 1
+        if alpha is not None:
+            adiabatic = alpha * adiabatic
         shear = reference.Di / self.Ra * shear_heating(self.viscosity(T_eta, None, x=x), u)
         return adiabatic, shear
 

@@ -116,11 +116,14 @@ FIELD_KINDS: dict[str, str] = {
     "elastic_stress": "stress", "elastic_stress_invariant": "stress", "elastic_strain_rate": "strain_rate",
     "viscous_strain_rate": "strain_rate", "elastic_viscosity": "viscosity",
     **{f"elastic_stress_{c}": "stress" for c in ("xx", "yy", "zz", "xy", "xz", "yz")},
+    # the reference state of the compressible approximations (issue 49)
+    "adiabatic_temperature": "temperature", "nonadiabatic_temperature": "temperature_difference",
 }
 """The unit kind of each output field or particle property by name (a name not here is
 dimensionless): a kind of :data:`UNIT_KINDS`, or ``density_anomaly`` for the ``density`` field
 (``rho' = sum_i Rb_i C_i - Ra T``, written as ``rho0 + rho' eta0 kappa / (g L^3)`` in the density
-unit; :meth:`Scaling.dimensional`)."""
+unit; :meth:`Scaling.dimensional`), or ``temperature_difference`` for a temperature less another (in the
+temperature unit, without its offset)."""
 
 
 @dataclass(frozen=True)
@@ -309,6 +312,10 @@ class Scaling:
         dT = self.needed("temperature_difference")
         return self.buoyancy_number(rho0 * alpha * dT)
 
+    def dissipation_number(self) -> float:
+        """Di = alpha g L / c_p (King et al. 2010)."""
+        return self.needed("thermal_expansivity") * self.needed("gravity") * self.length / self.needed("heat_capacity")
+
     def needed(self, name: str) -> float:
         """The value of ``scaling.<name>``.
 
@@ -324,6 +331,8 @@ class Scaling:
     def factor(self, kind: str) -> float:
         """Multiply a nondimensional value of ``kind`` (:data:`UNIT_KINDS`, a difference for
         temperatures) by this to get it in the output unit of that kind."""
+        if kind == "temperature_difference":  # of the values: also right for a unit with an offset (degC)
+            return self.dimensional("temperature", 1.0) - self.dimensional("temperature", 0.0)
         unit = registry().Unit(self.units[kind])
         one = registry().Quantity(1.0, unit).to_base_units()
         return self.scale(dict(one.dimensionality)) / float(one.magnitude)
@@ -341,12 +350,12 @@ class Scaling:
 
     def unit_label(self, kind: str) -> str:
         """The short text of the output unit of ``kind`` (as the user wrote it)."""
-        return self.units["density" if kind == "density_anomaly" else kind]
+        return self.units[{"density_anomaly": "density", "temperature_difference": "temperature"}.get(kind, kind)]
 
     def converts(self, kind: str) -> bool:
         """Whether values of ``kind`` can be written in units (a temperature needs
         ``temperature_difference``; a density anomaly ``density`` and ``gravity``)."""
-        if kind == "temperature":
+        if kind in ("temperature", "temperature_difference"):
             return self.temperature_difference is not None
         if kind == "density_anomaly":
             return self.density is not None and self.gravity is not None

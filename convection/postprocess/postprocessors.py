@@ -30,6 +30,8 @@ name            columns
 ``heating``     heating_W = <Di rho_r (T + T0) u . e_up>, the work against gravity (adiabatic cooling),
                 heating_Phi = <(Di / Ra) Phi>, the shear heating, and heating_misfit = |Phi - W| / W
                 (EBA, TALA: :mod:`convection.physics.compressible`; by default there only)
+``adiabat``     T_adiabatic_mean, T_nonadiabatic_mean: volume means of the adiabatic temperature T_ad and of
+                T - T_ad (EBA, TALA, ALA; only when asked for)
 ``surface``     vrms_surface = sqrt(int_top |u|^2 ds / |top|), vmax_surface (largest nodal |u| on
                 the top; shells: the outer surface)
 ``materials``   per material ``<m>``: volume_<m>, centroid x_<m>, y_<m> (, z_<m>), vup_<m> (mean
@@ -453,6 +455,32 @@ class Heating(Column):
         return {"heating_W": W, "heating_Phi": phi, "heating_misfit": abs(phi - W) / abs(W) if W else 0.0}
 
 
+class Adiabat(Heating):
+    """The reference state's temperatures (applies where :class:`Heating` does; only when asked for)."""
+
+    name: ClassVar[str] = "adiabat"
+    description: ClassVar[str] = "volume means of the adiabatic temperature T_ad and of the non-adiabatic T - T_ad"
+    columns = ("T_adiabatic_mean", "T_nonadiabatic_mean")
+    quantities: ClassVar[Mapping[str, str]] = {"T_adiabatic_mean": "temperature",
+                                               "T_nonadiabatic_mean": "temperature_difference"}
+
+    @classmethod
+    def by_default(cls, model: Model) -> bool:
+        return False
+
+    def __call__(self, model: Model, /) -> dict[str, float]:
+        def build() -> dict[str, Any]:
+            approximation = model.stokes.approximation
+            T_ad = approximation.reference.adiabat(approximation.gravity.depth(ufl.SpatialCoordinate(model.mesh)))
+            dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 2 * model.stokes.degree + 2})
+            return {"T_ad": dolfinx.fem.form(T_ad * dx), "T": dolfinx.fem.form(model.T * dx),
+                    "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
+        forms = self._forms.get(model, build)
+        volume = integral(model, forms["volume"])
+        T_ad = integral(model, forms["T_ad"]) / volume
+        return {"T_adiabatic_mean": T_ad, "T_nonadiabatic_mean": integral(model, forms["T"]) / volume - T_ad}
+
+
 class SurfaceVelocity(_Rheology):
     name: ClassVar[str] = "surface"
     description: ClassVar[str] = "rms and largest nodal speed on the top (shells: outer) surface"
@@ -506,7 +534,8 @@ def check_statistics(names: list[str] | tuple[str, ...] | None, features: ModelF
 POSTPROCESSORS: Registry[type] = Registry("postprocessor", (
     TimeColumns, Velocity, Nusselt, TemperatureStatistics, MeshStatistics, StokesStatistics, ParticleStatistics,
     ParticleDistribution, LoadStatistics, Entrainment, WallTime, NonlinearStatistics, ViscosityRange, EnergyBalance,
-    Heating, SurfaceVelocity, MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics, ElasticityStatistics))
+    Heating, Adiabat, SurfaceVelocity, MaterialStatistics, PointValues, Topography, FreeSurfaceStatistics,
+    ElasticityStatistics))
 """Postprocessor classes by their config name (``output.statistics``), in column order."""
 
 

@@ -291,7 +291,8 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
                                             elasticity=_elasticity(settings),
                                             phases=PhaseTransitions.from_settings(
                                                 settings.phase_transitions,
-                                                surface_temperature=physics.reference.surface_temperature))
+                                                surface_temperature=physics.reference.surface_temperature,
+                                                material_names=tuple(materials.names)))
     velocity_bcs = settings.boundary.velocity_bcs(domain)
     temperature_bcs = settings.boundary.temperature_bcs(domain)
     meshes = _meshes(settings, domain, materials, temperature_bcs, comm, restore)

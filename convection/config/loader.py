@@ -143,7 +143,8 @@ SCHEMA: dict[str, Any] = {
                        help="named materials {name: {initial, Rb, viscosity}} filling the domain over a background"),
     "phase_transitions": Field("mapping", {}, max_items=MAX_ENTRIES, items=section_schema(PhaseTransitionSettings),
                                help="named phase transitions {name: {depth, width, temperature, clapeyron, Rb or "
-                                    "density_jump, entropy_change, viscosity_jump}} (docs/phase_transitions.md)"),
+                                    "density_jump, entropy_change, viscosity_jump, materials}} "
+                                    "(docs/phase_transitions.md)"),
     "stokes": section_schema(StokesSettings),
     "energy": section_schema(EnergySettings),
     "composition": section_schema(CompositionSettings),
@@ -354,7 +355,8 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     _check_statistics(config)
     check_phase_transitions({name: settings_from(PhaseTransitionSettings, spec)
                              for name, spec in config["phase_transitions"].items()},
-                            energy=config["energy"]["enabled"], buoyancy_theta=config["stokes"]["buoyancy_theta"])
+                            energy=config["energy"]["enabled"], buoyancy_theta=config["stokes"]["buoyancy_theta"],
+                            material_names=tuple(m["name"] for m in material_table(config)[0]))
 
 
 def _check_steady_start(config: dict[str, Any]) -> None:

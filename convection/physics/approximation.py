@@ -427,7 +427,7 @@ class BoussinesqApproximation:
         :meth:`ViscosityLaw.__call__`)."""
         eta = self.viscosity_law(T, C, **flow)
         if self.phases.changes_viscosity:
-            eta = eta * self.phases.viscosity_factor(_as_ufl(T), self.gravity.depth(flow["x"]))
+            eta = eta * self.phases.viscosity_factor(_as_ufl(T), self.gravity.depth(flow["x"]), C)
         return eta
 
     def up(self, x: Any, /) -> Any:
@@ -459,7 +459,7 @@ class BoussinesqApproximation:
         if self.formulation.reference_density:
             magnitude = self.reference.density(self.gravity.depth(x)) * magnitude
         if self.phases.buoyant:
-            magnitude = magnitude - self.phases.density(_as_ufl(T), self.gravity.depth(x))
+            magnitude = magnitude - self.phases.density(_as_ufl(T), self.gravity.depth(x), C)
         return self.gravity.along_up(magnitude, x)
 
     @property

@@ -21,6 +21,13 @@ slope's sign), ``c >= 1``. Across the transition, in a steady downflow without c
 ``d ln(T + T_s) = L dGamma``: the absolute temperature grows by the factor ``exp(L)``
 (:meth:`PhaseTransition.temperature_below`). A viscosity jump ``f`` multiplies the viscosity by
 ``f ** Gamma``.
+
+Per material: a transition may apply to some materials only (``materials``: indices, 0 the
+background, ``i`` material ``i`` of the fractions ``C_1 .. C_n``). Its density jump and viscosity
+jump are then weighted by those materials' volume fraction ``phi = sum_{i in materials} C_i`` (``C_0 = 1
+- sum_i C_i``): the body force gains ``-Rb phi Gamma e_up`` and the viscosity the factor ``f ** (phi
+Gamma)`` (the geometric mixture's exactly; any mixture's where a cell holds one material). Different
+materials get different jumps (or depths, slopes) through different transitions.
 """
 
 from __future__ import annotations
@@ -59,6 +66,10 @@ class PhaseTransitionSettings:
                                             "(Delta S = clapeyron density_jump / scaling.density)")
     viscosity_jump: float = param(1.0, exclusive_minimum=0.0, help="the deep phase's viscosity over the shallow "
                                                                    "one's: eta *= viscosity_jump ** Gamma")
+    materials: tuple[str, ...] | None = param(None, help="the materials the transition applies to (names of the "
+                                                         "materials section, background: the background; its "
+                                                         "density and viscosity jumps weighted by their volume "
+                                                         "fraction); null: every material")
 
 
 @dataclass(frozen=True)
@@ -71,6 +82,8 @@ class PhaseTransition:
         Rb: Buoyancy number of the deep phase's excess density.
         entropy_change: ``L = Delta S / c_p``.
         viscosity_jump: ``f``, the deep phase's viscosity over the shallow one's.
+        materials: The materials it applies to (0 the background, ``i`` the fraction ``C_i``), or
+            None: every material.
     """
 
     name: str
@@ -81,8 +94,13 @@ class PhaseTransition:
     Rb: float = 0.0
     entropy_change: float = 0.0
     viscosity_jump: float = 1.0
+    materials: tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.materials is not None and (not self.materials or min(self.materials) < 0
+                                           or len(set(self.materials)) != len(self.materials)):
+            raise ValueError(f"phase transition {self.name!r}: materials must be distinct indices >= 0 (0 the "
+                             f"background), got {self.materials}")
         if not self.width > 0.0:
             raise ValueError(f"phase transition {self.name!r}: the width must be positive, got {self.width}")
         if not self.viscosity_jump > 0.0:
@@ -111,6 +129,26 @@ class PhaseTransition:
         without conduction from ``T_above``: ``(T_above + T_s) exp(L) - T_s`` (module docstring)."""
         return (T_above + surface_temperature) * math.exp(self.entropy_change) - surface_temperature
 
+    def fraction(self, C: Any, /) -> Any | None:
+        """``phi``, the volume fraction of the materials it applies to (UFL; the fractions ``C``: None, one
+        or a sequence, as :func:`~convection.physics.approximation.fractions`), or None for every material."""
+        if self.materials is None:
+            return None
+        cs = tuple(C) if isinstance(C, (list, tuple)) else (() if C is None else (C,))
+        if max(self.materials) > len(cs):
+            raise ValueError(f"phase transition {self.name!r} applies to material {max(self.materials)}, "
+                             f"the model has {len(cs)}")
+        clamped = [ufl.min_value(ufl.max_value(ufl.as_ufl(c), 0.0), 1.0) for c in cs]
+        terms = [clamped[i - 1] for i in self.materials if i > 0]
+        if 0 in self.materials:
+            terms.append(1.0 - sum(clamped[1:], clamped[0]) if clamped else ufl.as_ufl(1.0))
+        return sum(terms[1:], terms[0])
+
+    def weighted_phase(self, T: Any, depth: Any, C: Any = None, /) -> Any:
+        """``phi Gamma`` (UFL): the phase weighted by the fraction of its materials (``Gamma`` for all)."""
+        phi = self.fraction(C)
+        return self.phase(T, depth) if phi is None else phi * self.phase(T, depth)
+
 
 @dataclass(frozen=True)
 class PhaseTransitions:
@@ -125,11 +163,13 @@ class PhaseTransitions:
     surface_temperature: float = 0.0
 
     @classmethod
-    def from_settings(cls, settings: Mapping[str, PhaseTransitionSettings], /, *,
-                      surface_temperature: float = 0.0) -> PhaseTransitions:
-        """The transitions of the ``phase_transitions`` section (checked, nondimensional)."""
+    def from_settings(cls, settings: Mapping[str, PhaseTransitionSettings], /, *, surface_temperature: float = 0.0,
+                      material_names: tuple[str, ...] = ()) -> PhaseTransitions:
+        """The transitions of the ``phase_transitions`` section (checked, nondimensional);
+        ``material_names`` the materials in the order of the fractions (a transition's ``materials``)."""
         return cls(tuple(PhaseTransition(name, s.depth, s.width, s.temperature, s.clapeyron, s.Rb, s.entropy_change,
-                                         s.viscosity_jump) for name, s in settings.items()), surface_temperature)
+                                         s.viscosity_jump, material_indices(s.materials, material_names))
+                         for name, s in settings.items()), surface_temperature)
 
     def __len__(self) -> int:
         return len(self.transitions)
@@ -149,14 +189,16 @@ class PhaseTransitions:
         """Whether some transition changes the viscosity."""
         return any(t.viscosity_jump != 1.0 for t in self.transitions)
 
-    def density(self, T: Any, depth: Any, /) -> Any:
-        """``sum_k Rb_k Gamma_k`` (UFL): the deep phases' excess density, a buoyancy magnitude."""
-        terms = [t.Rb * t.phase(T, depth) for t in self.transitions if t.Rb != 0.0]
+    def density(self, T: Any, depth: Any, C: Any = None, /) -> Any:
+        """``sum_k Rb_k phi_k Gamma_k`` (UFL): the deep phases' excess density, a buoyancy magnitude
+        (``phi_k`` the fraction of the materials of transition ``k`` in ``C``; 1 for every material)."""
+        terms = [t.Rb * t.weighted_phase(T, depth, C) for t in self.transitions if t.Rb != 0.0]
         return sum(terms[1:], terms[0]) if terms else ufl.as_ufl(0.0)
 
-    def viscosity_factor(self, T: Any, depth: Any, /) -> Any:
-        """``prod_k f_k ** Gamma_k = exp(sum_k Gamma_k ln f_k)`` (UFL)."""
-        terms = [math.log(t.viscosity_jump) * t.phase(T, depth) for t in self.transitions if t.viscosity_jump != 1.0]
+    def viscosity_factor(self, T: Any, depth: Any, C: Any = None, /) -> Any:
+        """``prod_k f_k ** (phi_k Gamma_k) = exp(sum_k phi_k Gamma_k ln f_k)`` (UFL)."""
+        terms = [math.log(t.viscosity_jump) * t.weighted_phase(T, depth, C) for t in self.transitions
+                 if t.viscosity_jump != 1.0]
         return ufl.exp(sum(terms[1:], terms[0])) if terms else ufl.as_ufl(1.0)
 
     def latent_heat(self, T_new: Any, T: Any, w_up: Any, depth: Any, density: Any, /) -> tuple[Any, Any]:
@@ -175,8 +217,28 @@ class PhaseTransitions:
         return capacity, heating
 
 
+BACKGROUND = "background"
+"""The name of the background material in a transition's ``materials``."""
+
+
+def material_indices(names: tuple[str, ...] | None, material_names: tuple[str, ...], /) -> tuple[int, ...] | None:
+    """The indices of the materials ``names`` (0 the background, ``i`` the ``i``-th of ``material_names``),
+    or None for None (every material).
+
+    Raises:
+        ValueError: a name that is neither ``background`` nor one of ``material_names``.
+    """
+    if names is None:
+        return None
+    known = (BACKGROUND, *material_names)
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ValueError(f"unknown material {unknown[0]!r}; valid: {list(known)}")
+    return tuple(known.index(n) for n in names)
+
+
 def check_phase_transitions(settings: Mapping[str, PhaseTransitionSettings], /, *, energy: bool,
-                            buoyancy_theta: float) -> None:
+                            buoyancy_theta: float, material_names: tuple[str, ...] = ()) -> None:
     """The cross-key checks of the ``phase_transitions`` section (nondimensional: after the units pass).
 
     Raises:
@@ -193,6 +255,26 @@ def check_phase_transitions(settings: Mapping[str, PhaseTransitionSettings], /, 
         if s.entropy_change != 0.0 and not energy:
             raise ConfigError(f"config key '{key}.entropy_change': latent heat needs the energy equation "
                               "(energy.enabled: true)")
+        _check_materials(key, s, material_names)
         if buoyancy_theta != 0.0:
             raise ConfigError(f"config key '{key}': not with stokes.buoyancy_theta (the semi-implicit buoyancy has no "
                               "phase transitions yet)")
+
+
+def _check_materials(key: str, s: PhaseTransitionSettings, material_names: tuple[str, ...], /) -> None:
+    """A transition's ``materials``: known, distinct names, none with latent heat (:func:`check_phase_transitions`)."""
+    from convection.schema import ConfigError
+
+    if s.materials is None:
+        return
+    if not s.materials or len(set(s.materials)) != len(s.materials):
+        raise ConfigError(f"config key '{key}.materials': expected distinct material names, got {list(s.materials)}")
+    if BACKGROUND in material_names:
+        raise ConfigError(f"config key '{key}.materials': a material named {BACKGROUND!r} is ambiguous here; rename it")
+    try:
+        material_indices(s.materials, material_names)
+    except ValueError as err:
+        raise ConfigError(f"config key '{key}.materials': {err}") from None
+    if s.entropy_change != 0.0:
+        raise ConfigError(f"config key '{key}.materials': latent heat applies to every material (not yet per "
+                          "material); give the latent heat in a transition without materials")

@@ -76,8 +76,8 @@ TIP = np.array([[4.5, 2.75], [4.5, 3.0], [4.5, 2.5]])
 T_LOAD, T_END, DT = 50.0, 100.0, 1.0
 """End of the loading, of the run, and the step (kyr)."""
 RECOVERY_WINDOW = (52.0, 59.0)
-"""Where the recovery rate is measured (kyr): from the second step after the switch (the first moves
-in the loaded flow in both codes) over the part that ASPECT's 45 x 30 run reached."""
+"""Where the recovery rate is measured (kyr): the first 7 kyr from the second step after the switch (the
+first moves in the loaded flow in both codes)."""
 RESOLUTIONS = ((30, 20), (45, 30), (75, 50))
 QUICK = ((30, 20),)
 

@@ -185,10 +185,15 @@ class StokesDiscretisation:
         metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
         return ufl.dx(domain=self.mesh, metadata=metadata), metadata
 
+    def _density(self) -> Any:
+        """The continuity equation's reference density ``rho_r`` (UFL), or None for ``div u = 0``
+        (:meth:`~convection.physics.approximation.BoussinesqApproximation.continuity_density`)."""
+        return self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
+
     def _mass_flux(self, u: Any, /) -> Any:
         """The continuity equation's ``div u``, or ``div(rho_r u)`` when the approximation weighs it by
-        a reference density (:meth:`~convection.physics.approximation.BoussinesqApproximation.continuity_density`)."""
-        rho = self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
+        a reference density (:meth:`_density`)."""
+        rho = self._density()
         return ufl.div(u) if rho is None else ufl.div(rho * u)
 
     def _viscous(self, eta: Any, u: Any, v: Any, dx: Any, /) -> Any:
@@ -245,7 +250,7 @@ class StokesDiscretisation:
         curved = weak_free_slip_boundaries(self.bcs, self.domain)
         if curved:
             nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata)
+                                        metadata=metadata, density=self._density())
             F_u = F_u + nitsche.a_uu + nitsche.a_up
             F_p = F_p + nitsche.a_pu
         if self.surface is not None:
@@ -286,7 +291,7 @@ class StokesDiscretisation:
         curved = weak_free_slip_boundaries(self.bcs, self.domain)
         if curved:
             nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata)
+                                        metadata=metadata, density=self._density())
             a[0][0] += nitsche.a_uu
             a[0][1] += nitsche.a_up
             a[1][0] += nitsche.a_pu

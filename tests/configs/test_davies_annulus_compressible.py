@@ -126,7 +126,8 @@ def runs(tmp_path_factory):
 @pytest.mark.parametrize("formulation", ["eba", "tala", "ala"])
 def test_one_and_two_ranks_agree(runs, formulation):
     """To 1e-7 as the other annulus configs' tests (the partition changes MUMPS's pivoting; EBA's Nu
-    differed by 1.2e-9 at step 5)."""
+    differed by 1.2e-9 at step 5). ALA: its pressure mode includes the weak free slip's (p, v . n),
+    without which its vrms differed by 7e-5 at step 0."""
     one, two = rows(runs[formulation][1]), rows(runs[formulation][2])
     assert len(one) == 11
     assert [r["step"] for r in two] == [r["step"] for r in one]
@@ -136,10 +137,12 @@ def test_one_and_two_ranks_agree(runs, formulation):
 
 
 def test_eba_balances_shear_heating_and_work(runs):
-    """Under EBA div u = 0: the momentum equation tested with the velocity leaves Phi = W at every step."""
+    """Under EBA div u = 0: the momentum equation tested with the velocity leaves Phi = W at every
+    step, but for the weak free slip's work on the boundary (u . n is small, not zero): 2.4e-3 at
+    this size (the box's strong free slip: below 1e-3), 2e-4 at the steady state on 2599 cells."""
     statistics = rows(runs["eba"][1])[1:]
     assert all(float(r["heating_W"]) > 0.0 for r in statistics)
-    assert max(float(r["heating_misfit"]) for r in statistics) < 1e-3
+    assert max(float(r["heating_misfit"]) for r in statistics) < 4e-3
 
 
 def test_tala_has_pressure_work_and_ala_is_not_tala(runs):

@@ -218,7 +218,15 @@ class StokesDiscretisation:
     def pressure_column(self, p: Any, /) -> Any:
         """The compiled linear form ``v -> `` the momentum equation's pressure term of the pressure ``p``
         (:class:`convection.solvers.stokes.nullspace.PressureMode`). Collective."""
-        return dolfinx.fem.form(self._pressure_block(p, ufl.TestFunction(self.V), self._dx()[0]))
+        v = ufl.TestFunction(self.V)
+        dx, metadata = self._dx()
+        column = self._pressure_block(p, v, dx)
+        curved = weak_free_slip_boundaries(self.bcs, self.domain)
+        if curved:  # the weak free slip's (p, v . n) on the curved boundaries, as in the operator
+            column = column + nitsche_free_slip(self.mesh, self.domain, curved, ufl.TrialFunction(self.V), p, v,
+                                                ufl.TestFunction(self.Q), 1.0, penalty=self.nitsche_penalty,
+                                                metadata=metadata).a_up
+        return dolfinx.fem.form(column)
 
     def component_space(self, axis: int, /) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
         """``V.sub(axis).collapse()`` (made once): the scalar space and its map into ``V``'s

@@ -49,7 +49,7 @@ from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation
 from convection.geometry.boundary import (
-    VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries,
+    NitscheTerms, VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries,
 )
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
@@ -185,16 +185,18 @@ class StokesDiscretisation:
         metadata = {"quadrature_degree": 3 * self.degree} if self.approximation.is_variable_viscosity else {}
         return ufl.dx(domain=self.mesh, metadata=metadata), metadata
 
-    def _density(self) -> Any:
-        """The continuity equation's reference density ``rho_r`` (UFL), or None for ``div u = 0``
-        (:meth:`~convection.physics.approximation.BoussinesqApproximation.continuity_density`)."""
-        return self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
-
     def _mass_flux(self, u: Any, /) -> Any:
         """The continuity equation's ``div u``, or ``div(rho_r u)`` when the approximation weighs it by
-        a reference density (:meth:`_density`)."""
-        rho = self._density()
+        a reference density (:meth:`~convection.physics.approximation.BoussinesqApproximation.continuity_density`)."""
+        rho = self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
         return ufl.div(u) if rho is None else ufl.div(rho * u)
+
+    def _weak_free_slip(self, u: Any, p: Any, v: Any, q: Any, eta: Any, metadata: dict, /) -> NitscheTerms | None:
+        """The Nitsche terms of free slip on the curved boundaries (continuity: ``(q, rho_r u . n)``), or None."""
+        curved = weak_free_slip_boundaries(self.bcs, self.domain)
+        return nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+                                 metadata=metadata, density=self.approximation.continuity_density(
+                                     ufl.SpatialCoordinate(self.mesh))) if curved else None
 
     def _viscous(self, eta: Any, u: Any, v: Any, dx: Any, /) -> Any:
         """``(2 eta eps(u), eps(v))``; with the ALA's pressure buoyancy the compressible stress's
@@ -218,14 +220,11 @@ class StokesDiscretisation:
     def pressure_column(self, p: Any, /) -> Any:
         """The compiled linear form ``v -> `` the momentum equation's pressure term of the pressure ``p``
         (:class:`convection.solvers.stokes.nullspace.PressureMode`). Collective."""
-        v = ufl.TestFunction(self.V)
-        dx, metadata = self._dx()
+        v, (dx, metadata) = ufl.TestFunction(self.V), self._dx()
         column = self._pressure_block(p, v, dx)
-        curved = weak_free_slip_boundaries(self.bcs, self.domain)
-        if curved:  # the weak free slip's (p, v . n) on the curved boundaries, as in the operator
-            column = column + nitsche_free_slip(self.mesh, self.domain, curved, ufl.TrialFunction(self.V), p, v,
-                                                ufl.TestFunction(self.Q), 1.0, penalty=self.nitsche_penalty,
-                                                metadata=metadata).a_up
+        nitsche = self._weak_free_slip(ufl.TrialFunction(self.V), p, v, ufl.TestFunction(self.Q), 1.0, metadata)
+        if nitsche is not None:  # the weak free slip's (p, v . n), as in the operator
+            column = column + nitsche.a_up
         return dolfinx.fem.form(column)
 
     def component_space(self, axis: int, /) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
@@ -255,10 +254,8 @@ class StokesDiscretisation:
         elastic = self.elastic_load(T, C, {"u": u, "p": p, "fields": fields or {}}, v, dx)
         if elastic is not None:
             F_u = F_u - elastic
-        curved = weak_free_slip_boundaries(self.bcs, self.domain)
-        if curved:
-            nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata, density=self._density())
+        nitsche = self._weak_free_slip(u, p, v, q, eta, metadata)
+        if nitsche is not None:
             F_u = F_u + nitsche.a_uu + nitsche.a_up
             F_p = F_p + nitsche.a_pu
         if self.surface is not None:
@@ -296,10 +293,8 @@ class StokesDiscretisation:
             [self._viscous(eta, u, v, dx), self._pressure_block(p, v, dx)],
             [-ufl.inner(self._mass_flux(u), q) * dx, None],
         ]
-        curved = weak_free_slip_boundaries(self.bcs, self.domain)
-        if curved:
-            nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata, density=self._density())
+        nitsche = self._weak_free_slip(u, p, v, q, eta, metadata)
+        if nitsche is not None:
             a[0][0] += nitsche.a_uu
             a[0][1] += nitsche.a_up
             a[1][0] += nitsche.a_pu

@@ -49,7 +49,7 @@ from petsc4py import PETSc
 
 from convection.physics.approximation import BoussinesqApproximation
 from convection.geometry.boundary import (
-    VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries,
+    NitscheTerms, VelocityBC, nitsche_free_slip, velocity_dirichlet_bcs, weak_free_slip_boundaries,
 )
 from convection.geometry.domain import Domain
 from convection.physics.buoyancy import SemiImplicitBuoyancy
@@ -191,6 +191,13 @@ class StokesDiscretisation:
         rho = self.approximation.continuity_density(ufl.SpatialCoordinate(self.mesh))
         return ufl.div(u) if rho is None else ufl.div(rho * u)
 
+    def _weak_free_slip(self, u: Any, p: Any, v: Any, q: Any, eta: Any, metadata: dict, /) -> NitscheTerms | None:
+        """The Nitsche terms of free slip on the curved boundaries (continuity: ``(q, rho_r u . n)``), or None."""
+        curved = weak_free_slip_boundaries(self.bcs, self.domain)
+        return nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
+                                 metadata=metadata, density=self.approximation.continuity_density(
+                                     ufl.SpatialCoordinate(self.mesh))) if curved else None
+
     def _viscous(self, eta: Any, u: Any, v: Any, dx: Any, /) -> Any:
         """``(2 eta eps(u), eps(v))``; with the ALA's pressure buoyancy the compressible stress's
         ``-(2/3) eta div u I`` too, ``-(2/3) (eta div u, div v)`` (else the pressure would hold it and
@@ -213,7 +220,12 @@ class StokesDiscretisation:
     def pressure_column(self, p: Any, /) -> Any:
         """The compiled linear form ``v -> `` the momentum equation's pressure term of the pressure ``p``
         (:class:`convection.solvers.stokes.nullspace.PressureMode`). Collective."""
-        return dolfinx.fem.form(self._pressure_block(p, ufl.TestFunction(self.V), self._dx()[0]))
+        v, (dx, metadata) = ufl.TestFunction(self.V), self._dx()
+        column = self._pressure_block(p, v, dx)
+        nitsche = self._weak_free_slip(ufl.TrialFunction(self.V), p, v, ufl.TestFunction(self.Q), 1.0, metadata)
+        if nitsche is not None:  # the weak free slip's (p, v . n), as in the operator
+            column = column + nitsche.a_up
+        return dolfinx.fem.form(column)
 
     def component_space(self, axis: int, /) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
         """``V.sub(axis).collapse()`` (made once): the scalar space and its map into ``V``'s
@@ -242,10 +254,8 @@ class StokesDiscretisation:
         elastic = self.elastic_load(T, C, {"u": u, "p": p, "fields": fields or {}}, v, dx)
         if elastic is not None:
             F_u = F_u - elastic
-        curved = weak_free_slip_boundaries(self.bcs, self.domain)
-        if curved:
-            nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata)
+        nitsche = self._weak_free_slip(u, p, v, q, eta, metadata)
+        if nitsche is not None:
             F_u = F_u + nitsche.a_uu + nitsche.a_up
             F_p = F_p + nitsche.a_pu
         if self.surface is not None:
@@ -283,10 +293,8 @@ class StokesDiscretisation:
             [self._viscous(eta, u, v, dx), self._pressure_block(p, v, dx)],
             [-ufl.inner(self._mass_flux(u), q) * dx, None],
         ]
-        curved = weak_free_slip_boundaries(self.bcs, self.domain)
-        if curved:
-            nitsche = nitsche_free_slip(self.mesh, self.domain, curved, u, p, v, q, eta, penalty=self.nitsche_penalty,
-                                        metadata=metadata)
+        nitsche = self._weak_free_slip(u, p, v, q, eta, metadata)
+        if nitsche is not None:
             a[0][0] += nitsche.a_uu
             a[0][1] += nitsche.a_up
             a[1][0] += nitsche.a_pu

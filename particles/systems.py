@@ -168,6 +168,13 @@ class ParticleSystems:
                 records[name] = record
         return records
 
+    def refresh(self, column: str, context: PropertyContext, /) -> None:
+        """Refresh the property ``column`` now, whatever its update policy, in every system that has it
+        (the elastic stress for a flow solved again at a step's start: :meth:`convection.model.model.Model.step`)."""
+        for manager in self:
+            if column in manager.properties.names:
+                manager.properties.refresh(column, context)
+
     def follow_mesh(self) -> dict[str, FollowStats]:
         """:meth:`ParticleManager.follow_mesh` of every system (the mesh's nodes moved)."""
         return {name: manager.follow_mesh() for name, manager in self.items()}

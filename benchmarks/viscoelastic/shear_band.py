@@ -51,7 +51,6 @@ prints one JSON line last.
 from __future__ import annotations
 
 import json
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,6 +60,7 @@ import numpy as np
 from mpi4py import MPI
 
 from benchmarks.harness import OUTPUT, Benchmark, markdown_table
+from benchmarks.viscoelastic.common import resolutions_main
 from convection.app.factory import build_model
 from convection.config.loader import load_config
 
@@ -311,18 +311,8 @@ def _publish(runs: list[Run], results: Path, *, steps: int, ranks: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = BENCHMARK.parser()
-    parser.add_argument("--steps", type=int, default=STEPS, help="steps of t_yield / 10")
-    args = parser.parse_args(argv)
-    logging.getLogger().addFilter(lambda record: record.levelno >= logging.WARNING)
-    comm = MPI.COMM_WORLD
-    if comm.rank == 0:
-        BENCHMARK.log_load("start")
-    runs = [run_case(cells, out=args.out / f"{cells[0]}x{cells[1]}", steps=args.steps, comm=comm)
-            for cells in (QUICK if args.quick else RESOLUTIONS)]
-    if comm.rank == 0:
-        _publish(runs, args.results, steps=args.steps, ranks=comm.size)
-    return 0
+    return resolutions_main(argv, BENCHMARK, run_case=run_case, resolutions=RESOLUTIONS, quick=QUICK, steps=STEPS,
+                            steps_help="steps of t_yield / 10", publish=_publish)
 
 
 if __name__ == "__main__":

@@ -18,10 +18,12 @@ One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
 0. where the flow anticipates the step's end (a free surface's stabilisation, a predicted buoyancy)
    and was solved for less than half of ``dt`` (on the first step: for no step), it is solved again
    for ``dt``, and ``u* = u^n`` in 1. (a flow solved for another step is not of the history ``u*``
-   extrapolates). Up to twice the anticipated step the flow is kept: with ``theta = 1`` a relaxing
-   surface is then multiplied by ``|A| <= 1`` per step (:mod:`convection.deform.surface`), and
-   solving again at every growing CFL step made the flow noisier (vrms jumps 0.215 against 0.093
-   with the predicted buoyancy, tests/convection/physics/test_buoyancy.py);
+   extrapolates); the particles' elastic stress takes that flow's strain (the flow moves the step:
+   without it, the first step's elastic deformation would carry no stress, issue 48). Up to twice
+   the anticipated step the flow is kept: with ``theta = 1`` a relaxing surface is then multiplied
+   by ``|A| <= 1`` per step (:mod:`convection.deform.surface`), and solving again at every growing
+   CFL step made the flow noisier (vrms jumps 0.215 against 0.093 with the predicted buoyancy,
+   tests/convection/physics/test_buoyancy.py);
 1. the velocity at the step's end is extrapolated, ``u* = (1 + w) u^n - w u^{n-1}``
    (``w = dt / dt_previous``; ``u* = u^n`` on the first step) — the model is the one owner of the
    previous velocity;
@@ -85,9 +87,7 @@ class StepReport(NamedTuple):
 
 
 class Model(Stateful):
-    """Boussinesq convection with optional materials, particles, adaptivity and balancing.
-
-    All methods are collective.
+    """Boussinesq convection with optional materials, particles, adaptivity and balancing (all methods collective).
 
     Args:
         stokes: The flow solver on the model's mesh.
@@ -196,9 +196,9 @@ class Model(Stateful):
             return {}
         return self.rheology.rate_functions(self.flow() if self.flow_result is not None else None)
 
-    def property_context(self) -> PropertyContext:
-        """The current fields and time, for particle properties (with elasticity: the fields they read, issue 48)."""
-        return PropertyContext(time=self.time, dt=self.dt_previous, u_new=self.stokes.u, temperature=self.T,
+    def property_context(self, dt: float | None = None) -> PropertyContext:
+        """The fields, time and step (default: the last) for particle properties (elasticity's fields: issue 48)."""
+        return PropertyContext(time=self.time, dt=dt or self.dt_previous, u_new=self.stokes.u, temperature=self.T,
                                pressure=self.stokes.p, fields=self.rheology.property_fields(self.particle_fields))
 
     # ------------------------------------------------------------------ checkpoints
@@ -274,6 +274,8 @@ class Model(Stateful):
         if anticipates and dt > 2 * self.dt_previous:
             self.solve_flow(dt)  # it anticipated a far shorter step (the first step: none): step 0 above
             self.u_previous = None  # u^n is then not of the history u* extrapolates
+            if self.particles is not None:  # the step moves with this flow: its strain joins the elastic stress
+                self.particles.refresh("elastic_stress", self.property_context(dt))
         u = self.stokes.u
         u_end = self._velocity_at_step_end(dt)
         u_materials = u if self.stokes.buoyancy_theta > 0.0 else u_end

@@ -252,6 +252,10 @@ class PropertyManager:
             if policy == "every_step" or (policy == "output_only" and at_output):
                 prop.refresh(self.swarm, ctx)
 
+    def refresh(self, column: str, context: PropertyContext, /) -> None:
+        """Refresh the property ``column`` now, whatever its update policy."""
+        self[column].refresh(self.swarm, self._bind(context))
+
     @property
     def rate_fields(self) -> tuple[str, ...]:
         """The mesh fields the accumulating properties integrate, and those the others read when they

@@ -108,3 +108,24 @@ def test_the_balancer_weighs_every_systems_particles(world):
     assert loads.particles[mesh.comm.rank] == mine
     assert loads.load[mesh.comm.rank] == pytest.approx(owned + 2.0 * mine)
     assert sum(loads.particles) == dense.num_particles + tracers.num_particles
+
+
+def test_refresh_updates_one_property_where_a_system_has_it():
+    """``refresh(column, context)``: that property now, whatever its policy, in the systems that have
+    it (the elastic stress of a flow solved again at a step's start); the others untouched."""
+    mesh = _mesh(MPI.COMM_SELF)
+    u = _flow(mesh)
+    cells = mesh.topology.index_map(2).size_global
+    sampled = ParticleManager(mesh, generator=build_generator({"name": "random_uniform", "num_particles": 40,
+                                                               "seed": 2}, num_cells=cells),
+                              properties=build_properties(["initial_position", "velocity"]),
+                              context=PropertyContext(u_new=u))
+    systems = ParticleSystems({"sampled": sampled, "tracers": _tracers(mesh, u)})
+    sampled.properties.values("velocity")[:] = 0.0
+    before = systems["tracers"].swarm.properties.copy()
+    systems.refresh("velocity", PropertyContext(u_new=u))
+    x = sampled.swarm.x
+    expected = np.stack([np.pi * np.sin(np.pi * x[:, 0]) * np.cos(np.pi * x[:, 1]),
+                         -np.pi * np.cos(np.pi * x[:, 0]) * np.sin(np.pi * x[:, 1])], axis=1)
+    np.testing.assert_allclose(sampled.properties.values("velocity"), expected, atol=2e-2)
+    np.testing.assert_array_equal(systems["tracers"].swarm.properties, before)

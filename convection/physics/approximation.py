@@ -514,6 +514,26 @@ class BoussinesqApproximation:
         shear = reference.Di / self.Ra * shear_heating(self.viscosity(T_eta, None, x=x), u)
         return adiabatic, shear
 
+    def pressure_work(self, T_eta: Any, u: Any, p: Any, x: Any, /) -> Any:
+        """UFL ``P``, what the compression adds to the energy balance: ``Phi - W = <P>``.
+
+        Testing the momentum equation with the velocity gives, with ``Phi`` the shear heating
+        ``2 eta (eps : eps - (div u)^2 / 3)`` and ``<alpha_r rho_r w> = 0`` (mass):
+
+        - EBA, TALA (viscous term ``2 eta eps : eps``): ``P = (Di / Ra) (p div u - (2/3) eta (div u)^2)``,
+          zero under EBA (``div u = 0``);
+        - ALA (the compressible stress, and the pressure buoyancy ``-c p e_up``):
+          ``P = (Di / Ra) (p div u - c p w)``.
+
+        ``eta`` at ``T_eta``."""
+        div_u = ufl.div(u)
+        c = self.pressure_buoyancy(x)
+        if c is None:
+            work = p * div_u - 2.0 / 3.0 * self.viscosity(T_eta, None, x=x) * div_u * div_u
+        else:
+            work = p * div_u - c * p * ufl.dot(u, self.up(x))
+        return self.reference.Di / self.Ra * work
+
     def __repr__(self) -> str:
         return (
             f"BoussinesqApproximation(Ra={self.Ra}, Rb={self.Rb}, H={self.H}, "

@@ -28,7 +28,9 @@ name            columns
 ``energy``      W = <T u . e_up>, Phi_over_Ra = <2 eta eps(u):eps(u)> / Ra (volume averages) and
                 delta = |W - Phi/Ra| / max(W, Phi/Ra): the energy balance of steady convection
 ``heating``     heating_W = <Di rho_r (T + T0) u . e_up>, the work against gravity (adiabatic cooling),
-                heating_Phi = <(Di / Ra) Phi>, the shear heating, and heating_misfit = |Phi - W| / W
+                heating_Phi = <(Di / Ra) Phi>, the shear heating, heating_misfit = |Phi - W| / W,
+                heating_pressure_work = P, what the compression adds (TALA, ALA; 0 under EBA), and
+                heating_balance = |Phi - W - P| / W, the energy balance with it
                 (EBA, TALA: :mod:`convection.physics.compressible`; by default there only)
 ``adiabat``     T_adiabatic_mean, T_nonadiabatic_mean: volume means of the adiabatic temperature T_ad and of
                 T - T_ad (EBA, TALA, ALA; only when asked for)
@@ -429,9 +431,9 @@ class EnergyBalance(_Rheology):
 
 class Heating(Column):
     name: ClassVar[str] = "heating"
-    description: ClassVar[str] = ("work against gravity W (adiabatic cooling), shear heating Phi (volume averages) and "
-                                  "|Phi - W| / W")
-    columns = ("heating_W", "heating_Phi", "heating_misfit")
+    description: ClassVar[str] = ("work against gravity W (adiabatic cooling), shear heating Phi (volume averages), "
+                                  "|Phi - W| / W, the compression's work P and the balance |Phi - W - P| / W")
+    columns = ("heating_W", "heating_Phi", "heating_misfit", "heating_pressure_work", "heating_balance")
 
     def __init__(self) -> None:
         self._forms = Forms()
@@ -445,14 +447,17 @@ class Heating(Column):
         stokes = model.stokes
 
         def build() -> dict[str, Any]:
-            W, Phi = stokes.approximation.heating_rates(model.T, model.T, stokes.u, ufl.SpatialCoordinate(model.mesh))
+            x = ufl.SpatialCoordinate(model.mesh)
+            W, Phi = stokes.approximation.heating_rates(model.T, model.T, stokes.u, x)
+            P = stokes.approximation.pressure_work(model.T, stokes.u, stokes.p, x)
             dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 3 * stokes.degree})
-            return {"W": dolfinx.fem.form(W * dx), "Phi": dolfinx.fem.form(Phi * dx),
+            return {"W": dolfinx.fem.form(W * dx), "Phi": dolfinx.fem.form(Phi * dx), "P": dolfinx.fem.form(P * dx),
                     "volume": dolfinx.fem.form(dolfinx.fem.Constant(model.mesh, 1.0) * dx)}
         forms = self._forms.get(model, build)
         volume = integral(model, forms["volume"])
-        W, phi = integral(model, forms["W"]) / volume, integral(model, forms["Phi"]) / volume
-        return {"heating_W": W, "heating_Phi": phi, "heating_misfit": abs(phi - W) / abs(W) if W else 0.0}
+        W, phi, P = (integral(model, forms[k]) / volume for k in ("W", "Phi", "P"))
+        return {"heating_W": W, "heating_Phi": phi, "heating_misfit": abs(phi - W) / abs(W) if W else 0.0,
+                "heating_pressure_work": P, "heating_balance": abs(phi - W - P) / abs(W) if W else 0.0}
 
 
 class Adiabat(Heating):

@@ -3,7 +3,8 @@
 The full comparison (32 x 32, Di = 0.25, 0.5, 1) is benchmarks/compressible/run.py. Here: TALA at
 Di = 1 against the published codes' mean (1 %) and a stored value; the energy balance Phi = W that
 EBA keeps at every step (the momentum equation tested with the velocity: no pressure work, as
-div u = 0) and TALA breaks by its pressure work (King et al.'s codes: 4 %).
+div u = 0) and TALA breaks by its pressure work (King et al.'s codes: 4 %); and Phi - W = P, the
+compression's work, to round-off at every step under EBA, TALA and ALA.
 """
 
 from pathlib import Path
@@ -48,9 +49,29 @@ def test_tala_has_pressure_work(tala):
     assert 0.03 < tala["heating_misfit"][-1] < 0.06
 
 
+def test_tala_energy_closes_with_its_pressure_work(tala):
+    """Phi - W is the compression's work P at every step (the momentum equation tested with the
+    velocity): |Phi - W - P| / W at round-off, although P is 4 % of W at steady state."""
+    assert np.max(tala["heating_balance"][1:]) < 1e-10
+    assert tala["heating_pressure_work"][-1] == pytest.approx(tala["heating_Phi"][-1] - tala["heating_W"][-1],
+                                                               rel=1e-8)
+
+
+def test_ala_energy_closes_with_its_pressure_work(tmp_path_factory):
+    """ALA: the pressure's buoyancy takes part of the compression's work back; the balance with what
+    is left closes to round-off at every step."""
+    statistics = _run(tmp_path_factory, "ala", ["physics.approximation=ala", "physics.reference.Di=1.0",
+                                                "time.max_steps=20"])
+    assert np.all(statistics["heating_W"][1:] > 0.0)
+    assert np.max(statistics["heating_balance"][1:]) < 1e-10
+    assert np.max(np.abs(statistics["heating_pressure_work"][1:])) > 1e-4  # not a balance of nothing
+
+
 def test_eba_balances_dissipation_and_work(tmp_path_factory):
     statistics = _run(tmp_path_factory, "eba", ["physics.approximation=eba", "physics.reference.Di=0.5",
                                                 "time.max_steps=60"])
     assert len(statistics["step"]) == 61
     assert np.all(statistics["heating_W"][1:] > 0.0)
     assert np.max(statistics["heating_misfit"]) < 1e-3
+    assert np.max(np.abs(statistics["heating_pressure_work"])) < 1e-3 * np.max(statistics["heating_W"])
+    assert np.max(statistics["heating_balance"][1:]) < 1e-10

@@ -173,9 +173,10 @@ class Elasticity:
         return -self.memory(eta, C, rate) * ufl.inner(tau, ufl.sym(ufl.grad(v))) * dx
 
 
-def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], dt_max: float | None = None, /) -> None:
+def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], dt_max: float | None = None,
+                     dt_initial: float | None = None, /) -> None:
     """The cross-key checks of ``physics.elasticity`` (``carried``: the property names of the primary
-    particle system, empty without particles; ``dt_max``: ``time.dt_max``).
+    particle system, empty without particles; ``dt_max``, ``dt_initial``: the ``time`` keys).
 
     Raises:
         ConfigError: elasticity without the particles' ``elastic_stress``, or that property without
@@ -186,6 +187,9 @@ def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], dt_ma
     if settings.enabled and dt_e is not None and (dt_max is None or dt_max > dt_e):
         raise ConfigError("config key 'physics.elasticity.elastic_time_step': a fixed elastic time step must be at "
                           "least the longest step; set time.dt_max, at most elastic_time_step")
+    if settings.enabled and dt_e is not None and dt_initial is not None and dt_initial > dt_e:
+        raise ConfigError("config key 'time.dt_initial': a step longer than "
+                          "physics.elasticity.elastic_time_step; set it at most that")
     if settings.enabled and STRESS_PROPERTY not in carried:
         raise ConfigError("config key 'physics.elasticity.enabled': the stress history is carried by particles; set "
                           f"particles.enabled: true and carry {STRESS_PROPERTY!r} in particles.properties")

@@ -157,6 +157,8 @@ def test_elastic_time_step_is_checked_and_has_units():
     for document, needle in cases:
         with pytest.raises(ConfigError, match=f"physics.elasticity.elastic_time_step.*{needle}"):
             load_config(None, document=document)
+    with pytest.raises(ConfigError, match="time.dt_initial.*elastic_time_step"):
+        load_config(None, document=_with(physics__elasticity=fixed, time__dt_max=0.5, time__dt_initial=0.6))
     scaling = {"length": "100 km", "viscosity": "1e21 Pa s", "density": "3300 kg/m^3", "gravity": "9.81 m/s^2"}
     document = _with(physics__elasticity=fixed | {"elastic_time_step": "10 kyr"}, time__dt_max="5 kyr",
                      time__end="20 kyr") | {"scaling": scaling}

@@ -347,7 +347,8 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
     carried = _property_names(config) if particles_enabled(config) else ()
     check_elastic_outputs(config["physics"]["elasticity"]["enabled"], carried, config["output"]["extra_fields"])
     _check_particles(config)
-    check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), carried)  # issue 48
+    check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), carried,  # issue 48
+                     config["time"]["dt_max"], config["time"]["dt_initial"])
     if laws_given(config):  # visco-elasto-plastic: the yield limits the visco-elastic stress (issue 48)
         check_plasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), _keyed_laws(config))
     if config["initial"]["steady"]:

@@ -62,6 +62,7 @@ EXPECTED: dict[str, str] = {
     **dict.fromkeys(("yield_stress", "cohesion", "shear_modulus"), _STRESS),
     **dict.fromkeys(("reference_strain_rate", "steady_state_rate"), "1 / [time]"),
     "steady_state_time_window": "[time]",
+    "elastic_time_step": "[time]",
     "H": "[temperature] / [time]",
 }
 """The dimension a value with a unit must have, by the name of its key (a key not named here takes

@@ -228,14 +228,17 @@ def _elastic_rates(stokes: StokesSolver, /) -> dict[str, Callable[[Flow], Any]]:
     if stokes.discretisation.elasticity is None:
         return {}
 
-    def factor(name: str) -> Callable[[Flow], Any]:
+    def factor(index: int) -> Callable[[Flow], Any]:
         def expression(flow: Flow) -> Any:
             discretisation = flow.stokes.discretisation
             eta = discretisation.maxwell_viscosity(flow.T, flow.fractions, {"u": flow.stokes.u, "p": flow.stokes.p,
                                                                              "fields": flow.fields})
-            return getattr(discretisation.elasticity, name)(eta, flow.fractions, discretisation.elastic_rate)
+            elasticity = discretisation.elasticity
+            assert elasticity is not None  # made only with elasticity
+            return elasticity.update_factors(eta, flow.fractions, discretisation.elastic_rate,
+                                             discretisation.elastic_share)[index]
         return expression
-    return {"elastic_viscosity": factor("viscosity"), "elastic_memory": factor("memory")}
+    return {"elastic_viscosity": factor(0), "elastic_memory": factor(1)}
 
 
 def law_viscosity(flow: Flow, /) -> Any:

@@ -64,6 +64,10 @@ class ElasticitySettings:
                                       "elastic_stress")
     shear_modulus: float = param(1.0, exclusive_minimum=0.0, help="shear modulus G of the background material (a "
                                                                   "stress: e.g. 1e10 Pa with the scaling section)")
+    elastic_time_step: float | None = param(None, exclusive_minimum=0.0,
+                                            help="a fixed elastic time step dt_e >= time.dt_max, the stress averaged "
+                                                 "between steps (a time: e.g. 10 kyr with the scaling section); null: "
+                                                 "dt_e = dt")
 
 
 @dataclass(frozen=True)
@@ -73,14 +77,19 @@ class Elasticity:
     Attributes:
         shear_modulus: ``G`` of the background material.
         material_moduli: ``G`` of each material (None: the background's), in the materials' order.
+        time_step: a fixed elastic time step ``dt_e`` (None: ``dt_e = dt``, the step), with the stress
+            averaged between steps (:meth:`averaged`).
     """
 
     shear_modulus: float
     material_moduli: tuple[float | None, ...] = ()
+    time_step: float | None = None
 
     def __post_init__(self) -> None:
         if not all(g is None or g > 0.0 for g in (self.shear_modulus, *self.material_moduli)):
             raise ValueError(f"shear moduli must be > 0, got {self.shear_modulus}, {self.material_moduli}")
+        if self.time_step is not None and not self.time_step > 0.0:
+            raise ValueError(f"the elastic time step must be > 0, got {self.time_step}")
 
     @property
     def is_variable(self) -> bool:
@@ -91,7 +100,8 @@ class Elasticity:
     def from_settings(cls, settings: ElasticitySettings, material_moduli: Sequence[float | None] = (), /
                       ) -> Elasticity | None:
         """The elasticity of a run (None when not enabled)."""
-        return cls(settings.shear_modulus, tuple(material_moduli)) if settings.enabled else None
+        return (cls(settings.shear_modulus, tuple(material_moduli), settings.elastic_time_step) if settings.enabled
+                else None)
 
     def modulus(self, C: Any, /) -> Any:
         """``G`` at the material fractions ``C`` (a number where every material has the background's)."""
@@ -116,6 +126,30 @@ class Elasticity:
         de = self.deborah(eta, C, rate)
         return de / (1.0 + de)
 
+    def steps(self, dt: float, /) -> tuple[float, float]:
+        """``1 / dt_e`` and the averaging's share ``r = dt / dt_e`` for a step ``dt``: ``dt_e = dt``, ``r = 1``
+        without a fixed elastic time step; ``dt = 0`` (no step yet): ``1 / dt_e = 0``, the viscous flow."""
+        dt_e = dt if self.time_step is None else self.time_step
+        return (1.0 / dt_e if dt > 0.0 else 0.0), (1.0 if self.time_step is None else dt / self.time_step)
+
+    def update_factors(self, eta: Any, C: Any, rate: Any, share: Any, /) -> tuple[Any, Any]:
+        """The factors of the particles' stress update ``tau <- 2 eta_ve eps + chi R tau R^T``: ``eta_ve`` and
+        ``chi`` at ``dt_e``, averaged over the step (:meth:`averaged`, ``share``: ``dt / dt_e``) with a fixed
+        ``dt_e``."""
+        factors = self.viscosity(eta, C, rate), self.memory(eta, C, rate)
+        return factors if self.time_step is None else self.averaged(*factors, share)
+
+    @staticmethod
+    def averaged(eta_ve: Any, chi: Any, share: Any, /) -> tuple[Any, Any]:
+        """The factors of the particles' update ``tau <- 2 eta_ve' eps + chi' R tau R^T`` with the stress
+        averaged over a step ``dt`` shorter than a fixed ``dt_e`` (``share``: ``r = dt / dt_e``)::
+
+            tau <- (1 - r) R tau R^T + r (2 eta_ve eps + chi R tau R^T)
+            eta_ve' = r eta_ve,   chi' = 1 - r (1 - chi)
+
+        (docs/rheology.md, "A fixed elastic time step")."""
+        return share * eta_ve, 1.0 - share * (1.0 - chi)
+
     @staticmethod
     def stress(fields: Mapping[str, Any], gdim: int, /) -> Any:
         """The old deviatoric stress as a UFL tensor from its component fields (:func:`stress_labels`)."""
@@ -139,14 +173,23 @@ class Elasticity:
         return -self.memory(eta, C, rate) * ufl.inner(tau, ufl.sym(ufl.grad(v))) * dx
 
 
-def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], /) -> None:
+def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], dt_max: float | None = None,
+                     dt_initial: float | None = None, /) -> None:
     """The cross-key checks of ``physics.elasticity`` (``carried``: the property names of the primary
-    particle system, empty without particles).
+    particle system, empty without particles; ``dt_max``, ``dt_initial``: the ``time`` keys).
 
     Raises:
         ConfigError: elasticity without the particles' ``elastic_stress``, or that property without
-            elasticity.
+            elasticity; a fixed elastic time step without ``time.dt_max`` or below it (the averaging
+            would extrapolate the stress).
     """
+    dt_e = settings.elastic_time_step
+    if settings.enabled and dt_e is not None and (dt_max is None or dt_max > dt_e):
+        raise ConfigError("config key 'physics.elasticity.elastic_time_step': a fixed elastic time step must be at "
+                          "least the longest step; set time.dt_max, at most elastic_time_step")
+    if settings.enabled and dt_e is not None and dt_initial is not None and dt_initial > dt_e:
+        raise ConfigError("config key 'time.dt_initial': a step longer than "
+                          "physics.elasticity.elastic_time_step; set it at most that")
     if settings.enabled and STRESS_PROPERTY not in carried:
         raise ConfigError("config key 'physics.elasticity.enabled': the stress history is carried by particles; set "
                           f"particles.enabled: true and carry {STRESS_PROPERTY!r} in particles.properties")

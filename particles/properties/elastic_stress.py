@@ -12,7 +12,9 @@ where the linearised update ``tau + dt (W tau - tau W)`` (ASPECT's) grows them b
 per step. Jaumann's rate because it adds no strain-rate terms of its own (Oldroyd's and Truesdell's
 do), so a stress at rest in a rigid rotation only turns, and it is the rate of Moresi et al.
 (2003) and ASPECT. ``eta_ve`` and ``chi = eta_ve / (G dt_e)`` are mesh fields the model supplies
-(:mod:`convection.physics.elasticity`), sampled at the particle. A step of length 0 (the flow
+(:mod:`convection.physics.elasticity`), sampled at the particle; with a fixed elastic time step the
+model supplies the averaged factors ``r eta_ve`` and ``1 - r (1 - chi)``, ``r = dt / dt_e``
+(:meth:`~convection.physics.elasticity.Elasticity.averaged`). A step of length 0 (the flow
 solved before the first step) changes nothing. New particles take the mean of their neighbours.
 """
 

@@ -118,9 +118,9 @@ class StokesDiscretisation:
         self.dirichlet = velocity_dirichlet_bcs(self.V, bcs, domain)
         self.surface = surface
         self.surface_dt = SurfaceTerms.step_constant(mesh) if surface is not None else None
-        # Elasticity (issue 48): eta -> eta_ve and the old stress's load; 1 / dt_e (0: the viscous flow).
+        # Elasticity (issue 48): eta -> eta_ve, the old stress's load; 1 / dt_e (0: the viscous flow), r = dt / dt_e.
         self.elasticity: Elasticity | None = getattr(approximation, "elasticity", None)
-        self.elastic_rate = dolfinx.fem.Constant(mesh, PETSc.ScalarType(0.0)) if self.elasticity is not None else None
+        self.elastic_rate, self.elastic_share = (dolfinx.fem.Constant(mesh, PETSc.ScalarType(x)) for x in (0.0, 1.0))
 
     @property
     def anticipates_step(self) -> bool:
@@ -140,11 +140,11 @@ class StokesDiscretisation:
         return self.set_elastic_step(dt) or surface
 
     def set_elastic_step(self, dt: float, /) -> bool:
-        """Set the elastic time step ``dt_e = dt`` (``dt = 0``: no step yet, the viscous flow); whether the
-        operator changed (:mod:`convection.physics.elasticity`; always where ``G`` moves with the materials)."""
-        rate = 1.0 / dt if dt > 0.0 else 0.0
-        if self.elasticity is None or self.elastic_rate is None:
+        """Set ``1 / dt_e`` and ``r = dt / dt_e`` for the step ``dt`` (:mod:`convection.physics.elasticity`,
+        ``Elasticity.steps``); whether the operator changed (always where ``G`` moves with the materials)."""
+        if self.elasticity is None:
             return False
+        rate, self.elastic_share.value = self.elasticity.steps(dt)
         changed = self.elastic_rate.value != rate
         self.elastic_rate.value = rate
         return changed or self.elasticity.is_variable

@@ -132,3 +132,50 @@ def test_check_refuses_in_one_line(tmp_path):
     path.write_text(yaml.safe_dump(_with(physics__elasticity={"enabled": True, "shear_modulus": -3.0})))
     line = error_line(run_cli(["check", str(path)]), 2, "physics.elasticity.shear_modulus")
     assert "> 0" in line
+
+
+def test_averaged_factors_are_a_share_of_the_step():
+    """tau <- (1 - r) R tau R^T + r (2 eta_ve eps + chi R tau R^T) = 2 (r eta_ve) eps + (1 - r (1 - chi)) R tau R^T."""
+    eta_ve, chi, r = 0.3, 0.7, 0.25
+    viscosity, memory = Elasticity.averaged(eta_ve, chi, r)
+    tau, eps = 1.3, -0.4
+    assert 2 * viscosity * eps + memory * tau == pytest.approx((1 - r) * tau + r * (2 * eta_ve * eps + chi * tau),
+                                                               rel=1e-15)
+    assert Elasticity.averaged(eta_ve, chi, 1.0) == pytest.approx((eta_ve, chi), rel=1e-15)
+    with pytest.raises(ValueError, match="elastic time step"):
+        Elasticity(1.0, (), 0.0)
+
+
+def test_elastic_time_step_is_checked_and_has_units():
+    fixed = {"enabled": True, "elastic_time_step": 0.5}
+    assert load_config(None, document=_with(physics__elasticity=fixed, time__dt_max=0.5)
+                       )["physics"]["elasticity"]["elastic_time_step"] == 0.5
+    assert load_config(None, document=_with())["physics"]["elasticity"]["elastic_time_step"] is None
+    cases = [(_with(physics__elasticity=fixed | {"elastic_time_step": 0.0}, time__dt_max=0.5), "> 0"),
+             (_with(physics__elasticity=fixed), "set time.dt_max"),
+             (_with(physics__elasticity=fixed, time__dt_max=0.6), "at most elastic_time_step")]
+    for document, needle in cases:
+        with pytest.raises(ConfigError, match=f"physics.elasticity.elastic_time_step.*{needle}"):
+            load_config(None, document=document)
+    with pytest.raises(ConfigError, match="time.dt_initial.*elastic_time_step"):
+        load_config(None, document=_with(physics__elasticity=fixed, time__dt_max=0.5, time__dt_initial=0.6))
+    scaling = {"length": "100 km", "viscosity": "1e21 Pa s", "density": "3300 kg/m^3", "gravity": "9.81 m/s^2"}
+    document = _with(physics__elasticity=fixed | {"elastic_time_step": "10 kyr"}, time__dt_max="5 kyr",
+                     time__end="20 kyr") | {"scaling": scaling}
+    config = load_config(None, document=document)
+    assert config["physics"]["elasticity"]["elastic_time_step"] == pytest.approx(
+        2 * config["time"]["dt_max"], rel=1e-12)
+    assert config["physics"]["elasticity"]["elastic_time_step"] == pytest.approx(
+        scaling_of(config).nondimensional(parse_quantity("10 kyr")), rel=1e-12)
+    document["physics"]["elasticity"]["elastic_time_step"] = "10 km"
+    with pytest.raises(ConfigError, match="elastic_time_step"):
+        load_config(None, document=document)
+
+
+def test_check_refuses_a_short_elastic_time_step_in_one_line(tmp_path):
+    from _runs import error_line, run_cli
+
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(_with(physics__elasticity={"enabled": True, "elastic_time_step": 0.1},
+                                         time__dt_max=0.2)))
+    error_line(run_cli(["check", str(path)]), 2, "physics.elasticity.elastic_time_step")

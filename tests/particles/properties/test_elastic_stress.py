@@ -98,19 +98,31 @@ def test_initial_values_and_their_checks():
         too_many.initialise(PropertyContext())
 
 
+def _flow(x):
+    """A flow with spin and strain, not in P2: in 2D (all z = 0) or 3D."""
+    if np.all(x[2] == 0.0):
+        return np.stack([np.sin(2 * x[1]) + x[0] ** 2, np.cos(3 * x[0]) - x[0] * x[1]])
+    return np.stack([np.sin(2 * x[1]) + x[0] * x[2], np.cos(3 * x[2]) - x[0] * x[1],
+                     np.sin(x[0] + 2 * x[1]) + x[2] ** 2])
+
+
+@pytest.mark.parametrize("gdim", [2, 3])
 @pytest.mark.parametrize("degree", [0, 1])
-def test_compiled_update_gives_the_vectorised_numbers(degree, monkeypatch):
+def test_compiled_update_gives_the_vectorised_numbers(degree, gdim, monkeypatch):
     """The compiled loop (particles/properties/elastic_kernel.py) against the vectorised path on a
-    distorted mesh, a P2 flow with spin and strain, eta_ve and chi varying in space (DG0 or DG1), a
-    random stress and a large step: equal to round-off."""
+    distorted mesh of triangles or tetrahedra, a P2 flow with spin and strain, eta_ve and chi varying
+    in space (DG0 or DG1), a random stress and a large step: equal to round-off."""
     import particles.properties.elastic_stress as module
 
-    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 5, 4)
+    if gdim == 2:
+        mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 5, 4)
+    else:
+        mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 3, 3, 2)
     mesh.geometry.x[:, 0] += 0.05 * np.sin(3.0 * mesh.geometry.x[:, 1])  # cells of different shapes
-    points = RNG.uniform(0.05, 0.95, size=(200, 2))
-    V = function_space(mesh, "Lagrange", 2, shape=(2,))
+    points = RNG.uniform(0.05, 0.95, size=(200, gdim))
+    V = function_space(mesh, "Lagrange", 2, shape=(gdim,))
     u = dolfinx.fem.Function(V)
-    u.interpolate(lambda x: np.stack([np.sin(2 * x[1]) + x[0] ** 2, np.cos(3 * x[0]) - x[0] * x[1]]))
+    u.interpolate(_flow)
     D = function_space(mesh, "DG", degree)
     fields = {name: dolfinx.fem.Function(D) for name in ElasticStress.mesh_fields}
     fields["elastic_viscosity"].interpolate(lambda x: 1.0 + x[0] * x[1])
@@ -130,5 +142,6 @@ def test_compiled_update_gives_the_vectorised_numbers(degree, monkeypatch):
         results.append((manager.values("elastic_stress").copy(), start))
     (compiled, start), (vectorised, _) = results
     assert ran == [True]  # the first update took the compiled loop
+    assert compiled.shape[1] == (3 if gdim == 2 else 6)
     assert np.abs(compiled - start).max() > 0.1  # the update did something
     assert np.allclose(compiled, vectorised, rtol=0.0, atol=1e-13 * np.abs(vectorised).max())

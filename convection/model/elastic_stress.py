@@ -22,7 +22,6 @@ The fields are carried to a new mesh like composition fields and kept in checkpo
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any, ClassVar, NamedTuple
 
 import dolfinx.fem
@@ -32,12 +31,11 @@ import numpy as np
 import ufl
 from petsc4py import PETSc
 
-from convection.model.composition import Transfer
+from convection.model.composition import Transfer, TransportedFields
 from convection.model.rheology_fields import Flow
 from convection.physics.elasticity import STRESS_COMPONENTS, Elasticity, ElasticitySettings, rotated, stress_labels
 from convection.solvers.transport import TransportSolver
 from fembase.dolfinx_compat import create_vector, petsc_vector
-from fembase.state import State, Stateful
 
 __all__ = ["FieldStress", "StressContext"]
 
@@ -56,7 +54,7 @@ class StressContext(NamedTuple):
     stabilisation: str
 
 
-class FieldStress(Stateful):
+class FieldStress(TransportedFields):
     """The stress history as advected mesh fields (module docstring). All methods are collective.
 
     Args:
@@ -94,11 +92,6 @@ class FieldStress(Stateful):
         """The old stress's components by label (the Stokes forms read them)."""
         return {s.name: s.T for s in self.solvers}
 
-    def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None:
-        """Advect every component over ``dt`` with ``u`` (the velocity relative to the mesh)."""
-        for solver in self.solvers:
-            solver.step(u, dt)
-
     def update(self, flow: Flow, dt: float, /) -> None:
         """``tau <- 2 eta_ve eps + chi R tau R^T`` for the flow just solved and the step ``dt`` (0: the
         flow before the first step, nothing changes)."""
@@ -106,8 +99,7 @@ class FieldStress(Stateful):
             return
         key = (flow.stokes, *(id(f) for f in flow.fields.values()), *(id(f) for f in flow.fractions or ()))
         if self._projection is None or self._projection.key != key:
-            if self._projection is not None:
-                self._projection.destroy()
+            self._forget_projection()
             self._projection = _Projection(self, flow, key)
         new = self._projection.solve(dt)
         for solver, values in zip(self.solvers, new):
@@ -116,33 +108,18 @@ class FieldStress(Stateful):
                 f.x.array[:] += change
 
     def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None:
-        """Carry the fields and their transport history to ``mesh``."""
-        old = self.solvers
-        self.solvers = [s.on_mesh(mesh) for s in old]
-        for new, previous in zip(self.solvers, old):
-            new.transfer_from(previous, transfer)
-            previous.destroy()
+        """Carry the fields and their transport history to ``mesh`` (the projection is made again there)."""
+        super().to_mesh(mesh, transfer)
+        self._forget_projection()
+
+    def destroy(self) -> None:
+        super().destroy()
+        self._forget_projection()
+
+    def _forget_projection(self) -> None:
         if self._projection is not None:
             self._projection.destroy()
             self._projection = None
-
-    def state(self) -> State:
-        """Every component's transport history (Functions ``<label>/<name>``, scalars by component)."""
-        states = [s.state() for s in self.solvers]
-        fields = {f"{s.name}/{k}": f for s, state in zip(self.solvers, states) for k, f in state.fields.items()}
-        return State(fields=fields, scalars={"solvers": [state.scalars for state in states]})
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
-        fields = {}
-        for solver, saved in zip(self.solvers, scalars["solvers"]):
-            fields.update({f"{solver.name}/{k}": f for k, f in solver.restore(saved).items()})
-        return fields
-
-    def destroy(self) -> None:
-        for solver in self.solvers:
-            solver.destroy()
-        if self._projection is not None:
-            self._projection.destroy()
 
 
 class _Projection:

@@ -5,8 +5,6 @@ lid-driven Maxwell cavity with adaptivity and repartitioning: 1, 2 and 3 ranks a
 solver's tolerance, a run stopped at a checkpoint and resumed gives the uninterrupted one bit for
 bit. The build-up under a constant strain rate: tests/benchmarks_viscoelastic/test_stress.py."""
 
-import textwrap
-
 import numpy as np
 import pytest
 import yaml
@@ -17,6 +15,7 @@ from convection.config.loader import load_config
 from convection.physics.elasticity import stress_labels
 from convection.schema import ConfigError
 from particles.properties.elastic_stress import from_voigt, jaumann_rotation
+from test_elastic_history import CAVITY as HISTORY_CAVITY
 
 PRESTRESS = (0.3, -0.1, 0.2)  # xx, yy, xy
 ROTATION = {"kind": "prescribed", "value": ["-(z-0.5)", "x-0.5"]}  # spin 1 about the centre
@@ -109,32 +108,21 @@ def test_check_refuses_in_one_line(tmp_path):
     error_line(run_cli(["check", str(path)]), 2, "particles.properties")
 
 
-CAVITY = textwrap.dedent("""\
-    name: elastic_cavity_fields
-    mesh: {cells: [6, 6]}
-    physics:
-      Ra: 0.0
-      viscosity: {law: 1.0}
-      elasticity: {enabled: true, shear_modulus: 1.0, stress: fields}
-    boundary:
-      velocity:
-        top: {kind: prescribed, value: ["16*x*x*(1-x)*(1-x)", 0]}
-        bottom: no_slip
-        left: no_slip
-        right: no_slip
-      temperature: {left: insulating, right: insulating, bottom: insulating, top: insulating}
-    initial: {temperature: "0"}
-    energy: {enabled: false}
-    stokes: {solver: direct}
-    adaptivity: {enabled: true, every: 3, max_level: 1, fields: [temperature], min_level_where: "x < 0.2 + t"}
-    balance: {strategy: every, every: 2}
-    time: {end: 1.0, cfl: 100.0, dt_max: 0.05, max_steps: 8}
-    output:
-      fields_every: 0
-      progress: none
-      checkpoint: {every_steps: 4}
-      statistics: [time, velocity, mesh, elasticity]
-    """)
+def cavity_document() -> dict:
+    """test_elastic_history's Maxwell cavity with the stress as fields (no particles), adapted every 3 steps
+    (a refined band that moves with the time), repartitioned every 2, the elastic outputs written."""
+    document = yaml.safe_load(HISTORY_CAVITY)
+    del document["particles"]
+    document["name"] = "elastic_cavity_fields"
+    document["physics"]["elasticity"]["stress"] = "fields"
+    document["adaptivity"] = {"enabled": True, "every": 3, "max_level": 1, "fields": ["temperature"],
+                              "min_level_where": "x < 0.2 + t"}
+    document["balance"]["every"] = 2
+    document["output"] |= {"fields_every": 8, "extra_fields": ["elastic_stress", "elastic_share"],
+                           "statistics": ["time", "velocity", "mesh", "elasticity"]}
+    return document
+
+
 COMPARED = ("vrms", "elastic_stress_invariant_max", "elastic_stress_invariant_mean", "elastic_strain_rate_mean",
             "viscous_strain_rate_mean", "elastic_share")
 
@@ -143,7 +131,7 @@ COMPARED = ("vrms", "elastic_stress_invariant_max", "elastic_stress_invariant_me
 def cavity(tmp_path_factory):
     folder = tmp_path_factory.mktemp("cavity_fields")
     config = folder / "cavity.yaml"
-    config.write_text(CAVITY)
+    config.write_text(yaml.safe_dump(cavity_document()))
     out = run_on_ranks(config, {ranks: folder / f"ranks{ranks}" for ranks in (1, 2, 3)})
     out["stopped"] = folder / "stopped"
     proc = run_cli(["run", str(config), "--output", str(out["stopped"]), *sets(["time.max_steps=4"])], 2)
@@ -169,3 +157,9 @@ def test_cavity_ranks_agree(cavity):
 
 def test_resumed_cavity_is_bit_for_bit(cavity):
     assert_same_statistics(cavity[2], cavity["stopped"])
+
+
+def test_cavity_writes_the_elastic_fields(cavity):
+    """The field outputs read the forms' stress, the stress fields' here."""
+    texts = [p.read_text() for p in cavity[1].glob("*.xdmf")]
+    assert any("elastic_share" in text and "elastic_stress" in text for text in texts), sorted(cavity[1].iterdir())

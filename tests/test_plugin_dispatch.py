@@ -46,6 +46,7 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "format": ("FIELD_WRITERS", "PARTICLE_WRITERS"),
     "statistics": ("POSTPROCESSORS",),
     "postprocessor": ("POSTPROCESSORS",),
+    "stress": ("STRESS_CARRIERS",),
 }
 """Words that read a plugin-name setting, and the registries whose names it takes."""
 

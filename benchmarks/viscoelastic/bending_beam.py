@@ -42,6 +42,7 @@ from __future__ import annotations
 import json
 import logging
 import re
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -82,13 +83,16 @@ RESOLUTIONS = ((30, 20), (45, 30), (75, 50))
 QUICK = ((30, 20),)
 
 
-def document(*, cells: tuple[int, int], dt: float, end: float, out: Path, tracers: Path) -> dict[str, Any]:
-    """The config of the beam (module docstring), nondimensional, with a fixed step ``dt``."""
+def document(*, cells: tuple[int, int], dt: float, end: float, out: Path, tracers: Path,
+             stress: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The config of the beam (module docstring), nondimensional, with a fixed step ``dt``; ``stress``:
+    ``physics.elasticity`` keys of the stress's carrier (e.g. ``{"stress": "fields"}``; None: the particles)."""
+    on_particles = (stress or {}).get("stress", "particles") == "particles"
     return {
         "name": "viscoelastic_bending_beam",
         "mesh": {"cells": list(cells), "upper": [WIDTH, HEIGHT]},
         "physics": {"Ra": 0.0, "viscosity": {"law": 1.0, "mixing": "geometric", "sharp": ["beam"]},
-                    "elasticity": {"enabled": True, "shear_modulus": G_MEDIUM}},
+                    "elasticity": {"enabled": True, "shear_modulus": G_MEDIUM, **(stress or {})}},
         "materials": {"beam": {"initial": BEAM, "Rb": RB_BEAM, "viscosity": ETA_BEAM, "shear_modulus": G_BEAM}},
         "boundary": {"velocity": {"left": "no_slip", "right": "free_slip", "bottom": "free_slip", "top": "free_slip"},
                      "temperature": {side: "insulating" for side in ("left", "right", "bottom", "top")}},
@@ -99,7 +103,7 @@ def document(*, cells: tuple[int, int], dt: float, end: float, out: Path, tracer
         "particles": [
             {"name": "material", "generator": {"name": "random_uniform", "particles_per_cell": 16, "seed": 1},
              "integrator": "rk2", "interpolator": {"name": "least_squares", "limit": True},
-             "properties": ["elastic_stress"], "population": {"min_per_cell": 6, "max_per_cell": 48, "seed": 3}},
+             "properties": ["elastic_stress"] if on_particles else [], "population": {"min_per_cell": 6, "max_per_cell": 48, "seed": 3}},
             {"name": "tip", "generator": {"name": "from_file", "path": str(tracers)}, "integrator": "rk2"},
         ],
         "time": {"end": end, "dt_max": dt, "cfl": 100.0},
@@ -120,6 +124,8 @@ class Curve:
     label: str
     t: np.ndarray
     w: np.ndarray
+    cpu_per_step: float = float("nan")
+    """CPU seconds of the process per step (the steps' mean; nan: not measured)."""
 
     @property
     def loaded(self) -> float:
@@ -167,27 +173,32 @@ def _unload(model: Any) -> None:
 
 
 def run_case(cells: tuple[int, int], *, out: Path, t_load: float = T_LOAD, t_end: float = T_END, dt: float = DT,
-             comm: MPI.Comm = MPI.COMM_WORLD) -> Curve:
-    """Load to ``t_load``, recover to ``t_end`` (kyr) with the step ``dt`` (collective)."""
+             comm: MPI.Comm = MPI.COMM_WORLD, stress: dict[str, Any] | None = None) -> Curve:
+    """Load to ``t_load``, recover to ``t_end`` (kyr) with the step ``dt`` (collective; ``stress``: see
+    :func:`document`)."""
     out.mkdir(parents=True, exist_ok=True)
     tracers = out / "tip.txt"
     if comm.rank == 0:
         np.savetxt(tracers, TIP, header="x z (km): the beam's tip, mid-line, top, bottom")
     comm.barrier()
-    config = load_config(None, document=document(cells=cells, dt=dt, end=t_end, out=out, tracers=tracers))
+    config = load_config(None, document=document(cells=cells, dt=dt, end=t_end, out=out, tracers=tracers,
+                                                 stress=stress))
     model = build_model(config, comm=comm)
     model.start()
     z0 = _tip_z(model, comm)[0]
     times, w = [0.0], [0.0]
     n_load, n_end = round(t_load / dt), round(t_end / dt)
+    cpu = 0.0
     for n in range(1, n_end + 1):
         if n == n_load + 1:
             _unload(model)
+        start = time.process_time()
         model.step(dt)
+        cpu += time.process_time() - start
         times.append(n * dt)
         w.append((z0 - _tip_z(model, comm)[0]) * LENGTH)
     model.destroy()
-    curve = Curve(f"this code, {cells[0]} x {cells[1]}", np.array(times), np.array(w))
+    curve = Curve(f"this code, {cells[0]} x {cells[1]}", np.array(times), np.array(w), cpu / max(n_end, 1))
     if comm.rank == 0:
         np.savetxt(out / "tip.csv", np.column_stack([curve.t, curve.w]), delimiter=",", header="t_kyr,w_m", comments="")
     return curve

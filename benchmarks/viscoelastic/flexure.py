@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -129,6 +130,8 @@ class Run:
     w: np.ndarray
     history: tuple[float, ...]
     mean: float
+    cpu_per_step: float = float("nan")
+    """CPU seconds of the process per step (the steps' mean)."""
 
     @property
     def measured(self) -> tuple[float, float, float]:
@@ -154,22 +157,27 @@ def surface(model, comm: MPI.Comm) -> tuple[np.ndarray, np.ndarray]:
     return x, h[keep]
 
 
-def run_case(cells: tuple[int, int], *, out: Path, steps: int = STEPS, comm: MPI.Comm = MPI.COMM_WORLD) -> Run:
-    """The config at ``cells`` for ``steps`` steps of 0.1 Myr (collective)."""
+def run_case(cells: tuple[int, int], *, out: Path, steps: int = STEPS, comm: MPI.Comm = MPI.COMM_WORLD,
+             fields: bool = False) -> Run:
+    """The config at ``cells`` for ``steps`` steps of 0.1 Myr (collective); ``fields``: the stress as mesh
+    fields (``physics.elasticity.stress: fields``, the particles carrying only the materials)."""
     sets = [f"mesh.cells=[{cells[0]},{cells[1]}]", f"output.directory={out}", "output.progress=none",
-            "output.fields_every=0"]
+            "output.fields_every=0", *(["physics.elasticity.stress=fields", "particles.properties=[]"] if fields else [])]
     document = load_config(CONFIG, sets)
     model = build_model(document, comm=comm)
     model.start()
     history = []
+    cpu = 0.0
     for _ in range(steps):
+        start = time.process_time()
         model.step(document["time"]["dt_max"])  # DT_MYR
+        cpu += time.process_time() - start
         x, h = surface(model, comm)
         history.append(UPLIFT - h[0])
     x, h = surface(model, comm)
     mean = float(np.trapz(h, x) / (x[-1] - x[0]))
     model.destroy()
-    return Run(cells, x, UPLIFT - h, tuple(history), mean)
+    return Run(cells, x, UPLIFT - h, tuple(history), mean, cpu / max(steps, 1))
 
 
 def table(runs: list[Run]) -> str:

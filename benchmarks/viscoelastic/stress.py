@@ -56,11 +56,14 @@ STEPS = (0.2, 0.1, 0.05, 0.025, 0.0125)
 QUICK_STEPS = (0.2, 0.1, 0.05)
 
 
-def document(*, cells: int, dt: float, end: float, out: Path, dt_e: float | None = None) -> dict[str, Any]:
+def document(*, cells: int, dt: float, end: float, out: Path, dt_e: float | None = None,
+             stress: str = "particles") -> dict[str, Any]:
     """The config of the box (module docstring) with a fixed step ``dt`` (and a fixed elastic time step
-    ``dt_e``: the stress averaged between steps; None: ``dt_e = dt``)."""
+    ``dt_e``: the stress averaged between steps; None: ``dt_e = dt``); ``stress``: what carries the stress
+    (``physics.elasticity.stress``: ``fields`` keeps the particles, without the stress, for the same run)."""
     pure_shear = {"kind": "prescribed", "value": [f"{EPS}*x", f"-{EPS}*z"]}
-    elasticity = {"enabled": True, "shear_modulus": G} | ({} if dt_e is None else {"elastic_time_step": dt_e})
+    elasticity = ({"enabled": True, "shear_modulus": G, "stress": stress}
+                  | ({} if dt_e is None else {"elastic_time_step": dt_e}))
     return {
         "name": "viscoelastic_stress",
         "mesh": {"cells": [cells, cells]},
@@ -71,7 +74,7 @@ def document(*, cells: int, dt: float, end: float, out: Path, dt_e: float | None
         "energy": {"enabled": False},
         "stokes": {"solver": "direct"},
         "particles": {"enabled": True, "generator": {"name": "random_uniform", "particles_per_cell": 9, "seed": 1},
-                      "properties": ["elastic_stress"],
+                      "properties": ["elastic_stress"] if stress == "particles" else [],
                       "population": {"min_per_cell": 4, "max_per_cell": 30, "seed": 3}},
         "time": {"end": end, "dt_max": dt, "cfl": 100.0},
         "blowup": {"lost_fraction": 1.0},  # the box's material leaves through the right side
@@ -122,8 +125,12 @@ def _stop_loading(model: Any) -> None:
 
 
 def _stress_xx(model: Any, comm: MPI.Comm) -> tuple[float, float]:
-    """The particles' mean ``tau_xx`` and its spread (global)."""
-    tau = model.particles.primary.properties.values("elastic_stress")[:, 0]
+    """The particles' (or the stress field's nodes') mean ``tau_xx`` and its spread (global)."""
+    if model.elastic_stress is not None:
+        field = model.elastic_stress.fields["elastic_stress_xx"]
+        tau = field.x.array[:field.function_space.dofmap.index_map.size_local]
+    else:
+        tau = model.particles.primary.properties.values("elastic_stress")[:, 0]
     total = comm.allreduce(float(tau.sum()), op=MPI.SUM)
     count = comm.allreduce(int(tau.size), op=MPI.SUM)
     high = comm.allreduce(float(tau.max(initial=-np.inf)), op=MPI.MAX)
@@ -132,10 +139,10 @@ def _stress_xx(model: Any, comm: MPI.Comm) -> tuple[float, float]:
 
 
 def run_case(dt: float, *, t_load: float, t_end: float, cells: int, out: Path,
-             comm: MPI.Comm = MPI.COMM_WORLD, dt_e: float | None = None) -> Curve:
+             comm: MPI.Comm = MPI.COMM_WORLD, dt_e: float | None = None, stress: str = "particles") -> Curve:
     """Load to ``t_load``, relax to ``t_end`` with the step ``dt`` (and the elastic time step ``dt_e``;
-    None: ``dt``) (collective)."""
-    config = load_config(None, document=document(cells=cells, dt=dt, end=t_end, out=out, dt_e=dt_e))
+    None: ``dt``; ``stress``: its carrier, ``physics.elasticity.stress``) (collective)."""
+    config = load_config(None, document=document(cells=cells, dt=dt, end=t_end, out=out, dt_e=dt_e, stress=stress))
     model = build_model(config, comm=comm)
     model.start()
     times, taus, spreads = [0.0], *([value] for value in _stress_xx(model, comm))

@@ -61,7 +61,8 @@ from convection.geometry.registry import domain_from_settings
 from convection.physics.materials import Material, Materials
 from convection.physics.compressible import ReferenceState
 from convection.model.elastic_fields import ElasticFields
-from convection.physics.elasticity import STRESS_PROPERTY, Elasticity, stress_labels
+from convection.model.elastic_stress import FieldStress, StressContext
+from convection.physics.elasticity import STRESS_CARRIERS, STRESS_PROPERTY, Elasticity, stress_labels
 from convection.physics.phases import PhaseTransitions
 from convection.model.model import Model
 from convection.postprocess.postprocessors import create_postprocessors
@@ -321,17 +322,20 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
                   f"{steady.newton_iterations} Newton iterations", file=sys.stderr, flush=True)
     particles = _particles(settings, meshes, domain, materials, stokes, temperature, restore, free_surface)
     composition = _composition(settings, mesh, approximation, materials, particles, energy.stabilisation)
+    on_particles = STRESS_CARRIERS[physics.elasticity.stress].on_particles
     if particles is not None:
         # Particle properties the viscosity laws read (e.g. plastic_strain), averaged onto the mesh
         # with the particles' interpolator after every step.
         for name in approximation.viscosity_law.field_names:
             particles.primary.track(name)
-        if stokes.discretisation.elasticity is not None:  # the old stress of the forms (issue 48)
+        if stokes.discretisation.elasticity is not None and on_particles:  # the old stress of the forms (issue 48)
             for component, label in enumerate(stress_labels(mesh.geometry.dim)):
                 particles.primary.track(STRESS_PROPERTY, component=component, label=label)
+    stress = None if stokes.discretisation.elasticity is None or on_particles else FieldStress.build(
+        physics.elasticity, StressContext(mesh, approximation, energy.stabilisation))
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
                   particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer,
-                  free_surface=free_surface)
+                  free_surface=free_surface, elastic_stress=stress)
     if stokes.discretisation.elasticity is not None:  # the elastic outputs of the field output (issue 48)
         model.rheology.elastic = ElasticFields(settings.output.extra_fields).update
     if restore is not None:

@@ -69,7 +69,7 @@ from convection.schema import finite_number as _finite_number
 from convection.physics.approximation import HEATING_VISCOSITY, TEMPERATURE_LAWS, PhysicsSettings
 from convection.physics.compressible import APPROXIMATIONS, ReferenceProfile
 from convection.physics.elastic_outputs import check_elastic_outputs
-from convection.physics.elasticity import ElasticitySettings, check_elasticity, check_plasticity
+from convection.physics.elasticity import STRESS_CARRIERS, ElasticitySettings, check_elasticity, check_plasticity
 from fembase.dolfinx_compat import repartitioned_manifolds_nest
 from convection.physics.materials import MaterialSettings
 from convection.physics.phases import PhaseTransitionSettings, check_phase_transitions
@@ -345,12 +345,13 @@ def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None
                 raise ConfigError(f"config key 'adaptivity.{key}': only with adaptivity.enabled: true")
             _check_expression(config, f"adaptivity.{key}", text, extra={"t": 0.0})
     carried = _property_names(config) if particles_enabled(config) else ()
-    check_elastic_outputs(config["physics"]["elasticity"]["enabled"], carried, config["output"]["extra_fields"])
+    elasticity = settings_from(ElasticitySettings, config["physics"]["elasticity"])
+    check_elastic_outputs(elasticity.enabled, carried, config["output"]["extra_fields"],
+                          STRESS_CARRIERS[elasticity.stress].on_particles)
     _check_particles(config)
-    check_elasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), carried,  # issue 48
-                     config["time"]["dt_max"], config["time"]["dt_initial"])
+    check_elasticity(elasticity, carried, config["time"]["dt_max"], config["time"]["dt_initial"])  # issue 48
     if laws_given(config):  # visco-elasto-plastic: the yield limits the visco-elastic stress (issue 48)
-        check_plasticity(settings_from(ElasticitySettings, config["physics"]["elasticity"]), _keyed_laws(config))
+        check_plasticity(elasticity, _keyed_laws(config))
     if config["initial"]["steady"]:
         _check_steady_start(config)
     _check_statistics(config)

@@ -36,7 +36,8 @@ from particles.manager import ParticleManager
 from particles.properties import InitialComposition
 
 __all__ = ["COMPOSITION_SOURCES", "CompositionContext", "CompositionSettings", "CompositionSource", "FieldComposition",
-           "ParticleComposition", "StaticComposition", "Transfer", "composition_space", "particle_properties"]
+           "ParticleComposition", "StaticComposition", "Transfer", "TransportedFields", "composition_space",
+           "particle_properties"]
 
 Transfer = Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]
 """``transfer(source_on_old_mesh, target_on_new_mesh)`` fills the target (collective)."""
@@ -179,7 +180,43 @@ class StaticComposition(Stateful):
         """Nothing to free."""
 
 
-class FieldComposition(Stateful):
+class TransportedFields(Stateful):
+    """Fields advected by their transport solvers (one per field, named as it, no diffusion): what the
+    advected fractions and the elastic stress fields (:mod:`convection.model.elastic_stress`) share."""
+
+    solvers: list[TransportSolver]
+
+    def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None:
+        """Advect every field over ``dt`` with ``u``."""
+        for solver in self.solvers:
+            solver.step(u, dt)
+
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None:
+        """Carry the fields and their transport history to ``mesh``."""
+        old = self.solvers
+        self.solvers = [s.on_mesh(mesh) for s in old]
+        for new, previous in zip(self.solvers, old):
+            new.transfer_from(previous, transfer)
+            previous.destroy()
+
+    def state(self) -> State:
+        """Every field's transport history (Functions ``<field>/<name>``, scalars by field)."""
+        states = [s.state() for s in self.solvers]
+        fields = {f"{s.name}/{k}": f for s, state in zip(self.solvers, states) for k, f in state.fields.items()}
+        return State(fields=fields, scalars={"solvers": [state.scalars for state in states]})
+
+    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
+        fields = {}
+        for solver, saved in zip(self.solvers, scalars["solvers"]):
+            fields.update({f"{solver.name}/{k}": f for k, f in solver.restore(saved).items()})
+        return fields
+
+    def destroy(self) -> None:
+        for solver in self.solvers:
+            solver.destroy()
+
+
+class FieldComposition(TransportedFields):
     """Fractions advected as continuous fields (one transport solver per material, no diffusion).
 
     Args:
@@ -218,32 +255,6 @@ class FieldComposition(Stateful):
     def fields(self) -> tuple[dolfinx.fem.Function, ...]:
         return tuple(s.T for s in self.solvers)
 
-    def advance(self, u: dolfinx.fem.Function, dt: float, /) -> None:
-        for solver in self.solvers:
-            solver.step(u, dt)
-
-    def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None:
-        old = self.solvers
-        self.solvers = [s.on_mesh(mesh) for s in old]
-        for new, previous in zip(self.solvers, old):
-            new.transfer_from(previous, transfer)
-            previous.destroy()
-
-    def state(self) -> State:
-        """Every material's transport history (Functions ``<material>/<name>``, scalars by material)."""
-        states = [s.state() for s in self.solvers]
-        fields = {f"{s.name}/{k}": f for s, state in zip(self.solvers, states) for k, f in state.fields.items()}
-        return State(fields=fields, scalars={"solvers": [state.scalars for state in states]})
-
-    def restore(self, scalars: Mapping[str, Any], /) -> dict[str, dolfinx.fem.Function]:
-        fields = {}
-        for solver, saved in zip(self.solvers, scalars["solvers"]):
-            fields.update({f"{solver.name}/{k}": f for k, f in solver.restore(saved).items()})
-        return fields
-
-    def destroy(self) -> None:
-        for solver in self.solvers:
-            solver.destroy()
 
 
 def particle_properties(materials: Materials, gdim: int, /) -> list[InitialComposition]:

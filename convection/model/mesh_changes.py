@@ -35,7 +35,7 @@ from convection.adapt.rebalance import Balancer, RankLoads
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from convection.deform.motion import FreeSurface
 from convection.geometry.domain import Domain
-from convection.model.composition import CompositionSource
+from convection.model.composition import CompositionSource, Transfer
 from convection.solvers.stokes.solver import StokesSolver
 from convection.solvers.transport import TransportSolver
 from fembase.geometry import Candidates
@@ -45,6 +45,13 @@ from particles.storage.swarm import Swarm
 from particles.systems import ParticleSystems
 
 __all__ = ["ChangingModel", "MeshChanges"]
+
+
+class MovingFields(Protocol):
+    """Fields a mesh change carries over (the elastic stress fields,
+    :class:`convection.model.elastic_stress.FieldStress`)."""
+
+    def to_mesh(self, mesh: dolfinx.mesh.Mesh, transfer: Transfer, /) -> None: ...
 
 
 class ChangingModel(Protocol):
@@ -65,6 +72,9 @@ class ChangingModel(Protocol):
     time: float
     timestep: int
     mesh_version: int
+
+    @property
+    def elastic_stress(self) -> MovingFields | None: ...
 
     @property
     def mesh(self) -> dolfinx.mesh.Mesh: ...
@@ -253,4 +263,6 @@ class MeshChanges:
             model.u_previous = u_previous
         if model.composition is not None:
             model.composition.to_mesh(mesh, transfer)
+        if model.elastic_stress is not None:
+            model.elastic_stress.to_mesh(mesh, transfer)
         return [old_stokes, old_temperature]

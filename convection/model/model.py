@@ -11,14 +11,17 @@ The model holds the mesh's solvers and the components that act on them, each wit
 - ``adaptivity`` (:class:`convection.adapt.adaptivity.Adaptivity`) and ``balancer``
   (:class:`convection.adapt.rebalance.Balancer`), each with its own schedule;
 - ``free_surface`` (:class:`convection.deform.motion.FreeSurface`, or None): the mesh moves with
-  the surface.
+  the surface;
+- ``elastic_stress`` (:class:`convection.model.elastic_stress.FieldStress`, or None): the elastic
+  stress history as advected mesh fields (``physics.elasticity.stress: fields``; else the particles
+  carry it).
 
 One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
 
 0. where the flow anticipates the step's end (a free surface's stabilisation, a predicted buoyancy)
    and was solved for less than half of ``dt`` (on the first step: for no step), it is solved again
    for ``dt``, and ``u* = u^n`` in 1. (a flow solved for another step is not of the history ``u*``
-   extrapolates); the particles' elastic stress takes that flow's strain (the flow moves the step:
+   extrapolates); the elastic stress (particles' or fields') takes that flow's strain (the flow moves the step:
    without it, the first step's elastic deformation would carry no stress, issue 48). Up to twice
    the anticipated step the flow is kept: with ``theta = 1`` a relaxing surface is then multiplied
    by ``|A| <= 1`` per step (:mod:`convection.deform.surface`), and solving again at every growing
@@ -27,7 +30,8 @@ One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
 1. the velocity at the step's end is extrapolated, ``u* = (1 + w) u^n - w u^{n-1}``
    (``w = dt / dt_previous``; ``u* = u^n`` on the first step) — the model is the one owner of the
    previous velocity;
-2. the temperature is advanced with ``u*`` (SUPG, BDF2), then the advected material fields;
+2. the temperature is advanced with ``u*`` (SUPG, BDF2), then the advected material fields and
+   stress fields;
 3. the particles move in the velocity linear in time from ``u^n`` to ``u*`` (with their ODE
    properties), then the population bounds apply and the material fields are re-averaged. With a
    predicted buoyancy (``stokes.buoyancy_theta > 0``) ``u^n`` is the flow at ``t^n + theta dt`` and
@@ -38,8 +42,8 @@ One step of length ``dt`` from ``t^n`` (:meth:`Model.step`):
    in its cells (:mod:`convection.deform.motion`);
 4. ``t += dt``; the mesh is adapted and/or repartitioned if due (every field, the velocity history
    and the particles follow);
-5. Stokes is solved for ``u^{n+1}, p^{n+1}``; the particles' properties are refreshed from the new
-   solution and written when due.
+5. Stokes is solved for ``u^{n+1}, p^{n+1}``; the stress fields and the particles' properties are
+   refreshed from the new solution, the particles written when due.
 
 A run (:func:`convection.run.loop.run`) is a loop around :meth:`Model.step`; a user can write the same
 loop in Python (see ``demos/``).
@@ -58,6 +62,7 @@ from convection.adapt.adaptivity import Adaptivity
 from convection.deform.motion import FreeSurface
 from convection.geometry.domain import Domain
 from convection.model.composition import CompositionSource
+from convection.model.elastic_stress import FieldStress
 from convection.model.mesh_changes import MeshChanges
 from convection.physics.materials import material_index
 from convection.model.rheology_fields import Flow, RheologyFields
@@ -99,12 +104,14 @@ class Model(Stateful):
         adaptivity: Mesh adaptivity, or None.
         balancer: Load balancing, or None.
         free_surface: The free surface's mesh motion, or None.
+        elastic_stress: The elastic stress as mesh fields, or None.
     """
 
     def __init__(self, stokes: StokesSolver, /, *, temperature: TransportSolver | None = None,
                  solve_temperature: bool = True, composition: CompositionSource | None = None,
                  particles: ParticleSystems | ParticleManager | None = None, adaptivity: Adaptivity | None = None,
-                 balancer: Balancer | None = None, free_surface: FreeSurface | None = None) -> None:
+                 balancer: Balancer | None = None, free_surface: FreeSurface | None = None,
+                 elastic_stress: FieldStress | None = None) -> None:
         if temperature is not None and temperature.velocity_extrapolation:
             raise ValueError("the model extrapolates the velocity itself: build the temperature solver with "
                              "velocity_extrapolation=False")
@@ -116,6 +123,7 @@ class Model(Stateful):
         self.adaptivity = adaptivity
         self.balancer = balancer
         self.free_surface = free_surface
+        self.elastic_stress = elastic_stress
         self.timers = Timers()
         self.time = 0.0
         self.timestep = 0
@@ -125,7 +133,7 @@ class Model(Stateful):
         self.flow_result: StokesResult | None = None
         self.mesh_version = 0  # increases with every new mesh (caches keyed on the mesh use it)
         self._mesh_changes = MeshChanges(self)
-        self.rheology = RheologyFields(stokes, self.particles)
+        self.rheology = RheologyFields(stokes, self.particles, elastic_stress)
 
     # ------------------------------------------------------------------ state
     @property
@@ -204,17 +212,14 @@ class Model(Stateful):
     # ------------------------------------------------------------------ checkpoints
     def components(self) -> dict[str, Stateful]:
         """The stateful components by the name a checkpoint keeps them under (:mod:`fembase.state`):
-        the model's own time stepping, the flow, the temperature, the material fractions and the
-        particle manager (whose swarm is a checkpoint part of its own)."""
+        the model's own time stepping, the flow, the temperature, the material fractions, the particle
+        managers (whose swarms are checkpoint parts of their own), the free surface, the stress fields."""
         out: dict[str, Stateful] = {"model": self, "stokes": self.stokes}
-        if self.temperature is not None:
-            out["temperature"] = self.temperature
-        if self.composition is not None:
-            out["composition"] = self.composition
-        for name, manager in self.particles.items() if self.particles is not None else ():
-            out[file_stem(name)] = manager  # one per particle system
-        if self.free_surface is not None:
-            out["free_surface"] = self.free_surface
+        managers = [(file_stem(name), m) for name, m in (self.particles.items() if self.particles is not None else ())]
+        for name, component in (("temperature", self.temperature), ("composition", self.composition), *managers,
+                                ("free_surface", self.free_surface), ("elastic_stress", self.elastic_stress)):
+            if component is not None:
+                out[name] = component
         return out
 
     def state(self) -> State:
@@ -241,13 +246,15 @@ class Model(Stateful):
 
     # ------------------------------------------------------------------ time stepping
     def solve_flow(self, dt: float | None = None, /) -> StokesResult:
-        """Solve Stokes now, anticipating the coming step ``dt`` (default: the step just taken)."""
-        flow = self.flow()
-        result = self.stokes.solve(flow.T, flow.fractions, dt=self.dt_previous if dt is None else dt,
-                                   fields=flow.fields or None)
+        """Solve Stokes now for the coming step ``dt`` (default: the last); the stress fields take its strain."""
+        flow, step = self.flow(), self.dt_previous if dt is None else dt
+        result = self.stokes.solve(flow.T, flow.fractions, dt=step, fields=flow.fields or None)
         if self.rheology.rates:
             with self.timers("plastic_strain_rate"):
                 self.rheology.update_rates(flow)
+        if self.elastic_stress is not None:
+            with self.timers("elastic_stress"):
+                self.elastic_stress.update(flow, step)
         self.timers.add("stokes_assembly", result.assembly_seconds)
         self.stokes_assemblies += result.assemblies
         self.timers.add("stokes_solve", result.solve_seconds)
@@ -283,9 +290,10 @@ class Model(Stateful):
         if self.solve_temperature and self.temperature is not None:  # solve_temperature: there is one
             with self.timers("temperature"):
                 self.temperature.step(frame(u_end), dt)
-        if self.composition is not None:
-            with self.timers("composition"):
-                self.composition.advance(frame(u_materials), dt)
+        for name, advected in (("composition", self.composition), ("elastic_stress", self.elastic_stress)):
+            if advected is not None:
+                with self.timers(name):
+                    advected.advance(frame(u_materials), dt)
         if self.particles is not None:
             self.particles.advance(u, u_materials, dt, step=self.timestep, fields=self.particle_fields())
         if self.free_surface is not None:
@@ -293,9 +301,7 @@ class Model(Stateful):
         self.time += dt
         self.timestep += 1
         self.dt_previous = dt
-        adapted = None
-        if self.adaptivity is not None and self.adaptivity.due(self.timestep):
-            adapted = self.adapt()
+        adapted = self.adapt() if self.adaptivity is not None and self.adaptivity.due(self.timestep) else None
         report = StepReport(adapted, self._rebalance_if_due())
         self.solve_flow()
         if self.particles is not None:
@@ -304,8 +310,7 @@ class Model(Stateful):
 
     def _velocity_at_step_end(self, dt: float) -> dolfinx.fem.Function:
         """u* (module docstring); then remembers u^n as the previous velocity."""
-        u = self.stokes.u
-        u_end = u
+        u = u_end = self.stokes.u
         if self.u_previous is not None and self.dt_previous > 0.0:
             w = dt / self.dt_previous
             u_end = dolfinx.fem.Function(u.function_space)
@@ -333,6 +338,6 @@ class Model(Stateful):
 
     def destroy(self) -> None:
         """Free the solvers' PETSc objects now, on every rank together."""
-        for solver in (self.stokes, self.temperature, self.composition, self.free_surface):
+        for solver in (self.stokes, self.temperature, self.composition, self.free_surface, self.elastic_stress):
             if solver is not None:
                 solver.destroy()

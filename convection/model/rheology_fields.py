@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import dolfinx.fem
 import ufl
@@ -38,7 +38,14 @@ from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space, interpolation_points
 from particles.systems import ParticleSystems
 
-__all__ = ["ExpressionField", "Flow", "RheologyFields", "flow_viscosity", "law_viscosity"]
+__all__ = ["ExpressionField", "Flow", "RheologyFields", "StressFields", "flow_viscosity", "law_viscosity"]
+
+
+class StressFields(Protocol):
+    """The stress history as mesh fields (:class:`convection.model.elastic_stress.FieldStress`)."""
+
+    @property
+    def fields(self) -> dict[str, dolfinx.fem.Function]: ...
 
 
 @dataclass(frozen=True)
@@ -123,13 +130,18 @@ class RheologyFields:
         stokes: The flow solver (its approximation's viscosity law declares the rates).
         particles: The particles (their properties ask for rates; they average the laws' fields),
             or None.
+        stress: With ``physics.elasticity.stress: fields``, what holds the stress fields (its
+            ``fields`` by label, :class:`convection.model.elastic_stress.FieldStress`); None: the
+            particles' stress.
 
     Raises:
         ValueError: The particles ask for a rate the rheology does not provide.
     """
 
-    def __init__(self, stokes: StokesSolver, particles: ParticleSystems | None, /) -> None:
+    def __init__(self, stokes: StokesSolver, particles: ParticleSystems | None, stress: StressFields | None = None,
+                 /) -> None:
         self.particles = particles
+        self.stress = stress
         law = stokes.approximation.viscosity_law
         declared = {**{name: _rate(name, builder) for name, builder in law.rate_fields().items()},
                     **_elastic_rates(stokes)}
@@ -156,13 +168,16 @@ class RheologyFields:
 
     def law_fields(self, stokes: StokesSolver, /) -> dict[str, dolfinx.fem.Function]:
         """The mesh fields the viscosity laws read, by name: particle properties averaged onto the
-        mesh (the particles' tracked fields, e.g. ``plastic_strain``)."""
-        names = (*stokes.approximation.viscosity_law.field_names, *_elastic_stress_fields(stokes))
+        mesh (the particles' tracked fields, e.g. ``plastic_strain``), and the old elastic stress
+        (the particles' or :attr:`stress`'s fields)."""
+        stress = _elastic_stress_fields(stokes)
+        names = (*stokes.approximation.viscosity_law.field_names, *(stress if self.stress is None else ()))
+        out = {} if self.stress is None or not stress else dict(self.stress.fields)
         if not names:
-            return {}
+            return out
         if self.particles is None:
             raise ValueError(f"the viscosity laws read the fields {list(names)}, which come from particles")
-        return {name: self.particles.field(name) for name in names}
+        return {name: self.particles.field(name) for name in names} | out
 
     def property_fields(self, rates: Callable[[], dict[str, dolfinx.fem.Function]], /
                         ) -> dict[str, dolfinx.fem.Function]:

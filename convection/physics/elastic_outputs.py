@@ -71,16 +71,25 @@ def elastic_split(elasticity: Elasticity, eta: Any, C: Any, rate: Any, fields: M
     return ElasticSplit(stress, elastic, eps - elastic, eps)
 
 
-def check_elastic_outputs(enabled: bool, carried: Sequence[str], extra_fields: Sequence[str] | None, /) -> None:
+def check_elastic_outputs(enabled: bool, carried: Sequence[str], extra_fields: Sequence[str] | None,
+                          on_particles: bool = True, /) -> None:
     """Refuse an elastic output without elasticity (``carried``: the primary particle system's
-    property names; ``extra_fields``: ``output.extra_fields``).
+    property names; ``extra_fields``: ``output.extra_fields``), and an elastic particle property when
+    the stress is not carried by the particles (``on_particles`` False: ``physics.elasticity.stress:
+    fields``; the particle outputs need each particle's own stress; the fields work with either).
 
     Raises:
         ConfigError: naming the key and the output.
     """
+    history = [name for name in carried if name != "elastic_stress"]  # the history: checked with elasticity
+    if enabled and not on_particles:
+        asked = [name for name in history if name in ELASTIC_OUTPUTS]
+        if asked:
+            raise ConfigError(f"config key 'particles.properties': {asked[0]!r} needs the particles' stress "
+                              "(physics.elasticity.stress: particles); with stress: fields ask for it in "
+                              "output.extra_fields")
     if enabled:
         return
-    history = [name for name in carried if name != "elastic_stress"]  # the history: checked with elasticity
     for key, names in (("particles.properties", history), ("output.extra_fields", extra_fields or ())):
         asked = [name for name in names if name in ELASTIC_OUTPUTS]
         if asked:

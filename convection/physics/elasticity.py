@@ -32,10 +32,11 @@ from typing import Any
 import ufl
 
 from convection.physics.rheology import COMBINATIONS, ElasticTrial, ViscoPlastic, ViscosityLawBase, yield_law
-from convection.schema import ConfigError, param
+from convection.schema import MAX_DEGREE, ConfigError, Names, param
+from fembase.registry import Registry
 
-__all__ = ["STRESS_COMPONENTS", "STRESS_PROPERTY", "Elasticity", "ElasticitySettings", "check_elasticity",
-           "check_plasticity", "stress_labels"]
+__all__ = ["STRESS_CARRIERS", "STRESS_COMPONENTS", "STRESS_PROPERTY", "Elasticity", "ElasticitySettings",
+           "StressCarrier", "check_elasticity", "check_plasticity", "rotated", "stress_labels"]
 
 STRESS_COMPONENTS: dict[int, tuple[tuple[int, int], ...]] = {
     2: ((0, 0), (1, 1), (0, 1)),
@@ -57,17 +58,47 @@ def stress_labels(gdim: int, /) -> tuple[str, ...]:
 
 
 @dataclass(frozen=True)
+class StressCarrier:
+    """What carries the stress history between steps (``physics.elasticity.stress``).
+
+    Attributes:
+        name: The config name.
+        description: One line for the config reference.
+        on_particles: The particles' ``elastic_stress`` carries it (else advected mesh fields,
+            :mod:`convection.model.elastic_stress`).
+    """
+
+    name: str
+    description: str
+    on_particles: bool
+
+
+STRESS_CARRIERS: Registry[StressCarrier] = Registry("elastic stress carrier", (
+    StressCarrier("particles", "the particle property elastic_stress, interpolated onto the mesh after each step",
+                  on_particles=True),
+    StressCarrier("fields", "continuous mesh fields advected as composition fields (SUPG, BDF2, no diffusion)",
+                  on_particles=False),
+))
+"""Registry of the stress history's carriers (docs/rheology.md, "The stress as fields")."""
+
+
+@dataclass(frozen=True)
 class ElasticitySettings:
     """The ``physics.elasticity`` config section (off by default)."""
 
-    enabled: bool = param(False, help="Maxwell visco-elasticity (Moresi et al. 2003): needs particles carrying "
-                                      "elastic_stress")
+    enabled: bool = param(False, help="Maxwell visco-elasticity (Moresi et al. 2003): the stress history is carried "
+                                      "by particles carrying elastic_stress or by mesh fields (stress)")
     shear_modulus: float = param(1.0, exclusive_minimum=0.0, help="shear modulus G of the background material (a "
                                                                   "stress: e.g. 1e10 Pa with the scaling section)")
     elastic_time_step: float | None = param(None, exclusive_minimum=0.0,
                                             help="a fixed elastic time step dt_e >= time.dt_max, the stress averaged "
                                                  "between steps (a time: e.g. 10 kyr with the scaling section); null: "
                                                  "dt_e = dt")
+    stress: str = param("particles", choices=Names(STRESS_CARRIERS),
+                        help="what carries the stress history: particles (the property elastic_stress) or fields "
+                             "(advected continuous mesh fields, one per stress component)")
+    stress_degree: int = param(2, minimum=1, maximum=MAX_DEGREE,
+                               help="with stress: fields, the Lagrange degree of the stress fields")
 
 
 @dataclass(frozen=True)
@@ -173,13 +204,25 @@ class Elasticity:
         return -self.memory(eta, C, rate) * ufl.inner(tau, ufl.sym(ufl.grad(v))) * dx
 
 
+def rotated(tau: Any, grad_u: Any, dt: Any, /) -> Any:
+    """``R tau R^T`` with ``R = exp(dt W)``, ``W = (grad u - grad u^T) / 2`` (UFL; Rodrigues' formula as
+    :func:`particles.properties.elastic_stress.jaumann_rotation`): the Jaumann rotation of the stress
+    over a step, which keeps its invariants."""
+    K = 0.5 * dt * (grad_u - grad_u.T)
+    theta = ufl.max_value(ufl.sqrt(0.5 * ufl.inner(K, K)), 1.0e-20)  # sin(t) / t = 1 below 1e-20 in doubles
+    half = theta / 2.0
+    R = ufl.Identity(grad_u.ufl_shape[0]) + ufl.sin(theta) / theta * K + 0.5 * (ufl.sin(half) / half) ** 2 * K * K
+    return R * tau * R.T
+
+
 def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], dt_max: float | None = None,
                      dt_initial: float | None = None, /) -> None:
     """The cross-key checks of ``physics.elasticity`` (``carried``: the property names of the primary
     particle system, empty without particles; ``dt_max``, ``dt_initial``: the ``time`` keys).
 
     Raises:
-        ConfigError: elasticity without the particles' ``elastic_stress``, or that property without
+        ConfigError: elasticity whose stress is carried by particles without the particles'
+            ``elastic_stress``, that property with the stress carried by fields or without
             elasticity; a fixed elastic time step without ``time.dt_max`` or below it (the averaging
             would extrapolate the stress).
     """
@@ -190,9 +233,14 @@ def check_elasticity(settings: ElasticitySettings, carried: Sequence[str], dt_ma
     if settings.enabled and dt_e is not None and dt_initial is not None and dt_initial > dt_e:
         raise ConfigError("config key 'time.dt_initial': a step longer than "
                           "physics.elasticity.elastic_time_step; set it at most that")
-    if settings.enabled and STRESS_PROPERTY not in carried:
+    on_particles = STRESS_CARRIERS[settings.stress].on_particles
+    if settings.enabled and on_particles and STRESS_PROPERTY not in carried:
         raise ConfigError("config key 'physics.elasticity.enabled': the stress history is carried by particles; set "
-                          f"particles.enabled: true and carry {STRESS_PROPERTY!r} in particles.properties")
+                          f"particles.enabled: true and carry {STRESS_PROPERTY!r} in particles.properties (or "
+                          "physics.elasticity.stress: fields)")
+    if settings.enabled and not on_particles and STRESS_PROPERTY in carried:
+        raise ConfigError(f"config key 'particles.properties': {STRESS_PROPERTY!r} is the stress history of "
+                          f"physics.elasticity.stress: particles, not of stress: {settings.stress!r}; remove it")
     if not settings.enabled and STRESS_PROPERTY in carried:
         raise ConfigError(f"config key 'particles.properties': {STRESS_PROPERTY!r} needs physics.elasticity.enabled: "
                           "true")

@@ -89,3 +89,32 @@ def test_fixed_elastic_time_step_on_several_ranks(tmp_path_factory):
     c = stress.run_case(0.1, t_load=0.5, t_end=1.0, cells=2, out=comm.bcast(out), comm=comm, dt_e=0.2)
     assert np.max(np.abs(c.tau - averaged_curve(0.1, 0.2, 0.5, 1.0))) < 1e-13 * 2 * stress.ETA * stress.EPS
     assert np.max(c.spread) < 1e-13
+
+
+def test_stress_fields_give_the_particles_curve(tmp_path):
+    """physics.elasticity.stress: fields in the uniform box: the particles' discrete curve to round-off
+    (backward Euler's error against the Maxwell solutions), the field uniform; with a fixed dt_e the
+    averaged curve."""
+    scale = 2 * stress.ETA * stress.EPS
+    particles = stress.run_case(0.2, t_load=1.0, t_end=2.0, cells=2, out=tmp_path / "particles")
+    fields = stress.run_case(0.2, t_load=1.0, t_end=2.0, cells=2, out=tmp_path / "fields", stress="fields")
+    assert np.max(np.abs(fields.tau - particles.tau)) < 1e-13 * scale
+    assert fields.build_up_error() == pytest.approx(backward_euler_error(0.2, 1.0), rel=1e-9)
+    assert fields.relaxation_error() == pytest.approx(backward_euler_error(0.2, 1.0), rel=1e-9)
+    assert np.max(fields.spread) < 1e-13 * scale and fields.tau[5] > 0.5 * scale
+    averaged = stress.run_case(0.1, t_load=0.5, t_end=1.0, cells=2, out=tmp_path / "averaged", dt_e=0.2,
+                               stress="fields")
+    assert np.max(np.abs(averaged.tau - averaged_curve(0.1, 0.2, 0.5, 1.0))) < 1e-13 * scale
+
+
+@pytest.mark.mpi
+def test_stress_fields_on_several_ranks(tmp_path_factory):
+    """The fields' build-up and relaxation collectively: backward Euler's numbers on every rank count."""
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    out = tmp_path_factory.mktemp("viscoelastic") if comm.rank == 0 else None
+    c = stress.run_case(0.2, t_load=1.0, t_end=2.0, cells=3, out=comm.bcast(out), comm=comm, stress="fields")
+    assert c.build_up_error() == pytest.approx(backward_euler_error(0.2, 1.0), rel=1e-9)
+    assert c.relaxation_error() == pytest.approx(backward_euler_error(0.2, 1.0), rel=1e-9)
+    assert np.max(c.spread) < 1e-13 * 2 * stress.ETA * stress.EPS

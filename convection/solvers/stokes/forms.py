@@ -71,6 +71,8 @@ class StokesForms(NamedTuple):
             a semi-implicit buoyancy.
         a_pc: the preconditioning matrix ``[[A, B^T], [B, -M_p / eta]]``, or None.
         a_si: the semi-implicit buoyancy term (a velocity-velocity form), or None.
+        a_weights: ``sqrt(eta)`` times the scalar mass form on the velocity's component space, whose
+            diagonal weighs the w-BFBt Schur approximation (:mod:`convection.solvers.stokes.bfbt`), or None.
         a_si_component: where the term has one velocity component only (a box: ``e_up = e_k``),
             ``(k, W, W_to_V, form)``: the component's space ``V.sub(k).collapse()``, its map into
             ``V``'s unrolled dofs and the term as a scalar form on it
@@ -83,6 +85,7 @@ class StokesForms(NamedTuple):
     a_pc: Any = None
     a_si: Any = None
     a_si_component: Any = None
+    a_weights: Any = None
 
 
 class StokesDiscretisation:
@@ -271,7 +274,8 @@ class StokesDiscretisation:
         return dolfinx.fem.form([F_u, F_p]), dolfinx.fem.form(J)
 
     def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool,
-              semi_implicit: SemiImplicitBuoyancy | None = None, flow: dict[str, Any] | None = None) -> StokesForms:
+              semi_implicit: SemiImplicitBuoyancy | None = None, flow: dict[str, Any] | None = None,
+              weights: bool = False) -> StokesForms:
         """The forms for temperature ``T`` and composition ``C`` (see
         :meth:`convection.solvers.stokes.solver.StokesSolver.solve`); a semi-implicit buoyancy's term replaces its
         earlier one. Collective (compiles forms).
@@ -282,6 +286,7 @@ class StokesDiscretisation:
             semi_implicit: the buoyancy predictor whose operator term to build, or None.
             flow: the iterate ``{"u", "p", "fields"}`` the viscosity laws read (Picard: the
                 operator of the viscosity at the iterate), or None.
+            weights: also build the w-BFBt weights' form ``a_weights`` (with ``preconditioner``).
         """
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
@@ -334,4 +339,9 @@ class StokesDiscretisation:
             a_pc = dolfinx.fem.form(
                 [[a[0][0], a[0][1]], [a[1][0], -ufl.inner(p, q) / eta * dx]]
             )
-        return StokesForms(a_form, L, a_lift, a_pc, a_si, a_si_component)
+        a_weights = None
+        if preconditioner and weights:
+            W = self.component_space(0)[0]
+            w, s = ufl.TrialFunction(W), ufl.TestFunction(W)
+            a_weights = dolfinx.fem.form(ufl.sqrt(eta) * w * s * dx)
+        return StokesForms(a_form, L, a_lift, a_pc, a_si, a_si_component, a_weights)

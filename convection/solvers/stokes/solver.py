@@ -83,6 +83,7 @@ from convection.solvers.petsc_options import (
     HAS_HYPRE, MUMPS_LU, LinearSolver, PetscSolver, check_petsc_options, krylov_options, linear_solvers,
     reproducible_lu, set_owned_options,
 )
+from convection.solvers.stokes.bfbt import SCHUR_APPROXIMATIONS, schur_options
 from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
 from convection.solvers.stokes.linear import StokesLinearSystem
 from convection.solvers.stokes.lagged import LaggedPreconditioner, assemble_operator
@@ -209,6 +210,10 @@ class StokesSettings:
                                                   "viewers may only print")
     nonlinear: NonlinearSettings = subsection(NonlinearSettings)
     multigrid: MultigridSettings = subsection(MultigridSettings)
+    schur: str = param("mass", choices=Names(SCHUR_APPROXIMATIONS),
+                       help="Schur complement approximation of the iterative solvers: mass (-M_p/eta, SOR; the "
+                            "default) or wbfbt (weighted BFBt, two AMG cycles on a weighted pressure Poisson matrix: "
+                            "robust at large viscosity contrasts, benchmarks/nsinker); not with direct")
     buoyancy_theta: float = param(0.0, minimum=0.0, maximum=1.0,
                                   help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
                                        "t + theta dt along the flow, the material moved in the velocity so solved "
@@ -449,6 +454,8 @@ class StokesSolver(PetscSolver):
         nonlinear: Picard or Newton settings (:mod:`convection.solvers.stokes.nonlinear`), used when the
             viscosity depends on the flow (default: :class:`NonlinearSettings`'s defaults).
         multigrid: The ``stokes.multigrid`` settings (how many levels the caller makes).
+        schur: The Schur complement approximation of an iterative solver (:data:`SCHUR_APPROXIMATIONS`):
+            ``"mass"`` (``-M_p / eta``) or ``"wbfbt"`` (:mod:`convection.solvers.stokes.bfbt`).
         surface: The free surfaces' terms (:mod:`convection.deform.surface`; not in ``bcs``), or None.
         coarse_meshes: The meshes ``mesh`` is nested in, coarse to fine
             (:meth:`convection.geometry.domain.Domain.create_mesh_levels`), or what gives them for a
@@ -475,7 +482,7 @@ class StokesSolver(PetscSolver):
                  solver: str = _DEFAULTS.solver, petsc_options: Mapping[str, Any] | None = None,
                  nitsche_penalty: float | None = None, buoyancy_theta: float = _DEFAULTS.buoyancy_theta,
                  nonlinear: NonlinearSettings = _DEFAULTS.nonlinear, multigrid: MultigridSettings = _DEFAULTS.multigrid,
-                 coarse_meshes: CoarseMeshes = (),
+                 coarse_meshes: CoarseMeshes = (), schur: str = _DEFAULTS.schur,
                  surface: SurfaceTerms | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
@@ -491,6 +498,7 @@ class StokesSolver(PetscSolver):
         self.buoyancy_theta = float(buoyancy_theta)
         self.nonlinear_settings = nonlinear
         self.multigrid_settings = multigrid
+        self.schur = schur
         self.is_nonlinear = approximation.is_nonlinear
         self._coarse_meshes = coarse_meshes
         check_viscosity_rules(approximation.viscosity_law.depends_on, buoyancy_theta=self.buoyancy_theta,
@@ -503,6 +511,11 @@ class StokesSolver(PetscSolver):
         self._petsc_options = self._create_ksp(mesh.comm, name, petsc_options)
         kind = STOKES_SOLVERS[name]
         self.is_iterative = kind.iterative
+        if schur not in SCHUR_APPROXIMATIONS or (schur != "mass" and not kind.iterative):
+            raise ValueError(f"Schur complement approximation {schur!r}: one of {list(SCHUR_APPROXIMATIONS)}, and "
+                             f"only 'mass' with the {name} solver")
+        if schur != "mass":
+            self._petsc_options.update(schur_options(schur, self._user_options))
         self.surface = surface
         self.discretisation = StokesDiscretisation(mesh, approximation, domain=self.domain, bcs=self.bcs, degree=degree,
                                                    nitsche_penalty=self.nitsche_penalty, surface=surface)
@@ -519,7 +532,8 @@ class StokesSolver(PetscSolver):
         self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
             self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, domain=self.domain,
             iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space, multigrid=hierarchy,
-            term_in_preconditioner=kind.nested, operator_preconditions=kind.nested and not self.is_nonlinear)
+            term_in_preconditioner=kind.nested, operator_preconditions=kind.nested and not self.is_nonlinear,
+            wbfbt=self.discretisation.component_space(0) if schur == "wbfbt" else None)
         self._pressure_mean = pressure_normaliser(self.linear_system, self.discretisation)
 
         lags = (kind.nested and not self.is_nonlinear and self._semi_implicit is not None
@@ -542,7 +556,7 @@ class StokesSolver(PetscSolver):
         return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self._asked_solver,
                 "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
-                "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings,
+                "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings, "schur": self.schur,
                 "coarse_meshes": self._coarse_meshes, "surface": self.surface}
 
     def prepare(self, T: Any, C: Any = None, /, *, fields: dict[str, Any] | None = None) -> StokesForms:
@@ -556,7 +570,8 @@ class StokesSolver(PetscSolver):
             flow = {"u": self.u, "p": self.p, "fields": fields or {}}
             self.forms = self.discretisation.forms(T, C, pressure_block=self.linear_system.pinned,
                                                    preconditioner=self.is_iterative,
-                                                   semi_implicit=self._semi_implicit, flow=flow)
+                                                   semi_implicit=self._semi_implicit, flow=flow,
+                                                   weights=self.schur == "wbfbt")
             if self._forms_key is not None and self._lag is not None:
                 self._lag.dt = None  # new forms: set the preconditioner up at the next solve
             self._forms_key = key

@@ -23,6 +23,11 @@ boundary-modified weights of the paper are not done.
 :class:`WeightedBFBt` is a petsc4py Python preconditioner: the Stokes linear system
 (:class:`convection.solvers.stokes.linear.StokesLinearSystem`) owns one, sets it as the Schur
 complement's PC (``fieldsplit_p_pc_type python``) and updates it when the operator changes.
+
+Measured on nsinker (4 sinkers, benchmarks/nsinker/README.md): with an exact velocity solve at 4^3,
+14 -> 40 iterations from DR 1e2 to 1e6 against 28 -> 161 for ``-M_p / eta``; with the SOR multigrid at
+8^3 on one rank 28 -> 49 against 37 -> 138. On two ranks the SOR multigrid's velocity solve (SOR within
+each rank) is the limit and w-BFBt does not help it at DR 1e6 (8^3: 639 against 286).
 """
 
 from __future__ import annotations
@@ -35,13 +40,15 @@ import numpy as np
 from petsc4py import PETSc
 
 from convection.solvers.petsc_options import SCALAR_AMG
+from convection.solvers.stokes.forms import StokesForms
+from convection.solvers.stokes.linear import StokesLinearSystem
 
-__all__ = ["SCHUR_APPROXIMATIONS", "WeightedBFBt", "schur_options"]
+__all__ = ["SCHUR_APPROXIMATIONS", "WeightedBFBt", "WeightedBFBtSystem", "schur_options"]
 
 SCHUR_APPROXIMATIONS: dict[str, str] = {
     "mass": "-M_p / eta, the viscosity-scaled pressure mass matrix (the default)",
-    "wbfbt": "weighted BFBt (Rudi et al. 2017), weights sqrt(eta): robust at large viscosity contrasts "
-             "(benchmarks/nsinker)",
+    "wbfbt": "weighted BFBt (Rudi et al. 2017), weights sqrt(eta): far fewer iterations at large viscosity "
+             "contrasts where the velocity solve is good (benchmarks/nsinker)",
 }
 """The Schur complement approximations of ``stokes.schur``."""
 
@@ -49,8 +56,16 @@ PREFIX = "wbfbt_"
 """The options prefix of the Poisson-like solves, after the Schur complement's PC's (``fieldsplit_p_``)."""
 
 
-def schur_options(schur: str, user: dict[str, Any] | None = None, /) -> dict[str, Any]:
-    """The Stokes solver's PETSc options ``stokes.schur`` sets (but those the ``user``'s options set)."""
+def schur_options(schur: str, user: dict[str, Any] | None = None, /, *, solver: str = "iterative",
+                  iterative: bool = True) -> dict[str, Any]:
+    """The Stokes solver's PETSc options ``stokes.schur`` sets (but those the ``user``'s options set).
+
+    Raises:
+        ValueError: An unknown approximation, or one other than ``mass`` with a direct ``solver``.
+    """
+    if schur not in SCHUR_APPROXIMATIONS or (schur != "mass" and not iterative):
+        raise ValueError(f"Schur complement approximation {schur!r}: one of {list(SCHUR_APPROXIMATIONS)}, and "
+                         f"only 'mass' with the {solver} solver")
     if schur == "mass":
         return {}
     options = {"fieldsplit_p_pc_type": "python", f"fieldsplit_p_{PREFIX}ksp_type": "preonly",
@@ -66,12 +81,17 @@ class WeightedBFBt:
         component: ``V.sub(0).collapse()``: the scalar space and its map into ``V``'s unrolled local dofs.
         index_sets: The velocity and pressure rows of the block operator (global numbering, owned).
         constant_pressure: The constant pressure solves the homogeneous problem (``L``'s null space).
+
+    Attributes:
+        form: The weights' form of the last :meth:`update` (``a_weights`` of
+            :class:`~convection.solvers.stokes.forms.StokesForms`).
     """
 
     def __init__(self, V: dolfinx.fem.FunctionSpace, component: tuple[dolfinx.fem.FunctionSpace, np.ndarray],
                  index_sets: tuple[PETSc.IS, PETSc.IS], /, *, constant_pressure: bool) -> None:
         self.V, (self.W, self.W_to_V) = V, component
         self.is_u, self.is_p = index_sets
+        self.form: Any = None
         comm = V.mesh.comm
         self.null_space = PETSc.NullSpace().create(constant=True, comm=comm) if constant_pressure else None
         self.ksp = PETSc.KSP().create(comm)
@@ -89,14 +109,14 @@ class WeightedBFBt:
         self.ksp.setOptionsPrefix(prefix + PREFIX)
         self.ksp.setFromOptions()
 
-    def update(self, K: PETSc.Mat, weights: Any, /, *, blocks: PETSc.Mat | None = None) -> None:
-        """Take the operator ``K`` (``A`` at every application), the blocks ``G``, ``D`` of ``blocks``
-        (default ``K``: where ``K`` gets its values later, the matrix whose blocks it will have) and the
-        weight form ``weights`` (``sqrt(eta)`` times the scalar mass form on the component space):
-        ``W``, then ``L = D W G``. Collective."""
+    def update(self, K: PETSc.Mat, /, *, blocks: PETSc.Mat | None = None) -> None:
+        """Take the operator ``K`` (``A`` at every application) and the blocks ``G``, ``D`` of ``blocks``
+        (default ``K``: where ``K`` gets its values later, the matrix whose blocks it will have); assemble
+        :attr:`form` (``sqrt(eta)`` times the scalar mass form on the component space): ``W``, then
+        ``L = D W G``. Collective."""
         self.K = K
         blocks = K if blocks is None else blocks
-        self._assemble_weights(weights)
+        self._assemble_weights(self.form)
         reuse = self.L is not None
         self.G = blocks.createSubMatrix(self.is_u, self.is_p, submat=self.G)
         self.D = blocks.createSubMatrix(self.is_p, self.is_u, submat=self.D)
@@ -112,7 +132,7 @@ class WeightedBFBt:
             self._work = (z, z.duplicate(), self.G.createVecs()[1], self.L.createVecs()[0])
 
     def attach(self, pc: PETSc.PC, /) -> None:
-        """Be the Python PC ``pc`` (the Schur complement's, of type python from the options)."""
+        """Be the Python PC ``pc`` (the Schur complement's, of type python from the options). Not collective."""
         if pc.getType() != "python":
             raise ValueError(f"the Schur complement's preconditioner is {pc.getType()!r}, not python: "
                              "stokes.petsc_options changed fieldsplit_p_pc_type")
@@ -176,3 +196,51 @@ class WeightedBFBt:
                 obj.destroy()
         self.G = self.D = self._WG = self.L = self.weights = self._mass = self.null_space = None
         self._work = ()
+
+
+class WeightedBFBtSystem(StokesLinearSystem):
+    """:class:`~convection.solvers.stokes.linear.StokesLinearSystem` with the w-BFBt Schur complement PC
+    (an iterative solver; ``stokes.schur: wbfbt``): made at :meth:`setup`, updated with the preconditioning
+    matrix (the weights of the forms of the last :meth:`assemble_operator`; a Newton step's ``P`` takes
+    them from there too: their viscosity is the iterate's) and set as the Schur complement's Python PC
+    before every set-up.
+
+    Args:
+        component: The velocity's component space (:meth:`StokesDiscretisation.component_space`).
+        Others: as :class:`~convection.solvers.stokes.linear.StokesLinearSystem`'s.
+    """
+
+    def __init__(self, *args: Any, component: tuple[dolfinx.fem.FunctionSpace, np.ndarray], **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if not self.iterative:
+            raise ValueError("the weighted BFBt needs an iterative solver")
+        self._component = component
+        self.bfbt: WeightedBFBt | None = None
+
+    def setup(self, forms: StokesForms, /) -> None:
+        super().setup(forms)
+        self.bfbt = WeightedBFBt(self.V, self._component, self.index_sets(), constant_pressure=self.pressure_null_space)
+        self.bfbt.set_prefix(self.ksp.getOptionsPrefix() + "fieldsplit_p_")
+
+    def assemble_operator(self, forms: StokesForms, /, *, refresh: bool) -> None:
+        if self.bfbt is not None:
+            self.bfbt.form = forms.a_weights
+        super().assemble_operator(forms, refresh=refresh)
+
+    def _assemble_preconditioning(self, a_pc: list) -> None:
+        super()._assemble_preconditioning(a_pc)
+        if self.bfbt is not None:
+            self.bfbt.update(self._A, blocks=self._A if self._A0 is None else self._A0)
+
+    def prepare_preconditioner(self) -> None:
+        super().prepare_preconditioner()  # the outer PC set up (with a multigrid), or not
+        pc = self.ksp.getPC()
+        pc.setUp()
+        if self.bfbt is not None:
+            self.bfbt.attach(pc.getFieldSplitSubKSP()[1].getPC())
+
+    def destroy(self) -> None:
+        if self.bfbt is not None:
+            self.bfbt.destroy()
+            self.bfbt = None
+        super().destroy()

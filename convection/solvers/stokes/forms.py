@@ -88,6 +88,12 @@ class StokesForms(NamedTuple):
     a_weights: Any = None
 
 
+def weights_form(W: dolfinx.fem.FunctionSpace, eta: Any, dx: Any, /) -> Any:
+    """The compiled ``(sqrt(eta) w, s)`` on the scalar space ``W`` (the w-BFBt weights: its diagonal)."""
+    w, s = ufl.TrialFunction(W), ufl.TestFunction(W)
+    return dolfinx.fem.form(ufl.sqrt(eta) * w * s * dx)
+
+
 class StokesDiscretisation:
     """Taylor-Hood spaces, the strong velocity conditions and the forms (see the module docstring).
 
@@ -273,20 +279,18 @@ class StokesDiscretisation:
             J[1][1] = zero * ufl.inner(dp, q) * dx
         return dolfinx.fem.form([F_u, F_p]), dolfinx.fem.form(J)
 
-    def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool,
-              semi_implicit: SemiImplicitBuoyancy | None = None, flow: dict[str, Any] | None = None,
-              weights: bool = False) -> StokesForms:
+    def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool, weights: bool = False,
+              semi_implicit: SemiImplicitBuoyancy | None = None, flow: dict[str, Any] | None = None) -> StokesForms:
         """The forms for temperature ``T`` and composition ``C`` (see
         :meth:`convection.solvers.stokes.solver.StokesSolver.solve`); a semi-implicit buoyancy's term replaces its
         earlier one. Collective (compiles forms).
 
         Args:
             pressure_block: add a zero pressure-pressure block (for a pinned pressure dof).
-            preconditioner: also build the preconditioning matrix's form ``a_pc``.
+            preconditioner: also build the preconditioning matrix's form ``a_pc`` (and ``weights``: ``a_weights``).
             semi_implicit: the buoyancy predictor whose operator term to build, or None.
             flow: the iterate ``{"u", "p", "fields"}`` the viscosity laws read (Picard: the
                 operator of the viscosity at the iterate), or None.
-            weights: also build the w-BFBt weights' form ``a_weights`` (with ``preconditioner``).
         """
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         p, q = ufl.TrialFunction(self.Q), ufl.TestFunction(self.Q)
@@ -336,12 +340,6 @@ class StokesDiscretisation:
         a_pc = None
         if preconditioner:
             # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
-            a_pc = dolfinx.fem.form(
-                [[a[0][0], a[0][1]], [a[1][0], -ufl.inner(p, q) / eta * dx]]
-            )
-        a_weights = None
-        if preconditioner and weights:
-            W = self.component_space(0)[0]
-            w, s = ufl.TrialFunction(W), ufl.TestFunction(W)
-            a_weights = dolfinx.fem.form(ufl.sqrt(eta) * w * s * dx)
+            a_pc = dolfinx.fem.form([[a[0][0], a[0][1]], [a[1][0], -ufl.inner(p, q) / eta * dx]])
+        a_weights = weights_form(self.component_space(0)[0], eta, dx) if preconditioner and weights else None
         return StokesForms(a_form, L, a_lift, a_pc, a_si, a_si_component, a_weights)

@@ -22,10 +22,8 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
   the geometric multigrid of a linear solve), ``P`` is ``K`` itself and ``-M_p / eta`` a matrix of
   its own, fieldsplit's Schur preconditioning matrix (``user`` in place of ``a11``): the same
   preconditioner without a third copy of the velocity block (a quarter of the memory at 32^3)
-  and without adding the term to it every solve.
-- **Schur approximation** (``stokes.schur: wbfbt``): the weighted BFBt preconditioner
-  (:class:`convection.solvers.stokes.bfbt.WeightedBFBt`) is the Schur complement's PC in place of SOR
-  on ``-M_p / eta``, updated with the preconditioning matrix.
+  and without adding the term to it every solve. With ``stokes.schur: wbfbt`` the Schur complement's
+  PC is the weighted BFBt (:class:`convection.solvers.stokes.bfbt.WeightedBFBtSystem`, this class's).
 - **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
   ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
   dof (:meth:`convection.geometry.domain.Domain.pressure_pin`, a zero pressure block holds its
@@ -47,7 +45,6 @@ from petsc4py import PETSc
 from convection.geometry.domain import Domain
 from convection.solvers.stokes.nullspace import constant_pressure_null_space, rigid_body_modes
 from convection.solvers.petsc_options import destroy_petsc_objects
-from convection.solvers.stokes.bfbt import WeightedBFBt
 from convection.solvers.stokes.forms import StokesForms
 from convection.solvers.stokes.axis_block import SemiImplicitOperator
 from convection.solvers.stokes.multigrid import VelocityMultigrid
@@ -160,21 +157,18 @@ class StokesLinearSystem:
             a box (the preconditioner is then set up every solve; worth it for the multigrid).
         operator_preconditions: with ``term_in_preconditioner``, ``P`` is the operator itself (no
             Newton Jacobian takes the operator's place); see the module docstring.
-        wbfbt: the velocity's component space (:meth:`StokesDiscretisation.component_space`) for the
-            weighted BFBt Schur approximation, or None (``-M_p / eta``).
 
     Attributes:
         pinned: True when a pressure dof is pinned (direct solver with a pressure null space); the
             forms then need a pressure-pressure block.
     """
 
-    PETSC_OBJECTS = ("_A", "_A0", "_P", "_S", "_b", "_x", "_null_space", "_near_null_space", "multigrid", "_term",
-                     "bfbt")
+    PETSC_OBJECTS = ("_A", "_A0", "_P", "_S", "_b", "_x", "_null_space", "_near_null_space", "multigrid", "_term")
 
     def __init__(self, u: dolfinx.fem.Function, p: dolfinx.fem.Function, ksp: PETSc.KSP, /, *,
                  dirichlet: list, domain: Domain, iterative: bool, pressure_null_space: bool,
                  multigrid: VelocityMultigrid | None = None, term_in_preconditioner: bool = False,
-                 operator_preconditions: bool = False, wbfbt: tuple | None = None) -> None:
+                 operator_preconditions: bool = False) -> None:
         self.u, self.p, self.ksp, self.multigrid = u, p, ksp, multigrid
         self.term_in_preconditioner, self.operator_preconditions = term_in_preconditioner, operator_preconditions
         self.V, self.Q = u.function_space, p.function_space
@@ -192,9 +186,6 @@ class StokesLinearSystem:
         self._x: PETSc.Vec | None = None
         self._null_space: PETSc.NullSpace | None = None
         self._near_null_space: PETSc.NullSpace | None = None
-        self._wbfbt_component = wbfbt if iterative else None
-        self.bfbt: WeightedBFBt | None = None  # the Schur complement's PC (stokes.schur: wbfbt)
-        self._weights: object = None  # the w-BFBt weights' form of the last operator's forms
 
     @property
     def is_set_up(self) -> bool:
@@ -245,10 +236,6 @@ class StokesLinearSystem:
         self.ksp.setInitialGuessNonzero(True)
         if self._S is not None:
             schur_preconditioning_matrix(self.ksp.getPC(), self._S)
-        if self._wbfbt_component is not None:
-            self.bfbt = WeightedBFBt(self.V, self._wbfbt_component, self.index_sets(),
-                                     constant_pressure=self.pressure_null_space)
-            self.bfbt.set_prefix(self.ksp.getOptionsPrefix() + "fieldsplit_p_")
 
     def index_sets(self) -> tuple[PETSc.IS, PETSc.IS]:
         """:func:`velocity_pressure_sets` of ``K``. Collective."""
@@ -259,7 +246,6 @@ class StokesLinearSystem:
         """Assemble ``K`` (and ``P``): the fixed part only when ``refresh`` (the forms or their
         viscosity changed), the semi-implicit term always. Collective."""
         fixed = self._A if self._A0 is None else self._A0
-        self._weights = forms.a_weights
         if refresh:
             fixed.zeroEntries()
             assemble_block_matrix(fixed, forms.a, bcs=self._bcs)
@@ -351,8 +337,6 @@ class StokesLinearSystem:
                 assemble_block_matrix(matrix, a_pc, bcs=self._bcs)
             matrix.assemble()
             self._preconditioner_changed = True
-        if self.bfbt is not None:
-            self.bfbt.update(self._A, self._weights, blocks=self._A if self._A0 is None else self._A0)
 
     # ------------------------------------------------------------------ solve
     def prepare_preconditioner(self) -> None:
@@ -362,16 +346,12 @@ class StokesLinearSystem:
         multigrid. Fieldsplit extracts the block at the outer PC's set-up (a no-op when ``P`` did
         not change, else work the solve would do), and may make it anew (a Newton step's); PCMG
         sets itself up at its first use, after it has the prolongations."""
-        if self.multigrid is None and self.bfbt is None:
+        if self.multigrid is None:
             return
         pc = self.ksp.getPC()
         pc.setUp()
-        velocity, schur = pc.getFieldSplitSubKSP()
-        if self.multigrid is not None:
-            self.multigrid.attach(velocity, changed=self._preconditioner_changed)
-            self._preconditioner_changed = False
-        if self.bfbt is not None:
-            self.bfbt.attach(schur.getPC())
+        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed)
+        self._preconditioner_changed = False
 
     def solve(self, *, reuse_preconditioner: bool = False) -> float:
         """Solve ``K x = b`` from ``x = (u, p)`` and write ``x`` back to ``u``, ``p``. Collective.

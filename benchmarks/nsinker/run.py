@@ -98,9 +98,11 @@ def approximation(ratio: float, /) -> BoussinesqApproximation:
 
 
 def solve(comm: MPI.Comm, cells: int, ratio: float, solver: str, /, *, sinkers: int = 4, smoother: str = "jacobi",
-          petsc_options: dict[str, Any] | None = None, keep: bool = False) -> dict[str, Any]:
+          schur: str = "mass", petsc_options: dict[str, Any] | None = None, label: str | None = None,
+          keep: bool = False) -> dict[str, Any]:
     """One Stokes solve from zero (collective): iterations, the true residual against ``|b|``, vrms, the
-    L2 norm of div u, seconds and the peak resident size. ``smoother``: ``stokes.multigrid.smoother``.
+    L2 norm of div u, seconds and the peak resident size. ``smoother``: ``stokes.multigrid.smoother``;
+    ``schur``: ``stokes.schur``; ``label``: the row's solver name (default: from the three).
     ``keep``: also the solver under ``"stokes"`` (the caller destroys it)."""
     domain = BoxDomain.from_spec(BoxSpec((cells,) * 3, (0.0,) * 3, (1.0,) * 3))
     levels = domain.mesh_levels() if solver == "multigrid" else 1
@@ -109,7 +111,7 @@ def solve(comm: MPI.Comm, cells: int, ratio: float, solver: str, /, *, sinkers: 
     C = 1.0 - outside(ufl.SpatialCoordinate(mesh), sinkers)
     stokes = StokesSolver(mesh, approximation(ratio), bcs={side: VelocityBC("no_slip") for side in SIDES_3D},
                           solver=solver, coarse_meshes=meshes[:-1], petsc_options=petsc_options or None,
-                          multigrid=MultigridSettings(smoother=smoother))
+                          multigrid=MultigridSettings(smoother=smoother), schur=schur)
     start = time.perf_counter()
     try:
         result = stokes.solve(0.0, C)
@@ -123,7 +125,9 @@ def solve(comm: MPI.Comm, cells: int, ratio: float, solver: str, /, *, sinkers: 
     b_norm = float(system.b.norm())
     u = stokes.u
     vrms = math.sqrt(_integral(comm, ufl.inner(u, u) * ufl.dx))
-    name = solver if solver != "multigrid" or smoother == "jacobi" else f"{solver} ({smoother})"
+    extras = [x for x, default in ((smoother if solver == "multigrid" else "jacobi", "jacobi"), (schur, "mass"))
+              if x != default]
+    name = label or (f"{solver} ({', '.join(extras)})" if extras else solver)
     row = {"cells": cells, "ratio": ratio, "solver": name, "sinkers": sinkers, "levels": levels,
            "unknowns": (stokes.V.dofmap.index_map.size_global * stokes.V.dofmap.index_map_bs
                         + stokes.Q.dofmap.index_map.size_global),
@@ -218,6 +222,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sinkers", type=int, default=4)
     parser.add_argument("--merge", action="store_true", help="add to (or replace rows of) <out>/results.json")
     parser.add_argument("--smoother", default="jacobi", help="stokes.multigrid.smoother of the multigrid")
+    parser.add_argument("--schur", default="mass", help="stokes.schur of the iterative solvers (mass, wbfbt)")
+    parser.add_argument("--label", default=None, help="the rows' solver name (e.g. for an exact velocity solve)")
     parser.add_argument("--petsc", nargs="*", default=[], metavar="KEY=VALUE",
                         help="PETSc options on top of the solver's (e.g. fieldsplit_u_mg_levels_ksp_max_it=3)")
     args = parser.parse_args(argv)
@@ -232,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         for solver in args.solvers:
             for ratio in args.ratios:
                 row = solve(comm, n, ratio, solver, sinkers=args.sinkers, smoother=args.smoother,
-                            petsc_options=petsc)
+                            schur=args.schur, petsc_options=petsc, label=args.label)
                 rows = [r for r in rows if _key(r) != _key(row)] + [row]
                 if comm.rank == 0:  # every row as it comes: a long sweep can be stopped and merged
                     out.mkdir(parents=True, exist_ok=True)

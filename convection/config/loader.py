@@ -307,9 +307,20 @@ def _check_multigrid(config: dict[str, Any]) -> None:
                           f"not a fixed mesh.geometry {domain.name} with this mesh")
 
 
+def _check_schur(config: dict[str, Any]) -> None:
+    """``stokes.schur`` other than ``mass`` only with an iterative Stokes solver (``auto``: in 3D)."""
+    stokes = config["stokes"]
+    solver = STOKES_SOLVERS[resolve_solver(stokes["solver"], config_gdim(config))]
+    if stokes["schur"] != "mass" and not solver.iterative:
+        raise ConfigError(f"config key 'stokes.schur': {stokes['schur']} only with an iterative stokes.solver "
+                          f"(iterative, iterative_gamg, multigrid, or auto in 3D), not {stokes['solver']!r} "
+                          f"in {config_gdim(config)}D")
+
+
 def _check_consistency(config: dict[str, Any], document: dict[str, Any]) -> None:
     _check_mesh(config, document)
     _check_multigrid(config)
+    _check_schur(config)
     check_free_surface(settings_from(FreeSurfaceSettings, config["free_surface"]), free_surface_boundaries(config),
                        domain_class(config), multigrid=STOKES_SOLVER_CHOICES[config["stokes"]["solver"]].nested)
     if config["free_surface"]["initial_topography"] is not None:

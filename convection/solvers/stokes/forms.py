@@ -71,6 +71,8 @@ class StokesForms(NamedTuple):
             a semi-implicit buoyancy.
         a_pc: the preconditioning matrix ``[[A, B^T], [B, -M_p / eta]]``, or None.
         a_si: the semi-implicit buoyancy term (a velocity-velocity form), or None.
+        a_weights: ``sqrt(eta)`` times the scalar mass form on the velocity's component space, whose
+            diagonal weighs the w-BFBt Schur approximation (:mod:`convection.solvers.stokes.bfbt`), or None.
         a_si_component: where the term has one velocity component only (a box: ``e_up = e_k``),
             ``(k, W, W_to_V, form)``: the component's space ``V.sub(k).collapse()``, its map into
             ``V``'s unrolled dofs and the term as a scalar form on it
@@ -83,6 +85,13 @@ class StokesForms(NamedTuple):
     a_pc: Any = None
     a_si: Any = None
     a_si_component: Any = None
+    a_weights: Any = None
+
+
+def weights_form(W: dolfinx.fem.FunctionSpace, eta: Any, dx: Any, /) -> Any:
+    """The compiled ``(sqrt(eta) w, s)`` on the scalar space ``W`` (the w-BFBt weights: its diagonal)."""
+    w, s = ufl.TrialFunction(W), ufl.TestFunction(W)
+    return dolfinx.fem.form(ufl.sqrt(eta) * w * s * dx)
 
 
 class StokesDiscretisation:
@@ -270,7 +279,7 @@ class StokesDiscretisation:
             J[1][1] = zero * ufl.inner(dp, q) * dx
         return dolfinx.fem.form([F_u, F_p]), dolfinx.fem.form(J)
 
-    def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool,
+    def forms(self, T: Any, C: Any, /, *, pressure_block: bool, preconditioner: bool, weights: bool = False,
               semi_implicit: SemiImplicitBuoyancy | None = None, flow: dict[str, Any] | None = None) -> StokesForms:
         """The forms for temperature ``T`` and composition ``C`` (see
         :meth:`convection.solvers.stokes.solver.StokesSolver.solve`); a semi-implicit buoyancy's term replaces its
@@ -278,7 +287,7 @@ class StokesDiscretisation:
 
         Args:
             pressure_block: add a zero pressure-pressure block (for a pinned pressure dof).
-            preconditioner: also build the preconditioning matrix's form ``a_pc``.
+            preconditioner: also build the preconditioning matrix's form ``a_pc`` (and ``weights``: ``a_weights``).
             semi_implicit: the buoyancy predictor whose operator term to build, or None.
             flow: the iterate ``{"u", "p", "fields"}`` the viscosity laws read (Picard: the
                 operator of the viscosity at the iterate), or None.
@@ -331,7 +340,6 @@ class StokesDiscretisation:
         a_pc = None
         if preconditioner:
             # -M_p / eta approximates the Schur complement S = -B A^-1 B^T (PETSc's sign).
-            a_pc = dolfinx.fem.form(
-                [[a[0][0], a[0][1]], [a[1][0], -ufl.inner(p, q) / eta * dx]]
-            )
-        return StokesForms(a_form, L, a_lift, a_pc, a_si, a_si_component)
+            a_pc = dolfinx.fem.form([[a[0][0], a[0][1]], [a[1][0], -ufl.inner(p, q) / eta * dx]])
+        a_weights = weights_form(self.component_space(0)[0], eta, dx) if preconditioner and weights else None
+        return StokesForms(a_form, L, a_lift, a_pc, a_si, a_si_component, a_weights)

@@ -22,7 +22,8 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
   the geometric multigrid of a linear solve), ``P`` is ``K`` itself and ``-M_p / eta`` a matrix of
   its own, fieldsplit's Schur preconditioning matrix (``user`` in place of ``a11``): the same
   preconditioner without a third copy of the velocity block (a quarter of the memory at 32^3)
-  and without adding the term to it every solve.
+  and without adding the term to it every solve. With ``stokes.schur: wbfbt`` the Schur complement's
+  PC is the weighted BFBt (:class:`convection.solvers.stokes.bfbt.WeightedBFBtSystem`, this class's).
 - **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
   ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
   dof (:meth:`convection.geometry.domain.Domain.pressure_pin`, a zero pressure block holds its

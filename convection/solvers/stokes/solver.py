@@ -62,6 +62,7 @@ changes every step).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
@@ -83,6 +84,7 @@ from convection.solvers.petsc_options import (
     HAS_HYPRE, MUMPS_LU, LinearSolver, PetscSolver, check_petsc_options, krylov_options, linear_solvers,
     reproducible_lu, set_owned_options,
 )
+from convection.solvers.stokes.bfbt import SCHUR_APPROXIMATIONS, WeightedBFBtSystem, schur_options
 from convection.solvers.stokes.forms import StokesDiscretisation, StokesForms
 from convection.solvers.stokes.linear import StokesLinearSystem
 from convection.solvers.stokes.lagged import LaggedPreconditioner, assemble_operator
@@ -209,6 +211,11 @@ class StokesSettings:
                                                   "viewers may only print")
     nonlinear: NonlinearSettings = subsection(NonlinearSettings)
     multigrid: MultigridSettings = subsection(MultigridSettings)
+    schur: str = param("mass", choices=Names(SCHUR_APPROXIMATIONS),
+                       help="Schur complement approximation of the iterative solvers: mass (-M_p/eta, SOR; the "
+                            "default) or wbfbt (weighted BFBt, two AMG cycles on a weighted pressure Poisson matrix: "
+                            "fewer iterations at large viscosity contrasts where the velocity solve is good, "
+                            "benchmarks/nsinker); not with direct")
     buoyancy_theta: float = param(0.0, minimum=0.0, maximum=1.0,
                                   help="0: buoyancy of the current fields; 0 < theta <= 1: buoyancy predicted at "
                                        "t + theta dt along the flow, the material moved in the velocity so solved "
@@ -354,6 +361,13 @@ def _levels_of(mesh: dolfinx.mesh.Mesh, solver: str, coarse_meshes: CoarseMeshes
                      "(coarse_meshes=, Domain.create_mesh_levels)")
 
 
+def _linear_system(schur: str, discretisation: StokesDiscretisation, /) -> Callable[..., StokesLinearSystem]:
+    """The linear system's class for the Schur approximation ``schur`` (``stokes.schur``)."""
+    if schur == "mass":
+        return StokesLinearSystem
+    return functools.partial(WeightedBFBtSystem, component=discretisation.component_space(0))
+
+
 def _free_surfaces(surface: SurfaceTerms | None, /) -> dict[str, VelocityBC]:
     """The free surfaces as velocity conditions (for the rotations: a free surface lets them)."""
     return {name: VelocityBC("free_surface") for name in (surface.names if surface is not None else ())}
@@ -448,7 +462,7 @@ class StokesSolver(PetscSolver):
             (:class:`convection.physics.buoyancy.SemiImplicitBuoyancy`; ``dt`` is given to :meth:`solve`).
         nonlinear: Picard or Newton settings (:mod:`convection.solvers.stokes.nonlinear`), used when the
             viscosity depends on the flow (default: :class:`NonlinearSettings`'s defaults).
-        multigrid: The ``stokes.multigrid`` settings (how many levels the caller makes).
+        multigrid, schur: The ``stokes.multigrid`` settings (how many levels the caller makes), ``stokes.schur``.
         surface: The free surfaces' terms (:mod:`convection.deform.surface`; not in ``bcs``), or None.
         coarse_meshes: The meshes ``mesh`` is nested in, coarse to fine
             (:meth:`convection.geometry.domain.Domain.create_mesh_levels`), or what gives them for a
@@ -475,7 +489,7 @@ class StokesSolver(PetscSolver):
                  solver: str = _DEFAULTS.solver, petsc_options: Mapping[str, Any] | None = None,
                  nitsche_penalty: float | None = None, buoyancy_theta: float = _DEFAULTS.buoyancy_theta,
                  nonlinear: NonlinearSettings = _DEFAULTS.nonlinear, multigrid: MultigridSettings = _DEFAULTS.multigrid,
-                 coarse_meshes: CoarseMeshes = (),
+                 coarse_meshes: CoarseMeshes = (), schur: str = _DEFAULTS.schur,
                  surface: SurfaceTerms | None = None) -> None:
         if degree < 2:
             raise ValueError("Taylor-Hood needs velocity degree >= 2")
@@ -489,8 +503,7 @@ class StokesSolver(PetscSolver):
         self.nitsche_penalty = float(10 * (degree + 1) ** 2 if nitsche_penalty is None else nitsche_penalty)
         self.has_rotation_null_space = has_rotation_null_space({**self.bcs, **_free_surfaces(surface)}, self.domain)
         self.buoyancy_theta = float(buoyancy_theta)
-        self.nonlinear_settings = nonlinear
-        self.multigrid_settings = multigrid
+        self.nonlinear_settings, self.multigrid_settings, self.schur = nonlinear, multigrid, schur
         self.is_nonlinear = approximation.is_nonlinear
         self._coarse_meshes = coarse_meshes
         check_viscosity_rules(approximation.viscosity_law.depends_on, buoyancy_theta=self.buoyancy_theta,
@@ -503,6 +516,7 @@ class StokesSolver(PetscSolver):
         self._petsc_options = self._create_ksp(mesh.comm, name, petsc_options)
         kind = STOKES_SOLVERS[name]
         self.is_iterative = kind.iterative
+        self._petsc_options.update(schur_options(schur, self._user_options, solver=name, iterative=kind.iterative))
         self.surface = surface
         self.discretisation = StokesDiscretisation(mesh, approximation, domain=self.domain, bcs=self.bcs, degree=degree,
                                                    nitsche_penalty=self.nitsche_penalty, surface=surface)
@@ -516,7 +530,7 @@ class StokesSolver(PetscSolver):
 
         self.has_pressure_null_space = all(s in self.bcs for s in self.domain.boundaries)
         self._rotations = RigidRotations(self.V) if self.has_rotation_null_space else None
-        self.linear_system: StokesLinearSystem | None = StokesLinearSystem(
+        self.linear_system: StokesLinearSystem | None = _linear_system(schur, self.discretisation)(
             self.u, self.p, self.ksp, dirichlet=self.discretisation.dirichlet, domain=self.domain,
             iterative=self.is_iterative, pressure_null_space=self.has_pressure_null_space, multigrid=hierarchy,
             term_in_preconditioner=kind.nested, operator_preconditions=kind.nested and not self.is_nonlinear)
@@ -542,7 +556,7 @@ class StokesSolver(PetscSolver):
         return {"bcs": self.bcs, "domain": self.domain, "degree": self.degree, "solver": self._asked_solver,
                 "petsc_options": self._user_options,
                 "nitsche_penalty": self.nitsche_penalty, "buoyancy_theta": self.buoyancy_theta,
-                "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings,
+                "nonlinear": self.nonlinear_settings, "multigrid": self.multigrid_settings, "schur": self.schur,
                 "coarse_meshes": self._coarse_meshes, "surface": self.surface}
 
     def prepare(self, T: Any, C: Any = None, /, *, fields: dict[str, Any] | None = None) -> StokesForms:
@@ -555,7 +569,7 @@ class StokesSolver(PetscSolver):
         if self._forms_key is None or not _same_objects(self._forms_key, key):
             flow = {"u": self.u, "p": self.p, "fields": fields or {}}
             self.forms = self.discretisation.forms(T, C, pressure_block=self.linear_system.pinned,
-                                                   preconditioner=self.is_iterative,
+                                                   preconditioner=self.is_iterative, weights=self.schur == "wbfbt",
                                                    semi_implicit=self._semi_implicit, flow=flow)
             if self._forms_key is not None and self._lag is not None:
                 self._lag.dt = None  # new forms: set the preconditioner up at the next solve

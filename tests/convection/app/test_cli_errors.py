@@ -38,6 +38,7 @@ CASES = {
     "missing file": (["run", "configs/does_not_exist.yaml"], "not found"),
     "negative end time": (["run", str(GOOD), "--set", "time.end=-1"], "time.end"),
     "bad choice": (["run", str(GOOD), "--set", "stokes.solver=magic"], "stokes.solver"),
+    "schur approximation of the direct solver": (["run", str(GOOD), "--set", "stokes.schur=wbfbt"], "stokes.schur"),
     "bad expression": (["run", str(GOOD), "--set", "initial.temperature=1-q"], "initial.temperature"),
     "negative particles per cell": (["run", str(GOOD), "--set", "particles.generator.particles_per_cell=-5"],
                                     "particles.generator"),

@@ -240,6 +240,7 @@ def test_balanced_adaptive_and_shell_multigrid_are_accepted():
      "'stokes.multigrid.levels': 4 mesh levels need mesh.cells divisible by 2\\^3"),
     (["stokes.solver=multigrid", "balance.strategy=every"],
      "'balance.strategy': stokes.solver multigrid repartitions adaptive meshes only"),
+    (["stokes.solver=direct", "stokes.schur=wbfbt"], "'stokes.schur': wbfbt only with an iterative stokes.solver"),
 ])
 def test_config_rules(sets, message):
     with pytest.raises(ConfigError, match=message):

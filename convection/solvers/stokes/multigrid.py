@@ -146,6 +146,11 @@ class VelocityMultigrid:
         self._block: int | None = None  # the handle of the velocity block the PCMG is set up for
 
     @property
+    def attached(self) -> bool:
+        """Whether a velocity block's KSP has the prolongations (:meth:`attach`)."""
+        return self._block is not None
+
+    @property
     def levels(self) -> int:
         """The number of levels, the finest included."""
         return len(self.interpolations) + 1

@@ -80,6 +80,16 @@ def unpack_solution(x: PETSc.Vec, u: dolfinx.fem.Function, p: dolfinx.fem.Functi
     p.x.scatter_forward()
 
 
+def _operator_matrices(forms: StokesForms, preconditions: bool, /) -> tuple[PETSc.Mat, PETSc.Mat | None]:
+    """``K`` for ``forms`` and, where a vector-form semi-implicit term needs it (not on a box's
+    axis), ``K_0``, its copy without the term. ``K`` is a MATNEST where it is its own
+    preconditioning matrix (``preconditions``) and has no copy (module docstring)."""
+    copy_a0 = forms.a_si is not None and forms.a_si_component is None
+    nest = preconditions and not copy_a0
+    A = create_nest_matrix(forms.a) if nest else create_block_matrix(forms.a)
+    return A, create_block_matrix(forms.a) if copy_a0 else None
+
+
 def consistent_continuity(vec: PETSc.Vec, V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace,
                           pin: DirichletBC, /) -> None:
     """Make the continuity part of the block vector ``vec`` sum to zero, then zero the row of the
@@ -218,13 +228,7 @@ class StokesLinearSystem:
 
         The matrices serve any later forms on the same spaces (same sparsity)."""
         operator_preconditions = self.iterative and self.term_in_preconditioner and self.operator_preconditions
-        copy_a0 = forms.a_si is not None and forms.a_si_component is None  # on a box A's other entries are A0's
-        # Where K is the preconditioning matrix, its blocks are matrices of their own (MATNEST),
-        # which fieldsplit takes as they are instead of copying them out of K (module docstring).
-        nest = operator_preconditions and not copy_a0
-        self._A = create_nest_matrix(forms.a) if nest else create_block_matrix(forms.a)
-        if copy_a0:
-            self._A0 = create_block_matrix(forms.a)
+        self._A, self._A0 = _operator_matrices(forms, operator_preconditions)
         self._b = create_block_vector(forms.L)
         self._x = self._b.duplicate()
         if operator_preconditions:
@@ -351,16 +355,16 @@ class StokesLinearSystem:
     # ------------------------------------------------------------------ solve
     def prepare_preconditioner(self) -> None:
         """Before a solve with the current ``P`` (linear, or a Newton step's): give the geometric
-        multigrid its prolongations, on the velocity block fieldsplit holds now, and tell it
-        whether ``P`` changed (:meth:`VelocityMultigrid.attach`). Collective; nothing without a
-        multigrid. Fieldsplit extracts the block at the outer PC's set-up (a no-op when ``P`` did
-        not change, else work the solve would do), and may make it anew (a Newton step's); PCMG
-        sets itself up at its first use, after it has the prolongations."""
+        multigrid its prolongations, on the velocity block fieldsplit holds now (extracted at the
+        outer PC's set-up, a no-op when ``P`` did not change; a Newton step's may make it anew), and
+        tell it whether ``P`` changed (:meth:`VelocityMultigrid.attach`). Collective; nothing without
+        a multigrid. PCMG sets itself up at its first use, or here on a MATNEST's own block."""
         if self.multigrid is None:
             return
         pc = self.ksp.getPC()
         pc.setUp()
-        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed)
+        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed,
+                              set_up=self._A.getType() == "nest")
         self._preconditioner_changed = False
 
     def solve(self, *, reuse_preconditioner: bool = False) -> float:
@@ -388,11 +392,8 @@ class StokesLinearSystem:
         the last one (``reuse``: the solves use it until a call without). Collective."""
         pc = self.ksp.getPC()
         pc.setReusePreconditioner(reuse)
-        if self.multigrid is not None and self._A.getType() == "nest" and pc.getType() == "fieldsplit" and (
-                reuse or self.multigrid.attached):
-            # The velocity block is K's own: it changes with K, and the multigrid would set itself up
-            # again although the outer preconditioner is kept.
-            pc.getFieldSplitSubKSP()[0].getPC().setReusePreconditioner(reuse)
+        if self.multigrid is not None and self._A.getType() == "nest":  # the velocity block is K's own
+            self.multigrid.keep(pc, reuse)
         if not reuse:
             self.prepare_preconditioner()
             self.ksp.setUp()

@@ -104,7 +104,8 @@ __all__ = ["DOLFINX_VERSION", "DirichletBC", "REFINE_KEEPS_GHOSTS", "SCATTER_ADD
            "assemble_block_matrix", "assemble_block_vector", "assemble_matrix_into", "atan2", "bounding_box_tree",
            "cell_dofmap", "cell_partitioner", "compute_collisions", "coordinate_element",
            "coordinate_element_description", "coordinate_element_from", "coordinate_map", "cpp_mesh",
-           "create_block_matrix", "create_block_vector", "create_mesh", "create_vector", "element", "element_degree",
+           "create_block_matrix", "create_block_vector", "create_mesh", "create_nest_matrix", "create_vector",
+           "element", "element_degree",
            "entities_to_geometry", "evaluate_expression", "form", "function_space", "geometry_dofmap",
            "gmsh_model_to_mesh", "incident_entities", "interpolate_on_cells", "interpolation_points",
            "is_discontinuous", "is_lagrange", "mesh_domain", "orthonormalize", "petsc_vector",
@@ -436,6 +437,17 @@ def create_block_matrix(a: list[list[Any]], /) -> Any:
     return dolfinx.fem.petsc.create_matrix_block(a)
 
 
+def create_nest_matrix(a: list[list[Any]], /) -> Any:
+    """A PETSc MATNEST of one MPI AIJ matrix per block of the nested list of bilinear forms ``a``
+    (None: no block), with :func:`create_block_matrix`'s rows; its blocks are matrices of their
+    own, which PETSc's fieldsplit takes as they are (no copies)."""
+    import dolfinx.fem.petsc
+
+    if _V010:
+        return dolfinx.fem.petsc.create_matrix(a, kind="nest")
+    return dolfinx.fem.petsc.create_matrix_nest(a)
+
+
 def create_block_vector(L: list[Any], /) -> Any:
     """One PETSc vector for the list of linear forms ``L``, laid out as :func:`create_block_matrix`'s
     rows; not zeroed."""
@@ -448,12 +460,14 @@ def create_block_vector(L: list[Any], /) -> Any:
 
 def assemble_block_matrix(A: Any, a: list[list[Any]], /, *, bcs: list[Any]) -> None:
     """Add the nested list of bilinear forms ``a`` into the block matrix ``A`` (from
-    :func:`create_block_matrix`), with unit diagonal entries on the rows and columns of ``bcs``;
-    ``A`` is not finalised (call ``A.assemble()``)."""
+    :func:`create_block_matrix` or :func:`create_nest_matrix`), with unit diagonal entries on the
+    rows and columns of ``bcs``; ``A`` is not finalised (call ``A.assemble()``)."""
     import dolfinx.fem.petsc
 
     if _V010:
         dolfinx.fem.petsc.assemble_matrix(A, a, bcs=bcs)
+    elif A.getType() == "nest":
+        dolfinx.fem.petsc.assemble_matrix_nest(A, a, bcs=bcs)
     else:
         dolfinx.fem.petsc.assemble_matrix_block(A, a, bcs=bcs)
 

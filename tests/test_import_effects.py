@@ -53,3 +53,27 @@ assert PETSc.Options().hasName("vec_mdot_use_gemv")
 """
     proc = guarded_run([sys.executable, "-c", script], cwd=ROOT, budget=300)
     assert proc.returncode == 0, proc.stderr
+
+
+RUN_SCRIPT = """
+import sys
+from convection.app.cli import main
+code = main(["run", "configs/thick_layer_3d.yaml", "--output", sys.argv[1], "--set", "mesh.cells=[4,4,4]",
+             "--set", "stokes.solver=multigrid", "--set", "time.max_steps=2", "--set", "output.fields_every=1",
+             "--set", "output.progress=none"])
+assert code == 0, code
+print(" ".join(sorted(m for m in sys.modules if m.split(".")[0] in ("matplotlib", "pyvista", "vtk", "vtkmodules", "PIL")
+                     or m.startswith(("scipy.spatial", "convection.io.pictures")))))
+print("done")
+"""
+
+
+def test_a_run_loads_no_pictures_stack(tmp_path):
+    """A run of the 3D thick layer with particles, the multigrid, fields and checkpoints written
+    imports neither the plotting stack (matplotlib, PyVista/VTK, the pictures) nor scipy.spatial
+    (23 MB a process: imported where a k-d tree is used, on a restart or a new mesh)."""
+    proc = guarded_run([sys.executable, "-c", RUN_SCRIPT, str(tmp_path / "run")], cwd=ROOT, budget=300)
+    assert proc.returncode == 0, proc.stderr
+    loaded, done = proc.stdout.splitlines()[-2:]
+    assert done == "done" and loaded == "", loaded
+    assert (tmp_path / "run" / "fields.xdmf").exists()

@@ -41,8 +41,12 @@ def rss() -> tuple[float, float]:
 
 
 def mat_bytes(mat: PETSc.Mat | None) -> float:
-    """Allocated bytes of ``mat`` over all ranks (0 for None or a shell/Schur-complement matrix)."""
-    if mat is None or mat.getType() in ("schurcomplement", "shell", "python", "nest"):
+    """Allocated bytes of ``mat`` over all ranks (0 for None or a shell/Schur-complement matrix; a
+    MATNEST: its blocks')."""
+    if mat is not None and mat.getType() == "nest":
+        rows, columns = mat.getNestSize()
+        return sum(mat_bytes(mat.getNestSubMatrix(i, j)) for i in range(rows) for j in range(columns))
+    if mat is None or mat.getType() in ("schurcomplement", "shell", "python"):
         return 0.0
     info = mat.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)  # its "memory" is no longer kept by PETSc (0)
     scalar, index = np.dtype(PETSc.ScalarType).itemsize, np.dtype(PETSc.IntType).itemsize
@@ -92,16 +96,20 @@ def stokes_matrices(stokes: Any) -> list[tuple[str, float]]:
     pc = stokes.ksp.getPC()
     if pc.getType() == "fieldsplit":
         ksp_u, ksp_p = pc.getFieldSplitSubKSP()
-        rows.append(("fieldsplit's velocity block A00 (a copy)", mat_bytes(ksp_u.getOperators()[0])))
-        # Fieldsplit's Schur factorisation holds B^T and B extracted from P (petsc4py does not hand
-        # them out): their size is that of K's coupling blocks, extracted here once and freed.
-        is_u, is_p = system.index_sets()
-        coupling = 0.0
-        for rows_is, cols_is in ((is_u, is_p), (is_p, is_u)):
-            block = system.P.createSubMatrix(rows_is, cols_is)
-            coupling += mat_bytes(block)
-            block.destroy()
-        rows.append(("fieldsplit's coupling blocks B^T, B (copies; sized from P)", coupling))
+        nest = system.P.getType() == "nest"  # fieldsplit takes P's blocks as they are: no copies
+        if not nest:
+            rows.append(("fieldsplit's velocity block A00 (a copy)", mat_bytes(ksp_u.getOperators()[0])))
+            # Fieldsplit's Schur factorisation holds B^T and B extracted from P (petsc4py does not hand
+            # them out): their size is that of K's coupling blocks, extracted here once and freed.
+            is_u, is_p = system.index_sets()
+            coupling = 0.0
+            for rows_is, cols_is in ((is_u, is_p), (is_p, is_u)):
+                block = system.P.createSubMatrix(rows_is, cols_is)
+                coupling += mat_bytes(block)
+                block.destroy()
+            rows.append(("fieldsplit's coupling blocks B^T, B (copies; sized from P)", coupling))
+        elif ksp_u.getOperators()[0].handle != system.P.getNestSubMatrix(0, 0).handle:
+            rows.append(("fieldsplit's velocity block A00 (a copy of P's)", mat_bytes(ksp_u.getOperators()[0])))
         pressure = ksp_p.getOperators()[1]
         if system._S is None or pressure.handle != system._S.handle:
             rows.append(("fieldsplit's pressure preconditioning block (a copy)", mat_bytes(pressure)))

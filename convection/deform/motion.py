@@ -36,7 +36,6 @@ import numpy.typing as npt
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
-from scipy.spatial import cKDTree
 
 from convection.deform.surface import SurfaceTerms
 from convection.geometry.domain import Domain, keep_boundary_facets
@@ -290,6 +289,7 @@ class FreeSurface(Stateful):
         """
         gdim = self.mesh.geometry.dim
         x = self.mesh.geometry.x
+        from scipy.spatial import cKDTree  # here, not at import: scipy.spatial is 23 MB a process
         distance, index = cKDTree(reference).query(x[:, :gdim])
         scale = max(1.0, float(np.abs(reference).max(initial=0.0)))
         worst = self.mesh.comm.allreduce(float(distance.max(initial=0.0)), op=MPI.MAX)

@@ -58,7 +58,6 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 from mpi4py import MPI
-from scipy.spatial import cKDTree
 
 import dolfinx.fem
 import dolfinx.mesh
@@ -594,6 +593,7 @@ def _match_by_coordinates(target: dolfinx.fem.Function, coords: npt.NDArray, val
     V = target.function_space
     bs = V.dofmap.index_map_bs
     local = V.tabulate_dof_coordinates()
+    from scipy.spatial import cKDTree  # here, not at import: scipy.spatial is 23 MB a process
     distance, index = cKDTree(coords).query(local)
     scale = max(1.0, float(np.abs(coords).max(initial=0.0)))
     if local.shape[0] and distance.max() > 1e-9 * scale:

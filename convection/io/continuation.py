@@ -37,7 +37,6 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
-from scipy.spatial import cKDTree
 
 from convection.adapt.transfer import PointEvaluator, transfer_function
 from convection.io.checkpoint import (CheckpointError, block, fill_functions, latest_checkpoint,
@@ -73,6 +72,7 @@ def _copy_if_same_nodes(target: dolfinx.fem.Function, coords: npt.NDArray[np.flo
     V = target.function_space
     n = V.dofmap.index_map.size_local
     local = V.tabulate_dof_coordinates()[:n]
+    from scipy.spatial import cKDTree  # here, not at import: scipy.spatial is 23 MB a process
     distance, index = cKDTree(coords).query(local) if n else (np.zeros(0), np.zeros(0, dtype=int))
     scale = max(1.0, float(np.abs(coords).max(initial=0.0)))
     same = bool(np.all(distance <= 1e-12 * scale))

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from particles.storage.swarm import Swarm
 
@@ -48,6 +47,7 @@ def interpolate_from_neighbours(
     result[in_cell] = sums[new_cells[in_cell]] / counts[new_cells[in_cell], None]
     lonely = np.flatnonzero(~in_cell)
     if lonely.shape[0]:
+        from scipy.spatial import cKDTree  # here, not at import: scipy.spatial is 23 MB a process
         _, nearest = cKDTree(swarm.x[old]).query(swarm.x[rows[lonely]])
         result[lonely] = values[old[nearest]]
     swarm.properties[rows, columns] = result

@@ -17,7 +17,6 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
-from scipy.spatial import cKDTree
 
 import dolfinx.mesh
 
@@ -85,5 +84,6 @@ def _nearest_owned_cells(swarm: Swarm, /) -> npt.NDArray[np.int32]:
     missing = np.flatnonzero(cells < 0)
     if missing.size and swarm.num_owned_cells:
         owned = swarm.geometry.centres[: swarm.num_owned_cells]
+        from scipy.spatial import cKDTree  # here, not at import: scipy.spatial is 23 MB a process
         cells[missing] = cKDTree(owned).query(swarm.x[missing])[1]
     return cells

@@ -177,10 +177,12 @@ class SemiImplicitOperator:
                     A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
                 elif not refresh:  # A's block holds the last term, not the fixed values
                     raise RuntimeError("the semi-implicit term's block changed without the operator's refresh")
-                block.take_fixed(A)
+                block.take_fixed(self._velocity_block())
                 self._fixed_taken = True
             others = () if preconditioner is None else (preconditioner,)
-            block.add(A, forms.a_si_component[3], *others)
+            block.add(self._velocity_block(), forms.a_si_component[3], *others)
+            if A.getType() == "nest":
+                A.assemble()  # its state follows its block's change: the preconditioner is set up again
             return preconditioner is not None
         assert A0 is not None, "the vector form adds to A0's copy"
         A0.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
@@ -199,14 +201,24 @@ class SemiImplicitOperator:
             self._rows = _cpp.la.petsc.create_index_sets(spaces)[0]
         return self._rows
 
+    def _velocity_block(self) -> PETSc.Mat:
+        """The matrix that holds ``A``'s velocity block: ``A``, or its ``(0, 0)`` block where ``A``
+        is a MATNEST (:func:`fembase.dolfinx_compat.create_nest_matrix`)."""
+        return self.A.getNestSubMatrix(0, 0) if self.A.getType() == "nest" else self.A
+
     def _component_block(self, component: tuple[int, Any, np.ndarray, Any]) -> AxisBlock:
         axis, W, W_to_V, form = component
         block = self.block
         if block is None or block.axis != axis or block.W is not W:
             if block is not None:
                 block.destroy()
-            block = AxisBlock(self.A, self.V, self._velocity_rows().getIndices(), axis, W, W_to_V, form,
-                              self._velocity_bcs)
+            if self.A.getType() == "nest":  # the block's local rows are V's unrolled local dofs
+                index_map = self.V.dofmap.index_map
+                rows = np.arange(self.V.dofmap.index_map_bs * (index_map.size_local + index_map.num_ghosts),
+                                 dtype=np.int32)
+            else:
+                rows = self._velocity_rows().getIndices()
+            block = AxisBlock(self._velocity_block(), self.V, rows, axis, W, W_to_V, form, self._velocity_bcs)
             self.block = block
             self._fixed_taken = False
         return block

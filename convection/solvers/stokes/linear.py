@@ -22,8 +22,15 @@ then its owned pressure dofs. :class:`StokesLinearSystem` assembles the forms of
   the geometric multigrid of a linear solve), ``P`` is ``K`` itself and ``-M_p / eta`` a matrix of
   its own, fieldsplit's Schur preconditioning matrix (``user`` in place of ``a11``): the same
   preconditioner without a third copy of the velocity block (a quarter of the memory at 32^3)
-  and without adding the term to it every solve. With ``stokes.schur: wbfbt`` the Schur complement's
-  PC is the weighted BFBt (:class:`convection.solvers.stokes.bfbt.WeightedBFBtSystem`, this class's).
+  and without adding the term to it every solve. ``K`` is then a MATNEST (one matrix per block,
+  :func:`fembase.dolfinx_compat.create_nest_matrix`; where a vector-form term needs a copy ``K_0``
+  of the whole operator, monolithic), whose blocks fieldsplit takes as they are: no copy of the
+  velocity and coupling blocks (16^3 thick layer on 2 ranks: 61 MB per rank, 1.1 kB per Stokes
+  unknown). The multigrid's finest level then works with the current velocity block also while a
+  lagged preconditioner is kept (:mod:`convection.solvers.stokes.lagged`: its coarse operators,
+  Jacobi diagonals and Chebyshev bounds stay those of its set-up), where the copy froze it too.
+  With ``stokes.schur: wbfbt`` the Schur complement's PC is the weighted BFBt
+  (:class:`convection.solvers.stokes.bfbt.WeightedBFBtSystem`, this class's).
 - **Constant pressure** (when it solves the homogeneous problem): a Krylov solver gets it as
   ``K``'s null space and ``b`` is made orthogonal to it; a direct solver instead pins one pressure
   dof (:meth:`convection.geometry.domain.Domain.pressure_pin`, a zero pressure block holds its
@@ -49,7 +56,7 @@ from convection.solvers.stokes.forms import StokesForms
 from convection.solvers.stokes.axis_block import SemiImplicitOperator
 from convection.solvers.stokes.multigrid import VelocityMultigrid
 from fembase.dolfinx_compat import (DirichletBC, assemble_block_matrix, assemble_block_vector,
-                                    create_block_matrix, create_block_vector)
+                                    create_block_matrix, create_block_vector, create_nest_matrix)
 
 __all__ = ["StokesLinearSystem", "consistent_continuity", "owned_sizes", "pack_solution", "unpack_solution"]
 
@@ -73,6 +80,16 @@ def unpack_solution(x: PETSc.Vec, u: dolfinx.fem.Function, p: dolfinx.fem.Functi
     p.x.array[:n_p] = x.array_r[n_u:n_u + n_p]
     u.x.scatter_forward()
     p.x.scatter_forward()
+
+
+def _operator_matrices(forms: StokesForms, preconditions: bool, /) -> tuple[PETSc.Mat, PETSc.Mat | None]:
+    """``K`` for ``forms`` and, where a vector-form semi-implicit term needs it (not on a box's
+    axis), ``K_0``, its copy without the term. ``K`` is a MATNEST where it is its own
+    preconditioning matrix (``preconditions``) and has no copy (module docstring)."""
+    copy_a0 = forms.a_si is not None and forms.a_si_component is None
+    nest = preconditions and not copy_a0
+    A = create_nest_matrix(forms.a) if nest else create_block_matrix(forms.a)
+    return A, create_block_matrix(forms.a) if copy_a0 else None
 
 
 def consistent_continuity(vec: PETSc.Vec, V: dolfinx.fem.FunctionSpace, Q: dolfinx.fem.FunctionSpace,
@@ -212,12 +229,11 @@ class StokesLinearSystem:
         """Create the matrices and vectors for ``forms``' layout and configure the KSP. Collective.
 
         The matrices serve any later forms on the same spaces (same sparsity)."""
-        self._A = create_block_matrix(forms.a)
-        if forms.a_si is not None and forms.a_si_component is None:  # on a box A's other entries are A0's
-            self._A0 = create_block_matrix(forms.a)
+        operator_preconditions = self.iterative and self.term_in_preconditioner and self.operator_preconditions
+        self._A, self._A0 = _operator_matrices(forms, operator_preconditions)
         self._b = create_block_vector(forms.L)
         self._x = self._b.duplicate()
-        if self.iterative and self.term_in_preconditioner and self.operator_preconditions:
+        if operator_preconditions:
             self._S = dolfinx.fem.petsc.create_matrix(forms.a_pc[1][1])
         elif self.iterative:
             self._P = create_block_matrix(forms.a_pc)
@@ -341,16 +357,16 @@ class StokesLinearSystem:
     # ------------------------------------------------------------------ solve
     def prepare_preconditioner(self) -> None:
         """Before a solve with the current ``P`` (linear, or a Newton step's): give the geometric
-        multigrid its prolongations, on the velocity block fieldsplit holds now, and tell it
-        whether ``P`` changed (:meth:`VelocityMultigrid.attach`). Collective; nothing without a
-        multigrid. Fieldsplit extracts the block at the outer PC's set-up (a no-op when ``P`` did
-        not change, else work the solve would do), and may make it anew (a Newton step's); PCMG
-        sets itself up at its first use, after it has the prolongations."""
+        multigrid its prolongations, on the velocity block fieldsplit holds now (extracted at the
+        outer PC's set-up, a no-op when ``P`` did not change; a Newton step's may make it anew), and
+        tell it whether ``P`` changed (:meth:`VelocityMultigrid.attach`). Collective; nothing without
+        a multigrid. PCMG sets itself up at its first use, or here on a MATNEST's own block."""
         if self.multigrid is None:
             return
         pc = self.ksp.getPC()
         pc.setUp()
-        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed)
+        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed,
+                              set_up=self._A.getType() == "nest")
         self._preconditioner_changed = False
 
     def solve(self, *, reuse_preconditioner: bool = False) -> float:
@@ -376,7 +392,10 @@ class StokesLinearSystem:
     def set_up_preconditioner(self, *, reuse: bool = False) -> None:
         """Set the preconditioner up for the current ``P`` (a no-op unless ``P`` changed), or keep
         the last one (``reuse``: the solves use it until a call without). Collective."""
-        self.ksp.getPC().setReusePreconditioner(reuse)
+        pc = self.ksp.getPC()
+        pc.setReusePreconditioner(reuse)
+        if self.multigrid is not None and self._A.getType() == "nest":  # the velocity block is K's own
+            self.multigrid.keep(pc, reuse)
         if not reuse:
             self.prepare_preconditioner()
             self.ksp.setUp()

@@ -146,6 +146,28 @@ class VelocityMultigrid:
         self._block: int | None = None  # the handle of the velocity block the PCMG is set up for
 
     @property
+    def attached(self) -> bool:
+        """Whether a velocity block's KSP has the prolongations (:meth:`attach`)."""
+        return self._block is not None
+
+    def keep(self, fieldsplit: PETSc.PC, reuse: bool, /) -> None:
+        """Keep the set-up of the velocity block's PCMG (``reuse``) with the outer ``fieldsplit``
+        PC's, or let it follow its matrix again, where that matrix is the Stokes operator's own
+        block (a MATNEST's, which changes with every solve). Nothing before :meth:`attach`. Not
+        collective by itself.
+
+        PCMG itself and its finest level's smoother, whose operator is that block, are kept: the
+        smoother's Jacobi would otherwise take the block's new diagonal at every solve. The kept
+        smoother applies the current block with the diagonal and Chebyshev bounds of the set-up
+        (Chebyshev estimates them only at a set-up); the coarser levels' Galerkin operators are
+        those of the set-up anyway."""
+        if not self.attached:
+            return
+        pc = fieldsplit.getFieldSplitSubKSP()[0].getPC()
+        pc.setReusePreconditioner(reuse)
+        pc.getMGSmoother(pc.getMGLevels() - 1).getPC().setReusePreconditioner(reuse)
+
+    @property
     def levels(self) -> int:
         """The number of levels, the finest included."""
         return len(self.interpolations) + 1
@@ -159,7 +181,7 @@ class VelocityMultigrid:
         for level, P in enumerate(self.interpolations, start=1):
             pc.setMGInterpolation(level, P)
 
-    def attach(self, ksp: PETSc.KSP, /, *, changed: bool = False) -> None:
+    def attach(self, ksp: PETSc.KSP, /, *, changed: bool = False, set_up: bool = False) -> None:
         """Keep the velocity block's KSP (from fieldsplit, after its PC was set up) on a PCMG with
         these prolongations over its current matrix. Collective.
 
@@ -174,7 +196,17 @@ class VelocityMultigrid:
         (the finest level's smoother gets its operator every time): the preconditioner would
         depend on the run's history, and a resumed run would part from one that went on. Their
         operators are handed again, which makes each estimate its bounds anew at the set-up.
+
+        ``set_up``: set the PCMG up now, from the block's current values, not at its first use:
+        where the block is the operator's own (:meth:`keep`), which changes after the set-up (a
+        restart sets the kept preconditioner up from the checkpoint's saved term, then assembles
+        the current one: :func:`convection.solvers.stokes.lagged.assemble_operator`).
         """
+        self._attach(ksp, changed)
+        if set_up:
+            ksp.setUp()
+
+    def _attach(self, ksp: PETSc.KSP, changed: bool, /) -> None:
         A, P = ksp.getOperators()
         if self._block == P.handle:
             if changed:

@@ -30,10 +30,11 @@ __all__ = ["fast_update", "update_tetrahedra", "update_triangles"]
 def update_triangles(cells, xref, u_dofs, u, K, f_dofs, eta_ve, chi, dt, stress, start):  # pragma: no cover
     """Update the stress columns ``stress[:, start:start + 3]`` (xx, yy, xy) in place.
 
-    What belongs to a cell (its velocity dofs, inverse Jacobian, ``eta_ve`` and ``chi`` dofs) is
-    gathered once per run of particles in the same cell (the swarm is sorted by cell), then every
-    particle of the run does the same arithmetic as before the gathering moved out of its loop, so
-    the bits are the same.
+    A P2 velocity's gradient is linear on an affine triangle: ``L = L_0 + X L_X + Y L_Y`` in the
+    reference coordinates ``(X, Y)``. The three matrices are made once per run of particles in the
+    same cell (the swarm is sorted by cell) from its velocity dofs and inverse Jacobian, with its
+    ``eta_ve`` and ``chi`` values; a particle then needs 8 products for ``L``. The rotation by
+    ``a = dt (L_01 - L_10) / 2`` takes ``sin a`` and ``cos a = sqrt(1 - sin^2 a)`` (``|a| < 1``; beyond, ``cos``).
 
     Args:
         cells: shape=(n,), int32 (all >= 0). xref: shape=(n, 2).
@@ -44,47 +45,49 @@ def update_triangles(cells, xref, u_dofs, u, K, f_dofs, eta_ve, chi, dt, stress,
     """
     linear = f_dofs.shape[1] == 3
     U = np.zeros((6, 2))
+    R = np.zeros((3, 2, 2))  # d u_i / d X, d u_i / d Y: constant, X and Y parts
+    G = np.zeros((3, 2, 2))  # L_0, L_X, L_Y
     E = np.zeros(3)
     C = np.zeros(3)
-    k00 = k01 = k10 = k11 = 0.0
     last = -1
     for p in range(cells.shape[0]):
         c = cells[p]
-        if c != last:  # a new cell: gather its values
-            for i in range(6):
-                d = 2 * u_dofs[c, i]
-                U[i, 0] = u[d]
-                U[i, 1] = u[d + 1]
-            k00, k01, k10, k11 = K[c, 0, 0], K[c, 0, 1], K[c, 1, 0], K[c, 1, 1]
-            for i in range(f_dofs.shape[1]):
-                E[i] = eta_ve[f_dofs[c, i]]
-                C[i] = chi[f_dofs[c, i]]
+        if c != last:  # a new cell: its gradient's three parts (basix order: vertices 0, 1, 2; edges 12, 02, 01)
+            for k in range(6):
+                d = 2 * u_dofs[c, k]
+                U[k, 0] = u[d]
+                U[k, 1] = u[d + 1]
+            for i in range(2):
+                R[0, i, 0] = -3.0 * U[0, i] - U[1, i] + 4.0 * U[5, i]
+                R[1, i, 0] = 4.0 * (U[0, i] + U[1, i]) - 8.0 * U[5, i]
+                R[2, i, 0] = 4.0 * (U[0, i] + U[3, i] - U[4, i] - U[5, i])
+                R[0, i, 1] = -3.0 * U[0, i] - U[2, i] + 4.0 * U[4, i]
+                R[1, i, 1] = 4.0 * (U[0, i] + U[3, i] - U[4, i] - U[5, i])
+                R[2, i, 1] = 4.0 * (U[0, i] + U[2, i]) - 8.0 * U[4, i]
+            for m in range(3):
+                for i in range(2):
+                    for j in range(2):
+                        G[m, i, j] = R[m, i, 0] * K[c, 0, j] + R[m, i, 1] * K[c, 1, j]
+            for k in range(f_dofs.shape[1]):
+                E[k] = eta_ve[f_dofs[c, k]]
+                C[k] = chi[f_dofs[c, k]]
             last = c
         X = xref[p, 0]
         Y = xref[p, 1]
-        L = 1.0 - X - Y
-        # d phi_i / dX, d phi_i / dY of the P2 basis (vertices 0, 1, 2; edges (1, 2), (0, 2), (0, 1))
-        a0 = 1.0 - 4.0 * L
-        gx1, gy2 = 4.0 * X - 1.0, 4.0 * Y - 1.0
-        gx3, gy3 = 4.0 * Y, 4.0 * X
-        gx4, gy4 = -4.0 * Y, 4.0 * (L - Y)
-        gx5, gy5 = 4.0 * (L - X), -4.0 * X
-        ux_X = a0 * U[0, 0] + gx1 * U[1, 0] + gx3 * U[3, 0] + gx4 * U[4, 0] + gx5 * U[5, 0]
-        ux_Y = a0 * U[0, 0] + gy2 * U[2, 0] + gy3 * U[3, 0] + gy4 * U[4, 0] + gy5 * U[5, 0]
-        uy_X = a0 * U[0, 1] + gx1 * U[1, 1] + gx3 * U[3, 1] + gx4 * U[4, 1] + gx5 * U[5, 1]
-        uy_Y = a0 * U[0, 1] + gy2 * U[2, 1] + gy3 * U[3, 1] + gy4 * U[4, 1] + gy5 * U[5, 1]
-        l00 = ux_X * k00 + ux_Y * k10
-        l01 = ux_X * k01 + ux_Y * k11
-        l10 = uy_X * k00 + uy_Y * k10
-        l11 = uy_X * k01 + uy_Y * k11
+        l00 = G[0, 0, 0] + X * G[1, 0, 0] + Y * G[2, 0, 0]
+        l01 = G[0, 0, 1] + X * G[1, 0, 1] + Y * G[2, 0, 1]
+        l10 = G[0, 1, 0] + X * G[1, 1, 0] + Y * G[2, 1, 0]
+        l11 = G[0, 1, 1] + X * G[1, 1, 1] + Y * G[2, 1, 1]
         if linear:
+            L = 1.0 - X - Y
             viscosity = L * E[0] + X * E[1] + Y * E[2]
             memory = L * C[0] + X * C[1] + Y * C[2]
         else:
             viscosity = E[0]
             memory = C[0]
         angle = 0.5 * dt * (l01 - l10)
-        cs, sn = math.cos(angle), math.sin(angle)
+        sn = math.sin(angle)
+        cs = math.sqrt(1.0 - sn * sn) if abs(angle) < 1.0 else math.cos(angle)
         txx, tyy, txy = stress[p, start], stress[p, start + 1], stress[p, start + 2]
         # R tau R^T with R = [[cs, sn], [-sn, cs]]
         rxx = cs * cs * txx + 2.0 * cs * sn * txy + sn * sn * tyy

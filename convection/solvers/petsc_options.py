@@ -14,7 +14,7 @@ default options) built from the same pieces: :data:`MUMPS_LU` (direct; on severa
 Nothing happens at import: the solvers set what they need when they are made
 (:meth:`PetscSolver.prepare_process`: the global option ``vec_mdot_use_gemv = false`` unless it is
 set already, :func:`reproducible_vector_kernels`, the process's cache of compiled forms,
-:mod:`fembase.jit_cache`).
+:mod:`fembase.jit_cache`, and glibc's heap settings, :mod:`fembase.heap`).
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from petsc4py import PETSc
 
 from convection.schema import short_repr
 from fembase import jit_cache
+from fembase.heap import return_freed_memory
 from fembase.registry import Registry
 from fembase.state import Stateful
 
@@ -238,11 +239,13 @@ class PetscSolver(Stateful):
     @staticmethod
     def prepare_process() -> None:
         """What every solver needs of the process, set once (idempotent; not collective): PETSc's
-        reproducible vector kernels (:func:`reproducible_vector_kernels`) and the process's cache
-        of compiled forms and elements (:func:`fembase.jit_cache.install`). Subclasses call it first
-        in their constructor, before they make any vector."""
+        reproducible vector kernels (:func:`reproducible_vector_kernels`), the process's cache
+        of compiled forms and elements (:func:`fembase.jit_cache.install`) and a C heap that
+        returns freed memory, which loading PETSc turned off (:func:`fembase.heap.return_freed_memory`).
+        Subclasses call it first in their constructor, before they make any vector."""
         reproducible_vector_kernels()
         jit_cache.install()
+        return_freed_memory()
 
     def _create_ksp(self, comm: Any, solver: str, petsc_options: Mapping[str, Any] | None) -> dict[str, Any]:
         """Check ``solver``, create the KSP under a fresh prefix; returns the full option set."""

@@ -43,6 +43,7 @@ import ufl
 from mpi4py import MPI
 
 import dolfinx
+import dolfinx.fem.petsc
 
 from benchmarks.harness import Benchmark, markdown_table
 from convection.geometry.boundary import VelocityBC
@@ -50,6 +51,7 @@ from convection.geometry.box import SIDES_3D, BoxDomain, BoxSpec
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
 from convection.solvers.stokes.multigrid import MultigridSettings
 from convection.solvers.stokes.solver import StokesResult, StokesSolver
+from fembase.dolfinx_compat import function_space
 
 HERE = Path(__file__).resolve().parent
 BENCHMARK = Benchmark(__doc__, out=HERE, ranks=2, quick="8^3, 4 sinkers, the three iterative solvers")
@@ -89,6 +91,13 @@ def outside(x: Any, sinkers: int, /) -> Any:
     return chi
 
 
+AVERAGING = ("none", "harmonic")
+"""How the material enters (``--averaging``): ``none``, at the quadrature points (the formulas above);
+``harmonic``, ASPECT's ``Material averaging = harmonic average`` (its nsinker_gmg.prm, which ASPECT 2.5's GMG
+needs): viscosity and density each replaced on every cell by their harmonic mean over the cell,
+``|K| / int_K 1 / f`` (DG0 fields; a density of zero at a point makes the cell's zero)."""
+
+
 def approximation(ratio: float, /) -> BoussinesqApproximation:
     """The material model: viscosities ``1 / sqrt(DR)`` and ``sqrt(DR)`` mixed arithmetically by the fraction
     ``1 - chi``, buoyancy ``-10 (1 - chi) e_z``."""
@@ -97,19 +106,55 @@ def approximation(ratio: float, /) -> BoussinesqApproximation:
                                    viscosity=ViscosityLaw(material_viscosities=(1.0 / root, root), mixing="arithmetic"))
 
 
+class CellAveraged(BoussinesqApproximation):
+    """:func:`approximation` with the viscosity replaced by a DG0 field ``eta`` (the buoyancy is ``-10 C e_z``
+    as before; the caller passes the averaged density over 10 as ``C``)."""
+
+    def __init__(self, ratio: float, eta: dolfinx.fem.Function, /) -> None:
+        base = approximation(ratio)
+        super().__init__(Ra=0.0, Rb=SINKER_DENSITY, viscosity=base.viscosity_law)
+        self.eta = eta
+
+    def viscosity(self, T: Any, C: Any, /, **flow: Any) -> Any:
+        return self.eta
+
+
+def harmonic_cell_mean(mesh: dolfinx.mesh.Mesh, f: Any, /) -> dolfinx.fem.Function:
+    """``|K| / int_K 1 / f`` on every cell (DG0; quadrature degree 6, the Stokes forms'); ``f`` >= 0, a cell
+    where ``f`` vanishes somewhere gets (nearly) zero."""
+    Q0 = function_space(mesh, "DG", 0)
+    v = ufl.TestFunction(Q0)
+    dx = ufl.dx(metadata={"quadrature_degree": 6})
+    volumes = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(v * dx))
+    inverses = dolfinx.fem.petsc.assemble_vector(dolfinx.fem.form(v / ufl.max_value(f, 1e-200) * dx))
+    mean = dolfinx.fem.Function(Q0)
+    owned = volumes.array.size  # DG0: no ghost contributions to add; the ghosts from their owners
+    mean.x.array[:owned] = volumes.array / inverses.array
+    mean.x.scatter_forward()
+    volumes.destroy()
+    inverses.destroy()
+    return mean
+
+
 def solve(comm: MPI.Comm, cells: int, ratio: float, solver: str, /, *, sinkers: int = 4, smoother: str = "jacobi",
-          schur: str = "mass", petsc_options: dict[str, Any] | None = None, label: str | None = None,
-          keep: bool = False) -> dict[str, Any]:
+          schur: str = "mass", averaging: str = "none", petsc_options: dict[str, Any] | None = None,
+          label: str | None = None, keep: bool = False) -> dict[str, Any]:
     """One Stokes solve from zero (collective): iterations, the true residual against ``|b|``, vrms, the
     L2 norm of div u, seconds and the peak resident size. ``smoother``: ``stokes.multigrid.smoother``;
-    ``schur``: ``stokes.schur``; ``label``: the row's solver name (default: from the three).
-    ``keep``: also the solver under ``"stokes"`` (the caller destroys it)."""
+    ``schur``: ``stokes.schur``; ``averaging``: one of :data:`AVERAGING`; ``label``: the row's solver name
+    (default: from the four). ``keep``: also the solver under ``"stokes"`` (the caller destroys it)."""
     domain = BoxDomain.from_spec(BoxSpec((cells,) * 3, (0.0,) * 3, (1.0,) * 3))
     levels = domain.mesh_levels() if solver == "multigrid" else 1
     meshes = domain.create_mesh_levels(comm, levels)
     mesh = meshes[-1]
-    C = 1.0 - outside(ufl.SpatialCoordinate(mesh), sinkers)
-    stokes = StokesSolver(mesh, approximation(ratio), bcs={side: VelocityBC("no_slip") for side in SIDES_3D},
+    if averaging not in AVERAGING:
+        raise ValueError(f"averaging {averaging!r}: one of {', '.join(AVERAGING)}")
+    C: Any = 1.0 - outside(ufl.SpatialCoordinate(mesh), sinkers)
+    material = approximation(ratio)
+    if averaging == "harmonic":
+        material = CellAveraged(ratio, harmonic_cell_mean(mesh, material.viscosity(0.0, C)))
+        C = harmonic_cell_mean(mesh, C)  # the density over SINKER_DENSITY
+    stokes = StokesSolver(mesh, material, bcs={side: VelocityBC("no_slip") for side in SIDES_3D},
                           solver=solver, coarse_meshes=meshes[:-1], petsc_options=petsc_options or None,
                           multigrid=MultigridSettings(smoother=smoother), schur=schur)
     start = time.perf_counter()
@@ -125,8 +170,8 @@ def solve(comm: MPI.Comm, cells: int, ratio: float, solver: str, /, *, sinkers: 
     b_norm = float(system.b.norm())
     u = stokes.u
     vrms = math.sqrt(_integral(comm, ufl.inner(u, u) * ufl.dx))
-    extras = [x for x, default in ((smoother if solver == "multigrid" else "jacobi", "jacobi"), (schur, "mass"))
-              if x != default]
+    extras = [x for x, default in ((smoother if solver == "multigrid" else "jacobi", "jacobi"), (schur, "mass"),
+                                   (averaging, "none")) if x != default]
     name = label or (f"{solver} ({', '.join(extras)})" if extras else solver)
     row = {"cells": cells, "ratio": ratio, "solver": name, "sinkers": sinkers, "levels": levels,
            "unknowns": (stokes.V.dofmap.index_map.size_global * stokes.V.dofmap.index_map_bs
@@ -223,6 +268,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--merge", action="store_true", help="add to (or replace rows of) <out>/results.json")
     parser.add_argument("--smoother", default="jacobi", help="stokes.multigrid.smoother of the multigrid")
     parser.add_argument("--schur", default="mass", help="stokes.schur of the iterative solvers (mass, wbfbt)")
+    parser.add_argument("--averaging", default="none", choices=AVERAGING,
+                        help="the material at the quadrature points (none) or cell-averaged, harmonic (ASPECT's)")
     parser.add_argument("--label", default=None, help="the rows' solver name (e.g. for an exact velocity solve)")
     parser.add_argument("--petsc", nargs="*", default=[], metavar="KEY=VALUE",
                         help="PETSc options on top of the solver's (e.g. fieldsplit_u_mg_levels_ksp_max_it=3)")
@@ -238,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
         for solver in args.solvers:
             for ratio in args.ratios:
                 row = solve(comm, n, ratio, solver, sinkers=args.sinkers, smoother=args.smoother,
-                            schur=args.schur, petsc_options=petsc, label=args.label)
+                            schur=args.schur, averaging=args.averaging, petsc_options=petsc, label=args.label)
                 rows = [r for r in rows if _key(r) != _key(row)] + [row]
                 if comm.rank == 0:  # every row as it comes: a long sweep can be stopped and merged
                     out.mkdir(parents=True, exist_ok=True)

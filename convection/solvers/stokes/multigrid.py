@@ -26,8 +26,11 @@ One V-cycle of PETSc's PCMG replaces the AMG cycle:
   operator, LU), the same on any rank count.
 
 At large viscosity contrasts (the nsinker problem, ``benchmarks/nsinker``: DR = 1e4 and more) point-Jacobi
-Chebyshev stalls; ``stokes.multigrid.smoother: sor`` smooths with Chebyshev on SOR (per rank) instead
-(:data:`MULTIGRID_SMOOTHERS`). The default stays Jacobi, whose runs it would change.
+Chebyshev stalls; ``stokes.multigrid.smoother: sor`` smooths with Chebyshev on SOR (symmetric sweeps on each
+rank, block Jacobi between ranks) instead (:data:`MULTIGRID_SMOOTHERS`), with ``lambda_max`` from 10 GMRES
+steps: on one rank SOR's spectrum is bounded and 4 steps do, but block Jacobi between ranks widens it and
+4 steps underestimate it (nsinker 8^3, 2 ranks, DR 1e6 with ``stokes.schur: wbfbt``: 639 outer iterations
+with 4 steps, 73 with 10, 74 with 20). The default stays Jacobi, whose runs it would change.
 
 PETSc options under ``fieldsplit_u_`` (``stokes.petsc_options``) change any of this, e.g.
 ``fieldsplit_u_mg_levels_ksp_max_it: 3``.
@@ -60,8 +63,8 @@ MAX_LEVELS = 12
 
 MULTIGRID_SMOOTHERS: dict[str, str] = {
     "jacobi": "two Chebyshev steps with point-Jacobi on every level, lambda_max from 4 GMRES steps (the default)",
-    "sor": "two Chebyshev steps with SOR (on each rank) on every level: robust at large viscosity contrasts "
-           "(benchmarks/nsinker)",
+    "sor": "two Chebyshev steps with SOR (on each rank) on every level, lambda_max from 10 GMRES steps: robust at "
+           "large viscosity contrasts (benchmarks/nsinker)",
 }
 """The level smoothers of ``stokes.multigrid.smoother``."""
 
@@ -70,7 +73,8 @@ _SMOOTHER_OPTIONS: dict[str, dict[str, Any]] = {
     # Point-Jacobi Chebyshev stalls on nsinker's contrasts (8^3, 4 sinkers: > 1000 outer iterations from
     # DR = 1e4 on): its 4-step lambda_max estimate is too low there (20 steps: 220 at 1e6). Chebyshev on
     # SOR-preconditioned levels needs 37 / 68 / 138 at DR 1e2 / 1e4 / 1e6 (an exact velocity solve: 30 / 56 / 89).
-    "sor": {"fieldsplit_u_mg_levels_pc_type": "sor"},
+    # On several ranks SOR is block Jacobi between them, and lambda_max needs 10 estimate steps (module docstring).
+    "sor": {"fieldsplit_u_mg_levels_pc_type": "sor", "fieldsplit_u_mg_levels_ksp_chebyshev_esteig_steps": 10},
 }
 
 

@@ -292,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
                     (out / "results.json").write_text(json.dumps(rows, indent=1) + "\n")
                 if comm.rank == 0:
                     print(f"{n}^3 {solver} DR={ratio:.0e}: {row['iterations']} iterations, residual "
-                          f"{row['relative_residual']:.1e}, vrms {row['vrms']:.6e}, {row['seconds']:.1f} s, "
+                          f"{row['relative_residual']:.1e}, vrms {row['vrms']:.6e}, {row['seconds']:.3f} s, "
                           f"peak {row['peak_rss_mb']:.0f} MB", flush=True)
     if comm.rank == 0:
         write(out, rows, load=f"{comm.size} ranks, {load}")

@@ -17,20 +17,27 @@ One V-cycle of PETSc's PCMG replaces the AMG cycle:
   strong conditions' unit rows with it; they are formed again only when ``A`` changes;
 - two Chebyshev steps with point-Jacobi preconditioning before and after the coarse correction on
   every level (the Chebyshev interval ``[0.1, 1.1] lambda_max``, PETSc's default, with
-  ``lambda_max`` estimated at each set-up by 4 GMRES steps, not PETSc's 10: the same iterations
-  from 8^3 to 16^3 with a constant viscosity and contrasts of 1e4 and 1e6 (13 14 / 32 32 / 47 47
-  against 13 14 / 32 32 / 48 48; 2D 64^2 and 256^2 within one), for half the estimate's cost, 4 %
-  of a 16^3 thick-layer step, where the semi-implicit term changes the operator every solve: a
-  set-up then serves several solves, :mod:`convection.solvers.stokes.lagged`);
+  ``lambda_max`` estimated at each set-up by GMRES steps):
+
+  - with a constant viscosity 4 steps, not PETSc's 10: the same iterations from 8^3 to 16^3 (and
+    with smooth contrasts of 1e4 and 1e6: 13 14 / 32 32 / 47 47 against 13 14 / 32 32 / 48 48; 2D
+    64^2 and 256^2 within one), for half the estimate's cost, 4 % of a 16^3 thick-layer step,
+    where the semi-implicit term changes the operator every solve (a set-up then serves several
+    solves, :mod:`convection.solvers.stokes.lagged`);
+  - with a variable viscosity 10 (:data:`VARIABLE_VISCOSITY_ESTIMATE_STEPS`): a sharp contrast's stiff
+    modes are local, and 4 steps miss them, so the Chebyshev interval ends below ``lambda_max`` and
+    the smoother amplifies them. A 1e3 layer in the unit cube at 16^3, 2 ranks: 169 outer iterations
+    with 4 steps, 84 with 10 or 20 (a smooth 1e3 contrast: 24 and 25). nsinker: benchmarks/nsinker;
 - an exact solve on the coarsest level (``redundant``: every rank factorises the small coarsest
   operator, LU), the same on any rank count.
 
 At large viscosity contrasts (the nsinker problem, ``benchmarks/nsinker``: DR = 1e4 and more) point-Jacobi
 Chebyshev stalls; ``stokes.multigrid.smoother: sor`` smooths with Chebyshev on SOR (symmetric sweeps on each
 rank, block Jacobi between ranks) instead (:data:`MULTIGRID_SMOOTHERS`), with ``lambda_max`` from 10 GMRES
-steps: on one rank SOR's spectrum is bounded and 4 steps do, but block Jacobi between ranks widens it and
-4 steps underestimate it (nsinker 8^3, 2 ranks, DR 1e6 with ``stokes.schur: wbfbt``: 639 outer iterations
-with 4 steps, 73 with 10, 74 with 20). The default stays Jacobi, whose runs it would change.
+steps, whatever the viscosity: on one rank SOR's spectrum is bounded and 4 steps do, but block Jacobi between
+ranks widens it and 4 steps underestimate it (nsinker 8^3, 2 ranks, DR 1e6 with ``stokes.schur: wbfbt``: 639
+outer iterations with 4 steps, 73 with 10, 74 with 20). The default stays Jacobi: where the contrasts are
+smooth SOR needs the same iterations at 1.6 times the time (a 1e3 contrast in T at 16^3).
 
 PETSc options under ``fieldsplit_u_`` (``stokes.petsc_options``) change any of this, e.g.
 ``fieldsplit_u_mg_levels_ksp_max_it: 3``.
@@ -62,7 +69,8 @@ MAX_LEVELS = 12
 
 
 MULTIGRID_SMOOTHERS: dict[str, str] = {
-    "jacobi": "two Chebyshev steps with point-Jacobi on every level, lambda_max from 4 GMRES steps (the default)",
+    "jacobi": "two Chebyshev steps with point-Jacobi on every level, lambda_max from 4 GMRES steps (10 with a "
+              "variable viscosity; the default)",
     "sor": "two Chebyshev steps with SOR (on each rank) on every level, lambda_max from 10 GMRES steps: robust at "
            "large viscosity contrasts (benchmarks/nsinker)",
 }
@@ -76,6 +84,10 @@ _SMOOTHER_OPTIONS: dict[str, dict[str, Any]] = {
     # On several ranks SOR is block Jacobi between them, and lambda_max needs 10 estimate steps (module docstring).
     "sor": {"fieldsplit_u_mg_levels_pc_type": "sor", "fieldsplit_u_mg_levels_ksp_chebyshev_esteig_steps": 10},
 }
+_ESTIMATE_STEPS = "fieldsplit_u_mg_levels_ksp_chebyshev_esteig_steps"
+VARIABLE_VISCOSITY_ESTIMATE_STEPS = 10
+"""GMRES steps of every level's ``lambda_max`` estimate when the viscosity varies (4 when it is constant):
+module docstring."""
 
 
 @dataclass(frozen=True)
@@ -97,10 +109,15 @@ class MultigridSettings:
                           help="level smoother: jacobi (Chebyshev/point-Jacobi, the default) or sor (Chebyshev/SOR, "
                                "robust at viscosity contrasts of 1e4 and more, benchmarks/nsinker)")
 
-    def petsc_options(self, user: Mapping[str, Any] | None = None, levels: int | None = None, /) -> dict[str, Any]:
-        """The Stokes solver's PETSc options this section sets: the smoother's, but for those the ``user``'s
+    def petsc_options(self, user: Mapping[str, Any] | None = None, levels: int | None = None, /, *,
+                      variable_viscosity: bool = False) -> dict[str, Any]:
+        """The Stokes solver's PETSc options this section sets: the smoother's (with a ``variable_viscosity``
+        the Chebyshev bound from :data:`VARIABLE_VISCOSITY_ESTIMATE_STEPS`), but for those the ``user``'s
         options (``stokes.petsc_options``) set, and ``fieldsplit_u_pc_mg_levels`` when ``levels`` is given."""
-        options = {key: value for key, value in _SMOOTHER_OPTIONS[self.smoother].items() if key not in (user or {})}
+        options = dict(_SMOOTHER_OPTIONS[self.smoother])
+        if variable_viscosity:
+            options[_ESTIMATE_STEPS] = VARIABLE_VISCOSITY_ESTIMATE_STEPS
+        options = {key: value for key, value in options.items() if key not in (user or {})}
         return options if levels is None else {**options, "fieldsplit_u_pc_mg_levels": levels}
 
 GEOMETRIC_MULTIGRID: dict[str, Any] = {

@@ -524,7 +524,8 @@ class StokesSolver(PetscSolver):
         hierarchy = None
         if kind.nested:
             hierarchy = VelocityMultigrid(self.V, coarse, locate=getattr(coarse_meshes, "locate", None))
-            self._petsc_options.update(multigrid.petsc_options(self._user_options, hierarchy.levels))
+            self._petsc_options.update(multigrid.petsc_options(
+                self._user_options, hierarchy.levels, variable_viscosity=approximation.is_variable_viscosity))
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 

@@ -103,7 +103,7 @@ def _refuse_vtk_bound_elsewhere() -> None:
 
     scope.dl_iterate_phdr(collect, None)
     vtk = [i for i, name in enumerate(loaded) if os.path.basename(name).startswith("libvtkCommonCore")]
-    if owner in loaded and "vtkmodules" not in owner and vtk and loaded.index(owner) < vtk[0]:
+    if owner and owner in loaded and "vtkmodules" not in owner and vtk and loaded.index(owner) < vtk[0]:
         raise RuntimeError(f"VTK was loaded (a plain `import pyvista` or `import vtk`) after {owner} had put its "
                            "std::regex internals in the global symbol scope (`import dolfinx` does): its scalar "
                            "bars would abort the process; import pyvista with "

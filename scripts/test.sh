@@ -50,22 +50,10 @@ for n in 2 3; do
 done
 rm -rf "$logdir"
 
-# Serial tests last, so the closing summary line is the main run's. In the whole run the picture
-# tests (tests/convection/io) run in a pytest process of their own, as `convection plot` runs for a
-# user: after the other tests, VTK 9.7's scalar bar aborted that long process (an uncaught C++
-# exception inside the std::regex of vtkScalarBarActor::LayoutTicks, Debian 12; the test that sets
-# it up is not found yet, see benchmarks/performance/log/2026-12-07_memory_lean.md).
+# Serial tests last, so the closing summary line is the main run's.
 echo "== serial tests =="
 rc=0
-if [ "$#" -eq 0 ]; then
-    "$py" -m pytest -m "not slow and not mpi" --ignore=tests/convection/io || rc=$?
-    [ "$rc" -ne 0 ] && status=$rc
-    echo "== serial tests: pictures and output files (tests/convection/io), a process of their own =="
-    rc=0
-    "$py" -m pytest -m "not slow and not mpi" tests/convection/io || rc=$?
-else
-    "$py" -m pytest -m "not slow and not mpi" "$@" || rc=$?
-fi
+"$py" -m pytest -m "not slow and not mpi" "$@" || rc=$?
 [ "$rc" -ne 0 ] && status=$rc
 [ "$lint" -ne 0 ] && echo "== scripts/lint.sh failed (exit $lint): see its output at the top =="
 exit "$status"

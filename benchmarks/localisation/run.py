@@ -79,7 +79,10 @@ def picture(runs: dict[str, Path], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import pyvista as pv
+
+    from convection.io.pictures import import_pyvista
+
+    pv = import_pyvista()  # not `import pyvista` after DOLFINx: see import_pyvista
 
     fig, axes = plt.subplots(len(runs), 1, figsize=(10, 3.1 * len(runs)), squeeze=False)
     for ax, (label, out) in zip(axes[:, 0], runs.items()):

@@ -18,6 +18,7 @@ from mpi4py import MPI
 
 from _runs import CONFIGS, assert_same_statistics, error_line, kill_and_resume, rows, run_cli, run_on_ranks, sets
 from convection.config.loader import load_config
+from convection.io.pictures import import_pyvista
 from convection.physics.compressible import ReferenceProfile, ReferenceState
 from convection.schema import ConfigError
 
@@ -118,7 +119,7 @@ def test_adiabat_outputs_in_kelvin(runs):
     physics = load_config(folder / "config.yaml")["physics"]["reference"]
     reference = ReferenceState(**{**physics, "profile": ReferenceProfile(
         **{k: tuple(v) for k, v in physics["profile"].items()})})
-    pv = pytest.importorskip("pyvista")
+    pv = import_pyvista()  # not `import pyvista` after DOLFINx: see import_pyvista
     reader = pv.get_reader(str(folder / "fields.xdmf"))
     reader.set_active_time_value(reader.time_values[-1])
     grid = reader.read()

@@ -3,6 +3,7 @@ and what a picture takes from the data sets: the material field, values, colour 
 
 from __future__ import annotations
 
+import ctypes
 import os
 import sys
 import warnings
@@ -23,19 +24,40 @@ __all__ = ["Series", "clim", "field_values", "import_pyvista", "is_constant", "m
            "read_particles", "scalar_names", "snapshot_times"]
 
 
+# std::__detail::_Scanner<char>::_M_scan_normal(), one of the std::regex internals that a C++ library
+# instantiates and exports: the symbol that shows whose copy of std::regex the global scope holds.
+_REGEX_SYMBOL = "_ZNSt8__detail8_ScannerIcE14_M_scan_normalEv"
+_loaded_here: list[bool] = []  # [True] once import_pyvista has loaded VTK
+
+
 def import_pyvista() -> ModuleType:
     """pyvista, with VTK's libraries loaded so that they render also in a process that uses DOLFINx.
 
-    ``import dolfinx`` leaves the dlopen flags at ``RTLD_NOW | RTLD_GLOBAL``, which puts libdolfinx's
-    C++ template instantiations (e.g. ``std::regex`` internals, new ``std::string`` ABI) in the
-    global symbol scope. VTK's wheels are built with the old ``std::string`` ABI; loaded after
-    DOLFINx, their calls bind to DOLFINx's copies and the first scalar bar aborts the process
-    (``std::bad_alloc`` in ``vtkScalarBarActor``). Loaded with ``RTLD_DEEPBIND``, each VTK library
+    ``import dolfinx`` (Debian 12's DOLFINx 0.5) sets the dlopen flags to ``RTLD_NOW | RTLD_GLOBAL``
+    and leaves them so, which puts libdolfinx's C++ template instantiations (``std::regex``
+    internals built with the new ``std::string`` ABI) in the global symbol scope. VTK's wheels are
+    built with the old ``std::string`` ABI; a VTK library loaded after DOLFINx resolves its own
+    ``std::__detail::_Scanner<char>`` calls to libdolfinx's copies, which write a 32-byte string
+    where VTK's ``std::regex`` compiler reads an 8-byte one: the first scalar bar
+    (``vtkScalarBarActor::LayoutTicks`` -> ``vtk::is_printf_format``) throws ``std::bad_alloc``
+    from ``std::string::_S_create``, uncaught, and the process aborts (SIGABRT). Restoring the dlopen
+    flags does not help (libdolfinx stays global); loaded with ``RTLD_DEEPBIND``, each VTK library
     finds its own symbols first. All VTK modules are loaded at once, so no module that pyvista
-    loads later on demand binds the wrong way. Use this instead of ``import pyvista`` wherever
-    DOLFINx may have been imported first.
+    loads later on demand binds the wrong way.
+
+    So use this instead of ``import pyvista`` wherever DOLFINx may have been imported first: a plain
+    ``import pyvista`` after ``import dolfinx`` is the state that aborted the serial test process
+    at a picture test (2026-12-07: two tests read fields with ``pytest.importorskip("pyvista")``).
+    VTK loaded that way cannot be loaded again; it is refused with a RuntimeError here, before
+    it aborts the process. VTK loaded before DOLFINx binds to itself and is used as it is.
+
+    Raises:
+        RuntimeError: VTK was loaded without this function after a library that put its
+            ``std::regex`` internals in the global symbol scope (e.g. ``import dolfinx``).
     """
-    if "pyvista" in sys.modules:
+    if "vtkmodules.vtkCommonCore" in sys.modules and not _loaded_here:
+        _refuse_vtk_bound_elsewhere()
+    if "pyvista" in sys.modules and _loaded_here:
         return sys.modules["pyvista"]
     flags = sys.getdlopenflags()
     sys.setdlopenflags(os.RTLD_NOW | os.RTLD_DEEPBIND)
@@ -46,7 +68,46 @@ def import_pyvista() -> ModuleType:
         import pyvista.plotting  # noqa: F401
     finally:
         sys.setdlopenflags(flags)
+    _loaded_here[:] = [True]
     return pyvista
+
+
+def _refuse_vtk_bound_elsewhere() -> None:
+    """Raise if VTK's core library was loaded after the library whose ``std::regex`` internals the
+    global symbol scope holds (see :func:`import_pyvista`): the order of the dynamic linker's list
+    of loaded objects, which is the load order."""
+    if not sys.platform.startswith("linux"):
+        return
+    scope = ctypes.CDLL(None)  # dlopen(NULL): the global symbol scope
+    try:
+        address = ctypes.cast(getattr(scope, _REGEX_SYMBOL), ctypes.c_void_p).value
+    except AttributeError:
+        return  # no global std::regex internals: VTK bound to its own
+
+    class DlInfo(ctypes.Structure):
+        _fields_ = [("fname", ctypes.c_char_p), ("fbase", ctypes.c_void_p), ("sname", ctypes.c_char_p),
+                    ("saddr", ctypes.c_void_p)]
+
+    class PhdrInfo(ctypes.Structure):  # the leading fields of struct dl_phdr_info
+        _fields_ = [("addr", ctypes.c_void_p), ("name", ctypes.c_char_p)]
+
+    info = DlInfo()
+    scope.dladdr(ctypes.c_void_p(address), ctypes.byref(info))
+    owner = os.path.realpath(info.fname.decode()) if info.fname else ""
+    loaded: list[str] = []
+
+    @ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(PhdrInfo), ctypes.c_size_t, ctypes.c_void_p)
+    def collect(phdr, size, data):
+        loaded.append(os.path.realpath(phdr.contents.name.decode()) if phdr.contents.name else "")
+        return 0
+
+    scope.dl_iterate_phdr(collect, None)
+    vtk = [i for i, name in enumerate(loaded) if os.path.basename(name).startswith("libvtkCommonCore")]
+    if owner and owner in loaded and "vtkmodules" not in owner and vtk and loaded.index(owner) < vtk[0]:
+        raise RuntimeError(f"VTK was loaded (a plain `import pyvista` or `import vtk`) after {owner} had put its "
+                           "std::regex internals in the global symbol scope (`import dolfinx` does): its scalar "
+                           "bars would abort the process; import pyvista with "
+                           "convection.io.pictures.import_pyvista() instead")
 
 
 class Series:

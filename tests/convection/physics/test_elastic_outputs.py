@@ -18,6 +18,7 @@ import yaml
 
 from benchmarks.viscoelastic.stress import EPS, ETA, G, document
 from convection.config.loader import load_config
+from convection.io.pictures import import_pyvista
 from convection.schema import ConfigError
 
 OUTPUTS = ["elastic_stress_invariant", "elastic_strain_rate", "viscous_strain_rate", "elastic_share"]
@@ -112,7 +113,7 @@ def test_statistics_and_files_have_the_model_units(tmp_path):
     with h5py.File(tmp_path / "run" / "particles_000003.h5", "r") as f:
         invariant = f["properties/elastic_stress_invariant"][...]
     assert np.allclose(invariant, 0.1 * plain[-1]["elastic_stress_invariant_max"], rtol=1e-9, atol=0.0)
-    pv = pytest.importorskip("pyvista")
+    pv = import_pyvista()  # not `import pyvista` after DOLFINx: see import_pyvista
     reader = pv.get_reader(str(tmp_path / "run" / "fields.xdmf"))  # VTK's XdmfReader, as ParaView reads it
     reader.set_active_time_value(reader.time_values[-1])
     cells = reader.read().cell_data

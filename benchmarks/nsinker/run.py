@@ -242,19 +242,18 @@ def _picture(path: Path, rows: list[dict[str, Any]], solvers: list[str], cells: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4.2))
+    fig, ax = plt.subplots(figsize=(9, 4.8))
     styles = ["-", "--", ":"]
     for k, n in enumerate(cells):
         for solver in solvers:
             pts = sorted((r["ratio"], r["iterations"]) for r in rows if r["cells"] == n and r["solver"] == solver)
             if pts:
-                ax.semilogx(*zip(*pts), styles[k % 3], marker="o", markersize=4, label=f"{solver}, {n}$^3$")
+                ax.loglog(*zip(*pts), styles[k % 3], marker="o", markersize=4, label=f"{solver}, {n}$^3$")
     ax.set_xlabel("viscosity ratio DR")
     ax.set_ylabel("Stokes iterations (from zero, rtol 1e-7)")
     ax.set_title("nsinker: iterations against the viscosity contrast")
     ax.grid(True, which="both", alpha=0.3)
-    ax.set_ylim(bottom=0)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
 

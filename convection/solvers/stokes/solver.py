@@ -671,11 +671,8 @@ class StokesSolver(PetscSolver):
         return out
 
     # ------------------------------------------------------------------ adaptivity
-    def transfer_from(
-        self,
-        old: StokesSolver,
-        transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None],
-    ) -> None:
+    def transfer_from(self, old: StokesSolver,
+                      transfer: Callable[[dolfinx.fem.Function, dolfinx.fem.Function], None]) -> None:
         """Copy ``u`` and ``p`` (the initial guess) from ``old``, a solver on the previous mesh, by
         ``transfer(src_on_old_mesh, dst_on_new_mesh)`` (e.g. interpolation between non-matching
         meshes). Collective."""

@@ -37,7 +37,8 @@ rank, block Jacobi between ranks) instead (:data:`MULTIGRID_SMOOTHERS`), with ``
 steps, whatever the viscosity: on one rank SOR's spectrum is bounded and 4 steps do, but block Jacobi between
 ranks widens it and 4 steps underestimate it (nsinker 8^3, 2 ranks, DR 1e6 with ``stokes.schur: wbfbt``: 639
 outer iterations with 4 steps, 73 with 10, 74 with 20). The default stays Jacobi: where the contrasts are
-smooth SOR needs the same iterations at 1.6 times the time (a 1e3 contrast in T at 16^3).
+smooth SOR needs the same iterations, each dearer (a 1e3 contrast in T at 16^3: 24 and 24), and on nsinker
+at 16^3 with w-BFBt about as many at 1.5 times the time (8.25 against 5.25 s at DR 1e2, benchmarks/nsinker).
 
 PETSc options under ``fieldsplit_u_`` (``stokes.petsc_options``) change any of this, e.g.
 ``fieldsplit_u_mg_levels_ksp_max_it: 3``.
@@ -76,18 +77,19 @@ MULTIGRID_SMOOTHERS: dict[str, str] = {
 }
 """The level smoothers of ``stokes.multigrid.smoother``."""
 
+_ESTIMATE_STEPS = "fieldsplit_u_mg_levels_ksp_chebyshev_esteig_steps"
+VARIABLE_VISCOSITY_ESTIMATE_STEPS = 10
+"""GMRES steps of every level's ``lambda_max`` estimate when the viscosity varies (4 when it is constant):
+module docstring."""
+
 _SMOOTHER_OPTIONS: dict[str, dict[str, Any]] = {
     "jacobi": {},
     # Point-Jacobi Chebyshev stalls on nsinker's contrasts (8^3, 4 sinkers: > 1000 outer iterations from
     # DR = 1e4 on): its 4-step lambda_max estimate is too low there (20 steps: 220 at 1e6). Chebyshev on
     # SOR-preconditioned levels needs 37 / 68 / 138 at DR 1e2 / 1e4 / 1e6 (an exact velocity solve: 30 / 56 / 89).
     # On several ranks SOR is block Jacobi between them, and lambda_max needs 10 estimate steps (module docstring).
-    "sor": {"fieldsplit_u_mg_levels_pc_type": "sor", "fieldsplit_u_mg_levels_ksp_chebyshev_esteig_steps": 10},
+    "sor": {"fieldsplit_u_mg_levels_pc_type": "sor", _ESTIMATE_STEPS: VARIABLE_VISCOSITY_ESTIMATE_STEPS},
 }
-_ESTIMATE_STEPS = "fieldsplit_u_mg_levels_ksp_chebyshev_esteig_steps"
-VARIABLE_VISCOSITY_ESTIMATE_STEPS = 10
-"""GMRES steps of every level's ``lambda_max`` estimate when the viscosity varies (4 when it is constant):
-module docstring."""
 
 
 @dataclass(frozen=True)

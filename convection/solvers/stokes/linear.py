@@ -360,13 +360,12 @@ class StokesLinearSystem:
         multigrid its prolongations, on the velocity block fieldsplit holds now (extracted at the
         outer PC's set-up, a no-op when ``P`` did not change; a Newton step's may make it anew), and
         tell it whether ``P`` changed (:meth:`VelocityMultigrid.attach`). Collective; nothing without
-        a multigrid. PCMG sets itself up at its first use, or here on a MATNEST's own block."""
+        a multigrid. The PCMG sets itself up here."""
         if self.multigrid is None:
             return
         pc = self.ksp.getPC()
         pc.setUp()
-        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed,
-                              set_up=self._A.getType() == "nest")
+        self.multigrid.attach(pc.getFieldSplitSubKSP()[0], changed=self._preconditioner_changed)
         self._preconditioner_changed = False
 
     def solve(self, *, reuse_preconditioner: bool = False) -> float:

@@ -51,11 +51,13 @@ fieldsplit creates the velocity block's PC when the block preconditioner is firs
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
 import dolfinx
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from convection.schema import Names, param
@@ -63,7 +65,8 @@ from fembase.dolfinx_compat import element_degree, function_space
 from fembase.location import Located
 from fembase.multigrid import prolongation
 
-__all__ = ["GEOMETRIC_MULTIGRID", "MULTIGRID_SMOOTHERS", "MultigridSettings", "VelocityMultigrid"]
+__all__ = ["GALERKIN_PRODUCT", "GEOMETRIC_MULTIGRID", "MULTIGRID_SMOOTHERS", "MultigridSettings", "VelocityMultigrid",
+           "galerkin_products"]
 
 MAX_LEVELS = 12
 """Most multigrid levels a config may ask for (4096 times fewer cells per side on the coarsest)."""
@@ -137,6 +140,31 @@ GEOMETRIC_MULTIGRID: dict[str, Any] = {
 docstring. ``pc_mg_levels`` is added by the solver from the number of meshes."""
 
 
+GALERKIN_PRODUCT = "allatonce"
+"""PETSc's algorithm for the Galerkin products ``P^T A P`` on several ranks (``matptap_via``, while the
+PCMG sets itself up: :func:`galerkin_products`). PETSc's default (``scalable``) keeps the intermediate
+``A P`` of every level for the next numeric product; the all-at-once product of Kong et al. (2019) forms
+``P^T A P`` without it. 3D thick layer at 16^3 on 2 ranks: the set-up's resident memory 71 -> 22 MB a
+rank (benchmarks/performance/log/2026-12-07_memory_ptap.md). On one rank (sequential matrices) PETSc
+has no such algorithm; its default stays."""
+
+
+@contextmanager
+def galerkin_products(comm: PETSc.Comm | MPI.Comm, /) -> Iterator[None]:
+    """PETSc's options database asks for :data:`GALERKIN_PRODUCT` in the products of the set-ups run
+    inside (on several ranks; unless ``matptap_via`` is set already). The option is global: PETSc reads
+    it from the product matrix, which has no prefix, at a product's symbolic stage. Not collective."""
+    options = PETSc.Options()
+    if comm.size == 1 or options.hasName("matptap_via"):
+        yield
+        return
+    options["matptap_via"] = GALERKIN_PRODUCT
+    try:
+        yield
+    finally:
+        options.delValue("matptap_via")
+
+
 class VelocityMultigrid:
     """The prolongations between the velocity spaces of nested meshes, handed to a PCMG.
 
@@ -204,7 +232,7 @@ class VelocityMultigrid:
         for level, P in enumerate(self.interpolations, start=1):
             pc.setMGInterpolation(level, P)
 
-    def attach(self, ksp: PETSc.KSP, /, *, changed: bool = False, set_up: bool = False) -> None:
+    def attach(self, ksp: PETSc.KSP, /, *, changed: bool = False) -> None:
         """Keep the velocity block's KSP (from fieldsplit, after its PC was set up) on a PCMG with
         these prolongations over its current matrix. Collective.
 
@@ -220,13 +248,14 @@ class VelocityMultigrid:
         depend on the run's history, and a resumed run would part from one that went on. Their
         operators are handed again, which makes each estimate its bounds anew at the set-up.
 
-        ``set_up``: set the PCMG up now, from the block's current values, not at its first use:
-        where the block is the operator's own (:meth:`keep`), which changes after the set-up (a
-        restart sets the kept preconditioner up from the checkpoint's saved term, then assembles
-        the current one: :func:`convection.solvers.stokes.lagged.assemble_operator`).
+        The PCMG is set up here, from the block's current values, not at its first use: where the
+        block is the operator's own (:meth:`keep`) it changes after the set-up (a restart sets the
+        kept preconditioner up from the checkpoint's saved term, then assembles the current one:
+        :func:`convection.solvers.stokes.lagged.assemble_operator`); and the Galerkin products
+        take :data:`GALERKIN_PRODUCT` (:func:`galerkin_products`).
         """
         self._attach(ksp, changed)
-        if set_up:
+        with galerkin_products(ksp.getComm()):
             ksp.setUp()
 
     def _attach(self, ksp: PETSc.KSP, changed: bool, /) -> None:

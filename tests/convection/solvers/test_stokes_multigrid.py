@@ -20,6 +20,7 @@ from convection.config.loader import ConfigError, load_config
 from convection.geometry.boundary import VelocityBC
 from convection.geometry.box import SIDES_2D, SIDES_3D, BoxDomain, BoxSpec
 from convection.physics.approximation import BoussinesqApproximation, ViscosityLaw
+from convection.solvers.stokes.multigrid import GALERKIN_PRODUCT, galerkin_products
 from convection.solvers.stokes.solver import StokesSolver
 from fembase.dolfinx_compat import function_space
 
@@ -208,6 +209,50 @@ def test_constant_viscosity_sets_up_once(world):
     velocity_pc = stokes.ksp.getPC().getFieldSplitSubKSP()[0].getPC()
     assert velocity_pc.getType() == "mg" and velocity_pc.getMGLevels() == 2
     stokes.destroy()
+
+
+def test_coarse_operators_are_the_galerkin_products(world):
+    """Collective: every coarser level's operator is ``P^T A P`` of the next finer one, to round-off,
+    although on several ranks the set-up forms it by PETSc's all-at-once product
+    (:data:`GALERKIN_PRODUCT`) and the reference here by PETSc's default; the option leaves the
+    database with the set-up."""
+    meshes, T, C, approximation = _cube(world, 8, 3, "temperature")
+    stokes = StokesSolver(meshes[-1], approximation, bcs=FREE_SLIP_3D, solver="multigrid", coarse_meshes=meshes[:-1])
+    stokes.solve(T, C)
+    assert not PETSc.Options().hasName("matptap_via")
+    pc = stokes.ksp.getPC().getFieldSplitSubKSP()[0].getPC()
+    levels = pc.getMGLevels()
+    assert levels == 3
+    for level in range(levels - 1, 0, -1):
+        fine = pc.getMGSmoother(level).getOperators()[0]
+        coarse = pc.getMGSmoother(level - 1).getOperators()[0]
+        reference = fine.ptap(pc.getMGInterpolation(level))
+        reference.axpy(-1.0, coarse)
+        assert reference.norm() < 1e-12 * coarse.norm(), level
+        reference.destroy()
+    stokes.destroy()
+
+
+@pytest.mark.parametrize("preset", [None, "scalable"])
+def test_galerkin_products_option_is_scoped(world, preset):
+    """Collective: on several ranks the all-at-once product is asked for inside the scope only, and a
+    ``matptap_via`` the user set stays as it is; on one rank nothing is set."""
+    options = PETSc.Options()
+
+    def value() -> str | None:
+        return options.getString("matptap_via") if options.hasName("matptap_via") else None
+
+    if preset is not None:
+        options["matptap_via"] = preset
+    try:
+        with galerkin_products(world):
+            inside = value()
+        after = value()
+    finally:
+        if preset is not None:
+            options.delValue("matptap_via")
+    expected = preset if preset is not None else (GALERKIN_PRODUCT if world.size > 1 else None)
+    assert (inside, after) == (expected, preset)
 
 
 def test_multigrid_needs_the_coarse_meshes():

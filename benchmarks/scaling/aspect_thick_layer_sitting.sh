@@ -10,6 +10,7 @@
 #   ASPECT_BINARY: built by ../shared/bench/aspect/build.sh
 #   CELLS: cells per side, a power of 2 (default 16; ASPECT's GMG box is one cell refined log2(CELLS) times)
 #   END: the end time (default 0.002)
+#   LOGS: the folder of the raw logs (default below)
 # Writes the raw logs under benchmarks/scaling/log/aspect_thick_layer/ (CELLS=32:
 # .../aspect_thick_layer_32/) and the table to OUT_MD (default benchmarks/scaling/aspect_thick_layer.md,
 # CELLS=32: aspect_thick_layer_32.md).
@@ -23,7 +24,7 @@ suffix=$([ "$cells" = 16 ] && echo "" || echo "_$cells")
 refine=$(python3 -c "import math, sys; n = int(sys.argv[1]); k = round(math.log2(n)); assert 2**k == n; print(k)" "$cells")
 out_md="${3:-$here/benchmarks/scaling/aspect_thick_layer$suffix.md}"
 prm="$here/../shared/bench/aspect/thick_layer_3d.prm"
-logs="$here/benchmarks/scaling/log/aspect_thick_layer$suffix"
+logs="${LOGS:-$here/benchmarks/scaling/log/aspect_thick_layer$suffix}"
 work="$(mktemp -d "${TMPDIR:-/tmp}/aspect_sitting.XXXXXX")"
 mkdir -p "$logs"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
@@ -48,7 +49,8 @@ load=$(cut -d' ' -f1-3 /proc/loadavg)
 echo "load average before the sitting: $load" | tee "$logs/sitting.txt"
 echo "cells: $cells" | tee -a "$logs/sitting.txt"
 echo "end: $end" | tee -a "$logs/sitting.txt"
-# RUNS="aspect_gmg multigrid" limits the sitting to some of the four. Each run's peak resident size
+# RUNS="aspect_gmg multigrid" limits the sitting to some of the four; multigrid_scalable is the
+# multigrid with PETSc's default Galerkin product (before 2026-12-07: matptap_via scalable). Each run's peak resident size
 # (the largest rank's, from GNU time on mpirun) goes to <run>_<round>.rss.
 runs="${RUNS:-aspect_amg aspect_gmg iterative multigrid}"
 for round in $(seq 1 "$repeat"); do
@@ -59,8 +61,10 @@ for round in $(seq 1 "$repeat"); do
     case $run in
       aspect_amg) "${rss[@]}" mpirun -n 2 "$aspect" "$work/amg.prm" > "$log" 2>&1 ;;
       aspect_gmg) "${rss[@]}" mpirun -n 2 "$aspect" "$work/gmg.prm" > "$log" 2>&1 ;;
-      *) "${rss[@]}" mpirun -n 2 env PYTHONPATH="$here" "$python" -m convection run "$here/configs/thick_layer_3d.yaml" \
-           --set "mesh.cells=[$cells,$cells,$cells]" --set time.end=$end --set stokes.solver=$run \
+      *) solver=${run%_scalable}  # multigrid_scalable: the multigrid with PETSc's default Galerkin product
+         petsc=$([ "$run" = "$solver" ] && echo "" || echo "-matptap_via scalable")
+         "${rss[@]}" mpirun -n 2 env PYTHONPATH="$here" PETSC_OPTIONS="$petsc" "$python" -m convection run \
+           "$here/configs/thick_layer_3d.yaml" --set "mesh.cells=[$cells,$cells,$cells]" --set time.end=$end --set stokes.solver=$solver \
            --output "$work/out-$run" > "$log" 2>&1
          cp "$work/out-$run/summary.json" "$logs/${run}_$round.summary.json"
          cp "$work/out-$run/statistics.csv" "$logs/${run}_$round.statistics.csv" ;;

@@ -22,7 +22,9 @@ def _runs(cells: int) -> dict[str, str]:
     return {"aspect_amg": "ASPECT 2.5, block AMG",
             "aspect_gmg": f"ASPECT 2.5, block GMG (matrix-free, {levels} levels)",
             "iterative": "this project, `iterative` (FGMRES + BoomerAMG)",
-            "multigrid": f"this project, `multigrid` (FGMRES + geometric multigrid, {levels - 1} levels; `auto` here)"}
+            "multigrid": f"this project, `multigrid` (FGMRES + geometric multigrid, {levels - 1} levels; `auto` here)",
+            "multigrid_scalable": f"this project, `multigrid` ({levels - 1} levels) with PETSc's default Galerkin product "
+                                  "(`-matptap_via scalable`, before 2026-12-07)"}
 
 
 def _walls(sitting: Path) -> dict[str, list[tuple[float, int]]]:

@@ -11,13 +11,14 @@ swarm), or a part of the mesh is not connected to any value, those cells get 0.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
 from particles.parallel.ghosts import GhostExchange
 
-__all__ = ["fill_cells"]
+__all__ = ["fill_cells", "neighbour_sums"]
 
 
 def fill_cells(exchange: GhostExchange, values: npt.ArrayLike, known: npt.ArrayLike, /
@@ -39,15 +40,14 @@ def fill_cells(exchange: GhostExchange, values: npt.ArrayLike, known: npt.ArrayL
     if n_empty == 0:
         return vals, 0
     offsets, nbrs = exchange.neighbour_offsets, exchange.neighbour_cells
-    rows = np.repeat(np.arange(known.shape[0]), np.diff(offsets))
     n = known.shape[0]
+    s, c = np.zeros(n), np.zeros(n)
     rounds = 0
     while True:
         halo = exchange.exchange_cell_values(np.stack([vals, known.astype(np.float64)], axis=1))
         all_vals = np.concatenate([vals, halo[:, 0]])
         all_known = np.concatenate([known.astype(np.float64), halo[:, 1]])
-        s = np.bincount(rows, weights=all_vals[nbrs] * all_known[nbrs], minlength=n)
-        c = np.bincount(rows, weights=all_known[nbrs], minlength=n)
+        neighbour_sums(offsets, nbrs, all_vals, all_known, known, s, c)
         new = ~known & (c > 0)
         progress = int(comm.allreduce(int(np.count_nonzero(new)), op=MPI.SUM))
         if progress == 0:
@@ -59,3 +59,25 @@ def fill_cells(exchange: GhostExchange, values: npt.ArrayLike, known: npt.ArrayL
         if n_empty == 0:
             break
     return vals, rounds
+
+
+@numba.njit(cache=True)
+def neighbour_sums(offsets: npt.NDArray[np.int64], nbrs: npt.NDArray[np.int32], values: npt.NDArray[np.float64],
+                   weights: npt.NDArray[np.float64], skip: npt.NDArray[np.bool_], s: npt.NDArray[np.float64],
+                   c: npt.NDArray[np.float64]) -> None:  # pragma: no cover - numba
+    """``s[i] = sum_k values[j_k] weights[j_k]`` and ``c[i] = sum_k weights[j_k]`` over the neighbours
+    ``j_k = nbrs[offsets[i]:offsets[i + 1]]`` of every cell ``i`` not ``skip``ped, summed in that order
+    (the bits of ``np.bincount`` over the same rows); skipped cells keep their entries. Without the
+    temporaries of a vectorised gather (an int64 row index and two products per neighbour entry:
+    150 MB a rank on the 3D thick layer at 32^3, about 80 vertex neighbours a tetrahedron)."""
+    for i in range(skip.shape[0]):
+        if skip[i]:
+            continue
+        total = 0.0
+        count = 0.0
+        for k in range(offsets[i], offsets[i + 1]):
+            j = nbrs[k]
+            total += values[j] * weights[j]
+            count += weights[j]
+        s[i] = total
+        c[i] = count

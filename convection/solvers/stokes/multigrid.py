@@ -14,7 +14,8 @@ One V-cycle of PETSc's PCMG replaces the AMG cycle:
 
 - coarse operators by Galerkin products, ``A_{l-1} = P_l^T A_l P_l`` (PETSc's ``pc_mg_galerkin``),
   so they carry the viscosity (and a varying one's contrasts) of the fine operator exactly, and the
-  strong conditions' unit rows with it; they are formed again only when ``A`` changes;
+  strong conditions' unit rows with it; they are formed again only when ``A`` changes; on several
+  ranks by PETSc's all-at-once product, which keeps no intermediate (:data:`GALERKIN_PRODUCT`);
 - two Chebyshev steps with point-Jacobi preconditioning before and after the coarse correction on
   every level (the Chebyshev interval ``[0.1, 1.1] lambda_max``, PETSc's default, with
   ``lambda_max`` estimated at each set-up by GMRES steps):
@@ -144,9 +145,11 @@ GALERKIN_PRODUCT = "allatonce"
 """PETSc's algorithm for the Galerkin products ``P^T A P`` on several ranks (``matptap_via``, while the
 PCMG sets itself up: :func:`galerkin_products`). PETSc's default (``scalable``) keeps the intermediate
 ``A P`` of every level for the next numeric product; the all-at-once product of Kong et al. (2019) forms
-``P^T A P`` without it. 3D thick layer at 16^3 on 2 ranks: the set-up's resident memory 71 -> 22 MB a
-rank (benchmarks/performance/log/2026-12-07_memory_ptap.md). On one rank (sequential matrices) PETSc
-has no such algorithm; its default stays."""
+``P^T A P`` without it, at about twice the time of a numeric product. 3D thick layer on 2 ranks: peak
+resident size 475 -> 424 MB a rank at 16^3; the whole run to t = 0.002 3.6 % longer (96 against 93 s,
+best of three; benchmarks/performance/log/2026-12-07_memory_ptap.md). ``PETSC_OPTIONS="-matptap_via
+scalable"`` brings PETSc's default back. On one rank (sequential matrices) PETSc has no such algorithm;
+its default stays."""
 
 
 @contextmanager

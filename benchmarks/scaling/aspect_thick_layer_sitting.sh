@@ -50,8 +50,8 @@ echo "load average before the sitting: $load" | tee "$logs/sitting.txt"
 echo "cells: $cells" | tee -a "$logs/sitting.txt"
 echo "end: $end" | tee -a "$logs/sitting.txt"
 # RUNS="aspect_gmg multigrid" limits the sitting to some of the four; multigrid_scalable is the
-# multigrid with PETSc's default Galerkin product (before 2026-12-07: matptap_via scalable). Each run's peak resident size
-# (the largest rank's, from GNU time on mpirun) goes to <run>_<round>.rss.
+# multigrid with PETSc's default Galerkin product (before 2026-12-07: matptap_via scalable). Each
+# run's peak resident size (the largest rank's, from GNU time on mpirun) goes to <run>_<round>.rss.
 runs="${RUNS:-aspect_amg aspect_gmg iterative multigrid}"
 for round in $(seq 1 "$repeat"); do
   for run in $runs; do

@@ -23,8 +23,9 @@ by the manifold (``Phi^-1``) and found in the straight cell of the coarser level
 evaluates the coarse basis at that reference point (:meth:`MeshLevels.locate`), i.e. it maps
 parameter space to parameter space. Measured on the adaptive 3D shell (configs/shell_adaptive.yaml
 at gmsh size 0.8, repartitioned every 2 steps, 2 ranks): 17-22 iterations a step against
-BoomerAMG's 35-45, the same vrms to 1e-6. A shell without adaptivity has no coarser mesh (gmsh
-makes the base) and keeps the AMG.
+BoomerAMG's 35-45, the same vrms to 1e-6. A fixed shell with the multigrid is a hierarchy too: its
+base is gmsh's shell at a coarser size and its mesh the base refined uniformly
+(:meth:`convection.geometry.shell.ShellDomain.mesh_levels`), so its levels are those rounds' meshes.
 
 A round that refines a small region leaves a mesh hardly coarser than the next: a multigrid level
 that costs a smoothing sweep over nearly the whole mesh and corrects little. Such rounds are

@@ -45,7 +45,7 @@ from convection.adapt.adaptivity import INDICATOR_FIELDS, Adaptivity, LevelBound
 from convection.adapt.hierarchy import MeshHierarchy
 from convection.adapt.levels import MeshLevels
 from convection.geometry.boundary import TemperatureBC, VelocityBC, temperature_dirichlet_bcs
-from convection.geometry.domain import Domain
+from convection.geometry.domain import Domain, LevelsByRefinement
 from convection.deform.motion import FreeSurface
 from convection.deform.surface import surface_terms
 from convection.io.continuation import initial_temperature
@@ -138,17 +138,21 @@ def _meshes(settings: RunSettings, domain: Domain, materials: Materials, tempera
             comm: MPI.Comm, restore: SavedRun | None) -> _Meshes:
     """The run's mesh: the base mesh (adapted to the initial condition), or the checkpoint's."""
     adapt = settings.adaptivity
-    hierarchical = settings.hierarchical
+    exact = True
+    levels = settings.multigrid_levels(domain, ranks=comm.size)
+    # A fixed shell's multigrid levels: a coarser gmsh shell (the hierarchy's base) refined uniformly.
+    refinements = levels - 1 if isinstance(domain, LevelsByRefinement) else 0
+    hierarchical = settings.hierarchical or refinements > 0
     # A curved domain's hierarchy refines the straight-sided base and curves what it hands out.
     manifold = domain.manifold() if hierarchical else None
     straight = manifold is not None
-    exact = True
-    levels = settings.multigrid_levels(domain, ranks=comm.size)
     coarse: list[dolfinx.mesh.Mesh] = []  # the boxes below the base, then the base they nest in
 
     def make_base(owners: Any) -> dolfinx.mesh.Mesh:
         """The base mesh; with multigrid also the meshes nested below it, kept in ``coarse`` (with
         the base: a checkpoint's repartitioned base replaces it, and they do not nest in that)."""
+        if refinements:
+            return domain.coarsened(refinements).create_mesh(comm, owners=owners, straight=True)
         if levels == 1:
             return domain.create_mesh(comm, owners=owners, straight=straight)
         meshes = domain.create_mesh_levels(comm, levels, owners=owners)
@@ -164,7 +168,7 @@ def _meshes(settings: RunSettings, domain: Domain, materials: Materials, tempera
         mesh = make_base(None)
         hierarchy = MeshHierarchy(mesh, manifold=manifold) if hierarchical else None
         if manifold is not None:
-            mesh = hierarchy.uniform(0)
+            mesh = hierarchy.uniform(refinements)
     adaptivity = None
     if adapt.enabled:
         bounds = None
@@ -182,9 +186,10 @@ def _meshes(settings: RunSettings, domain: Domain, materials: Materials, tempera
         levels = MeshLevels(coarse[:-1], coarse[-1], hierarchy)
         if hierarchy is not None:
             hierarchy.keep_levels = True  # a repartition moves the refinement rounds' meshes too
-    elif adaptivity is not None and STOKES_SOLVER_CHOICES[settings.stokes.solver].nested:
+    elif (adaptivity is not None or refinements) and STOKES_SOLVER_CHOICES[settings.stokes.solver].nested:
         # No box nests below the base (a shell; a box whose cells do not halve): the levels are
-        # the refinement rounds (curved on a shell).
+        # the refinement rounds (curved on a shell; a fixed shell's uniform ones).
+        assert hierarchy is not None
         levels = MeshLevels((), hierarchy.base, hierarchy)
         hierarchy.keep_levels = True
     return _Meshes(mesh, hierarchy, manifold, adaptivity, balancer, exact, levels)
@@ -336,6 +341,7 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     model = Model(stokes, temperature=temperature, solve_temperature=energy.enabled, composition=composition,
                   particles=particles, adaptivity=meshes.adaptivity, balancer=meshes.balancer,
                   free_surface=free_surface, elastic_stress=stress)
+    model.hierarchy = meshes.hierarchy  # a fixed shell's multigrid levels: neither adaptivity nor balancing has it
     if stokes.discretisation.elasticity is not None:  # the elastic outputs of the field output (issue 48)
         model.rheology.elastic = ElasticFields(settings.output.extra_fields).update
     if restore is not None:

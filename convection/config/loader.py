@@ -51,7 +51,7 @@ from convection.config.particle_systems import (
 )
 from convection.config.units import apply_scaling, in_written_terms, scaling_of, written_quantities
 from convection.geometry.boundary import VELOCITY_BC_KINDS
-from convection.geometry.domain import Domain, safe_product
+from convection.geometry.domain import Domain, LevelsByRefinement, safe_product
 from convection.geometry.probes import boundary_probes, domain_probes
 from convection.geometry.registry import DOMAINS, boundary_descriptions, domain_from_settings, mesh_section_schema
 from convection.adapt.adaptivity import AdaptivitySettings
@@ -260,10 +260,17 @@ def nested_levels(solver: str, wanted: int, domain: Domain, /, *, fixed: bool, r
     ``ranks`` cells (every rank needs one): on the 3D thick layer to t = 0.002 it ran 2.39 (16^3)
     and 2.03 (32^3) times as fast as ASPECT's GMG (benchmarks/scaling/aspect_thick_layer.md,
     aspect_thick_layer_32.md); elsewhere ``auto`` is what
-    :func:`convection.solvers.stokes.solver.resolve_solver` says."""
+    :func:`convection.solvers.stokes.solver.resolve_solver` says (on a shell, whose levels refine a
+    coarser gmsh mesh, the AMG until the multigrid is measured faster there)."""
+    refines = isinstance(domain, LevelsByRefinement)
     if STOKES_SOLVER_CHOICES[solver].nested:
+        if refines and not fixed:
+            if wanted > 1:
+                raise ValueError(f"an adaptive or repartitioned {domain.name} takes its refinement rounds as the "
+                                 f"levels (leave it 0)")
+            return 1
         return domain.mesh_levels(wanted)
-    if STOKES_SOLVER_CHOICES[solver].by_mesh and fixed and domain.gdim == 3:
+    if STOKES_SOLVER_CHOICES[solver].by_mesh and fixed and domain.gdim == 3 and not refines:
         levels = domain.mesh_levels(wanted)
         coarsest = domain.estimated_cells() / 8 ** (levels - 1)
         return levels if levels >= AUTO_MULTIGRID_LEVELS and coarsest >= ranks else 1
@@ -272,7 +279,8 @@ def nested_levels(solver: str, wanted: int, domain: Domain, /, *, fixed: bool, r
 
 def _check_multigrid(config: dict[str, Any]) -> None:
     """``stokes.solver: multigrid`` needs coarser meshes nested in the run's base mesh (a box whose
-    cells halve) or an adaptive mesh (the meshes of its refinement rounds, curved on a shell:
+    cells halve), a fixed shell fine enough for a coarser gmsh mesh refined (``LevelsByRefinement``)
+    or an adaptive mesh (the meshes of its refinement rounds, curved on a shell:
     :mod:`convection.adapt.levels`), repartitioned only if adaptive; ``stokes.multigrid.levels``
     only means something with it (or with ``auto`` where that picks it)."""
     stokes = config["stokes"]
@@ -293,7 +301,7 @@ def _check_multigrid(config: dict[str, Any]) -> None:
                           "balance.strategy: none)")
     domain = config_domain(config)
     try:
-        count = domain.mesh_levels(levels)
+        count = multigrid_levels(config, domain)
     except ValueError as err:
         raise ConfigError(f"config key 'stokes.multigrid.levels': {err}") from None
     if BALANCE_STRATEGIES[config["balance"]["strategy"]].repartitions and domain.manifold() is not None \
@@ -301,6 +309,13 @@ def _check_multigrid(config: dict[str, Any]) -> None:
         raise ConfigError("config key 'balance.strategy': stokes.solver multigrid on a repartitioned curved mesh needs "
                           "DOLFINx 0.5 for now (on 0.9 a node of the repartitioned shell lay in no coarser cell of "
                           "its rank); use balance.strategy: none, or stokes.solver: iterative")
+    if count < 2 and not config["adaptivity"]["enabled"] and isinstance(domain, LevelsByRefinement):
+        why = ("its free surface moves the mesh" if free_surface_boundaries(config) else
+               "mesh.resolution is too coarse: the coarsest level, gmsh's at twice the resolution, needs cells no "
+               "larger than the shell's thickness / 2" if config["mesh"].get("geometry_degree", 2) == 2 else
+               "mesh.geometry_degree 1: the refined levels are curved")
+        raise ConfigError(f"config key 'stokes.solver': multigrid on a fixed mesh.geometry {domain.name} refines a "
+                          f"coarser gmsh mesh for its levels, and here cannot: {why}")
     if count < 2 and not config["adaptivity"]["enabled"]:  # adaptive: the refinement rounds are levels
         raise ConfigError(f"config key 'stokes.solver': multigrid needs coarser meshes nested in the mesh (a box whose "
                           f"cells per side are even, e.g. 16, 20, 32, of simplices not graded) or an adaptive mesh, "

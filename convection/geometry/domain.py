@@ -20,7 +20,7 @@ import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 import dolfinx
 import numpy as np
@@ -32,7 +32,8 @@ from petsc4py import PETSc
 from convection.geometry.gravity import Gravity
 from fembase.dolfinx_compat import DirichletBC
 
-__all__ = ["Columns", "Domain", "DomainContext", "MeshSection", "keep_boundary_facets", "kept_facets", "safe_product"]
+__all__ = ["Columns", "Domain", "DomainContext", "LevelsByRefinement", "MeshSection", "keep_boundary_facets",
+           "kept_facets", "safe_product"]
 
 _KEPT_FACETS = "_convection_kept_facets"
 _FACET_TAGS = "_convection_facet_tags"
@@ -349,3 +350,16 @@ class Domain(ABC):
         """The Nusselt number through boundary ``name``: the heat flow from its ``lower`` to its
         ``upper`` boundary (:meth:`opposite`) over the conductive heat flow of the temperature
         difference ``delta_T`` between their means (``area``: the measure of ``name``). Collective."""
+
+
+@runtime_checkable
+class LevelsByRefinement(Protocol):
+    """A domain whose geometric-multigrid levels on a fixed mesh are made by refining a coarser base
+    uniformly (a gmsh shell: :class:`convection.geometry.shell.ShellDomain`), not by coarsening its
+    base (a box: :meth:`Domain.create_mesh_levels`). With ``L`` levels (:meth:`Domain.mesh_levels`)
+    the run's mesh is the base of ``coarsened(L - 1)`` refined uniformly ``L - 1`` times; on an
+    adaptive or repartitioned mesh the refinement rounds are the levels instead."""
+
+    def coarsened(self, refinements: int, /) -> Domain:
+        """The domain whose base mesh, refined uniformly ``refinements`` times, makes this domain's
+        mesh."""

@@ -53,6 +53,7 @@ def gmsh_mesh(comm: MPI.Comm, build: Callable[[Any], None], /, *, gdim: int, nam
             them (benchmarks/releases). None: mesh, write nothing.
     """
     started = False
+    error = None
     if comm.rank == 0:
         import gmsh
 
@@ -66,10 +67,16 @@ def gmsh_mesh(comm: MPI.Comm, build: Callable[[Any], None], /, *, gdim: int, nam
             gmsh.open(str(msh_file))
         else:
             gmsh.model.add(name)
-            build(gmsh)
-            if msh_file is not None:
+            try:
+                build(gmsh)
+            except ValueError as err:  # raised on every rank below: the others would wait for the mesh
+                error = str(err)
+            if msh_file is not None and error is None:
                 gmsh.write(str(msh_file))
+    error = comm.bcast(error, root=0)
     try:
+        if error is not None:
+            raise ValueError(error)
         return create_reproducible_mesh(comm, lambda c: gmsh_model_to_mesh(gmsh.model, c, 0, gdim=gdim),
                                         owners=owners)
     finally:

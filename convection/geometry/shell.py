@@ -12,14 +12,20 @@ refinement works); gravity along ``-x/|x|``. Free slip is imposed weakly (Nitsch
 on both surfaces rigid rotations about the origin solve the homogeneous problem. Optional
 ``interfaces`` (radii strictly between the two) are meshed conformingly, e.g. for forcing
 concentrated on a surface ``r = r'``. Refined meshes are curved by :class:`fembase.manifold.ShellManifold`.
+
+A fixed shell with ``stokes.solver: multigrid`` gets its levels by refinement
+(:meth:`ShellDomain.mesh_levels`): with ``L`` levels the run's mesh is gmsh's straight shell at
+``resolution * 2^(L-1)``, refined uniformly ``L - 1`` times and curved by the manifold, so the
+cells are about ``resolution`` in size and every coarser level is one of the refinement's meshes
+(curved the same way; :mod:`convection.adapt.levels`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import dolfinx
 import numpy as np
@@ -40,6 +46,19 @@ __all__ = ["SHELL_BOUNDARIES", "Annulus", "ShellDomain", "ShellSpec", "Spherical
 SHELL_BOUNDARIES: tuple[str, ...] = ("inner", "outer")
 _DIMENSIONS = {"annulus": 2, "spherical_shell": 3}
 
+CURVABLE_SHRINK = 0.97
+CURVABLE_TRIES = 8
+"""A straight base the manifold curves is meshed again at this fraction of the last cell size, up to
+this many times, while a tetrahedron has all four vertices on a sphere (:func:`_shell_model`). gmsh's
+Delaunay mesher leaves one or two such cells at some sizes (radii 1.22 and 2.22: at 0.2, 0.4 and
+0.5, none at 0.25, 0.3, 0.35, 0.45, 0.55, 0.6, 0.7, 0.8, 0.9, 1.0); its HXT mesher left none but
+gave another mesh at every call (1620, 1645, 1620, 1658 cells at 0.5)."""
+
+COARSEST_LAYERS = 2
+"""The coarsest multigrid level of a fixed shell has cells no larger than the shell's thickness over
+this (:meth:`ShellDomain.mesh_levels`): two cells across, so the coarse problem still resolves
+the radial flow."""
+
 
 @dataclass(frozen=True)
 class ShellSpec:
@@ -53,6 +72,8 @@ class ShellSpec:
         geometry_degree: 1 (straight-sided cells) or 2 (curved cells, boundary nodes on the
             circles/spheres).
         interfaces: Radii of interior circles/spheres the mesh conforms to (facets on them).
+        curvable: The straight base of meshes the manifold curves (a hierarchy's): in 3D, no
+            tetrahedron may have all four vertices on one sphere (:func:`_shell_model`).
     """
 
     gdim: int
@@ -61,6 +82,7 @@ class ShellSpec:
     resolution: float = 0.1
     geometry_degree: int = 2
     interfaces: tuple[float, ...] = ()
+    curvable: bool = False
 
 
     def __post_init__(self) -> None:
@@ -112,7 +134,26 @@ def _shell_model(gmsh, spec: ShellSpec) -> None:
         pieces, _ = occ.fragment(pieces[:1], pieces[1:])
     occ.synchronize()
     gmsh.model.addPhysicalGroup(dim, [tag for _, tag in gmsh.model.getEntities(dim)], 1)
-    mesh_uniformly(gmsh, dim, spec.resolution, spec.geometry_degree, untangle=True)
+    size = spec.resolution
+    for _ in range(CURVABLE_TRIES):
+        mesh_uniformly(gmsh, dim, size, spec.geometry_degree, untangle=True)
+        if not spec.curvable or dim == 2 or not _caps(gmsh, (spec.inner_radius, spec.outer_radius)):
+            return
+        gmsh.model.mesh.clear()
+        size *= CURVABLE_SHRINK
+    raise ValueError(f"gmsh's shell of size {spec.resolution:g} to {size / CURVABLE_SHRINK:.4g} kept a "
+                     f"tetrahedron with all four vertices on a sphere, which the manifold cannot curve: try another "
+                     f"mesh.resolution")
+
+
+def _caps(gmsh: Any, radii: tuple[float, ...], /) -> int:
+    """Tetrahedra of gmsh's current mesh with all four vertices on one of the spheres ``radii``."""
+    _, _, nodes = gmsh.model.mesh.getElements(3)
+    tags, x, _ = gmsh.model.mesh.getNodes()
+    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    r = np.linalg.norm(x.reshape(-1, 3), axis=1)[index[np.concatenate(nodes).astype(np.int64)]].reshape(-1, 4)
+    return int(sum(np.all(np.abs(r - radius) <= 1e-9 * radius, axis=1).sum() for radius in radii))
 
 
 def create_shell_mesh(comm: MPI.Comm, spec: ShellSpec, /, *, owners: npt.NDArray[np.int32] | None = None,
@@ -173,6 +214,33 @@ class ShellDomain(RadialDomain):
                               0.11785113))
         return safe_product(volume / cell, *[1.0 / mesh.keys.resolution] * cls.config_gdim(mesh)) + 1.0
 
+    def mesh_levels(self, wanted: int = 0, /) -> int:
+        """A gmsh shell nests in no coarser gmsh shell: ``L`` levels are gmsh's shell at
+        ``resolution * 2^(L-1)`` refined uniformly ``L - 1`` times (module docstring). The coarsest
+        cells must be no larger than the shell's thickness over :data:`COARSEST_LAYERS`. With
+        ``wanted`` 0, as many levels as that allows (1: none)."""
+        spec = self.spec
+        thickness = spec.outer_radius - spec.inner_radius
+        most = 1
+        while spec.resolution * 2 ** most <= thickness / COARSEST_LAYERS:
+            most += 1
+        if wanted == 0:
+            return most if spec.geometry_degree == 2 else 1
+        if wanted > 1 and spec.geometry_degree != 2:
+            raise ValueError("levels by refinement need mesh.geometry_degree 2 (the refined cells are curved onto "
+                             "the spheres)")
+        if wanted > most:
+            raise ValueError(f"{wanted} levels need a coarsest mesh of cell size resolution * 2^{wanted - 1} = "
+                             f"{spec.resolution * 2 ** (wanted - 1):.4g}, more than the shell's thickness "
+                             f"{thickness:.4g} / {COARSEST_LAYERS}: at most {most} with mesh.resolution "
+                             f"{spec.resolution:.4g}")
+        return wanted
+
+    def coarsened(self, refinements: int, /) -> ShellDomain:
+        """The shell of gmsh cells ``2^refinements`` times larger (:meth:`mesh_levels`;
+        :class:`convection.geometry.domain.LevelsByRefinement`)."""
+        return shell_domain(replace(self.spec, resolution=self.spec.resolution * 2 ** refinements))
+
     def angle_limits(self) -> list[tuple[float, float]]:
         """Longitude (poles included: -pi and pi) and, in 3D, colatitude."""
         return [(-math.pi, math.pi), (0.0, math.pi)][: self.gdim - 1]
@@ -182,7 +250,9 @@ class ShellDomain(RadialDomain):
         return 0, name == "outer"
 
     # ------------------------------------------------------------------ mesh and boundaries
-    def _mesh(self, comm: MPI.Comm, spec: ShellSpec, owners: npt.NDArray[np.int32] | None, /) -> dolfinx.mesh.Mesh:
+    def create_mesh(self, comm: MPI.Comm, /, *, owners: npt.NDArray[np.int32] | None = None,
+                    straight: bool = False) -> dolfinx.mesh.Mesh:
+        spec = replace(self.spec, geometry_degree=1, curvable=True) if straight else self.spec
         return create_shell_mesh(comm, spec, owners=owners)
 
     def manifold(self) -> ShellManifold:

@@ -240,8 +240,8 @@ def write_checkpoint(model: Model, run_dir: str | os.PathLike[str], /, *, config
             shutil.rmtree(stray, ignore_errors=True)
         tmp.mkdir(parents=True)
     comm.Barrier()
-    hierarchy = (model.adaptivity.hierarchy if model.adaptivity
-                 else (model.balancer.hierarchy if model.balancer else None))
+    hierarchy = model.hierarchy if model.hierarchy is not None else (
+        model.adaptivity.hierarchy if model.adaptivity else (model.balancer.hierarchy if model.balancer else None))
     states = component_states(model)
     state = {"components": {name: s.scalars for name, s in states.items()}, "run": run_state, "num_ranks": comm.size,
              "recipe_rounds": None, "hierarchy": hierarchy is not None}

@@ -59,6 +59,7 @@ import dolfinx.mesh
 import numpy as np
 
 from convection.adapt.adaptivity import Adaptivity
+from convection.adapt.hierarchy import MeshHierarchy
 from convection.deform.motion import FreeSurface
 from convection.geometry.domain import Domain
 from convection.model.composition import CompositionSource
@@ -120,8 +121,8 @@ class Model(Stateful):
         self.solve_temperature = solve_temperature and temperature is not None
         self.composition = composition
         self.particles = ParticleSystems.of(particles) if particles is not None else None
-        self.adaptivity = adaptivity
-        self.balancer = balancer
+        self.adaptivity, self.balancer = adaptivity, balancer
+        self.hierarchy: MeshHierarchy | None = None  # the mesh's, where neither of those holds it (checkpoints)
         self.free_surface = free_surface
         self.elastic_stress = elastic_stress
         self.timers = Timers()

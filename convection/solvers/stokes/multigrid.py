@@ -30,7 +30,10 @@ One V-cycle of PETSc's PCMG replaces the AMG cycle:
     the smoother amplifies them. A 1e3 layer in the unit cube at 16^3, 2 ranks: 169 outer iterations
     with 4 steps, 84 with 10 or 20 (a smooth 1e3 contrast: 24 and 25). nsinker: benchmarks/nsinker;
 - an exact solve on the coarsest level (``redundant``: every rank factorises the small coarsest
-  operator, LU), the same on any rank count.
+  operator, LU by MUMPS), the same on any rank count. A fixed shell's coarsest level is gmsh's
+  shell at a few times the cell size, thousands of cells (:meth:`convection.geometry.shell.ShellDomain.mesh_levels`):
+  PETSc's own LU took 4.9 of the 6.5 s set-up there (gmsh size 0.485, 1929 cells, 2 ranks), MUMPS
+  brings the set-up to 3.0 s.
 
 At large viscosity contrasts (the nsinker problem, ``benchmarks/nsinker``: DR = 1e4 and more) point-Jacobi
 Chebyshev stalls; ``stokes.multigrid.smoother: sor`` smooths with Chebyshev on SOR (symmetric sweeps on each
@@ -103,7 +106,9 @@ class MultigridSettings:
     levels: int = param(0, minimum=0, maximum=MAX_LEVELS,
                         help="meshes in the hierarchy, the run's mesh included (box: each coarser has half the cells "
                              "per side); 0: halve while every count is even and stays >= 2 (16 -> 8 -> 4 -> 2: 4); "
-                             "an adaptive mesh adds its refinement rounds above the base (convection/adapt/levels.py)")
+                             "an adaptive mesh adds its refinement rounds above the base (convection/adapt/levels.py); "
+                             "a fixed shell: gmsh's shell at resolution * 2^(levels-1) refined uniformly levels-1 "
+                             "times, 0: as many as keep its cells at most half the thickness")
     rebuild_steps: int = param(10, minimum=1,
                                help="solves a preconditioner serves at most while only the semi-implicit buoyancy's "
                                     "term changes (a linear solve, constant viscosity); 1: set up at every solve "
@@ -136,6 +141,7 @@ GEOMETRIC_MULTIGRID: dict[str, Any] = {
     "mg_coarse_ksp_type": "preonly",
     "mg_coarse_pc_type": "redundant",
     "mg_coarse_redundant_pc_type": "lu",
+    "mg_coarse_redundant_pc_factor_mat_solver_type": "mumps",
 }
 """PCMG options of the velocity block (without the ``fieldsplit_u_`` prefix): see the module
 docstring. ``pc_mg_levels`` is added by the solver from the number of meshes."""

@@ -11,12 +11,12 @@ import dolfinx.fem
 pytest.importorskip("gmsh")
 
 from convection.geometry.registry import DOMAINS, domain_from_settings  # noqa: E402
-from convection.geometry.domain import MeshSection  # noqa: E402
+from convection.geometry.domain import LevelsByRefinement, MeshSection  # noqa: E402
 from convection.geometry.radial import RadialMeshSettings  # noqa: E402
 from convection.geometry.shell import (  # noqa: E402
     SHELL_BOUNDARIES, ShellSpec, SphericalShell, create_shell_mesh, shell_domain, shell_radii,
 )
-from fembase.dolfinx_compat import coordinate_map, evaluate_expression  # noqa: E402
+from fembase.dolfinx_compat import coordinate_map, evaluate_expression, geometry_dofmap  # noqa: E402
 
 
 def _integral(mesh, form):
@@ -83,3 +83,48 @@ def test_shell_mesh_written_and_read_again(tmp_path):
     assert np.allclose(read.geometry.x, made.geometry.x, rtol=0.0, atol=1e-14)
     facets = shell_domain(spec).locate_facets(read, "outer")
     assert facets.size > 0
+
+
+def _cap_cells(mesh, radii) -> int:
+    """Owned cells with all vertices on one of the spheres ``radii``."""
+    tdim = mesh.topology.dim
+    n = mesh.topology.index_map(tdim).size_local
+    nodes = geometry_dofmap(mesh)[:n, : tdim + 1]
+    r = np.linalg.norm(mesh.geometry.x[nodes], axis=2)
+    return sum(int(np.all(np.abs(r - radius) < 1e-9 * radius, axis=1).sum()) for radius in radii)
+
+
+def test_a_base_the_manifold_curves_has_no_cell_on_one_sphere():
+    """gmsh's Delaunay shell of size 0.5 has tetrahedra with all four vertices on a sphere (which the
+    manifold cannot curve); the straight base of a hierarchy (``curvable``) is meshed again a little
+    finer until it has none, the same mesh at every call."""
+    radii = (1.22, 2.22)
+    plain = create_shell_mesh(MPI.COMM_SELF, ShellSpec(3, *radii, resolution=0.5, geometry_degree=1))
+    assert _cap_cells(plain, radii) > 0
+    spec = ShellSpec(3, *radii, resolution=0.5, geometry_degree=1, curvable=True)
+    meshes = [create_shell_mesh(MPI.COMM_SELF, spec) for _ in range(2)]
+    assert _cap_cells(meshes[0], radii) == 0
+    assert np.array_equal(meshes[0].geometry.x, meshes[1].geometry.x)
+    domain = shell_domain(ShellSpec(3, *radii, resolution=0.5))
+    assert _cap_cells(domain.create_mesh(MPI.COMM_SELF, straight=True), radii) == 0
+
+
+@pytest.mark.parametrize("resolution, degree, levels", [
+    (0.25, 2, 2), (0.125, 2, 3), (0.1, 2, 3), (0.3, 2, 1), (0.25, 1, 1),
+])
+def test_shell_levels_by_refinement(resolution, degree, levels):
+    """A fixed shell's multigrid levels refine gmsh's shell at ``resolution * 2^(L-1)``, whose cells
+    may be at most half the shell's thickness (1 here)."""
+    domain = shell_domain(ShellSpec(3, 1.22, 2.22, resolution=resolution, geometry_degree=degree))
+    assert isinstance(domain, LevelsByRefinement)
+    assert domain.mesh_levels() == levels
+    assert domain.coarsened(2).spec.resolution == pytest.approx(4 * resolution)
+
+
+def test_shell_levels_refused_beyond_the_thickness():
+    domain = shell_domain(ShellSpec(3, 1.22, 2.22, resolution=0.25))
+    assert domain.mesh_levels(2) == 2
+    with pytest.raises(ValueError, match="3 levels need a coarsest mesh of cell size resolution \\* 2\\^2 = 1"):
+        domain.mesh_levels(3)
+    with pytest.raises(ValueError, match="need mesh.geometry_degree 2"):
+        shell_domain(ShellSpec(3, 1.22, 2.22, resolution=0.25, geometry_degree=1)).mesh_levels(2)

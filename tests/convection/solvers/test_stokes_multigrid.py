@@ -304,8 +304,23 @@ def test_config_rules(sets, message):
 
 
 def test_config_rules_shell():
-    with pytest.raises(ConfigError, match="not a fixed mesh.geometry spherical_shell"):
-        load_config(ROOT / "configs" / "shell_plates.yaml", ["stokes.solver=multigrid"])
+    """A fixed shell's levels refine a coarser gmsh shell (cells at most half the thickness); an
+    adaptive shell's are its refinement rounds; ``auto`` keeps the AMG on shells."""
+    from convection.config.loader import multigrid_levels
+
+    plates = ROOT / "configs" / "shell_plates.yaml"  # mesh.resolution 0.3, thickness 1
+    with pytest.raises(ConfigError, match="multigrid on a fixed mesh.geometry spherical_shell refines a coarser gmsh "
+                                          "mesh for its levels, and here cannot: mesh.resolution is too coarse"):
+        load_config(plates, ["stokes.solver=multigrid"])
+    assert multigrid_levels(load_config(plates, ["stokes.solver=multigrid", "mesh.resolution=0.25"])) == 2
+    assert multigrid_levels(load_config(plates, ["stokes.solver=multigrid", "mesh.resolution=0.1"])) == 3
+    assert multigrid_levels(load_config(plates, ["mesh.resolution=0.1"])) == 1  # auto
+    with pytest.raises(ConfigError, match="'stokes.multigrid.levels': 3 levels need a coarsest mesh"):
+        load_config(plates, ["stokes.solver=multigrid", "mesh.resolution=0.25", "stokes.multigrid.levels=3"])
+    with pytest.raises(ConfigError, match="'stokes.multigrid.levels': an adaptive or repartitioned spherical_shell "
+                                          "takes its refinement rounds as the levels"):
+        load_config(ROOT / "configs" / "shell_adaptive.yaml",
+                    ["stokes.solver=multigrid", "balance.strategy=none", "stokes.multigrid.levels=2"])
 
 
 @pytest.mark.parametrize("sets, levels", [

@@ -157,10 +157,8 @@ _LOST = 1e-8
 """A point of :meth:`ShellMap.straight_points` whose result lies outside its last cell by more than this
 (barycentric) was lost by its walk."""
 
-_PULLS = (0.02, 0.05, 0.1, 0.2, 0.4)
-"""How far :meth:`ShellMap._cells_below` moves a point towards the middle radius, in turn (fractions of
-its distance from it): past a flat boundary face's sagitta ``h^2 / (8 r)`` (0.014 at ``r = 2.22`` and
-0.026 at 1.22 for base cells of 0.5) without leaving the cell below it."""
+_SEARCHED = 64
+"""How many local cells, nearest first, :meth:`ShellMap._search` tries for a point its walk lost."""
 
 
 class ShellMap:
@@ -173,15 +171,12 @@ class ShellMap:
         order: Sorted vertex ``j`` of cell ``c`` is the mesh's local vertex ``order[c, j]``.
         entities: The cells' curved entities.
         r_outer: The outer radius (the scale of the inverse's round-off).
-        r_inner: The inner radius (0: unknown; where the inverse starts again for a point its
-            walk lost, :meth:`straight_points`).
     """
 
     def __init__(self, geometry: CellGeometry, vertices: npt.NDArray[np.float64], order: npt.NDArray[np.int64],
-                 entities: EdgeBubbles | ProjectedEntities, r_outer: float, r_inner: float = 0.0, /) -> None:
+                 entities: EdgeBubbles | ProjectedEntities, r_outer: float, /) -> None:
         n, gdim = vertices.shape[0], geometry.gdim
         self.geometry, self.order, self.entities, self.r_outer = geometry, order, entities, r_outer
-        self.r_inner = r_inner
         self.origin = np.ascontiguousarray(vertices[:, 0])
         self.vertices = np.ascontiguousarray(vertices)
         self.inverse = (np.linalg.inv(np.transpose(vertices[:, 1:] - vertices[:, :1], (0, 2, 1))) if n
@@ -214,7 +209,7 @@ class ShellMap:
         interface = {t: t in interfaces for t in radii}  # interior surfaces: any edge/face on them
         entities = (ProjectedEntities.fit(base, x, c2e, order, boundary, on_sphere, interface) if tdim == 3
                     else EdgeBubbles.fit(x, c2e, boundary, radii, on_sphere, interface))
-        return cls(geometry, x, order, entities, r_outer, r_inner)
+        return cls(geometry, x, order, entities, r_outer)
 
     def barycentric(self, cells: npt.NDArray[np.int32], x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Barycentric coordinates (sorted vertex order) of points x in the straight base cells
@@ -246,13 +241,13 @@ class ShellMap:
         """``Phi^-1(y)``, y shape=(n, gdim), contiguous (not collective): see
         :meth:`fembase.manifold.ShellManifold.straight_points`.
 
-        A walk that ends outside its cell (it met the shell's boundary, or a cell this rank does
-        not hold, before the cell of the answer: the nearest centre of a point between a flat
-        boundary face and its sphere can lie cells away on a coarse base) starts again from the
-        cell below the point (:meth:`_cells_below`)."""
+        A walk that ends outside its cell (it met the shell's boundary, or cycled, before the cell
+        of the answer: the nearest centre of a point between a flat boundary face and its sphere can
+        lie cells away on a coarse base, and the map extended far beyond a cell leads astray) is
+        replaced by a search of the nearest cells (:meth:`_search`)."""
         x, lost = self._walk(y, self._start_cells(y))
-        if lost.size and self.r_inner > 0.0:
-            x[lost] = self._walk(y[lost], self._cells_below(y[lost]))[0]
+        if lost.size:
+            x[lost] = self._search(y[lost], x[lost])
         return x
 
     def _walk(self, y: npt.NDArray[np.float64], cells: npt.NDArray[np.int32], /
@@ -279,23 +274,22 @@ class ShellMap:
             np.zeros(0, dtype=np.int64)
         return x, lost
 
-    def _cells_below(self, y: npt.NDArray[np.float64], /) -> npt.NDArray[np.int32]:
-        """A local base cell for each point ``y``: the one holding the point moved radially towards
-        the middle of the shell by the first of :data:`_PULLS` (fractions of its distance) that
-        lands in one, else the nearest centre's (:meth:`_start_cells`)."""
-        r = np.linalg.norm(y, axis=1)
-        middle = 0.5 * (self.r_inner + self.r_outer)
-        cells = np.full(y.shape[0], -1, dtype=np.int32)
-        for pull in _PULLS:
-            todo = np.flatnonzero(cells < 0)
-            if todo.size == 0:
-                break
-            scale = (r[todo] + pull * (middle - r[todo])) / np.maximum(r[todo], 1e-300)
-            cells[todo] = self.geometry.locate(np.ascontiguousarray(y[todo] * scale[:, None])).cells
-        todo = np.flatnonzero(cells < 0)
-        if todo.size:
-            cells[todo] = self._start_cells(np.ascontiguousarray(y[todo]))
-        return cells
+    def _search(self, y: npt.NDArray[np.float64], x: npt.NDArray[np.float64], /) -> npt.NDArray[np.float64]:
+        """``Phi^-1`` of points a walk lost: the fixed point in each of the :data:`_SEARCHED` local
+        cells whose centres are nearest, the first (nearest) whose result lies in it; a point none
+        takes keeps ``x``."""
+        centres = self.geometry.centres
+        count = min(_SEARCHED, centres.shape[0])
+        x = x.copy()
+        for i in range(y.shape[0]):
+            cells = np.argsort(np.linalg.norm(centres - y[i], axis=1), kind="stable")[:count].astype(np.int32)
+            ys = np.repeat(y[i : i + 1], count, axis=0)
+            with np.errstate(over="ignore", invalid="ignore"):  # the map extended far beyond a cell diverges
+                candidates = self._fixed_point(cells, ys, ys)
+                inside = np.flatnonzero(self.barycentric(cells, candidates).min(axis=1) >= -_LOST)
+            if inside.size:
+                x[i] = candidates[inside[0]]
+        return x
 
     def _fixed_point(self, cells: npt.NDArray[np.int32], y: npt.NDArray[np.float64], x: npt.NDArray[np.float64]
                      ) -> npt.NDArray[np.float64]:

@@ -90,6 +90,7 @@ from convection.solvers.stokes.linear import StokesLinearSystem
 from convection.solvers.stokes.lagged import LaggedPreconditioner, assemble_operator
 from convection.solvers.stokes.multigrid import GEOMETRIC_MULTIGRID, MultigridSettings, VelocityMultigrid
 from convection.solvers.stokes.nonlinear import NonlinearResult, NonlinearSettings, NonlinearStokes
+from fembase.dolfinx_compat import coordinate_map
 from fembase.registry import Registry
 from fembase.state import State
 
@@ -525,7 +526,8 @@ class StokesSolver(PetscSolver):
         if kind.nested:
             hierarchy = VelocityMultigrid(self.V, coarse, locate=getattr(coarse_meshes, "locate", None))
             self._petsc_options.update(multigrid.petsc_options(
-                self._user_options, hierarchy.levels, variable_viscosity=approximation.is_variable_viscosity))
+                self._user_options, hierarchy.levels, variable_viscosity=approximation.is_variable_viscosity,
+                curved=coordinate_map(mesh).degree > 1))
         self.u = dolfinx.fem.Function(self.V, name="velocity")
         self.p = dolfinx.fem.Function(self.Q, name="pressure")
 

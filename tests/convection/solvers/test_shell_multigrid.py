@@ -35,8 +35,8 @@ def _norm(comm, f) -> float:
 def test_fixed_shell_multigrid_solves_the_amg_problem(world, tmp_path):
     """configs/shell_plates.yaml at gmsh size 0.25 (the base at 0.485, 1929 cells, refined once): the
     first Stokes solve of the multigrid and of the AMG on the same mesh agree to 1e-7 (both at
-    rtol 1e-10); the multigrid needs fewer iterations (measured at the default rtol 1e-7 on 2 ranks:
-    21 against 58 on gmsh's own mesh at 0.25)."""
+    rtol 1e-10); the multigrid needs fewer iterations (measured on 1 rank: 31 against 73; 250 at
+    gmsh size 0.125 before its Chebyshev bound took 10 estimate steps on curved levels, 21 after)."""
     config = load_config(ROOT / "configs" / "shell_plates.yaml",
                          ["stokes.solver=multigrid", "mesh.resolution=0.25", "particles.enabled=false",
                           f"output.directory={tmp_path}", "stokes.petsc_options={ksp_rtol: 1.0e-10}"])
@@ -51,7 +51,8 @@ def test_fixed_shell_multigrid_solves_the_amg_problem(world, tmp_path):
                        petsc_options={"ksp_rtol": 1e-10})
     reference = amg.solve(model.flow().T)
     assert _norm(world, stokes.u - amg.u) < 1e-7 * _norm(world, amg.u)
-    assert multigrid.iterations < reference.iterations
+    assert multigrid.iterations <= 40 and multigrid.iterations < reference.iterations, \
+        (multigrid.iterations, reference.iterations)
     amg.destroy()
 
 

@@ -87,10 +87,9 @@ MULTIGRID_SMOOTHERS: dict[str, str] = {
 _ESTIMATE_STEPS = "fieldsplit_u_mg_levels_ksp_chebyshev_esteig_steps"
 VARIABLE_VISCOSITY_ESTIMATE_STEPS = 10
 """GMRES steps of every level's ``lambda_max`` estimate when the viscosity varies (4 when it is constant):
-module docstring. Also on curved levels (a shell's): the coarse gmsh shell's flattened boundary cells,
-refined, keep local stiff modes that 4 steps miss. configs/shell_plates.yaml at gmsh size 0.125 (3
-levels, 123 456 cells, 2 ranks), first solve: 250 outer iterations with 4 steps, 21 with 10 (4 smoothing
-steps instead of 2: 196); BoomerAMG on the same mesh: 81."""
+module docstring. Also on curved levels (a shell's), where 4 steps fall short as well:
+configs/shell_plates.yaml at gmsh size 0.125 (3 levels, 123 456 cells, 2 ranks), first solve: 250 outer
+iterations with 4 steps, 21 with 10 (4 smoothing steps instead of 2: 196); BoomerAMG on the same mesh: 81."""
 
 _SMOOTHER_OPTIONS: dict[str, dict[str, Any]] = {
     "jacobi": {},

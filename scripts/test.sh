@@ -2,7 +2,7 @@
 # Set everything up (idempotent), lint and type check (scripts/lint.sh: ruff, mypy), and run the
 # test suite: the collective tests under MPI's launcher
 # with 2 ranks and 3 ranks (Open MPI's mpirun --oversubscribe, or MPICH's mpiexec on the PyPI route:
-# python -m convection.launch N tells which), then the serial tests (exit 5, none collected,
+# python -m convection.launch N tells which), then the serial tests in pytest-xdist workers (exit 5, none collected,
 # fails). Extra arguments go to every pytest call. PIC_DOLFINX=pypi: the PyPI route (setup.sh).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -50,10 +50,15 @@ for n in 2 3; do
 done
 rm -rf "$logdir"
 
-# Serial tests last, so the closing summary line is the main run's.
-echo "== serial tests =="
+# Serial tests last, so the closing summary line is the main run's. They run in pytest-xdist's
+# workers, one a core (PIC_TEST_WORKERS=N to choose, 0 for none), each test handed to the next idle
+# worker (worksteal): on the 2-core machine this halves the phase that takes most of the time.
+workers="${PIC_TEST_WORKERS:-$(nproc)}"
+xdist=()
+[ "$workers" -gt 1 ] && xdist=(-n "$workers" --dist worksteal)
+echo "== serial tests (${workers} workers) =="
 rc=0
-"$py" -m pytest -m "not slow and not mpi" "$@" || rc=$?
+"$py" -m pytest -m "not slow and not mpi" "${xdist[@]}" "$@" || rc=$?
 [ "$rc" -ne 0 ] && status=$rc
 [ "$lint" -ne 0 ] && echo "== scripts/lint.sh failed (exit $lint): see its output at the top =="
 exit "$status"

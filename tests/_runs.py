@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import h5py
 import numpy as np
@@ -159,18 +159,30 @@ def final_property(run_dir: Path, name: str) -> np.ndarray:
     return values[:, 0] if size == 1 else values
 
 
-def kill_session(leader: int) -> None:
-    """SIGKILL every process of the session ``leader`` leads (a process started with
-    ``start_new_session=True``): mpirun and all its ranks. Open MPI 4 keeps the ranks in mpirun's
-    process group; Open MPI 5 (prterun) gives each rank a group of its own, in the same session."""
+def _processes() -> Iterator[tuple[int, list[str]]]:
+    """Every process's pid and the fields of its /proc stat after "pid (comm)": state ppid pgrp
+    session ..."""
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
             fields = stat.read_text().rsplit(")", 1)[1].split()
         except OSError:
             continue
-        if int(fields[3]) == leader:  # after "pid (comm)": state ppid pgrp session ...
+        yield int(stat.parent.name), fields
+
+
+def children(parent: int) -> list[int]:
+    """The processes ``parent`` started (under mpirun: its ranks, with Open MPI 4 and 5 alike)."""
+    return [pid for pid, fields in _processes() if int(fields[1]) == parent]
+
+
+def kill_session(leader: int) -> None:
+    """SIGKILL every process of the session ``leader`` leads (a process started with
+    ``start_new_session=True``): mpirun and all its ranks. Open MPI 4 keeps the ranks in mpirun's
+    process group; Open MPI 5 (prterun) gives each rank a group of its own, in the same session."""
+    for pid, fields in _processes():
+        if int(fields[3]) == leader:
             try:
-                os.kill(int(stat.parent.name), signal.SIGKILL)
+                os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
 

@@ -86,17 +86,26 @@ def gmsh_mesh(comm: MPI.Comm, build: Callable[[Any], None], /, *, gdim: int, nam
                 gmsh.finalize()
 
 
-def mesh_uniformly(gmsh: Any, dim: int, resolution: float, degree: int, /, *, untangle: bool) -> None:
+def mesh_uniformly(gmsh: Any, dim: int, resolution: float, degree: int, /, *, untangle: bool,
+                   optimize_below: float | None = None) -> None:
     """Mesh gmsh's current model (rank 0) with cells of size ``resolution`` everywhere, of geometry
     ``degree`` (2: curved onto the model's curves and surfaces). ``untangle``: run gmsh's high-order
     optimiser after curving, which moves only cells below its quality threshold (boundary nodes stay
     on the surfaces): curving the boundary faces of coarse tetrahedra can invert them (a negative
-    Jacobian where a concave face bends into a thin cell)."""
+    Jacobian where a concave face bends into a thin cell). ``optimize_below``: gmsh's tetrahedron
+    optimiser works on every cell of quality below this (``Mesh.OptimizeThreshold``; gmsh's own 0.3
+    when None), restored afterwards."""
     gmsh.option.setNumber("Mesh.CharacteristicLengthMin", resolution)
     gmsh.option.setNumber("Mesh.CharacteristicLengthMax", resolution)
     gmsh.option.setNumber("Mesh.CharacteristicLengthFromCurvature", 0)
     gmsh.option.setNumber("Mesh.CharacteristicLengthExtendFromBoundary", 0)
-    gmsh.model.mesh.generate(dim)
+    threshold = gmsh.option.getNumber("Mesh.OptimizeThreshold")
+    if optimize_below is not None:
+        gmsh.option.setNumber("Mesh.OptimizeThreshold", optimize_below)
+    try:
+        gmsh.model.mesh.generate(dim)
+    finally:
+        gmsh.option.setNumber("Mesh.OptimizeThreshold", threshold)
     if degree > 1:
         gmsh.model.mesh.setOrder(degree)
         if untangle:

@@ -50,9 +50,20 @@ CURVABLE_SHRINK = 0.97
 CURVABLE_TRIES = 8
 """A straight base the manifold curves is meshed again at this fraction of the last cell size, up to
 this many times, while a tetrahedron has all four vertices on a sphere (:func:`_shell_model`). gmsh's
-Delaunay mesher leaves one or two such cells at some sizes (radii 1.22 and 2.22: at 0.2, 0.4 and
-0.5, none at 0.25, 0.3, 0.35, 0.45, 0.55, 0.6, 0.7, 0.8, 0.9, 1.0); its HXT mesher left none but
-gave another mesh at every call (1620, 1645, 1620, 1658 cells at 0.5)."""
+Delaunay mesher leaves one or two such cells at some sizes (radii 1.22 and 2.22, 13 sizes from 0.2
+to 1.0: at 0.2, 0.4 and 0.5; at 0.4 and 0.7 with :data:`UNIFORM_BASE_QUALITY`); its HXT mesher left
+none but gave another mesh at every call (1620, 1645, 1620, 1658 cells at 0.5)."""
+
+UNIFORM_BASE_QUALITY = 0.95
+"""gmsh's tetrahedron optimiser improves every cell below this quality (its own threshold: 0.3) in
+the base of a fixed shell's levels, which is refined uniformly. That refinement cuts a tetrahedron's
+inner octahedron along the diagonal between the midpoints of its longest edge and the opposite
+edge; in a flat (sliver) cell these two edges cross and their midpoints nearly meet, so the refined
+mesh gets an edge far shorter than half the base's, and the CFL step with it. Radii 1.22 and 2.22,
+shortest edge of the base refined once: 0.113 at size 0.5 (0.083 at gmsh's threshold, size 0.485);
+refined twice: 0.056 (0.042); gmsh's own mesh of as many cells: 0.132 and about 0.066. Adaptive
+shells keep gmsh's threshold: on configs/shell_adaptive.yaml at CI size (1.8x coarser, 2 ranks)
+it gave a first step 0.59x as long (0.00229 against 0.00390) and 0.94x the model time in 10 steps."""
 
 COARSEST_LAYERS = 2
 """The coarsest multigrid level of a fixed shell has cells no larger than the shell's thickness over
@@ -74,6 +85,8 @@ class ShellSpec:
         interfaces: Radii of interior circles/spheres the mesh conforms to (facets on them).
         curvable: The straight base of meshes the manifold curves (a hierarchy's): in 3D, no
             tetrahedron may have all four vertices on one sphere (:func:`_shell_model`).
+        refined_uniformly: The base of a fixed shell's levels (:meth:`ShellDomain.coarsened`),
+            refined uniformly: in 3D, gmsh optimises its cells up to :data:`UNIFORM_BASE_QUALITY`.
     """
 
     gdim: int
@@ -83,6 +96,7 @@ class ShellSpec:
     geometry_degree: int = 2
     interfaces: tuple[float, ...] = ()
     curvable: bool = False
+    refined_uniformly: bool = False
 
 
     def __post_init__(self) -> None:
@@ -136,7 +150,8 @@ def _shell_model(gmsh, spec: ShellSpec) -> None:
     gmsh.model.addPhysicalGroup(dim, [tag for _, tag in gmsh.model.getEntities(dim)], 1)
     size = spec.resolution
     for _ in range(CURVABLE_TRIES):
-        mesh_uniformly(gmsh, dim, size, spec.geometry_degree, untangle=True)
+        mesh_uniformly(gmsh, dim, size, spec.geometry_degree, untangle=True,
+                       optimize_below=UNIFORM_BASE_QUALITY if spec.refined_uniformly and dim == 3 else None)
         if not spec.curvable or dim == 2 or not _caps(gmsh, (spec.inner_radius, spec.outer_radius)):
             return
         gmsh.model.mesh.clear()
@@ -239,7 +254,8 @@ class ShellDomain(RadialDomain):
     def coarsened(self, refinements: int, /) -> ShellDomain:
         """The shell of gmsh cells ``2^refinements`` times larger (:meth:`mesh_levels`;
         :class:`convection.geometry.domain.LevelsByRefinement`)."""
-        return shell_domain(replace(self.spec, resolution=self.spec.resolution * 2 ** refinements))
+        return shell_domain(replace(self.spec, resolution=self.spec.resolution * 2 ** refinements,
+                                    refined_uniformly=True))
 
     def angle_limits(self) -> list[tuple[float, float]]:
         """Longitude (poles included: -pi and pi) and, in 3D, colatitude."""

@@ -7,6 +7,7 @@ import ufl
 from mpi4py import MPI
 
 import dolfinx.fem
+import dolfinx.mesh
 
 pytest.importorskip("gmsh")
 
@@ -95,18 +96,42 @@ def _cap_cells(mesh, radii) -> int:
 
 
 def test_a_base_the_manifold_curves_has_no_cell_on_one_sphere():
-    """gmsh's Delaunay shell of size 0.5 has tetrahedra with all four vertices on a sphere (which the
+    """gmsh's Delaunay shell of size 0.4 has tetrahedra with all four vertices on a sphere (which the
     manifold cannot curve); the straight base of a hierarchy (``curvable``) is meshed again a little
     finer until it has none, the same mesh at every call."""
     radii = (1.22, 2.22)
-    plain = create_shell_mesh(MPI.COMM_SELF, ShellSpec(3, *radii, resolution=0.5, geometry_degree=1))
+    plain = create_shell_mesh(MPI.COMM_SELF, ShellSpec(3, *radii, resolution=0.4, geometry_degree=1))
     assert _cap_cells(plain, radii) > 0
-    spec = ShellSpec(3, *radii, resolution=0.5, geometry_degree=1, curvable=True)
+    spec = ShellSpec(3, *radii, resolution=0.4, geometry_degree=1, curvable=True)
     meshes = [create_shell_mesh(MPI.COMM_SELF, spec) for _ in range(2)]
     assert _cap_cells(meshes[0], radii) == 0
     assert np.array_equal(meshes[0].geometry.x, meshes[1].geometry.x)
-    domain = shell_domain(ShellSpec(3, *radii, resolution=0.5))
+    domain = shell_domain(ShellSpec(3, *radii, resolution=0.4))
     assert _cap_cells(domain.create_mesh(MPI.COMM_SELF, straight=True), radii) == 0
+
+
+def _shortest_edge(mesh) -> float:
+    tdim = mesh.topology.dim
+    nodes = geometry_dofmap(mesh)[:, : tdim + 1]
+    x = mesh.geometry.x[nodes]
+    local = min(float(np.linalg.norm(x[:, i] - x[:, j], axis=1).min()) for i in range(4) for j in range(i))
+    return mesh.comm.allreduce(local, op=MPI.MIN)
+
+
+def test_a_uniformly_refined_base_has_no_short_edges():
+    """Uniform refinement cuts a sliver's inner octahedron along a diagonal far shorter than half the
+    cell (:data:`convection.geometry.shell.UNIFORM_BASE_QUALITY`): the base of a fixed shell's two
+    levels (gmsh at 0.5) refined once has no edge below a fifth of 0.5; the curvable base gmsh's
+    own optimiser threshold leaves (an adaptive shell's) has one of 0.083."""
+    domain = shell_domain(ShellSpec(3, 1.22, 2.22, resolution=0.25))
+
+    def refined_shortest_edge(base):
+        base.topology.create_entities(1)
+        return _shortest_edge(dolfinx.mesh.refine(base))
+
+    assert refined_shortest_edge(domain.coarsened(1).create_mesh(MPI.COMM_SELF, straight=True)) > 0.1
+    assert refined_shortest_edge(shell_domain(ShellSpec(3, 1.22, 2.22, resolution=0.5)).create_mesh(
+        MPI.COMM_SELF, straight=True)) < 0.09
 
 
 @pytest.mark.parametrize("resolution, degree, levels", [

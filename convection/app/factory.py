@@ -186,9 +186,10 @@ def _meshes(settings: RunSettings, domain: Domain, materials: Materials, tempera
         levels = MeshLevels(coarse[:-1], coarse[-1], hierarchy)
         if hierarchy is not None:
             hierarchy.keep_levels = True  # a repartition moves the refinement rounds' meshes too
-    elif (adaptivity is not None or refinements) and STOKES_SOLVER_CHOICES[settings.stokes.solver].nested:
+    elif refinements or (adaptivity is not None and STOKES_SOLVER_CHOICES[settings.stokes.solver].nested):
         # No box nests below the base (a shell; a box whose cells do not halve): the levels are
-        # the refinement rounds (curved on a shell; a fixed shell's uniform ones).
+        # the refinement rounds (curved on a shell; a fixed shell's uniform ones, which "auto"
+        # makes too where multigrid_levels picks the multigrid).
         assert hierarchy is not None
         levels = MeshLevels((), hierarchy.base, hierarchy)
         hierarchy.keep_levels = True
@@ -305,7 +306,7 @@ def build_model_from_settings(settings: RunSettings, /, *, comm: MPI.Comm = MPI.
     mesh = meshes.mesh
     free_surface = _free_surface(settings, domain, mesh, velocity_bcs, restore, exact=meshes.exact)
     stokes_settings = settings.stokes
-    if meshes.coarse is not None:  # "auto" on a box whose cells halve picks the multigrid (multigrid_levels)
+    if meshes.coarse is not None:  # "auto" on a box whose cells halve or a fine fixed shell picks the multigrid
         stokes_settings = dataclasses.replace(stokes_settings, solver="multigrid")
     stokes = StokesSolver(mesh, approximation,
                           bcs={n: bc for n, bc in velocity_bcs.items() if not bc.spec.moves}, domain=domain,

@@ -33,7 +33,8 @@ Solvers (``solver=``, names in :data:`STOKES_SOLVER_NAMES`):
     ``"auto"`` (the default): ``"iterative"`` in 3D (``"iterative_gamg"`` for a shell with free
         slip on both surfaces: its rigid rotations, see :func:`resolve_solver`), ``"direct"`` in 2D.
         A run of a config goes further: on a fixed 3D box whose cells halve at least twice it makes
-        the coarser boxes and uses ``"multigrid"``
+        the coarser boxes, and on a fixed spherical shell of gmsh size at most an eighth of its
+        thickness the levels by refinement, and uses ``"multigrid"``
         (:func:`convection.config.loader.multigrid_levels`).
     ``"direct"``: MUMPS LU of the monolithic (block) system; the factorisation is reused while the
         viscosity is constant.
@@ -205,8 +206,9 @@ class StokesSettings:
     degree: int = param(2, minimum=2, maximum=MAX_DEGREE, help="velocity degree (pressure degree - 1)")
     solver: str = param(AUTO, choices=Names(lambda: STOKES_SOLVER_CHOICES),
                         help="auto: multigrid (FGMRES + block preconditioner, geometric multigrid) on a fixed 3D box "
-                             "whose cells halve twice, else iterative (AMG) in 3D (iterative_gamg for a shell free "
-                             "slip on both surfaces), direct (MUMPS) in 2D")
+                             "whose cells halve twice or a fixed spherical shell whose gmsh size is at most 1/8 of "
+                             "its thickness, else iterative (AMG) in 3D (iterative_gamg for a shell free slip on "
+                             "both surfaces), direct (MUMPS) in 2D")
     petsc_options: Mapping[str, Any] = param({}, check=check_petsc_options, max_items=MAX_ENTRIES,
                                              help="extra PETSc options for the Stokes solver (e.g. ksp_rtol: 1e-6); "
                                                   "viewers may only print")
@@ -282,8 +284,9 @@ class AutoStokesSolver(StokesSolverChoice):
     """The choice ``"auto"``: a solver of :data:`STOKES_SOLVERS` picked by the mesh (:func:`resolve_solver`)."""
 
     name = AUTO
-    description = ("multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3), else iterative in 3D "
-                   "(iterative_gamg for a shell with free slip on both surfaces), direct in 2D")
+    description = ("multigrid in 3D on a fixed box whose cells halve twice (e.g. 16^3, 20^3) or a fixed spherical "
+                   "shell whose gmsh size is at most 1/8 of its thickness, else iterative in 3D (iterative_gamg for "
+                   "a shell with free slip on both surfaces), direct in 2D")
     by_mesh = True
 
     @classmethod

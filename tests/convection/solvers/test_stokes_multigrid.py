@@ -305,7 +305,9 @@ def test_config_rules(sets, message):
 
 def test_config_rules_shell():
     """A fixed shell's levels refine a coarser gmsh shell (cells at most half the thickness); an
-    adaptive shell's are its refinement rounds; ``auto`` keeps the AMG on shells."""
+    adaptive shell's are its refinement rounds; ``auto`` takes the multigrid on a fixed shell of
+    three levels or more (gmsh size at most an eighth of the thickness), free slip on both surfaces
+    too, and keeps the AMG below that and on adaptive shells."""
     from convection.config.loader import multigrid_levels
 
     plates = ROOT / "configs" / "shell_plates.yaml"  # mesh.resolution 0.3, thickness 1
@@ -314,7 +316,11 @@ def test_config_rules_shell():
         load_config(plates, ["stokes.solver=multigrid"])
     assert multigrid_levels(load_config(plates, ["stokes.solver=multigrid", "mesh.resolution=0.25"])) == 2
     assert multigrid_levels(load_config(plates, ["stokes.solver=multigrid", "mesh.resolution=0.1"])) == 3
-    assert multigrid_levels(load_config(plates, ["mesh.resolution=0.1"])) == 1  # auto
+    assert multigrid_levels(load_config(plates, ["mesh.resolution=0.1"])) == 3  # auto
+    assert multigrid_levels(load_config(plates, ["mesh.resolution=0.125", "boundary.velocity.outer=free_slip"])) == 3
+    assert multigrid_levels(load_config(plates, ["mesh.resolution=0.25"])) == 1  # two levels: too few for auto
+    assert multigrid_levels(load_config(plates, ["mesh.resolution=0.1", "stokes.solver=iterative"])) == 1
+    assert multigrid_levels(load_config(ROOT / "configs" / "shell_adaptive.yaml", ["mesh.resolution=0.12"])) == 1
     with pytest.raises(ConfigError, match="'stokes.multigrid.levels': 3 levels need a coarsest mesh"):
         load_config(plates, ["stokes.solver=multigrid", "mesh.resolution=0.25", "stokes.multigrid.levels=3"])
     with pytest.raises(ConfigError, match="'stokes.multigrid.levels': an adaptive or repartitioned spherical_shell "

@@ -61,7 +61,7 @@ inner octahedron along the diagonal between the midpoints of its longest edge an
 edge; in a flat (sliver) cell these two edges cross and their midpoints nearly meet, so the refined
 mesh gets an edge far shorter than half the base's, and the CFL step with it. Radii 1.22 and 2.22,
 shortest edge of the base refined once: 0.113 at size 0.5 (0.083 at gmsh's threshold, size 0.485);
-refined twice: 0.056 (0.042); gmsh's own mesh of as many cells: 0.132 and about 0.066. Adaptive
+refined twice: 0.056 (0.042); gmsh's own mesh of as many cells as the first: 0.142. Adaptive
 shells keep gmsh's threshold: on configs/shell_adaptive.yaml at CI size (1.8x coarser, 2 ranks)
 it gave a first step 0.59x as long (0.00229 against 0.00390) and 0.94x the model time in 10 steps."""
 
